@@ -1,0 +1,362 @@
+"""LVDT calibration against the motor angle (paper section 2.3, Figure 9).
+
+During a slow full-stroke sweep under a constant opposing force the internal
+load path deflection is constant, so the motor angle referred to the ram,
+``x = phi / i_total``, is an exact (resolver-accurate) measure of the ram
+stroke up to a constant. A polynomial regression of the LVDT reading ``s``
+on ``x`` captures the LVDT's offset, pitch (gain) and non-linearity; its
+inverse maps later LVDT readings back onto the motor-angle scale.
+
+Pure: arrays in, frozen dataclass out, no IO.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import comb
+
+import numpy as np
+
+from hil.errors import AnalysisError, InputError
+
+from .signals import _as_1d_finite, _same_shape
+
+__all__ = ["LvdtCalibration", "fit_lvdt_calibration"]
+
+_GRID_POINTS = 2001  # dense grid for the non-linearity figure
+
+
+@dataclass(frozen=True)
+class LvdtCalibration:
+    """Polynomial LVDT calibration ``s = sum_k c_k x**k`` and its inverse.
+
+    Attributes
+    ----------
+    coefficients : tuple of float
+        ``(c0, c1, ..., c_deg)`` of ``s = sum_k c_k x**k``; ``c_k`` is in
+        mm**(1-k) (``c0`` in mm, ``c1`` dimensionless, ``c3`` in 1/mm**2).
+    coefficient_sigmas : tuple of float
+        Standard errors of ``coefficients`` (same units), from the residual
+        variance with ``n - degree - 1`` degrees of freedom.
+    degree : int
+        Polynomial degree.
+    pitch : float
+        ``ds/dx`` at ``x = 0`` (= ``c1``), dimensionless; 1.075 for an LVDT
+        reading 7.5 % high.
+    offset_mm : float
+        ``s`` at ``x = 0`` (= ``c0``), mm. Includes the (constant) internal
+        deflection during the sweep, which is harmless for backlash.
+    nonlinearity_mm : float
+        Maximum absolute deviation of the polynomial from its least-squares
+        best straight line over the swept range, mm.
+    rmse_mm : float
+        Root-mean-square residual of the regression, mm.
+    x_min_mm, x_max_mm : float
+        Swept range of ``x = phi / i_total``, mm.
+    n : int
+        Number of samples used.
+    monotone : bool
+        Whether the polynomial is strictly monotone on the swept range
+        (required by :meth:`correct`).
+    """
+
+    coefficients: tuple
+    coefficient_sigmas: tuple
+    degree: int
+    pitch: float
+    offset_mm: float
+    nonlinearity_mm: float
+    rmse_mm: float
+    x_min_mm: float
+    x_max_mm: float
+    n: int
+    monotone: bool
+
+    def evaluate(self, x_mm) -> np.ndarray:
+        """LVDT reading predicted for ``x_mm`` (motor-angle scale), in mm.
+
+        Parameters
+        ----------
+        x_mm : array_like
+            Ram position on the motor-angle scale, ``phi / i_total``, mm.
+
+        Returns
+        -------
+        ndarray
+            ``s = sum_k c_k x**k`` in mm, same shape as ``x_mm``.
+        """
+        x = _as_finite_any_shape(x_mm, "x_mm", "mm")
+        return _polyval(self.coefficients, x)
+
+    def correct(self, s_mm) -> np.ndarray:
+        """Map LVDT readings onto the motor-angle scale (invert the polynomial).
+
+        Parameters
+        ----------
+        s_mm : array_like
+            Raw LVDT readings in mm, any shape.
+
+        Returns
+        -------
+        ndarray
+            ``x`` in mm with ``P(x) = s`` (same shape as ``s_mm``).
+
+        Raises
+        ------
+        hil.errors.InputError
+            If ``s_mm`` contains NaN or inf.
+        hil.errors.AnalysisError
+            If the polynomial is not strictly monotone on the swept range.
+
+        Notes
+        -----
+        Solves :math:`P(x) = \\sum_k c_k x^k = s` for :math:`x` [mm] by a
+        vectorised, bracketed Newton iteration on the swept range
+        :math:`[x_{min}, x_{max}]` (bisection whenever a Newton step leaves
+        the bracket) until :math:`|P(x) - s|` is at round-off level, so
+        ``correct(evaluate(x)) == x`` to ~1e-12 mm. Readings beyond
+        :math:`P(x_{min})`, :math:`P(x_{max})` are extrapolated linearly with
+        the end slope :math:`P'` (continuous, monotone; the cubic is not
+        trusted outside the sweep).
+        """
+        s = _as_finite_any_shape(s_mm, "s_mm", "mm")
+        if not self.monotone:
+            raise AnalysisError(
+                "LVDT calibration polynomial is not strictly monotone on the swept range "
+                f"[{self.x_min_mm:.3f}, {self.x_max_mm:.3f}] mm; it cannot be inverted"
+            )
+        return _invert_monotone(self.coefficients, s, self.x_min_mm, self.x_max_mm)
+
+
+def fit_lvdt_calibration(
+    x_mm: np.ndarray,
+    s_mm: np.ndarray,
+    *,
+    degree: int = 3,
+    min_span_mm: float = 1.0,
+) -> LvdtCalibration:
+    """Fit the LVDT calibration polynomial from a slow full-stroke sweep.
+
+    Parameters
+    ----------
+    x_mm : array_like, shape (n,)
+        Motor angle referred to the ram, ``phi / i_total``, in mm, recorded
+        during the sweep (n >= 50).
+    s_mm : array_like, shape (n,)
+        Raw LVDT stroke in mm at the same instants.
+    degree : int, optional
+        Polynomial degree, 1..5 (default 3: offset, pitch, quadratic and cubic
+        non-linearity).
+    min_span_mm : float, optional
+        Minimum swept range ``max(x) - min(x)`` in mm (default 1.0); shorter
+        sweeps cannot separate pitch from non-linearity.
+
+    Returns
+    -------
+    LvdtCalibration
+        Coefficients, their standard errors, pitch, offset, non-linearity,
+        residual RMS, swept range and the inverse mapping ``correct``.
+
+    Raises
+    ------
+    hil.errors.InputError
+        Bad shapes, NaN/inf, fewer than 50 samples, a bad ``degree`` or a
+        swept range shorter than ``min_span_mm``.
+    hil.errors.AnalysisError
+        If the regression is rank deficient.
+
+    Notes
+    -----
+    Model (ordinary least squares, Gaussian LVDT noise :math:`e` in mm):
+
+    .. math::
+
+        s = c_0 + c_1 x + c_2 x^2 + c_3 x^3 + e \\qquad [mm]
+
+    For conditioning the regression is solved in the centred, scaled variable
+    :math:`u = (x - x_c) / x_h \\in [-1, 1]` (``x_c``, ``x_h`` centre and half
+    span of the sweep) by a QR-based least-squares solve; the coefficients
+    and their covariance :math:`\\hat\\sigma^2 (V^T V)^{-1}` are then mapped
+    linearly to the power basis in :math:`x`. ``pitch`` is
+    :math:`P'(0) = c_1` (the paper's 1.075), ``offset_mm`` is :math:`c_0`.
+    ``nonlinearity_mm`` is :math:`\\max |P(x) - (a + b x)|` over the sweep with
+    :math:`a + b x` the least-squares line through :math:`P` on a uniform grid;
+    for a pure cubic term :math:`c_3 x^3` on :math:`[-L, L]` it equals
+    :math:`0.4\\,c_3 L^3`. ``rmse_mm`` is :math:`\\sqrt{RSS / n}`.
+
+    During the sweep the internal deflection :math:`d` is constant, so the
+    true stroke is :math:`x - d`; :math:`d` only shifts :math:`c_0` and the
+    corrected strokes by a constant, which cancels in backlash and stiffness.
+    """
+    x = _as_1d_finite(x_mm, "x_mm", "mm")
+    s = _as_1d_finite(s_mm, "s_mm", "mm")
+    _same_shape((x, "x_mm", "mm"), (s, "s_mm", "mm"))
+    if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or not 1 <= degree <= 5:
+        raise InputError(f"degree must be an integer in 1..5 (dimensionless); got {degree!r}")
+    degree = int(degree)
+    if x.size < 50:
+        raise InputError(
+            f"x_mm and s_mm must have at least 50 samples (mm); got shape {x.shape}"
+        )
+    try:
+        span_min = float(min_span_mm)
+    except (TypeError, ValueError):
+        raise InputError(f"min_span_mm must be a number in mm; got {min_span_mm!r}") from None
+    x_min, x_max = float(np.min(x)), float(np.max(x))
+    if not (x_max - x_min >= span_min and x_max > x_min):
+        raise InputError(
+            f"x_mm must span at least {span_min:g} mm (a full-stroke sweep); got range "
+            f"{x_max - x_min:.4g} mm in shape {x.shape}"
+        )
+    if np.unique(x).size < degree + 2:
+        raise InputError(
+            f"x_mm needs at least {degree + 2} distinct values (mm) for degree {degree}; "
+            f"got {np.unique(x).size} in shape {x.shape}"
+        )
+
+    n = x.size
+    p = degree + 1
+    x_c = 0.5 * (x_min + x_max)
+    x_h = 0.5 * (x_max - x_min)
+    u = (x - x_c) / x_h
+    vander = np.vander(u, p, increasing=True)
+    q_mat, r_mat = np.linalg.qr(vander)
+    diag = np.abs(np.diag(r_mat))
+    if diag.min() <= 1e-10 * diag.max():
+        raise AnalysisError(
+            f"LVDT calibration regression of degree {degree} is rank deficient for the "
+            f"{n} samples given (x_mm range {x_min:.3f}..{x_max:.3f} mm)"
+        )
+    a_scaled = np.linalg.solve(r_mat, q_mat.T @ s)
+    resid = s - vander @ a_scaled
+    rss = float(resid @ resid)
+    dof = n - p
+    sigma2 = rss / dof
+    r_inv = np.linalg.inv(r_mat)
+    cov_scaled = sigma2 * (r_inv @ r_inv.T)
+
+    # map u-basis coefficients to x-power-basis coefficients: c = T a
+    t_mat = np.zeros((p, p))
+    for k in range(p):
+        for j in range(k + 1):
+            t_mat[j, k] = comb(k, j) * (-x_c) ** (k - j) / x_h**k
+    coeffs = t_mat @ a_scaled
+    cov = t_mat @ cov_scaled @ t_mat.T
+    sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
+    coeff_t = tuple(float(c) for c in coeffs)
+    grid = np.linspace(x_min, x_max, _GRID_POINTS)
+    p_grid = _polyval(coeff_t, grid)
+    line = np.polynomial.polynomial.polyfit(grid, p_grid, 1)
+    nonlin = float(np.max(np.abs(p_grid - (line[0] + line[1] * grid))))
+
+    return LvdtCalibration(
+        coefficients=coeff_t,
+        coefficient_sigmas=tuple(float(v) for v in sig),
+        degree=degree,
+        pitch=float(coeffs[1]),
+        offset_mm=float(coeffs[0]),
+        nonlinearity_mm=nonlin,
+        rmse_mm=float(np.sqrt(rss / n)),
+        x_min_mm=x_min,
+        x_max_mm=x_max,
+        n=int(n),
+        monotone=_is_strictly_monotone(coeff_t, x_min, x_max),
+    )
+
+
+# --------------------------------------------------------------------------
+# private helpers
+# --------------------------------------------------------------------------
+
+
+def _as_finite_any_shape(value, name: str, unit: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(
+            f"{name} must be a numeric array in {unit}; got {type(value).__name__}"
+        ) from None
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
+        raise InputError(
+            f"{name} must be finite (in {unit}); got {bad} NaN/inf value(s) in shape {arr.shape}"
+        )
+    return arr
+
+
+def _polyval(coeffs, x: np.ndarray) -> np.ndarray:
+    """Horner evaluation of ``sum_k coeffs[k] * x**k``."""
+    out = np.full_like(x, coeffs[-1], dtype=np.float64)
+    for c in coeffs[-2::-1]:
+        out = out * x + c
+    return out
+
+
+def _polyder(coeffs) -> tuple:
+    return tuple(k * c for k, c in enumerate(coeffs))[1:] or (0.0,)
+
+
+def _is_strictly_monotone(coeffs, x_min: float, x_max: float) -> bool:
+    """Exact check: P evaluated at the ends and at all critical points in between."""
+    dcoef = np.asarray(_polyder(coeffs), dtype=np.float64)
+    pts = [x_min, x_max]
+    nz = np.flatnonzero(dcoef)
+    if nz.size == 0:
+        return False  # constant polynomial
+    trimmed = dcoef[: nz[-1] + 1]
+    if trimmed.size > 1:
+        roots = np.polynomial.polynomial.polyroots(trimmed)
+        real = roots[np.abs(roots.imag) <= 1e-9 * (1.0 + np.abs(roots.real))].real
+        pts.extend(r for r in real if x_min < r < x_max)
+    pts = np.sort(np.asarray(pts))
+    vals = _polyval(coeffs, pts)
+    dv = np.diff(vals)
+    return bool(np.all(dv > 0.0) or np.all(dv < 0.0))
+
+
+def _invert_monotone(coeffs, s: np.ndarray, x_min: float, x_max: float) -> np.ndarray:
+    """Solve P(x) = s for x on a monotone range; linear extrapolation outside."""
+    dcoef = _polyder(coeffs)
+    s_flat = s.reshape(-1)
+    p_lo = float(_polyval(coeffs, np.array(x_min)))
+    p_hi = float(_polyval(coeffs, np.array(x_max)))
+    direction = 1.0 if p_hi > p_lo else -1.0
+    # work on the increasing polynomial direction*P
+    t = direction * s_flat
+    t_lo, t_hi = direction * p_lo, direction * p_hi
+    x = np.empty_like(s_flat)
+
+    below = t < t_lo
+    above = t > t_hi
+    inside = ~(below | above)
+    if np.any(below):
+        slope = float(_polyval(dcoef, np.array(x_min)))
+        x[below] = x_min + (s_flat[below] - p_lo) / slope
+    if np.any(above):
+        slope = float(_polyval(dcoef, np.array(x_max)))
+        x[above] = x_max + (s_flat[above] - p_hi) / slope
+    if np.any(inside):
+        ti = t[inside]
+        lo = np.full(ti.shape, x_min)
+        hi = np.full(ti.shape, x_max)
+        xi = x_min + (ti - t_lo) / (t_hi - t_lo) * (x_max - x_min)
+        scale = max(abs(x_min), abs(x_max), 1.0)
+        s_scale = max(abs(p_lo), abs(p_hi), 1.0)
+        for _ in range(200):
+            f = direction * _polyval(coeffs, xi) - ti
+            pos = f > 0.0
+            hi = np.where(pos, xi, hi)
+            lo = np.where(pos, lo, xi)
+            dfx = direction * _polyval(dcoef, xi)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                xn = xi - f / dfx
+            bad = ~np.isfinite(xn) | (xn <= lo) | (xn >= hi)
+            xn = np.where(bad, 0.5 * (lo + hi), xn)
+            xn = np.where(f == 0.0, xi, xn)
+            step = np.abs(xn - xi)
+            xi = xn
+            if np.all((step <= 1e-14 * scale) | (np.abs(f) <= 1e-14 * s_scale)):
+                break
+        x[inside] = xi
+    return x.reshape(s.shape)

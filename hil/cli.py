@@ -1,0 +1,101 @@
+"""Command line of emacheck.
+
+Exit status: 0 pass, 1 fail (backlash above B_spec), 2 aborted, 3 bad input
+(profile, recording, arguments), 4 internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import sys
+import time
+from pathlib import Path
+
+from hil import __version__
+from hil.errors import EmacheckError, ProfileError, RecordingError
+
+EXIT_PASS, EXIT_FAIL, EXIT_ABORTED, EXIT_INPUT, EXIT_INTERNAL = 0, 1, 2, 3, 4
+
+_EPILOG = """\
+exit status: 0 pass, 1 fail (backlash above B_spec), 2 check aborted,
+3 bad input (profile, recording, arguments), 4 internal error.
+Profiles default to the ones shipped in the package (profiles/*.toml)."""
+
+
+def _default_out(kind: str) -> Path:
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    return Path("emacheck-runs") / f"{stamp}-{kind}"
+
+
+def _add_profile_args(p: argparse.ArgumentParser, sim: bool) -> None:
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
+                   help="actuation profile (gear ratio, stroke, F_limit, B_spec, SYNC period)")
+    p.add_argument("--check", metavar="CHECK.toml", type=Path,
+                   help="check profile (sweep, opposing force, force fight, safety limits)")
+    if sim:
+        p.add_argument("--sim", metavar="SIMRIG.toml", type=Path,
+                       help="simulated-rig profile (physical parameters, sensor errors, seed)")
+        p.add_argument("--seed", type=int, help="noise seed (default: the simulated-rig profile's)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="emacheck",
+        description="Maintenance check of a dual-EMA flight-control actuation: LVDT calibration "
+                    "under opposing force, force-fight excursions to +-15 %% of limit load, then "
+                    "backlash and stiffness by BLFmaint (Schallert et al.).",
+        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--version", action="version", version=f"emacheck {__version__}")
+    sub = ap.add_subparsers(dest="cmd", metavar="COMMAND")
+
+    p = sub.add_parser("simulate", help="run the check on the simulated rig, no CAN in between",
+                       description="Run the whole check against the simulated plant directly "
+                                   "(no CANopen), then analyse it and write the run folder and report.",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-simulate)")
+    _add_profile_args(p, sim=True)
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
+    p = sub.add_parser("analyze", help="BLFmaint on a run folder or a signals CSV",
+                       description="Recompute calibration, backlash and stiffness from a run folder "
+                                   "or a bare signals CSV (columns t,phi1,phi2,s1,s2,F1,F2 in s, rad, mm, N). "
+                                   "Without a step column the calibration sweeps and force-fight "
+                                   "segments are found automatically.",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", metavar="RUN_FOLDER|SIGNALS.csv", type=Path)
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
+                   help="actuation profile (default: the run folder's snapshot, else the shipped one)")
+    p.add_argument("--out", metavar="DIR", type=Path,
+                   help="where result.json and report.html go (default: the run folder, or next to the CSV)")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if args.cmd is None:
+        ap.print_help()
+        return EXIT_INPUT
+    try:
+        if args.cmd == "simulate":
+            from hil.commands import cmd_simulate
+            return cmd_simulate(args)
+        if args.cmd == "analyze":
+            from hil.commands import cmd_analyze
+            return cmd_analyze(args)
+    except (ProfileError, RecordingError) as exc:
+        print(f"emacheck: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except EmacheckError as exc:
+        print(f"emacheck: error: {exc}", file=sys.stderr)
+        return EXIT_ABORTED
+    except KeyboardInterrupt:
+        print("emacheck: interrupted", file=sys.stderr)
+        return EXIT_ABORTED
+    ap.error(f"unknown command {args.cmd}")  # pragma: no cover
+    return EXIT_INTERNAL
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

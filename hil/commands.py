@@ -1,0 +1,181 @@
+"""The commands behind the CLI (IO shell: files, terminal, clocks)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from hil.analyze import CHANNELS, analyze_signals, result_dict
+from hil.config import Actuation
+from hil.errors import RecordingError
+from hil.profiles import build_dataclass, load_actuation, load_check, load_simrig, snapshot
+from hil.runfolder import read_signals, resolve_recording, write_json_atomic
+
+EXIT_PASS, EXIT_FAIL, EXIT_ABORTED = 0, 1, 2
+
+
+def _out_dir(args: argparse.Namespace, kind: str) -> Path:
+    if args.out is not None:
+        return Path(args.out)
+    from hil.cli import _default_out
+    return _default_out(kind)
+
+
+class LiveProgress:
+    """Terminal progress of a running check: step, progress, forces and strokes."""
+
+    def __init__(self, console: Console, total_s: float, enabled: bool) -> None:
+        self.enabled = enabled and console.is_terminal
+        self._p = Progress(TextColumn("[bold]{task.fields[step]:<12}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                           TextColumn("{task.fields[values]}"), TimeElapsedColumn(), console=console,
+                           transient=False, disable=not self.enabled, refresh_per_second=8)
+        self._task = self._p.add_task("check", total=1.0, step="", values="")
+        self._n = 0
+
+    def __enter__(self) -> "LiveProgress":
+        self._p.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._p.__exit__(*exc)
+
+    def __call__(self, prog, smp) -> None:
+        self._n += 1
+        if not self.enabled or self._n % 25:
+            return
+        vals = (f"F1 {smp.F1_N / 1e3:+6.2f} kN  F2 {smp.F2_N / 1e3:+6.2f} kN  "
+                f"s1 {smp.s1_mm:+7.3f} mm  s2 {smp.s2_mm:+7.3f} mm  t {smp.t_s:6.1f} s")
+        self._p.update(self._task, completed=prog.total_fraction, step=prog.step.value, values=vals)
+
+
+def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
+    """The result as a table, truth beside it when known."""
+    truth = result.get("truth")
+    tab = Table(title=f"BLFmaint result: [bold]{result['status'].upper()}[/bold]")
+    tab.add_column("channel")
+    tab.add_column("backlash mm", justify="right")
+    tab.add_column("± 1σ", justify="right")
+    tab.add_column("c_left N/mm", justify="right")
+    tab.add_column("c_right N/mm", justify="right")
+    if truth:
+        tab.add_column("truth B mm", justify="right")
+        tab.add_column("truth c_l / c_r", justify="right")
+    for ch in CHANNELS:
+        b = result["backlash_mm"][ch]
+        row = [ch, "—" if b is None else f"{b:.4f}",
+               "—" if b is None else f"{result['backlash_sigma_mm'][ch]:.4f}",
+               "—" if b is None else f"{result['stiffness_N_per_mm'][ch]['left']:.0f}",
+               "—" if b is None else f"{result['stiffness_N_per_mm'][ch]['right']:.0f}"]
+        if truth:
+            row += [f"{truth['backlash_mm'][ch]:.4f}",
+                    f"{truth['stiffness_N_per_mm'][ch]['left']:.0f} / {truth['stiffness_N_per_mm'][ch]['right']:.0f}"]
+        tab.add_row(*row)
+    console.print(tab)
+    for k in ("ema1", "ema2"):
+        c = result["calibration"][k]
+        if c is None:
+            console.print(f"LVDT {k[-1]}: not calibrated (no sweep)")
+        else:
+            tr = truth["calibration"][k]["pitch"] if truth else None
+            console.print(f"LVDT {k[-1]}: pitch {c['pitch']:.5f}" + (f" (truth {tr:.5f})" if tr else "")
+                          + f", offset {c['offset_mm']:+.4f} mm, rmse {c['rmse_mm']:.4f} mm")
+    for n in result.get("notes", []):
+        console.print(f"[yellow]note:[/yellow] {n}")
+    if out_dir is not None:
+        console.print(f"run folder: {out_dir}")
+
+
+def analyze_and_report(sig_path: Path, act: Actuation, out_dir: Path, truth: dict | None,
+                       meta: dict | None, console: Console) -> dict:
+    """Read the signals back, analyse, write result.json and report.html."""
+    from hil.report import write_report
+    t0 = time.perf_counter()
+    sig = read_signals(sig_path)
+    an = analyze_signals(sig, act)
+    result = result_dict(an, act, truth)
+    if meta is not None and meta.get("status") == "aborted":
+        result["status"] = "aborted"
+        result["reason"] = meta.get("reason", "")
+    result["analysis_s"] = round(time.perf_counter() - t0, 3)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out_dir / "result.json", result)
+    write_report(out_dir / "report.html", sig, an, result, act, meta)
+    return result
+
+
+def _exit_for(result: dict) -> int:
+    return {"pass": EXIT_PASS, "fail": EXIT_FAIL}.get(result["status"], EXIT_ABORTED)
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """``emacheck simulate``: the check on the plant, then analysis and report."""
+    import numpy as np
+
+    from hil.runner import PlantLink, run_check, start_meta
+    from sim.plant import RigPlant
+    from sim.truth import rig_truth
+
+    console = Console(stderr=False)
+    act = load_actuation(args.profile)
+    check = load_check(args.check, act)
+    simrig = load_simrig(args.sim)
+    seed = simrig.seed if args.seed is None else args.seed
+    out = _out_dir(args, "simulate")
+    rng = np.random.default_rng(seed)
+    plant = RigPlant(simrig.params, rng)
+    truth = truth_dict(rig_truth(simrig.params))
+    meta = start_meta(act, check, {"mode": "simulate", "seed": seed,
+                                   "simrig": snapshot(simrig.params), "truth": truth})
+    console.print(f"emacheck simulate: seed {seed}, run folder {out}")
+    t0 = time.perf_counter()
+    with LiveProgress(console, 0.0, not args.quiet) as live:
+        outcome = run_check(PlantLink(plant), act, check, out, meta, on_cycle=live)
+    wall = time.perf_counter() - t0
+    console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated "
+                  f"({outcome.samples} samples) in {wall:.2f} s wall")
+    if outcome.status != "done":
+        console.print(f"[red]aborted:[/red] {outcome.reason}")
+    result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+    print_summary(console, result, out)
+    return _exit_for(result)
+
+
+def truth_dict(truth) -> dict:
+    """The simulator's truth in result.json's shape."""
+    return {"backlash_mm": dict(truth.backlash_mm),
+            "stiffness_N_per_mm": {k: dict(v) for k, v in truth.stiffness_N_per_mm.items()},
+            "calibration": {k: dict(v) for k, v in truth.calibration.items()}}
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    """``emacheck analyze``: recompute the result from a run folder or a signals CSV."""
+    console = Console()
+    sig_path, run_dir = resolve_recording(args.recording)
+    meta = None
+    if run_dir is not None and (run_dir / "meta.json").exists():
+        try:
+            meta = json.loads((run_dir / "meta.json").read_text())
+        except json.JSONDecodeError as exc:
+            raise RecordingError(f"{run_dir / 'meta.json'}: not valid JSON: {exc}") from None
+    if args.profile is not None:
+        act = load_actuation(args.profile)
+    elif meta is not None and "profiles" in meta:
+        act = build_dataclass(Actuation, meta["profiles"]["actuation"], "meta.json (actuation snapshot)")
+    else:
+        act = load_actuation(None)
+    out = Path(args.out) if args.out is not None else (run_dir if run_dir is not None else sig_path.parent)
+    truth = meta.get("truth") if meta else None
+    result = analyze_and_report(sig_path, act, out, truth, meta, console)
+    print_summary(console, result, out)
+    return _exit_for(result)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(2)

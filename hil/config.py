@@ -1,0 +1,134 @@
+"""Validated, frozen configuration of the actuation and of the check.
+
+Each field carries its unit in its name and, in its metadata, the range a
+profile may give it. ``hard_max`` bounds are hard caps that no profile can
+raise (they are the envelope the check must never leave); see
+:mod:`hil.profiles` for loading from TOML.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+def _rng(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+         hard_max: float | None = None, doc: str = "") -> dict:
+    """Field metadata: allowed range and hard cap."""
+    return {"lo": lo, "hi": hi, "lo_open": lo_open, "hard_max": hard_max, "doc": doc}
+
+
+# ---------------------------------------------------------------- actuation
+
+
+@dataclass(frozen=True)
+class Mechanics:
+    i_total_rad_per_mm: float = field(metadata=_rng(0.0, 1e4, lo_open=True))
+    stroke_limit_mm: float = field(metadata=_rng(0.0, 200.0, lo_open=True))
+    limit_load_N: float = field(metadata=_rng(0.0, 1e6, lo_open=True))
+    backlash_spec_int_mm: float = field(metadata=_rng(0.0, 5.0, lo_open=True))
+    backlash_spec_ext_mm: float = field(metadata=_rng(0.0, 5.0, lo_open=True))
+
+
+@dataclass(frozen=True)
+class Sensors:
+    resolver_counts_per_rev: int = field(metadata=_rng(16, 1 << 24))
+    lvdt_full_scale_mm: float = field(metadata=_rng(0.0, 500.0, lo_open=True))
+    lvdt_noise_pp_mm: float = field(metadata=_rng(0.0, 1.0, lo_open=True))
+    loadcell_noise_std_N: float = field(metadata=_rng(0.0, 1e4, lo_open=True))
+
+
+@dataclass(frozen=True)
+class Timing:
+    sync_period_s: float = field(metadata=_rng(1e-4, 0.1))
+
+
+@dataclass(frozen=True)
+class Canopen:
+    """The CAN bus and the two drives as the master expects them."""
+
+    node_id_ema1: int = field(metadata=_rng(1, 127))
+    node_id_ema2: int = field(metadata=_rng(1, 127))
+    bitrate_bps: int = field(metadata=_rng(10_000, 1_000_000))
+    heartbeat_period_s: float = field(metadata=_rng(0.01, 10.0))  #: producer heartbeat set in the drives (0x1017)
+    heartbeat_timeout_factor: float = field(metadata=_rng(1.1, 10.0))  #: consumer timeout = factor * period
+    boot_timeout_s: float = field(metadata=_rng(0.1, 60.0))  #: wait for boot-up after NMT reset
+    sdo_timeout_s: float = field(metadata=_rng(0.01, 10.0))
+    enable_timeout_s: float = field(metadata=_rng(0.01, 10.0))  #: CiA 402 power-up to Operation enabled
+    vendor_id: int = field(metadata=_rng(0, 0xFFFF_FFFF))  #: expected identity 0x1018:01
+    product_code: int = field(metadata=_rng(0, 0xFFFF_FFFF))  #: expected identity 0x1018:02
+    revision_min: int = field(metadata=_rng(0, 0xFFFF_FFFF))  #: lowest accepted 0x1018:03
+    eds: str  #: the drives' EDS: a path relative to the profile, or the name of a shipped one
+
+    @property
+    def node_ids(self) -> tuple[int, int]:
+        return (self.node_id_ema1, self.node_id_ema2)
+
+
+@dataclass(frozen=True)
+class Actuation:
+    """The actuation as the master and the analysis see it (profiles/actuation.toml)."""
+
+    name: str
+    mechanics: Mechanics
+    sensors: Sensors
+    timing: Timing
+    canopen: Canopen
+
+    @property
+    def sample_rate_Hz(self) -> float:
+        return 1.0 / self.timing.sync_period_s
+
+
+# -------------------------------------------------------------------- check
+
+#: Hard caps that no check profile can raise, as fractions or absolute values.
+HARD_FORCE_FIGHT_FRACTION = 0.15  #: force fight at most 15 % of F_limit (paper 2.1)
+HARD_MAX_FORCE_FRACTION = 0.25  #: any EMA force at most 25 % of F_limit during the check
+HARD_MAX_VELOCITY_MM_PER_S = 50.0
+HARD_MAX_FOLLOWING_ERROR_MM = 2.0
+HARD_MAX_D_INT_MM = 2.0
+
+
+@dataclass(frozen=True)
+class Approach:
+    speed_mm_per_s: float = field(metadata=_rng(0.0, 20.0, lo_open=True, hard_max=20.0))
+    settle_s: float = field(metadata=_rng(0.0, 60.0))
+
+
+@dataclass(frozen=True)
+class CalibrationStep:
+    sweep_speed_mm_per_s: float = field(metadata=_rng(0.0, 20.0, lo_open=True, hard_max=20.0))
+    sweep_amplitude_mm: float = field(metadata=_rng(0.0, 200.0, lo_open=True))
+    opposing_force_N: float = field(metadata=_rng(0.0, 1e5, lo_open=True))
+    force_ramp_s: float = field(metadata=_rng(0.0, 60.0, lo_open=True))
+
+
+@dataclass(frozen=True)
+class ForceFightStep:
+    amplitude_fraction_of_limit: float = field(
+        metadata=_rng(0.0, 1.0, lo_open=True, hard_max=HARD_FORCE_FIGHT_FRACTION))
+    cycles: int = field(metadata=_rng(1, 50))
+    force_rate_N_per_s: float = field(metadata=_rng(0.0, 1e5, lo_open=True))
+    loop_gain_mm_per_N_s: float = field(metadata=_rng(0.0, 1.0, lo_open=True))
+    max_excursion_rate_mm_per_s: float = field(metadata=_rng(0.0, 5.0, lo_open=True, hard_max=5.0))
+
+
+@dataclass(frozen=True)
+class Safety:
+    max_force_N: float = field(metadata=_rng(0.0, 1e6, lo_open=True))
+    max_stroke_mm: float = field(metadata=_rng(0.0, 200.0, lo_open=True))
+    max_velocity_mm_per_s: float = field(
+        metadata=_rng(0.0, 1e3, lo_open=True, hard_max=HARD_MAX_VELOCITY_MM_PER_S))
+    max_following_error_mm: float = field(
+        metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_FOLLOWING_ERROR_MM))
+    max_d_int_mm: float = field(metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_D_INT_MM))
+
+
+@dataclass(frozen=True)
+class Check:
+    """The automated check (profiles/check.toml)."""
+
+    approach: Approach
+    calibration: CalibrationStep
+    force_fight: ForceFightStep
+    safety: Safety

@@ -1,0 +1,576 @@
+"""The CANopen master as a sans-IO core (CiA 302-style boot, CiA 402 drives).
+
+:class:`MasterCore` is fed every frame seen on the bus (including the SYNC
+frames, whoever sends them) with a time value, and returns the frames to
+transmit. It never touches a bus, a thread or a clock: the shells in
+:mod:`hil.canopen_link` move frames over python-can, pace SYNC and pass time.
+
+Life cycle::
+
+    PREFLIGHT  NMT reset node -> boot-up of both drives -> per drive, by SDO:
+               identity 0x1018 against the profile, device type 0x1000 (CiA 402),
+               supported modes 0x6502 (CSP, CST), gear ratio 0x2102 and encoder
+               resolution 0x608F against the profile, rated/max torque,
+               heartbeat producer 0x1017, interpolation period 0x60C2,
+               software position limits 0x607D (the stroke limits), quick stop
+               option 0x605A, PDO mapping of :data:`hil.pdo.DEFAULT_LAYOUT`
+               -> NMT start.
+    CYCLIC     SYNC -> TPDO1/TPDO2 of both drives -> one :class:`~hil.types.Sample`;
+               setpoints -> RPDO2 (mode, only on change) and RPDO1 (controlword,
+               targets) before the next SYNC. Heartbeat consumer with a timeout
+               per drive, EMCY consumer.
+
+Errors are typed and name the drive: :class:`PreflightError` (identity,
+device type, ...), :class:`~hil.sdo.SdoAbortError` (code and meaning),
+:class:`~hil.sdo.SdoTimeout`, :class:`DriveFault` (EMCY, fault state),
+:class:`HeartbeatLost`.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+from enum import Enum, IntEnum
+from typing import Generator
+
+from hil.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
+from hil.config import Actuation
+from hil.errors import EmacheckError
+from hil.pdo import (
+    DEFAULT_LAYOUT,
+    EMCY_COB_ID_BASE,
+    HEARTBEAT_COB_ID_BASE,
+    SYNC_COB_ID,
+    Frame,
+    PdoError,
+    Rpdo1,
+    Rpdo2,
+    decode_tpdo1,
+    decode_tpdo2,
+    encode_rpdo1,
+    encode_rpdo2,
+    force_dN_to_newton,
+    force_to_permille,
+    increments_to_rad,
+    lvdt_um_to_mm,
+    rad_to_increments,
+)
+from hil.sdo import SdoClient, SdoEvent
+from hil.types import DriveMode, Sample, Setpoint
+
+
+class PreflightError(EmacheckError, RuntimeError):
+    """A drive does not match the profile or did not come up."""
+
+
+class DriveFault(EmacheckError, RuntimeError):
+    """A drive reported a fault (EMCY or fault state) during the check."""
+
+
+class HeartbeatLost(EmacheckError, RuntimeError):
+    """A drive's heartbeat did not arrive within its timeout."""
+
+
+class NmtCommand(IntEnum):
+    START = 0x01
+    STOP = 0x02
+    PRE_OPERATIONAL = 0x80
+    RESET_NODE = 0x81
+    RESET_COMMUNICATION = 0x82
+
+
+class NmtState(IntEnum):
+    BOOT_UP = 0x00
+    STOPPED = 0x04
+    OPERATIONAL = 0x05
+    PRE_OPERATIONAL = 0x7F
+
+
+class EmcyCode(IntEnum):
+    """Common CiA 301 / CiA 402 emergency error codes (0x603F / EMCY bytes 0-1)."""
+
+    NO_ERROR = 0x0000
+    GENERIC = 0x1000
+    CURRENT = 0x2000
+    OVER_CURRENT = 0x2310
+    SHORT_CIRCUIT = 0x2320
+    VOLTAGE = 0x3000
+    DC_LINK_OVER_VOLTAGE = 0x3210
+    DC_LINK_UNDER_VOLTAGE = 0x3220
+    TEMPERATURE = 0x4000
+    DRIVE_OVER_TEMPERATURE = 0x4310
+    MOTOR_OVER_TEMPERATURE = 0x4410
+    DEVICE_HARDWARE = 0x5000
+    SOFTWARE = 0x6000
+    MONITORING = 0x8000
+    COMMUNICATION = 0x8100
+    CAN_OVERRUN = 0x8110
+    CAN_PASSIVE = 0x8120
+    LIFE_GUARD_OR_HEARTBEAT = 0x8130
+    CAN_BUS_OFF_RECOVERED = 0x8140
+    PDO_LENGTH = 0x8210
+    PDO_LENGTH_EXCEEDED = 0x8220
+    SYNC_LENGTH = 0x8240
+    RPDO_TIMEOUT = 0x8250
+    FOLLOWING_ERROR = 0x8611
+    SENSOR = 0x7300
+    POSITION_SENSOR = 0x7320
+
+
+def describe_emcy(code: int) -> str:
+    try:
+        return EmcyCode(code).name.replace("_", " ").lower()
+    except ValueError:
+        try:
+            return EmcyCode(code & 0xFF00).name.replace("_", " ").lower() + " (class)"
+        except ValueError:
+            return "manufacturer specific" if code >= 0xFF00 else "unknown"
+
+
+@dataclass(frozen=True, slots=True)
+class Emcy:
+    t_s: float
+    node_id: int
+    code: int
+    error_register: int
+    data: bytes
+
+    def __str__(self) -> str:
+        return (f"node {self.node_id}: EMCY 0x{self.code:04X} ({describe_emcy(self.code)}), "
+                f"error register 0x{self.error_register:02X}")
+
+
+@dataclass(frozen=True, slots=True)
+class MasterEvent:
+    t_s: float
+    kind: str  #: "nmt", "boot", "sdo", "preflight", "state", "emcy", "missing", "bad_frame", "heartbeat"
+    node_id: int
+    detail: str
+
+
+# ------------------------------------------------------------ preflight requests
+
+
+@dataclass(frozen=True, slots=True)
+class _Nmt:
+    command: NmtCommand
+
+
+@dataclass(frozen=True, slots=True)
+class _WaitBoot:
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class _SdoRead:
+    node: int
+    index: int
+    sub: int
+    what: str
+
+
+@dataclass(frozen=True, slots=True)
+class _SdoWrite:
+    node: int
+    index: int
+    sub: int
+    data: bytes
+    what: str
+
+
+class Phase(Enum):
+    IDLE = "idle"
+    PREFLIGHT = "preflight"
+    CYCLIC = "cyclic"
+    FAILED = "failed"
+
+
+@dataclass
+class DriveView:
+    """What the master knows of one drive (mutable, owned by the core)."""
+
+    node_id: int
+    rated_torque_Nm: float = 1.0
+    max_torque_permille: int = 0
+    state: State = State.NOT_READY_TO_SWITCH_ON
+    statusword: int = 0
+    mode_display: int = 0
+    mode_sent: int | None = None
+    last_heartbeat_s: float | None = None
+    nmt_state: int | None = None
+    booted: bool = False
+    tpdo1: object | None = None
+    tpdo2: object | None = None
+    identity: dict = field(default_factory=dict)
+
+
+def _u(data: bytes) -> int:
+    return int.from_bytes(data, "little", signed=False)
+
+
+class MasterCore:
+    """CANopen master of the two EMA drives, sans-IO.
+
+    Parameters
+    ----------
+    actuation : Actuation
+        Node ids, bit rate, heartbeat, identity, gear ratio, stroke limits,
+        resolver resolution, SYNC period.
+    """
+
+    def __init__(self, actuation: Actuation) -> None:
+        self.act = actuation
+        c = actuation.canopen
+        self.T = actuation.timing.sync_period_s
+        self.i_total = actuation.mechanics.i_total_rad_per_mm
+        self.counts = actuation.sensors.resolver_counts_per_rev
+        self.hb_timeout_s = c.heartbeat_period_s * c.heartbeat_timeout_factor
+        self.drives = {n: DriveView(n) for n in c.node_ids}
+        self.order = c.node_ids  # EMA 1, EMA 2
+        self.phase = Phase.IDLE
+        self.events: list[MasterEvent] = []
+        self.emcy: list[Emcy] = []
+        self.cycle = 0  #: SYNC frames seen in the cyclic phase
+        self.missing_cycles = 0  #: cycles whose TPDOs were incomplete at the next SYNC
+        self.bad_frames = 0
+        self.unknown_frames = 0
+        self.quick_stop = False  #: shut down by quick stop (abort) rather than orderly
+        self._sdo = {n: SdoClient(n, timeout_s=c.sdo_timeout_s) for n in c.node_ids}
+        self._gen: Generator | None = None
+        self._pending: object | None = None
+        self._boot_deadline = 0.0
+        self._complete = False
+        self._sample: Sample | None = None
+
+    # ---------------------------------------------------------------- events
+
+    def _event(self, t: float, kind: str, node: int, detail: str) -> None:
+        self.events.append(MasterEvent(t, kind, node, detail))
+
+    def drain_events(self) -> list[MasterEvent]:
+        ev, self.events = self.events, []
+        return ev
+
+    # ------------------------------------------------------------- preflight
+
+    def start(self, t: float) -> list[Frame]:
+        """Begin the preflight; returns the first frames to send."""
+        if self.phase is not Phase.IDLE:
+            raise PreflightError(f"master already started (phase {self.phase.value})")
+        self.phase = Phase.PREFLIGHT
+        self._gen = self._preflight()
+        return self._advance(None, t, first=True)
+
+    @property
+    def preflight_done(self) -> bool:
+        return self.phase is Phase.CYCLIC
+
+    def _preflight(self) -> Generator:
+        a = self.act
+        c = a.canopen
+        yield _Nmt(NmtCommand.RESET_NODE)
+        yield _WaitBoot()
+        for n in self.order:
+            d = self.drives[n]
+            ema = self.order.index(n) + 1
+            vendor = _u((yield _SdoRead(n, 0x1018, 1, "vendor id")))
+            product = _u((yield _SdoRead(n, 0x1018, 2, "product code")))
+            revision = _u((yield _SdoRead(n, 0x1018, 3, "revision")))
+            serial = _u((yield _SdoRead(n, 0x1018, 4, "serial number")))
+            d.identity = {"vendor_id": vendor, "product_code": product, "revision": revision, "serial": serial}
+            if vendor != c.vendor_id or product != c.product_code:
+                raise PreflightError(
+                    f"node {n} (EMA {ema}): identity 0x1018 vendor 0x{vendor:08X} product 0x{product:08X} "
+                    f"does not match the profile (canopen.vendor_id 0x{c.vendor_id:08X}, "
+                    f"canopen.product_code 0x{c.product_code:08X})")
+            if revision < c.revision_min:
+                raise PreflightError(f"node {n} (EMA {ema}): revision 0x{revision:08X} below "
+                                     f"canopen.revision_min 0x{c.revision_min:08X}")
+            devtype = _u((yield _SdoRead(n, 0x1000, 0, "device type")))
+            if devtype & 0xFFFF != 402:
+                raise PreflightError(f"node {n} (EMA {ema}): device type 0x{devtype:08X} is not a CiA 402 drive")
+            modes = _u((yield _SdoRead(n, 0x6502, 0, "supported drive modes")))
+            for mode, bit in ((OperationMode.CSP, 7), (OperationMode.CST, 9)):
+                if not modes >> bit & 1:
+                    raise PreflightError(f"node {n} (EMA {ema}): does not support {mode.name} (0x6502 = 0x{modes:08X})")
+            ratio = struct.unpack("<f", (yield _SdoRead(n, 0x2102, 0, "gear ratio")))[0]
+            if not math.isclose(ratio, self.i_total, rel_tol=1e-5):
+                raise PreflightError(f"node {n} (EMA {ema}): gear ratio 0x2102 = {ratio:.6f} rad/mm, profile "
+                                     f"mechanics.i_total_rad_per_mm = {self.i_total:.6f}")
+            inc = _u((yield _SdoRead(n, 0x608F, 1, "encoder increments")))
+            revs = _u((yield _SdoRead(n, 0x608F, 2, "motor revolutions")))
+            if revs == 0 or inc / revs != self.counts:
+                raise PreflightError(f"node {n} (EMA {ema}): encoder resolution 0x608F = {inc}/{revs} "
+                                     f"increments per revolution, profile sensors.resolver_counts_per_rev = {self.counts}")
+            d.rated_torque_Nm = _u((yield _SdoRead(n, 0x6076, 0, "rated torque"))) / 1000.0
+            if d.rated_torque_Nm <= 0:
+                raise PreflightError(f"node {n} (EMA {ema}): rated torque 0x6076 is 0")
+            d.max_torque_permille = _u((yield _SdoRead(n, 0x6072, 0, "max torque")))
+            hb_ms = int(round(c.heartbeat_period_s * 1000))
+            yield _SdoWrite(n, 0x1017, 0, struct.pack("<H", hb_ms), "producer heartbeat time")
+            period_us = int(round(self.T * 1e6))
+            yield _SdoWrite(n, 0x60C2, 1, struct.pack("<B", int(round(self.T * 1000))), "interpolation period value")
+            yield _SdoWrite(n, 0x60C2, 2, struct.pack("<b", -3), "interpolation period index")
+            lim = rad_to_increments(a.mechanics.stroke_limit_mm * self.i_total, self.counts)
+            yield _SdoWrite(n, 0x607D, 1, struct.pack("<i", -lim), "software position limit min")
+            yield _SdoWrite(n, 0x607D, 2, struct.pack("<i", lim), "software position limit max")
+            yield _SdoWrite(n, 0x605A, 0, struct.pack("<h", 2), "quick stop option code")
+            yield _SdoWrite(n, 0x1006, 0, struct.pack("<I", period_us), "communication cycle period")
+            for w in DEFAULT_LAYOUT.configuration_writes(n):
+                yield _SdoWrite(n, w.index, w.subindex, w.data, w.what)
+            self._event(0.0, "preflight", n, f"configured: identity {d.identity}, rated torque "
+                                             f"{d.rated_torque_Nm} Nm, heartbeat {hb_ms} ms")
+        yield _Nmt(NmtCommand.START)
+
+    def _advance(self, result: object, t: float, first: bool = False) -> list[Frame]:
+        """Run the preflight generator until it waits for something."""
+        out: list[Frame] = []
+        assert self._gen is not None
+        while True:
+            try:
+                req = next(self._gen) if first else self._gen.send(result)
+                first = False
+            except StopIteration:
+                self._gen = None
+                self._pending = None
+                self.phase = Phase.CYCLIC
+                for d in self.drives.values():
+                    d.last_heartbeat_s = t  # the consumer starts now
+                return out
+            result = None
+            self._pending = req
+            if isinstance(req, _Nmt):
+                out.append(Frame(0x000, bytes([int(req.command), 0])))
+                self._event(t, "nmt", 0, f"NMT {req.command.name} to all nodes")
+                if req.command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
+                    for d in self.drives.values():
+                        d.booted = False
+                result = True
+                continue
+            if isinstance(req, _WaitBoot):
+                self._boot_deadline = t + self.act.canopen.boot_timeout_s
+                if all(d.booted for d in self.drives.values()):
+                    result = True
+                    continue
+                return out
+            if isinstance(req, _SdoRead):
+                out.append(self._sdo[req.node].start_upload(req.index, req.sub, t))
+                return out
+            if isinstance(req, _SdoWrite):
+                out.append(self._sdo[req.node].start_download(req.index, req.sub, req.data, t))
+                return out
+            raise PreflightError(f"internal: unknown preflight request {req!r}")  # pragma: no cover
+
+    # -------------------------------------------------------------- frames in
+
+    def on_frame(self, frame: Frame, t: float) -> list[Frame]:
+        """Feed one frame seen on the bus; returns frames to send.
+
+        Raises the typed errors of the module on preflight failures, drive
+        faults and protocol aborts. Unknown and malformed frames are counted
+        and otherwise ignored.
+        """
+        cid = frame.arbitration_id
+        try:
+            if cid == SYNC_COB_ID:
+                self._on_sync(t)
+                return []
+            base, node = cid & 0x780, cid & 0x07F
+            if node in self.drives:
+                if base == HEARTBEAT_COB_ID_BASE:
+                    return self._on_heartbeat(node, frame.data, t)
+                if base == EMCY_COB_ID_BASE:
+                    self._on_emcy(node, frame.data, t)
+                    return []
+                if base == 0x580:
+                    return self._on_sdo(node, frame, t)
+                if base == 0x180:
+                    self.drives[node].tpdo1 = decode_tpdo1(frame)
+                    self._check_complete(t)
+                    return []
+                if base == 0x280:
+                    self.drives[node].tpdo2 = decode_tpdo2(frame)
+                    self._check_complete(t)
+                    return []
+                if base in (0x200, 0x300, 0x600):
+                    return []  # our own RPDOs / SDO requests seen on the bus
+            if cid == 0x000:
+                return []  # NMT (ours)
+            self.unknown_frames += 1
+            return []
+        except PdoError as exc:
+            self.bad_frames += 1
+            self._event(t, "bad_frame", cid & 0x7F, str(exc))
+            return []
+
+    def _on_sdo(self, node: int, frame: Frame, t: float) -> list[Frame]:
+        if self.phase is not Phase.PREFLIGHT:
+            return []
+        res = self._sdo[node].on_frame(frame, t)  # raises SdoAbortError with code and meaning
+        if isinstance(res, Frame):
+            return [res]
+        if isinstance(res, SdoEvent):
+            return self._advance(res.data if res.transfer.value == "upload" else True, t)
+        return []
+
+    def _on_heartbeat(self, node: int, data: bytes, t: float) -> list[Frame]:
+        if len(data) != 1:
+            self.bad_frames += 1
+            return []
+        d = self.drives[node]
+        state = data[0] & 0x7F
+        d.last_heartbeat_s = t
+        if state == NmtState.BOOT_UP:
+            d.booted = True
+            self._event(t, "boot", node, "boot-up")
+            if self.phase is Phase.PREFLIGHT and isinstance(self._pending, _WaitBoot) and \
+                    all(x.booted for x in self.drives.values()):
+                return self._advance(True, t)
+            if self.phase is Phase.CYCLIC:
+                raise DriveFault(f"node {node}: unexpected boot-up during the check (drive reset)")
+            return []
+        if self.phase is Phase.CYCLIC and state != NmtState.OPERATIONAL and d.nmt_state == NmtState.OPERATIONAL:
+            raise DriveFault(f"node {node}: left NMT operational (heartbeat state 0x{state:02X})")
+        d.nmt_state = state
+        return []
+
+    def _on_emcy(self, node: int, data: bytes, t: float) -> None:
+        if len(data) != 8:
+            self.bad_frames += 1
+            return
+        code, reg = struct.unpack_from("<HB", data)
+        e = Emcy(t, node, code, reg, bytes(data[3:]))
+        self.emcy.append(e)
+        self._event(t, "emcy", node, str(e))
+        if code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
+            raise DriveFault(str(e))
+
+    # ------------------------------------------------------------------ timing
+
+    def poll(self, t: float) -> list[Frame]:
+        """Check timeouts at time ``t`` (boot-up, SDO, heartbeat)."""
+        if self.phase is Phase.PREFLIGHT:
+            if isinstance(self._pending, _WaitBoot) and t > self._boot_deadline:
+                missing = [n for n, d in self.drives.items() if not d.booted]
+                raise PreflightError(f"node(s) {missing}: no boot-up within "
+                                     f"canopen.boot_timeout_s = {self.act.canopen.boot_timeout_s} s of NMT reset")
+            for c in self._sdo.values():
+                c.poll(t)  # raises SdoTimeout (its abort frame is in the exception)
+        elif self.phase is Phase.CYCLIC:
+            for n, d in self.drives.items():
+                if d.last_heartbeat_s is not None and t - d.last_heartbeat_s > self.hb_timeout_s:
+                    raise HeartbeatLost(f"node {n}: heartbeat lost (none for {t - d.last_heartbeat_s:.3f} s, "
+                                        f"timeout {self.hb_timeout_s:.3f} s)")
+        return []
+
+    # ------------------------------------------------------------------ cyclic
+
+    def _on_sync(self, t: float) -> None:
+        if self.phase is not Phase.CYCLIC:
+            return
+        if self.cycle > 0 and not self._complete:
+            self.missing_cycles += 1
+            self._event(t, "missing", 0, f"cycle {self.cycle}: TPDOs incomplete at the next SYNC")
+        self.cycle += 1
+        self._complete = False
+        self._sample = None
+        for d in self.drives.values():
+            d.tpdo1 = d.tpdo2 = None
+
+    def _check_complete(self, t: float) -> None:
+        if self.phase is not Phase.CYCLIC or self._complete:
+            return
+        if any(d.tpdo1 is None or d.tpdo2 is None for d in self.drives.values()):
+            return
+        self._complete = True
+        d1, d2 = (self.drives[n] for n in self.order)
+        for d in (d1, d2):
+            d.statusword = d.tpdo1.statusword
+            new = decode_state(d.statusword)
+            if new != d.state:
+                self._event(t, "state", d.node_id, f"{d.state.name} -> {new.name}")
+                d.state = new
+            d.mode_display = d.tpdo1.mode_display
+        self._sample = Sample(
+            t_s=self.cycle * self.T,
+            phi1_rad=increments_to_rad(d1.tpdo1.position_inc, self.counts),
+            phi2_rad=increments_to_rad(d2.tpdo1.position_inc, self.counts),
+            s1_mm=lvdt_um_to_mm(d1.tpdo2.lvdt_um),
+            s2_mm=lvdt_um_to_mm(d2.tpdo2.lvdt_um),
+            F1_N=force_dN_to_newton(d1.tpdo2.force_dN),
+            F2_N=force_dN_to_newton(d2.tpdo2.force_dN),
+        )
+        for d in (d1, d2):
+            if d.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+                raise DriveFault(f"node {d.node_id}: drive in {d.state.name} (statusword 0x{d.statusword:04X})")
+
+    def take_sample(self) -> Sample | None:
+        """The sample of the current cycle once both drives' TPDOs arrived (else None)."""
+        s, self._sample = self._sample, None
+        return s
+
+    def state_of(self, ema: int) -> State:
+        return self.drives[self.order[ema - 1]].state
+
+    def setpoint_frames(self, sp1: Setpoint, sp2: Setpoint, sample: Sample) -> list[Frame]:
+        """RPDO frames that carry the setpoints to the drives for the next SYNC.
+
+        POSITION: CSP, target position; FORCE: CST, target torque (target
+        position follows the actual one, so a switch back to CSP does not
+        jump); DISABLED: down to SWITCH_ON_DISABLED, by quick stop when
+        :attr:`quick_stop` is set. The controlword walks the CiA 402 state
+        machine one transition per cycle towards Operation enabled.
+        """
+        out: list[Frame] = []
+        for n, sp, phi in ((self.order[0], sp1, sample.phi1_rad), (self.order[1], sp2, sample.phi2_rad)):
+            d = self.drives[n]
+            pos = rad_to_increments(phi, self.counts)
+            torque = 0
+            if sp.mode is DriveMode.DISABLED:
+                if self.quick_stop and d.state is State.OPERATION_ENABLED:
+                    cmd = Command.QUICK_STOP
+                elif d.state is State.QUICK_STOP_ACTIVE:
+                    cmd = Command.QUICK_STOP  # keep it until the drive is through
+                else:
+                    cmd = next_command(d.state, State.SWITCH_ON_DISABLED) or _hold(d.state)
+                mode = d.mode_sent if d.mode_sent is not None else int(OperationMode.CSP)
+            else:
+                mode = int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST)
+                if sp.mode is DriveMode.POSITION:
+                    pos = rad_to_increments(sp.value, self.counts)
+                else:
+                    torque = force_to_permille(sp.value, self.i_total, d.rated_torque_Nm)
+                target = State.OPERATION_ENABLED
+                cmd = next_command(d.state, target) if d.state is not State.FAULT else Command.FAULT_RESET
+                if cmd is None:
+                    cmd = _hold(d.state)
+            if mode != d.mode_sent:
+                out.append(encode_rpdo2(n, Rpdo2(mode)))
+                d.mode_sent = mode
+            cw = controlword(cmd) if cmd is not None else 0
+            out.append(encode_rpdo1(n, Rpdo1(cw, pos, torque)))
+        return out
+
+    def nmt_frames(self, command: NmtCommand) -> list[Frame]:
+        return [Frame(0x000, bytes([int(command), 0]))]
+
+    def all_in(self, state: State) -> bool:
+        return all(d.state is state for d in self.drives.values())
+
+    def modes_confirmed(self, sp1: Setpoint, sp2: Setpoint) -> bool:
+        want = []
+        for sp in (sp1, sp2):
+            want.append(int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST))
+        return all(self.drives[n].mode_display == w for n, w in zip(self.order, want))
+
+
+def _hold(state: State) -> Command | None:
+    """The controlword that keeps a drive where it is."""
+    return {
+        State.SWITCH_ON_DISABLED: Command.DISABLE_VOLTAGE,
+        State.READY_TO_SWITCH_ON: Command.SHUTDOWN,
+        State.SWITCHED_ON: Command.SWITCH_ON,
+        State.OPERATION_ENABLED: Command.ENABLE_OPERATION,
+        State.QUICK_STOP_ACTIVE: Command.QUICK_STOP,
+    }.get(state)

@@ -1,0 +1,324 @@
+"""Load profiles (TOML) from a given path into validated frozen dataclasses.
+
+Three profiles describe a check: the actuation (:class:`hil.config.Actuation`),
+the check itself (:class:`hil.config.Check`) and, for dry-runs, the simulated
+rig (:class:`sim.params.RigParams`). The defaults ship in the ``profiles``
+package. Every error names the file and the dotted field, e.g.
+``check.toml: force_fight.amplitude_fraction_of_limit = 0.2 is above the hard
+cap 0.15``; unknown keys are refused with the closest known name, which catches
+wrong units (``sweep_speed_mm_per_min`` is not ``sweep_speed_mm_per_s``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import tomllib
+import typing
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from hil.config import (
+    HARD_FORCE_FIGHT_FRACTION,
+    HARD_MAX_FORCE_FRACTION,
+    Actuation,
+    Check,
+)
+from hil.errors import ProfileError
+from sim import effects as sim_effects
+from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams
+
+
+def default_profile_path(name: str) -> Path:
+    """Path of a profile shipped in the ``profiles`` package (e.g. ``"check.toml"``)."""
+    return Path(str(resources.files("profiles").joinpath(name)))
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ProfileError(f"{path}: profile not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"{path}: not valid TOML: {exc}") from None
+
+
+def _check_keys(table: dict, known: list[str], where: str, fname: str) -> None:
+    for key in table:
+        if key not in known:
+            close = difflib.get_close_matches(key, known, n=1, cutoff=0.5)
+            hint = f" (did you mean '{close[0]}'? units are part of the name)" if close else ""
+            raise ProfileError(f"{fname}: unknown field '{where}{key}'{hint}")
+
+
+def _convert_scalar(value: Any, typ: Any, name: str, fname: str) -> Any:
+    if typ is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ProfileError(f"{fname}: field '{name}' must be a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ProfileError(f"{fname}: field '{name}' must be finite, got {value!r}")
+        return value
+    if typ is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ProfileError(f"{fname}: field '{name}' must be an integer, got {value!r}")
+        return value
+    if typ is str:
+        if not isinstance(value, str):
+            raise ProfileError(f"{fname}: field '{name}' must be a string, got {value!r}")
+        return value
+    raise ProfileError(f"{fname}: field '{name}' has an unsupported type {typ!r}")  # pragma: no cover
+
+
+def _check_range(value: Any, meta: typing.Mapping, name: str, fname: str) -> None:
+    lo, hi, hard = meta.get("lo"), meta.get("hi"), meta.get("hard_max")
+    if hard is not None and value > hard:
+        raise ProfileError(f"{fname}: field '{name}' = {value} is above the hard cap {hard}")
+    if lo is not None:
+        if meta.get("lo_open") and not value > lo:
+            raise ProfileError(f"{fname}: field '{name}' = {value} must be > {lo}")
+        if not meta.get("lo_open") and not value >= lo:
+            raise ProfileError(f"{fname}: field '{name}' = {value} must be >= {lo}")
+    if hi is not None and value > hi:
+        raise ProfileError(f"{fname}: field '{name}' = {value} must be <= {hi}")
+
+
+def build_dataclass(cls: type, table: Any, fname: str, where: str = "",
+                    ranges: typing.Mapping[str, tuple] | None = None) -> Any:
+    """Build a (nested) frozen dataclass from a TOML table, validating everything.
+
+    Parameters
+    ----------
+    cls : dataclass type
+    table : dict
+        The TOML table.
+    fname : str
+        File name quoted in errors.
+    where : str
+        Dotted prefix of this table quoted in errors.
+    ranges : mapping, optional
+        ``{"Class.field": (lo, hi)}`` for classes without range metadata.
+    """
+    if not isinstance(table, dict):
+        raise ProfileError(f"{fname}: '{where.rstrip('.') or 'profile'}' must be a table")
+    hints = typing.get_type_hints(cls)
+    fields = [f for f in dataclasses.fields(cls) if f.init]
+    names = [f.name for f in fields]
+    _check_keys(table, names, where, fname)
+    kwargs = {}
+    for f in fields:
+        name = f"{where}{f.name}"
+        if f.name not in table:
+            if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING:
+                continue
+            raise ProfileError(f"{fname}: missing field '{name}'")
+        typ = hints[f.name]
+        value = table[f.name]
+        if dataclasses.is_dataclass(typ):
+            kwargs[f.name] = build_dataclass(typ, value, fname, name + ".", ranges)
+            continue
+        value = _convert_scalar(value, typ, name, fname)
+        meta = dict(f.metadata)
+        if ranges and f"{cls.__name__}.{f.name}" in ranges:
+            lo, hi = ranges[f"{cls.__name__}.{f.name}"]
+            meta.update(lo=lo, hi=hi, lo_open=False)
+        if meta:
+            _check_range(value, meta, name, fname)
+        kwargs[f.name] = value
+    return cls(**kwargs)
+
+
+# ----------------------------------------------------------------- loaders
+
+
+def load_actuation(path: str | Path | None = None) -> Actuation:
+    """Load and validate an actuation profile (default: the shipped one)."""
+    path = Path(path) if path is not None else default_profile_path("actuation.toml")
+    act = build_dataclass(Actuation, _read_toml(path), path.name)
+    if act.canopen.node_id_ema1 == act.canopen.node_id_ema2:
+        raise ProfileError(f"{path.name}: fields 'canopen.node_id_ema1' and 'canopen.node_id_ema2' "
+                           f"are both {act.canopen.node_id_ema1}; the drives need distinct node ids")
+    return act
+
+
+def resolve_eds(act: Actuation, profile_path: str | Path | None) -> Path:
+    """Path of the EDS an actuation profile names (relative to the profile, else shipped)."""
+    name = act.canopen.eds
+    if profile_path is not None:
+        p = Path(profile_path).parent / name
+        if p.exists():
+            return p
+    p = Path(name)
+    if p.is_absolute() and p.exists():
+        return p
+    shipped = default_profile_path(name)
+    if shipped.exists():
+        return shipped
+    raise ProfileError(f"actuation profile: field 'canopen.eds' = {name!r}: no such EDS "
+                       f"(looked next to the profile and among the shipped profiles)")
+
+
+def load_check(path: str | Path | None = None, actuation: Actuation | None = None) -> Check:
+    """Load and validate a check profile; with ``actuation``, also cross-check limits."""
+    path = Path(path) if path is not None else default_profile_path("check.toml")
+    check = build_dataclass(Check, _read_toml(path), path.name)
+    if actuation is not None:
+        validate_check(check, actuation, path.name)
+    return check
+
+
+def validate_check(check: Check, act: Actuation, fname: str = "check.toml") -> None:
+    """Cross-field checks between a check profile and the actuation it runs on."""
+    f_limit = act.mechanics.limit_load_N
+    cap = HARD_MAX_FORCE_FRACTION * f_limit
+    s = check.safety
+    if s.max_force_N > cap:
+        raise ProfileError(
+            f"{fname}: field 'safety.max_force_N' = {s.max_force_N} is above the hard cap "
+            f"{cap:g} N ({HARD_MAX_FORCE_FRACTION:.0%} of limit_load_N)")
+    ff = check.force_fight.amplitude_fraction_of_limit * f_limit
+    if ff >= s.max_force_N:
+        raise ProfileError(
+            f"{fname}: field 'force_fight.amplitude_fraction_of_limit' gives {ff:g} N, "
+            f"not below safety.max_force_N = {s.max_force_N:g} N")
+    if check.force_fight.amplitude_fraction_of_limit > HARD_FORCE_FIGHT_FRACTION:  # pragma: no cover
+        raise ProfileError(f"{fname}: force fight above the hard cap")  # (metadata catches it first)
+    if check.calibration.opposing_force_N >= s.max_force_N:
+        raise ProfileError(
+            f"{fname}: field 'calibration.opposing_force_N' = {check.calibration.opposing_force_N:g} N "
+            f"is not below safety.max_force_N = {s.max_force_N:g} N")
+    if s.max_stroke_mm > act.mechanics.stroke_limit_mm:
+        raise ProfileError(
+            f"{fname}: field 'safety.max_stroke_mm' = {s.max_stroke_mm} is above the hard cap "
+            f"{act.mechanics.stroke_limit_mm} mm (the actuation's stroke_limit_mm)")
+    if check.calibration.sweep_amplitude_mm >= s.max_stroke_mm:
+        raise ProfileError(
+            f"{fname}: field 'calibration.sweep_amplitude_mm' = {check.calibration.sweep_amplitude_mm} "
+            f"must stay below safety.max_stroke_mm = {s.max_stroke_mm}")
+    for name, v in (("approach.speed_mm_per_s", check.approach.speed_mm_per_s),
+                    ("calibration.sweep_speed_mm_per_s", check.calibration.sweep_speed_mm_per_s)):
+        if v >= s.max_velocity_mm_per_s:
+            raise ProfileError(f"{fname}: field '{name}' = {v} must stay below "
+                               f"safety.max_velocity_mm_per_s = {s.max_velocity_mm_per_s}")
+
+
+#: Ranges of the simulated-rig parameters (sim/params.py holds only values).
+_SIM_RANGES: dict[str, tuple] = {
+    "EmaMechanics.backlash_int_mm": (0.0, 5.0),
+    "EmaMechanics.stiffness_compression_N_per_mm": (1.0, 1e7),
+    "EmaMechanics.stiffness_tension_N_per_mm": (1.0, 1e7),
+    "EmaMechanics.bearing_backlash_mm": (0.0, 5.0),
+    "EmaMechanics.bearing_stiffness_N_per_mm": (1.0, 1e8),
+    "EmaMechanics.housing_stiffness_N_per_mm": (1.0, 1e8),
+    "DriveParams.motor_inertia_kg_m2": (1e-7, 10.0),
+    "DriveParams.motor_viscous_Nm_s_per_rad": (0.0, 10.0),
+    "DriveParams.torque_limit_Nm": (1e-3, 1e4),
+    "DriveParams.position_bandwidth_rad_s": (1.0, 2000.0),
+    "DriveParams.position_damping": (0.05, 5.0),
+    "DriveParams.position_integral_time_s": (0.0, 100.0),
+    "SurfaceParams.mass_kg": (1e-3, 1e6),
+    "SurfaceParams.damping_N_s_per_mm": (0.0, 1e6),
+    "SurfaceParams.load_stiffness_N_per_mm": (0.0, 1e7),
+    "SensorParams.lvdt_gain": (0.5, 2.0),
+    "SensorParams.lvdt_offset_mm": (-50.0, 50.0),
+    "SensorParams.lvdt_nonlinearity_mm": (-5.0, 5.0),
+    "SensorParams.lvdt_full_scale_mm": (1e-3, 500.0),
+    "SensorParams.lvdt_noise_pp_mm": (0.0, 5.0),
+    "SensorParams.loadcell_gain": (0.5, 2.0),
+    "SensorParams.loadcell_noise_std_N": (0.0, 1e4),
+    "SensorParams.resolver_bits": (4, 24),
+}
+
+
+@dataclass(frozen=True)
+class SimRigProfile:
+    """A simulated-rig profile: the rig parameters and the seed recorded with it."""
+
+    params: RigParams
+    seed: int
+
+
+def load_simrig(path: str | Path | None = None) -> SimRigProfile:
+    """Load and validate a simulated-rig profile (default: the shipped one)."""
+    path = Path(path) if path is not None else default_profile_path("simrig.toml")
+    fname = path.name
+    data = _read_toml(path)
+    known = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2", "effects"]
+    _check_keys(data, known, "", fname)
+    for key in known[:-1]:
+        if key not in data:
+            raise ProfileError(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
+    seed = data["seed"]
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ProfileError(f"{fname}: field 'seed' must be a non-negative integer, got {seed!r}")
+    rig = data["rig"]
+    if not isinstance(rig, dict):
+        raise ProfileError(f"{fname}: 'rig' must be a table")
+    rig_known = ["i_total_rad_per_mm", "stroke_limit_mm", "sample_period_s", "substeps"]
+    _check_keys(rig, rig_known, "rig.", fname)
+    for k in rig_known:
+        if k not in rig:
+            raise ProfileError(f"{fname}: missing field 'rig.{k}'")
+    i_total = _convert_scalar(rig["i_total_rad_per_mm"], float, "rig.i_total_rad_per_mm", fname)
+    stroke = _convert_scalar(rig["stroke_limit_mm"], float, "rig.stroke_limit_mm", fname)
+    period = _convert_scalar(rig["sample_period_s"], float, "rig.sample_period_s", fname)
+    substeps = _convert_scalar(rig["substeps"], int, "rig.substeps", fname)
+    _check_range(i_total, {"lo": 0.0, "lo_open": True, "hi": 1e4}, "rig.i_total_rad_per_mm", fname)
+    _check_range(stroke, {"lo": 0.0, "lo_open": True, "hi": 500.0}, "rig.stroke_limit_mm", fname)
+    _check_range(period, {"lo": 1e-4, "hi": 0.1}, "rig.sample_period_s", fname)
+    _check_range(substeps, {"lo": 1, "hi": 1000}, "rig.substeps", fname)
+    parts = {}
+    for key, cls in (("ema1", EmaMechanics), ("ema2", EmaMechanics), ("drive", DriveParams),
+                     ("surface", SurfaceParams), ("sensors1", SensorParams), ("sensors2", SensorParams)):
+        parts[key] = build_dataclass(cls, data[key], fname, key + ".", _SIM_RANGES)
+    effects = tuple(_load_effect(tbl, i, fname) for i, tbl in enumerate(data.get("effects", [])))
+    params = RigParams(i_total_rad_per_mm=i_total, stroke_limit_mm=stroke, sample_period_s=period,
+                       substeps=substeps, effects=effects, **parts)
+    return SimRigProfile(params=params, seed=seed)
+
+
+def effect_registry() -> dict[str, type]:
+    """Machine name (as in profiles and diagnosis.json) -> effect class of :mod:`sim.effects`."""
+    reg = getattr(sim_effects, "EFFECTS", None)
+    if reg is not None:
+        return dict(reg)
+    import re
+    return {re.sub(r"(?<!^)(?=[A-Z])", "_", c.__name__).lower(): c for c in sim_effects._KNOWN}
+
+
+def _load_effect(tbl: Any, index: int, fname: str) -> Any:
+    where = f"effects[{index}]"
+    if not isinstance(tbl, dict):
+        raise ProfileError(f"{fname}: '{where}' must be a table")
+    name = tbl.get("name")
+    registry = effect_registry()
+    if name not in registry:
+        close = difflib.get_close_matches(str(name), list(registry), n=1, cutoff=0.5)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ProfileError(f"{fname}: field '{where}.name' = {name!r} is not a known effect{hint}; "
+                           f"known: {', '.join(sorted(registry))}")
+    body = {k: v for k, v in tbl.items() if k != "name"}
+    try:
+        return build_dataclass(registry[name], body, fname, where + ".")
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, ProfileError):
+            raise
+        raise ProfileError(f"{fname}: '{where}': {exc}") from None
+
+
+def snapshot(obj: Any) -> Any:
+    """A JSON-serialisable snapshot of a profile dataclass (for meta.json)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        out = {f.name: snapshot(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        if hasattr(obj, "name") and isinstance(getattr(type(obj), "NAME", None), str):
+            out["name"] = type(obj).NAME
+        return out
+    if isinstance(obj, (tuple, list)):
+        return [snapshot(x) for x in obj]
+    if isinstance(obj, dict):
+        return {str(k): snapshot(v) for k, v in obj.items()}
+    return obj

@@ -1,0 +1,209 @@
+"""The run folder: signals CSV written as it happens, meta.json, result.json.
+
+Format (see README, "File formats")::
+
+    RUN/signals.csv   t,phi1,phi2,s1,s2,F1,F2,mode1,sp1,mode2,sp2,step
+                      t in s, phi in rad, s in mm, F in N; mode is the CiA 402
+                      mode (0 disabled, 8 CSP, 10 CST), sp the setpoint (rad or N)
+    RUN/meta.json     profiles snapshot, software version, seed, step times
+    RUN/result.json   the analysis result
+    RUN/report.html   the report
+
+The CSV is flushed at least every ``flush_rows`` rows and at every step
+change, so a crash loses at most that much. A bare CSV recorded elsewhere
+needs only the first seven columns.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hil.errors import RecordingError
+from hil.types import Sample, Setpoint
+
+SIGNAL_COLUMNS = ("t", "phi1", "phi2", "s1", "s2", "F1", "F2")
+EXTRA_COLUMNS = ("mode1", "sp1", "mode2", "sp2", "step")
+COLUMN_UNITS = {"t": "s", "phi1": "rad", "phi2": "rad", "s1": "mm", "s2": "mm", "F1": "N", "F2": "N"}
+
+
+def write_json_atomic(path: Path, obj: Any) -> None:
+    """Write JSON via a temporary file and rename, so a crash never leaves half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as fh:
+        json.dump(obj, fh, indent=2, sort_keys=False, default=_json_default)
+        fh.write("\n")
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+class SignalsWriter:
+    """Append-only writer of ``signals.csv`` (IO shell)."""
+
+    def __init__(self, path: Path, flush_rows: int = 500) -> None:
+        self.path = path
+        self._fh = open(path, "w", buffering=1 << 16)
+        self._fh.write(",".join(SIGNAL_COLUMNS + EXTRA_COLUMNS) + "\n")
+        self._pending = 0
+        self._flush_rows = flush_rows
+        self.rows = 0
+
+    def write(self, smp: Sample, sp1: Setpoint, sp2: Setpoint, step: str) -> None:
+        self._fh.write(
+            f"{smp.t_s:.4f},{smp.phi1_rad:.7f},{smp.phi2_rad:.7f},{smp.s1_mm:.6f},{smp.s2_mm:.6f},"
+            f"{smp.F1_N:.3f},{smp.F2_N:.3f},{int(sp1.mode)},{sp1.value:.7g},{int(sp2.mode)},"
+            f"{sp2.value:.7g},{step}\n")
+        self.rows += 1
+        self._pending += 1
+        if self._pending >= self._flush_rows:
+            self.flush()
+
+    def flush(self) -> None:
+        self._fh.flush()
+        self._pending = 0
+
+    def close(self) -> None:
+        if not self._fh.closed:
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+            self._fh.close()
+
+
+@dataclass(frozen=True)
+class Signals:
+    """A recording as arrays (units as in :data:`COLUMN_UNITS`).
+
+    ``step`` is an array of step names, or None for a bare recording;
+    ``mode1/sp1/mode2/sp2`` likewise.
+    """
+
+    t: np.ndarray
+    phi1: np.ndarray
+    phi2: np.ndarray
+    s1: np.ndarray
+    s2: np.ndarray
+    F1: np.ndarray
+    F2: np.ndarray
+    step: np.ndarray | None = None
+    mode1: np.ndarray | None = None
+    sp1: np.ndarray | None = None
+    mode2: np.ndarray | None = None
+    sp2: np.ndarray | None = None
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def n(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def sample_period_s(self) -> float:
+        return float(np.median(np.diff(self.t)))
+
+    def select(self, mask: np.ndarray) -> "Signals":
+        kw = {}
+        for name in SIGNAL_COLUMNS + EXTRA_COLUMNS:
+            v = getattr(self, name)
+            kw[name] = None if v is None else v[mask]
+        return Signals(notes=self.notes, **kw)
+
+
+def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) -> Signals:
+    """Read a signals CSV (a run folder's or one recorded elsewhere).
+
+    Requires the columns ``t,phi1,phi2,s1,s2,F1,F2``; uses ``mode1,sp1,mode2,sp2,step``
+    when present. Refuses NaN, non-numeric cells and non-increasing time with
+    the line number. A last line cut short by a crash is dropped and noted.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise RecordingError(f"{path}: no such file") from None
+    except UnicodeDecodeError:
+        raise RecordingError(f"{path}: not a text CSV file") from None
+    lines = text.splitlines()
+    if not lines:
+        raise RecordingError(f"{path}: empty file")
+    header = [h.strip() for h in next(csv.reader(io.StringIO(lines[0])))]
+    missing = [c for c in SIGNAL_COLUMNS if c not in header]
+    if missing:
+        raise RecordingError(
+            f"{path}: line 1: missing column(s) {', '.join(missing)}; expected at least "
+            + ",".join(f"{c} [{COLUMN_UNITS[c]}]" for c in SIGNAL_COLUMNS))
+    notes: list[str] = []
+    body = lines[1:]
+    ncol = len(header)
+    if body and allow_truncated_last_line and not text.endswith("\n"):
+        body = body[:-1]
+        notes.append("last line incomplete (recording cut short), dropped")
+    if not body:
+        raise RecordingError(f"{path}: no data rows")
+    idx = {c: header.index(c) for c in header}
+    numeric = [c for c in SIGNAL_COLUMNS + ("mode1", "sp1", "mode2", "sp2") if c in idx]
+    cols: dict[str, list] = {c: [] for c in numeric}
+    steps: list[str] = []
+    has_step = "step" in idx
+    for ln, line in enumerate(body, start=2):
+        cells = line.split(",")
+        if len(cells) != ncol:
+            raise RecordingError(f"{path}: line {ln}: {len(cells)} fields, header has {ncol}")
+        for c in numeric:
+            cell = cells[idx[c]]
+            try:
+                v = float(cell)
+            except ValueError:
+                raise RecordingError(f"{path}: line {ln}: column '{c}': not a number: {cell!r}") from None
+            if not math.isfinite(v):
+                raise RecordingError(f"{path}: line {ln}: column '{c}' [{COLUMN_UNITS.get(c, '-')}] is {cell}")
+            cols[c].append(v)
+        if has_step:
+            steps.append(cells[idx["step"]].strip())
+    arrays = {c: np.asarray(v, dtype=float) for c, v in cols.items()}
+    t = arrays["t"]
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        k = int(bad[0])
+        raise RecordingError(
+            f"{path}: line {k + 3}: time not increasing (t = {t[k + 1]} s after {t[k]} s)")
+    if t.size >= 3:
+        dt = np.diff(t)
+        med = float(np.median(dt))
+        gaps = np.flatnonzero(dt > 1.5 * med)
+        if gaps.size:
+            notes.append(f"{gaps.size} gap(s) in time, first at t = {t[gaps[0]]:.4f} s")
+    return Signals(
+        t=t, phi1=arrays["phi1"], phi2=arrays["phi2"], s1=arrays["s1"], s2=arrays["s2"],
+        F1=arrays["F1"], F2=arrays["F2"],
+        step=np.asarray(steps) if has_step else None,
+        mode1=arrays.get("mode1"), sp1=arrays.get("sp1"), mode2=arrays.get("mode2"), sp2=arrays.get("sp2"),
+        notes=tuple(notes))
+
+
+def resolve_recording(arg: str | Path) -> tuple[Path, Path | None]:
+    """Map a RUN_FOLDER or SIGNALS.csv argument to (signals path, run folder or None)."""
+    p = Path(arg)
+    if p.is_dir():
+        sig = p / "signals.csv"
+        if not sig.exists():
+            raise RecordingError(f"{p}: run folder without signals.csv")
+        return sig, p
+    if not p.exists():
+        raise RecordingError(f"{p}: no such file or folder")
+    return p, None

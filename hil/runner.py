@@ -1,0 +1,146 @@
+"""The check loop: sequence core + supervisor + run-folder logging over a link.
+
+A *link* is whatever carries setpoints to the two drives and brings back one
+synchronous sample per cycle: the plant directly (:class:`PlantLink`, for
+``emacheck simulate``) or the CANopen master (``dry-run``/``run``). The loop
+is the same for all of them, so the sequence core runs unchanged on hardware.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Protocol
+
+import numpy as np
+
+from hil import __version__
+from hil.config import Actuation, Check
+from hil.profiles import snapshot
+from hil.runfolder import SignalsWriter, write_json_atomic
+from hil.sequence import CheckSequence, CycleOutput, Progress, Step
+from hil.supervisor import Supervisor
+from hil.types import DriveMode, Sample, Setpoint
+
+DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
+
+
+class Link(Protocol):
+    """Carries setpoints to the two drives and returns the next synchronous sample."""
+
+    def first_sample(self) -> Sample: ...
+
+    def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample: ...
+
+    def close(self) -> None: ...
+
+
+class PlantLink:
+    """The simulated plant as a link, no CAN in between (``emacheck simulate``)."""
+
+    def __init__(self, plant) -> None:  # sim.plant.RigPlant
+        self.plant = plant
+
+    def first_sample(self) -> Sample:
+        return self.plant.step(DISABLED, DISABLED)
+
+    def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
+        return self.plant.step(sp1, sp2)
+
+    def close(self) -> None:
+        pass
+
+
+@dataclass(frozen=True)
+class LoopOutcome:
+    status: str  #: "done" or "aborted"
+    reason: str
+    samples: int
+    duration_s: float  #: rig (simulated or real) time
+    steps: dict  #: step name -> [t_start, t_end]
+
+
+def _now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def start_meta(act: Actuation, check: Check, extra: dict) -> dict:
+    """The meta.json content at the start of a run."""
+    return {
+        "software": {"name": "emacheck", "version": __version__},
+        "started_utc": _now_iso(),
+        "status": "running",
+        "profiles": {"actuation": snapshot(act), "check": snapshot(check)},
+        "steps": {},
+        **extra,
+    }
+
+
+def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dict,
+              on_cycle: Callable[[Progress, Sample], None] | None = None,
+              max_duration_s: float | None = None) -> LoopOutcome:
+    """Run the check over ``link``, logging every cycle into ``run_dir``.
+
+    ``meta`` is written to meta.json at the start and updated at each step
+    change and at the end. Any exception aborts the sequence, stops both
+    drives (DISABLED), closes the log and is re-raised.
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    seq = CheckSequence(act, check)
+    sup = Supervisor(act, check)
+    writer = SignalsWriter(run_dir / "signals.csv")
+    meta_path = run_dir / "meta.json"
+    write_json_atomic(meta_path, meta)
+    limit = max_duration_s if max_duration_s is not None else 3.0 * seq.planned_duration_s() + 60.0
+    sp1 = sp2 = DISABLED
+    steps: dict[str, list[float]] = {}
+    smp = link.first_sample()
+    t_start = smp.t_s
+    try:
+        while True:
+            viol = sup.check(smp, sp1, sp2)
+            if viol is not None:
+                out: CycleOutput = seq.abort(smp.t_s, f"safety limit {viol.limit}: {viol.detail}")
+            elif smp.t_s - t_start > limit:
+                out = seq.abort(smp.t_s, f"check exceeded {limit:.0f} s")
+            else:
+                out = seq.step(smp)
+            writer.write(smp, out.sp1, out.sp2, out.step.value)
+            if out.events:
+                for ev in out.events:
+                    prev = [k for k, v in steps.items() if len(v) == 1]
+                    for k in prev:
+                        steps[k].append(ev.t_s)
+                    steps.setdefault(ev.step.value, [ev.t_s])
+                writer.flush()
+                meta["steps"] = steps
+                write_json_atomic(meta_path, meta)
+            if on_cycle is not None:
+                on_cycle(seq.progress(smp.t_s), smp)
+            sp1, sp2 = out.sp1, out.sp2
+            if seq.finished:
+                link.exchange(DISABLED, DISABLED)
+                break
+            smp = link.exchange(sp1, sp2)
+    except BaseException as exc:
+        # fail closed: stop both drives, keep the log, record why, re-raise
+        try:
+            seq.abort(smp.t_s, f"error: {exc!r}")
+            link.exchange(DISABLED, DISABLED)
+        finally:
+            writer.close()
+            meta.update(status="aborted", reason=f"error: {exc!r}", ended_utc=_now_iso(), steps=steps)
+            write_json_atomic(meta_path, meta)
+        raise
+    writer.close()
+    status = "done" if seq.step_now == Step.DONE else "aborted"
+    meta.update(status=status, reason=seq.abort_reason, ended_utc=_now_iso(), steps=steps,
+                samples=writer.rows, duration_s=smp.t_s - t_start)
+    write_json_atomic(meta_path, meta)
+    link.close()
+    return LoopOutcome(status, seq.abort_reason, writer.rows, smp.t_s - t_start, steps)
+
+
+def seeded_rng(seed: int) -> np.random.Generator:
+    return np.random.default_rng(seed)

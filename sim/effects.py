@@ -1,0 +1,348 @@
+"""Switchable physics terms of the simulated rig.
+
+Each effect is a frozen dataclass holding its parameters (units in the field
+names) and, where it applies to one place only, a ``where`` field naming it:
+``"ema1"``, ``"ema2"`` or ``"external"``. A :class:`~sim.params.RigParams`
+collects them in its ``effects`` tuple; an empty tuple is the core model.
+
+The numba kernel of :mod:`sim.plant` cannot take arbitrary Python objects, so
+:func:`compile_effects` turns the tuple once, at plant construction, into an
+effect table: a float64 array of shape ``(3, N_COLUMNS)`` whose rows are the
+places (:data:`WHERE_ROW`) and whose columns are named by the ``COL_*``
+constants below (SI units). A column left at its neutral value (0) switches
+the term off, so the kernel needs no flags.
+
+Adding an effect is a local change:
+
+1. define a frozen dataclass here with a ``NAME`` class variable (its machine
+   name in profiles), validate in ``__post_init__``, add it to ``_KNOWN``;
+2. give it a ``COL_*`` column (append to :data:`COLUMNS`) and a
+   ``_compile(table, row, sample_period_s)`` method that writes it;
+3. read the column in the kernel of :mod:`sim.plant` where the physics acts.
+
+Sign conventions are those of :mod:`sim.plant`: ram-axis positions positive
+extended, force positive in compression.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from hil.errors import InputError
+
+__all__ = [
+    "CoulombFriction",
+    "ViscousFriction",
+    "Viscoelastic",
+    "LvdtDrift",
+    "TimeSkew",
+    "COLUMNS",
+    "N_COLUMNS",
+    "WHERE_ROW",
+    "compile_effects",
+    "EFFECTS",
+]
+
+#: Row of the effect table for each place.
+WHERE_ROW = {"ema1": 0, "ema2": 1, "external": 2}
+
+#: Column names of the effect table (SI units), in column order.
+COLUMNS = (
+    "coulomb_force_N",  # Coulomb friction level on the motor-side motion
+    "coulomb_band_m_per_s",  # velocity band of the smooth sign (tanh)
+    "viscous_N_s_per_m",  # viscous friction on the motor-side motion
+    "ve_stiffness_N_per_m",  # Maxwell arm spring
+    "ve_alpha",  # 1 - exp(-substep / tau) of the Maxwell dashpot
+    "ve_time_constant_s",  # tau (kept for diagnostics, not read by the kernel)
+    "lvdt_drift_per_s",  # relative LVDT gain change per second
+    "lvdt_delay_s",  # LVDT sampling delay relative to the resolver
+)
+N_COLUMNS = len(COLUMNS)
+COL_COULOMB_N = COLUMNS.index("coulomb_force_N")
+COL_COULOMB_BAND = COLUMNS.index("coulomb_band_m_per_s")
+COL_VISCOUS = COLUMNS.index("viscous_N_s_per_m")
+COL_VE_K = COLUMNS.index("ve_stiffness_N_per_m")
+COL_VE_ALPHA = COLUMNS.index("ve_alpha")
+COL_VE_TAU = COLUMNS.index("ve_time_constant_s")
+COL_LVDT_DRIFT = COLUMNS.index("lvdt_drift_per_s")
+COL_LVDT_DELAY = COLUMNS.index("lvdt_delay_s")
+
+_EMA_ONLY = ("ema1", "ema2")
+
+
+def _check_where(cls_name: str, where: object, allowed: tuple[str, ...]) -> None:
+    if not isinstance(where, str) or where not in allowed:
+        raise InputError(
+            f"{cls_name}.where must be one of {allowed} (a str, no unit), got {where!r}"
+        )
+
+
+def _check_number(cls_name: str, field: str, value: object, unit: str, *, lo: float,
+                  lo_open: bool, hi: float = math.inf, hi_open: bool = True) -> None:
+    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
+    if ok:
+        v = float(value)
+        ok = math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    if not ok:
+        lo_b = "(" if lo_open else "["
+        hi_b = ")" if hi_open else "]"
+        raise InputError(
+            f"{cls_name}.{field} must be a finite scalar in {lo_b}{lo}, {hi}{hi_b} {unit}, got {value!r}"
+        )
+
+
+@dataclass(frozen=True)
+class CoulombFriction:
+    """Coulomb friction of the ballscrew/nut, acting on the motor-side motion.
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+        The EMA whose motor-side motion is braked.
+    force_N : float
+        Friction force level at the ram, >= 0 N.
+    velocity_band_mm_per_s : float
+        Width of the smooth sign, > 0 mm/s (default 0.1 mm/s).
+
+    Notes
+    -----
+    Friction force along the ram axis, opposing the motor-side ram velocity
+    :math:`v = \\dot\\varphi / i_{total}`:
+
+    .. math:: F_f = F_C \\tanh(v / v_\\varepsilon)
+
+    It acts on the motor as the torque :math:`F_f / i_{total}` [N m] with
+    :math:`i_{total}` in rad/m. The kernel linearises it in the velocity
+    (trapezoidal rule); the explicit half-kick moves the velocity by at most
+    :math:`h F_C / (2M)`, so even a very narrow band stays bounded (measured:
+    the same force offset for bands from 1e-5 to 0.1 mm/s). It is
+    not seen by the load cell (it is reacted inside the EMA); it appears in the
+    load-path force only through the drive: an EMA in FORCE mode delivers
+    :math:`F = F_{target} - F_f` at steady velocity.
+    """
+
+    NAME: ClassVar[str] = "coulomb_friction"  #: machine name in profiles
+
+    where: str
+    force_N: float
+    velocity_band_mm_per_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        _check_where("CoulombFriction", self.where, _EMA_ONLY)
+        _check_number("CoulombFriction", "force_N", self.force_N, "N", lo=0.0, lo_open=False)
+        _check_number("CoulombFriction", "velocity_band_mm_per_s", self.velocity_band_mm_per_s,
+                      "mm/s", lo=0.0, lo_open=True)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_COULOMB_N] = float(self.force_N)
+        table[row, COL_COULOMB_BAND] = float(self.velocity_band_mm_per_s) * 1e-3
+
+
+@dataclass(frozen=True)
+class ViscousFriction:
+    """Viscous friction on the motor-side motion of one EMA.
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    coeff_N_s_per_mm : float
+        Friction coefficient at the ram, >= 0 N s/mm.
+
+    Notes
+    -----
+    :math:`F_v = c\\,v`, with :math:`v = \\dot\\varphi / i_{total}` the
+    motor-side ram velocity [mm/s]; acts on the motor as the torque
+    :math:`F_v / i_{total}` (trapezoidal rule in the kernel).
+    """
+
+    NAME: ClassVar[str] = "viscous_friction"  #: machine name in profiles
+
+    where: str
+    coeff_N_s_per_mm: float
+
+    def __post_init__(self) -> None:
+        _check_where("ViscousFriction", self.where, _EMA_ONLY)
+        _check_number("ViscousFriction", "coeff_N_s_per_mm", self.coeff_N_s_per_mm, "N s/mm",
+                      lo=0.0, lo_open=False)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_VISCOUS] = float(self.coeff_N_s_per_mm) * 1e3
+
+
+@dataclass(frozen=True)
+class Viscoelastic:
+    """Maxwell arm in parallel with the internal contact spring of one EMA.
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    stiffness_N_per_mm : float
+        Spring of the Maxwell arm, > 0 N/mm.
+    time_constant_s : float
+        Relaxation time :math:`\\tau = c_v / k_v` of the arm, > 0 s.
+
+    Notes
+    -----
+    Each flank of the internal play (compression, tension) carries a material
+    deflection :math:`\\delta` beyond the play and a dashpot state :math:`z`.
+    The flank force is
+
+    .. math:: F = k\\,\\delta + k_v(\\delta - z), \\qquad \\dot z = (\\delta - z)/\\tau
+
+    with :math:`k` = ``k_c`` (compression) or ``k_t`` (tension). Just after
+    contact the flank is stiffer (:math:`k + k_v`); held at constant
+    :math:`\\delta` the force relaxes to :math:`k\\delta` with time constant
+    :math:`\\tau`; unloaded (F = 0) the material is still deflected by
+    :math:`\\delta_0 = k_v z/(k + k_v)` and recovers with time constant
+    :math:`\\tau (k + k_v)/k`, so contact is lost before the geometric flank
+    and the backlash-to-contact transition is rounded. The static stiffness is
+    unchanged (``k``). The chain solve stays closed form because :math:`z` is
+    frozen over one substep and updated exactly afterwards,
+    :math:`z \\leftarrow z + (\\delta - z)(1 - e^{-h/\\tau})`.
+    """
+
+    NAME: ClassVar[str] = "viscoelastic"  #: machine name in profiles
+
+    where: str
+    stiffness_N_per_mm: float
+    time_constant_s: float
+
+    def __post_init__(self) -> None:
+        _check_where("Viscoelastic", self.where, _EMA_ONLY)
+        _check_number("Viscoelastic", "stiffness_N_per_mm", self.stiffness_N_per_mm, "N/mm",
+                      lo=0.0, lo_open=True)
+        _check_number("Viscoelastic", "time_constant_s", self.time_constant_s, "s",
+                      lo=0.0, lo_open=True)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_VE_K] = float(self.stiffness_N_per_mm) * 1e3
+        table[row, COL_VE_ALPHA] = -math.expm1(-substep_s / float(self.time_constant_s))
+        table[row, COL_VE_TAU] = float(self.time_constant_s)
+
+
+@dataclass(frozen=True)
+class LvdtDrift:
+    """LVDT gain drifting linearly with time (temperature).
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    gain_drift_per_s : float
+        Relative gain change per second (any sign), 1/s.
+
+    Notes
+    -----
+    ``s_meas = offset + gain * (1 + drift * t) * s + nonlinearity * (s / full_scale)**3 + noise``
+    with ``t`` the sample time in s (0 at plant construction).
+    """
+
+    NAME: ClassVar[str] = "lvdt_drift"  #: machine name in profiles
+
+    where: str
+    gain_drift_per_s: float
+
+    def __post_init__(self) -> None:
+        _check_where("LvdtDrift", self.where, _EMA_ONLY)
+        _check_number("LvdtDrift", "gain_drift_per_s", self.gain_drift_per_s, "1/s",
+                      lo=-math.inf, lo_open=True)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_LVDT_DRIFT] = float(self.gain_drift_per_s)
+
+
+@dataclass(frozen=True)
+class TimeSkew:
+    """The LVDT of one EMA is latched ``delay_s`` earlier than the resolver sample.
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    delay_s : float
+        Skew in s, ``0 <= delay_s < sample_period_s`` (checked by
+        :func:`compile_effects`).
+
+    Notes
+    -----
+    The sample stamped :math:`t_k` carries :math:`s(t_k - \\Delta)`: the LVDT
+    lags the resolver. The true stroke is interpolated linearly between the
+    integration substeps of the current sample period.
+    """
+
+    NAME: ClassVar[str] = "time_skew"  #: machine name in profiles
+
+    where: str
+    delay_s: float
+
+    def __post_init__(self) -> None:
+        _check_where("TimeSkew", self.where, _EMA_ONLY)
+        _check_number("TimeSkew", "delay_s", self.delay_s, "s", lo=0.0, lo_open=False)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        if not float(self.delay_s) < sample_period_s:
+            raise InputError(
+                f"TimeSkew.delay_s must be < sample_period_s = {sample_period_s} s, got {self.delay_s!r} s"
+            )
+        table[row, COL_LVDT_DELAY] = float(self.delay_s)
+
+
+_KNOWN = (CoulombFriction, ViscousFriction, Viscoelastic, LvdtDrift, TimeSkew)
+
+#: Machine name (profiles, diagnosis) -> effect class.
+EFFECTS = {cls.NAME: cls for cls in _KNOWN}
+
+
+def compile_effects(effects: tuple, sample_period_s: float, substeps: int) -> np.ndarray:
+    """Compile the effects tuple of a RigParams into the kernel's effect table.
+
+    Parameters
+    ----------
+    effects : tuple
+        Instances of the effect classes of this module; at most one of each
+        class per place.
+    sample_period_s : float
+        Sample period, s (> 0).
+    substeps : int
+        Integration substeps per sample (>= 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 array of shape ``(3, N_COLUMNS)``; rows per :data:`WHERE_ROW`,
+        columns per :data:`COLUMNS` (SI units), 0 where no effect applies.
+
+    Raises
+    ------
+    hil.errors.InputError
+        Unknown effect type, duplicate (class, where) or out-of-range parameter.
+
+    Notes
+    -----
+    The substep is :math:`h = T_s / n`; time-constant effects store
+    :math:`1 - e^{-h/\\tau}` so the kernel's update is exact for a frozen input.
+    """
+    if not isinstance(effects, tuple):
+        raise InputError(f"effects must be a tuple of effect objects, got {type(effects).__name__}")
+    if not (math.isfinite(sample_period_s) and sample_period_s > 0):
+        raise InputError(f"sample_period_s must be finite and > 0 s, got {sample_period_s!r}")
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise InputError(f"substeps must be an int >= 1 (count), got {substeps!r}")
+    table = np.zeros((3, N_COLUMNS), dtype=np.float64)
+    seen: set[tuple[type, str]] = set()
+    for k, eff in enumerate(effects):
+        if not isinstance(eff, _KNOWN):
+            raise InputError(
+                f"effects[{k}] must be one of {[c.__name__ for c in _KNOWN]}, got {type(eff).__name__}"
+            )
+        key = (type(eff), eff.where)
+        if key in seen:
+            raise InputError(
+                f"effects[{k}]: duplicate {type(eff).__name__} at where={eff.where!r}; combine them into one"
+            )
+        seen.add(key)
+        eff._compile(table, WHERE_ROW[eff.where], float(sample_period_s),
+                     float(sample_period_s) / int(substeps))
+    return table

@@ -1,0 +1,888 @@
+"""Simulated dual-EMA aileron rig: two drives, two backlash load paths, one surface.
+
+Pure physics: no clocks, no IO. Time advances only by :meth:`RigPlant.step`
+(one sample period per call); randomness comes only from the
+``numpy.random.Generator`` given to the constructor.
+
+Coordinates and signs
+---------------------
+All positions lie on the ram axis, positive when the ram extends; forces are
+positive in compression (the EMA pushes the surface towards +y). The public
+API uses mm, N, rad, s; the numba kernel works in SI (m, N, rad, s) and
+converts at the boundary (``i_total`` in rad/m = 1000 x rad/mm).
+
+Per EMA i in {1, 2}:
+
+* motor angle :math:`\\varphi_i` [rad] relative to the housing, motor-side
+  ram position :math:`x_{m,i} = \\varphi_i / i_{total}`;
+* motor dynamics :math:`J\\ddot\\varphi_i = T_i - b\\dot\\varphi_i - F_i/i_{total}
+  - T_{fric,i} - F_{stop,i}/i_{total}` (reflected mass
+  :math:`M = J\\,i_{total}^2` ~ 2500 kg with the default rig);
+* quasi-static load path (massless housing and ram): structure --k_h--
+  housing (h_i) --motor (x_m)-- internal path (play B_int, k_c for F > 0,
+  k_t for F < 0) -- ram (r_i) -- bearing (play B_b, k_b) -- surface (y).
+  With :math:`u_i = x_{m,i} - y` the chain force is the closed-form dead-zone
+  spring
+
+  .. math:: u = F/k_h + F/k_{int}(F) + F/k_b + \\mathrm{sign}(F)(B_{int} + B_b)/2
+
+  in contact :math:`h_i = -F_i/k_h`, :math:`r_i = y + F_i/k_b + \\mathrm{sign}(F_i)B_b/2`;
+  slack (:math:`|u_i| < (B_{int}+B_b)/2`): :math:`F_i = 0`, :math:`h_i = 0`
+  and the ram follows the play operator
+  :math:`r_i = \\mathrm{clip}(r_i^-, \\max(x - B_{int}/2, y - B_b/2), \\min(x + B_{int}/2, y + B_b/2))`,
+  :math:`x = h_i + x_{m,i}`;
+* stroke (LVDT truth) :math:`s_i = r_i - h_i`; load cell truth :math:`F_i`;
+  so :math:`D_{int,i} = s_i - \\varphi_i/i_{total} = -(F_i/k_{int} + \\mathrm{sign}(F_i)B_{int}/2)`
+  in contact (paper eq. 1).
+
+Surface: :math:`m_s\\ddot y = F_1 + F_2 - c_s\\dot y - k_{load}y + F_{load}`.
+
+End stops: a protective spring of 1e6 N/mm acts on the motor when
+:math:`|x_{m,i}| >` ``stroke_limit_mm`` (on the motor side, which differs from
+s by :math:`D_{int}`, a fraction of a mm). It is reacted inside the EMA and is
+not seen by the load cell. It is not meant to be reached by a valid sequence.
+
+Drives (continuous-time laws evaluated every substep; the real drive's current
+loop is taken as ideal):
+
+* POSITION (CSP): :math:`T = K_p e + K_d(\\omega_{ff} - \\dot\\varphi) + K_i\\int e`,
+  :math:`e = \\varphi_{target} - \\varphi`, target held over the sample period,
+  velocity feed-forward :math:`\\omega_{ff}` = difference of successive targets
+  / period (0 on the first POSITION sample), :math:`K_p = J\\omega_n^2`,
+  :math:`K_d = 2\\zeta\\omega_n J`, :math:`K_i = J\\omega_n^2/T_i` (none if
+  :math:`T_i = 0`); conditional-integration anti-windup; :math:`|T| \\le T_{lim}`.
+* FORCE (CST): :math:`T = \\mathrm{clip}(F_{target}/i_{total}, \\pm T_{lim})`.
+* DISABLED: holding brake, :math:`\\dot\\varphi = 0`, integrator reset.
+
+Integration: Stormer-Verlet (kick-drift-kick) with ``params.substeps``
+substeps per sample (second order; one closed-form chain solve per substep):
+half-kick of all velocities with the forces at the current positions, drift of
+all positions with the half-step velocities, chain solve at the new
+positions, second half-kick. Velocity-proportional terms (drive D-gain,
+viscous losses, linearised friction, surface damping) are explicit in the
+first half-kick and implicit in the second, i.e. trapezoidal; the CSP
+integrator uses the trapezoidal rule too; the Maxwell states are updated
+exactly with the deflection frozen over the substep. Stable for
+:math:`h\\,\\omega_{max} < 2`; the constructor rejects :math:`h\\,\\omega_{max} > 1`
+(Gershgorin bound of the stiffest mode) and :math:`h\\,c/(2M) > 1` for the
+damping terms. Verified against scipy DOP853 (3.5e-5 mm on a 1 s dynamic
+contact case with 8 substeps of 0.25 ms; error / 4 per substep doubling).
+
+Switchable effects (:mod:`sim.effects`, compiled once into a (3, n) table):
+Coulomb and viscous friction act on the motor-side motion of one EMA; a
+Viscoelastic Maxwell arm adds, per flank of the internal play, a dashpot state
+z with flank force :math:`k\\delta + k_v(\\delta - z)` (the chain solve stays
+closed form with z frozen over a substep: the contact threshold moves to
+:math:`(B_{int}+B_b)/2 + k_v z/(k + k_v)` and the contact compliance uses
+:math:`k + k_v`); LvdtDrift and TimeSkew change the LVDT reading only.
+
+Dynamics worth knowing: an EMA in FORCE mode is an almost undamped 2.5 t
+reflected mass on the chain springs (7.9 Hz, 2 % damping with the default
+rig: damping only from ``motor_viscous``, the surface damping and the other
+drive), and the 300 kg surface between the two chains rings at about 50 Hz
+with 0.3 % damping and rattles in the backlash after abrupt motions; the
+contacts themselves are lossless.
+
+Sensors, sampled at the end of each period (time stamp :math:`t_k = kT_s`):
+resolver :math:`\\varphi_{meas} = q\\,\\mathrm{round}(\\varphi/q)`,
+:math:`q = 2\\pi/2^{bits}` (multi-turn); LVDT
+:math:`s_{meas} = o + g s + n_3 (s/s_{fs})^3 + N(0, (pp/6)^2)`; load cell
+:math:`F_{meas} = g_F F + N(0, \\sigma_F^2)`. Noise is drawn from the
+generator in blocks of :data:`NOISE_BLOCK` samples x 4 channels
+(LVDT1, LVDT2, load cell 1, load cell 2), so a seed fixes the whole record.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from hil.errors import InputError
+from hil.types import DriveMode, Sample, Setpoint
+from sim import effects as _fx
+from sim.effects import (
+    COL_COULOMB_BAND,
+    COL_COULOMB_N,
+    COL_LVDT_DELAY,
+    COL_LVDT_DRIFT,
+    COL_VE_ALPHA,
+    COL_VE_K,
+    COL_VISCOUS,
+)
+from sim.params import RigParams
+from sim.truth import RigTruth, rig_truth
+
+__all__ = ["RigPlant", "PlantState", "PlantTrace", "END_STOP_STIFFNESS_N_PER_MM", "NOISE_BLOCK"]
+
+#: Stiffness of the protective end stops.
+END_STOP_STIFFNESS_N_PER_MM = 1.0e6
+#: Samples of sensor noise drawn from the generator at once.
+NOISE_BLOCK = 4096
+
+_DISABLED = int(DriveMode.DISABLED)
+_POSITION = int(DriveMode.POSITION)
+_FORCE = int(DriveMode.FORCE)
+_MODES = frozenset((_DISABLED, _POSITION, _FORCE))
+
+# ---------------------------------------------------------------- parameter vector P (SI)
+G_IM = 0  # i_total, rad/m
+G_J = 1  # motor inertia, kg m^2
+G_B = 2  # motor viscous, N m s/rad
+G_TLIM = 3  # torque limit, N m
+G_KP = 4  # N m/rad
+G_KD = 5  # N m s/rad
+G_KI = 6  # N m/(rad s)
+G_MS = 7  # surface mass, kg
+G_CS = 8  # surface damping, N s/m
+G_KLOAD = 9  # load stiffness, N/m
+G_XLIM = 10  # stroke limit, m
+G_KSTOP = 11  # end-stop stiffness, N/m
+G_H = 12  # substep, s
+G_NSUB = 13  # substeps per sample
+G_PERIOD = 14  # sample period, s
+G_Q = 15  # resolver quantum, rad
+G_N = 16
+# per-EMA block, base G_N + e * E_N
+E_BI = 0  # internal play, m
+E_BB = 1  # bearing play, m
+E_KC = 2  # internal compression stiffness, N/m
+E_KT = 3  # internal tension stiffness, N/m
+E_KB = 4  # bearing stiffness, N/m
+E_KH = 5  # housing stiffness, N/m
+E_GAIN = 6  # LVDT gain
+E_OFF = 7  # LVDT offset, mm
+E_NL = 8  # LVDT cubic term at full scale, mm
+E_FS = 9  # LVDT full scale, mm
+E_LSIG = 10  # LVDT noise std, mm
+E_LCG = 11  # load cell gain
+E_LCSIG = 12  # load cell noise std, N
+E_N = 13
+P_LEN = G_N + 2 * E_N
+
+# ---------------------------------------------------------------- state vector X (SI)
+S_K = 0  # samples done
+S_Y = 1  # surface position, m
+S_V = 2  # surface velocity, m/s
+S_N = 3
+SE_PHI = 0  # motor angle, rad
+SE_W = 1  # motor speed, rad/s
+SE_I = 2  # integral of the position error, rad s
+SE_R = 3  # ram position, m
+SE_H = 4  # housing position, m
+SE_F = 5  # load-path force, N
+SE_S = 6  # stroke r - h, m
+SE_ZC = 7  # Maxwell dashpot state, compression flank, m
+SE_ZT = 8  # Maxwell dashpot state, tension flank, m
+SE_PT = 9  # previous POSITION target, rad
+SE_PV = 10  # previous target valid (1.0) or not (0.0)
+SE_T = 11  # drive torque of the last substep, N m
+SE_TMAX = 12  # max |torque| over the last sample, N m
+SE_N = 13
+X_LEN = S_N + 2 * SE_N
+
+# ---------------------------------------------------------------- truth record columns (batch)
+TR_PHI, TR_W, TR_S, TR_F, TR_R, TR_H, TR_T, TR_TMAX = 0, 2, 4, 6, 8, 10, 12, 14
+TR_Y, TR_V = 16, 17
+TR_N = 18
+
+
+@njit(cache=True)
+def _chain(xm, y, r_prev, zc, zt, bi, bb, kc, kt, kb, kh, kv):
+    """Closed-form load path of one EMA (SI). Returns F, r, h, dmc, dmt."""
+    u = xm - y
+    kcv = kc + kv
+    ktv = kt + kv
+    dc0 = kv * zc / kcv  # free material deflection of the compression flank (>= 0)
+    dt0 = kv * zt / ktv  # ... of the tension flank (<= 0)
+    half = 0.5 * (bi + bb)
+    ac = half + dc0
+    at = -half + dt0
+    if u > ac:
+        f = (u - ac) / (1.0 / kh + 1.0 / kb + 1.0 / kcv)
+        h = -f / kh
+        r = y + f / kb + 0.5 * bb
+        return f, r, h, (f + kv * zc) / kcv, dt0
+    if u < at:
+        f = (u - at) / (1.0 / kh + 1.0 / kb + 1.0 / ktv)
+        h = -f / kh
+        r = y + f / kb - 0.5 * bb
+        return f, r, h, dc0, (f + kv * zt) / ktv
+    lo = max(xm - 0.5 * bi - dc0, y - 0.5 * bb)
+    hi = min(xm + 0.5 * bi - dt0, y + 0.5 * bb)
+    r = min(max(r_prev, lo), hi)
+    return 0.0, r, 0.0, dc0, dt0
+
+
+@njit(cache=True)
+def _solve_chains(X, P, E, dm):
+    """Chain solve of both EMAs at the current positions; fills X[F, R, H, S] and dm."""
+    im = P[G_IM]
+    y = X[S_Y]
+    for e in range(2):
+        b = S_N + e * SE_N
+        p = G_N + e * E_N
+        f, r, h, dmc, dmt = _chain(
+            X[b + SE_PHI] / im, y, X[b + SE_R], X[b + SE_ZC], X[b + SE_ZT],
+            P[p + E_BI], P[p + E_BB], P[p + E_KC], P[p + E_KT], P[p + E_KB], P[p + E_KH],
+            E[e, COL_VE_K],
+        )
+        X[b + SE_F] = f
+        X[b + SE_R] = r
+        X[b + SE_H] = h
+        X[b + SE_S] = r - h
+        dm[2 * e] = dmc
+        dm[2 * e + 1] = dmt
+
+
+@njit(cache=True)
+def _kick(X, P, E, e, mode, val, wff, hk, implicit):
+    """Half-kick of motor ``e`` over ``hk`` s.
+
+    Velocity terms (drive D-gain, viscous losses, linearised friction) are
+    explicit in the first half-kick and implicit in the second (together the
+    trapezoidal rule). Uses the chain force stored in X (current positions)
+    and the CSP integrator state; returns (torque, saturated).
+    """
+    b = S_N + e * SE_N
+    if mode == 0:
+        X[b + SE_W] = 0.0
+        return 0.0, False
+    im = P[G_IM]
+    J = P[G_J]
+    tlim = P[G_TLIM]
+    kd = P[G_KD]
+    phi = X[b + SE_PHI]
+    w = X[b + SE_W]
+    # explicit load torque: chain + end stop
+    xm = phi / im
+    fstop = 0.0
+    if xm > P[G_XLIM]:
+        fstop = P[G_KSTOP] * (xm - P[G_XLIM])
+    elif xm < -P[G_XLIM]:
+        fstop = P[G_KSTOP] * (xm + P[G_XLIM])
+    # passive velocity terms (implicit): motor viscous, ram viscous, Coulomb (linearised)
+    c_lin = P[G_B] + E[e, COL_VISCOUS] / (im * im)
+    t_rest = -(X[b + SE_F] + fstop) / im
+    fc = E[e, COL_COULOMB_N]
+    if fc > 0.0:
+        band = E[e, COL_COULOMB_BAND]
+        th = math.tanh(w / im / band)
+        dtf = fc * (1.0 - th * th) / band / (im * im)
+        t_rest -= fc * th / im - dtf * w
+        c_lin += dtf
+    sat = False
+    if not implicit:
+        # explicit: all terms at the current speed
+        t_rest -= c_lin * w
+        c_lin = 0.0
+    if mode == 8:
+        t_lin = P[G_KP] * (val - phi) + kd * wff + P[G_KI] * X[b + SE_I]
+        if implicit:
+            w_new = (J * w + hk * (t_lin + t_rest)) / (J + hk * (c_lin + kd))
+            torque = t_lin - kd * w_new
+        else:
+            torque = t_lin - kd * w
+        if torque > tlim or torque < -tlim:
+            sat = True
+            torque = tlim if torque > 0.0 else -tlim
+            w_new = (J * w + hk * (torque + t_rest)) / (J + hk * c_lin)
+        elif not implicit:
+            w_new = w + hk * (torque + t_rest) / J
+    else:
+        torque = val / im
+        if torque > tlim:
+            torque = tlim
+        elif torque < -tlim:
+            torque = -tlim
+        w_new = (J * w + hk * (torque + t_rest)) / (J + hk * c_lin)
+    X[b + SE_W] = w_new
+    X[b + SE_T] = torque
+    if abs(torque) > X[b + SE_TMAX]:
+        X[b + SE_TMAX] = abs(torque)
+    return torque, sat
+
+
+@njit(cache=True)
+def _kick_surface(X, P, hk, load, implicit):
+    fsum = X[S_N + SE_F] + X[S_N + SE_N + SE_F]
+    ms = P[G_MS]
+    if implicit:
+        X[S_V] = (ms * X[S_V] + hk * (fsum - P[G_KLOAD] * X[S_Y] + load)) / (ms + hk * P[G_CS])
+    else:
+        X[S_V] += hk * (fsum - P[G_KLOAD] * X[S_Y] + load - P[G_CS] * X[S_V]) / ms
+
+
+@njit(cache=True)
+def _advance(X, P, E, sbuf, dm, mode1, val1, mode2, val2, load, noise, kn):
+    """Advance one sample period in place; return the measured sample tuple."""
+    im = P[G_IM]
+    h = P[G_H]
+    hh = 0.5 * h
+    n = int(P[G_NSUB])
+    period = P[G_PERIOD]
+    ki = P[G_KI]
+
+    # velocity feed-forward of each drive (held over the period)
+    wff0 = 0.0
+    wff1 = 0.0
+    for e in range(2):
+        b = S_N + e * SE_N
+        mode = mode1 if e == 0 else mode2
+        val = val1 if e == 0 else val2
+        wff = 0.0
+        if mode == 8:
+            if X[b + SE_PV] > 0.5:
+                wff = (val - X[b + SE_PT]) / period
+        else:
+            X[b + SE_I] = 0.0
+        if e == 0:
+            wff0 = wff
+        else:
+            wff1 = wff
+        X[b + SE_TMAX] = 0.0
+
+    _solve_chains(X, P, E, dm)
+    for j in range(n):
+        sbuf[0, j] = X[S_N + SE_S]
+        sbuf[1, j] = X[S_N + SE_N + SE_S]
+        # Maxwell arms: exact exponential update with the deflection frozen over the substep
+        for e in range(2):
+            alpha = E[e, COL_VE_ALPHA]
+            if alpha > 0.0:
+                b = S_N + e * SE_N
+                X[b + SE_ZC] += (dm[2 * e] - X[b + SE_ZC]) * alpha
+                X[b + SE_ZT] += (dm[2 * e + 1] - X[b + SE_ZT]) * alpha
+        # kick (h/2) with the forces at the current positions
+        _, sat0 = _kick(X, P, E, 0, mode1, val1, wff0, hh, False)
+        _, sat1 = _kick(X, P, E, 1, mode2, val2, wff1, hh, False)
+        _kick_surface(X, P, hh, load, False)
+        # drift (h), CSP integrator by the trapezoidal rule, conditional anti-windup
+        for e in range(2):
+            b = S_N + e * SE_N
+            phi = X[b + SE_PHI]
+            phin = phi + h * X[b + SE_W]
+            X[b + SE_PHI] = phin
+            mode = mode1 if e == 0 else mode2
+            if mode == 8 and ki > 0.0:
+                val = val1 if e == 0 else val2
+                err = 0.5 * ((val - phi) + (val - phin))
+                sat = sat0 if e == 0 else sat1
+                if (not sat) or err * X[b + SE_T] < 0.0:
+                    X[b + SE_I] += err * h
+        X[S_Y] += h * X[S_V]
+        # forces at the new positions, second kick (h/2)
+        _solve_chains(X, P, E, dm)
+        _kick(X, P, E, 0, mode1, val1, wff0, hh, True)
+        _kick(X, P, E, 1, mode2, val2, wff1, hh, True)
+        _kick_surface(X, P, hh, load, True)
+
+    sbuf[0, n] = X[S_N + SE_S]
+    sbuf[1, n] = X[S_N + SE_N + SE_S]
+    k = X[S_K] + 1.0
+    X[S_K] = k
+    t = k * period
+
+    # drive memory for the velocity feed-forward
+    for e in range(2):
+        b = S_N + e * SE_N
+        mode = mode1 if e == 0 else mode2
+        if mode == 8:
+            X[b + SE_PT] = val1 if e == 0 else val2
+            X[b + SE_PV] = 1.0
+        else:
+            X[b + SE_PV] = 0.0
+
+    # sensors
+    q = P[G_Q]
+    phim0 = math.floor(X[S_N + SE_PHI] / q + 0.5) * q
+    phim1 = math.floor(X[S_N + SE_N + SE_PHI] / q + 0.5) * q
+    smeas0 = 0.0
+    smeas1 = 0.0
+    fmeas0 = 0.0
+    fmeas1 = 0.0
+    for e in range(2):
+        b = S_N + e * SE_N
+        p = G_N + e * E_N
+        delay = E[e, COL_LVDT_DELAY]
+        if delay > 0.0:
+            x = n - delay / h
+            j0 = int(math.floor(x))
+            if j0 >= n:
+                s_true = sbuf[e, n]
+            else:
+                fr = x - j0
+                s_true = sbuf[e, j0] * (1.0 - fr) + sbuf[e, j0 + 1] * fr
+        else:
+            s_true = X[b + SE_S]
+        s_mm = s_true * 1e3
+        gain = P[p + E_GAIN] * (1.0 + E[e, COL_LVDT_DRIFT] * t)
+        rel = s_mm / P[p + E_FS]
+        sm = P[p + E_OFF] + gain * s_mm + P[p + E_NL] * rel * rel * rel + P[p + E_LSIG] * noise[kn, e]
+        fm = P[p + E_LCG] * X[b + SE_F] + P[p + E_LCSIG] * noise[kn, 2 + e]
+        if e == 0:
+            smeas0 = sm
+            fmeas0 = fm
+        else:
+            smeas1 = sm
+            fmeas1 = fm
+    return t, phim0, phim1, smeas0, smeas1, fmeas0, fmeas1
+
+
+@njit(cache=True)
+def _run(X, P, E, sbuf, dm, modes1, vals1, modes2, vals2, loads, noise, kn0, meas, truth, i0):
+    """Batch of samples: rows i0.. of meas (n, 7) and truth (n, TR_N)."""
+    m = modes1.shape[0]
+    for i in range(m):
+        out = _advance(X, P, E, sbuf, dm, modes1[i], vals1[i], modes2[i], vals2[i], loads[i], noise, kn0 + i)
+        row = i0 + i
+        for c in range(7):
+            meas[row, c] = out[c]
+        for e in range(2):
+            b = S_N + e * SE_N
+            truth[row, TR_PHI + e] = X[b + SE_PHI]
+            truth[row, TR_W + e] = X[b + SE_W]
+            truth[row, TR_S + e] = X[b + SE_S] * 1e3
+            truth[row, TR_F + e] = X[b + SE_F]
+            truth[row, TR_R + e] = X[b + SE_R] * 1e3
+            truth[row, TR_H + e] = X[b + SE_H] * 1e3
+            truth[row, TR_T + e] = X[b + SE_T]
+            truth[row, TR_TMAX + e] = X[b + SE_TMAX]
+        truth[row, TR_Y] = X[S_Y] * 1e3
+        truth[row, TR_V] = X[S_V] * 1e3
+
+
+# ====================================================================== public types
+
+
+@dataclass(frozen=True)
+class PlantState:
+    """True internal state of the rig at the end of the last sample (no sensor errors).
+
+    Per-EMA quantities are ``(ema1, ema2)`` tuples.
+
+    Attributes
+    ----------
+    t_s : float
+        Time of the last sample, s.
+    phi_rad, omega_rad_s : tuple of float
+        Motor angle (rad) and speed (rad/s), relative to the housing.
+    y_mm, v_mm_s : float
+        Surface position (mm) and velocity (mm/s).
+    r_mm, h_mm : tuple of float
+        Ram and housing absolute positions, mm.
+    F_N : tuple of float
+        Load-path force, N (> 0 compression).
+    s_mm : tuple of float
+        True stroke ``r - h``, mm.
+    torque_Nm : tuple of float
+        Drive torque of the last substep, N m (0 when DISABLED).
+    integral_rad_s : tuple of float
+        CSP integrator state (integral of the angle error), rad s.
+    """
+
+    t_s: float
+    phi_rad: tuple
+    omega_rad_s: tuple
+    y_mm: float
+    v_mm_s: float
+    r_mm: tuple
+    h_mm: tuple
+    F_N: tuple
+    s_mm: tuple
+    torque_Nm: tuple
+    integral_rad_s: tuple
+
+
+@dataclass(frozen=True)
+class PlantTrace:
+    """Record of a batch :meth:`RigPlant.run`: measured samples and true states.
+
+    Measured arrays, shape (n,), same fields and units as :class:`hil.types.Sample`:
+    ``t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N``.
+
+    True arrays, shape (n, 2) per EMA (column 0 = EMA1): ``true_phi_rad``,
+    ``true_omega_rad_s``, ``true_s_mm``, ``true_F_N``, ``true_r_mm``,
+    ``true_h_mm``, ``torque_Nm`` (last substep), ``torque_abs_max_Nm`` (max over
+    the sample's substeps); shape (n,): ``y_mm``, ``v_mm_s``.
+    """
+
+    t_s: np.ndarray
+    phi1_rad: np.ndarray
+    phi2_rad: np.ndarray
+    s1_mm: np.ndarray
+    s2_mm: np.ndarray
+    F1_N: np.ndarray
+    F2_N: np.ndarray
+    true_phi_rad: np.ndarray
+    true_omega_rad_s: np.ndarray
+    true_s_mm: np.ndarray
+    true_F_N: np.ndarray
+    true_r_mm: np.ndarray
+    true_h_mm: np.ndarray
+    torque_Nm: np.ndarray
+    torque_abs_max_Nm: np.ndarray
+    y_mm: np.ndarray
+    v_mm_s: np.ndarray
+
+
+# ====================================================================== validation
+
+
+def _num(value: Any) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
+def _check(value: Any, name: str, unit: str, *, lo: float = -math.inf, lo_open: bool = False,
+           hi: float = math.inf, hi_open: bool = False) -> float:
+    ok = _num(value) and math.isfinite(float(value))
+    if ok:
+        v = float(value)
+        ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    if not ok:
+        lb = "(" if lo_open else "["
+        hb = ")" if hi_open else "]"
+        raise InputError(f"{name} must be a finite scalar in {lb}{lo}, {hi}{hb} {unit}, got {value!r}")
+    return float(value)
+
+
+def _check_int(value: Any, name: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
+        raise InputError(f"{name} must be an int in [{lo}, {hi}] (count), got {value!r}")
+    return int(value)
+
+
+def _build_vectors(params: RigParams) -> tuple[np.ndarray, np.ndarray, float]:
+    """Validate ``params`` and pack them into the kernel's P vector and effect table."""
+    if not isinstance(params, RigParams):
+        raise InputError(f"params must be a RigParams, got {type(params).__name__}")
+    P = np.zeros(P_LEN, dtype=np.float64)
+    i_mm = _check(params.i_total_rad_per_mm, "params.i_total_rad_per_mm", "rad/mm", lo=0.0, lo_open=True)
+    xlim = _check(params.stroke_limit_mm, "params.stroke_limit_mm", "mm", lo=0.0, lo_open=True)
+    period = _check(params.sample_period_s, "params.sample_period_s", "s", lo=0.0, lo_open=True)
+    nsub = _check_int(params.substeps, "params.substeps", 1, 100_000)
+    d = params.drive
+    J = _check(d.motor_inertia_kg_m2, "params.drive.motor_inertia_kg_m2", "kg m^2", lo=0.0, lo_open=True)
+    bm = _check(d.motor_viscous_Nm_s_per_rad, "params.drive.motor_viscous_Nm_s_per_rad", "N m s/rad", lo=0.0)
+    tlim = _check(d.torque_limit_Nm, "params.drive.torque_limit_Nm", "N m", lo=0.0, lo_open=True)
+    wn = _check(d.position_bandwidth_rad_s, "params.drive.position_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
+    zeta = _check(d.position_damping, "params.drive.position_damping", "(dimensionless)", lo=0.0)
+    ti = _check(d.position_integral_time_s, "params.drive.position_integral_time_s", "s", lo=0.0)
+    sf = params.surface
+    ms = _check(sf.mass_kg, "params.surface.mass_kg", "kg", lo=0.0, lo_open=True)
+    cs = _check(sf.damping_N_s_per_mm, "params.surface.damping_N_s_per_mm", "N s/mm", lo=0.0)
+    kload = _check(sf.load_stiffness_N_per_mm, "params.surface.load_stiffness_N_per_mm", "N/mm", lo=0.0)
+
+    im = i_mm * 1e3
+    h = period / nsub
+    P[G_IM] = im
+    P[G_J] = J
+    P[G_B] = bm
+    P[G_TLIM] = tlim
+    P[G_KP] = J * wn * wn
+    P[G_KD] = 2.0 * zeta * wn * J
+    P[G_KI] = J * wn * wn / ti if ti > 0.0 else 0.0
+    P[G_MS] = ms
+    P[G_CS] = cs * 1e3
+    P[G_KLOAD] = kload * 1e3
+    P[G_XLIM] = xlim * 1e-3
+    P[G_KSTOP] = END_STOP_STIFFNESS_N_PER_MM * 1e3
+    P[G_H] = h
+    P[G_NSUB] = nsub
+    P[G_PERIOD] = period
+
+    bits = None
+    for e, (mname, sname) in enumerate((("ema1", "sensors1"), ("ema2", "sensors2"))):
+        m = getattr(params, mname)
+        s = getattr(params, sname)
+        p = G_N + e * E_N
+        pre = f"params.{mname}."
+        P[p + E_BI] = _check(m.backlash_int_mm, pre + "backlash_int_mm", "mm", lo=0.0) * 1e-3
+        P[p + E_BB] = _check(m.bearing_backlash_mm, pre + "bearing_backlash_mm", "mm", lo=0.0) * 1e-3
+        for col, f in ((E_KC, "stiffness_compression_N_per_mm"), (E_KT, "stiffness_tension_N_per_mm"),
+                       (E_KB, "bearing_stiffness_N_per_mm"), (E_KH, "housing_stiffness_N_per_mm")):
+            P[p + col] = _check(getattr(m, f), pre + f, "N/mm", lo=0.0, lo_open=True) * 1e3
+        pre = f"params.{sname}."
+        P[p + E_GAIN] = _check(s.lvdt_gain, pre + "lvdt_gain", "(mm/mm)", lo=0.0, lo_open=True)
+        P[p + E_OFF] = _check(s.lvdt_offset_mm, pre + "lvdt_offset_mm", "mm")
+        P[p + E_NL] = _check(s.lvdt_nonlinearity_mm, pre + "lvdt_nonlinearity_mm", "mm")
+        P[p + E_FS] = _check(s.lvdt_full_scale_mm, pre + "lvdt_full_scale_mm", "mm", lo=0.0, lo_open=True)
+        P[p + E_LSIG] = _check(s.lvdt_noise_pp_mm, pre + "lvdt_noise_pp_mm", "mm", lo=0.0) / 6.0
+        P[p + E_LCG] = _check(s.loadcell_gain, pre + "loadcell_gain", "(N/N)", lo=0.0, lo_open=True)
+        P[p + E_LCSIG] = _check(s.loadcell_noise_std_N, pre + "loadcell_noise_std_N", "N", lo=0.0)
+        b = _check_int(s.resolver_bits, pre + "resolver_bits", 1, 40)
+        if bits is not None and b != bits:
+            raise InputError(f"params.sensors2.resolver_bits must equal params.sensors1.resolver_bits "
+                             f"(one resolver quantum per rig), got {b} and {bits}")
+        bits = b
+    P[G_Q] = 2.0 * math.pi / 2.0**bits
+
+    table = _fx.compile_effects(params.effects, period, nsub)
+
+    # stability of the explicit spring terms: Gershgorin bound of M^-1 K
+    M = J * im * im
+    kch = []
+    for e in range(2):
+        p = G_N + e * E_N
+        kint = max(P[p + E_KC], P[p + E_KT]) + table[e, _fx.COL_VE_K]
+        kch.append(1.0 / (1.0 / P[p + E_KH] + 1.0 / P[p + E_KB] + 1.0 / kint))
+    w2 = max(
+        (P[G_KP] * im * im + 2.0 * max(kch) + P[G_KSTOP]) / M,
+        (2.0 * (kch[0] + kch[1]) + P[G_KLOAD]) / ms,
+    )
+    hw = h * math.sqrt(w2)
+    # explicit half-kick of the damping terms (trapezoidal rule): h/2 * c/m <= 1
+    visc = max(table[0, _fx.COL_VISCOUS], table[1, _fx.COL_VISCOUS])
+    damp = 0.5 * h * max((P[G_KD] + bm + visc / (im * im)) / J, P[G_CS] / ms)
+    if damp > 1.0:
+        need = math.ceil(nsub * damp)
+        raise InputError(
+            f"params.substeps = {nsub} is too few for the damping terms: substep/2 x damping rate "
+            f"= {damp:.3g} > 1; use at least {need} substeps"
+        )
+    if hw > 1.0:
+        need = math.ceil(nsub * hw)
+        raise InputError(
+            f"params.substeps = {nsub} is too few: substep {h:.3g} s times the stiffest mode "
+            f"{math.sqrt(w2):.4g} rad/s = {hw:.3g} > 1; use at least {need} substeps"
+        )
+    return P, table, hw
+
+
+# ====================================================================== the plant
+
+
+class RigPlant:
+    """The simulated rig, advanced one sample period per :meth:`step`.
+
+    Parameters
+    ----------
+    params : RigParams
+        Rig parameters (validated here; :class:`hil.errors.InputError` names the field).
+    rng : numpy.random.Generator
+        Source of all sensor noise.
+    s0_mm : float, optional
+        Initial stroke of both EMAs, mm (default 0). The rig starts at rest,
+        chains slack and centred (motor, ram and surface all at ``s0_mm``),
+        drives DISABLED.
+
+    Notes
+    -----
+    See the module docstring for the model equations and units. The per-sample
+    kernel is compiled with numba (cached on disk); the first construction in
+    a process triggers the compilation (seconds) unless the cache is warm.
+    """
+
+    def __init__(self, params: RigParams, rng: np.random.Generator, *, s0_mm: float = 0.0) -> None:
+        P, table, hw = _build_vectors(params)
+        if not isinstance(rng, np.random.Generator):
+            raise InputError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        s0 = _check(s0_mm, "s0_mm", "mm", lo=-params.stroke_limit_mm, hi=params.stroke_limit_mm)
+        self._params = params
+        self._rng = rng
+        self._P = P
+        self._E = table
+        self.stability_number = hw  #: substep x stiffest mode frequency (must be <= 1)
+        X = np.zeros(X_LEN, dtype=np.float64)
+        x0 = s0 * 1e-3
+        X[S_Y] = x0
+        for e in range(2):
+            b = S_N + e * SE_N
+            X[b + SE_PHI] = x0 * P[G_IM]
+            X[b + SE_R] = x0
+            X[b + SE_S] = x0
+        self._X = X
+        self._sbuf = np.zeros((2, int(P[G_NSUB]) + 1), dtype=np.float64)
+        self._dm = np.zeros(4, dtype=np.float64)
+        self._noise = rng.standard_normal((NOISE_BLOCK, 4))
+        self._kn = 0
+        self._period = float(params.sample_period_s)
+
+    # ------------------------------------------------------------------ stepping
+    def step_raw(self, mode1: int, value1: float, mode2: int, value2: float,
+                 load_N: float = 0.0) -> tuple:
+        """Advance one sample period with plain numbers (fast path of :meth:`step`).
+
+        Parameters
+        ----------
+        mode1, mode2 : int
+            Drive modes as :class:`hil.types.DriveMode` values (0, 8, 10).
+        value1, value2 : float
+            Motor angle target (rad) for POSITION, ram force target (N) for
+            FORCE, ignored for DISABLED.
+        load_N : float
+            External force on the surface over this period, N (+ towards +y).
+
+        Returns
+        -------
+        tuple
+            ``(t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N)`` measured at
+            the end of the period, ``t_s = k * sample_period_s``.
+        """
+        if mode1 not in _MODES:
+            raise InputError(f"mode1 must be a DriveMode value in {sorted(_MODES)}, got {mode1!r}")
+        if mode2 not in _MODES:
+            raise InputError(f"mode2 must be a DriveMode value in {sorted(_MODES)}, got {mode2!r}")
+        if mode1 == _DISABLED:
+            value1 = 0.0
+        elif not math.isfinite(value1):
+            raise InputError(f"value1 must be finite (rad for POSITION, N for FORCE), got {value1!r}")
+        if mode2 == _DISABLED:
+            value2 = 0.0
+        elif not math.isfinite(value2):
+            raise InputError(f"value2 must be finite (rad for POSITION, N for FORCE), got {value2!r}")
+        if not math.isfinite(load_N):
+            raise InputError(f"load_N must be a finite scalar in N, got {load_N!r}")
+        if self._kn >= NOISE_BLOCK:
+            self._noise = self._rng.standard_normal((NOISE_BLOCK, 4))
+            self._kn = 0
+        out = _advance(self._X, self._P, self._E, self._sbuf, self._dm, int(mode1), float(value1),
+                       int(mode2), float(value2), float(load_N), self._noise, self._kn)
+        self._kn += 1
+        return out
+
+    def step(self, sp1: Setpoint, sp2: Setpoint, load_N: float = 0.0) -> Sample:
+        """Advance one sample period and return the sample measured at its end.
+
+        Parameters
+        ----------
+        sp1, sp2 : hil.types.Setpoint
+            Commands of drive 1 and 2, held over the period.
+        load_N : float, optional
+            External force on the surface, N (+ towards +y), held over the period.
+
+        Returns
+        -------
+        hil.types.Sample
+            Measured (quantised, noisy, miscalibrated) sample at ``t_s = k * period``.
+
+        Raises
+        ------
+        hil.errors.InputError
+            ``sp1``/``sp2`` not a Setpoint, unknown mode, non-finite value or load.
+        """
+        if not isinstance(sp1, Setpoint):
+            raise InputError(f"sp1 must be a hil.types.Setpoint, got {type(sp1).__name__}")
+        if not isinstance(sp2, Setpoint):
+            raise InputError(f"sp2 must be a hil.types.Setpoint, got {type(sp2).__name__}")
+        try:
+            return Sample(*self.step_raw(sp1.mode, sp1.value, sp2.mode, sp2.value, load_N))
+        except InputError as exc:
+            msg = str(exc).replace("mode1", "sp1.mode").replace("value1", "sp1.value")
+            msg = msg.replace("mode2", "sp2.mode").replace("value2", "sp2.value")
+            raise InputError(msg) from None
+        except TypeError as exc:
+            raise InputError(f"sp1.value, sp2.value and load_N must be real scalars: {exc}") from None
+
+    def run(self, mode1: Any, value1: Any, mode2: Any, value2: Any, load_N: Any = 0.0) -> PlantTrace:
+        """Advance many sample periods in one compiled loop (tests, benchmarks).
+
+        Identical to calling :meth:`step_raw` once per row (same noise draws
+        for the same generator state), but without the per-call overhead.
+
+        Parameters
+        ----------
+        mode1, mode2 : int or array_like of int, shape (n,)
+            Drive modes per sample (DriveMode values); scalars are broadcast.
+        value1, value2 : float or array_like, shape (n,)
+            Targets per sample: rad (POSITION) or N (FORCE).
+        load_N : float or array_like, shape (n,)
+            External surface force per sample, N.
+
+        Returns
+        -------
+        PlantTrace
+            Measured samples and true states after each period.
+
+        Raises
+        ------
+        hil.errors.InputError
+            Shapes that do not broadcast to one length n >= 1, unknown modes,
+            non-finite values.
+        """
+        arrs = {}
+        for name, a in (("mode1", mode1), ("value1", value1), ("mode2", mode2), ("value2", value2),
+                        ("load_N", load_N)):
+            arr = np.asarray(a)
+            if arr.ndim > 1:
+                raise InputError(f"{name} must be a scalar or 1-D array, got shape {arr.shape}")
+            arrs[name] = arr
+        try:
+            b = np.broadcast_arrays(*arrs.values())
+        except ValueError:
+            raise InputError("mode1, value1, mode2, value2 and load_N must broadcast to one length n; got "
+                             + ", ".join(f"{k} shape {v.shape}" for k, v in arrs.items())) from None
+        n = b[0].size if b[0].ndim == 1 else 1
+        if n < 1:
+            raise InputError("run needs at least one sample (n >= 1), got n = 0")
+        m1, v1, m2, v2, ld = (np.ascontiguousarray(np.broadcast_to(x, (n,))) for x in b)
+        mm = []
+        for name, m in (("mode1", m1), ("mode2", m2)):
+            if not np.issubdtype(m.dtype, np.integer) or not np.isin(m, list(_MODES)).all():
+                raise InputError(f"{name} must hold DriveMode values {sorted(_MODES)} (int), shape ({n},)")
+            mm.append(m.astype(np.int64))
+        vv = []
+        for name, v, m in (("value1", v1, mm[0]), ("value2", v2, mm[1])):
+            v = np.where(m == _DISABLED, 0.0, v.astype(np.float64))
+            if not np.isfinite(v).all():
+                raise InputError(f"{name} must be finite where the drive is enabled (rad or N), shape ({n},)")
+            vv.append(v)
+        ld = ld.astype(np.float64)
+        if not np.isfinite(ld).all():
+            raise InputError(f"load_N must be finite, N, shape ({n},)")
+
+        meas = np.empty((n, 7), dtype=np.float64)
+        truth = np.empty((n, TR_N), dtype=np.float64)
+        i = 0
+        while i < n:
+            if self._kn >= NOISE_BLOCK:
+                self._noise = self._rng.standard_normal((NOISE_BLOCK, 4))
+                self._kn = 0
+            m = min(n - i, NOISE_BLOCK - self._kn)
+            sl = slice(i, i + m)
+            _run(self._X, self._P, self._E, self._sbuf, self._dm, mm[0][sl], vv[0][sl], mm[1][sl],
+                 vv[1][sl], ld[sl], self._noise, self._kn, meas, truth, i)
+            self._kn += m
+            i += m
+        return PlantTrace(
+            t_s=meas[:, 0], phi1_rad=meas[:, 1], phi2_rad=meas[:, 2], s1_mm=meas[:, 3],
+            s2_mm=meas[:, 4], F1_N=meas[:, 5], F2_N=meas[:, 6],
+            true_phi_rad=truth[:, TR_PHI:TR_PHI + 2], true_omega_rad_s=truth[:, TR_W:TR_W + 2],
+            true_s_mm=truth[:, TR_S:TR_S + 2], true_F_N=truth[:, TR_F:TR_F + 2],
+            true_r_mm=truth[:, TR_R:TR_R + 2], true_h_mm=truth[:, TR_H:TR_H + 2],
+            torque_Nm=truth[:, TR_T:TR_T + 2], torque_abs_max_Nm=truth[:, TR_TMAX:TR_TMAX + 2],
+            y_mm=truth[:, TR_Y], v_mm_s=truth[:, TR_V],
+        )
+
+    # ------------------------------------------------------------------ inspection
+    @property
+    def t_s(self) -> float:
+        """Time of the last sample, s (0 before the first step)."""
+        return float(self._X[S_K]) * self._period
+
+    @property
+    def params(self) -> RigParams:
+        """The rig parameters this plant was built from."""
+        return self._params
+
+    def state(self) -> PlantState:
+        """True internal state at the end of the last sample (copy)."""
+        X = self._X
+
+        def pair(idx: int, scale: float = 1.0) -> tuple:
+            return (float(X[S_N + idx]) * scale, float(X[S_N + SE_N + idx]) * scale)
+
+        return PlantState(
+            t_s=self.t_s,
+            phi_rad=pair(SE_PHI), omega_rad_s=pair(SE_W),
+            y_mm=float(X[S_Y]) * 1e3, v_mm_s=float(X[S_V]) * 1e3,
+            r_mm=pair(SE_R, 1e3), h_mm=pair(SE_H, 1e3), F_N=pair(SE_F), s_mm=pair(SE_S, 1e3),
+            torque_Nm=pair(SE_T), integral_rad_s=pair(SE_I),
+        )
+
+    def truth(self) -> RigTruth:
+        """Backlash, stiffness and calibration of this rig (:func:`sim.truth.rig_truth`)."""
+        return rig_truth(self._params)

@@ -1,0 +1,1381 @@
+"""Two simulated CiA 402 EMA drives as real CANopen slaves around one rig plant (sans-IO).
+
+:class:`SimDrivePair` replaces the two EMA drives of the rig in dry-runs and
+tests. Each node (:class:`SimDrive`) is built from the same EDS the master
+reads (``profiles/ema_drive.eds`` through :func:`hil.drive_od.load_drive_od`)
+and serves it with a ``canopen.LocalNode`` (SDO server and data store). The
+pair consumes every frame seen on the bus and returns the frames it
+transmits; time is passed in. No threads, no clocks, no bus objects: the
+caller (an IO shell on a python-can bus, or a test) moves the frames.
+
+What canopen 2.4.1's ``LocalNode`` lacks is implemented here: the NMT slave
+(boot-up, NMT commands, heartbeat producer), the PDO engine driven by the
+object dictionary (SYNC-driven TPDOs, latched synchronous and event RPDOs,
+mapping validation), the EMCY producer and the CiA 402 drive behaviour
+(:class:`hil.cia402.DriveStateMachine`). ``LocalNode`` is used only for the
+SDO server (expedited and segmented transfers) and the data store; its own
+NMT slave is detached (it would start a periodic heartbeat task on the bus).
+
+Per SYNC (COB-ID of 0x1005, 0x080 by default) the pair, in this order:
+
+1. sends the due synchronous TPDOs of every OPERATIONAL node with the current
+   sample (the plant state at this SYNC);
+2. applies the synchronous RPDOs latched since the previous SYNC;
+3. computes both drives' setpoints and steps the plant once, so that the
+   current sample becomes the state at the next SYNC.
+
+A statusword change commanded by a synchronous RPDO therefore shows in the
+TPDO of the SYNC after the one that applied it (one cycle of latency, as on
+the real bus).
+
+Choices (CiA 301 / CiA 402 leave them open or this drive restricts them)
+-------------------------------------------------------------------------
+* Power-on: the drives' application boots instantly (CiA 402 transition 1 at
+  power-on, NMT INITIALISING -> boot-up frame -> PRE-OPERATIONAL). At the
+  first power-on the plant is stepped once with both drives DISABLED, so the
+  current sample is the measured rig at rest; this step counts in
+  ``stats.plant_steps`` (``plant_steps == syncs + 1``).
+* Modes of operation: CSP (8) and CST (10). An SDO write of another value to
+  0x6060 is aborted (0x06090030); an RPDO cannot be refused, so a drive whose
+  0x6060 holds another value keeps 0x6061 unchanged, clears statusword bit 12
+  and commands DISABLED (holding brake), even in OPERATION_ENABLED.
+* Quick stop (option code 2): the drive holds the motor angle measured when
+  the quick stop began for :data:`QUICK_STOP_HOLD_S` (a fixed 50 ms, counted
+  in SYNC cycles of the plant's sample period; 0x6085 is not used), then
+  takes transition 12 to SWITCH_ON_DISABLED (brake).
+* Fault reaction: FAULT_REACTION_ACTIVE lasts until the next SYNC, then FAULT;
+  both command DISABLED. A fault reset (rising edge of controlword bit 7)
+  sends EMCY 0x0000.
+* Illegal controlwords leave the state unchanged and are counted
+  (``stats.illegal_commands``), no EMCY. A repeated controlword is a no-op.
+  Bit 8 (halt) is not implemented.
+* PDO mapping (CiA 301 7.5.2.35/36 procedure): entries and the number of
+  entries can only be written while the PDO is invalid (COB-ID bit 31 set)
+  and entries only while sub-index 0 is 0, else abort 0x06040043 (general
+  parameter incompatibility). An entry must name an existing, PDO-mappable
+  object, readable for a TPDO and writable for an RPDO, with its exact bit
+  length (a whole number of bytes, EDS Granularity=8), else 0x06040041.
+  Writing sub-index 0 checks the entries and aborts with 0x06040042 when
+  they exceed 64 bits (or the number of entries the record has).
+* PDO communication: 11-bit COB-IDs only; the CAN-ID cannot change while the
+  PDO is valid and a valid PDO cannot use a CiA 301 restricted CAN-ID
+  (0x06090030). Transmission types 0..240, 254, 255 (252/253 RTR-only and
+  241..251 refused, 0x06090030). TPDO type 0 is sent at a SYNC when its
+  payload changed; 254/255 when its payload changed after any event (SYNC,
+  RPDO, SDO write, fault), not faster than the inhibit time (sub 3, 100 us,
+  changeable only while invalid), and every event timer (sub 5, ms) from
+  :meth:`SimDrivePair.tick`. RPDO event timers (deadline monitoring) and the
+  consumer heartbeat 0x1016 are stored but not monitored.
+* RPDO length: shorter than mapped -> EMCY 0x8210, longer -> EMCY 0x8220,
+  the frame is not processed. The EMCY is sent when the error appears (not
+  for every further bad frame); the next RPDO of correct length resets it
+  with EMCY 0x0000.
+* EMCY: COB-ID from 0x1014 (bit 31 = not sent), sent in PRE-OPERATIONAL and
+  OPERATIONAL only; data = error code u16, error register 0x1001 u8, five
+  zero manufacturer bytes. Error codes other than 0 are pushed into the
+  pre-defined error field 0x1003 (4 entries; writing 0 to 0x1003:00 clears it).
+* NMT reset node restores every object to its EDS default (plus the drive's
+  own data, see ``counts_per_rev``) and the drive state to SWITCH_ON_DISABLED;
+  reset communication restores 0x1000..0x1FFF and keeps the drive state.
+  Leaving OPERATIONAL does not change the drive state: the drive keeps
+  following the last values received.
+* Software position limits 0x607D: a write that makes max < min is aborted
+  (0x06090036). Rated torque 0x6076 and 0x608F must be > 0 (0x06090032).
+* Time passed to :meth:`SimDrivePair.on_frame` and :meth:`SimDrivePair.tick`
+  never runs backwards: a smaller ``t`` than the last one is taken as the last.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+import struct
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any, Callable
+
+import canopen
+import canopen.objectdictionary as cod
+from canopen.sdo import SdoAbortedError
+
+from hil.cia402 import DriveStateMachine, IllegalTransition, OperationMode, State, Statusword
+from hil.drive_od import check_drive_od, load_drive_od
+from hil.errors import InputError, ProfileError
+from hil.pdo import (
+    COB_ID_INVALID,
+    HEARTBEAT_COB_ID_BASE,
+    Frame,
+    increments_to_rad,
+    mm_to_lvdt_um,
+    newton_to_force_dN,
+    permille_to_force_N,
+    rad_to_increments,
+)
+from hil.sdo import SDO_RX_COB_ID_BASE, SDO_TX_COB_ID_BASE, SdoAbortCode
+from hil.types import DriveMode, Sample, Setpoint
+from sim.plant import RigPlant
+
+__all__ = [
+    "SimDrivePair",
+    "SimDrive",
+    "SimPairStats",
+    "NmtState",
+    "NmtCommand",
+    "QUICK_STOP_HOLD_S",
+    "TARGET_WINDOW_INC",
+    "EMCY_NO_ERROR",
+    "EMCY_PDO_LENGTH_ERROR",
+    "EMCY_PDO_LENGTH_EXCEEDED",
+    "error_register_bits",
+]
+
+#: How long a quick stop holds the motor angle before SWITCH_ON_DISABLED [s].
+QUICK_STOP_HOLD_S = 0.05
+#: CSP target reached (statusword bit 10) when |target - actual| <= this [increments].
+TARGET_WINDOW_INC = 20
+#: EMCY error code "error reset or no error".
+EMCY_NO_ERROR = 0x0000
+#: EMCY error code "PDO not processed due to length error".
+EMCY_PDO_LENGTH_ERROR = 0x8210
+#: EMCY error code "PDO length exceeded".
+EMCY_PDO_LENGTH_EXCEEDED = 0x8220
+
+_SUPPORTED_MODES = frozenset((int(OperationMode.CSP), int(OperationMode.CST)))
+_ERROR_HISTORY_LEN = 4
+_TIME_EPS_S = 1e-9
+_I16 = (-(2**15), 2**15 - 1)
+#: CiA 301 restricted CAN-IDs (may not be used by a PDO).
+_RESTRICTED_CAN_IDS = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x5FF),
+                       (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x77F), (0x780, 0x7FF))
+#: Objects this simulation needs besides what hil.drive_od.check_drive_od demands.
+_SIM_REQUIRED = ((0x1001, 0), (0x1005, 0), (0x1014, 0), (0x1017, 0), (0x6040, 0), (0x6041, 0),
+                 (0x6060, 0), (0x6061, 0), (0x6064, 0), (0x6071, 0), (0x6072, 0), (0x6076, 0),
+                 (0x6077, 0), (0x607A, 0), (0x607D, 1), (0x607D, 2), (0x608F, 1), (0x608F, 2),
+                 (0x2100, 0), (0x2101, 0), (0x2102, 0))
+
+
+class NmtState(IntEnum):
+    """NMT states of a CANopen slave, valued as the heartbeat state byte."""
+
+    INITIALISING = 0x00  #: also the boot-up message
+    STOPPED = 0x04
+    OPERATIONAL = 0x05
+    PRE_OPERATIONAL = 0x7F
+
+
+class NmtCommand(IntEnum):
+    """NMT command specifiers (byte 0 of the NMT frame, COB-ID 0)."""
+
+    START = 0x01
+    STOP = 0x02
+    ENTER_PRE_OPERATIONAL = 0x80
+    RESET_NODE = 0x81
+    RESET_COMMUNICATION = 0x82
+
+
+def error_register_bits(code: int) -> int:
+    """The error register 0x1001 bits an EMCY error code sets (CiA 301 Table 48).
+
+    Parameters
+    ----------
+    code : int
+        EMCY error code, 0..0xFFFF.
+
+    Returns
+    -------
+    int
+        0 for code 0; otherwise bit 0 (generic) plus bit 1 for 0x2xxx
+        (current), bit 2 for 0x3xxx (voltage), bit 3 for 0x4xxx (temperature),
+        bit 4 for 0x81xx/0x82xx (communication), bit 7 for 0xFFxx
+        (manufacturer specific).
+
+    Notes
+    -----
+    E.g. 0x2310 (continuous over-current) -> 0x03, 0x8210 (PDO length) -> 0x11.
+    """
+    c = _check_code(code, "code", allow_zero=True)
+    if c == 0:
+        return 0
+    reg = 0x01
+    group = c >> 12
+    if group == 0x2:
+        reg |= 0x02
+    elif group == 0x3:
+        reg |= 0x04
+    elif group == 0x4:
+        reg |= 0x08
+    elif c >> 8 in (0x81, 0x82):
+        reg |= 0x10
+    elif c >> 8 == 0xFF:
+        reg |= 0x80
+    return reg
+
+
+def _check_code(code: int, name: str, *, allow_zero: bool) -> int:
+    if isinstance(code, bool):
+        raise InputError(f"{name} must be an int error code 0x0001..0xFFFF, got bool")
+    try:
+        c = operator.index(code)
+    except TypeError:
+        raise InputError(f"{name} must be an int error code 0x0001..0xFFFF, got {code!r}") from None
+    lo = 0 if allow_zero else 1
+    if not lo <= c <= 0xFFFF:
+        raise InputError(f"{name} = 0x{c:X} is outside 0x{lo:04X}..0xFFFF (16-bit EMCY error code)")
+    return c
+
+
+def _check_time(t: float) -> float:
+    if isinstance(t, bool):
+        raise InputError("t must be a time in s (float), got bool")
+    try:
+        v = float(t)
+    except (TypeError, ValueError):
+        raise InputError(f"t must be a time in s (float), got {t!r}") from None
+    if not math.isfinite(v):
+        raise InputError(f"t = {v} [s] must be finite")
+    return v
+
+
+def _abort(code: int) -> SdoAbortedError:
+    return SdoAbortedError(int(code))
+
+
+# --------------------------------------------------------------------------- stats
+
+
+@dataclass(frozen=True, slots=True)
+class SimPairStats:
+    """Counters of a :class:`SimDrivePair` (a snapshot; both nodes together).
+
+    Attributes
+    ----------
+    syncs : int
+        SYNC frames processed.
+    plant_steps : int
+        Calls of ``plant.step`` (one per SYNC plus one at the first power-on).
+    tpdos_sent : int
+        TPDO frames transmitted.
+    rpdos_applied : int
+        RPDOs written into a data store (synchronous ones at their SYNC).
+    rpdos_late : int
+        Latched synchronous RPDOs overwritten by a newer one before their
+        SYNC (the older one missed its cycle).
+    rpdos_dropped : int
+        RPDOs not processed: node not OPERATIONAL, or wrong length.
+    bad_frames_ignored : int
+        Frames no node consumes (unknown COB-ID, another node's traffic,
+        NMT for other nodes) or that are malformed (NMT not 2 bytes, SYNC
+        over 1 byte, SDO request not 8 bytes, unknown NMT command).
+    frames_unpowered : int
+        Frames received before :meth:`SimDrivePair.power_on`.
+    sdo_requests : int
+        SDO request frames served.
+    illegal_commands : int
+        Controlwords refused by the CiA 402 state machine.
+    emcys_sent, heartbeats_sent : int
+        EMCY and heartbeat frames transmitted (boot-up frames excluded).
+    """
+
+    syncs: int = 0
+    plant_steps: int = 0
+    tpdos_sent: int = 0
+    rpdos_applied: int = 0
+    rpdos_late: int = 0
+    rpdos_dropped: int = 0
+    bad_frames_ignored: int = 0
+    frames_unpowered: int = 0
+    sdo_requests: int = 0
+    illegal_commands: int = 0
+    emcys_sent: int = 0
+    heartbeats_sent: int = 0
+
+
+class _Counters:
+    """Mutable counters shared by the pair and its nodes."""
+
+    __slots__ = SimPairStats.__slots__
+
+    def __init__(self) -> None:
+        for name in self.__slots__:
+            setattr(self, name, 0)
+
+    def snapshot(self) -> SimPairStats:
+        return SimPairStats(**{name: getattr(self, name) for name in self.__slots__})
+
+
+# --------------------------------------------------------------------------- sans-IO glue
+
+
+class _CaptureBus:
+    """The python-can "bus" of a node's private ``canopen.Network``: ``send`` only records.
+
+    canopen calls ``bus.send(can.Message)`` for the SDO responses; the node
+    drains :attr:`sent` into :class:`hil.pdo.Frame` objects right after each
+    request. Nothing else of the ``can.BusABC`` interface is used.
+    """
+
+    channel_info = "emacheck simulated drive (sans-IO)"
+
+    def __init__(self) -> None:
+        self.sent: list[Any] = []
+
+    def send(self, msg: Any, timeout: float | None = None) -> None:
+        self.sent.append(msg)
+
+
+@dataclass(eq=False)
+class _Pdo:
+    """One PDO of a node: configuration (from the data store) and runtime state."""
+
+    rx: bool
+    number: int
+    comm_index: int
+    map_index: int
+    n_entries_max: int
+    has_inhibit: bool
+    has_event_timer: bool
+    cob_id: int = 0
+    valid: bool = False
+    trans_type: int = 0
+    entries: tuple[tuple[int, int, int], ...] = ()  # (index, subindex, bytes)
+    length: int = 0
+    inhibit_s: float = 0.0
+    event_timer_s: float = 0.0
+    sync_count: int = 0
+    latched: bytes | None = None
+    last_payload: bytes | None = None
+    last_sent_t: float | None = None
+    pending: bool = False
+    key: tuple = field(default=())
+
+    @property
+    def is_synchronous(self) -> bool:
+        return self.trans_type <= 240
+
+    @property
+    def is_event(self) -> bool:
+        return self.trans_type >= 254
+
+
+# --------------------------------------------------------------------------- one node
+
+
+class SimDrive:
+    """One simulated EMA drive: a CANopen slave (CiA 301) with a CiA 402 drive core.
+
+    Created by :class:`SimDrivePair`; not meant to be built alone (it has no
+    plant: the pair feeds it the measured sample and steps the plant).
+
+    Attributes
+    ----------
+    node_id : int
+        CANopen node id, 1..127.
+    ema_index : int
+        0 for EMA 1, 1 for EMA 2 of the plant.
+    local : canopen.LocalNode
+        SDO server and data store (``local.data_store``), from the EDS.
+    network : canopen.Network
+        The node's private network; its ``bus`` only captures sent messages.
+    nmt_state : NmtState
+        Current NMT state.
+    state_machine : hil.cia402.DriveStateMachine
+        The CiA 402 power drive state machine (remote bit 9 reported).
+    heartbeat_enabled : bool
+        Fault hook: False suppresses the heartbeat frames (the producer timer
+        keeps running, so re-enabling resumes in phase).
+    """
+
+    def __init__(self, node_id: int, ema_index: int, od: cod.ObjectDictionary, *,
+                 gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
+                 counters: _Counters, outbox: list[Frame]) -> None:
+        self.node_id = node_id
+        self.ema_index = ema_index
+        self._od = od
+        self._i_total = float(gear_ratio_rad_per_mm)
+        self._cpr_override = counts_per_rev
+        self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9)) + 1
+        self._counters = counters
+        self._out = outbox
+
+        self._bus = _CaptureBus()
+        self.network = canopen.Network(self._bus)
+        self.local = canopen.LocalNode(node_id, od)
+        self.network.add_node(self.local)
+        # Detach LocalNode's own NMT slave: it would act on NMT frames and start a
+        # periodic heartbeat task on the bus when 0x1017 is written.
+        self.network.unsubscribe(0, self.local.nmt.on_command)
+        callbacks = getattr(self.local, "_write_callbacks", None)
+        if callbacks is not None and self.local.nmt.on_write in callbacks:
+            callbacks.remove(self.local.nmt.on_write)
+        self.local.add_read_callback(self._on_read)
+        self.local.add_write_callback(self._on_write)
+        self.sdo_request_cob_id = SDO_TX_COB_ID_BASE + node_id  #: requests to this node
+        self.sdo_response_cob_id = SDO_RX_COB_ID_BASE + node_id  #: its responses
+
+        self._live: dict[tuple[int, int], Callable[[], int | float]] = {
+            (0x6041, 0): lambda: self.statusword,
+            (0x6061, 0): lambda: self._mode_display,
+            (0x6064, 0): lambda: self.position_inc,
+            (0x6077, 0): lambda: self.torque_actual_permille,
+            (0x2100, 0): lambda: mm_to_lvdt_um(self._s_mm),
+            (0x2101, 0): lambda: newton_to_force_dN(self._F_N),
+            (0x2102, 0): lambda: self._i_total,
+            (0x603F, 0): lambda: self.state_machine.error_code,
+            (0x1001, 0): lambda: self.error_register,
+        }
+
+        self.nmt_state = NmtState.INITIALISING
+        self.state_machine = DriveStateMachine(remote=True)
+        self.heartbeat_enabled = True
+        self._now = 0.0
+        self._phi_rad = 0.0
+        self._s_mm = 0.0
+        self._F_N = 0.0
+        self._torque_Nm = 0.0
+        self._reset_drive()
+        self._hb_period_s = 0.0
+        self._hb_next: float | None = None
+        self._sync_cob_id = 0x080
+        self._emcy_cob_id: int | None = 0x80 + node_id
+        self._comm_error = False
+        self._pending: set[tuple[int, int]] = set()
+        self._sdo_phase: int | None = None  # segment command specifier expected next
+        self._sdo_mux: tuple[int, int] = (0, 0)  # index, subindex of the last transfer
+
+        self._rpdos = self._discover(rx=True)
+        self._tpdos = self._discover(rx=False)
+        self._rx_by_cob: dict[int, list[_Pdo]] = {}
+        problems = []
+        for p in self._rpdos + self._tpdos:
+            problem = self._mapping_problem(p, self._int(p.map_index, 0))
+            if problem is not None:
+                problems.append(f"0x{p.map_index:04X}: {problem[1]}")
+        if problems:
+            raise InputError(f"node {node_id} object dictionary: default PDO mapping invalid: "
+                             + "; ".join(problems))
+        self._refresh_comm(restart_heartbeat=False)
+
+    # ------------------------------------------------------------------ OD access
+
+    def _var(self, index: int, subindex: int) -> cod.ODVariable | None:
+        """The real variable at index:subindex (no synthesised array members)."""
+        if index not in self._od:
+            return None
+        obj = self._od[index]
+        if isinstance(obj, cod.ODVariable):
+            return obj if subindex == 0 else None
+        return obj.subindices.get(subindex)
+
+    def read(self, index: int, subindex: int = 0) -> int | float | str | bytes:
+        """Decoded value of ``index:subindex`` as an SDO upload would return it.
+
+        Raises
+        ------
+        hil.errors.InputError
+            The object does not exist in this node's object dictionary.
+        """
+        var = self._var(index, subindex)
+        if var is None:
+            raise InputError(f"index:subindex 0x{index:04X}:{subindex:02X} is not in the object "
+                             f"dictionary of node {self.node_id}")
+        return var.decode_raw(self.local.get_data(index, subindex))
+
+    def _int(self, index: int, subindex: int = 0) -> int:
+        return int(self._var(index, subindex).decode_raw(self.local.get_data(index, subindex)))
+
+    def _store(self, index: int, subindex: int, data: bytes) -> None:
+        self.local.data_store.setdefault(index, {})[subindex] = bytes(data)
+
+    # ------------------------------------------------------------------ live values
+
+    def _measure(self, sample: Sample, torque_Nm: float) -> None:
+        if self.ema_index == 0:
+            self._phi_rad, self._s_mm, self._F_N = sample.phi1_rad, sample.s1_mm, sample.F1_N
+        else:
+            self._phi_rad, self._s_mm, self._F_N = sample.phi2_rad, sample.s2_mm, sample.F2_N
+        self._torque_Nm = float(torque_Nm)
+
+    @property
+    def counts_per_rev(self) -> float:
+        """Position increments per motor revolution, 0x608F:01 / 0x608F:02."""
+        return self._int(0x608F, 1) / self._int(0x608F, 2)
+
+    @property
+    def position_inc(self) -> int:
+        """Position actual value 0x6064 [increments] of the current sample."""
+        return rad_to_increments(self._phi_rad, self.counts_per_rev)
+
+    @property
+    def torque_actual_permille(self) -> int:
+        """Torque actual value 0x6077 [per mille of the rated torque 0x6076]."""
+        rated_Nm = self._int(0x6076) / 1000.0
+        return int(min(max(round(1000.0 * self._torque_Nm / rated_Nm), _I16[0]), _I16[1]))
+
+    @property
+    def error_register(self) -> int:
+        """Error register 0x1001: bits of the latched fault plus bits 0 and 4 for a PDO length error."""
+        reg = 0
+        sm = self.state_machine
+        if sm.state in (State.FAULT_REACTION_ACTIVE, State.FAULT) and sm.error_code:
+            reg |= error_register_bits(sm.error_code)
+        if self._comm_error:
+            reg |= 0x11
+        return reg
+
+    def _effective_mode(self) -> int | None:
+        mode = self._int(0x6060)
+        return mode if mode in _SUPPORTED_MODES else None
+
+    @property
+    def statusword(self) -> int:
+        """Statusword 0x6041 now.
+
+        State bits from the state machine, remote (bit 9) always; in
+        OPERATION_ENABLED with a supported mode: bit 12 (drive follows the
+        command), bit 11 when the last target was clipped (software position
+        limits 0x607D in CSP, max torque 0x6072 in CST), bit 10 in CSP when
+        ``|effective target - position actual| <= TARGET_WINDOW_INC``.
+        """
+        sm = self.state_machine
+        extra = 0
+        if sm.state is State.OPERATION_ENABLED:
+            mode = self._effective_mode()
+            if mode is not None:
+                extra |= Statusword.DRIVE_FOLLOWS_COMMAND
+                if self._limit_active:
+                    extra |= Statusword.INTERNAL_LIMIT_ACTIVE
+                if (mode == OperationMode.CSP and self._target_eff_inc is not None
+                        and abs(self._target_eff_inc - self.position_inc) <= TARGET_WINDOW_INC):
+                    extra |= Statusword.TARGET_REACHED
+        return sm.statusword(extra)
+
+    @property
+    def setpoint(self) -> Setpoint:
+        """What the drive commanded the plant at the last SYNC."""
+        return self._setpoint
+
+    def _on_read(self, index: int, subindex: int, od: Any = None, **_: Any) -> int | float | None:
+        f = self._live.get((index, subindex))
+        return None if f is None else f()
+
+    # ------------------------------------------------------------------ write validation (SDO)
+
+    def _on_write(self, index: int, subindex: int, od: cod.ODVariable, data: bytes, **_: Any) -> None:
+        """Validate an SDO write (raise SdoAbortedError to refuse) and note its side effects."""
+        value = od.decode_raw(bytes(data)) if od.data_type in cod.NUMBER_TYPES else None
+        pdo = self._pdo_by_index(index)
+        if pdo is not None:
+            if index == pdo.comm_index:
+                self._check_comm_write(pdo, subindex, value)
+            else:
+                self._check_map_write(pdo, subindex, value)
+        elif index == 0x1005:
+            if value & ((1 << 30) | (1 << 29)) or value & 0x1FFFF800:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)  # this node is no SYNC producer; 11 bit
+        elif index == 0x1014:
+            if value & (1 << 29) or value & 0x1FFFF800:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+            old = self._int(0x1014)
+            if not (old | value) & COB_ID_INVALID and (old ^ value) & 0x7FF:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif index == 0x1003 and subindex == 0:
+            if value != 0:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif index == 0x6060:
+            if value not in _SUPPORTED_MODES:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif index == 0x607D and subindex in (1, 2):
+            lo = value if subindex == 1 else self._int(0x607D, 1)
+            hi = value if subindex == 2 else self._int(0x607D, 2)
+            if hi < lo:
+                raise _abort(SdoAbortCode.MAX_LESS_THAN_MIN)
+        elif index in (0x6076, 0x608F):
+            if value is not None and value <= 0:
+                raise _abort(SdoAbortCode.VALUE_TOO_LOW)
+        self._pending.add((index, subindex))
+
+    def _pdo_by_index(self, index: int) -> _Pdo | None:
+        for p in self._rpdos + self._tpdos:
+            if index in (p.comm_index, p.map_index):
+                return p
+        return None
+
+    def _check_comm_write(self, p: _Pdo, subindex: int, value: int) -> None:
+        if subindex == 1:
+            if value & (1 << 29) or value & 0x1FFFF800:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)  # 11-bit identifiers only
+            new_valid = not value & COB_ID_INVALID
+            can_id = value & 0x7FF
+            if p.valid and new_valid and can_id != p.cob_id:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)  # CiA 301: not while the PDO exists
+            if new_valid and any(lo <= can_id <= hi for lo, hi in _RESTRICTED_CAN_IDS):
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif subindex == 2:
+            if not (0 <= value <= 240 or value in (254, 255)):
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif subindex == 3:
+            if p.valid:
+                raise _abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)  # inhibit time: only while invalid
+
+    def _check_map_write(self, p: _Pdo, subindex: int, value: int) -> None:
+        if p.valid:
+            raise _abort(SdoAbortCode.PARAMETER_INCOMPATIBILITY)
+        if subindex == 0:
+            problem = self._mapping_problem(p, value)
+            if problem is not None:
+                raise _abort(problem[0])
+        else:
+            if self._int(p.map_index, 0) != 0:
+                raise _abort(SdoAbortCode.PARAMETER_INCOMPATIBILITY)
+            if value != 0 and self._entry_problem(value, p.rx) is not None:
+                raise _abort(SdoAbortCode.CANNOT_BE_MAPPED)
+
+    def _entry_problem(self, entry: int, rx: bool) -> str | None:
+        index, subindex, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
+        var = self._var(index, subindex)
+        where = f"entry 0x{entry:08X}"
+        if var is None:
+            return f"{where}: object 0x{index:04X}:{subindex:02X} does not exist"
+        if not var.pdo_mappable:
+            return f"{where}: object is not PDO-mappable"
+        if rx and not var.writable:
+            return f"{where}: object is not writable (RPDO)"
+        if not rx and not var.readable:
+            return f"{where}: object is not readable (TPDO)"
+        if var.data_type not in cod.NUMBER_TYPES or bits % 8 or bits != len(var):
+            return f"{where}: {bits} bits, the object has {len(var)} (whole bytes only)"
+        return None
+
+    def _mapping_problem(self, p: _Pdo, count: int) -> tuple[SdoAbortCode, str] | None:
+        """(abort code, reason) if ``count`` entries of ``p``'s stored mapping are not a valid PDO."""
+        if count > p.n_entries_max:
+            return SdoAbortCode.EXCEEDS_PDO_LENGTH, f"{count} entries exceed the {p.n_entries_max} of the record"
+        total = 0
+        for k in range(1, count + 1):
+            entry = self._int(p.map_index, k)
+            problem = self._entry_problem(entry, p.rx)
+            if problem is not None:
+                return SdoAbortCode.CANNOT_BE_MAPPED, problem
+            total += entry & 0xFF
+        if total > 64:
+            return SdoAbortCode.EXCEEDS_PDO_LENGTH, f"{total} mapped bits exceed 64"
+        return None
+
+    # ------------------------------------------------------------------ PDO configuration
+
+    def _discover(self, rx: bool) -> list[_Pdo]:
+        base = 0x1400 if rx else 0x1800
+        pdos = []
+        for k in range(512):
+            comm, mapping = base + k, base + 0x200 + k
+            if comm not in self._od or mapping not in self._od:
+                continue
+            n_max = max((s for s in self._od[mapping].subindices if s > 0), default=0)
+            pdos.append(_Pdo(rx=rx, number=k + 1, comm_index=comm, map_index=mapping, n_entries_max=n_max,
+                             has_inhibit=self._var(comm, 3) is not None,
+                             has_event_timer=self._var(comm, 5) is not None))
+        return pdos
+
+    def _refresh_pdos(self) -> None:
+        """Re-read every PDO's configuration from the data store; keep runtime state if unchanged."""
+        by_cob: dict[int, list[_Pdo]] = {}
+        for p in self._rpdos + self._tpdos:
+            cob = self._int(p.comm_index, 1)
+            count = self._int(p.map_index, 0)
+            entries = []
+            for k in range(1, count + 1):
+                e = self._int(p.map_index, k)
+                entries.append((e >> 16, (e >> 8) & 0xFF, (e & 0xFF) // 8))
+            p.cob_id = cob & 0x7FF
+            p.valid = not cob & COB_ID_INVALID
+            p.trans_type = self._int(p.comm_index, 2)
+            p.entries = tuple(entries)
+            p.length = sum(n for _, _, n in entries)
+            p.inhibit_s = self._int(p.comm_index, 3) * 1e-4 if p.has_inhibit else 0.0
+            p.event_timer_s = self._int(p.comm_index, 5) * 1e-3 if p.has_event_timer else 0.0
+            key = (p.cob_id, p.valid, p.trans_type, p.entries)
+            if key != p.key:
+                p.key = key
+                p.sync_count = 0
+                p.latched = None
+                p.last_payload = None
+                p.pending = False
+            if p.rx and p.valid:
+                by_cob.setdefault(p.cob_id, []).append(p)
+        self._rx_by_cob = by_cob
+
+    def _refresh_comm(self, *, restart_heartbeat: bool) -> None:
+        self._sync_cob_id = self._int(0x1005) & 0x7FF
+        emcy = self._int(0x1014)
+        self._emcy_cob_id = None if emcy & COB_ID_INVALID else emcy & 0x7FF
+        if restart_heartbeat:
+            period_ms = self._int(0x1017)
+            self._hb_period_s = period_ms / 1000.0
+            self._hb_next = self._now + self._hb_period_s if period_ms > 0 else None
+        self._refresh_pdos()
+
+    # ------------------------------------------------------------------ NMT
+
+    def _reset_drive(self) -> None:
+        self.state_machine = DriveStateMachine(remote=True)
+        self.state_machine.boot_done()
+        self._mode_display = int(self._od[0x6061].default or 0)
+        self._limit_active = False
+        self._target_eff_inc: int | None = None
+        self._qs_phi_rad = 0.0
+        self._qs_left = 0
+        self._setpoint = Setpoint(DriveMode.DISABLED, 0.0)
+
+    def _apply_own_data(self) -> None:
+        if self._cpr_override is not None:
+            self._store(0x608F, 1, struct.pack("<I", self._cpr_override))
+            self._store(0x608F, 2, struct.pack("<I", 1))
+
+    def _boot(self, t: float, *, communication_only: bool) -> None:
+        """Power-on / reset: restore defaults, boot-up frame, PRE-OPERATIONAL."""
+        self._now = t
+        store = self.local.data_store
+        if communication_only:
+            for index in [i for i in store if 0x1000 <= i <= 0x1FFF]:
+                del store[index]
+        else:
+            store.clear()
+            self._apply_own_data()
+            self._reset_drive()
+        self._comm_error = False
+        self._pending.clear()
+        self._sdo_phase = None
+        self.nmt_state = NmtState.INITIALISING
+        self._out.append(Frame(HEARTBEAT_COB_ID_BASE + self.node_id, b"\x00"))
+        self.nmt_state = NmtState.PRE_OPERATIONAL
+        self._refresh_comm(restart_heartbeat=True)
+
+    def _nmt(self, cs: int, t: float) -> None:
+        self._now = t
+        if cs == NmtCommand.START:
+            if self.nmt_state is not NmtState.OPERATIONAL:
+                self.nmt_state = NmtState.OPERATIONAL
+                for p in self._rpdos + self._tpdos:
+                    p.sync_count = 0
+                    p.latched = None
+                    p.last_payload = None
+                    p.pending = False
+        elif cs == NmtCommand.STOP:
+            self.nmt_state = NmtState.STOPPED
+            self._drop_latched()
+        elif cs == NmtCommand.ENTER_PRE_OPERATIONAL:
+            self.nmt_state = NmtState.PRE_OPERATIONAL
+            self._drop_latched()
+        elif cs == NmtCommand.RESET_NODE:
+            self._boot(t, communication_only=False)
+        elif cs == NmtCommand.RESET_COMMUNICATION:
+            self._boot(t, communication_only=True)
+
+    def _drop_latched(self) -> None:
+        for p in self._rpdos:
+            p.latched = None
+
+    # ------------------------------------------------------------------ SDO
+
+    def _on_sdo(self, frame: Frame, t: float) -> None:
+        """Serve one SDO request (expedited and segmented; block transfers are refused).
+
+        The initiate requests are checked here first (object and sub-index
+        exist, segmented download of a read-only object) and segment requests
+        are only passed on inside a segmented transfer; everything else is
+        canopen's ``SdoServer`` on the node's data store.
+        """
+        self._now = t
+        if self.nmt_state not in (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL):
+            self._counters.bad_frames_ignored += 1
+            return
+        data = frame.data
+        if len(data) != 8:
+            self._counters.bad_frames_ignored += 1
+            return
+        self._counters.sdo_requests += 1
+        ccs = data[0] >> 5
+        if ccs == 4:  # abort by the client
+            self._sdo_phase = None
+        elif ccs in (1, 2):  # initiate download / upload: check the object first
+            self._sdo_mux = struct.unpack_from("<HB", data, 1)
+            self._sdo_phase = None
+            code = self._access_problem(*self._sdo_mux, download=ccs == 1, expedited=bool(data[0] & 0x02))
+            if code is not None:
+                self._sdo_abort(code)
+                return
+        elif ccs in (0, 3):  # download / upload segment: only inside that transfer
+            if self._sdo_phase != ccs:
+                self._sdo_abort(SdoAbortCode.COMMAND_SPECIFIER_INVALID)
+                return
+        else:  # 5, 6 block upload / download (not supported), 7 invalid
+            self._sdo_mux = struct.unpack_from("<HB", data, 1)
+            self._sdo_phase = None
+            self._sdo_abort(SdoAbortCode.COMMAND_SPECIFIER_INVALID)
+            return
+        self._pending.clear()
+        self.network.notify(frame.arbitration_id, bytearray(data), t)
+        for msg in self._bus.sent:
+            reply = Frame(msg.arbitration_id, bytes(msg.data))
+            self._out.append(reply)
+            self._sdo_phase = self._next_sdo_phase(ccs, data[0], reply.data[0])
+        self._bus.sent.clear()
+        if self._pending:
+            self._after_write(sorted(self._pending))
+            self._pending.clear()
+
+    def _sdo_abort(self, code: int) -> None:
+        index, subindex = self._sdo_mux
+        self._sdo_phase = None
+        self._out.append(Frame(self.sdo_response_cob_id, struct.pack("<BHBI", 0x80, index, subindex, int(code))))
+
+    @staticmethod
+    def _next_sdo_phase(ccs: int, request: int, response: int) -> int | None:
+        """Segment ccs expected next (0 download, 3 upload) after a request/response pair, or None."""
+        if response >> 5 == 4:  # the server aborted
+            return None
+        if ccs == 1:
+            return None if request & 0x02 else 0  # expedited done / segments follow
+        if ccs == 2:
+            return None if response & 0x02 else 3
+        if ccs in (0, 3):
+            last = request & 0x01 if ccs == 0 else response & 0x01
+            return None if last else ccs
+        return None
+
+    def _access_problem(self, index: int, subindex: int, *, download: bool, expedited: bool) -> int | None:
+        """Abort code for an initiate request LocalNode would not catch (or catch too late)."""
+        if index not in self._od:
+            return SdoAbortCode.OBJECT_DOES_NOT_EXIST
+        if self._var(index, subindex) is None:
+            return SdoAbortCode.SUBINDEX_DOES_NOT_EXIST
+        if download and not expedited and not self._var(index, subindex).writable:
+            return SdoAbortCode.WRITE_OF_READ_ONLY  # LocalNode would only check after the last segment
+        return None
+
+    def _after_write(self, written: list[tuple[int, int]]) -> None:
+        """Side effects of objects just written (by SDO or RPDO), after they are stored."""
+        comm = False
+        restart_hb = False
+        for index, subindex in written:
+            if index == 0x6040:
+                self._controlword()
+            elif index == 0x6060:
+                mode = self._int(0x6060)
+                if mode in _SUPPORTED_MODES:
+                    self._mode_display = mode
+            elif index == 0x1003 and subindex == 0:
+                for k in range(1, _ERROR_HISTORY_LEN + 1):
+                    self.local.data_store.get(0x1003, {}).pop(k, None)
+            elif 0x1000 <= index <= 0x1FFF:
+                comm = True
+                restart_hb |= index == 0x1017
+        if comm:
+            self._refresh_comm(restart_heartbeat=restart_hb)
+
+    # ------------------------------------------------------------------ EMCY
+
+    def _emcy(self, code: int) -> None:
+        if code:
+            self._push_error(code)
+        if self.nmt_state not in (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL) or self._emcy_cob_id is None:
+            return
+        self._out.append(Frame(self._emcy_cob_id, struct.pack("<HB5x", code, self.error_register)))
+        self._counters.emcys_sent += 1
+
+    def _push_error(self, code: int) -> None:
+        if self._var(0x1003, 0) is None:
+            return
+        n = min(self._int(0x1003, 0), _ERROR_HISTORY_LEN)
+        old = [self.local.get_data(0x1003, k) for k in range(1, n + 1)]
+        self._store(0x1003, 1, struct.pack("<I", code))
+        for k, raw in enumerate(old[:_ERROR_HISTORY_LEN - 1], start=2):
+            self._store(0x1003, k, raw)
+        self._store(0x1003, 0, bytes([min(n + 1, _ERROR_HISTORY_LEN)]))
+
+    def _inject_fault(self, code: int) -> None:
+        self.state_machine.fault(code)
+        self._emcy(code)
+
+    # ------------------------------------------------------------------ CiA 402
+
+    def _controlword(self) -> None:
+        sm = self.state_machine
+        old = sm.state
+        try:
+            sm.on_controlword(self._int(0x6040))
+        except IllegalTransition:
+            self._counters.illegal_commands += 1
+            return
+        new = sm.state
+        if new is State.QUICK_STOP_ACTIVE and old is not State.QUICK_STOP_ACTIVE:
+            self._qs_phi_rad = self._phi_rad
+            self._qs_left = self._qs_cycles
+        if old is State.FAULT and new is State.SWITCH_ON_DISABLED:
+            self._emcy(EMCY_NO_ERROR)
+
+    def _cycle(self) -> Setpoint:
+        """The drive's control cycle at a SYNC: internal transitions and the plant setpoint."""
+        sm = self.state_machine
+        if sm.state is State.FAULT_REACTION_ACTIVE:
+            sm.fault_reaction_done()
+        if sm.state is State.QUICK_STOP_ACTIVE:
+            if self._qs_left > 0:
+                self._qs_left -= 1
+                self._limit_active = False
+                self._target_eff_inc = None
+                self._setpoint = Setpoint(DriveMode.POSITION, self._qs_phi_rad)
+                return self._setpoint
+            sm.quick_stop_done()
+        self._limit_active = False
+        self._target_eff_inc = None
+        sp = Setpoint(DriveMode.DISABLED, 0.0)
+        if sm.state is State.OPERATION_ENABLED:
+            mode = self._effective_mode()
+            if mode == OperationMode.CSP:
+                target = self._int(0x607A)
+                lo, hi = self._int(0x607D, 1), self._int(0x607D, 2)
+                eff = min(max(target, lo), hi)
+                self._limit_active = eff != target
+                self._target_eff_inc = eff
+                sp = Setpoint(DriveMode.POSITION, increments_to_rad(eff, self.counts_per_rev))
+            elif mode == OperationMode.CST:
+                tau = self._int(0x6071)
+                tmax = self._int(0x6072)
+                eff = min(max(tau, -tmax), tmax)
+                self._limit_active = eff != tau
+                force = permille_to_force_N(eff, self._i_total, self._int(0x6076) / 1000.0)
+                sp = Setpoint(DriveMode.FORCE, force)
+        self._setpoint = sp
+        return sp
+
+    # ------------------------------------------------------------------ PDO engine
+
+    def _assemble(self, p: _Pdo) -> bytes:
+        get = self.local.get_data
+        return b"".join(get(i, s) for i, s, _ in p.entries)
+
+    def _send_tpdo(self, p: _Pdo, t: float, payload: bytes | None = None) -> None:
+        if payload is None:
+            payload = self._assemble(p)
+        self._out.append(Frame(p.cob_id, payload))
+        p.last_payload = payload
+        p.last_sent_t = t
+        p.pending = False
+        self._counters.tpdos_sent += 1
+
+    def _sync_tpdos(self, t: float) -> None:
+        if self.nmt_state is not NmtState.OPERATIONAL:
+            return
+        for p in self._tpdos:
+            if not p.valid:
+                continue
+            if 1 <= p.trans_type <= 240:
+                p.sync_count += 1
+                if p.sync_count >= p.trans_type:
+                    p.sync_count = 0
+                    self._send_tpdo(p, t)
+            elif p.trans_type == 0:
+                payload = self._assemble(p)
+                if payload != p.last_payload:
+                    self._send_tpdo(p, t, payload)
+
+    def _event_tpdos(self, t: float) -> None:
+        """Send event-driven TPDOs (254/255) whose payload changed, respecting the inhibit time."""
+        if self.nmt_state is not NmtState.OPERATIONAL:
+            return
+        for p in self._tpdos:
+            if not (p.valid and p.is_event):
+                continue
+            payload = self._assemble(p)
+            if payload == p.last_payload and not p.pending:
+                continue
+            if p.last_sent_t is None or t - p.last_sent_t >= p.inhibit_s - _TIME_EPS_S:
+                self._send_tpdo(p, t, payload)
+            else:
+                p.pending = True
+
+    def _timed_tpdos(self, t: float) -> None:
+        if self.nmt_state is not NmtState.OPERATIONAL:
+            return
+        for p in self._tpdos:
+            if p.valid and p.is_event and p.event_timer_s > 0.0:
+                if p.last_sent_t is None or t - p.last_sent_t >= p.event_timer_s - _TIME_EPS_S:
+                    self._send_tpdo(p, t)
+        self._event_tpdos(t)
+
+    def _on_rpdo(self, pdos: list[_Pdo], frame: Frame, t: float) -> None:
+        self._now = t
+        if self.nmt_state is not NmtState.OPERATIONAL:
+            self._counters.rpdos_dropped += 1
+            return
+        n = len(frame.data)
+        for p in pdos:
+            if n != p.length:
+                self._counters.rpdos_dropped += 1
+                if not self._comm_error:
+                    self._comm_error = True
+                    self._emcy(EMCY_PDO_LENGTH_ERROR if n < p.length else EMCY_PDO_LENGTH_EXCEEDED)
+                continue
+            if self._comm_error:
+                self._comm_error = False
+                self._emcy(EMCY_NO_ERROR)
+            if p.is_synchronous:
+                if p.latched is not None:
+                    self._counters.rpdos_late += 1
+                p.latched = frame.data
+            else:
+                self._apply_rpdo(p, frame.data)
+
+    def _apply_rpdo(self, p: _Pdo, data: bytes) -> None:
+        off = 0
+        written = []
+        for index, subindex, nbytes in p.entries:
+            self._store(index, subindex, data[off:off + nbytes])
+            off += nbytes
+            written.append((index, subindex))
+        self._counters.rpdos_applied += 1
+        self._after_write(written)
+
+    def _apply_latched(self) -> None:
+        for p in self._rpdos:
+            if p.latched is not None:
+                data, p.latched = p.latched, None
+                self._apply_rpdo(p, data)
+
+    def _tick(self, t: float) -> None:
+        self._now = t
+        if self._hb_next is not None and t >= self._hb_next - _TIME_EPS_S:
+            if self.heartbeat_enabled:
+                self._out.append(Frame(HEARTBEAT_COB_ID_BASE + self.node_id, bytes([int(self.nmt_state)])))
+                self._counters.heartbeats_sent += 1
+            self._hb_next += self._hb_period_s
+            if self._hb_next <= t:
+                self._hb_next = t + self._hb_period_s
+        self._timed_tpdos(t)
+
+
+# --------------------------------------------------------------------------- the pair
+
+
+class SimDrivePair:
+    """Two simulated CiA 402 EMA drives (CANopen slaves) moving one simulated rig.
+
+    Parameters
+    ----------
+    plant : sim.plant.RigPlant
+        The rig; ``node_ids[0]`` drives EMA 1, ``node_ids[1]`` EMA 2. The pair
+        steps it once per SYNC (and once at the first power-on).
+    od_factory : callable, optional
+        ``od_factory(node_id=n)`` returns a fresh ``canopen.ObjectDictionary``
+        for node ``n`` (default :func:`hil.drive_od.load_drive_od`, the shipped
+        EDS with ``$NODEID`` resolved). It must pass
+        :func:`hil.drive_od.check_drive_od` and hold the objects the drive
+        serves (0x1001, 0x1005, 0x1014, 0x6072, 0x6077, ...).
+    node_ids : tuple of two int, optional
+        Distinct node ids 1..127, default (1, 2).
+    counts_per_rev : int, optional
+        Encoder increments per motor revolution. None: the EDS's 0x608F
+        (4096 / 1). Given: written to 0x608F:01 (and 1 to 0x608F:02) as the
+        drive's own data at every power-on and reset node.
+
+    Attributes
+    ----------
+    nodes : tuple of SimDrive
+        The two drives, in ``node_ids`` order.
+    plant : RigPlant
+        The simulated rig.
+
+    Raises
+    ------
+    hil.errors.InputError
+        Wrong plant type, node ids, ``counts_per_rev``, or an object
+        dictionary that lacks what the drive needs.
+
+    Notes
+    -----
+    Conversions between the plant (rad, mm, N) and the drive objects, per
+    EMA with :math:`N = \\text{0x608F:01} / \\text{0x608F:02}` increments per
+    revolution, :math:`T_r = \\text{0x6076} / 1000` N m and the plant's gear
+    ratio :math:`i` [rad/mm] (also served as 0x2102, REAL32):
+
+    .. math::
+
+        p_{actual} = \\mathrm{round}(\\varphi N / 2\\pi)\\ \\text{[inc]},\\quad
+        \\text{0x2100} = \\mathrm{round}(1000\\, s)\\ [\\mu m],\\quad
+        \\text{0x2101} = \\mathrm{round}(10\\, F)\\ [0.1\\,N],
+
+        \\text{0x6077} = \\mathrm{round}(1000\\, T / T_r)\\ [per mille],\\quad
+        \\varphi_{target} = 2\\pi\\,\\mathrm{clip}(p_{target}, p_{min}, p_{max}) / N
+        \\ \\text{(CSP)},
+
+        F_{target} = \\mathrm{clip}(\\tau, \\pm\\tau_{max}) / 1000 \\cdot T_r \\cdot 1000\\, i
+        \\ \\text{[N] (CST)},
+
+    with :math:`\\varphi, s, F` the measured sample of that EMA, :math:`T`
+    the plant's drive torque [N m], :math:`p_{min}, p_{max}` = 0x607D:01/02,
+    :math:`\\tau` = 0x6071 and :math:`\\tau_{max}` = 0x6072 [per mille].
+    Commands to the plant per drive state: OPERATION_ENABLED + CSP ->
+    POSITION, + CST -> FORCE; QUICK_STOP_ACTIVE -> POSITION at the angle
+    measured when the quick stop began, for :data:`QUICK_STOP_HOLD_S`;
+    anything else -> DISABLED (holding brake). See the module docstring for
+    the protocol choices.
+    """
+
+    def __init__(self, plant: RigPlant, od_factory: Callable[..., cod.ObjectDictionary] = load_drive_od,
+                 node_ids: tuple[int, int] = (1, 2), *, counts_per_rev: int | None = None) -> None:
+        if not isinstance(plant, RigPlant):
+            raise InputError(f"plant must be a sim.plant.RigPlant, got {type(plant).__name__}")
+        if not callable(od_factory):
+            raise InputError(f"od_factory must be callable as od_factory(node_id=n), got {od_factory!r}")
+        try:
+            ids = tuple(operator.index(n) for n in node_ids)
+        except TypeError:
+            raise InputError(f"node_ids must be two ints in 1..127, got {node_ids!r}") from None
+        if len(ids) != 2 or ids[0] == ids[1] or not all(1 <= n <= 127 for n in ids):
+            raise InputError(f"node_ids must be two distinct ints in 1..127 (shape (2,)), got {node_ids!r}")
+        if counts_per_rev is not None:
+            if isinstance(counts_per_rev, bool):
+                raise InputError("counts_per_rev must be an int > 0 [increments/rev], got bool")
+            try:
+                cpr = operator.index(counts_per_rev)
+            except TypeError:
+                raise InputError(f"counts_per_rev must be an int > 0 [increments/rev], "
+                                 f"got {counts_per_rev!r}") from None
+            if not 0 < cpr < 2**32:
+                raise InputError(f"counts_per_rev = {cpr} [increments/rev] must be in 1..2**32-1")
+            counts_per_rev = cpr
+        self.plant = plant
+        self._counters = _Counters()
+        self._out: list[Frame] = []
+        self._powered = False
+        self._now = -math.inf
+        self._sample: Sample | None = None
+        params = plant.params
+        nodes = []
+        for k, n in enumerate(ids):
+            od = od_factory(node_id=n)
+            if not isinstance(od, cod.ObjectDictionary):
+                raise InputError(f"od_factory(node_id={n}) must return a canopen ObjectDictionary, "
+                                 f"got {type(od).__name__}")
+            try:
+                check_drive_od(od, source=f"node {n} object dictionary")
+            except ProfileError as exc:
+                raise InputError(str(exc)) from None
+            missing = [f"0x{i:04X}:{s:02X}" for i, s in _SIM_REQUIRED if _lookup(od, i, s) is None]
+            if missing:
+                raise InputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
+                                 + ", ".join(missing))
+            nodes.append(SimDrive(n, k, od, gear_ratio_rad_per_mm=params.i_total_rad_per_mm,
+                                  counts_per_rev=counts_per_rev, sample_period_s=params.sample_period_s,
+                                  counters=self._counters, outbox=self._out))
+        self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
+
+    # ------------------------------------------------------------------ inspection
+
+    @property
+    def stats(self) -> SimPairStats:
+        """Snapshot of the counters."""
+        return self._counters.snapshot()
+
+    @property
+    def sample(self) -> Sample | None:
+        """The current sample (plant state at the next SYNC); None before the first power-on."""
+        return self._sample
+
+    @property
+    def powered(self) -> bool:
+        """True after :meth:`power_on`."""
+        return self._powered
+
+    # ------------------------------------------------------------------ internals
+
+    def _clock(self, t: float) -> float:
+        v = _check_time(t)
+        if v > self._now:
+            self._now = v
+        return self._now
+
+    def _drain(self) -> list[Frame]:
+        out = list(self._out)
+        self._out.clear()
+        return out
+
+    def _step(self, sp1: Setpoint, sp2: Setpoint) -> None:
+        self._sample = self.plant.step(sp1, sp2)
+        torque = self.plant.state().torque_Nm
+        self._counters.plant_steps += 1
+        for node in self.nodes:
+            node._measure(self._sample, torque[node.ema_index])
+
+    def _node_index(self, node_index: int) -> SimDrive:
+        if isinstance(node_index, bool):
+            raise InputError("node_index must be 0 or 1 (int), got bool")
+        try:
+            k = operator.index(node_index)
+        except TypeError:
+            raise InputError(f"node_index must be 0 or 1 (int), got {node_index!r}") from None
+        if k not in (0, 1):
+            raise InputError(f"node_index = {k} must be 0 (node {self.nodes[0].node_id}) "
+                             f"or 1 (node {self.nodes[1].node_id})")
+        return self.nodes[k]
+
+    # ------------------------------------------------------------------ the sans-IO interface
+
+    def power_on(self, t: float) -> list[Frame]:
+        """Switch both drives on (or power-cycle them) at time ``t`` [s].
+
+        Returns
+        -------
+        list of Frame
+            The boot-up frames ``0x700 + n [00]`` of both nodes, in ``node_ids``
+            order; both nodes are then PRE-OPERATIONAL, drives SWITCH_ON_DISABLED.
+
+        Notes
+        -----
+        The first power-on steps the plant once with both drives DISABLED so
+        that the current sample is the measured rig at rest.
+        """
+        now = self._clock(t)
+        if self._sample is None:
+            disabled = Setpoint(DriveMode.DISABLED, 0.0)
+            self._step(disabled, disabled)
+        self._powered = True
+        for node in self.nodes:
+            node._boot(now, communication_only=False)
+        return self._drain()
+
+    def on_frame(self, frame: Frame, t: float) -> list[Frame]:
+        """Process one frame seen on the bus at time ``t`` [s]; return the frames to transmit.
+
+        NMT (COB-ID 0, ``[cs, node or 0]``), SYNC (COB-ID of 0x1005), SDO
+        requests (0x600 + n) and the RPDOs valid in each node are consumed;
+        anything else is counted in ``stats.bad_frames_ignored`` and ignored.
+        Never raises for frame contents.
+
+        Raises
+        ------
+        hil.errors.InputError
+            ``frame`` is not a :class:`hil.pdo.Frame` or ``t`` not a finite time.
+        """
+        if not isinstance(frame, Frame):
+            raise InputError(f"frame must be a hil.pdo.Frame, got {type(frame).__name__}")
+        now = self._clock(t)
+        if not self._powered:
+            self._counters.frames_unpowered += 1
+            return []
+        cob = frame.arbitration_id
+        if cob == 0:
+            self._on_nmt(frame, now)
+        elif any(cob == n._sync_cob_id for n in self.nodes):
+            self._on_sync(frame, now)
+        else:
+            consumed = False
+            for node in self.nodes:
+                if cob == node.sdo_request_cob_id:
+                    node._on_sdo(frame, now)
+                    consumed = True
+                rx = node._rx_by_cob.get(cob)
+                if rx:
+                    node._on_rpdo(rx, frame, now)
+                    consumed = True
+            if not consumed:
+                self._counters.bad_frames_ignored += 1
+        for node in self.nodes:
+            node._event_tpdos(now)
+        return self._drain()
+
+    def _on_nmt(self, frame: Frame, t: float) -> None:
+        if len(frame.data) != 2:
+            self._counters.bad_frames_ignored += 1
+            return
+        cs, target = frame.data
+        try:
+            NmtCommand(cs)
+        except ValueError:
+            self._counters.bad_frames_ignored += 1
+            return
+        targets = [n for n in self.nodes if target in (0, n.node_id)]
+        if not targets:
+            self._counters.bad_frames_ignored += 1
+        for node in targets:
+            node._nmt(cs, t)
+
+    def _on_sync(self, frame: Frame, t: float) -> None:
+        if len(frame.data) > 1:
+            self._counters.bad_frames_ignored += 1
+            return
+        self._counters.syncs += 1
+        consumers = [n for n in self.nodes if n._sync_cob_id == frame.arbitration_id]
+        for node in consumers:
+            node._now = t
+            node._sync_tpdos(t)
+        for node in consumers:
+            node._apply_latched()
+        sp1, sp2 = (node._cycle() for node in self.nodes)
+        self._step(sp1, sp2)
+
+    def tick(self, t: float) -> list[Frame]:
+        """Let time pass to ``t`` [s]: heartbeats (0x1017) and timed event TPDOs that are due.
+
+        A heartbeat is sent at the first tick at or after each multiple of the
+        producer time since boot-up (or since 0x1017 was written); if ticks are
+        farther apart than the period, one heartbeat is sent and the schedule
+        restarts from ``t``.
+
+        Returns
+        -------
+        list of Frame
+            Heartbeats ``0x700 + n [state]`` (0x7F pre-operational, 0x05
+            operational, 0x04 stopped) and event TPDOs, node by node.
+        """
+        now = self._clock(t)
+        if self._powered:
+            for node in self.nodes:
+                node._tick(now)
+        return self._drain()
+
+    # ------------------------------------------------------------------ fault hooks
+
+    def inject_fault(self, node_index: int, emcy_code: int) -> list[Frame]:
+        """Make drive ``node_index`` (0 or 1) fault with error code ``emcy_code``.
+
+        The state machine goes to FAULT_REACTION_ACTIVE (FAULT at the next
+        SYNC), 0x603F and the error register 0x1001 are set
+        (:func:`error_register_bits`), the code is pushed into 0x1003.
+
+        Returns
+        -------
+        list of Frame
+            The EMCY ``[code u16, 0x1001, 0, 0, 0, 0, 0]`` (empty if the node is
+            STOPPED or 0x1014 is invalid).
+
+        Raises
+        ------
+        hil.errors.InputError
+            ``node_index`` not 0/1, ``emcy_code`` not in 0x0001..0xFFFF, or the
+            pair is not powered on.
+        """
+        node = self._node_index(node_index)
+        code = _check_code(emcy_code, "emcy_code", allow_zero=False)
+        if not self._powered:
+            raise InputError("inject_fault needs a powered pair: call power_on(t) first")
+        node._inject_fault(code)
+        node._event_tpdos(self._now)
+        return self._drain()
+
+    def set_heartbeat_enabled(self, node_index: int, enabled: bool) -> None:
+        """Fault hook: stop (False) or resume (True) the heartbeat frames of drive ``node_index``."""
+        node = self._node_index(node_index)
+        if not isinstance(enabled, bool):
+            raise InputError(f"enabled must be a bool, got {enabled!r}")
+        node.heartbeat_enabled = enabled
+
+
+def _lookup(od: cod.ObjectDictionary, index: int, subindex: int) -> cod.ODVariable | None:
+    if index not in od:
+        return None
+    obj = od[index]
+    if isinstance(obj, cod.ODVariable):
+        return obj if subindex == 0 else None
+    return obj.subindices.get(subindex)

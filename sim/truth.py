@@ -1,0 +1,117 @@
+"""Ground truth of a simulated rig: the numbers the BLFmaint analysis should find.
+
+Pure: parameters in, a frozen dataclass out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from hil.errors import InputError
+from sim.params import EmaMechanics, RigParams
+
+__all__ = ["RigTruth", "rig_truth"]
+
+
+@dataclass(frozen=True)
+class RigTruth:
+    """Backlash, stiffness and LVDT calibration of a simulated rig.
+
+    The fields are plain dicts inside a frozen dataclass: treat them as
+    read-only (they are built fresh by :func:`rig_truth`, JSON-serialisable).
+
+    Attributes
+    ----------
+    backlash_mm : dict
+        ``{"int1": B_int1, "int2": B_int2, "ext": B_b1 + B_b2}`` in mm.
+    stiffness_N_per_mm : dict
+        ``{"int1": {"left": k, "right": k}, "int2": {...}, "ext": {...}}``,
+        positive magnitudes in N/mm; "left"/"right" are the regions of the
+        F-D plane ordered by increasing D.
+    calibration : dict
+        ``{"ema1": {"pitch": gain, "offset_mm": offset}, "ema2": {...}}``:
+        the LVDT law ``s_meas = offset_mm + pitch * s`` (nonlinearity, noise
+        and drift excluded; pitch at t = 0).
+    """
+
+    backlash_mm: dict
+    stiffness_N_per_mm: dict
+    calibration: dict
+
+
+def _series(*stiffness_N_per_mm: float) -> float:
+    return 1.0 / sum(1.0 / k for k in stiffness_N_per_mm)
+
+
+def rig_truth(params: RigParams) -> RigTruth:
+    """Derive the true backlash, stiffness and calibration from rig parameters.
+
+    Parameters
+    ----------
+    params : RigParams
+        The rig (the same object given to :class:`sim.plant.RigPlant`).
+
+    Returns
+    -------
+    RigTruth
+
+    Raises
+    ------
+    hil.errors.InputError
+        If ``params`` is not a RigParams or a stiffness is not > 0 N/mm.
+
+    Notes
+    -----
+    Internal (paper eq. 1, :math:`D_{int} = s - \\varphi/i_{total}`): in contact
+    :math:`D_{int} = -(F/k_{int}(F) + \\mathrm{sign}(F) B_{int}/2)`, so the
+    compression branch (F > 0) lies at the smaller D ("left") with
+    :math:`|dF/dD| = k_c`, the tension branch at the larger D ("right") with
+    :math:`|dF/dD| = k_t`, and the jump through the slack region is
+    :math:`B_{int}`.
+
+    External (:math:`D_{ext} = s_2 - s_1`, with :math:`F_1 = -F_2`, no load):
+    :math:`s_i - y = F_i/k_{s,i} + \\mathrm{sign}(F_i) B_{b,i}/2` with
+    :math:`k_{s,i} = (1/k_{b,i} + 1/k_{h,i})^{-1}`, so
+
+    .. math:: D_{ext} = \\tfrac{1}{2}(F_2 - F_1)(1/k_{s,1} + 1/k_{s,2})
+              + \\mathrm{sign}(F_2)(B_{b,1} + B_{b,2})/2
+
+    slope :math:`d(F_2 - F_1)/dD_{ext} = 2/(1/k_{s,1} + 1/k_{s,2})` on both
+    sides and jump :math:`B_{b,1} + B_{b,2}`.
+
+    A :class:`sim.effects.Viscoelastic` arm does not change these static
+    values (its force relaxes to zero at constant deflection).
+    """
+    if not isinstance(params, RigParams):
+        raise InputError(f"params must be a RigParams, got {type(params).__name__}")
+
+    def mech(name: str) -> EmaMechanics:
+        m = getattr(params, name)
+        for f in ("stiffness_compression_N_per_mm", "stiffness_tension_N_per_mm",
+                  "bearing_stiffness_N_per_mm", "housing_stiffness_N_per_mm"):
+            v = getattr(m, f)
+            if not (isinstance(v, (int, float)) and v > 0):
+                raise InputError(f"params.{name}.{f} must be > 0 N/mm, got {v!r}")
+        return m
+
+    m1, m2 = mech("ema1"), mech("ema2")
+    ks1 = _series(m1.bearing_stiffness_N_per_mm, m1.housing_stiffness_N_per_mm)
+    ks2 = _series(m2.bearing_stiffness_N_per_mm, m2.housing_stiffness_N_per_mm)
+    k_ext = 2.0 / (1.0 / ks1 + 1.0 / ks2)
+    backlash = {
+        "int1": float(m1.backlash_int_mm),
+        "int2": float(m2.backlash_int_mm),
+        "ext": float(m1.bearing_backlash_mm + m2.bearing_backlash_mm),
+    }
+    stiffness = {
+        "int1": {"left": float(m1.stiffness_compression_N_per_mm),
+                 "right": float(m1.stiffness_tension_N_per_mm)},
+        "int2": {"left": float(m2.stiffness_compression_N_per_mm),
+                 "right": float(m2.stiffness_tension_N_per_mm)},
+        "ext": {"left": float(k_ext), "right": float(k_ext)},
+    }
+    calibration = {
+        "ema1": {"pitch": float(params.sensors1.lvdt_gain), "offset_mm": float(params.sensors1.lvdt_offset_mm)},
+        "ema2": {"pitch": float(params.sensors2.lvdt_gain), "offset_mm": float(params.sensors2.lvdt_offset_mm)},
+    }
+    return RigTruth(backlash_mm=backlash, stiffness_N_per_mm=stiffness, calibration=calibration)

@@ -1,0 +1,50 @@
+"""Shared fixtures: one simulated default check per test session (it takes ~2 s)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil.profiles import load_actuation, load_check, load_simrig
+
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+
+
+@pytest.fixture(scope="session")
+def actuation():
+    return load_actuation()
+
+
+@pytest.fixture(scope="session")
+def check_profile(actuation):
+    return load_check(None, actuation)
+
+
+@pytest.fixture(scope="session")
+def simrig():
+    return load_simrig()
+
+
+def simulate_run(out: Path, act, check, simrig_profile, seed: int):
+    """The check on the plant, as `emacheck simulate` runs it, without the terminal."""
+    from hil.commands import truth_dict
+    from hil.runner import PlantLink, run_check, start_meta
+    from sim.plant import RigPlant
+    from sim.truth import rig_truth
+
+    plant = RigPlant(simrig_profile.params, np.random.default_rng(seed))
+    truth = truth_dict(rig_truth(simrig_profile.params))
+    meta = start_meta(act, check, {"mode": "simulate", "seed": seed, "truth": truth})
+    outcome = run_check(PlantLink(plant), act, check, out, meta)
+    return outcome, truth
+
+
+@pytest.fixture(scope="session")
+def default_run(tmp_path_factory, actuation, check_profile, simrig):
+    """Run folder of one simulated check with the shipped profiles and seed."""
+    out = tmp_path_factory.mktemp("run") / "default"
+    outcome, truth = simulate_run(out, actuation, check_profile, simrig, simrig.seed)
+    assert outcome.status == "done", outcome.reason
+    return out, truth

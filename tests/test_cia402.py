@@ -1,0 +1,327 @@
+"""CiA 402 state machine: the transition table, golden controlword/statusword paths, decoding."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from hil.cia402 import (
+    TRANSITIONS,
+    Command,
+    Controlword,
+    DriveStateMachine,
+    IllegalTransition,
+    OperationMode,
+    State,
+    Statusword,
+    controlword,
+    decode_command,
+    decode_state,
+    match_state,
+    next_command,
+    path,
+    state_word,
+)
+from hil.errors import EmacheckError, InputError
+from hil.types import DriveMode
+
+S = State
+C = Command
+
+# Independent copy of CiA 402 (option code 2, no transition 16): the test's known answer.
+EXPECTED = {
+    (S.SWITCH_ON_DISABLED, C.SHUTDOWN): (S.READY_TO_SWITCH_ON, 2),
+    (S.READY_TO_SWITCH_ON, C.SWITCH_ON): (S.SWITCHED_ON, 3),
+    (S.SWITCHED_ON, C.ENABLE_OPERATION): (S.OPERATION_ENABLED, 4),
+    (S.OPERATION_ENABLED, C.DISABLE_OPERATION): (S.SWITCHED_ON, 5),
+    (S.SWITCHED_ON, C.SHUTDOWN): (S.READY_TO_SWITCH_ON, 6),
+    (S.READY_TO_SWITCH_ON, C.DISABLE_VOLTAGE): (S.SWITCH_ON_DISABLED, 7),
+    (S.READY_TO_SWITCH_ON, C.QUICK_STOP): (S.SWITCH_ON_DISABLED, 7),
+    (S.OPERATION_ENABLED, C.SHUTDOWN): (S.READY_TO_SWITCH_ON, 8),
+    (S.OPERATION_ENABLED, C.DISABLE_VOLTAGE): (S.SWITCH_ON_DISABLED, 9),
+    (S.SWITCHED_ON, C.DISABLE_VOLTAGE): (S.SWITCH_ON_DISABLED, 10),
+    (S.SWITCHED_ON, C.QUICK_STOP): (S.SWITCH_ON_DISABLED, 10),
+    (S.OPERATION_ENABLED, C.QUICK_STOP): (S.QUICK_STOP_ACTIVE, 11),
+    (S.QUICK_STOP_ACTIVE, C.DISABLE_VOLTAGE): (S.SWITCH_ON_DISABLED, 12),
+    (S.FAULT, C.FAULT_RESET): (S.SWITCH_ON_DISABLED, 15),
+}
+# Repeating the command that leads into a state is a no-op there.
+NO_OP = {
+    (S.SWITCH_ON_DISABLED, C.DISABLE_VOLTAGE), (S.SWITCH_ON_DISABLED, C.QUICK_STOP),
+    (S.SWITCH_ON_DISABLED, C.FAULT_RESET), (S.READY_TO_SWITCH_ON, C.SHUTDOWN),
+    (S.SWITCHED_ON, C.SWITCH_ON), (S.SWITCHED_ON, C.DISABLE_OPERATION),
+    (S.OPERATION_ENABLED, C.ENABLE_OPERATION), (S.QUICK_STOP_ACTIVE, C.QUICK_STOP),
+}
+MASKS = [  # (state, mask, value) from CiA 402
+    (S.NOT_READY_TO_SWITCH_ON, 0x4F, 0x00), (S.SWITCH_ON_DISABLED, 0x4F, 0x40),
+    (S.READY_TO_SWITCH_ON, 0x6F, 0x21), (S.SWITCHED_ON, 0x6F, 0x23),
+    (S.OPERATION_ENABLED, 0x6F, 0x27), (S.QUICK_STOP_ACTIVE, 0x6F, 0x07),
+    (S.FAULT_REACTION_ACTIVE, 0x4F, 0x0F), (S.FAULT, 0x4F, 0x08),
+]
+
+
+def machine_in(state: State) -> DriveStateMachine:
+    m = DriveStateMachine()
+    m.state = state
+    return m
+
+
+def test_table_is_the_standard_one():
+    assert TRANSITIONS == EXPECTED
+
+
+@pytest.mark.parametrize("state,cmd", list(itertools.product(State, Command)),
+                         ids=lambda v: v.name)
+def test_every_state_and_command(state, cmd):
+    m = machine_in(state)
+    if (state, cmd) in EXPECTED:
+        new, number = EXPECTED[(state, cmd)]
+        assert m.apply(cmd) is new
+        assert (m.state, m.last_transition) == (new, number)
+    elif (state, cmd) in NO_OP:
+        assert m.apply(cmd) is state
+        assert m.last_transition is None
+    else:
+        with pytest.raises(IllegalTransition, match=f"{cmd.name} not allowed in state {state.name}"):
+            m.apply(cmd)
+        assert m.state is state
+
+
+def test_illegal_transition_is_typed():
+    assert issubclass(IllegalTransition, EmacheckError) and issubclass(IllegalTransition, ValueError)
+
+
+def test_controlword_bit_patterns():
+    assert {c: controlword(c) for c in Command} == {
+        C.SHUTDOWN: 0x0006, C.SWITCH_ON: 0x0007, C.DISABLE_VOLTAGE: 0x0000, C.QUICK_STOP: 0x0002,
+        C.DISABLE_OPERATION: 0x0007, C.ENABLE_OPERATION: 0x000F, C.FAULT_RESET: 0x0080,
+    }
+    assert Controlword.ENABLE_OPERATION | Controlword.QUICK_STOP | Controlword.ENABLE_VOLTAGE \
+        | Controlword.SWITCH_ON == 0x000F
+    assert (Controlword.FAULT_RESET, Controlword.HALT) == (0x80, 0x100)
+    assert (Statusword.REMOTE, Statusword.TARGET_REACHED, Statusword.FOLLOWING_ERROR) == (0x200, 0x400, 0x2000)
+
+
+@pytest.mark.parametrize("cw,cmd", [
+    (0x0006, C.SHUTDOWN), (0x000E, C.SHUTDOWN), (0x0076, C.SHUTDOWN),  # bit 3 and bits 4..6 are x
+    (0x0007, C.SWITCH_ON), (0x0107, C.SWITCH_ON), (0x000F, C.ENABLE_OPERATION), (0x011F, C.ENABLE_OPERATION),
+    (0x0000, C.DISABLE_VOLTAGE), (0x000D, C.DISABLE_VOLTAGE), (0x0002, C.QUICK_STOP),
+    (0x000B, C.QUICK_STOP), (0x0080, C.FAULT_RESET), (0x008F, C.FAULT_RESET),
+])
+def test_decode_command_masks(cw, cmd):
+    assert decode_command(cw) is cmd
+
+
+def test_fault_reset_needs_a_rising_edge():
+    assert decode_command(0x0080, previous_cw=0x000F) is C.FAULT_RESET
+    assert decode_command(0x0080, previous_cw=0x0080) is None
+
+
+@given(st.integers(0, 0xFFFF))
+def test_decode_command_only_reads_command_bits(cw):
+    assert decode_command(cw) is decode_command(cw & 0x008F)
+
+
+def test_decode_rejects_non_words():
+    with pytest.raises(InputError, match="0x10000"):
+        decode_state(0x10000)
+    with pytest.raises(InputError):
+        decode_command(-1)
+
+
+def test_decode_state_all_words():
+    unmatched = 0
+    for sw in range(0x10000):
+        hits = [s for s, mask, value in MASKS if sw & mask == value]
+        assert len(hits) <= 1  # the patterns are disjoint
+        got = decode_state(sw)
+        if hits:
+            assert got is hits[0] and match_state(sw) is hits[0]
+        else:
+            unmatched += 1
+            assert got is S.NOT_READY_TO_SWITCH_ON and match_state(sw) is None
+    # of the 128 values of bits 0..6, 24 are valid (4 per 0x004F mask, 2 per 0x006F mask);
+    # bits 7..15 are free: 104 * 512 words match no state
+    assert unmatched == 104 * 512
+
+
+@given(st.sampled_from(list(State)), st.integers(0, 0xFFFF).map(lambda x: x & ~0x006F))
+def test_state_word_decodes_back(state, extra):
+    sw = state_word(state, extra=extra)
+    assert decode_state(sw) is state
+    assert sw & ~0x007F == extra & ~0x007F
+
+
+def test_state_words_golden():
+    r = Statusword.REMOTE
+    assert [state_word(s, extra=r) for s in State] == [
+        0x0200, 0x0250, 0x0231, 0x0233, 0x0237, 0x0217, 0x021F, 0x0218,
+    ]
+    with pytest.raises(InputError, match="state bits"):
+        state_word(S.FAULT, extra=Statusword.SWITCHED_ON)
+
+
+def test_master_enable_path_golden():
+    drive = DriveStateMachine()
+    assert drive.statusword() == 0x0200  # not ready to switch on, remote
+    drive.boot_done()
+    assert (drive.last_transition, drive.statusword()) == (1, 0x0250)
+
+    cmds = path(decode_state(drive.statusword()), S.OPERATION_ENABLED)
+    assert cmds == [C.SHUTDOWN, C.SWITCH_ON, C.ENABLE_OPERATION]
+    cws = [controlword(c) for c in cmds]
+    assert cws == [0x06, 0x07, 0x0F]
+    reported = []
+    for cw in cws:
+        drive.on_controlword(cw)
+        reported.append(drive.statusword())
+    assert reported == [0x0231, 0x0233, 0x0237]
+
+    # The master keeps sending 0x0F every SYNC: no-op, not an error.
+    for _ in range(3):
+        assert drive.on_controlword(0x0F) is S.OPERATION_ENABLED
+    assert drive.last_transition == 4
+
+
+def test_master_loop_with_next_command():
+    drive = DriveStateMachine()
+    drive.boot_done()
+    sent = []
+    for _ in range(10):
+        cmd = next_command(decode_state(drive.statusword()), S.OPERATION_ENABLED)
+        if cmd is None:
+            break
+        sent.append(controlword(cmd))
+        drive.on_controlword(sent[-1])
+    assert sent == [0x06, 0x07, 0x0F] and drive.state is S.OPERATION_ENABLED
+
+
+def test_disable_operation_shares_the_switch_on_pattern():
+    drive = machine_in(S.OPERATION_ENABLED)
+    assert drive.on_controlword(0x0007) is S.SWITCHED_ON and drive.last_transition == 5
+    assert drive.on_controlword(0x0007) is S.SWITCHED_ON and drive.last_transition == 5  # repeat: no-op
+    drive = machine_in(S.READY_TO_SWITCH_ON)
+    with pytest.raises(IllegalTransition, match=r"0x000F \(ENABLE_OPERATION\).*READY_TO_SWITCH_ON"):
+        drive.on_controlword(0x000F)  # no combined 3 + 4
+    assert drive.state is S.READY_TO_SWITCH_ON
+
+
+def test_quick_stop_path():
+    drive = machine_in(S.OPERATION_ENABLED)
+    assert drive.on_controlword(0x0002) is S.QUICK_STOP_ACTIVE and drive.last_transition == 11
+    assert drive.statusword() == 0x0217
+    assert drive.on_controlword(0x0002) is S.QUICK_STOP_ACTIVE  # repeated while ramping
+    with pytest.raises(IllegalTransition):  # transition 16 needs option code 5..8
+        drive.on_controlword(0x000F)
+    assert drive.quick_stop_done() is S.SWITCH_ON_DISABLED and drive.last_transition == 12
+    assert drive.statusword() == 0x0250
+    assert drive.on_controlword(0x0002) is S.SWITCH_ON_DISABLED  # still quick stop: no-op
+    with pytest.raises(IllegalTransition, match="quick stop done"):
+        drive.quick_stop_done()
+    # disable voltage during the ramp is transition 12 as well
+    drive = machine_in(S.QUICK_STOP_ACTIVE)
+    assert drive.on_controlword(0x0000) is S.SWITCH_ON_DISABLED and drive.last_transition == 12
+    assert path(S.QUICK_STOP_ACTIVE, S.OPERATION_ENABLED) == [
+        C.DISABLE_VOLTAGE, C.SHUTDOWN, C.SWITCH_ON, C.ENABLE_OPERATION]
+
+
+def test_fault_and_fault_reset_path():
+    drive = DriveStateMachine()
+    drive.boot_done()
+    for cw in (0x06, 0x07, 0x0F):
+        drive.on_controlword(cw)
+    assert drive.fault(0x8611) is S.FAULT_REACTION_ACTIVE and drive.last_transition == 13
+    assert (drive.statusword(), drive.error_code) == (0x021F, 0x8611)
+    assert drive.fault(0x2310) is S.FAULT_REACTION_ACTIVE and drive.error_code == 0x8611  # first latched
+    assert next_command(S.FAULT_REACTION_ACTIVE, S.OPERATION_ENABLED) is None  # master waits
+    with pytest.raises(IllegalTransition):
+        drive.on_controlword(0x0F)
+    assert drive.fault_reaction_done() is S.FAULT and drive.last_transition == 14
+    assert drive.statusword() == 0x0218
+    with pytest.raises(IllegalTransition, match=r"0x000F.*FAULT"):
+        drive.on_controlword(0x0F)  # the master has not noticed yet
+    assert drive.state is S.FAULT
+
+    assert path(S.FAULT, S.SWITCH_ON_DISABLED) == [C.FAULT_RESET]
+    cws = [controlword(c) for c in path(S.FAULT, S.OPERATION_ENABLED)]
+    assert cws == [0x80, 0x06, 0x07, 0x0F]
+    assert drive.on_controlword(0x80) is S.SWITCH_ON_DISABLED and drive.last_transition == 15
+    assert drive.error_code == 0 and drive.statusword() == 0x0250
+    assert drive.on_controlword(0x80) is S.SWITCH_ON_DISABLED  # bit 7 held: no new command
+    for cw in cws[1:]:
+        drive.on_controlword(cw)
+    assert drive.statusword() == 0x0237
+
+
+def test_fault_reset_needs_edge_on_the_drive():
+    drive = machine_in(S.SWITCH_ON_DISABLED)
+    drive.on_controlword(0x80)  # bit 7 already high when the fault comes
+    drive.fault(0x5530)
+    drive.fault_reaction_done()
+    assert drive.on_controlword(0x80) is S.FAULT  # held high: no edge
+    with pytest.raises(IllegalTransition):
+        drive.on_controlword(0x00)  # not allowed in FAULT, but bit 7 drops
+    assert drive.on_controlword(0x80) is S.SWITCH_ON_DISABLED and drive.last_transition == 15
+
+
+def test_internal_events_only_from_their_state():
+    drive = DriveStateMachine()
+    with pytest.raises(IllegalTransition, match="fault reaction done"):
+        drive.fault_reaction_done()
+    with pytest.raises(IllegalTransition, match="0x0006"):
+        drive.on_controlword(0x06)  # not ready to switch on accepts no command
+    drive.boot_done()
+    with pytest.raises(IllegalTransition, match="boot done"):
+        drive.boot_done()
+    assert drive.fault(0x1000) is S.FAULT_REACTION_ACTIVE  # 13 from any state
+
+
+@pytest.mark.parametrize("src,dst,expected", [
+    (S.SWITCH_ON_DISABLED, S.OPERATION_ENABLED, [C.SHUTDOWN, C.SWITCH_ON, C.ENABLE_OPERATION]),
+    (S.OPERATION_ENABLED, S.SWITCH_ON_DISABLED, [C.DISABLE_VOLTAGE]),
+    (S.OPERATION_ENABLED, S.READY_TO_SWITCH_ON, [C.SHUTDOWN]),
+    (S.OPERATION_ENABLED, S.SWITCHED_ON, [C.DISABLE_OPERATION]),
+    (S.READY_TO_SWITCH_ON, S.SWITCH_ON_DISABLED, [C.DISABLE_VOLTAGE]),
+    (S.SWITCHED_ON, S.QUICK_STOP_ACTIVE, [C.ENABLE_OPERATION, C.QUICK_STOP]),
+    (S.FAULT, S.READY_TO_SWITCH_ON, [C.FAULT_RESET, C.SHUTDOWN]),
+    (S.SWITCHED_ON, S.SWITCHED_ON, []),
+])
+def test_path_examples(src, dst, expected):
+    assert path(src, dst) == expected
+
+
+@pytest.mark.parametrize("src,dst", [
+    (S.OPERATION_ENABLED, S.FAULT), (S.SWITCH_ON_DISABLED, S.NOT_READY_TO_SWITCH_ON),
+    (S.FAULT_REACTION_ACTIVE, S.OPERATION_ENABLED), (S.NOT_READY_TO_SWITCH_ON, S.SWITCH_ON_DISABLED),
+])
+def test_unreachable_targets(src, dst):
+    with pytest.raises(IllegalTransition, match=f"from {src.name} to {dst.name}"):
+        path(src, dst)
+
+
+def test_next_command():
+    assert next_command(S.SWITCHED_ON, S.SWITCH_ON_DISABLED) is C.DISABLE_VOLTAGE
+    assert next_command(S.OPERATION_ENABLED, S.OPERATION_ENABLED) is None
+    assert next_command(S.NOT_READY_TO_SWITCH_ON, S.OPERATION_ENABLED) is None
+    with pytest.raises(IllegalTransition):
+        next_command(S.SWITCH_ON_DISABLED, S.FAULT)
+
+
+@pytest.mark.parametrize("src,dst", list(itertools.product(State, State)), ids=lambda v: v.name)
+def test_path_drives_the_device_there(src, dst):
+    try:
+        cmds = path(src, dst)
+    except IllegalTransition:
+        return
+    drive = machine_in(src)
+    for c in cmds:
+        drive.on_controlword(controlword(c))
+    assert drive.state is dst
+
+
+def test_operation_modes():
+    assert [int(m) for m in OperationMode] == [1, 3, 6, 7, 8, 9, 10]
+    assert OperationMode.CSP == DriveMode.POSITION and OperationMode.CST == DriveMode.FORCE

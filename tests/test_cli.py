@@ -1,0 +1,98 @@
+"""End-to-end through the command line: simulate, analyze, exit codes, bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from hil.cli import main
+from hil.profiles import default_profile_path
+
+
+def test_simulate_writes_run_folder_and_passes(tmp_path):
+    out = tmp_path / "run"
+    rc = main(["simulate", "--out", str(out), "--seed", "7", "--quiet"])
+    assert rc == 0
+    for f in ("signals.csv", "meta.json", "result.json", "report.html"):
+        assert (out / f).stat().st_size > 0, f
+    res = json.loads((out / "result.json").read_text())
+    meta = json.loads((out / "meta.json").read_text())
+    assert res["status"] == "pass" and meta["seed"] == 7 and meta["status"] == "done"
+    assert meta["software"]["name"] == "emacheck"
+    assert set(res["backlash_mm"]) == {"int1", "int2", "ext"}
+    assert abs(res["backlash_mm"]["int2"] - res["truth"]["backlash_mm"]["int2"]) < 0.005
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 8 and "PASS" in html
+
+
+def test_analyze_run_folder_reproduces_result(default_run, tmp_path):
+    run_dir, truth = default_run
+    rc = main(["analyze", str(run_dir), "--out", str(tmp_path)])
+    assert rc == 0
+    res = json.loads((tmp_path / "result.json").read_text())
+    assert res["segments"]["source"] == "step column"
+    assert res["truth"] == truth  # carried in meta.json
+
+
+def test_analyze_bare_csv_finds_segments_itself(default_run, tmp_path):
+    """A CSV recorded elsewhere: only t,phi1,phi2,s1,s2,F1,F2, no step column."""
+    run_dir, truth = default_run
+    lines = (run_dir / "signals.csv").read_text().splitlines()
+    bare = tmp_path / "bare.csv"
+    bare.write_text("\n".join(",".join(l.split(",")[:7]) for l in lines) + "\n")
+    rc = main(["analyze", str(bare), "--out", str(tmp_path / "a")])
+    assert rc == 0
+    res = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert res["segments"]["source"] == "detected"
+    for ch in ("int1", "int2", "ext"):
+        assert abs(res["backlash_mm"][ch] - truth["backlash_mm"][ch]) < 0.005, ch
+    for k in ("ema1", "ema2"):
+        assert res["calibration"][k]["pitch"] == pytest.approx(truth["calibration"][k]["pitch"], rel=1e-3)
+
+
+def test_analyze_force_fight_only_says_uncorrected(default_run, tmp_path):
+    run_dir, truth = default_run
+    lines = (run_dir / "signals.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    step = head.index("step")
+    keep = [lines[0]] + [l for l in lines[1:] if l.split(",")[step] == "force_fight"]
+    p = tmp_path / "ff.csv"
+    p.write_text("\n".join(",".join(l.split(",")[:7]) for l in keep) + "\n")
+    rc = main(["analyze", str(p), "--out", str(tmp_path / "a")])
+    assert rc in (0, 1)
+    res = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert res["calibration"] == {"ema1": None, "ema2": None}
+    assert any("uncorrected" in n for n in res["notes"])
+
+
+def test_fail_against_spec_exits_1(default_run, tmp_path):
+    run_dir, _ = default_run
+    act = default_profile_path("actuation.toml").read_text().replace(
+        "backlash_spec_int_mm = 0.20", "backlash_spec_int_mm = 0.11")
+    p = tmp_path / "tight.toml"
+    p.write_text(act)
+    rc = main(["analyze", str(run_dir), "--profile", str(p), "--out", str(tmp_path / "a")])
+    assert rc == 1  # int2 has 0.12 mm > 0.11 mm
+    assert json.loads((tmp_path / "a" / "result.json").read_text())["status"] == "fail"
+
+
+def test_bad_input_exit_3_and_message(tmp_path, capsys):
+    bad = tmp_path / "check.toml"
+    bad.write_text(default_profile_path("check.toml").read_text().replace("cycles = 3", "cycles = 0"))
+    assert main(["simulate", "--check", str(bad), "--out", str(tmp_path / "x"), "--quiet"]) == 3
+    err = capsys.readouterr().err
+    assert "check.toml: field 'force_fight.cycles' = 0 must be >= 1" in err
+    assert not (tmp_path / "x").exists()  # nothing ran
+    assert main(["analyze", str(tmp_path / "missing.csv")]) == 3
+    assert "no such file" in capsys.readouterr().err
+
+
+def test_help_lists_commands(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert "simulate" in out and "analyze" in out and "exit status" in out

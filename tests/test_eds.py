@@ -1,0 +1,138 @@
+"""The shipped drive EDS: loads, passes the master's check, identity and PDO defaults; broken ones refused."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import pytest
+from canopen.objectdictionary import ODRecord
+
+from hil.drive_od import (
+    REQUIRED_OBJECTS,
+    check_drive_od,
+    decode_value,
+    default_eds_path,
+    encode_value,
+    load_drive_od,
+    od_variable,
+)
+from hil.errors import ProfileError
+from hil.pdo import DEFAULT_LAYOUT
+
+
+@pytest.fixture(scope="module")
+def od():
+    return load_drive_od(node_id=2)
+
+
+def default(od, index, sub=0):
+    return od_variable(od, index, sub).default
+
+
+def test_shipped_eds_loads_and_passes_the_check(od):
+    check_drive_od(od)
+    check_drive_od(load_drive_od())  # without node id ($NODEID defaults unresolved) too
+    info = od.device_information
+    assert (info.vendor_name, info.product_name) == ("emacheck", "EMA drive (simulated)")
+    assert (info.vendor_number, info.product_number, info.revision_number) == (0x0E3A, 0x0402, 0x00010000)
+    assert 1_000_000 in info.allowed_baudrates
+    assert (info.nr_of_RXPDO, info.nr_of_TXPDO) == (2, 2)
+    assert default_eds_path().name == "ema_drive.eds"
+
+
+def test_identity_and_device_defaults(od):
+    assert default(od, 0x1000) == 0x00020192  # CiA 402 servo drive
+    assert isinstance(od[0x1018], ODRecord)
+    assert [default(od, 0x1018, s) for s in (1, 2, 3, 4)] == [0x00000E3A, 0x00000402, 0x00010000, 0]
+    assert default(od, 0x1008) == "EMA drive"
+    assert default(od, 0x1014) == 0x82  # $NODEID + 0x80
+    assert default(od, 0x6076) == 1000  # mNm
+    assert (default(od, 0x608F, 1), default(od, 0x608F, 2)) == (4096, 1)
+    assert (default(od, 0x60C2, 1), default(od, 0x60C2, 2)) == (2, -3)  # 2 ms
+    assert default(od, 0x6502) == (1 << 7) | (1 << 9)  # CSP and CST
+    assert default(od, 0x605A) == 2
+    assert (default(od, 0x607D, 1), default(od, 0x607D, 2)) == (-65536, 65536)  # +-20 mm
+    assert default(od, 0x2102) == pytest.approx(2 * 3.141592653589793 * 4 / 5, rel=1e-7)
+
+
+def test_pdo_defaults_equal_the_layout(od):
+    for p in DEFAULT_LAYOUT.pdos:
+        assert default(od, p.comm_index, 1) == p.cob_id(2), p.name
+        assert default(od, p.comm_index, 2) == p.transmission_type, p.name
+        assert default(od, p.mapping_index, 0) == len(p.entries), p.name
+        got = [default(od, p.mapping_index, k) for k in range(1, 9)]
+        assert got == [e.mapping_entry for e in p.entries] + [0] * (8 - len(p.entries)), p.name
+    assert od_variable(load_drive_od(), 0x1800, 1).default_raw == "$NODEID+0x180"
+
+
+def test_required_objects_cover_the_layout():
+    need = {(r.index, r.subindex) for r in REQUIRED_OBJECTS}
+    for p in DEFAULT_LAYOUT.pdos:
+        assert {(e.index, e.subindex) for e in p.entries} <= need
+        assert {(p.comm_index, 1), (p.comm_index, 2), (p.mapping_index, 0)} <= need
+
+
+def test_value_codec(od):
+    assert encode_value(od, 0x1017, 0, 100) == b"\x64\x00"
+    assert encode_value(od, 0x60C2, 2, -3) == b"\xfd"
+    assert decode_value(od, 0x2102, 0, struct.pack("<f", 5.0265482)) == pytest.approx(5.0265482, rel=1e-7)
+    assert decode_value(od, 0x1008, 0, b"EMA drive\x00") == "EMA drive"
+    with pytest.raises(ProfileError, match="cannot encode 70000"):
+        encode_value(od, 0x1017, 0, 70000)
+    with pytest.raises(ProfileError, match="0x1016:05 is not in the object dictionary"):
+        od_variable(od, 0x1016, 5)  # canopen would synthesise array members; we do not
+
+
+def _sections(text: str) -> list[list[str]]:
+    """The EDS as blocks of lines, one block per section (split at blank lines)."""
+    return [block.split("\n") for block in text.strip("\n").split("\n\n")]
+
+
+def _broken(tmp_path: Path, section: str, key: str | None = None, value: str = "") -> Path:
+    """The shipped EDS with ``[section]`` removed (key None) or its ``key`` set to ``value``."""
+    blocks = _sections(default_eds_path().read_text())
+    hits = [b for b in blocks if b[0] == f"[{section}]"]
+    assert len(hits) == 1, section
+    if key is None:
+        blocks.remove(hits[0])
+    else:
+        lines = hits[0]
+        k = next(i for i, line in enumerate(lines) if line.startswith(key + "="))
+        lines[k] = f"{key}={value}"
+    p = tmp_path / "broken.eds"
+    p.write_text("\n\n".join("\n".join(b) for b in blocks) + "\n")
+    return p
+
+
+@pytest.mark.parametrize("section,key,value,message", [
+    ("6041", None, "", r"0x6041:00 \(statusword\) is missing"),
+    ("1A01sub2", None, "", r"0x1A01:02 \(TPDO2 mapping entry 2\) is missing"),
+    ("6064", "DataType", "0x0007",
+     r"0x6064:00 \(position_inc\) has data type 0x0007 \(UNSIGNED32\), expected 0x0004 \(INTEGER32\)"),
+    ("6040", "AccessType", "ro", r"0x6040:00 \(controlword\) is not writable \(access ro\)"),
+    ("2100", "PDOMapping", "0", r"0x2100:00 \(lvdt_um\) is not PDO-mappable"),
+    ("1018sub1", None, "", r"0x1018:01 \(vendor-ID\) is missing"),
+])
+def test_broken_eds_refused_with_object_named(tmp_path, section, key, value, message):
+    path = _broken(tmp_path, section, key, value)
+    od = load_drive_od(path, node_id=1)
+    with pytest.raises(ProfileError, match=message) as exc:
+        check_drive_od(od, source=str(path))
+    assert str(exc.value).startswith(f"{path}: ")
+    assert str(exc.value).count("; ") == 0  # exactly one problem reported
+
+
+def test_unchanged_copy_passes(tmp_path):
+    text = default_eds_path().read_text()
+    assert "\n\n".join("\n".join(b) for b in _sections(text)) + "\n" == text
+    check_drive_od(load_drive_od(_broken(tmp_path, "6041", "DefaultValue", "0x0000")))
+
+
+def test_missing_or_garbage_eds(tmp_path):
+    with pytest.raises(ProfileError, match="EDS not found"):
+        load_drive_od(tmp_path / "nope.eds")
+    bad = tmp_path / "bad.eds"
+    bad.write_text("[DeviceInfo]\nVendorName=x\n\n[6041]\nObjectType=0x7\n")  # no ParameterName
+    with pytest.raises(ProfileError, match="bad.eds: not a valid EDS"):
+        load_drive_od(bad)

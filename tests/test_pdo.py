@@ -1,0 +1,269 @@
+"""PDO layout and codec: golden bytes, round trips, length errors, configuration SDO writes, bus load."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import canopen
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from hil.drive_od import load_drive_od
+from hil.errors import EmacheckError, InputError
+from hil.pdo import (
+    DEFAULT_LAYOUT,
+    Direction,
+    Frame,
+    FrameError,
+    PdoError,
+    PdoLengthError,
+    Rpdo1,
+    Rpdo2,
+    Tpdo1,
+    Tpdo2,
+    bus_load,
+    decode_rpdo1,
+    decode_rpdo2,
+    decode_tpdo1,
+    decode_tpdo2,
+    encode_rpdo1,
+    encode_rpdo2,
+    encode_tpdo1,
+    encode_tpdo2,
+    force_dN_to_newton,
+    force_to_permille,
+    frame_bits,
+    increments_per_rad,
+    increments_to_rad,
+    lvdt_um_to_mm,
+    mm_to_lvdt_um,
+    newton_to_force_dN,
+    permille_to_force_N,
+    rad_to_increments,
+    sync_frame,
+)
+from hil.sdo import SdoClient, SdoEvent
+
+I_TOTAL = 2 * math.pi * 4 / 5  # rad/mm, the default actuation (gearbox 4:1, lead 5 mm)
+
+i8 = st.integers(-128, 127)
+u16 = st.integers(0, 0xFFFF)
+i16 = st.integers(-(2**15), 2**15 - 1)
+i32 = st.integers(-(2**31), 2**31 - 1)
+node = st.integers(1, 127)
+
+
+# ---------------------------------------------------------------------------- golden bytes
+
+
+def test_rpdo1_golden():
+    f = encode_rpdo1(1, Rpdo1(controlword=0x000F, target_position_inc=0x00012345, target_torque_permille=-2))
+    assert f == Frame(0x201, bytes.fromhex("0F 00 45 23 01 00 FE FF"))
+    assert decode_rpdo1(f) == Rpdo1(0x000F, 74565, -2)
+
+
+def test_tpdo2_golden():
+    f = encode_tpdo2(2, Tpdo2(lvdt_um=-12345, force_dN=60000))
+    assert f == Frame(0x282, bytes.fromhex("C7 CF FF FF 60 EA 00 00"))
+    assert decode_tpdo2(f) == Tpdo2(-12345, 60000)
+
+
+def test_tpdo1_and_rpdo2_golden():
+    assert encode_tpdo1(2, Tpdo1(0x0237, -65536, 10)).data == bytes.fromhex("37 02 00 00 FF FF 0A")
+    assert encode_rpdo2(1, Rpdo2(8)) == Frame(0x301, b"\x08")
+    assert sync_frame() == Frame(0x080, b"")
+
+
+# ---------------------------------------------------------------------------- round trips
+
+
+@given(node, u16, i32, i16)
+def test_rpdo1_round_trip(n, cw, pos, tq):
+    f = encode_rpdo1(n, Rpdo1(cw, pos, tq))
+    assert f.arbitration_id == 0x200 + n and len(f.data) == 8
+    assert decode_rpdo1(f) == Rpdo1(cw, pos, tq)
+
+
+@given(node, i8)
+def test_rpdo2_round_trip(n, mode):
+    f = encode_rpdo2(n, Rpdo2(mode))
+    assert f.arbitration_id == 0x300 + n and decode_rpdo2(f) == Rpdo2(mode)
+
+
+@given(node, u16, i32, i8)
+def test_tpdo1_round_trip(n, sw, pos, mode):
+    f = encode_tpdo1(n, Tpdo1(sw, pos, mode))
+    assert f.arbitration_id == 0x180 + n and len(f.data) == 7
+    assert decode_tpdo1(f) == Tpdo1(sw, pos, mode)
+
+
+@given(node, i32, i32)
+def test_tpdo2_round_trip(n, lvdt, force):
+    f = encode_tpdo2(n, Tpdo2(lvdt, force))
+    assert f.arbitration_id == 0x280 + n and decode_tpdo2(f) == Tpdo2(lvdt, force)
+
+
+# ---------------------------------------------------------------------------- errors
+
+
+@pytest.mark.parametrize("decode,frame,expected,got", [
+    (decode_rpdo1, Frame(0x201, bytes(7)), 8, 7),
+    (decode_rpdo1, Frame(0x27F, b""), 8, 0),
+    (decode_rpdo2, Frame(0x302, b"\x08\x00"), 1, 2),
+    (decode_tpdo1, Frame(0x182, bytes(8)), 7, 8),
+    (decode_tpdo2, Frame(0x281, bytes(4)), 8, 4),
+])
+def test_length_errors_name_cob_id(decode, frame, expected, got):
+    with pytest.raises(PdoLengthError,
+                       match=f"COB-ID 0x{frame.arbitration_id:03X}: expected {expected} data bytes, got {got}"):
+        decode(frame)
+
+
+def test_error_types():
+    assert issubclass(PdoLengthError, EmacheckError) and issubclass(PdoLengthError, ValueError)
+    with pytest.raises(PdoError, match="not a TPDO1 COB-ID"):
+        decode_tpdo1(Frame(0x282, bytes(7)))
+    with pytest.raises(PdoError, match=r"Rpdo1.controlword = 65536 is outside 0..65535"):
+        Rpdo1(0x10000, 0, 0)
+    with pytest.raises(PdoError, match=r"Rpdo1.target_torque_permille = 32768"):
+        Rpdo1(0, 0, 32768)
+    with pytest.raises(PdoError, match="must be an int"):
+        Tpdo2(1.5, 0)
+    with pytest.raises(FrameError):
+        Frame(0x800, b"")
+    with pytest.raises(FrameError, match="9 data bytes"):
+        Frame(0x201, bytes(9))
+    with pytest.raises(InputError, match="node_id = 128"):
+        encode_rpdo2(128, Rpdo2(8))
+    assert Frame(0x201, bytearray(b"\x01")).data == b"\x01"
+
+
+# ---------------------------------------------------------------------------- layout
+
+
+def test_layout_lengths_and_indices():
+    got = [(p.name, p.direction, p.comm_index, p.mapping_index, p.transmission_type, p.length_bytes,
+            struct.calcsize(p.struct_format)) for p in DEFAULT_LAYOUT.pdos]
+    assert got == [
+        ("RPDO1", Direction.RX, 0x1400, 0x1600, 1, 8, 8),
+        ("RPDO2", Direction.RX, 0x1401, 0x1601, 255, 1, 1),
+        ("TPDO1", Direction.TX, 0x1800, 0x1A00, 1, 7, 7),
+        ("TPDO2", Direction.TX, 0x1801, 0x1A01, 1, 8, 8),
+    ]
+    assert [(e.index, e.subindex, e.bit_length) for e in DEFAULT_LAYOUT["TPDO1"].entries] == [
+        (0x6041, 0, 16), (0x6064, 0, 32), (0x6061, 0, 8)]
+    assert DEFAULT_LAYOUT.find(0x182) == (DEFAULT_LAYOUT["TPDO1"], 2)
+    assert DEFAULT_LAYOUT.find(0x27F) == (DEFAULT_LAYOUT["RPDO1"], 127)
+    assert DEFAULT_LAYOUT.find(0x080) is None and DEFAULT_LAYOUT.find(0x602) is None
+
+
+CONFIG_NODE2 = [  # (index, subindex, data) for node 2, the CiA 301 mapping procedure per PDO
+    (0x1400, 1, "02 02 00 80"), (0x1600, 0, "00"), (0x1600, 1, "10 00 40 60"), (0x1600, 2, "20 00 7A 60"),
+    (0x1600, 3, "10 00 71 60"), (0x1600, 0, "03"), (0x1400, 2, "01"), (0x1400, 1, "02 02 00 00"),
+    (0x1401, 1, "02 03 00 80"), (0x1601, 0, "00"), (0x1601, 1, "08 00 60 60"), (0x1601, 0, "01"),
+    (0x1401, 2, "FF"), (0x1401, 1, "02 03 00 00"),
+    (0x1800, 1, "82 01 00 80"), (0x1A00, 0, "00"), (0x1A00, 1, "10 00 41 60"), (0x1A00, 2, "20 00 64 60"),
+    (0x1A00, 3, "08 00 61 60"), (0x1A00, 0, "03"), (0x1800, 2, "01"), (0x1800, 1, "82 01 00 00"),
+    (0x1801, 1, "82 02 00 80"), (0x1A01, 0, "00"), (0x1A01, 1, "20 00 00 21"), (0x1A01, 2, "20 00 01 21"),
+    (0x1A01, 0, "02"), (0x1801, 2, "01"), (0x1801, 1, "82 02 00 00"),
+]
+
+
+def test_configuration_writes_golden():
+    writes = DEFAULT_LAYOUT.configuration_writes(2)
+    assert [(w.index, w.subindex, w.data.hex(" ").upper()) for w in writes] == CONFIG_NODE2
+    assert writes[0].what == "RPDO1 disable" and writes[-1].what == "TPDO2 enable"
+
+
+class CollectingBus:
+    def __init__(self) -> None:
+        self.sent: list = []
+
+    def send(self, msg) -> None:
+        self.sent.append(msg)
+
+
+def test_configuration_writes_accepted_by_the_eds_drive():
+    """Every write goes through canopen's SdoServer on the shipped EDS (access, lengths)."""
+    bus = CollectingBus()
+    network = canopen.Network(bus)
+    drive = canopen.LocalNode(1, load_drive_od(node_id=1))
+    network.add_node(drive)
+    client = SdoClient(1)
+    for w in DEFAULT_LAYOUT.configuration_writes(1):
+        frame = client.start_download(w.index, w.subindex, w.data, 0.0)
+        network.notify(frame.arbitration_id, bytearray(frame.data), 0.0)
+        (reply,), bus.sent = bus.sent, []
+        assert isinstance(client.on_frame(Frame(reply.arbitration_id, bytes(reply.data)), 0.0), SdoEvent)
+    assert drive.data_store[0x1A00] == {0: b"\x03", 1: bytes.fromhex("10004160"),
+                                         2: bytes.fromhex("20006460"), 3: bytes.fromhex("08006160")}
+    assert drive.data_store[0x1801][1] == bytes.fromhex("81020000")
+
+
+# ---------------------------------------------------------------------------- scaling
+
+
+def test_position_scaling():
+    assert increments_per_rad(4096) == pytest.approx(651.8986469044033, rel=1e-15)
+    assert rad_to_increments(2 * math.pi, 4096) == 4096
+    assert rad_to_increments(-20 * I_TOTAL, 4096) == -65536  # -20 mm stroke = -16 motor turns
+    assert increments_to_rad(2048, 4096) == pytest.approx(math.pi, rel=1e-15)
+    assert rad_to_increments(1e12, 4096) == 2**31 - 1
+    with pytest.raises(InputError, match="counts_per_rev = 0"):
+        increments_per_rad(0)
+
+
+def test_force_scaling():
+    # T = 10000 N / (5.0265 rad/mm * 1000) = 1.98944 N m -> 1989.4 per mille of 1 N m
+    assert force_to_permille(10_000.0, I_TOTAL, 1.0) == 1989
+    assert force_to_permille(-40_000.0, I_TOTAL, 1.0) == -7958
+    assert force_to_permille(10_000.0, I_TOTAL, 2.0) == 995
+    assert force_to_permille(1e9, I_TOTAL, 1.0) == 32767 and force_to_permille(-1e9, I_TOTAL, 1.0) == -32768
+    assert permille_to_force_N(1000, I_TOTAL, 1.0) == pytest.approx(5026.548245743669, rel=1e-12)
+    for F in (-6000.0, -3.0, 0.0, 2.4, 6000.0):
+        back = permille_to_force_N(force_to_permille(F, I_TOTAL, 1.0), I_TOTAL, 1.0)
+        assert abs(back - F) <= 0.5 * I_TOTAL + 1e-9  # half a per mille = 2.51 N
+    with pytest.raises(InputError, match="F_N"):
+        force_to_permille(float("nan"), I_TOTAL, 1.0)
+    with pytest.raises(InputError, match=r"i_total_rad_per_mm = -1.0 \[rad/mm\] must be > 0"):
+        force_to_permille(1.0, -1.0, 1.0)
+
+
+def test_sensor_scaling():
+    assert mm_to_lvdt_um(-12.345) == -12345 and lvdt_um_to_mm(-12345) == pytest.approx(-12.345, abs=1e-15)
+    assert newton_to_force_dN(6000.04) == 60000 and force_dN_to_newton(60000) == 6000.0
+
+
+# ---------------------------------------------------------------------------- bus load
+
+
+def test_frame_bits():
+    assert [frame_bits(n, worst_case=False) for n in (0, 1, 7, 8)] == [47, 55, 103, 111]
+    assert [frame_bits(n, worst_case=True) for n in (0, 1, 7, 8)] == [55, 65, 125, 135]
+
+
+def test_bus_load_two_drives_1mbit_2ms():
+    load = bus_load(DEFAULT_LAYOUT, 2, 1_000_000, 0.002, 0.1)
+    per_cycle = {i.name: i.frames_per_cycle for i in load.items}
+    assert per_cycle == {"SYNC": 1, "RPDO1": 2, "RPDO2": 0, "TPDO1": 2, "TPDO2": 2,
+                         "heartbeat": pytest.approx(0.06)}
+    # nominal: 47 + 2*111 + 2*103 + 2*111 + 3 * 55 * 0.02 = 700.3 bits of 2000
+    assert load.bits_per_cycle_nominal == pytest.approx(700.3)
+    assert load.load_nominal == pytest.approx(0.35015)
+    # worst case stuffing: 55 + 2*135 + 2*125 + 2*135 + 3 * 65 * 0.02 = 848.9 bits -> 42.4 %
+    assert load.bits_per_cycle_worst == pytest.approx(848.9)
+    assert load.load_worst == pytest.approx(0.42445)
+    assert load.load_worst < 0.50
+    # a cycle in which both drives also get a mode change (2 RPDO2): 978.9 bits, still < 50 %
+    assert load.event_bits_worst == 130
+    assert (load.bits_per_cycle_worst + load.event_bits_worst) / 2000 == pytest.approx(0.48945)
+
+
+def test_bus_load_inputs():
+    assert bus_load(DEFAULT_LAYOUT, 2, 500_000, 0.002, 0.0).load_worst == pytest.approx(845 / 1000)
+    with pytest.raises(InputError, match="sync_period_s"):
+        bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.0, 0.1)
+    with pytest.raises(InputError, match="n_drives"):
+        bus_load(DEFAULT_LAYOUT, 0, 1e6, 0.002, 0.1)

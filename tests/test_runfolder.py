@@ -1,0 +1,58 @@
+"""Run-folder CSV: round trip, and bad recordings refused with the line named."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hil.errors import RecordingError
+from hil.runfolder import SignalsWriter, read_signals
+from hil.types import DriveMode, Sample, Setpoint
+
+HEADER = "t,phi1,phi2,s1,s2,F1,F2\n"
+
+
+def _write(tmp_path, body: str, header: str = HEADER):
+    p = tmp_path / "sig.csv"
+    p.write_text(header + body)
+    return p
+
+
+def test_writer_reader_round_trip(tmp_path):
+    w = SignalsWriter(tmp_path / "signals.csv", flush_rows=3)
+    sp = (Setpoint(DriveMode.POSITION, 1.25), Setpoint(DriveMode.FORCE, -2000.0))
+    for k in range(10):
+        w.write(Sample(0.002 * (k + 1), 0.1 * k, -0.1 * k, 0.01 * k, -0.01 * k, 100.0 * k, -100.0 * k), *sp, "cal1_sweep")
+    w.close()
+    sig = read_signals(tmp_path / "signals.csv")
+    assert sig.n == 10
+    np.testing.assert_allclose(sig.t, 0.002 * np.arange(1, 11))
+    np.testing.assert_allclose(sig.F2, -100.0 * np.arange(10))
+    assert list(sig.mode1) == [8.0] * 10 and list(sig.mode2) == [10.0] * 10
+    assert sig.sp2[0] == -2000.0 and sig.step[0] == "cal1_sweep"
+    assert sig.notes == ()
+
+
+def test_truncated_last_line_is_dropped_and_noted(tmp_path):
+    p = _write(tmp_path, "0.002,0,0,0,0,0,0\n0.004,0,0,0,0,0,0\n0.006,0,0,0.1")
+    sig = read_signals(p)
+    assert sig.n == 2
+    assert "incomplete" in sig.notes[0]
+
+
+@pytest.mark.parametrize("body,header,message", [
+    ("0.002,0,0,0,0,0,0\n0.004,0,0,nan,0,0,0\n", HEADER, r"line 3: column 's1' \[mm\] is nan"),
+    ("0.002,0,0,0,0,0,0\n0.004,0,0,abc,0,0,0\n", HEADER, r"line 3: column 's1': not a number: 'abc'"),
+    ("0.002,0,0,0,0,0,0\n0.002,0,0,0,0,0,0\n", HEADER, r"line 3: time not increasing"),
+    ("0.002,0,0,0,0,0\n", "t,phi1,phi2,s1,s2,F1\n", r"line 1: missing column\(s\) F2"),
+    ("0.002,0,0,0,0,0,0,7\n", HEADER, r"line 2: 8 fields, header has 7"),
+    ("", HEADER, r"no data rows"),
+])
+def test_bad_recordings(tmp_path, body, header, message):
+    with pytest.raises(RecordingError, match=message):
+        read_signals(_write(tmp_path, body, header))
+
+
+def test_gap_is_noted(tmp_path):
+    p = _write(tmp_path, "0.002,0,0,0,0,0,0\n0.004,0,0,0,0,0,0\n0.006,0,0,0,0,0,0\n0.020,0,0,0,0,0,0\n")
+    assert "gap" in read_signals(p).notes[0]

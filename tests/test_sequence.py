@@ -1,0 +1,92 @@
+"""Unit tests of the sans-IO check sequence core (no plant, no IO, no sleeps)."""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.errors import SequenceError
+from hil.sequence import TRANSITIONS, CheckSequence, Step, _triangle
+from hil.types import DriveMode, Sample
+
+
+def _smp(t, phi1=0.0, phi2=0.0, s1=0.0, s2=0.0, F1=0.0, F2=0.0):
+    return Sample(t, phi1, phi2, s1, s2, F1, F2)
+
+
+def test_transition_table_is_a_chain_with_abort():
+    assert TRANSITIONS[Step.IDLE] == {Step.ENABLE, Step.ABORTED}
+    assert TRANSITIONS[Step.FORCE_FIGHT] == {Step.UNLOAD, Step.ABORTED}
+    assert TRANSITIONS[Step.DONE] == frozenset() and TRANSITIONS[Step.ABORTED] == frozenset()
+
+
+def test_illegal_transition_raises(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile)
+    with pytest.raises(SequenceError, match="illegal step transition IDLE -> FORCE_FIGHT"):
+        seq._goto(Step.FORCE_FIGHT, 0.0)
+
+
+def test_enable_holds_measured_position_then_approach_moves_both_rams_equally(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile)
+    i = actuation.mechanics.i_total_rad_per_mm
+    out = seq.step(_smp(0.002, phi1=10.0, phi2=-4.0, s1=1.0, s2=0.6))
+    assert out.step == Step.ENABLE and out.events[0].step == Step.ENABLE
+    assert out.sp1.mode == DriveMode.POSITION and out.sp1.value == 10.0 and out.sp2.value == -4.0
+    t = 0.002
+    while seq.step_now != Step.CAL1_LOAD:
+        t += 0.002
+        out = seq.step(_smp(t, phi1=10.0, phi2=-4.0, s1=1.0, s2=0.6))
+        assert t < 10
+    # both rams moved by the same stroke, -(1.0 + 0.6)/2 = -0.8 mm
+    assert (out.sp1.value - 10.0) / i == pytest.approx(-0.8)
+    assert (out.sp2.value + 4.0) / i == pytest.approx(-0.8)
+
+
+def test_opposing_force_ramps_from_the_measured_force(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile)
+    t = 0.0
+    while seq.step_now != Step.CAL1_LOAD:
+        t += 0.002
+        out = seq.step(_smp(t, F1=500.0, F2=-500.0))
+    t += 0.002
+    out = seq.step(_smp(t, F1=500.0, F2=-500.0))
+    assert out.sp2.mode == DriveMode.FORCE and out.sp1.mode == DriveMode.POSITION
+    assert out.sp2.value == pytest.approx(-500.0, abs=5.0)  # no jump to 0 N
+    while seq.step_now == Step.CAL1_LOAD:
+        t += 0.002
+        out = seq.step(_smp(t, F1=500.0, F2=-500.0))
+    assert out.sp2.value == pytest.approx(-check_profile.calibration.opposing_force_N)
+
+
+def test_abort_latches_and_disables(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile)
+    seq.step(_smp(0.002))
+    out = seq.abort(0.004, "test")
+    assert out.step == Step.ABORTED and out.sp1.mode == DriveMode.DISABLED and out.sp2.mode == DriveMode.DISABLED
+    assert seq.finished and seq.abort_reason == "test"
+    assert seq.abort(0.006, "again").step == Step.ABORTED and seq.abort_reason == "test"
+
+
+def test_exception_in_core_aborts_and_reraises(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile)
+    seq.step(_smp(0.002))
+    with pytest.raises(SequenceError, match="not increasing"):
+        seq.step(_smp(0.002))
+    assert seq.step_now == Step.ABORTED and "not increasing" in seq.abort_reason
+
+
+def test_force_fight_demand_triangle():
+    assert _triangle(0.0, 6000.0, 12.0) == 0.0
+    assert _triangle(3.0, 6000.0, 12.0) == pytest.approx(6000.0)
+    assert _triangle(6.0, 6000.0, 12.0) == pytest.approx(0.0)
+    assert _triangle(9.0, 6000.0, 12.0) == pytest.approx(-6000.0)
+    assert _triangle(1.5, 6000.0, 12.0) == pytest.approx(3000.0)
+
+
+def test_run_goes_through_all_steps_in_order(default_run):
+    import json
+    run_dir, _ = default_run
+    meta = json.loads((run_dir / "meta.json").read_text())
+    names = list(meta["steps"])
+    assert names == ["enable", "approach", "cal1_load", "cal1_sweep", "cal1_unload", "cal2_load",
+                     "cal2_sweep", "cal2_unload", "force_fight", "unload", "done"]
+    assert meta["status"] == "done"

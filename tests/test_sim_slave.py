@@ -1,0 +1,692 @@
+"""Tests of the simulated CiA 402 drive pair (sim.slave): golden frames and closed-loop numbers.
+
+Known answers: the EDS defaults (identity, heartbeat, PDO layout), the CiA 301
+frame formats (boot-up, heartbeat, EMCY, SDO abort), the CiA 402 statuswords
+of hil.cia402, the sensor model of sim.plant at rest (noise-free LVDT
+s_meas = offset, force 0), and the unit conversions of hil.pdo.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from hil.cia402 import State, controlword, decode_state, next_command
+from hil.errors import InputError
+from hil.pdo import (
+    DEFAULT_LAYOUT,
+    Frame,
+    Rpdo1,
+    Rpdo2,
+    decode_tpdo1,
+    decode_tpdo2,
+    encode_rpdo1,
+    encode_rpdo2,
+    permille_to_force_N,
+    sync_frame,
+)
+from hil.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
+from hil.types import DriveMode
+from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams
+from sim.plant import RigPlant
+from sim.slave import (
+    QUICK_STOP_HOLD_S,
+    TARGET_WINDOW_INC,
+    NmtState,
+    SimDrivePair,
+    error_register_bits,
+)
+
+I_TOTAL = 2 * math.pi * 4 / 5  # rad/mm
+T_S = 0.002
+INC_PER_MM = I_TOTAL * 4096 / (2 * math.pi)  # 3276.8 increments per mm of stroke
+
+SW_SOD = 0x0250  # switch on disabled + remote
+SW_READY = 0x0231
+SW_SWITCHED_ON = 0x0233
+SW_OE = 0x0237  # operation enabled, no supported mode
+SW_OE_CSP_REACHED = 0x1637  # + drive follows command (12) + target reached (10)
+SW_QSA = 0x0217
+SW_FRA = 0x021F
+SW_FAULT = 0x0218
+
+
+def make_params() -> RigParams:
+    """The default rig of tests/test_sim_plant.py with noise-free LVDTs and load cells."""
+    return RigParams(
+        i_total_rad_per_mm=I_TOTAL,
+        stroke_limit_mm=20.0,
+        sample_period_s=T_S,
+        substeps=8,
+        ema1=EmaMechanics(0.10, 80e3, 80e3, 0.05, 200e3, 20e3),
+        ema2=EmaMechanics(0.12, 80e3, 80e3, 0.05, 200e3, 20e3),
+        drive=DriveParams(1.0e-4, 1e-4, 10.0, 150.0, 0.8, 0.05),
+        surface=SurfaceParams(300.0, 0.5, 0.0),
+        sensors1=SensorParams(1.075, 0.3, 0.02, 20.0, 0.0, 1.0, 0.0, 12),
+        sensors2=SensorParams(0.98, -0.2, 0.02, 20.0, 0.0, 1.0, 0.0, 12),
+        effects=(),
+    )
+
+
+class Rig:
+    """A minimal master: time, frames to the pair, SDO transfers, SYNC cycles."""
+
+    def __init__(self, pair: SimDrivePair) -> None:
+        self.pair = pair
+        self.t = 0.0
+
+    def send(self, frame: Frame) -> list[Frame]:
+        return self.pair.on_frame(frame, self.t)
+
+    def nmt(self, cs: int, node: int = 0) -> list[Frame]:
+        return self.send(Frame(0x000, bytes([cs, node])))
+
+    def sync(self) -> list[Frame]:
+        self.t += T_S
+        return self.send(sync_frame())
+
+    def sync_by_id(self) -> dict[int, Frame]:
+        frames = self.sync()
+        return {f.arbitration_id: f for f in frames}
+
+    def sdo(self, node: int, index: int, sub: int, data: bytes | None = None) -> bytes:
+        """One SDO transfer; returns the uploaded (or written) bytes, raises SdoAbortError."""
+        client = SdoClient(node)
+        req = client.start_upload(index, sub, self.t) if data is None else \
+            client.start_download(index, sub, data, self.t)
+        for _ in range(64):
+            replies = [f for f in self.send(req) if f.arbitration_id == 0x580 + node]
+            assert len(replies) == 1
+            result = client.on_frame(replies[0], self.t)
+            if isinstance(result, SdoEvent):
+                return result.data
+            req = result
+        raise AssertionError("SDO transfer did not finish")
+
+    def write(self, node: int, index: int, sub: int, fmt: str, value: int) -> None:
+        self.sdo(node, index, sub, struct.pack("<" + fmt, value))
+
+    def read(self, node: int, index: int, sub: int, fmt: str) -> int:
+        return struct.unpack("<" + fmt, self.sdo(node, index, sub))[0]
+
+    def cycle(self, cw: tuple[int, int], pos: tuple[int, int] = (0, 0),
+              torque: tuple[int, int] = (0, 0)) -> dict[int, Frame]:
+        """RPDO1 to both drives, then SYNC; returns the SYNC's output by COB-ID."""
+        for k, node in enumerate((1, 2)):
+            assert self.send(encode_rpdo1(node, Rpdo1(cw[k], pos[k], torque[k]))) == []
+        return self.sync_by_id()
+
+    def enable(self, mode1: int = 8, mode2: int = 8) -> None:
+        """Start both nodes, set the modes (RPDO2) and walk both drives to OPERATION_ENABLED."""
+        self.nmt(0x01)
+        self.send(encode_rpdo2(1, Rpdo2(mode1)))
+        self.send(encode_rpdo2(2, Rpdo2(mode2)))
+        for cw in (0x06, 0x07, 0x0F):
+            self.cycle((cw, cw))
+        assert all(n.state_machine.state is State.OPERATION_ENABLED for n in self.pair.nodes)
+
+
+def status(frames: dict[int, Frame], node: int) -> int:
+    return decode_tpdo1(frames[0x180 + node]).statusword
+
+
+def position(frames: dict[int, Frame], node: int) -> int:
+    return decode_tpdo1(frames[0x180 + node]).position_inc
+
+
+@pytest.fixture
+def pair() -> SimDrivePair:
+    return SimDrivePair(RigPlant(make_params(), np.random.default_rng(0)))
+
+
+@pytest.fixture
+def rig(pair) -> Rig:
+    r = Rig(pair)
+    r.pair.power_on(0.0)
+    return r
+
+
+# ------------------------------------------------------------------ NMT, heartbeat
+
+
+def test_power_on_sends_bootup_frames_and_enters_pre_operational(pair):
+    assert pair.sample is None
+    frames = pair.power_on(0.0)
+    assert frames == [Frame(0x701, b"\x00"), Frame(0x702, b"\x00")]
+    assert [n.nmt_state for n in pair.nodes] == [NmtState.PRE_OPERATIONAL] * 2
+    assert [n.statusword for n in pair.nodes] == [SW_SOD, SW_SOD]
+    # one DISABLED plant step at power-on: the current sample is the rig at rest
+    assert pair.stats.plant_steps == 1
+    assert pair.plant.t_s == pytest.approx(T_S)
+    assert pair.sample.s1_mm == pytest.approx(0.3) and pair.sample.s2_mm == pytest.approx(-0.2)
+
+
+def test_frames_before_power_on_are_ignored(pair):
+    assert pair.on_frame(sync_frame(), 0.0) == []
+    assert pair.tick(1.0) == []
+    assert pair.stats.frames_unpowered == 1 and pair.stats.plant_steps == 0
+
+
+def test_nmt_reset_node_and_reset_communication(rig):
+    rig.write(1, 0x1017, 0, "H", 100)
+    rig.write(2, 0x1017, 0, "H", 50)
+    assert rig.read(1, 0x1017, 0, "H") == 100
+    rig.write(1, 0x6040, 0, "H", 0x06)  # acyclic controlword by SDO: -> READY_TO_SWITCH_ON
+    assert rig.pair.nodes[0].statusword == SW_READY
+
+    # reset communication: 0x1000..0x1FFF back to the EDS, the drive state stays
+    assert rig.nmt(0x82, 1) == [Frame(0x701, b"\x00")]
+    assert rig.read(1, 0x1017, 0, "H") == 0
+    assert rig.pair.nodes[0].statusword == SW_READY
+    rig.write(1, 0x1017, 0, "H", 100)
+    rig.write(1, 0x6072, 0, "H", 5000)
+
+    # reset node: everything back to the EDS, drive SWITCH_ON_DISABLED; node 2 untouched
+    assert rig.nmt(0x81, 1) == [Frame(0x701, b"\x00")]
+    assert rig.read(1, 0x1017, 0, "H") == 0
+    assert rig.read(1, 0x6072, 0, "H") == 10000
+    assert rig.pair.nodes[0].statusword == SW_SOD
+    assert rig.pair.nodes[0].nmt_state is NmtState.PRE_OPERATIONAL
+    assert rig.read(2, 0x1017, 0, "H") == 50
+
+    # reset of all nodes
+    assert rig.nmt(0x81, 0) == [Frame(0x701, b"\x00"), Frame(0x702, b"\x00")]
+    assert rig.read(2, 0x1017, 0, "H") == 0
+
+
+def test_heartbeat_every_producer_time_with_the_nmt_state(rig):
+    rig.write(1, 0x1017, 0, "H", 100)  # at t = 0
+    pair = rig.pair
+    assert pair.tick(0.05) == []
+    assert pair.tick(0.1) == [Frame(0x701, b"\x7F")]  # pre-operational
+    rig.t = 0.1
+    assert rig.nmt(0x01) == []
+    assert pair.tick(0.15) == []
+    assert pair.tick(0.2) == [Frame(0x701, b"\x05")]  # operational
+    assert pair.tick(0.25) == []
+    assert pair.tick(0.3) == [Frame(0x701, b"\x05")]
+    rig.t = 0.3
+    rig.nmt(0x02, 1)  # stopped: no SDO
+    assert rig.send(Frame(0x601, bytes([0x40, 0x17, 0x10, 0, 0, 0, 0, 0]))) == []
+    assert pair.tick(0.4) == [Frame(0x701, b"\x04")]
+    pair.set_heartbeat_enabled(0, False)
+    assert pair.tick(0.5) == []
+    pair.set_heartbeat_enabled(0, True)
+    assert pair.tick(0.6) == [Frame(0x701, b"\x04")]
+    assert pair.stats.heartbeats_sent == 5  # node 2 has 0x1017 = 0: none
+
+
+def test_unknown_and_malformed_frames_are_ignored_and_counted(rig):
+    before = rig.pair.stats.bad_frames_ignored
+    assert rig.send(Frame(0x123, b"\x01\x02")) == []
+    assert rig.send(Frame(0x000, b"\x01")) == []  # NMT needs 2 bytes
+    assert rig.send(Frame(0x000, b"\x55\x00")) == []  # unknown command specifier
+    assert rig.send(Frame(0x601, b"\x40\x00\x10")) == []  # SDO request not 8 bytes
+    assert rig.send(Frame(0x181, b"\x50\x02\x00\x00\x00\x00\x00")) == []  # another node's TPDO
+    assert rig.pair.stats.bad_frames_ignored == before + 5
+    assert [n.nmt_state for n in rig.pair.nodes] == [NmtState.PRE_OPERATIONAL] * 2
+
+
+# ------------------------------------------------------------------ SDO
+
+
+def test_sdo_upload_identity_and_segmented_device_name(rig):
+    assert rig.read(1, 0x1018, 1, "I") == 0x00000E3A
+    assert rig.read(1, 0x1018, 2, "I") == 0x00000402
+    assert rig.read(2, 0x1018, 3, "I") == 0x00010000
+    assert rig.read(1, 0x1000, 0, "I") == 0x00020192
+    assert rig.read(2, 0x1014, 0, "I") == 0x82  # $NODEID + 0x80 resolved per node
+    # 9 characters: segmented upload (initiate response 0x41 with the size)
+    first = rig.send(Frame(0x601, bytes([0x40, 0x08, 0x10, 0x00, 0, 0, 0, 0])))
+    assert first == [Frame(0x581, bytes([0x41, 0x08, 0x10, 0x00, 9, 0, 0, 0]))]
+    rig.send(Frame(0x601, bytes([0x80, 0x08, 0x10, 0x00, 0, 0, 0, 0])))  # abort it
+    assert rig.sdo(1, 0x1008, 0) == b"EMA drive"
+    # the drive's own data: gear ratio of the plant as REAL32
+    assert struct.unpack("<f", rig.sdo(1, 0x2102, 0))[0] == pytest.approx(I_TOTAL, rel=1e-7)
+    # live values at rest
+    assert rig.read(1, 0x6041, 0, "H") == SW_SOD
+    assert rig.read(1, 0x2100, 0, "i") == 300
+    assert rig.read(2, 0x2100, 0, "i") == -200
+
+
+def test_sdo_download_read_back_and_abort_codes(rig):
+    rig.write(2, 0x6072, 0, "H", 5000)
+    assert rig.read(2, 0x6072, 0, "H") == 5000
+    assert rig.read(1, 0x6072, 0, "H") == 10000
+
+    def abort_code(node: int, index: int, sub: int, data: bytes | None = None) -> int:
+        with pytest.raises(SdoAbortError) as info:
+            rig.sdo(node, index, sub, data)
+        return info.value.code
+
+    assert abort_code(1, 0x2000, 0) == SdoAbortCode.OBJECT_DOES_NOT_EXIST
+    assert abort_code(1, 0x1018, 7) == SdoAbortCode.SUBINDEX_DOES_NOT_EXIST
+    assert abort_code(1, 0x1018, 1, struct.pack("<I", 1)) == SdoAbortCode.WRITE_OF_READ_ONLY
+    assert abort_code(1, 0x1008, 0, b"new name!") == SdoAbortCode.WRITE_OF_READ_ONLY  # segmented
+    assert abort_code(1, 0x1017, 0, struct.pack("<I", 1)) == SdoAbortCode.LENGTH_MISMATCH
+    assert abort_code(1, 0x607D, 2, struct.pack("<i", -70000)) == SdoAbortCode.MAX_LESS_THAN_MIN
+    assert abort_code(1, 0x6060, 0, struct.pack("<b", 3)) == SdoAbortCode.VALUE_RANGE_EXCEEDED
+    # golden abort frame: 0x80, index, subindex, code
+    assert rig.send(Frame(0x601, bytes([0x40, 0x00, 0x20, 0x00, 0, 0, 0, 0]))) == \
+        [Frame(0x581, bytes([0x80, 0x00, 0x20, 0x00, 0x00, 0x00, 0x02, 0x06]))]
+
+
+def test_pdo_mapping_validation_aborts(rig):
+    def abort_code(index: int, sub: int, data: bytes) -> int:
+        with pytest.raises(SdoAbortError) as info:
+            rig.sdo(1, index, sub, data)
+        return info.value.code
+
+    # mapping changed while TPDO2 is valid
+    assert abort_code(0x1A01, 0, b"\x00") == SdoAbortCode.PARAMETER_INCOMPATIBILITY
+    rig.write(1, 0x1801, 1, "I", 0x8000_0281)  # disable TPDO2
+    # entry written while sub-index 0 is not 0
+    assert abort_code(0x1A01, 3, struct.pack("<I", 0x60640020)) == SdoAbortCode.PARAMETER_INCOMPATIBILITY
+    rig.write(1, 0x1A01, 0, "B", 0)
+    assert abort_code(0x1A01, 3, struct.pack("<I", 0x20000020)) == SdoAbortCode.CANNOT_BE_MAPPED  # no object
+    assert abort_code(0x1A01, 3, struct.pack("<I", 0x10170010)) == SdoAbortCode.CANNOT_BE_MAPPED  # not mappable
+    assert abort_code(0x1A01, 3, struct.pack("<I", 0x60640010)) == SdoAbortCode.CANNOT_BE_MAPPED  # wrong length
+    rig.write(1, 0x1A01, 3, "I", 0x60640020)
+    # 32 + 32 + 32 bits: too long
+    assert abort_code(0x1A01, 0, b"\x03") == SdoAbortCode.EXCEEDS_PDO_LENGTH
+    assert abort_code(0x1A01, 0, b"\x09") == SdoAbortCode.EXCEEDS_PDO_LENGTH
+    # an RPDO cannot map a read-only object
+    rig.write(1, 0x1400, 1, "I", 0x8000_0201)
+    rig.write(1, 0x1600, 0, "B", 0)
+    assert abort_code(0x1600, 1, struct.pack("<I", 0x60410010)) == SdoAbortCode.CANNOT_BE_MAPPED
+    # communication parameters: CAN-ID change while valid, restricted CAN-ID, reserved type
+    assert abort_code(0x1800, 1, struct.pack("<I", 0x190)) == SdoAbortCode.VALUE_RANGE_EXCEEDED
+    rig.write(1, 0x1800, 1, "I", 0x8000_0181)
+    assert abort_code(0x1800, 1, struct.pack("<I", 0x701)) == SdoAbortCode.VALUE_RANGE_EXCEEDED
+    assert abort_code(0x1800, 2, b"\xFC") == SdoAbortCode.VALUE_RANGE_EXCEEDED
+
+
+def test_remapping_tpdo2_by_sdo_swaps_its_bytes(rig):
+    rig.nmt(0x01)
+    frames = rig.sync_by_id()
+    assert frames[0x281].data == bytes.fromhex("2C010000 00000000")  # LVDT 300 um, force 0
+    rig.write(1, 0x1801, 1, "I", 0x8000_0281)
+    rig.write(1, 0x1A01, 0, "B", 0)
+    rig.write(1, 0x1A01, 1, "I", 0x21010020)
+    rig.write(1, 0x1A01, 2, "I", 0x21000020)
+    rig.write(1, 0x1A01, 0, "B", 2)
+    assert 0x281 not in rig.sync_by_id()  # disabled
+    rig.write(1, 0x1801, 1, "I", 0x281)
+    frames = rig.sync_by_id()
+    assert frames[0x281].data == bytes.fromhex("00000000 2C010000")
+    assert frames[0x282].data == bytes.fromhex("38FFFFFF 00000000")  # node 2 unchanged
+    # one object only, on a new COB-ID, every 2nd SYNC
+    rig.write(1, 0x1801, 1, "I", 0x8000_0281)
+    rig.write(1, 0x1A01, 0, "B", 1)
+    rig.write(1, 0x1801, 2, "B", 2)
+    rig.write(1, 0x1801, 1, "I", 0x381)
+    sent = [0x381 in rig.sync_by_id() for _ in range(4)]
+    assert sent == [False, True, False, True]
+    assert rig.sync_by_id().get(0x381) is None
+    assert rig.sync_by_id()[0x381].data == bytes.fromhex("00000000")
+
+
+# ------------------------------------------------------------------ SYNC and PDOs
+
+
+def test_sync_tpdos_golden_bytes_at_rest(rig):
+    # PRE-OPERATIONAL: no PDOs, but the plant steps
+    assert rig.sync() == []
+    assert rig.nmt(0x01) == []
+    frames = rig.sync()
+    assert frames == [
+        Frame(0x181, bytes.fromhex("5002 00000000 00")),
+        Frame(0x281, bytes.fromhex("2C010000 00000000")),
+        Frame(0x182, bytes.fromhex("5002 00000000 00")),
+        Frame(0x282, bytes.fromhex("38FFFFFF 00000000")),
+    ]
+
+
+def test_one_plant_step_per_sync(rig):
+    for _ in range(3):
+        rig.sync()
+    rig.nmt(0x01)
+    for _ in range(7):
+        rig.sync()
+    stats = rig.pair.stats
+    assert stats.syncs == 10
+    assert stats.plant_steps == 11  # + the power-on step
+    assert rig.pair.plant.t_s == pytest.approx(11 * T_S)
+    assert stats.tpdos_sent == 7 * 4
+
+
+def test_enable_path_statuswords(rig):
+    rig.nmt(0x01)
+    words = [status(rig.sync_by_id(), 1)]
+    for cw in (0x06, 0x07, 0x0F):
+        frames = rig.cycle((cw, 0x00))
+        words.append(status(frames, 1))
+    words.append(status(rig.cycle((0x0F, 0x00)), 1))
+    # the TPDO at a SYNC shows the state before that SYNC's RPDO is applied
+    assert words == [SW_SOD, SW_SOD, SW_READY, SW_SWITCHED_ON, SW_OE]
+    assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED  # no mode of operation yet
+    assert rig.pair.nodes[1].statusword == SW_SOD
+    # CSP by the event RPDO2: applied on reception, visible at once by SDO
+    assert rig.send(encode_rpdo2(1, Rpdo2(8))) == []
+    assert rig.read(1, 0x6061, 0, "b") == 8
+    rig.cycle((0x0F, 0x00))
+    assert status(rig.cycle((0x0F, 0x00)), 1) == SW_OE_CSP_REACHED
+    assert rig.pair.nodes[0].setpoint.mode is DriveMode.POSITION
+    assert rig.pair.stats.illegal_commands == 0
+
+
+def test_synchronous_rpdo_is_latched_until_sync_and_late_ones_counted(rig):
+    rig.nmt(0x01)
+    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))
+    assert rig.read(1, 0x6041, 0, "H") == SW_SOD  # not applied before the SYNC
+    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))  # a second one before the SYNC
+    rig.sync()
+    assert rig.read(1, 0x6041, 0, "H") == SW_READY
+    assert rig.pair.stats.rpdos_late == 1 and rig.pair.stats.rpdos_applied == 1
+
+
+def test_rpdo_ignored_unless_operational(rig):
+    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))
+    rig.sync()
+    assert rig.pair.nodes[0].statusword == SW_SOD
+    assert rig.pair.stats.rpdos_dropped == 1 and rig.pair.stats.rpdos_applied == 0
+
+
+def test_rpdo_with_wrong_length_sends_emcy_and_is_not_applied(rig):
+    rig.nmt(0x01)
+    frames = rig.send(Frame(0x201, b"\x06\x00\x00"))
+    assert frames == [Frame(0x081, bytes.fromhex("1082 11 0000000000"))]
+    assert rig.read(1, 0x1001, 0, "B") == 0x11
+    rig.sync()
+    assert status(rig.sync_by_id(), 1) == SW_SOD  # not applied
+    assert rig.send(Frame(0x201, b"\x06\x00")) == []  # error still active: no second EMCY
+    # a correct RPDO resets the error
+    assert rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0))) == [Frame(0x081, bytes(8))]
+    rig.sync()
+    assert rig.pair.nodes[0].statusword == SW_READY
+    assert rig.read(1, 0x1003, 1, "I") == 0x8210
+    assert rig.pair.stats.rpdos_dropped == 2 and rig.pair.stats.emcys_sent == 2
+
+
+def test_event_driven_tpdo(rig):
+    # TPDO1 event driven (255) with an event timer of 100 ms
+    rig.write(1, 0x1800, 1, "I", 0x8000_0181)
+    rig.write(1, 0x1800, 2, "B", 255)
+    rig.write(1, 0x1800, 5, "H", 100)
+    rig.write(1, 0x1800, 1, "I", 0x181)
+    out = rig.nmt(0x01)  # sent once on entering OPERATIONAL
+    assert out == [Frame(0x181, bytes.fromhex("5002 00000000 00"))]
+    assert 0x181 not in rig.sync_by_id()  # nothing changed
+    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))
+    frames = rig.sync()
+    assert Frame(0x181, bytes.fromhex("3102 00000000 00")) in frames  # statusword changed at this SYNC
+    assert rig.pair.tick(0.05) == []
+    assert rig.pair.tick(0.1) == []
+    assert rig.pair.tick(rig.t + 0.1) == [Frame(0x181, bytes.fromhex("3102 00000000 00"))]  # event timer
+
+
+# ------------------------------------------------------------------ CiA 402 and the plant
+
+
+def test_csp_target_moves_the_motor_angle(rig):
+    rig.enable()
+    target = round(0.5 * INC_PER_MM)  # 1638 increments = 0.5 mm of stroke
+    for k in range(100):  # 50 ms ramp, then hold, 0.2 s in all
+        p = round(target * min(1.0, (k + 1) / 25))
+        frames = rig.cycle((0x0F, 0x0F), (p, p))
+    for node in (1, 2):
+        assert abs(position(frames, node) - target) <= 3
+        assert status(frames, node) == SW_OE_CSP_REACHED
+    phi = rig.pair.plant.state().phi_rad
+    assert phi == pytest.approx((target * 2 * math.pi / 4096,) * 2, abs=0.005)  # 3 increments
+    assert rig.pair.nodes[0].setpoint.value == pytest.approx(target * 2 * math.pi / 4096)
+
+
+def test_cst_force_follows_torque_against_csp_drive(rig):
+    rig.enable(mode1=10, mode2=8)
+    assert rig.read(1, 0x6061, 0, "b") == 10
+    f1, f2 = [], []
+    for k in range(1000):  # torque ramp over 0.5 s to 100 per mille, hold 1.5 s
+        frames = rig.cycle((0x0F, 0x0F), torque=(round(100 * min(1.0, k / 250)), 0))
+        f1.append(decode_tpdo2(frames[0x281]).force_dN / 10)
+        f2.append(decode_tpdo2(frames[0x282]).force_dN / 10)
+    f_cmd = permille_to_force_N(100, I_TOTAL, 1.0)  # 502.65 N
+    assert f_cmd == pytest.approx(502.6548, abs=1e-3)
+    # the FORCE-mode EMA rings lightly damped (plant docs): compare the mean over 0.8 s
+    assert np.mean(f1[-400:]) == pytest.approx(f_cmd, rel=0.02)
+    assert np.mean(f2[-400:]) == pytest.approx(-f_cmd, rel=0.02)
+    assert rig.read(1, 0x6077, 0, "h") == 100  # torque actual in per mille
+    sp = rig.pair.nodes[0].setpoint
+    assert sp.mode is DriveMode.FORCE and sp.value == pytest.approx(f_cmd)
+    # torque saturation at 0x6072 (bit 11)
+    rig.write(1, 0x6072, 0, "H", 50)
+    rig.cycle((0x0F, 0x0F), torque=(100, 0))
+    frames = rig.cycle((0x0F, 0x0F), torque=(100, 0))
+    assert rig.pair.nodes[0].setpoint.value == pytest.approx(f_cmd / 2)
+    assert status(frames, 1) & 0x0800
+
+
+def test_software_position_limit_clips_target_and_sets_bit_11(rig):
+    rig.write(1, 0x607D, 2, "i", 800)
+    rig.enable()
+    for _ in range(150):
+        frames = rig.cycle((0x0F, 0x0F), (2000, 0))
+    sw = status(frames, 1)
+    assert sw & 0x0800 and sw & 0x0400  # internal limit active, target (clipped) reached
+    assert abs(position(frames, 1) - 800) <= TARGET_WINDOW_INC
+    assert rig.pair.nodes[0].setpoint.value == pytest.approx(800 * 2 * math.pi / 4096)
+    rig.cycle((0x0F, 0x0F), (700, 0))
+    frames = rig.cycle((0x0F, 0x0F), (700, 0))
+    assert not status(frames, 1) & 0x0800
+
+
+def test_quick_stop_holds_then_switch_on_disabled(rig):
+    rig.enable()
+    target = round(0.2 * INC_PER_MM)
+    for k in range(50):
+        rig.cycle((0x0F, 0x0F), (round(target * min(1.0, (k + 1) / 25)),) * 2)
+    phi_before = rig.pair.sample.phi1_rad
+    frames = rig.cycle((0x02, 0x0F), (target, target))  # quick stop applied at this SYNC
+    assert decode_state(status(frames, 1)) is State.OPERATION_ENABLED
+    node = rig.pair.nodes[0]
+    assert node.setpoint.mode is DriveMode.POSITION and node.setpoint.value == phi_before
+    words = []
+    for _ in range(40):
+        words.append(status(rig.cycle((0x02, 0x0F), (target, target)), 1))
+    hold_cycles = round(QUICK_STOP_HOLD_S / T_S)  # 25
+    assert words[:hold_cycles] == [SW_QSA] * hold_cycles
+    assert words[hold_cycles:] == [SW_SOD] * (40 - hold_cycles)
+    assert node.setpoint.mode is DriveMode.DISABLED
+    assert rig.pair.nodes[1].setpoint.mode is DriveMode.POSITION
+    assert rig.pair.stats.illegal_commands == 0  # a held quick stop word is a no-op in SOD
+
+
+def test_illegal_command_leaves_state_unchanged(rig):
+    rig.nmt(0x01)
+    frames = rig.cycle((0x0F, 0x00))  # enable operation in SWITCH_ON_DISABLED
+    frames = rig.cycle((0x0F, 0x00))
+    assert status(frames, 1) == SW_SOD
+    assert rig.pair.stats.illegal_commands == 2  # the word was applied at both SYNCs
+    assert not any(0x81 <= cob <= 0x82 for cob in frames)  # no EMCY
+    assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED
+
+
+def test_unsupported_mode_by_rpdo_disables_the_drive(rig):
+    rig.enable()
+    rig.send(encode_rpdo2(1, Rpdo2(1)))  # profile position: not supported
+    rig.cycle((0x0F, 0x0F))
+    frames = rig.cycle((0x0F, 0x0F))
+    assert status(frames, 1) == SW_OE  # bit 12 clear, display unchanged
+    assert decode_tpdo1(frames[0x181]).mode_display == 8
+    assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED
+
+
+def test_injected_fault_emcy_and_fault_reset(rig):
+    rig.enable()
+    assert error_register_bits(0x2310) == 0x03
+    out = rig.pair.inject_fault(0, 0x2310)
+    assert out == [Frame(0x081, bytes.fromhex("1023 03 0000000000"))]
+    assert status(rig.cycle((0x0F, 0x0F)), 1) == SW_FRA
+    assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED
+    assert status(rig.cycle((0x0F, 0x0F)), 1) == SW_FAULT
+    assert rig.read(1, 0x603F, 0, "H") == 0x2310
+    assert rig.read(1, 0x1001, 0, "B") == 0x03
+    assert rig.read(1, 0x1003, 0, "B") == 1 and rig.read(1, 0x1003, 1, "I") == 0x2310
+    frames = rig.sync()  # controlword 0x0F repeated in FAULT: illegal, counted
+    assert rig.pair.stats.illegal_commands >= 1
+    frames = rig.send(encode_rpdo1(1, Rpdo1(0x80, 0, 0)))
+    frames = rig.sync()
+    assert Frame(0x081, bytes(8)) in frames  # EMCY "no error" on the fault reset
+    assert status(rig.sync_by_id(), 1) == SW_SOD
+    assert rig.read(1, 0x1001, 0, "B") == 0 and rig.read(1, 0x603F, 0, "H") == 0
+    rig.write(1, 0x1003, 0, "B", 0)  # clear the error history
+    assert rig.read(1, 0x1003, 0, "B") == 0
+    assert rig.pair.nodes[1].statusword == SW_OE_CSP_REACHED
+
+
+# ------------------------------------------------------------------ the whole loop
+
+
+def test_round_trip_master_configures_enables_and_follows_a_csp_ramp(rig):
+    pair = rig.pair
+    nodes = (1, 2)
+    for n in nodes:
+        writes = DEFAULT_LAYOUT.configuration_writes(n)
+        assert len(writes) == 4 * 5 + 9  # per PDO: disable, clear, count, type, enable + entries
+        for w in writes:
+            rig.sdo(n, w.index, w.subindex, w.data)
+    assert rig.nmt(0x01) == []
+    for n in nodes:
+        rig.send(encode_rpdo2(n, Rpdo2(8)))
+
+    end_inc = round(0.2 * INC_PER_MM)  # ramp 0 -> 0.2 mm (655 increments) in 1 s
+    state = {n: State.SWITCH_ON_DISABLED for n in nodes}
+    cw = {n: 0 for n in nodes}
+    target = {n: 0 for n in nodes}
+    applied = None  # targets sent before the previous SYNC: the plant state now reflects them
+    ramp_start = None
+    errors = {n: [] for n in nodes}
+    for k in range(600):
+        if ramp_start is None and all(s is State.OPERATION_ENABLED for s in state.values()):
+            ramp_start = k
+        for n in nodes:
+            cmd = next_command(state[n], State.OPERATION_ENABLED)
+            if cmd is not None:
+                cw[n] = controlword(cmd)
+            if ramp_start is not None:
+                target[n] = round(end_inc * min(1.0, (k - ramp_start) * T_S))
+            rig.send(encode_rpdo1(n, Rpdo1(cw[n], target[n], 0)))
+        frames = rig.sync_by_id()
+        for n in nodes:
+            tp1 = decode_tpdo1(frames[0x180 + n])
+            state[n] = decode_state(tp1.statusword)
+            if applied is not None:
+                errors[n].append(tp1.position_inc - applied[n])
+        applied = dict(target) if ramp_start is not None else None
+
+    # 3 steps x 2 SYNCs: the TPDO at SYNC k shows the state before SYNC k applied the
+    # controlword, so the master repeats each word once (a no-op) before it sees the new state
+    assert ramp_start == 6
+    for n in nodes:
+        assert len(errors[n]) == 600 - ramp_start - 1
+        assert max(abs(e) for e in errors[n]) <= 4  # measured: 2 increments (0.6 um)
+        assert position(frames, n) == pytest.approx(end_inc, abs=3)
+        assert status(frames, n) == SW_OE_CSP_REACHED
+    # LVDT of EMA 1 (0.3 mm + 1.075 s) follows the stroke within the backlash
+    assert decode_tpdo2(frames[0x281]).lvdt_um / 1000 == pytest.approx(0.3 + 1.075 * 0.2, abs=0.1)
+    stats = pair.stats
+    assert stats.syncs == 600 and stats.plant_steps == 601
+    assert stats.rpdos_late == 0 and stats.rpdos_dropped == 0 and stats.illegal_commands == 0
+    assert stats.tpdos_sent == 600 * 4
+
+
+def test_sdo_protocol_errors_are_aborted(rig):
+    def abort_of(request: bytes) -> tuple[int, int, int]:
+        out = rig.send(Frame(0x601, request))
+        assert len(out) == 1 and out[0].arbitration_id == 0x581 and out[0].data[0] == 0x80
+        return struct.unpack_from("<HBI", out[0].data, 1)
+
+    # upload segment request without a segmented upload in progress
+    assert abort_of(bytes([0x60, 0, 0, 0, 0, 0, 0, 0]))[2] == SdoAbortCode.COMMAND_SPECIFIER_INVALID
+    # block download initiate: not supported
+    assert abort_of(bytes([0xC6, 0x17, 0x10, 0x00, 2, 0, 0, 0])) == \
+        (0x1017, 0, SdoAbortCode.COMMAND_SPECIFIER_INVALID)
+    # segmented download: a segment with the wrong toggle bit
+    assert rig.send(Frame(0x601, bytes([0x21, 0x17, 0x10, 0x00, 2, 0, 0, 0]))) == \
+        [Frame(0x581, bytes([0x60, 0x17, 0x10, 0x00, 0, 0, 0, 0]))]
+    assert abort_of(bytes([0x1B, 0x64, 0x00, 0, 0, 0, 0, 0]))[2] == SdoAbortCode.TOGGLE_BIT_NOT_ALTERNATED
+    assert rig.read(1, 0x1017, 0, "H") == 0
+    # a segmented download of 2 bytes works
+    assert rig.send(Frame(0x601, bytes([0x21, 0x17, 0x10, 0x00, 2, 0, 0, 0])))[0].data[0] == 0x60
+    assert rig.send(Frame(0x601, bytes([0x0B, 0x64, 0x00, 0, 0, 0, 0, 0]))) == \
+        [Frame(0x581, bytes([0x20, 0, 0, 0, 0, 0, 0, 0]))]
+    assert rig.read(1, 0x1017, 0, "H") == 100
+
+
+def test_random_frames_never_raise_and_the_pair_recovers(rig):
+    rnd = np.random.default_rng(7)
+    cobs = [0x000, 0x080, 0x081, 0x181, 0x201, 0x202, 0x301, 0x302, 0x601, 0x602, 0x123, 0x701]
+    rig.nmt(0x01)
+    for _ in range(3000):
+        rig.t += 0.001
+        cob = int(rnd.choice(cobs))
+        data = bytes(rnd.integers(0, 256, size=int(rnd.integers(0, 9)), dtype=np.uint8))
+        if cob == 0x000:
+            data = bytes([int(rnd.choice([0x01, 0x01, 0x02, 0x80, 0x82, 0x7])), int(rnd.integers(0, 3))])
+        elif cob == 0x080:
+            data = data[:int(rnd.integers(0, 2))]
+        elif cob in (0x601, 0x602) and rnd.random() < 0.9:  # 8 bytes with an existing index
+            index = int(rnd.choice([0x1003, 0x1008, 0x1017, 0x1400, 0x1600, 0x1801, 0x1A01, 0x6040,
+                                    0x6060, 0x607D, 0x6076]))
+            data = bytes([data[0] if data else 0]) + struct.pack("<HB", index, int(rnd.integers(0, 4))) + \
+                bytes(rnd.integers(0, 256, size=4, dtype=np.uint8))
+        for frame in rig.send(Frame(cob, data)) + rig.pair.tick(rig.t):
+            assert isinstance(frame, Frame)
+    assert rig.pair.stats.sdo_requests > 100 and rig.pair.stats.syncs > 100
+    # afterwards the drives still answer and can be reset to a known state
+    assert rig.nmt(0x81) == [Frame(0x701, b"\x00"), Frame(0x702, b"\x00")]
+    assert rig.read(1, 0x1018, 1, "I") == 0x0E3A
+    rig.nmt(0x01)
+    assert rig.sync_by_id()[0x181].data[:2] == bytes.fromhex("5002")
+
+
+# ------------------------------------------------------------------ input validation
+
+
+def test_constructor_and_call_validation(pair):
+    plant = pair.plant
+    with pytest.raises(InputError, match="plant"):
+        SimDrivePair("plant")
+    with pytest.raises(InputError, match="node_ids"):
+        SimDrivePair(plant, node_ids=(3, 3))
+    with pytest.raises(InputError, match="node_ids"):
+        SimDrivePair(plant, node_ids=(1, 128))
+    with pytest.raises(InputError, match="counts_per_rev"):
+        SimDrivePair(plant, counts_per_rev=0)
+    with pytest.raises(InputError, match="frame"):
+        pair.on_frame(b"\x01\x00", 0.0)
+    with pytest.raises(InputError, match="t ="):
+        pair.tick(float("nan"))
+    with pytest.raises(InputError, match="power_on"):
+        pair.inject_fault(0, 0x2310)
+    pair.power_on(0.0)
+    with pytest.raises(InputError, match="emcy_code"):
+        pair.inject_fault(1, 0)
+    with pytest.raises(InputError, match="node_index"):
+        pair.inject_fault(2, 0x2310)
+
+
+def test_node_ids_and_counts_per_rev_option():
+    plant = RigPlant(make_params(), np.random.default_rng(0))
+    pair = SimDrivePair(plant, node_ids=(5, 9), counts_per_rev=8192)
+    rig = Rig(pair)
+    assert pair.power_on(0.0) == [Frame(0x705, b"\x00"), Frame(0x709, b"\x00")]
+    assert rig.read(9, 0x608F, 1, "I") == 8192
+    assert rig.read(9, 0x1400, 1, "I") == 0x209
+    rig.nmt(0x01)
+    frames = rig.sync_by_id()
+    assert set(frames) == {0x185, 0x285, 0x189, 0x289}
+    assert pair.nodes[1].ema_index == 1 and pair.nodes[1].node_id == 9
