@@ -393,7 +393,7 @@ class SimDrive:
         self._od = od
         self._i_total = float(gear_ratio_rad_per_mm)
         self._cpr_override = counts_per_rev
-        self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9)) + 1
+        self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9))
         self._counters = counters
         self._out = outbox
 
