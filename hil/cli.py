@@ -49,6 +49,28 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action="version", version=f"emacheck {__version__}")
     sub = ap.add_subparsers(dest="cmd", metavar="COMMAND")
 
+    p = sub.add_parser("dry-run", help="the check over CANopen against two simulated drives (the main job)",
+                       description="Run the complete check through the CANopen master against two simulated "
+                                   "CiA 402 drives on an in-process virtual CAN bus, log every frame, analyse "
+                                   "and report, with the simulator's truth beside the measurement.",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-dry-run)")
+    _add_profile_args(p, sim=True)
+    p.add_argument("--realtime", action="store_true", help="pace SYNC at the SYNC period (default: as fast as possible)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
+    p = sub.add_parser("run", help="the check on real drives (needs --arm)",
+                       description="Run the check on two real CiA 402 drives on a CAN bus: the same code path "
+                                   "as dry-run, SYNC on the wall clock (kernel-timed on SocketCAN).",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--interface", required=True, help="python-can interface, e.g. socketcan, pcan, kvaser")
+    p.add_argument("--channel", required=True, help="channel, e.g. can0 or vcan0")
+    p.add_argument("--bitrate", type=int, metavar="BPS", help="bit rate (default: the actuation profile's)")
+    p.add_argument("--arm", action="store_true", help="confirm that the actuators may move")
+    p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-run)")
+    _add_profile_args(p, sim=False)
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
     p = sub.add_parser("simulate", help="run the check on the simulated rig, no CAN in between",
                        description="Run the whole check against the simulated plant directly "
                                    "(no CANopen), then analyse it and write the run folder and report.",
@@ -78,6 +100,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.print_help()
         return EXIT_INPUT
     try:
+        if args.cmd == "dry-run":
+            from hil.commands import cmd_dry_run
+            return cmd_dry_run(args)
+        if args.cmd == "run":
+            from hil.commands import cmd_run
+            return cmd_run(args)
         if args.cmd == "simulate":
             from hil.commands import cmd_simulate
             return cmd_simulate(args)

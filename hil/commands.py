@@ -92,12 +92,34 @@ def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
         console.print(f"run folder: {out_dir}")
 
 
+def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
+    """Signals from a CSV, or decoded from a raw CAN log (``*.log``), step labels from meta.json."""
+    if sig_path.suffix != ".log":
+        return read_signals(sig_path)
+    from hil.canlog import decode_can_log
+    import dataclasses
+    import numpy as np
+
+    dec = decode_can_log(sig_path, act)
+    sig = dec.signals
+    steps = (meta or {}).get("steps") or {}
+    if steps:
+        label = np.full(sig.n, "", dtype=object)
+        for name, span in steps.items():
+            t0 = span[0]
+            t1 = span[1] if len(span) > 1 else np.inf
+            label[(sig.t >= t0 - 1e-9) & (sig.t < t1 - 1e-9)] = name
+        sig = dataclasses.replace(sig, step=label.astype(str),
+                                  notes=sig.notes + ("step labels from meta.json step times",))
+    return sig
+
+
 def analyze_and_report(sig_path: Path, act: Actuation, out_dir: Path, truth: dict | None,
                        meta: dict | None, console: Console) -> dict:
     """Read the signals back, analyse, write result.json and report.html."""
     from hil.report import write_report
     t0 = time.perf_counter()
-    sig = read_signals(sig_path)
+    sig = load_recording(sig_path, act, meta)
     an = analyze_signals(sig, act)
     result = result_dict(an, act, truth)
     if meta is not None and meta.get("status") == "aborted":
@@ -143,6 +165,137 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if outcome.status != "done":
         console.print(f"[red]aborted:[/red] {outcome.reason}")
     result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+    print_summary(console, result, out)
+    return _exit_for(result)
+
+
+def _master_setup(act, profile_path, out: Path):
+    """Checks before anything touches a bus: EDS against the layout, bus load."""
+    from hil.drive_od import check_drive_od, load_drive_od
+    from hil.pdo import DEFAULT_LAYOUT, bus_load
+    from hil.profiles import resolve_eds
+
+    eds = resolve_eds(act, profile_path)
+    check_drive_od(load_drive_od(eds), source=str(eds))
+    c = act.canopen
+    load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, act.timing.sync_period_s, c.heartbeat_period_s)
+    if load.load_worst >= 0.5:
+        from hil.errors import ProfileError
+        raise ProfileError(f"bus load of the PDO layout at canopen.bitrate_bps = {c.bitrate_bps} is "
+                           f"{load.load_worst:.1%} (worst case), not below 50 %")
+    return eds, load
+
+
+def _canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):
+    from hil.runner import run_check
+
+    t0 = time.perf_counter()
+    with LiveProgress(console, 0.0, not quiet) as live:
+        outcome = run_check(link, act, check, out, meta, on_cycle=live)
+    wall = time.perf_counter() - t0
+    return outcome, wall
+
+
+def cmd_dry_run(args: argparse.Namespace) -> int:
+    """``emacheck dry-run``: the check over CANopen against two simulated drives (virtual bus)."""
+    import numpy as np
+
+    from hil.canlog import CanLogWriter
+    from hil.canopen_link import CanopenLink, InProcessTransport
+    from hil.master import MasterCore
+    from hil.runner import start_meta
+    from sim.plant import RigPlant
+    from sim.slave import SimDrivePair
+    from sim.truth import rig_truth
+
+    console = Console()
+    # every profile is validated before anything is sent on the bus
+    act = load_actuation(args.profile)
+    check = load_check(args.check, act)
+    simrig = load_simrig(args.sim)
+    eds, load = _master_setup(act, args.profile, None)
+    seed = simrig.seed if args.seed is None else args.seed
+    out = _out_dir(args, "dry-run")
+    out.mkdir(parents=True, exist_ok=True)
+    plant = RigPlant(simrig.params, np.random.default_rng(seed))
+    from hil.drive_od import load_drive_od
+    pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id), node_ids=act.canopen.node_ids)
+    transport = InProcessTransport(pair, act.timing.sync_period_s, realtime=args.realtime)
+    master = MasterCore(act)
+    log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
+    link = CanopenLink(master, transport, log)
+    truth = truth_dict(rig_truth(simrig.params))
+    meta = start_meta(act, check, {"mode": "dry-run", "seed": seed, "realtime": bool(args.realtime),
+                                   "simrig": snapshot(simrig.params), "truth": truth,
+                                   "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
+                                   "eds": str(eds)})
+    console.print(f"emacheck dry-run: two simulated CiA 402 drives (nodes {act.canopen.node_ids}) on an "
+                  f"in-process virtual CAN bus, seed {seed}, bus load {load.load_worst:.1%} worst case; "
+                  f"run folder {out}")
+    try:
+        outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
+    finally:
+        transport.close()
+    meta["wall_s"] = round(wall, 3)
+    meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
+                   "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
+    write_json_atomic(out / "meta.json", meta)
+    console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated in {wall:.2f} s wall "
+                  f"({outcome.duration_s / max(wall, 1e-9):.1f}x real time); {log.frames} CAN frames logged")
+    if outcome.status != "done":
+        console.print(f"[red]aborted:[/red] {outcome.reason}")
+    result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+    print_summary(console, result, out)
+    return _exit_for(result)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """``emacheck run``: the check on real drives (same code path as dry-run, wall-clock SYNC)."""
+    import can
+
+    from hil.canlog import CanLogWriter
+    from hil.canopen_link import BusTransport, CanopenLink
+    from hil.master import MasterCore
+    from hil.runner import start_meta
+
+    console = Console()
+    act = load_actuation(args.profile)
+    check = load_check(args.check, act)
+    eds, load = _master_setup(act, args.profile, None)
+    if not args.arm:
+        console.print("[red]refusing to move anything:[/red] `emacheck run` drives real actuators; "
+                      "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
+        return 3
+    out = _out_dir(args, "run")
+    out.mkdir(parents=True, exist_ok=True)
+    bitrate = args.bitrate or act.canopen.bitrate_bps
+    kwargs = {"interface": args.interface, "channel": args.channel}
+    if args.interface not in ("virtual", "socketcan"):
+        kwargs["bitrate"] = bitrate
+    if args.interface == "virtual":
+        kwargs["receive_own_messages"] = True  # the SYNC task's frames are part of the traffic
+    bus = can.Bus(**kwargs)
+    transport = BusTransport(bus, act.timing.sync_period_s)
+    master = MasterCore(act)
+    log = CanLogWriter(out / "can.log", channel=args.channel)
+    link = CanopenLink(master, transport, log)
+    meta = start_meta(act, check, {"mode": "run", "interface": args.interface, "channel": args.channel,
+                                   "bitrate_bps": bitrate,
+                                   "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
+                                   "eds": str(eds)})
+    console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
+    try:
+        outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
+    finally:
+        transport.close()
+        bus.shutdown()
+    meta["wall_s"] = round(wall, 3)
+    meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
+                   "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
+    write_json_atomic(out / "meta.json", meta)
+    if outcome.status != "done":
+        console.print(f"[red]aborted:[/red] {outcome.reason}")
+    result = analyze_and_report(out / "signals.csv", act, out, None, meta, console)
     print_summary(console, result, out)
     return _exit_for(result)
 

@@ -533,7 +533,9 @@ class MasterCore:
                 elif d.state is State.QUICK_STOP_ACTIVE:
                     cmd = Command.QUICK_STOP  # keep it until the drive is through
                 else:
-                    cmd = next_command(d.state, State.SWITCH_ON_DISABLED) or _hold(d.state)
+                    # orderly: disable operation (drive stops under control), shutdown, disable voltage;
+                    # not the shortest path (disable voltage cuts the power stage at once)
+                    cmd = _ORDERLY_DOWN.get(d.state) or _hold(d.state)
                 mode = d.mode_sent if d.mode_sent is not None else int(OperationMode.CSP)
             else:
                 mode = int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST)
@@ -563,6 +565,14 @@ class MasterCore:
         for sp in (sp1, sp2):
             want.append(int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST))
         return all(self.drives[n].mode_display == w for n, w in zip(self.order, want))
+
+
+_ORDERLY_DOWN = {
+    State.OPERATION_ENABLED: Command.DISABLE_OPERATION,
+    State.SWITCHED_ON: Command.SHUTDOWN,
+    State.READY_TO_SWITCH_ON: Command.DISABLE_VOLTAGE,
+    State.FAULT: Command.FAULT_RESET,
+}
 
 
 def _hold(state: State) -> Command | None:

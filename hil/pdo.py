@@ -79,6 +79,15 @@ class Frame:
     def __str__(self) -> str:
         return f"{self.arbitration_id:03X}#{self.data.hex().upper()}"
 
+    @classmethod
+    def trusted(cls, arbitration_id: int, data: bytes) -> "Frame":
+        """A frame from a source that already guarantees an 11-bit id and <= 8 bytes of
+        ``bytes`` (a python-can message, a struct-packed PDO): no re-validation (hot path)."""
+        f = object.__new__(cls)
+        object.__setattr__(f, "arbitration_id", arbitration_id)
+        object.__setattr__(f, "data", data)
+        return f
+
 
 def sync_frame() -> Frame:
     """The SYNC frame (COB-ID 0x080, no data: the SYNC counter is not used)."""
@@ -393,6 +402,15 @@ _TPDO1_S = struct.Struct(TPDO1.struct_format)  # "<Hib", 7 bytes
 _TPDO2_S = struct.Struct(TPDO2.struct_format)  # "<ii", 8 bytes
 
 
+def _trusted(cls: type, values: tuple) -> object:
+    """Instance of a PDO-contents dataclass from ``struct.unpack`` values, which are in
+    range by construction: skips ``__post_init__`` validation (hot path of the master)."""
+    obj = object.__new__(cls)
+    for name, v in zip(cls.__slots__, values):
+        object.__setattr__(obj, name, v)
+    return obj
+
+
 def _payload(frame: Frame, spec: PdoSpec, s: struct.Struct) -> bytes:
     if not isinstance(frame, Frame):
         raise InputError(f"frame must be a hil.pdo.Frame, got {type(frame).__name__}")
@@ -412,43 +430,43 @@ def _payload(frame: Frame, spec: PdoSpec, s: struct.Struct) -> bytes:
 
 def encode_rpdo1(node_id: int, msg: Rpdo1) -> Frame:
     """RPDO1 frame to drive ``node_id``: ``<H i h`` = controlword, target position, target torque."""
-    return Frame(RPDO1.cob_id(node_id), _RPDO1_S.pack(msg.controlword, msg.target_position_inc,
+    return Frame.trusted(RPDO1.cob_id(node_id), _RPDO1_S.pack(msg.controlword, msg.target_position_inc,
                                                       msg.target_torque_permille))
 
 
 def decode_rpdo1(frame: Frame) -> Rpdo1:
     """Decode an RPDO1 frame; raises PdoLengthError unless it has exactly 8 data bytes."""
-    return Rpdo1(*_RPDO1_S.unpack(_payload(frame, RPDO1, _RPDO1_S)))
+    return _trusted(Rpdo1, _RPDO1_S.unpack(_payload(frame, RPDO1, _RPDO1_S)))
 
 
 def encode_rpdo2(node_id: int, msg: Rpdo2) -> Frame:
     """RPDO2 frame to drive ``node_id``: ``<b`` = modes of operation."""
-    return Frame(RPDO2.cob_id(node_id), _RPDO2_S.pack(msg.mode))
+    return Frame.trusted(RPDO2.cob_id(node_id), _RPDO2_S.pack(msg.mode))
 
 
 def decode_rpdo2(frame: Frame) -> Rpdo2:
     """Decode an RPDO2 frame; raises PdoLengthError unless it has exactly 1 data byte."""
-    return Rpdo2(*_RPDO2_S.unpack(_payload(frame, RPDO2, _RPDO2_S)))
+    return _trusted(Rpdo2, _RPDO2_S.unpack(_payload(frame, RPDO2, _RPDO2_S)))
 
 
 def encode_tpdo1(node_id: int, msg: Tpdo1) -> Frame:
     """TPDO1 frame from drive ``node_id``: ``<H i b`` = statusword, position, mode display."""
-    return Frame(TPDO1.cob_id(node_id), _TPDO1_S.pack(msg.statusword, msg.position_inc, msg.mode_display))
+    return Frame.trusted(TPDO1.cob_id(node_id), _TPDO1_S.pack(msg.statusword, msg.position_inc, msg.mode_display))
 
 
 def decode_tpdo1(frame: Frame) -> Tpdo1:
     """Decode a TPDO1 frame; raises PdoLengthError unless it has exactly 7 data bytes."""
-    return Tpdo1(*_TPDO1_S.unpack(_payload(frame, TPDO1, _TPDO1_S)))
+    return _trusted(Tpdo1, _TPDO1_S.unpack(_payload(frame, TPDO1, _TPDO1_S)))
 
 
 def encode_tpdo2(node_id: int, msg: Tpdo2) -> Frame:
     """TPDO2 frame from drive ``node_id``: ``<i i`` = LVDT stroke [um], force [dN]."""
-    return Frame(TPDO2.cob_id(node_id), _TPDO2_S.pack(msg.lvdt_um, msg.force_dN))
+    return Frame.trusted(TPDO2.cob_id(node_id), _TPDO2_S.pack(msg.lvdt_um, msg.force_dN))
 
 
 def decode_tpdo2(frame: Frame) -> Tpdo2:
     """Decode a TPDO2 frame; raises PdoLengthError unless it has exactly 8 data bytes."""
-    return Tpdo2(*_TPDO2_S.unpack(_payload(frame, TPDO2, _TPDO2_S)))
+    return _trusted(Tpdo2, _TPDO2_S.unpack(_payload(frame, TPDO2, _TPDO2_S)))
 
 
 # --------------------------------------------------------------------------- scaling

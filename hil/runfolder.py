@@ -202,7 +202,9 @@ def resolve_recording(arg: str | Path) -> tuple[Path, Path | None]:
     if p.is_dir():
         sig = p / "signals.csv"
         if not sig.exists():
-            raise RecordingError(f"{p}: run folder without signals.csv")
+            if (p / "can.log").exists():
+                return p / "can.log", p  # the raw CAN traffic alone
+            raise RecordingError(f"{p}: run folder without signals.csv or can.log")
         return sig, p
     if not p.exists():
         raise RecordingError(f"{p}: no such file or folder")

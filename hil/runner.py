@@ -33,6 +33,9 @@ class Link(Protocol):
 
     def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample: ...
 
+    def abort(self) -> None:
+        """The check aborted: the next DISABLED setpoints mean a quick stop."""
+
     def close(self) -> None: ...
 
 
@@ -47,6 +50,9 @@ class PlantLink:
 
     def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
         return self.plant.step(sp1, sp2)
+
+    def abort(self) -> None:
+        pass
 
     def close(self) -> None:
         pass
@@ -95,9 +101,11 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
     limit = max_duration_s if max_duration_s is not None else 3.0 * seq.planned_duration_s() + 60.0
     sp1 = sp2 = DISABLED
     steps: dict[str, list[float]] = {}
-    smp = link.first_sample()
-    t_start = smp.t_s
+    smp: Sample | None = None
+    t_start = 0.0
     try:
+        smp = link.first_sample()
+        t_start = smp.t_s
         while True:
             viol = sup.check(smp, sp1, sp2)
             if viol is not None:
@@ -109,10 +117,12 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
             writer.write(smp, out.sp1, out.sp2, out.step.value)
             if out.events:
                 for ev in out.events:
-                    prev = [k for k, v in steps.items() if len(v) == 1]
-                    for k in prev:
-                        steps[k].append(ev.t_s)
+                    for v in steps.values():
+                        if len(v) == 1:
+                            v.append(ev.t_s)
                     steps.setdefault(ev.step.value, [ev.t_s])
+                    if ev.kind == "aborted":
+                        link.abort()
                 writer.flush()
                 meta["steps"] = steps
                 write_json_atomic(meta_path, meta)
@@ -123,14 +133,26 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                 link.exchange(DISABLED, DISABLED)
                 break
             smp = link.exchange(sp1, sp2)
+        link.close()
     except BaseException as exc:
         # fail closed: stop both drives, keep the log, record why, re-raise
+        reason = f"error: {type(exc).__name__}: {exc}"
+        secondary = ""
         try:
-            seq.abort(smp.t_s, f"error: {exc!r}")
-            link.exchange(DISABLED, DISABLED)
+            seq.abort(smp.t_s if smp is not None else 0.0, reason)
+            link.abort()
+            if smp is not None:
+                link.exchange(DISABLED, DISABLED)
+        except Exception as exc2:  # the original error is re-raised; this one is recorded
+            secondary = f"; while stopping: {type(exc2).__name__}: {exc2}"
         finally:
+            try:
+                link.close()
+            except Exception as exc3:
+                secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
             writer.close()
-            meta.update(status="aborted", reason=f"error: {exc!r}", ended_utc=_now_iso(), steps=steps)
+            meta.update(status="aborted", reason=reason + secondary, ended_utc=_now_iso(), steps=steps,
+                        samples=writer.rows)
             write_json_atomic(meta_path, meta)
         raise
     writer.close()
@@ -138,7 +160,6 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
     meta.update(status=status, reason=seq.abort_reason, ended_utc=_now_iso(), steps=steps,
                 samples=writer.rows, duration_s=smp.t_s - t_start)
     write_json_atomic(meta_path, meta)
-    link.close()
     return LoopOutcome(status, seq.abort_reason, writer.rows, smp.t_s - t_start, steps)
 
 

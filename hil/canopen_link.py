@@ -1,0 +1,354 @@
+"""The CANopen link: the master core over a python-can bus (the thin IO shell).
+
+:class:`CanopenLink` implements the :class:`hil.runner.Link` protocol, so the
+check loop and the sequence core run unchanged whether the drives are
+simulated or real. Two transports move the frames:
+
+* :class:`InProcessTransport` (``emacheck dry-run``): the master's bus and the
+  simulated drive pair's bus are python-can ``virtual`` buses on one channel;
+  frames are pumped synchronously in this thread and the SYNC is sent once per
+  cycle on simulated time, so a dry-run is deterministic for a seed and runs as
+  fast as the CPU allows (``realtime=True`` paces SYNC at the SYNC period on
+  the monotonic clock).
+* :class:`BusTransport` (``emacheck run``): any python-can bus; SYNC by
+  ``send_periodic`` (kernel-timed Broadcast Manager on SocketCAN), frames
+  received on this thread, time from the monotonic clock.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable, Protocol
+
+import can
+from can.interfaces.virtual import VirtualBus
+
+from hil.canlog import CanLogWriter
+from hil.cia402 import State
+from hil.errors import EmacheckError
+from hil.master import MasterCore, NmtCommand, PreflightError
+from hil.pdo import SYNC_COB_ID, Frame, sync_frame
+from hil.sdo import SdoAbortError, SdoTimeout
+from hil.types import DriveMode, Sample, Setpoint
+
+DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
+
+
+class LinkError(EmacheckError, RuntimeError):
+    """The cyclic exchange with the drives broke down (no samples)."""
+
+
+class Transport(Protocol):
+    def now(self) -> float: ...
+
+    def send(self, frames: list[Frame], t: float) -> None: ...
+
+    def receive(self, deadline: float) -> list[tuple[Frame, float]]: ...
+
+    def start_sync(self) -> None: ...
+
+    def next_sync(self) -> float | None: ...
+
+    def stop_sync(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class SharedVirtualBus(VirtualBus):
+    """python-can's in-process virtual bus, minus the deep copy of every message per recipient.
+
+    The stock ``VirtualBus.send`` deep-copies each message for each receiver
+    (about half of a dry-run's time). The link never mutates a message after
+    sending it, so the receivers may share it. Everything else (channels,
+    queues, ``recv``) is python-can's.
+    """
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._check_if_open()
+        for bus_queue in self.channel:
+            if bus_queue is self.queue and not self.receive_own_messages:
+                continue
+            bus_queue.put_nowait(msg)
+
+
+def _to_msg(f: Frame, t: float, rx: bool = False) -> can.Message:
+    return can.Message(timestamp=t, arbitration_id=f.arbitration_id, data=f.data, is_extended_id=False,
+                       is_rx=rx, check=False)
+
+
+class InProcessTransport:
+    """Master bus and simulated drive pair on an in-process python-can virtual bus.
+
+    ``pair`` is a :class:`sim.slave.SimDrivePair`; its frames are produced in
+    this thread as soon as the master's frames reach its bus.
+    """
+
+    def __init__(self, pair, sync_period_s: float, channel: str = "emacheck-dry-run",
+                 realtime: bool = False) -> None:
+        self.pair = pair
+        self.T = sync_period_s
+        self.t = 0.0
+        self.realtime = realtime
+        self.master_bus = SharedVirtualBus(channel=channel, preserve_timestamps=True)
+        self.slave_bus = SharedVirtualBus(channel=channel, preserve_timestamps=True)
+        self._sync_on = False
+        self._t0_wall: float | None = None
+        self._pending: list[tuple[Frame, float]] = []
+        for f in pair.power_on(self.t):
+            self.slave_bus.send(_to_msg(f, self.t, rx=True))
+
+    def now(self) -> float:
+        return self.t
+
+    def send(self, frames: list[Frame], t: float) -> list[can.Message]:
+        msgs = [_to_msg(f, t) for f in frames]
+        for m in msgs:
+            self.master_bus.send(m)
+        return msgs
+
+    def _pump_slaves(self) -> None:
+        bus = self.slave_bus
+        pair = self.pair
+        while True:
+            msg = bus.recv(0.0)
+            if msg is None:
+                return
+            out = pair.on_frame(Frame.trusted(msg.arbitration_id, bytes(msg.data)), self.t)
+            for f in out:
+                bus.send(_to_msg(f, self.t, rx=True))
+
+    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
+        """Deliver everything in flight; simulated time advances to ``deadline`` if idle."""
+        self._pump_slaves()
+        got = []
+        bus = self.master_bus
+        while True:
+            msg = bus.recv(0.0)
+            if msg is None:
+                break
+            got.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), msg.timestamp, msg))
+        if not got and deadline > self.t:
+            # nothing in flight: let simulated time pass (heartbeats, boot-up)
+            self.t = min(deadline, self.t + self.T)
+            for f in self.pair.tick(self.t):
+                self.slave_bus.send(_to_msg(f, self.t, rx=True))
+            self._pump_slaves()
+        return got
+
+    def start_sync(self) -> None:
+        self._sync_on = True
+        self._t0_wall = time.monotonic()
+
+    def next_sync(self) -> float | None:
+        """Advance one SYNC period and send SYNC (the pair steps its plant on it)."""
+        if not self._sync_on:
+            return None
+        self.t += self.T
+        if self.realtime and self._t0_wall is not None:
+            delay = self._t0_wall + self.t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        for f in self.pair.tick(self.t):
+            self.slave_bus.send(_to_msg(f, self.t, rx=True))
+        self.master_bus.send(_to_msg(sync_frame(), self.t))
+        return self.t
+
+    def stop_sync(self) -> None:
+        self._sync_on = False
+
+    def close(self) -> None:
+        self.master_bus.shutdown()
+        self.slave_bus.shutdown()
+
+
+class BusTransport:
+    """A real python-can bus (SocketCAN, or any interface python-can knows)."""
+
+    def __init__(self, bus: can.BusABC, sync_period_s: float) -> None:
+        self.bus = bus
+        self.T = sync_period_s
+        self._task = None
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._t0
+
+    def send(self, frames: list[Frame], t: float) -> list[can.Message]:
+        msgs = [_to_msg(f, t) for f in frames]
+        for m in msgs:
+            self.bus.send(m)
+        return msgs
+
+    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
+        timeout = max(0.0, deadline - self.now())
+        msg = self.bus.recv(timeout)
+        out = []
+        while msg is not None:
+            if not msg.is_extended_id and not msg.is_error_frame and not msg.is_remote_frame and msg.dlc <= 8:
+                out.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), self.now(), msg))
+            msg = self.bus.recv(0.0)
+        return out
+
+    def start_sync(self) -> None:
+        # kernel-timed on socketcan (Broadcast Manager), a thread elsewhere
+        self._task = self.bus.send_periodic(
+            can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False), self.T)
+
+    def next_sync(self) -> float | None:
+        return None  # SYNC comes from the periodic task; the master sees it on the bus
+
+    def stop_sync(self) -> None:
+        if self._task is not None:
+            self._task.stop()
+            self._task = None
+
+    def close(self) -> None:
+        self.stop_sync()
+
+
+class CanopenLink:
+    """The drives over CANopen, as a :class:`hil.runner.Link`.
+
+    Parameters
+    ----------
+    master : MasterCore
+    transport : InProcessTransport or BusTransport
+    log : CanLogWriter, optional
+        Every frame sent and received is logged as it happens.
+    on_event : callable, optional
+        Receives the master's events (boot-up, states, EMCY, ...).
+    """
+
+    def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
+                 on_event: Callable | None = None, max_missing_cycles: int = 5) -> None:
+        self.m = master
+        self.tr = transport
+        self.log = log
+        self.on_event = on_event
+        self.max_missing = max_missing_cycles
+        self._last: Sample | None = None
+        self._closed = False
+        self.sync_times: list[float] = []
+
+    # -------------------------------------------------------------- plumbing
+
+    def _send(self, frames: list[Frame]) -> None:
+        if not frames:
+            return
+        msgs = self.tr.send(frames, self.tr.now())
+        if self.log is not None:
+            for m in msgs:
+                self.log.write_msg(m)
+
+    def _feed(self, got: list[tuple[Frame, float, can.Message]]) -> None:
+        log = self.log
+        on_frame = self.m.on_frame
+        now = self.tr.now
+        for f, t, msg in got:
+            if log is not None:
+                if msg.timestamp != t:
+                    msg.timestamp = t  # log the time the master saw it
+                log.write_msg(msg)
+            out = on_frame(f, now())
+            if out:
+                self._send(out)
+        if self.on_event is not None:
+            for ev in self.m.drain_events():
+                self.on_event(ev)
+
+    def _sync(self) -> None:
+        t = self.tr.next_sync()
+        if t is not None:
+            self.sync_times.append(t)
+            # the SYNC we sent is part of the traffic the master follows
+            if self.log is not None:
+                self.log.write(sync_frame(), t, rx=False)
+            self.m.on_frame(sync_frame(), t)
+
+    # --------------------------------------------------------------- phases
+
+    def preflight(self) -> None:
+        """Boot, identify and configure both drives (SDO), then NMT start."""
+        t0 = self.tr.now()
+        try:
+            self._send(self.m.start(t0))
+            limit = t0 + self.m.act.canopen.boot_timeout_s + 30.0
+            while not self.m.preflight_done:
+                now = self.tr.now()
+                if now > limit:
+                    raise PreflightError("preflight did not complete within "
+                                         f"{limit - t0:.0f} s")
+                self._feed(self.tr.receive(now + 0.01))
+                self._send(self.m.poll(self.tr.now()))
+        except (SdoAbortError, SdoTimeout) as exc:
+            if getattr(exc, "abort_frame", None) is not None:
+                self._send([exc.abort_frame])
+            raise
+
+    def _next_sample(self) -> Sample:
+        """Run one SYNC cycle and return its sample (SYNC, TPDOs of both drives)."""
+        inproc = isinstance(self.tr, InProcessTransport)
+        missing = 0
+        while True:
+            self._sync()
+            cycle_end = self.tr.now() + self.tr.T
+            sample = None
+            while True:
+                # in-process: deliver what is in flight (time stands still until the next SYNC);
+                # on a bus: wait for frames until the cycle would end
+                got = self.tr.receive(self.tr.now() if inproc else cycle_end)
+                if got:
+                    self._feed(got)
+                self._send(self.m.poll(self.tr.now()))
+                sample = self.m.take_sample()
+                if sample is not None or not got or (not inproc and self.tr.now() >= cycle_end):
+                    break
+            if sample is not None:
+                self._last = sample
+                return sample
+            missing += 1
+            if missing > self.max_missing:
+                raise LinkError(f"no complete sample from the drives for {missing} SYNC cycles "
+                                f"(missing TPDOs; drive states {[d.state.name for d in self.m.drives.values()]})")
+
+    def first_sample(self) -> Sample:
+        """Preflight, start SYNC, enable both drives in CSP holding their position."""
+        self.preflight()
+        self.tr.start_sync()
+        smp = self._next_sample()
+        deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
+        while not self.m.all_in(State.OPERATION_ENABLED):
+            if self.tr.now() > deadline:
+                states = {n: d.state.name for n, d in self.m.drives.items()}
+                raise PreflightError(f"drives not in OPERATION_ENABLED within canopen.enable_timeout_s = "
+                                     f"{self.m.act.canopen.enable_timeout_s} s: {states}")
+            hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
+            self._send(self.m.setpoint_frames(*hold, smp))
+            smp = self._next_sample()
+        return smp
+
+    def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
+        self._send(self.m.setpoint_frames(sp1, sp2, self._last))
+        return self._next_sample()
+
+    def abort(self) -> None:
+        """The check aborted: drives go down by quick stop."""
+        self.m.quick_stop = True
+
+    def close(self) -> None:
+        """Bring both drives down to SWITCH_ON_DISABLED, stop SYNC, NMT pre-operational."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._last is not None and self.m.preflight_done:
+                deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
+                while not self.m.all_in(State.SWITCH_ON_DISABLED) and self.tr.now() < deadline:
+                    self._send(self.m.setpoint_frames(DISABLED, DISABLED, self._last))
+                    self._next_sample()
+            self.tr.stop_sync()
+            self._send(self.m.nmt_frames(NmtCommand.PRE_OPERATIONAL))
+            self._feed(self.tr.receive(self.tr.now()))
+        finally:
+            if self.log is not None:
+                self.log.close()
