@@ -71,6 +71,20 @@ def build_parser() -> argparse.ArgumentParser:
     _add_profile_args(p, sim=False)
     p.add_argument("--quiet", action="store_true", help="no progress display")
 
+    p = sub.add_parser("sim-serve", help="the two simulated drives on a CAN bus (until SIGINT/SIGTERM)",
+                       description="Serve two simulated CiA 402 drives on a python-can bus (e.g. socketcan "
+                                   "vcan0) for `emacheck run` in another process; the plant steps on each "
+                                   "SYNC received. SIGINT/SIGTERM end it cleanly.",
+                       epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--interface", required=True, help="python-can interface, e.g. socketcan, virtual")
+    p.add_argument("--channel", required=True, help="channel, e.g. vcan0")
+    p.add_argument("--bitrate", type=int, metavar="BPS", help="bit rate (default: the actuation profile's)")
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path, help="actuation profile (node ids, EDS)")
+    p.add_argument("--sim", metavar="SIMRIG.toml", type=Path, help="simulated-rig profile")
+    p.add_argument("--seed", type=int, help="noise seed (default: the simulated-rig profile's)")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")
+
     p = sub.add_parser("simulate", help="run the check on the simulated rig, no CAN in between",
                        description="Run the whole check against the simulated plant directly "
                                    "(no CANopen), then analyse it and write the run folder and report.",
@@ -90,6 +104,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="actuation profile (default: the run folder's snapshot, else the shipped one)")
     p.add_argument("--out", metavar="DIR", type=Path,
                    help="where result.json and report.html go (default: the run folder, or next to the CSV)")
+
+    p = sub.add_parser("serv", help="BLFserv: in-service backlash from a normal-operation recording",
+                       description="Measure internal and external backlash from the jumps of the position "
+                                   "differences during normal operation (paper 2.2, no force sensors): a run "
+                                   "folder, a signals CSV (t,phi1,phi2,s1,s2,F1,F2) or a raw CAN log. Writes "
+                                   "serv.json and serv_report.html (paper Fig. 8, error budget of paper 2.3).",
+                       epilog="exit status: 0 done, 3 bad input (profile, recording, arguments).",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", metavar="RECORDING", type=Path, help="run folder, signals CSV or CAN log (*.log)")
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
+                   help="actuation profile (default: the run folder's snapshot, else the shipped one)")
+    p.add_argument("--out", metavar="DIR", type=Path,
+                   help="where serv.json and serv_report.html go (default: the run folder, or next to the file)")
+    p.add_argument("--calibration", metavar="RESULT.json", type=Path,
+                   help="LVDT pitch and offset from a maintenance check's result.json")
+    p.add_argument("--method", choices=("improved", "paper"), default="improved",
+                   help="backlash from plateau levels (improved, default) or the paper's Delta D")
+    p.add_argument("--no-report", action="store_true", help="write serv.json only, no HTML report")
     return ap
 
 
@@ -106,9 +138,15 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "run":
             from hil.commands import cmd_run
             return cmd_run(args)
+        if args.cmd == "sim-serve":
+            from hil.serve import cmd_sim_serve
+            return cmd_sim_serve(args)
         if args.cmd == "simulate":
             from hil.commands import cmd_simulate
             return cmd_simulate(args)
+        if args.cmd == "serv":
+            from hil.serv_cmd import cmd_serv
+            return cmd_serv(args)
         if args.cmd == "analyze":
             from hil.commands import cmd_analyze
             return cmd_analyze(args)

@@ -162,11 +162,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated "
                   f"({outcome.samples} samples) in {wall:.2f} s wall")
-    if outcome.status != "done":
-        console.print(f"[red]aborted:[/red] {outcome.reason}")
-    result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
-    print_summary(console, result, out)
-    return _exit_for(result)
+    return _result_after(out, act, truth, meta, outcome, console)
 
 
 def _master_setup(act, profile_path, out: Path):
@@ -187,13 +183,53 @@ def _master_setup(act, profile_path, out: Path):
 
 
 def _canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):
-    from hil.runner import run_check
+    """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
+    ...) has already stopped the drives and closed the log when it arrives here: it becomes an
+    aborted outcome with the reason, and result.json says so."""
+    from hil.errors import EmacheckError
+    from hil.runner import LoopOutcome, run_check
 
     t0 = time.perf_counter()
-    with LiveProgress(console, 0.0, not quiet) as live:
-        outcome = run_check(link, act, check, out, meta, on_cycle=live)
+    try:
+        with LiveProgress(console, 0.0, not quiet) as live:
+            outcome = run_check(link, act, check, out, meta, on_cycle=live)
+    except EmacheckError as exc:
+        reason = f"{type(exc).__name__}: {exc}"
+        outcome = LoopOutcome("aborted", reason, 0, 0.0, meta.get("steps", {}))
     wall = time.perf_counter() - t0
     return outcome, wall
+
+
+def _record_can_stats(out: Path, meta: dict, wall: float, log, master) -> None:
+    meta["wall_s"] = round(wall, 3)
+    meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
+                   "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
+    write_json_atomic(out / "meta.json", meta)
+
+
+def _result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -> int:
+    """Analyse a finished check; an aborted one gets result.json with the reason (and the
+    analysis where enough data was recorded)."""
+    from hil.errors import EmacheckError
+
+    if outcome.status != "done":
+        console.print(f"[red]aborted:[/red] {outcome.reason}")
+        meta["status"], meta["reason"] = "aborted", meta.get("reason") or outcome.reason
+        write_json_atomic(out / "meta.json", meta)
+        try:
+            result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+        except EmacheckError as exc:
+            result = {"status": "aborted", "reason": meta["reason"], "analysis_error": str(exc)}
+            if truth is not None:
+                result["truth"] = truth
+            write_json_atomic(out / "result.json", result)
+            console.print(f"no analysis: {exc}")
+            return EXIT_ABORTED
+        print_summary(console, result, out)
+        return EXIT_ABORTED
+    result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+    print_summary(console, result, out)
+    return _exit_for(result)
 
 
 def cmd_dry_run(args: argparse.Namespace) -> int:
@@ -236,17 +272,10 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
         outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
     finally:
         transport.close()
-    meta["wall_s"] = round(wall, 3)
-    meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
-                   "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
-    write_json_atomic(out / "meta.json", meta)
+    _record_can_stats(out, meta, wall, log, master)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated in {wall:.2f} s wall "
                   f"({outcome.duration_s / max(wall, 1e-9):.1f}x real time); {log.frames} CAN frames logged")
-    if outcome.status != "done":
-        console.print(f"[red]aborted:[/red] {outcome.reason}")
-    result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
-    print_summary(console, result, out)
-    return _exit_for(result)
+    return _result_after(out, act, truth, meta, outcome, console)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -289,15 +318,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     finally:
         transport.close()
         bus.shutdown()
-    meta["wall_s"] = round(wall, 3)
-    meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
-                   "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
-    write_json_atomic(out / "meta.json", meta)
-    if outcome.status != "done":
-        console.print(f"[red]aborted:[/red] {outcome.reason}")
-    result = analyze_and_report(out / "signals.csv", act, out, None, meta, console)
-    print_summary(console, result, out)
-    return _exit_for(result)
+    _record_can_stats(out, meta, wall, log, master)
+    console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
+                  f"{log.frames} CAN frames logged")
+    return _result_after(out, act, None, meta, outcome, console)
 
 
 def truth_dict(truth) -> dict:

@@ -236,6 +236,7 @@ class MasterCore:
         self.bad_frames = 0
         self.unknown_frames = 0
         self.quick_stop = False  #: shut down by quick stop (abort) rather than orderly
+        self.fault: BaseException | None = None  #: the first error, latched
         self._sdo = {n: SdoClient(n, timeout_s=c.sdo_timeout_s) for n in c.node_ids}
         self._gen: Generator | None = None
         self._pending: object | None = None
@@ -369,8 +370,21 @@ class MasterCore:
 
         Raises the typed errors of the module on preflight failures, drive
         faults and protocol aborts. Unknown and malformed frames are counted
-        and otherwise ignored.
+        and otherwise ignored. Any exception latches :attr:`fault` and sets
+        :attr:`quick_stop` (fail closed) before it propagates.
         """
+        try:
+            return self._on_frame(frame, t)
+        except BaseException as exc:
+            self._latch(exc)
+            raise
+
+    def _latch(self, exc: BaseException) -> None:
+        if self.fault is None:
+            self.fault = exc
+        self.quick_stop = True
+
+    def _on_frame(self, frame: Frame, t: float) -> list[Frame]:
         cid = frame.arbitration_id
         try:
             if cid == SYNC_COB_ID:
@@ -449,7 +463,14 @@ class MasterCore:
     # ------------------------------------------------------------------ timing
 
     def poll(self, t: float) -> list[Frame]:
-        """Check timeouts at time ``t`` (boot-up, SDO, heartbeat)."""
+        """Check timeouts at time ``t`` (boot-up, SDO, heartbeat); latches like :meth:`on_frame`."""
+        try:
+            return self._poll(t)
+        except BaseException as exc:
+            self._latch(exc)
+            raise
+
+    def _poll(self, t: float) -> list[Frame]:
         if self.phase is Phase.PREFLIGHT:
             if isinstance(self._pending, _WaitBoot) and t > self._boot_deadline:
                 missing = [n for n, d in self.drives.items() if not d.booted]

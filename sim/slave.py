@@ -98,13 +98,14 @@ import canopen
 import canopen.objectdictionary as cod
 from canopen.sdo import SdoAbortedError
 
-from hil.cia402 import DriveStateMachine, IllegalTransition, OperationMode, State, Statusword
+from hil.cia402 import DriveStateMachine, IllegalTransition, OperationMode, State, Statusword, state_word
 from hil.drive_od import check_drive_od, load_drive_od
 from hil.errors import InputError, ProfileError
 from hil.pdo import (
     COB_ID_INVALID,
     HEARTBEAT_COB_ID_BASE,
     Frame,
+    increments_per_rad,
     increments_to_rad,
     mm_to_lvdt_um,
     newton_to_force_dN,
@@ -144,6 +145,29 @@ _SUPPORTED_MODES = frozenset((int(OperationMode.CSP), int(OperationMode.CST)))
 _ERROR_HISTORY_LEN = 4
 _TIME_EPS_S = 1e-9
 _I16 = (-(2**15), 2**15 - 1)
+_I32_LO, _I32_HI = -(2**31), 2**31 - 1
+# Hot-path constants (plain ints and identities instead of enum arithmetic and hashing).
+_CSP = int(OperationMode.CSP)
+_CST = int(OperationMode.CST)
+_MODE_DISABLED = int(DriveMode.DISABLED)
+_MODE_POSITION = int(DriveMode.POSITION)
+_MODE_FORCE = int(DriveMode.FORCE)
+_REMOTE = int(Statusword.REMOTE)
+_SW_FOLLOWS = int(Statusword.DRIVE_FOLLOWS_COMMAND)
+_SW_LIMIT = int(Statusword.INTERNAL_LIMIT_ACTIVE)
+_SW_REACHED = int(Statusword.TARGET_REACHED)
+_OE = State.OPERATION_ENABLED
+_QSA = State.QUICK_STOP_ACTIVE
+_FRA = State.FAULT_REACTION_ACTIVE
+_K_CONTROLWORD = (0x6040, 0)
+_ONLY_CONTROLWORD = (_K_CONTROLWORD,)
+_K_MODE = (0x6060, 0)
+_K_TARGET_POS = (0x607A, 0)
+_K_POS_MIN = (0x607D, 1)
+_K_POS_MAX = (0x607D, 2)
+_K_TARGET_TORQUE = (0x6071, 0)
+_K_MAX_TORQUE = (0x6072, 0)
+_K_RATED_TORQUE = (0x6076, 0)
 #: CiA 301 restricted CAN-IDs (may not be used by a PDO).
 _RESTRICTED_CAN_IDS = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x5FF),
                        (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x77F), (0x780, 0x7FF))
@@ -306,6 +330,13 @@ class _Counters:
 # --------------------------------------------------------------------------- sans-IO glue
 
 
+_STRUCT_CODES = {
+    cod.BOOLEAN: "?", cod.INTEGER8: "b", cod.INTEGER16: "h", cod.INTEGER32: "i", cod.INTEGER64: "q",
+    cod.UNSIGNED8: "B", cod.UNSIGNED16: "H", cod.UNSIGNED32: "I", cod.UNSIGNED64: "Q",
+    cod.REAL32: "f", cod.REAL64: "d",
+}
+
+
 class _CaptureBus:
     """The python-can "bus" of a node's private ``canopen.Network``: ``send`` only records.
 
@@ -323,9 +354,19 @@ class _CaptureBus:
         self.sent.append(msg)
 
 
-@dataclass(eq=False)
+_INT_CODES = frozenset("bBhHiIqQ")
+
+
+@dataclass(eq=False, slots=True)
 class _Pdo:
-    """One PDO of a node: configuration (from the data store) and runtime state."""
+    """One PDO of a node: configuration (from the data store) and runtime state.
+
+    The fields after ``key`` are compiled from the configuration by
+    :meth:`SimDrive._compile_pdo` whenever it is (re-)read: a TPDO whose entries
+    are all live numeric objects is assembled by one ``struct`` pack of its
+    getters (``pack``, ``getters``); an RPDO of numeric objects is decoded by one
+    unpack (``unpack``, ``plan``: index, subindex, byte slice per entry).
+    """
 
     rx: bool
     number: int
@@ -347,6 +388,17 @@ class _Pdo:
     last_sent_t: float | None = None
     pending: bool = False
     key: tuple = field(default=())
+    sync: bool = False  # trans_type <= 240
+    event: bool = False  # trans_type >= 254
+    pack: Callable[..., bytes] | None = None
+    getters: tuple[Callable[[], int | float], ...] = ()
+    unpack: Callable[[bytes], tuple] | None = None
+    plan: tuple[tuple[int, int, int, int], ...] = ()
+    keys: tuple[tuple[int, int], ...] = ()
+    cache_ok: tuple[bool, ...] = ()  # per entry: decoded value goes to SimDrive._icache
+    all_cache_ok: bool = False
+    touches_cpr: bool = False  # maps 0x608F (counts per revolution)
+    effects: tuple[tuple[int, int], ...] = ()  # entries with side effects (SimDrive._after_write)
 
     @property
     def is_synchronous(self) -> bool:
@@ -400,6 +452,8 @@ class SimDrive:
         self._bus = _CaptureBus()
         self.network = canopen.Network(self._bus)
         self.local = canopen.LocalNode(node_id, od)
+        self._icache: dict[tuple[int, int], int] = {}  # decoded stored values (not live ones)
+        self._packers: dict[tuple[int, int], Any] = {}
         self.network.add_node(self.local)
         # Detach LocalNode's own NMT slave: it would act on NMT frames and start a
         # periodic heartbeat task on the bus when 0x1017 is written.
@@ -413,12 +467,12 @@ class SimDrive:
         self.sdo_response_cob_id = SDO_RX_COB_ID_BASE + node_id  #: its responses
 
         self._live: dict[tuple[int, int], Callable[[], int | float]] = {
-            (0x6041, 0): lambda: self.statusword,
+            (0x6041, 0): self._statusword_now,
             (0x6061, 0): lambda: self._mode_display,
-            (0x6064, 0): lambda: self.position_inc,
+            (0x6064, 0): self._position_now,
             (0x6077, 0): lambda: self.torque_actual_permille,
-            (0x2100, 0): lambda: mm_to_lvdt_um(self._s_mm),
-            (0x2101, 0): lambda: newton_to_force_dN(self._F_N),
+            (0x2100, 0): self._lvdt_um_now,
+            (0x2101, 0): self._force_dN_now,
             (0x2102, 0): lambda: self._i_total,
             (0x603F, 0): lambda: self.state_machine.error_code,
             (0x1001, 0): lambda: self.error_register,
@@ -431,7 +485,28 @@ class SimDrive:
         self._phi_rad = 0.0
         self._s_mm = 0.0
         self._F_N = 0.0
-        self._torque_Nm = 0.0
+        # Derived values, computed when first needed and kept until their inputs change:
+        # the measured values after each plant step (_measure), the increments per rad
+        # and the position when 0x608F changes (_cpr_changed).
+        self._torque_val = 0.0
+        self._torque_stale = False
+        self._torque_fetch: Callable[[], None] = self._no_torque_source  # set by SimDrivePair
+        self._inc_per_rad: float | None = None
+        self._pos_memo: int | None = None
+        self._um_memo: int | None = None
+        self._dN_memo: int | None = None
+        self._sw_state: State | None = None  # statusword bits of this state: _sw_base
+        self._sw_base = 0
+        # controlword -> states in which receiving it again (same word as the previous one)
+        # was seen to leave the state machine unchanged (a pure function of state and words)
+        self._cw_noop: dict[int, tuple[State, ...]] = {}
+        self._sp_mode = _MODE_DISABLED
+        self._sp_value = 0.0
+        self._sp_obj: Setpoint | None = None
+        self._sync_tpdos_list: tuple[_Pdo, ...] = ()
+        self._event_tpdos_list: tuple[_Pdo, ...] = ()
+        self._timed_tpdos_list: tuple[_Pdo, ...] = ()
+        self._sync_rpdos: tuple[_Pdo, ...] = ()
         self._reset_drive()
         self._hb_period_s = 0.0
         self._hb_next: float | None = None
@@ -481,19 +556,78 @@ class SimDrive:
         return var.decode_raw(self.local.get_data(index, subindex))
 
     def _int(self, index: int, subindex: int = 0) -> int:
-        return int(self._var(index, subindex).decode_raw(self.local.get_data(index, subindex)))
+        key = (index, subindex)
+        v = self._icache.get(key)
+        if v is None:
+            v = int(self._var(index, subindex).decode_raw(self.local.get_data(index, subindex)))
+            if key not in self._live:
+                self._icache[key] = v  # invalidated by every store of this object
+        return v
 
     def _store(self, index: int, subindex: int, data: bytes) -> None:
         self.local.data_store.setdefault(index, {})[subindex] = bytes(data)
+        self._icache.pop((index, subindex), None)
+        if index == 0x608F:
+            self._cpr_changed()
+
+    def _cpr_changed(self) -> None:
+        """0x608F (may have) changed: drop the values derived from the counts per revolution."""
+        self._inc_per_rad = None
+        self._pos_memo = None
+
+    def _k_inc(self) -> float:
+        """Increments per rad, :func:`hil.pdo.increments_per_rad` of :attr:`counts_per_rev` (cached)."""
+        k = self._inc_per_rad
+        if k is None:
+            k = self._inc_per_rad = increments_per_rad(self.counts_per_rev)
+        return k
+
+    def _packer(self, index: int, subindex: int) -> Any:
+        """struct.Struct of a numeric object (cached), or None for other types."""
+        key = (index, subindex)
+        if key not in self._packers:
+            var = self._var(index, subindex)
+            code = _STRUCT_CODES.get(var.data_type) if var is not None else None
+            self._packers[key] = struct.Struct("<" + code) if code else None
+        return self._packers[key]
+
+    def _raw(self, index: int, subindex: int) -> bytes:
+        """Encoded value for a PDO: live values packed directly, stored ones from the store."""
+        f = self._live.get((index, subindex))
+        if f is not None:
+            pk = self._packer(index, subindex)
+            if pk is not None:
+                return pk.pack(f())
+        else:
+            raw = self.local.data_store.get(index, {}).get(subindex)
+            if raw is not None:
+                return raw
+        return self.local.get_data(index, subindex)
 
     # ------------------------------------------------------------------ live values
 
-    def _measure(self, sample: Sample, torque_Nm: float) -> None:
-        if self.ema_index == 0:
-            self._phi_rad, self._s_mm, self._F_N = sample.phi1_rad, sample.s1_mm, sample.F1_N
-        else:
-            self._phi_rad, self._s_mm, self._F_N = sample.phi2_rad, sample.s2_mm, sample.F2_N
-        self._torque_Nm = float(torque_Nm)
+    def _measure(self, raw: tuple) -> None:
+        """Take this EMA's values of a plant sample ``(t_s, phi1, phi2, s1, s2, F1, F2)``.
+
+        The drive torque is fetched from the plant only when it is first needed
+        (0x6077), see :meth:`SimDrivePair._fetch_torque`.
+        """
+        k = self.ema_index
+        self._phi_rad = raw[1 + k]
+        self._s_mm = raw[3 + k]
+        self._F_N = raw[5 + k]
+        self._pos_memo = self._um_memo = self._dN_memo = None
+        self._torque_stale = True
+
+    def _no_torque_source(self) -> None:
+        self._torque_stale = False
+
+    @property
+    def _torque_Nm(self) -> float:
+        """Drive torque [N m] of the current sample."""
+        if self._torque_stale:
+            self._torque_fetch()
+        return self._torque_val
 
     @property
     def counts_per_rev(self) -> float:
@@ -503,7 +637,55 @@ class SimDrive:
     @property
     def position_inc(self) -> int:
         """Position actual value 0x6064 [increments] of the current sample."""
-        return rad_to_increments(self._phi_rad, self.counts_per_rev)
+        return self._position_now()
+
+    def _position_now(self) -> int:
+        # = rad_to_increments(self._phi_rad, self.counts_per_rev), the same float operations
+        v = self._pos_memo
+        if v is None:
+            phi = self._phi_rad
+            try:
+                v = round(phi * self._k_inc())  # (an int: _clip_round without the int() of an int)
+                if v < _I32_LO:
+                    v = _I32_LO
+                elif v > _I32_HI:
+                    v = _I32_HI
+            except (ValueError, ArithmeticError):  # (InputError is a ValueError)
+                return rad_to_increments(phi, self.counts_per_rev)  # raises its own error
+            self._pos_memo = v
+        return v
+
+    def _lvdt_um_now(self) -> int:
+        # = mm_to_lvdt_um(self._s_mm)
+        v = self._um_memo
+        if v is None:
+            s_mm = self._s_mm
+            try:
+                v = round(s_mm * 1000.0)  # (an int: _clip_round without the int() of an int)
+                if v < _I32_LO:
+                    v = _I32_LO
+                elif v > _I32_HI:
+                    v = _I32_HI
+            except (ValueError, OverflowError):
+                return mm_to_lvdt_um(s_mm)  # raises its own error
+            self._um_memo = v
+        return v
+
+    def _force_dN_now(self) -> int:
+        # = newton_to_force_dN(self._F_N)
+        v = self._dN_memo
+        if v is None:
+            F_N = self._F_N
+            try:
+                v = round(F_N * 10.0)  # (an int: _clip_round without the int() of an int)
+                if v < _I32_LO:
+                    v = _I32_LO
+                elif v > _I32_HI:
+                    v = _I32_HI
+            except (ValueError, OverflowError):
+                return newton_to_force_dN(F_N)  # raises its own error
+            self._dN_memo = v
+        return v
 
     @property
     def torque_actual_permille(self) -> int:
@@ -522,10 +704,6 @@ class SimDrive:
             reg |= 0x11
         return reg
 
-    def _effective_mode(self) -> int | None:
-        mode = self._int(0x6060)
-        return mode if mode in _SUPPORTED_MODES else None
-
     @property
     def statusword(self) -> int:
         """Statusword 0x6041 now.
@@ -536,23 +714,37 @@ class SimDrive:
         limits 0x607D in CSP, max torque 0x6072 in CST), bit 10 in CSP when
         ``|effective target - position actual| <= TARGET_WINDOW_INC``.
         """
+        return self._statusword_now()
+
+    def _statusword_now(self) -> int:
+        # = sm.statusword(extra): hil.cia402.state_word of the state | remote bit | extra
         sm = self.state_machine
+        state = sm.state
         extra = 0
-        if sm.state is State.OPERATION_ENABLED:
-            mode = self._effective_mode()
-            if mode is not None:
-                extra |= Statusword.DRIVE_FOLLOWS_COMMAND
+        if state is _OE:
+            mode = self._icache.get(_K_MODE)
+            if mode is None:
+                mode = self._int(0x6060)
+            if mode in _SUPPORTED_MODES:
+                extra = _SW_FOLLOWS
                 if self._limit_active:
-                    extra |= Statusword.INTERNAL_LIMIT_ACTIVE
-                if (mode == OperationMode.CSP and self._target_eff_inc is not None
-                        and abs(self._target_eff_inc - self.position_inc) <= TARGET_WINDOW_INC):
-                    extra |= Statusword.TARGET_REACHED
-        return sm.statusword(extra)
+                    extra |= _SW_LIMIT
+                eff = self._target_eff_inc
+                if (mode == _CSP and eff is not None
+                        and abs(eff - self._position_now()) <= TARGET_WINDOW_INC):
+                    extra |= _SW_REACHED
+        if state is not self._sw_state:
+            self._sw_base = state_word(state)
+            self._sw_state = state
+        return self._sw_base | extra | (_REMOTE if sm.remote else 0)
 
     @property
     def setpoint(self) -> Setpoint:
         """What the drive commanded the plant at the last SYNC."""
-        return self._setpoint
+        sp = self._sp_obj
+        if sp is None:
+            sp = self._sp_obj = Setpoint(DriveMode(self._sp_mode), self._sp_value)
+        return sp
 
     def _on_read(self, index: int, subindex: int, od: Any = None, **_: Any) -> int | float | None:
         f = self._live.get((index, subindex))
@@ -563,6 +755,7 @@ class SimDrive:
     def _on_write(self, index: int, subindex: int, od: cod.ODVariable, data: bytes, **_: Any) -> None:
         """Validate an SDO write (raise SdoAbortedError to refuse) and note its side effects."""
         value = od.decode_raw(bytes(data)) if od.data_type in cod.NUMBER_TYPES else None
+        self._icache.pop((index, subindex), None)
         pdo = self._pdo_by_index(index)
         if pdo is not None:
             if index == pdo.comm_index:
@@ -702,7 +895,44 @@ class SimDrive:
                 p.pending = False
             if p.rx and p.valid:
                 by_cob.setdefault(p.cob_id, []).append(p)
+            self._compile_pdo(p)
         self._rx_by_cob = by_cob
+        self._sync_tpdos_list = tuple(p for p in self._tpdos if p.valid and p.sync)
+        self._event_tpdos_list = tuple(p for p in self._tpdos if p.valid and p.event)
+        self._timed_tpdos_list = tuple(p for p in self._event_tpdos_list if p.event_timer_s > 0.0)
+        # a latched RPDO is always valid and synchronous: a change of either resets ``latched``
+        self._sync_rpdos = tuple(p for p in self._rpdos if p.valid and p.sync)
+
+    def _compile_pdo(self, p: _Pdo) -> None:
+        """Precompile ``p``'s entries into one struct (see :class:`_Pdo`); generic path otherwise."""
+        p.sync = p.trans_type <= 240
+        p.event = p.trans_type >= 254
+        p.pack = p.unpack = None
+        p.getters = p.plan = p.cache_ok = ()
+        p.all_cache_ok = False
+        p.keys = tuple((i, s) for i, s, _ in p.entries)
+        p.touches_cpr = any(i == 0x608F for i, _ in p.keys)
+        p.effects = tuple((i, s) for i, s in p.keys if i == 0x6040 or i == 0x6060 or 0x1000 <= i <= 0x1FFF)
+        codes = []
+        for i, s, nbytes in p.entries:
+            var = self._var(i, s)
+            code = _STRUCT_CODES.get(var.data_type) if var is not None else None
+            if code is None or struct.calcsize("<" + code) != nbytes:
+                return
+            codes.append(code)
+        st = struct.Struct("<" + "".join(codes))
+        if p.rx:
+            plan, off = [], 0
+            for i, s, nbytes in p.entries:
+                plan.append((i, s, off, off + nbytes))
+                off += nbytes
+            p.plan = tuple(plan)
+            p.cache_ok = tuple(c in _INT_CODES and k not in self._live for c, k in zip(codes, p.keys))
+            p.all_cache_ok = all(p.cache_ok)
+            p.unpack = st.unpack
+        elif all(k in self._live for k in p.keys):
+            p.getters = tuple(self._live[k] for k in p.keys)
+            p.pack = st.pack
 
     def _refresh_comm(self, *, restart_heartbeat: bool) -> None:
         self._sync_cob_id = self._int(0x1005) & 0x7FF
@@ -724,7 +954,13 @@ class SimDrive:
         self._target_eff_inc: int | None = None
         self._qs_phi_rad = 0.0
         self._qs_left = 0
-        self._setpoint = Setpoint(DriveMode.DISABLED, 0.0)
+        self._set_setpoint(_MODE_DISABLED, 0.0)
+
+    def _set_setpoint(self, mode: int, value: float) -> None:
+        """The plant command of this cycle (``mode`` a DriveMode value); :attr:`setpoint` builds it."""
+        self._sp_mode = mode
+        self._sp_value = value
+        self._sp_obj = None
 
     def _apply_own_data(self) -> None:
         if self._cpr_override is not None:
@@ -735,6 +971,8 @@ class SimDrive:
         """Power-on / reset: restore defaults, boot-up frame, PRE-OPERATIONAL."""
         self._now = t
         store = self.local.data_store
+        self._icache.clear()
+        self._cpr_changed()
         if communication_only:
             for index in [i for i in store if 0x1000 <= i <= 0x1FFF]:
                 del store[index]
@@ -821,6 +1059,12 @@ class SimDrive:
             self._sdo_phase = self._next_sdo_phase(ccs, data[0], reply.data[0])
         self._bus.sent.clear()
         if self._pending:
+            # the decoded-value cache is invalidated once the values are stored (a
+            # write callback may have read the old value of the object it checks)
+            for key in self._pending:
+                self._icache.pop(key, None)
+                if key[0] == 0x608F:
+                    self._cpr_changed()
             self._after_write(sorted(self._pending))
             self._pending.clear()
 
@@ -867,6 +1111,7 @@ class SimDrive:
             elif index == 0x1003 and subindex == 0:
                 for k in range(1, _ERROR_HISTORY_LEN + 1):
                     self.local.data_store.get(0x1003, {}).pop(k, None)
+                    self._icache.pop((0x1003, k), None)
             elif 0x1000 <= index <= 0x1FFF:
                 comm = True
                 restart_hb |= index == 0x1017
@@ -902,63 +1147,120 @@ class SimDrive:
     def _controlword(self) -> None:
         sm = self.state_machine
         old = sm.state
+        cw = self._icache.get(_K_CONTROLWORD)
+        if cw is None:
+            cw = self._int(0x6040)
+        # The master repeats the controlword every cycle: the same word as the previous
+        # one in a state where that was seen to be a no-op is a no-op again (the outcome
+        # of on_controlword depends only on the state, the previous and this word).
+        repeated = cw == getattr(sm, "_previous_cw", None)
+        if repeated:
+            seen = self._cw_noop.get(cw)
+            if seen is not None and old in seen:
+                return
+            before = (sm.last_transition, sm.error_code)
         try:
-            sm.on_controlword(self._int(0x6040))
+            sm.on_controlword(cw)
         except IllegalTransition:
             self._counters.illegal_commands += 1
             return
         new = sm.state
+        if repeated and new is old and (sm.last_transition, sm.error_code) == before:
+            self._cw_noop[cw] = self._cw_noop.get(cw, ()) + (old,)
         if new is State.QUICK_STOP_ACTIVE and old is not State.QUICK_STOP_ACTIVE:
             self._qs_phi_rad = self._phi_rad
             self._qs_left = self._qs_cycles
         if old is State.FAULT and new is State.SWITCH_ON_DISABLED:
             self._emcy(EMCY_NO_ERROR)
 
-    def _cycle(self) -> Setpoint:
-        """The drive's control cycle at a SYNC: internal transitions and the plant setpoint."""
+    def _cycle(self) -> tuple[int, float]:
+        """The drive's control cycle at a SYNC: internal transitions and the plant command.
+
+        Returns the plant command ``(mode, value)`` (a DriveMode value and rad / N),
+        also kept as :attr:`setpoint`.
+        """
         sm = self.state_machine
-        if sm.state is State.FAULT_REACTION_ACTIVE:
+        if sm.state is _FRA:
             sm.fault_reaction_done()
-        if sm.state is State.QUICK_STOP_ACTIVE:
+        if sm.state is _QSA:
             if self._qs_left > 0:
                 self._qs_left -= 1
                 self._limit_active = False
                 self._target_eff_inc = None
-                self._setpoint = Setpoint(DriveMode.POSITION, self._qs_phi_rad)
-                return self._setpoint
+                value = self._qs_phi_rad
+                self._set_setpoint(_MODE_POSITION, value)
+                return _MODE_POSITION, value
             sm.quick_stop_done()
         self._limit_active = False
         self._target_eff_inc = None
-        sp = Setpoint(DriveMode.DISABLED, 0.0)
-        if sm.state is State.OPERATION_ENABLED:
-            mode = self._effective_mode()
-            if mode == OperationMode.CSP:
-                target = self._int(0x607A)
-                lo, hi = self._int(0x607D, 1), self._int(0x607D, 2)
+        mode_out, value = _MODE_DISABLED, 0.0
+        if sm.state is _OE:
+            ic = self._icache
+            mode = ic.get(_K_MODE)
+            if mode is None:
+                mode = self._int(0x6060)
+            if mode == _CSP:  # (a supported mode, so the effective one)
+                target = ic.get(_K_TARGET_POS)
+                if target is None:
+                    target = self._int(0x607A)
+                lo = ic.get(_K_POS_MIN)
+                if lo is None:
+                    lo = self._int(0x607D, 1)
+                hi = ic.get(_K_POS_MAX)
+                if hi is None:
+                    hi = self._int(0x607D, 2)
                 eff = min(max(target, lo), hi)
                 self._limit_active = eff != target
                 self._target_eff_inc = eff
-                sp = Setpoint(DriveMode.POSITION, increments_to_rad(eff, self.counts_per_rev))
-            elif mode == OperationMode.CST:
-                tau = self._int(0x6071)
-                tmax = self._int(0x6072)
+                # = increments_to_rad(eff, self.counts_per_rev), the same float operations
+                try:
+                    value = float(eff) / self._k_inc()
+                except (ArithmeticError, InputError):
+                    value = increments_to_rad(eff, self.counts_per_rev)  # raises its own error
+                mode_out = _MODE_POSITION
+            elif mode == _CST:
+                tau = ic.get(_K_TARGET_TORQUE)
+                if tau is None:
+                    tau = self._int(0x6071)
+                tmax = ic.get(_K_MAX_TORQUE)
+                if tmax is None:
+                    tmax = self._int(0x6072)
                 eff = min(max(tau, -tmax), tmax)
                 self._limit_active = eff != tau
-                force = permille_to_force_N(eff, self._i_total, self._int(0x6076) / 1000.0)
-                sp = Setpoint(DriveMode.FORCE, force)
-        self._setpoint = sp
-        return sp
+                rated = ic.get(_K_RATED_TORQUE)
+                if rated is None:
+                    rated = self._int(0x6076)
+                rated_Nm = rated / 1000.0
+                i_total = self._i_total
+                if 0.0 < rated_Nm < math.inf and 0.0 < i_total < math.inf:
+                    # = permille_to_force_N(eff, i_total, rated_Nm), the same float operations
+                    value = float(eff) / 1000.0 * rated_Nm * i_total * 1000.0
+                else:
+                    value = permille_to_force_N(eff, i_total, rated_Nm)  # raises its own error
+                mode_out = _MODE_FORCE
+        self._set_setpoint(mode_out, value)
+        return mode_out, value
 
     # ------------------------------------------------------------------ PDO engine
 
     def _assemble(self, p: _Pdo) -> bytes:
-        get = self.local.get_data
-        return b"".join(get(i, s) for i, s, _ in p.entries)
+        pack = p.pack
+        if pack is not None:  # all entries live numbers: one struct pack of the getters
+            g = p.getters
+            n = len(g)
+            if n == 3:
+                return pack(g[0](), g[1](), g[2]())
+            if n == 2:
+                return pack(g[0](), g[1]())
+            return pack(*[f() for f in g])
+        raw = self._raw
+        return b"".join(raw(i, s) for i, s, _ in p.entries)
 
     def _send_tpdo(self, p: _Pdo, t: float, payload: bytes | None = None) -> None:
         if payload is None:
             payload = self._assemble(p)
-        self._out.append(Frame(p.cob_id, payload))
+        # 11-bit COB-ID (cob & 0x7FF) and at most 64 mapped bits: a valid frame by construction
+        self._out.append(Frame.trusted(p.cob_id, payload))
         p.last_payload = payload
         p.last_sent_t = t
         p.pending = False
@@ -967,26 +1269,41 @@ class SimDrive:
     def _sync_tpdos(self, t: float) -> None:
         if self.nmt_state is not NmtState.OPERATIONAL:
             return
-        for p in self._tpdos:
-            if not p.valid:
-                continue
-            if 1 <= p.trans_type <= 240:
-                p.sync_count += 1
-                if p.sync_count >= p.trans_type:
-                    p.sync_count = 0
-                    self._send_tpdo(p, t)
-            elif p.trans_type == 0:
+        out = self._out
+        counters = self._counters
+        for p in self._sync_tpdos_list:  # valid, transmission type 0..240
+            tt = p.trans_type
+            if tt:
+                count = p.sync_count + 1
+                if count < tt:
+                    p.sync_count = count
+                    continue
+                p.sync_count = 0
+                pack = p.pack
+                if pack is not None and len(p.getters) == 3:  # (_assemble inlined)
+                    g0, g1, g2 = p.getters
+                    payload = pack(g0(), g1(), g2())
+                elif pack is not None and len(p.getters) == 2:
+                    g0, g1 = p.getters
+                    payload = pack(g0(), g1())
+                else:
+                    payload = self._assemble(p)
+            else:
                 payload = self._assemble(p)
-                if payload != p.last_payload:
-                    self._send_tpdo(p, t, payload)
+                if payload == p.last_payload:
+                    continue
+            # (_send_tpdo inlined)
+            out.append(Frame.trusted(p.cob_id, payload))
+            p.last_payload = payload
+            p.last_sent_t = t
+            p.pending = False
+            counters.tpdos_sent += 1
 
     def _event_tpdos(self, t: float) -> None:
         """Send event-driven TPDOs (254/255) whose payload changed, respecting the inhibit time."""
-        if self.nmt_state is not NmtState.OPERATIONAL:
+        if not self._event_tpdos_list or self.nmt_state is not NmtState.OPERATIONAL:
             return
-        for p in self._tpdos:
-            if not (p.valid and p.is_event):
-                continue
+        for p in self._event_tpdos_list:  # valid, transmission type 254/255
             payload = self._assemble(p)
             if payload == p.last_payload and not p.pending:
                 continue
@@ -998,10 +1315,9 @@ class SimDrive:
     def _timed_tpdos(self, t: float) -> None:
         if self.nmt_state is not NmtState.OPERATIONAL:
             return
-        for p in self._tpdos:
-            if p.valid and p.is_event and p.event_timer_s > 0.0:
-                if p.last_sent_t is None or t - p.last_sent_t >= p.event_timer_s - _TIME_EPS_S:
-                    self._send_tpdo(p, t)
+        for p in self._timed_tpdos_list:  # valid, 254/255, event timer > 0
+            if p.last_sent_t is None or t - p.last_sent_t >= p.event_timer_s - _TIME_EPS_S:
+                self._send_tpdo(p, t)
         self._event_tpdos(t)
 
     def _on_rpdo(self, pdos: list[_Pdo], frame: Frame, t: float) -> None:
@@ -1020,7 +1336,7 @@ class SimDrive:
             if self._comm_error:
                 self._comm_error = False
                 self._emcy(EMCY_NO_ERROR)
-            if p.is_synchronous:
+            if p.sync:
                 if p.latched is not None:
                     self._counters.rpdos_late += 1
                 p.latched = frame.data
@@ -1028,17 +1344,45 @@ class SimDrive:
                 self._apply_rpdo(p, frame.data)
 
     def _apply_rpdo(self, p: _Pdo, data: bytes) -> None:
-        off = 0
-        written = []
-        for index, subindex, nbytes in p.entries:
-            self._store(index, subindex, data[off:off + nbytes])
-            off += nbytes
-            written.append((index, subindex))
+        unpack = p.unpack
+        if unpack is not None:
+            # one unpack; raw bytes to the data store (the OD stays the source of truth)
+            # and the decoded integers straight into the decoded-value cache
+            if data.__class__ is not bytes:
+                data = bytes(data)
+            store = self.local.data_store
+            for index, subindex, a, b in p.plan:
+                d = store.get(index)
+                if d is None:
+                    d = store[index] = {}
+                d[subindex] = data[a:b]
+            values = unpack(data)
+            ic = self._icache
+            if p.all_cache_ok:
+                ic.update(zip(p.keys, values))
+            else:
+                for key, v, ok in zip(p.keys, values, p.cache_ok):
+                    if ok:
+                        ic[key] = v
+                    else:
+                        ic.pop(key, None)
+            if p.touches_cpr:
+                self._cpr_changed()
+        else:
+            off = 0
+            for index, subindex, nbytes in p.entries:
+                self._store(index, subindex, data[off:off + nbytes])
+                off += nbytes
         self._counters.rpdos_applied += 1
-        self._after_write(written)
+        effects = p.effects  # the entries _after_write acts on, in mapping order
+        if effects:
+            if effects == _ONLY_CONTROLWORD:
+                self._controlword()
+            else:
+                self._after_write(effects)
 
     def _apply_latched(self) -> None:
-        for p in self._rpdos:
+        for p in self._sync_rpdos:  # (only valid synchronous RPDOs latch)
             if p.latched is not None:
                 data, p.latched = p.latched, None
                 self._apply_rpdo(p, data)
@@ -1052,7 +1396,8 @@ class SimDrive:
             self._hb_next += self._hb_period_s
             if self._hb_next <= t:
                 self._hb_next = t + self._hb_period_s
-        self._timed_tpdos(t)
+        if self._event_tpdos_list:  # (_timed_tpdos only acts on valid event-driven TPDOs)
+            self._timed_tpdos(t)
 
 
 # --------------------------------------------------------------------------- the pair
@@ -1150,6 +1495,7 @@ class SimDrivePair:
         self._out: list[Frame] = []
         self._powered = False
         self._now = -math.inf
+        self._raw_sample: tuple | None = None  # plant.step_raw output; :attr:`sample` builds the Sample
         self._sample: Sample | None = None
         params = plant.params
         nodes = []
@@ -1170,6 +1516,11 @@ class SimDrivePair:
                                   counts_per_rev=counts_per_rev, sample_period_s=params.sample_period_s,
                                   counters=self._counters, outbox=self._out))
         self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
+        for node in self.nodes:
+            node._torque_fetch = self._fetch_torque
+        # COB-ID -> ((node, its RPDOs of that COB-ID), ...), valid for the nodes' _rx_by_cob dicts
+        self._routes: dict[int, tuple[tuple[SimDrive, list[_Pdo]], ...]] = {}
+        self._routes_rx: tuple[dict, dict] = (nodes[0]._rx_by_cob, nodes[1]._rx_by_cob)
 
     # ------------------------------------------------------------------ inspection
 
@@ -1181,6 +1532,8 @@ class SimDrivePair:
     @property
     def sample(self) -> Sample | None:
         """The current sample (plant state at the next SYNC); None before the first power-on."""
+        if self._sample is None and self._raw_sample is not None:
+            self._sample = Sample(*self._raw_sample)
         return self._sample
 
     @property
@@ -1201,12 +1554,34 @@ class SimDrivePair:
         self._out.clear()
         return out
 
-    def _step(self, sp1: Setpoint, sp2: Setpoint) -> None:
-        self._sample = self.plant.step(sp1, sp2)
-        torque = self.plant.state().torque_Nm
+    def _step(self, mode1: int, value1: float, mode2: int, value2: float) -> None:
+        """Step the plant with both drives' commands (DriveMode values, rad / N).
+
+        ``plant.step_raw`` is ``plant.step`` without the Setpoint and Sample
+        objects; on an error ``plant.step`` is called with the same commands so
+        that it raises its own error (the plant validates before it advances).
+        The drive torques (0x6077) are read from the plant only when needed
+        (:meth:`_fetch_torque`): the pair is the only one stepping its plant.
+        """
+        plant = self.plant
+        try:
+            raw = plant.step_raw(mode1, value1, mode2, value2)
+        except (InputError, TypeError):
+            plant.step(Setpoint(DriveMode(mode1), value1), Setpoint(DriveMode(mode2), value2))
+            raise
+        self._raw_sample = raw
+        self._sample = None
         self._counters.plant_steps += 1
+        n0, n1 = self.nodes
+        n0._measure(raw)
+        n1._measure(raw)
+
+    def _fetch_torque(self) -> None:
+        """Read both drive torques [N m] of the last plant step into the nodes."""
+        torque = self.plant.state().torque_Nm
         for node in self.nodes:
-            node._measure(self._sample, torque[node.ema_index])
+            node._torque_val = float(torque[node.ema_index])
+            node._torque_stale = False
 
     def _node_index(self, node_index: int) -> SimDrive:
         if isinstance(node_index, bool):
@@ -1237,9 +1612,8 @@ class SimDrivePair:
         that the current sample is the measured rig at rest.
         """
         now = self._clock(t)
-        if self._sample is None:
-            disabled = Setpoint(DriveMode.DISABLED, 0.0)
-            self._step(disabled, disabled)
+        if self._raw_sample is None:
+            self._step(_MODE_DISABLED, 0.0, _MODE_DISABLED, 0.0)
         self._powered = True
         for node in self.nodes:
             node._boot(now, communication_only=False)
@@ -1260,18 +1634,24 @@ class SimDrivePair:
         """
         if not isinstance(frame, Frame):
             raise InputError(f"frame must be a hil.pdo.Frame, got {type(frame).__name__}")
-        now = self._clock(t)
+        if t.__class__ is float and t - t == 0.0:  # finite float: _clock without the conversions
+            now = self._now
+            if t > now:
+                now = self._now = t
+        else:
+            now = self._clock(t)
         if not self._powered:
             self._counters.frames_unpowered += 1
             return []
         cob = frame.arbitration_id
+        n0, n1 = self.nodes
         if cob == 0:
             self._on_nmt(frame, now)
-        elif any(cob == n._sync_cob_id for n in self.nodes):
+        elif cob == n0._sync_cob_id or cob == n1._sync_cob_id:
             self._on_sync(frame, now)
-        else:
+        elif cob == n0.sdo_request_cob_id or cob == n1.sdo_request_cob_id:
             consumed = False
-            for node in self.nodes:
+            for node in (n0, n1):
                 if cob == node.sdo_request_cob_id:
                     node._on_sdo(frame, now)
                     consumed = True
@@ -1281,9 +1661,31 @@ class SimDrivePair:
                     consumed = True
             if not consumed:
                 self._counters.bad_frames_ignored += 1
-        for node in self.nodes:
-            node._event_tpdos(now)
-        return self._drain()
+        else:
+            # RPDOs (or nothing): the nodes' RPDOs of this COB-ID, looked up once per
+            # configuration (a node's RPDO only changes that node's configuration)
+            if n0._rx_by_cob is not self._routes_rx[0] or n1._rx_by_cob is not self._routes_rx[1]:
+                self._routes = {}
+                self._routes_rx = (n0._rx_by_cob, n1._rx_by_cob)
+            route = self._routes.get(cob)
+            if route is None:
+                route = self._routes[cob] = tuple(
+                    (node, node._rx_by_cob[cob]) for node in (n0, n1) if node._rx_by_cob.get(cob))
+            if route:
+                for node, rx in route:
+                    node._on_rpdo(rx, frame, now)
+            else:
+                self._counters.bad_frames_ignored += 1
+        if n0._event_tpdos_list:
+            n0._event_tpdos(now)
+        if n1._event_tpdos_list:
+            n1._event_tpdos(now)
+        out = self._out
+        if out:
+            frames = out.copy()
+            out.clear()
+            return frames
+        return []
 
     def _on_nmt(self, frame: Frame, t: float) -> None:
         if len(frame.data) != 2:
@@ -1306,14 +1708,23 @@ class SimDrivePair:
             self._counters.bad_frames_ignored += 1
             return
         self._counters.syncs += 1
-        consumers = [n for n in self.nodes if n._sync_cob_id == frame.arbitration_id]
-        for node in consumers:
-            node._now = t
-            node._sync_tpdos(t)
-        for node in consumers:
-            node._apply_latched()
-        sp1, sp2 = (node._cycle() for node in self.nodes)
-        self._step(sp1, sp2)
+        cob = frame.arbitration_id
+        n0, n1 = self.nodes
+        c0 = n0._sync_cob_id == cob
+        c1 = n1._sync_cob_id == cob
+        if c0:
+            n0._now = t
+            n0._sync_tpdos(t)
+        if c1:
+            n1._now = t
+            n1._sync_tpdos(t)
+        if c0:
+            n0._apply_latched()
+        if c1:
+            n1._apply_latched()
+        mode1, value1 = n0._cycle()
+        mode2, value2 = n1._cycle()
+        self._step(mode1, value1, mode2, value2)
 
     def tick(self, t: float) -> list[Frame]:
         """Let time pass to ``t`` [s]: heartbeats (0x1017) and timed event TPDOs that are due.
@@ -1329,11 +1740,21 @@ class SimDrivePair:
             Heartbeats ``0x700 + n [state]`` (0x7F pre-operational, 0x05
             operational, 0x04 stopped) and event TPDOs, node by node.
         """
-        now = self._clock(t)
+        if t.__class__ is float and t - t == 0.0:  # finite float: _clock without the conversions
+            now = self._now
+            if t > now:
+                now = self._now = t
+        else:
+            now = self._clock(t)
         if self._powered:
             for node in self.nodes:
                 node._tick(now)
-        return self._drain()
+        out = self._out
+        if out:
+            frames = out.copy()
+            out.clear()
+            return frames
+        return []
 
     # ------------------------------------------------------------------ fault hooks
 

@@ -96,3 +96,21 @@ def test_help_lists_commands(capsys):
     assert e.value.code == 0
     out = capsys.readouterr().out
     assert "simulate" in out and "analyze" in out and "exit status" in out
+
+
+def test_safety_violation_aborts_with_reason_and_exit_2(tmp_path):
+    chk = tmp_path / "check.toml"
+    chk.write_text(default_profile_path("check.toml").read_text().replace(
+        "max_following_error_mm = 0.5", "max_following_error_mm = 0.002"))
+    out = tmp_path / "run"
+    rc = main(["simulate", "--check", str(chk), "--out", str(out), "--quiet"])
+    assert rc == 2
+    res = json.loads((out / "result.json").read_text())
+    meta = json.loads((out / "meta.json").read_text())
+    assert res["status"] == "aborted" and meta["status"] == "aborted"
+    assert "max_following_error_mm" in res["reason"] and "following error" in meta["reason"]
+    # both drives were commanded to DISABLED on the abort, and the data up to it is kept
+    lines = (out / "signals.csv").read_text().splitlines()
+    last = lines[-1].split(",")
+    assert last[-1] == "aborted" and last[7] == "0" and last[9] == "0"
+    assert len(lines) > 2

@@ -221,3 +221,19 @@ def test_unknown_and_malformed_frames_are_counted_not_fatal(actuation, pair):
     m.on_frame(Frame(0x181, b"\x01\x02\x03"), p.t)  # TPDO1 too short
     assert m.unknown_frames == 1 and m.bad_frames == 1
     assert p.sync() is not None
+
+
+def test_errors_latch_and_force_quick_stop(actuation, pair):
+    m, p = _preflight(actuation, pair)
+    smp = p.sync()
+    for _ in range(12):
+        hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
+        p.send(m.setpoint_frames(*hold, smp))
+        smp = p.sync()
+    assert m.fault is None and not m.quick_stop
+    with pytest.raises(DriveFault):
+        m.on_frame(Frame(0x081, struct.pack("<HB5x", 0x2310, 0x03)), p.t)
+    assert isinstance(m.fault, DriveFault) and m.quick_stop
+    off = Setpoint(DriveMode.DISABLED, 0.0)
+    rpdo1 = [f for f in m.setpoint_frames(off, off, smp) if f.arbitration_id == 0x201]
+    assert rpdo1[0].data[:2] == bytes([0x02, 0x00])  # quick stop

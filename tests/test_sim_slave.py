@@ -690,3 +690,80 @@ def test_node_ids_and_counts_per_rev_option():
     frames = rig.sync_by_id()
     assert set(frames) == {0x185, 0x285, 0x189, 0x289}
     assert pair.nodes[1].ema_index == 1 and pair.nodes[1].node_id == 9
+
+
+# ------------------------------------------------------------------ cached values stay in step with the OD
+
+
+def test_emcy_cob_id_written_by_sdo_takes_effect(rig):
+    # the write check of 0x1014 reads the old value: the new one must still win
+    rig.write(1, 0x1014, 0, "I", 0x8000_0081)  # EMCY of node 1 not sent
+    assert rig.read(1, 0x1014, 0, "I") == 0x8000_0081
+    assert rig.pair.inject_fault(0, 0x2310) == []
+    assert rig.pair.inject_fault(1, 0x2310) == [Frame(0x082, bytes.fromhex("1023 03 0000000000"))]
+    assert rig.pair.stats.emcys_sent == 1
+    rig.write(1, 0x1014, 0, "I", 0x0000_0095)  # valid again, on another CAN-ID
+    rig.nmt(0x01)
+    # PDO length error: error register = fault bits 0x03 | communication 0x11
+    assert rig.send(Frame(0x201, b"\x06")) == [Frame(0x095, bytes.fromhex("1082 13 0000000000"))]
+
+
+def test_counts_per_rev_written_by_sdo_rescales_position_and_target_at_once(rig):
+    rig.enable()
+    for k in range(100):  # 50 ms ramp to 1024 increments (a quarter turn), then hold
+        p = round(1024 * min(1.0, (k + 1) / 25))
+        rig.cycle((0x0F, 0x0F), (p, p))
+    assert rig.pair.nodes[0].setpoint.value == pytest.approx(1024 * 2 * math.pi / 4096, rel=1e-12)
+    rig.write(1, 0x608F, 1, "I", 8192)  # node 1 only
+    phi1, phi2 = rig.pair.sample.phi1_rad, rig.pair.sample.phi2_rad
+    assert rig.pair.nodes[0].position_inc == round(phi1 * 8192 / (2 * math.pi))
+    frames = rig.cycle((0x0F, 0x0F), (1024, 1024))
+    assert position(frames, 1) == round(phi1 * 8192 / (2 * math.pi))  # the sample of this SYNC
+    assert position(frames, 2) == round(phi2 * 4096 / (2 * math.pi))
+    assert abs(position(frames, 1) - 2048) <= 2 * TARGET_WINDOW_INC  # at the target, twice the counts
+    assert rig.pair.nodes[0].setpoint.value == pytest.approx(1024 * 2 * math.pi / 8192, rel=1e-12)
+    assert rig.pair.nodes[1].setpoint.value == pytest.approx(1024 * 2 * math.pi / 4096, rel=1e-12)
+    rig.write(1, 0x608F, 2, "I", 2)  # 4096 increments per revolution again
+    rig.cycle((0x0F, 0x0F), (1024, 1024))
+    assert rig.pair.nodes[0].setpoint.value == pytest.approx(1024 * 2 * math.pi / 4096, rel=1e-12)
+
+
+def test_repeated_controlword_counts_as_illegal_in_every_state_that_refuses_it(rig):
+    rig.enable()
+    for _ in range(5):  # 0x0F repeated in OPERATION_ENABLED: no-op
+        rig.cycle((0x0F, 0x0F))
+    assert rig.pair.stats.illegal_commands == 0
+    rig.pair.inject_fault(0, 0x8611)
+    counts = []
+    for _ in range(4):  # the same word in FAULT_REACTION_ACTIVE, then FAULT: refused every cycle
+        assert status(rig.cycle((0x0F, 0x0F)), 2) == SW_OE_CSP_REACHED
+        counts.append(rig.pair.stats.illegal_commands)
+    assert counts == [1, 2, 3, 4]
+    for cw in (0x00, 0x80, 0x06, 0x07, 0x0F, 0x0F, 0x0F):  # fault reset and enable again
+        rig.cycle((cw, 0x0F))
+    assert rig.pair.nodes[0].state_machine.state is State.OPERATION_ENABLED
+    assert rig.pair.stats.illegal_commands == 5  # + disable voltage (0x00) refused in FAULT
+
+
+def test_tpdo_with_a_stored_object_and_an_event_rpdo_with_two_side_effects(rig):
+    # TPDO2 of node 1: max torque 0x6072 (a stored object), statusword, position
+    rig.write(1, 0x1801, 1, "I", 0x8000_0281)
+    rig.write(1, 0x1A01, 0, "B", 0)
+    for k, entry in enumerate((0x60720010, 0x60410010, 0x60640020), start=1):
+        rig.write(1, 0x1A01, k, "I", entry)
+    rig.write(1, 0x1A01, 0, "B", 3)
+    rig.write(1, 0x1801, 1, "I", 0x281)
+    # RPDO2 of node 1 (event driven): modes of operation, then controlword
+    rig.write(1, 0x1401, 1, "I", 0x8000_0301)
+    rig.write(1, 0x1601, 0, "B", 0)
+    rig.write(1, 0x1601, 1, "I", 0x60600008)
+    rig.write(1, 0x1601, 2, "I", 0x60400010)
+    rig.write(1, 0x1601, 0, "B", 2)
+    rig.write(1, 0x1401, 1, "I", 0x301)
+    rig.nmt(0x01)
+    assert rig.sync_by_id()[0x281].data == bytes.fromhex("1027 5002 00000000")  # 10000 per mille, SOD
+    rig.write(1, 0x6072, 0, "H", 500)
+    assert rig.send(Frame(0x301, bytes.fromhex("08 0600"))) == []  # applied on reception
+    assert rig.read(1, 0x6061, 0, "b") == 8 and rig.read(1, 0x6041, 0, "H") == SW_READY
+    assert rig.sync_by_id()[0x281].data == bytes.fromhex("F401 3102 00000000")
+    assert rig.pair.stats.rpdos_applied == 1
