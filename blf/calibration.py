@@ -343,20 +343,26 @@ def _invert_monotone(coeffs, s: np.ndarray, x_min: float, x_max: float) -> np.nd
         xi = x_min + (ti - t_lo) / (t_hi - t_lo) * (x_max - x_min)
         scale = max(abs(x_min), abs(x_max), 1.0)
         s_scale = max(abs(p_lo), abs(p_hi), 1.0)
+        tol_f = 1e-14 * s_scale
         for _ in range(200):
             f = direction * _polyval(coeffs, xi) - ti
+            # an element whose residual is already small is final: stepping it again
+            # could move it (Newton step below the bracket's resolution -> bisection)
+            done = np.abs(f) <= tol_f
+            if np.all(done):
+                break
             pos = f > 0.0
             hi = np.where(pos, xi, hi)
             lo = np.where(pos, lo, xi)
             dfx = direction * _polyval(dcoef, xi)
             with np.errstate(divide="ignore", invalid="ignore"):
                 xn = xi - f / dfx
-            bad = ~np.isfinite(xn) | (xn <= lo) | (xn >= hi)
+            bad = ~np.isfinite(xn) | (xn < lo) | (xn > hi)
             xn = np.where(bad, 0.5 * (lo + hi), xn)
-            xn = np.where(f == 0.0, xi, xn)
+            xn = np.where(done, xi, xn)
             step = np.abs(xn - xi)
             xi = xn
-            if np.all((step <= 1e-14 * scale) | (np.abs(f) <= 1e-14 * s_scale)):
+            if np.all(step <= 1e-14 * scale):
                 break
         x[inside] = xi
     return x.reshape(s.shape)

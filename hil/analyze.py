@@ -17,7 +17,7 @@ from blf.calibration import LvdtCalibration, fit_lvdt_calibration
 from blf.maint import BlfMaintResult, blf_maint
 from blf.signals import position_differences
 from hil.config import Actuation
-from hil.errors import AnalysisError, RecordingError
+from hil.errors import AnalysisError, IncompleteRecordingError, RecordingError
 from hil.runfolder import Signals
 
 CHANNELS = ("int1", "int2", "ext")
@@ -123,10 +123,39 @@ def _trim(mask: np.ndarray, frac: float = 0.02) -> np.ndarray:
     return out
 
 
+def check_units(sig: Signals, act: Actuation) -> None:
+    """Refuse a recording whose columns are plainly in other units than the file format's.
+
+    Time [s]: the median sample period must be within a factor 2 of the actuation's SYNC
+    period (a column in ms is 1000 times too large). Stroke [mm]: |s| must stay within twice
+    the stroke limit (a column in um is 1000 times too large). Force [N]: |F| must stay within
+    the limit load (in kN, a check's forces would stay below 10 "N", which is noted, not
+    refused: an unloaded recording looks the same).
+    """
+    T = act.timing.sync_period_s
+    dt = sig.sample_period_s
+    if not 0.5 * T <= dt <= 2.0 * T:
+        hint = " (time in ms?)" if 500 * T <= dt <= 2000 * T else ""
+        raise RecordingError(f"column 't' [s]: median sample period {dt:g} s does not match the actuation's "
+                             f"SYNC period timing.sync_period_s = {T:g} s{hint}")
+    lim = act.mechanics.stroke_limit_mm
+    for name in ("s1", "s2"):
+        peak = float(np.max(np.abs(getattr(sig, name))))
+        if peak > 2.0 * lim:
+            raise RecordingError(f"column '{name}' [mm]: |{name}| reaches {peak:g}, beyond twice the stroke limit "
+                                 f"{lim:g} mm (stroke in um?)")
+    for name in ("F1", "F2"):
+        peak = float(np.max(np.abs(getattr(sig, name))))
+        if peak > act.mechanics.limit_load_N:
+            raise RecordingError(f"column '{name}' [N]: |{name}| reaches {peak:g}, beyond the limit load "
+                                 f"{act.mechanics.limit_load_N:g} N (force in another unit?)")
+
+
 def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
     """Calibrate the LVDTs, form the D signals and run BLFmaint on all three channels."""
     if sig.n < 1000:
-        raise RecordingError(f"recording too short for the check: {sig.n} samples (need >= 1000)")
+        raise IncompleteRecordingError(f"recording too short for the check: {sig.n} samples (need >= 1000)")
+    check_units(sig, act)
     seg = find_segments(sig, act)
     i = act.mechanics.i_total_rad_per_mm
     notes = list(sig.notes)

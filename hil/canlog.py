@@ -12,6 +12,7 @@ master does, and the RPDOs for the setpoint columns.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import numpy as np
 
 from hil.cia402 import OperationMode
 from hil.config import Actuation
-from hil.errors import RecordingError
+from hil.errors import IncompleteRecordingError, RecordingError
 from hil.pdo import (
     SYNC_COB_ID,
     Frame,
@@ -38,13 +39,21 @@ from hil.runfolder import Signals
 
 
 class CanLogWriter:
-    """Append frames to a candump ``.log`` file, flushed every ``flush_frames`` frames."""
+    """Append frames to a candump ``.log`` file as they happen.
 
-    def __init__(self, path: Path, channel: str = "can0", flush_frames: int = 2000) -> None:
+    Flushed to the OS every ``flush_frames`` frames and whenever the frame time
+    moved ``flush_period_s`` past the last flush, so a killed master loses at
+    most that much of the log (the last line may be cut short: readers drop it).
+    """
+
+    def __init__(self, path: Path, channel: str = "can0", flush_frames: int = 2000,
+                 flush_period_s: float = 0.5) -> None:
         self.path = path
         self._w = can.io.CanutilsLogWriter(str(path), channel=channel)
         self._n = 0
         self._flush_frames = flush_frames
+        self._flush_period_s = flush_period_s
+        self._flushed_t = 0.0
         self.frames = 0
 
     def write(self, frame: Frame, t: float, rx: bool) -> None:
@@ -57,8 +66,9 @@ class CanLogWriter:
         self._w.on_message_received(msg)
         self.frames += 1
         self._n += 1
-        if self._n >= self._flush_frames:
+        if self._n >= self._flush_frames or msg.timestamp - self._flushed_t >= self._flush_period_s:
             self.flush()
+            self._flushed_t = msg.timestamp
 
     def flush(self) -> None:
         self._w.file.flush()
@@ -77,6 +87,30 @@ class DecodedLog:
     bad_lines: int
 
 
+_LINE = re.compile(rb"\(\d+(?:\.\d+)?\) \S+ [0-9A-Fa-f]{3}(?:[0-9A-Fa-f]{5})?#(?:[0-9A-Fa-f]{2}){0,8}(?: [RT])?")
+
+
+def _check_lines(path: Path) -> bool:
+    """Refuse a CAN log with lines that are not candump frames, naming the first one.
+
+    A last line without its newline (the writer was killed mid-line) is tolerated:
+    returns True when there is one (the reader drops it as a bad line).
+    """
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
+    lines = data.split(b"\n")
+    cut_short = bool(lines) and lines[-1] != b""
+    body = lines[:-1]
+    match = _LINE.fullmatch
+    for k, line in enumerate(body, start=1):
+        if line and match(line) is None:
+            shown = line[:60].decode("ascii", "replace")
+            raise RecordingError(f"{path}: line {k}: not a candump frame line '(time) channel ID#DATA': {shown!r}")
+    return cut_short
+
+
 def decode_can_log(path: str | Path, act: Actuation, rated_torque_Nm: float = 1.0) -> DecodedLog:
     """Decode a candump log of a check into run-folder signals.
 
@@ -89,6 +123,7 @@ def decode_can_log(path: str | Path, act: Actuation, rated_torque_Nm: float = 1.
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such CAN log")
+    cut_short = _check_lines(path)
     n1, n2 = act.canopen.node_ids
     counts = act.sensors.resolver_counts_per_rev
     i_total = act.mechanics.i_total_rad_per_mm
@@ -170,10 +205,11 @@ def decode_can_log(path: str | Path, act: Actuation, rated_torque_Nm: float = 1.
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
     if not rows:
-        raise RecordingError(f"{path}: no complete SYNC cycle with TPDOs of nodes {n1} and {n2}")
+        raise IncompleteRecordingError(f"{path}: no complete SYNC cycle with TPDOs of nodes {n1} and {n2}")
     a = np.asarray(rows)
     s = np.asarray(setp)
     sig = Signals(t=a[:, 0], phi1=a[:, 1], phi2=a[:, 2], s1=a[:, 3], s2=a[:, 4], F1=a[:, 5], F2=a[:, 6],
                   mode1=s[:, 0], sp1=s[:, 1], mode2=s[:, 2], sp2=s[:, 3],
-                  notes=(f"decoded from CAN log {path.name}: {incomplete} incomplete cycle(s), {bad} bad line(s)",))
+                  notes=(f"decoded from CAN log {path.name}: {incomplete} incomplete cycle(s), {bad} bad line(s)",)
+                  + (("last line incomplete (recording cut short), dropped",) if cut_short else ()))
     return DecodedLog(sig, frames, syncs, incomplete, bad)

@@ -29,16 +29,24 @@ from can.interfaces.virtual import VirtualBus
 from hil.canlog import CanLogWriter
 from hil.cia402 import State
 from hil.errors import EmacheckError
-from hil.master import MasterCore, NmtCommand, PreflightError
+from hil.master import MasterCore, PreflightError
+from hil.nmt import NmtCommand
 from hil.pdo import SYNC_COB_ID, Frame, sync_frame
 from hil.sdo import SdoAbortError, SdoTimeout
 from hil.types import DriveMode, Sample, Setpoint
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
+#: Safe-state cycles after which a drive still in OPERATION_ENABLED gets the quick stop by SDO
+#: (and again every as many cycles): its RPDOs are not getting through.
+SDO_FALLBACK_CYCLES = 5
 
 
 class LinkError(EmacheckError, RuntimeError):
     """The cyclic exchange with the drives broke down (no samples)."""
+
+
+class StaleData(LinkError):
+    """Sensor freshness: no complete sample for more SYNC cycles than ``safety.max_stale_cycles``."""
 
 
 class Transport(Protocol):
@@ -327,6 +335,9 @@ class CanopenLink:
         Every frame sent and received is logged as it happens.
     on_event : callable, optional
         Receives the master's events (boot-up, states, EMCY, ...).
+    max_missing_cycles : int
+        Sensor freshness: SYNC cycles in a row without a complete sample before
+        :class:`StaleData` is raised (the check's ``safety.max_stale_cycles``).
     """
 
     def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
@@ -339,6 +350,9 @@ class CanopenLink:
         self._last: Sample | None = None
         self._closed = False
         self.sync_times: list[float] = []
+        self.final_states: dict | None = None  #: per EMA, after :meth:`close`
+        self._safe_cycles = 0
+        self.close_errors: list[str] = []  #: errors met while stopping the drives (recorded, not raised)
 
     # -------------------------------------------------------------- plumbing
 
@@ -397,29 +411,21 @@ class CanopenLink:
 
     def _next_sample(self) -> Sample:
         """Run one SYNC cycle and return its sample (SYNC, TPDOs of both drives)."""
-        inproc = isinstance(self.tr, InProcessTransport)
         missing = 0
         while True:
-            self._sync()
-            cycle_end = self.tr.now() + self.tr.T
-            sample = None
-            while True:
-                # in-process: deliver what is in flight (time stands still until the next SYNC);
-                # on a bus: wait for frames until the cycle would end
-                got = self.tr.receive(self.tr.now() if inproc else cycle_end)
-                if got:
-                    self._feed(got)
-                self._send(self.m.poll(self.tr.now()))
-                sample = self.m.take_sample()
-                if sample is not None or not got or (not inproc and self.tr.now() >= cycle_end):
-                    break
+            sample = self._cycle(stop_at_sample=True)
             if sample is not None:
                 self._last = sample
                 return sample
             missing += 1
             if missing > self.max_missing:
-                raise LinkError(f"no complete sample from the drives for {missing} SYNC cycles "
-                                f"(missing TPDOs; drive states {[d.state.name for d in self.m.drives.values()]})")
+                err = StaleData(f"sensor data stale: no complete sample for {missing} SYNC cycles "
+                                f"(safety.max_stale_cycles = {self.max_missing}); missing: "
+                                + ", ".join(f"node {n} TPDO{k}" for n, d in self.m.drives.items()
+                                            for k, tp in ((1, d.tpdo1), (2, d.tpdo2)) if tp is None)
+                                + f"; drive states {[d.state.name for d in self.m.drives.values()]}")
+                self.m._latch(err)
+                raise err
 
     def first_sample(self) -> Sample:
         """Preflight, start SYNC, enable both drives in CSP holding their position."""
@@ -438,6 +444,10 @@ class CanopenLink:
         return smp
 
     def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
+        if self.m.fault is not None and sp1.mode is DriveMode.DISABLED and sp2.mode is DriveMode.DISABLED:
+            # stopping after a fault: one safe-state cycle, no complete sample required
+            self._safe_cycle()
+            return self._last
         self._send(self.m.setpoint_frames(sp1, sp2, self._last))
         return self._next_sample()
 
@@ -445,20 +455,80 @@ class CanopenLink:
         """The check aborted: drives go down by quick stop."""
         self.m.quick_stop = True
 
+    def _safe_cycle(self) -> None:
+        """One SYNC cycle of the safe-state sequence: DISABLED setpoints (quick stop when aborting),
+        SYNC, whatever the drives answer; no complete sample needed (a drive may be gone)."""
+        if self._last is not None:
+            self._send(self.m.setpoint_frames(DISABLED, DISABLED, self._last))
+        self._safe_cycles += 1
+        if self._safe_cycles % SDO_FALLBACK_CYCLES == 0:  # a drive that ignores its RPDOs: by SDO
+            self._send(self.m.fallback_stop_frames(self.tr.now()))
+        sample = self._cycle(stop_at_sample=False)
+        if sample is not None:
+            self._last = sample
+
+    def _cycle(self, stop_at_sample: bool) -> Sample | None:
+        """SYNC, then the frames of this cycle; returns the cycle's sample if it completed.
+
+        In-process: deliver what is in flight (time stands still until the next SYNC); on a
+        bus: wait for frames until the cycle would end (or, with ``stop_at_sample``, until the
+        sample is complete).
+        """
+        self._sync()
+        inproc = isinstance(self.tr, InProcessTransport)
+        cycle_end = self.tr.now() + self.tr.T
+        found = None
+        while True:
+            got = self.tr.receive(self.tr.now() if inproc else cycle_end)
+            if got:
+                self._feed(got)
+            self._send(self.m.poll(self.tr.now()))
+            sample = self.m.take_sample()
+            if sample is not None:
+                found = sample
+                if stop_at_sample:
+                    return found
+            if not got or (not inproc and self.tr.now() >= cycle_end):
+                return found
+
     def close(self) -> None:
-        """Bring both drives down to SWITCH_ON_DISABLED, stop SYNC, NMT pre-operational."""
+        """Bring both drives down to the safe state, stop SYNC, NMT pre-operational, close the log.
+
+        Orderly (disable operation, shutdown, disable voltage) after a finished check, quick stop
+        then disable after an abort. A drive that cannot be reached (heartbeat lost, no statusword)
+        does not hold up the other. Every step runs even if an earlier one fails; the first error
+        is re-raised at the end. :attr:`final_states` then holds each drive's last known state.
+        """
         if self._closed:
             return
         self._closed = True
+        errors: list[BaseException] = []
         try:
             if self._last is not None and self.m.preflight_done:
                 deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
-                while not self.m.all_in(State.SWITCH_ON_DISABLED) and self.tr.now() < deadline:
-                    self._send(self.m.setpoint_frames(DISABLED, DISABLED, self._last))
-                    self._next_sample()
-            self.tr.stop_sync()
-            self._send(self.m.nmt_frames(NmtCommand.PRE_OPERATIONAL))
-            self._feed(self.tr.receive(self.tr.now()))
-        finally:
-            if self.log is not None:
+                while not self.m.in_safe_state(self.tr.now()) and self.tr.now() < deadline:
+                    try:
+                        self._safe_cycle()
+                    except EmacheckError as exc:  # recorded; keep stopping the drives
+                        errors.append(exc)
+                        if len(errors) > 50:
+                            break
+        except BaseException as exc:
+            errors.append(exc)
+        self.final_states = self.m.safe_state_report(self.tr.now())
+        self.close_errors = [f"{type(e).__name__}: {e}" for e in errors]
+        for step in (self.tr.stop_sync,
+                     lambda: self._send(self.m.nmt_frames(NmtCommand.PRE_OPERATIONAL)),
+                     lambda: self._feed(self.tr.receive(self.tr.now()))):
+            try:
+                step()
+            except BaseException as exc:
+                errors.append(exc)
+        if self.log is not None:
+            try:
                 self.log.close()
+            except BaseException as exc:
+                errors.append(exc)
+        fatal = [e for e in errors if not isinstance(e, EmacheckError)]
+        if fatal:
+            raise fatal[0]

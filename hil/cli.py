@@ -18,7 +18,8 @@ from hil.errors import EmacheckError, ProfileError, RecordingError
 EXIT_PASS, EXIT_FAIL, EXIT_ABORTED, EXIT_INPUT, EXIT_INTERNAL = 0, 1, 2, 3, 4
 
 _EPILOG = """\
-exit status: 0 pass, 1 fail (backlash above B_spec), 2 check aborted,
+exit status: 0 pass, 1 fail (backlash above B_spec), 2 check aborted
+(analyze: also a run that did not finish, reported incomplete),
 3 bad input (profile, recording, arguments), 4 internal error.
 Profiles default to the ones shipped in the package (profiles/*.toml)."""
 
@@ -122,6 +123,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("improved", "paper"), default="improved",
                    help="backlash from plateau levels (improved, default) or the paper's Delta D")
     p.add_argument("--no-report", action="store_true", help="write serv.json only, no HTML report")
+
+    p = sub.add_parser("diagnose", help="simulation versus recording: locate the mismatch, name the missing physics",
+                       description="Replay a recording through the simulation driven by the measured motor "
+                                   "angles, fit the nominal model, localise where they differ, screen a library "
+                                   "of candidate physics terms, refit the best and accept it only if BIC and a "
+                                   "held-out half of the recording both improve. Writes diagnosis.json and "
+                                   "diagnosis_report.html.",
+                       epilog="exit status: 0 done, 3 bad input (profile, recording, arguments).",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("recording", metavar="RECORDING", type=Path,
+                   help="run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2), CAN log; single-axis: .mat or "
+                        "CSV t,q,q_ref,force")
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path, help="actuation profile (gear ratio)")
+    p.add_argument("--out", metavar="DIR", type=Path,
+                   help="where diagnosis.json and diagnosis_report.html go (default: the run folder, or next to the file)")
+    p.add_argument("--model", choices=("dual-ema", "single-axis"), default="dual-ema",
+                   help="dual-EMA rig (default) or a single positioning axis (e.g. EMPS)")
+    p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
     return ap
 
 
@@ -147,6 +167,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.cmd == "serv":
             from hil.serv_cmd import cmd_serv
             return cmd_serv(args)
+        if args.cmd == "diagnose":
+            from hil.diagnose_cmd import cmd_diagnose
+            return cmd_diagnose(args)
         if args.cmd == "analyze":
             from hil.commands import cmd_analyze
             return cmd_analyze(args)

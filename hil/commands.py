@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from rich.console import Console
@@ -14,7 +15,7 @@ from rich.table import Table
 
 from hil.analyze import CHANNELS, analyze_signals, result_dict
 from hil.config import Actuation
-from hil.errors import RecordingError
+from hil.errors import AnalysisError, EmacheckError, IncompleteRecordingError, RecordingError
 from hil.profiles import build_dataclass, load_actuation, load_check, load_simrig, snapshot
 from hil.runfolder import read_signals, resolve_recording, write_json_atomic
 
@@ -125,11 +126,21 @@ def analyze_and_report(sig_path: Path, act: Actuation, out_dir: Path, truth: dic
     if meta is not None and meta.get("status") == "aborted":
         result["status"] = "aborted"
         result["reason"] = meta.get("reason", "")
+    elif meta is not None and meta.get("status") == "running":
+        result["status"] = "incomplete"
+        result["reason"] = INCOMPLETE_REASON
+    if sig.notes:
+        result.setdefault("notes", [])
+        result["notes"] = list(result["notes"]) + [n for n in sig.notes if n not in result["notes"]]
     result["analysis_s"] = round(time.perf_counter() - t0, 3)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out_dir / "result.json", result)
     write_report(out_dir / "report.html", sig, an, result, act, meta)
     return result
+
+
+INCOMPLETE_REASON = ("the run did not finish (meta.json still says running: the master was killed or lost "
+                     "power); analysed what was logged up to its last flush")
 
 
 def _exit_for(result: dict) -> int:
@@ -172,14 +183,34 @@ def _master_setup(act, profile_path, out: Path):
     from hil.profiles import resolve_eds
 
     eds = resolve_eds(act, profile_path)
-    check_drive_od(load_drive_od(eds), source=str(eds))
+    od = load_drive_od(eds)
+    check_drive_od(od, source=str(eds))
     c = act.canopen
+    _check_eds_identity(od, c, eds)
     load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, act.timing.sync_period_s, c.heartbeat_period_s)
     if load.load_worst >= 0.5:
         from hil.errors import ProfileError
         raise ProfileError(f"bus load of the PDO layout at canopen.bitrate_bps = {c.bitrate_bps} is "
                            f"{load.load_worst:.1%} (worst case), not below 50 %")
     return eds, load
+
+
+def _check_eds_identity(od, c, eds) -> None:
+    """The EDS must describe the drive the profile expects (identity 0x1018:01/02/03 defaults)."""
+    from hil.errors import ProfileError
+
+    ident = od[0x1018] if 0x1018 in od else None
+    for sub, field_name, want, cmp in ((1, "vendor_id", c.vendor_id, "=="), (2, "product_code", c.product_code, "=="),
+                                       (3, "revision_min", c.revision_min, ">=")):
+        var = ident.subindices.get(sub) if ident is not None else None
+        have = getattr(var, "default", None)
+        if have is None:
+            raise ProfileError(f"EDS {eds}: identity 0x1018:{sub:02X} has no default value; cannot check it "
+                               f"against the profile's canopen.{field_name}")
+        ok = have == want if cmp == "==" else have >= want
+        if not ok:
+            raise ProfileError(f"EDS {eds}: identity 0x1018:{sub:02X} = 0x{have:08X} does not match the profile's "
+                               f"canopen.{field_name} = 0x{want:08X}: the EDS describes another drive")
 
 
 def _canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):
@@ -232,50 +263,86 @@ def _result_after(out: Path, act, truth, meta: dict, outcome, console: Console) 
     return _exit_for(result)
 
 
-def cmd_dry_run(args: argparse.Namespace) -> int:
-    """``emacheck dry-run``: the check over CANopen against two simulated drives (virtual bus)."""
+@dataclass
+class DryRun:
+    """What :func:`dry_run` leaves behind: the exit status, the outcome and the live objects
+    (the simulated pair with its fault injector and truth trace, the master, the link)."""
+
+    exit_code: int
+    outcome: object
+    out: Path
+    injector: object
+    master: object
+    link: object
+    wall_s: float
+
+
+def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=None, realtime: bool = False,
+            quiet: bool = True, console: Console | None = None, profile_path=None) -> DryRun:
+    """The check over CANopen against two simulated drives on an in-process virtual bus.
+
+    ``faults`` (a :class:`sim.faults.Fault` sequence) replaces the simulated-rig profile's
+    ``[[faults]]``. The profiles are validated by the caller; nothing is sent on the bus before
+    the EDS and the bus load are checked here.
+    """
     import numpy as np
 
     from hil.canlog import CanLogWriter
     from hil.canopen_link import CanopenLink, InProcessTransport
+    from hil.drive_od import load_drive_od
     from hil.master import MasterCore
     from hil.runner import start_meta
+    from sim.faults import FaultInjector
     from sim.plant import RigPlant
     from sim.slave import SimDrivePair
     from sim.truth import rig_truth
 
-    console = Console()
-    # every profile is validated before anything is sent on the bus
-    act = load_actuation(args.profile)
-    check = load_check(args.check, act)
-    simrig = load_simrig(args.sim)
-    eds, load = _master_setup(act, args.profile, None)
-    seed = simrig.seed if args.seed is None else args.seed
-    out = _out_dir(args, "dry-run")
+    console = console or Console(quiet=quiet)
+    eds, load = _master_setup(act, profile_path, None)
+    seed = simrig.seed if seed is None else seed
+    faults = tuple(simrig.faults if faults is None else faults)
     out.mkdir(parents=True, exist_ok=True)
-    plant = RigPlant(simrig.params, np.random.default_rng(seed))
-    from hil.drive_od import load_drive_od
+    rng = np.random.default_rng(seed)
+    plant = RigPlant(simrig.params, rng)
     pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id), node_ids=act.canopen.node_ids)
-    transport = InProcessTransport(pair, act.timing.sync_period_s, realtime=args.realtime)
-    master = MasterCore(act)
-    log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
-    link = CanopenLink(master, transport, log)
+    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=bool(faults))
     truth = truth_dict(rig_truth(simrig.params))
-    meta = start_meta(act, check, {"mode": "dry-run", "seed": seed, "realtime": bool(args.realtime),
+    meta = start_meta(act, check, {"mode": "dry-run", "seed": seed, "realtime": bool(realtime),
                                    "simrig": snapshot(simrig.params), "truth": truth,
+                                   "faults": [snapshot(f) for f in faults],
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
                                    "eds": str(eds)})
+    write_json_atomic(out / "meta.json", meta)  # the run folder says "running" from the start
+    # a channel of its own: python-can's virtual channels are process-global by name
+    transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
+                                   realtime=realtime)
+    master = MasterCore(act)
+    log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
+    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles)
     console.print(f"emacheck dry-run: two simulated CiA 402 drives (nodes {act.canopen.node_ids}) on an "
-                  f"in-process virtual CAN bus, seed {seed}, bus load {load.load_worst:.1%} worst case; "
-                  f"run folder {out}")
+                  f"in-process virtual CAN bus, seed {seed}, bus load {load.load_worst:.1%} worst case"
+                  + (f", {len(faults)} injected fault(s)" if faults else "") + f"; run folder {out}")
     try:
-        outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
+        outcome, wall = _canopen_check(console, act, check, link, out, meta, quiet)
     finally:
         transport.close()
     _record_can_stats(out, meta, wall, log, master)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated in {wall:.2f} s wall "
                   f"({outcome.duration_s / max(wall, 1e-9):.1f}x real time); {log.frames} CAN frames logged")
-    return _result_after(out, act, truth, meta, outcome, console)
+    rc = _result_after(out, act, truth, meta, outcome, console)
+    return DryRun(rc, outcome, out, injector, master, link, wall)
+
+
+def cmd_dry_run(args: argparse.Namespace) -> int:
+    """``emacheck dry-run``: the check over CANopen against two simulated drives (virtual bus)."""
+    console = Console()
+    # every profile is validated before anything is sent on the bus
+    act = load_actuation(args.profile)
+    check = load_check(args.check, act)
+    simrig = load_simrig(args.sim)
+    out = _out_dir(args, "dry-run")
+    return dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
+                   console=console, profile_path=args.profile).exit_code
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -313,6 +380,12 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
                                    "eds": str(eds)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
+    import gc
+
+    from hil.serve import lock_memory, realtime_priority
+    gc.collect()
+    gc.freeze()  # the set-up's objects are never scanned again: no long GC pause inside a SYNC cycle
+    console.print(f"real time: {lock_memory()}; {realtime_priority()}")
     try:
         outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
     finally:
@@ -334,7 +407,13 @@ def truth_dict(truth) -> dict:
 def cmd_analyze(args: argparse.Namespace) -> int:
     """``emacheck analyze``: recompute the result from a run folder or a signals CSV."""
     console = Console()
-    sig_path, run_dir = resolve_recording(args.recording)
+    arg = Path(args.recording)
+    try:
+        sig_path, run_dir = resolve_recording(arg)
+    except IncompleteRecordingError:
+        if not (arg.is_dir() and (arg / "meta.json").exists()):
+            raise
+        sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = None
     if run_dir is not None and (run_dir / "meta.json").exists():
         try:
@@ -349,7 +428,25 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         act = load_actuation(None)
     out = Path(args.out) if args.out is not None else (run_dir if run_dir is not None else sig_path.parent)
     truth = meta.get("truth") if meta else None
-    result = analyze_and_report(sig_path, act, out, truth, meta, console)
+    incomplete = meta is not None and meta.get("status") == "running"
+    try:
+        result = analyze_and_report(sig_path, act, out, truth, meta, console)
+    except (IncompleteRecordingError, AnalysisError) as exc:
+        # (bad content, e.g. garbage lines or NaN, is refused whatever the run's status)
+        if not incomplete and not (meta is not None and meta.get("status") == "aborted"):
+            raise
+        # an interrupted run with too little data for the analysis: say so, keep what is known
+        result = {"status": "incomplete" if incomplete else "aborted",
+                  "reason": INCOMPLETE_REASON if incomplete else meta.get("reason", ""),
+                  "analysis_error": f"{type(exc).__name__}: {exc}", "recording": str(sig_path)}
+        if truth is not None:
+            result["truth"] = truth
+        out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(out / "result.json", result)
+        console.print(f"[yellow]{result['status']}:[/yellow] {result['reason']}; no analysis: {exc}")
+        return EXIT_ABORTED
+    if incomplete:
+        console.print(f"[yellow]incomplete:[/yellow] {INCOMPLETE_REASON}")
     print_summary(console, result, out)
     return _exit_for(result)
 

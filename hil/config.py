@@ -82,11 +82,18 @@ class Actuation:
 # -------------------------------------------------------------------- check
 
 #: Hard caps that no check profile can raise, as fractions or absolute values.
+#: A profile value above its cap is refused at load naming the field, and the
+#: supervisor applies ``min(profile value, cap)`` again at run time.
 HARD_FORCE_FIGHT_FRACTION = 0.15  #: force fight at most 15 % of F_limit (paper 2.1)
 HARD_MAX_FORCE_FRACTION = 0.25  #: any EMA force at most 25 % of F_limit during the check
+HARD_MAX_FORCE_FIGHT_FRACTION = 0.20  #: measured force-fight level |F1 - F2| / 2 at most 20 % of F_limit
+HARD_MAX_FORCE_IMBALANCE_FRACTION = 0.10  #: |F1 + F2| (load cells disagree) at most 10 % of F_limit
 HARD_MAX_VELOCITY_MM_PER_S = 50.0
 HARD_MAX_FOLLOWING_ERROR_MM = 2.0
 HARD_MAX_D_INT_MM = 2.0
+HARD_LVDT_GAIN_TOLERANCE = 0.10  #: D plausibility allows this LVDT pitch error (the paper's is 7.5 %)
+HARD_MAX_STALE_CYCLES = 5  #: SYNC cycles a sample may be missing before it is stale
+HARD_MAX_FROZEN_CYCLES = 100  #: cycles a noisy sensor may repeat the same value
 
 
 @dataclass(frozen=True)
@@ -115,6 +122,8 @@ class ForceFightStep:
 
 @dataclass(frozen=True)
 class Safety:
+    """Supervisor limits of the check (profile ``[safety]``); each is capped by a hard constant."""
+
     max_force_N: float = field(metadata=_rng(0.0, 1e6, lo_open=True))
     max_stroke_mm: float = field(metadata=_rng(0.0, 200.0, lo_open=True))
     max_velocity_mm_per_s: float = field(
@@ -122,6 +131,14 @@ class Safety:
     max_following_error_mm: float = field(
         metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_FOLLOWING_ERROR_MM))
     max_d_int_mm: float = field(metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_D_INT_MM))
+    #: force-fight level |F1 - F2| / 2 (hard cap HARD_MAX_FORCE_FIGHT_FRACTION of F_limit)
+    max_force_fight_N: float = field(default=7000.0, metadata=_rng(0.0, 1e6, lo_open=True))
+    #: load-cell plausibility |F1 + F2| (hard cap HARD_MAX_FORCE_IMBALANCE_FRACTION of F_limit)
+    max_force_imbalance_N: float = field(default=2500.0, metadata=_rng(0.0, 1e6, lo_open=True))
+    #: sensor freshness: SYNC cycles in a row without a complete sample
+    max_stale_cycles: int = field(default=2, metadata=_rng(1, 1000, hard_max=HARD_MAX_STALE_CYCLES))
+    #: sensor freshness: cycles a noisy LVDT or load cell may repeat exactly the same value
+    max_frozen_cycles: int = field(default=25, metadata=_rng(3, 10_000, hard_max=HARD_MAX_FROZEN_CYCLES))
 
 
 @dataclass(frozen=True)

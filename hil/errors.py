@@ -19,6 +19,10 @@ class RecordingError(EmacheckError, ValueError):
     """A recording (signals CSV, run folder, CAN log) cannot be used."""
 
 
+class IncompleteRecordingError(RecordingError):
+    """A recording that is well-formed but ends too early or holds no data (e.g. a killed run)."""
+
+
 class AnalysisError(EmacheckError, ValueError):
     """The data do not support the requested analysis (e.g. no backlash traversal)."""
 

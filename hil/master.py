@@ -37,6 +37,7 @@ from typing import Generator
 from hil.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
 from hil.config import Actuation
 from hil.errors import EmacheckError
+from hil.nmt import NmtCommand, NmtState
 from hil.pdo import (
     DEFAULT_LAYOUT,
     EMCY_COB_ID_BASE,
@@ -70,21 +71,6 @@ class DriveFault(EmacheckError, RuntimeError):
 
 class HeartbeatLost(EmacheckError, RuntimeError):
     """A drive's heartbeat did not arrive within its timeout."""
-
-
-class NmtCommand(IntEnum):
-    START = 0x01
-    STOP = 0x02
-    PRE_OPERATIONAL = 0x80
-    RESET_NODE = 0x81
-    RESET_COMMUNICATION = 0x82
-
-
-class NmtState(IntEnum):
-    BOOT_UP = 0x00
-    STOPPED = 0x04
-    OPERATIONAL = 0x05
-    PRE_OPERATIONAL = 0x7F
 
 
 class EmcyCode(IntEnum):
@@ -203,6 +189,8 @@ class DriveView:
     tpdo1: object | None = None
     tpdo2: object | None = None
     identity: dict = field(default_factory=dict)
+    last_tpdo_s: float | None = None  #: time of the last TPDO1 (statusword) seen in the cyclic phase
+    lost: bool = False  #: heartbeat lost (the consumer fired for this node)
 
 
 def _u(data: bytes) -> int:
@@ -237,6 +225,8 @@ class MasterCore:
         self.unknown_frames = 0
         self.quick_stop = False  #: shut down by quick stop (abort) rather than orderly
         self.fault: BaseException | None = None  #: the first error, latched
+        self.fault_cycle: int | None = None  #: the cyclic-phase SYNC count when the fault latched
+        self.later_faults: list[str] = []  #: errors after the first one (recorded, not raised again)
         self._sdo = {n: SdoClient(n, timeout_s=c.sdo_timeout_s) for n in c.node_ids}
         self._gen: Generator | None = None
         self._pending: object | None = None
@@ -382,7 +372,17 @@ class MasterCore:
     def _latch(self, exc: BaseException) -> None:
         if self.fault is None:
             self.fault = exc
+            self.fault_cycle = self.cycle
         self.quick_stop = True
+
+    def _fail(self, exc: EmacheckError, t: float, node: int) -> None:
+        """Raise a fault of the cyclic phase, only the first one: once the master is stopping the
+        drives, later faults are recorded (:attr:`later_faults`, an event) so that the safe-state
+        sequence is not interrupted by them."""
+        if self.fault is None:
+            raise exc
+        self.later_faults.append(f"{type(exc).__name__}: {exc}")
+        self._event(t, "fault", node, str(exc))
 
     def _on_frame(self, frame: Frame, t: float) -> list[Frame]:
         cid = frame.arbitration_id
@@ -400,7 +400,7 @@ class MasterCore:
                 if base == 0x580:
                     return self._on_sdo(node, frame, t)
                 if base == 0x180:
-                    self.drives[node].tpdo1 = decode_tpdo1(frame)
+                    self._on_tpdo1(self.drives[node], decode_tpdo1(frame), t)
                     self._check_complete(t)
                     return []
                 if base == 0x280:
@@ -442,11 +442,11 @@ class MasterCore:
                     all(x.booted for x in self.drives.values()):
                 return self._advance(True, t)
             if self.phase is Phase.CYCLIC:
-                raise DriveFault(f"node {node}: unexpected boot-up during the check (drive reset)")
+                self._fail(DriveFault(f"node {node}: unexpected boot-up during the check (drive reset)"), t, node)
             return []
-        if self.phase is Phase.CYCLIC and state != NmtState.OPERATIONAL and d.nmt_state == NmtState.OPERATIONAL:
-            raise DriveFault(f"node {node}: left NMT operational (heartbeat state 0x{state:02X})")
-        d.nmt_state = state
+        prev, d.nmt_state = d.nmt_state, state
+        if self.phase is Phase.CYCLIC and state != NmtState.OPERATIONAL and prev == NmtState.OPERATIONAL:
+            self._fail(DriveFault(f"node {node}: left NMT operational (heartbeat state 0x{state:02X})"), t, node)
         return []
 
     def _on_emcy(self, node: int, data: bytes, t: float) -> None:
@@ -458,7 +458,7 @@ class MasterCore:
         self.emcy.append(e)
         self._event(t, "emcy", node, str(e))
         if code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
-            raise DriveFault(str(e))
+            self._fail(DriveFault(str(e)), t, node)
 
     # ------------------------------------------------------------------ timing
 
@@ -479,10 +479,17 @@ class MasterCore:
             for c in self._sdo.values():
                 c.poll(t)  # raises SdoTimeout (its abort frame is in the exception)
         elif self.phase is Phase.CYCLIC:
+            # polled once per SYNC period: fire at the first poll within half a period of the
+            # timeout, so the consumer reacts no later than timeout + T/2 (= the timeout on the
+            # SYNC grid), not timeout + T
+            limit = self.hb_timeout_s - 0.5 * self.T
             for n, d in self.drives.items():
-                if d.last_heartbeat_s is not None and t - d.last_heartbeat_s > self.hb_timeout_s:
-                    raise HeartbeatLost(f"node {n}: heartbeat lost (none for {t - d.last_heartbeat_s:.3f} s, "
-                                        f"timeout {self.hb_timeout_s:.3f} s)")
+                if not d.lost and d.last_heartbeat_s is not None and t - d.last_heartbeat_s > limit:
+                    d.lost = True
+                    self._event(t, "heartbeat", n, "heartbeat lost")
+                    self._fail(HeartbeatLost(f"node {n} (EMA {self.order.index(n) + 1}): heartbeat lost "
+                                             f"(none for {t - d.last_heartbeat_s:.3f} s, "
+                                             f"timeout {self.hb_timeout_s:.3f} s)"), t, n)
         return []
 
     # ------------------------------------------------------------------ cyclic
@@ -499,6 +506,23 @@ class MasterCore:
         for d in self.drives.values():
             d.tpdo1 = d.tpdo2 = None
 
+    def _on_tpdo1(self, d: DriveView, tp, t: float) -> None:
+        """Statusword and mode of one drive, as soon as its TPDO1 arrives (also without a
+        complete sample, so that the safe-state sequence sees every drive it can reach)."""
+        d.tpdo1 = tp
+        if self.phase is not Phase.CYCLIC:
+            return
+        d.last_tpdo_s = t
+        d.statusword = tp.statusword
+        new = decode_state(d.statusword)
+        if new != d.state:
+            self._event(t, "state", d.node_id, f"{d.state.name} -> {new.name}")
+            d.state = new
+        d.mode_display = tp.mode_display
+        if new in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            self._fail(DriveFault(f"node {d.node_id}: drive in {new.name} (statusword 0x{d.statusword:04X})"),
+                       t, d.node_id)
+
     def _check_complete(self, t: float) -> None:
         if self.phase is not Phase.CYCLIC or self._complete:
             return
@@ -506,13 +530,6 @@ class MasterCore:
             return
         self._complete = True
         d1, d2 = (self.drives[n] for n in self.order)
-        for d in (d1, d2):
-            d.statusword = d.tpdo1.statusword
-            new = decode_state(d.statusword)
-            if new != d.state:
-                self._event(t, "state", d.node_id, f"{d.state.name} -> {new.name}")
-                d.state = new
-            d.mode_display = d.tpdo1.mode_display
         self._sample = Sample(
             t_s=self.cycle * self.T,
             phi1_rad=increments_to_rad(d1.tpdo1.position_inc, self.counts),
@@ -522,9 +539,6 @@ class MasterCore:
             F1_N=force_dN_to_newton(d1.tpdo2.force_dN),
             F2_N=force_dN_to_newton(d2.tpdo2.force_dN),
         )
-        for d in (d1, d2):
-            if d.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
-                raise DriveFault(f"node {d.node_id}: drive in {d.state.name} (statusword 0x{d.statusword:04X})")
 
     def take_sample(self) -> Sample | None:
         """The sample of the current cycle once both drives' TPDOs arrived (else None)."""
@@ -553,6 +567,8 @@ class MasterCore:
                     cmd = Command.QUICK_STOP
                 elif d.state is State.QUICK_STOP_ACTIVE:
                     cmd = Command.QUICK_STOP  # keep it until the drive is through
+                elif self.quick_stop and d.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+                    cmd = None  # aborting: a faulted drive is safe (power stage off); never reset it here
                 else:
                     # orderly: disable operation (drive stops under control), shutdown, disable voltage;
                     # not the shortest path (disable voltage cuts the power stage at once)
@@ -578,6 +594,46 @@ class MasterCore:
     def nmt_frames(self, command: NmtCommand) -> list[Frame]:
         return [Frame(0x000, bytes([int(command), 0]))]
 
+    def fallback_stop_frames(self, t: float) -> list[Frame]:
+        """Quick stop by SDO for drives still in OPERATION_ENABLED although the RPDOs asked for it.
+
+        Fallback of the safe-state sequence when a drive's RPDOs do not get through: an expedited
+        SDO download of the controlword (0x6040 = quick stop) to every drive whose fresh statusword
+        still says OPERATION_ENABLED. Fire and forget: the response is not awaited (the cyclic
+        phase ignores SDO responses); the statusword in TPDO1 confirms.
+        """
+        out = []
+        for n, d in self.drives.items():
+            if self.quick_stop and d.state is State.OPERATION_ENABLED and self._confirmed(d, t):
+                out.append(Frame(0x600 + n, struct.pack("<BHBH2x", 0x2B, 0x6040, 0, controlword(Command.QUICK_STOP))))
+                self._event(t, "sdo", n, "quick stop by SDO (0x6040): the drive did not follow the RPDOs")
+        return out
+
+    def unreachable(self, t: float) -> list[int]:
+        """Nodes the master cannot reach: heartbeat lost and no statusword for a heartbeat timeout."""
+        return [n for n, d in self.drives.items() if d.lost and not self._confirmed(d, t)]
+
+    def _confirmed(self, d: DriveView, t: float) -> bool:
+        """The drive's statusword is fresh (seen within the last heartbeat timeout)."""
+        return d.last_tpdo_s is not None and t - d.last_tpdo_s <= self.hb_timeout_s
+
+    def in_safe_state(self, t: float) -> bool:
+        """Every drive the master can reach is disabled: SWITCH_ON_DISABLED (or below) or FAULT."""
+        gone = self.unreachable(t)
+        return all(d.state in SAFE_STATES and self._confirmed(d, t)
+                   for n, d in self.drives.items() if n not in gone)
+
+    def safe_state_report(self, t: float) -> dict:
+        """Per EMA: the drive's last known state, whether it could be reached (heartbeat), whether
+        that state is confirmed by a fresh statusword, and whether it is the safe state."""
+        out = {}
+        for k, n in enumerate(self.order, start=1):
+            d = self.drives[n]
+            ok = self._confirmed(d, t)
+            out[f"ema{k}"] = {"node": n, "state": d.state.name, "reachable": not d.lost, "confirmed": ok,
+                              "safe": ok and d.state in SAFE_STATES}
+        return out
+
     def all_in(self, state: State) -> bool:
         return all(d.state is state for d in self.drives.values())
 
@@ -587,6 +643,9 @@ class MasterCore:
             want.append(int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST))
         return all(self.drives[n].mode_display == w for n, w in zip(self.order, want))
 
+
+#: CiA 402 states in which a drive's power stage is off (the safe state of an abort).
+SAFE_STATES = frozenset((State.NOT_READY_TO_SWITCH_ON, State.SWITCH_ON_DISABLED, State.FAULT))
 
 _ORDERLY_DOWN = {
     State.OPERATION_ENABLED: Command.DISABLE_OPERATION,

@@ -23,7 +23,9 @@ from typing import Any
 
 from hil.config import (
     HARD_FORCE_FIGHT_FRACTION,
+    HARD_MAX_FORCE_FIGHT_FRACTION,
     HARD_MAX_FORCE_FRACTION,
+    HARD_MAX_FORCE_IMBALANCE_FRACTION,
     Actuation,
     Check,
 )
@@ -180,7 +182,17 @@ def validate_check(check: Check, act: Actuation, fname: str = "check.toml") -> N
         raise ProfileError(
             f"{fname}: field 'safety.max_force_N' = {s.max_force_N} is above the hard cap "
             f"{cap:g} N ({HARD_MAX_FORCE_FRACTION:.0%} of limit_load_N)")
+    for name, value, frac in (("safety.max_force_fight_N", s.max_force_fight_N, HARD_MAX_FORCE_FIGHT_FRACTION),
+                              ("safety.max_force_imbalance_N", s.max_force_imbalance_N,
+                               HARD_MAX_FORCE_IMBALANCE_FRACTION)):
+        if value > frac * f_limit:
+            raise ProfileError(f"{fname}: field '{name}' = {value} is above the hard cap "
+                               f"{frac * f_limit:g} N ({frac:.0%} of limit_load_N)")
     ff = check.force_fight.amplitude_fraction_of_limit * f_limit
+    if ff >= s.max_force_fight_N:
+        raise ProfileError(
+            f"{fname}: field 'force_fight.amplitude_fraction_of_limit' gives {ff:g} N, "
+            f"not below safety.max_force_fight_N = {s.max_force_fight_N:g} N")
     if ff >= s.max_force_N:
         raise ProfileError(
             f"{fname}: field 'force_fight.amplitude_fraction_of_limit' gives {ff:g} N, "
@@ -240,6 +252,7 @@ class SimRigProfile:
 
     params: RigParams
     seed: int
+    faults: tuple = ()  #: sim.faults.Fault schedule of ``[[faults]]`` (none by default)
 
 
 def load_simrig(path: str | Path | None = None) -> SimRigProfile:
@@ -247,9 +260,9 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     path = Path(path) if path is not None else default_profile_path("simrig.toml")
     fname = path.name
     data = _read_toml(path)
-    known = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2", "effects"]
+    known = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2", "effects", "faults"]
     _check_keys(data, known, "", fname)
-    for key in known[:-1]:
+    for key in known[:-2]:
         if key not in data:
             raise ProfileError(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
     seed = data["seed"]
@@ -278,7 +291,42 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     effects = tuple(_load_effect(tbl, i, fname) for i, tbl in enumerate(data.get("effects", [])))
     params = RigParams(i_total_rad_per_mm=i_total, stroke_limit_mm=stroke, sample_period_s=period,
                        substeps=substeps, effects=effects, **parts)
-    return SimRigProfile(params=params, seed=seed)
+    faults = _load_faults(data.get("faults", []), fname)
+    return SimRigProfile(params=params, seed=seed, faults=faults)
+
+
+def _load_faults(tables: Any, fname: str) -> tuple:
+    """``[[faults]]`` tables of a simulated-rig profile -> a :class:`sim.faults.Fault` schedule."""
+    from sim.faults import Fault, FaultKind
+
+    if not isinstance(tables, list):
+        raise ProfileError(f"{fname}: 'faults' must be an array of tables ([[faults]])")
+    out = []
+    for k, tbl in enumerate(tables):
+        where = f"faults[{k}]"
+        if not isinstance(tbl, dict):
+            raise ProfileError(f"{fname}: '{where}' must be a table")
+        _check_keys(tbl, ["kind", "ema", "start_s", "duration_s", "value"], where + ".", fname)
+        kind = tbl.get("kind")
+        kinds = [x.value for x in FaultKind]
+        if kind not in kinds:
+            close = difflib.get_close_matches(str(kind), kinds, n=1, cutoff=0.5)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ProfileError(f"{fname}: field '{where}.kind' = {kind!r} is not a known fault{hint}; "
+                               f"known: {', '.join(kinds)}")
+        kw: dict[str, Any] = {"kind": kind}
+        if "ema" in tbl:
+            kw["ema"] = _convert_scalar(tbl["ema"], int, where + ".ema", fname)
+            _check_range(kw["ema"], {"lo": 1, "hi": 2}, where + ".ema", fname)
+        for name in ("start_s", "duration_s", "value"):
+            if name in tbl:
+                kw[name] = _convert_scalar(tbl[name], float, f"{where}.{name}", fname)
+        if kw.get("start_s", 0.0) < 0:
+            raise ProfileError(f"{fname}: field '{where}.start_s' = {kw['start_s']} must be >= 0")
+        if "duration_s" in kw and not kw["duration_s"] > 0:
+            raise ProfileError(f"{fname}: field '{where}.duration_s' = {kw['duration_s']} must be > 0")
+        out.append(Fault(**kw))
+    return tuple(out)
 
 
 def effect_registry() -> dict[str, type]:

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from hil.errors import RecordingError
+from hil.errors import IncompleteRecordingError, RecordingError
 from hil.types import Sample, Setpoint
 
 SIGNAL_COLUMNS = ("t", "phi1", "phi2", "s1", "s2", "F1", "F2")
@@ -61,9 +61,11 @@ class SignalsWriter:
         self.path = path
         self._fh = open(path, "w", buffering=1 << 16)
         self._fh.write(",".join(SIGNAL_COLUMNS + EXTRA_COLUMNS) + "\n")
+        self._fh.flush()
         self._pending = 0
         self._flush_rows = flush_rows
         self.rows = 0
+        self.flushed_t_s = 0.0  #: sample time of the last flush
 
     def write(self, smp: Sample, sp1: Setpoint, sp2: Setpoint, step: str) -> None:
         self._fh.write(
@@ -73,11 +75,17 @@ class SignalsWriter:
         self.rows += 1
         self._pending += 1
         if self._pending >= self._flush_rows:
-            self.flush()
+            self.flush(smp.t_s)
 
-    def flush(self) -> None:
+    def flush(self, t_s: float | None = None, sync: bool = False) -> None:
+        """Hand the buffered rows to the OS (they survive a killed process); ``sync``: also to
+        the disk (they survive a power cut)."""
         self._fh.flush()
+        if sync:
+            os.fsync(self._fh.fileno())
         self._pending = 0
+        if t_s is not None:
+            self.flushed_t_s = t_s
 
     def close(self) -> None:
         if not self._fh.closed:
@@ -135,12 +143,12 @@ def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) ->
     try:
         text = path.read_text()
     except FileNotFoundError:
-        raise RecordingError(f"{path}: no such file") from None
+        raise IncompleteRecordingError(f"{path}: no such file") from None
     except UnicodeDecodeError:
         raise RecordingError(f"{path}: not a text CSV file") from None
     lines = text.splitlines()
     if not lines:
-        raise RecordingError(f"{path}: empty file")
+        raise IncompleteRecordingError(f"{path}: empty file")
     header = [h.strip() for h in next(csv.reader(io.StringIO(lines[0])))]
     missing = [c for c in SIGNAL_COLUMNS if c not in header]
     if missing:
@@ -154,7 +162,7 @@ def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) ->
         body = body[:-1]
         notes.append("last line incomplete (recording cut short), dropped")
     if not body:
-        raise RecordingError(f"{path}: no data rows")
+        raise IncompleteRecordingError(f"{path}: no data rows")
     idx = {c: header.index(c) for c in header}
     numeric = [c for c in SIGNAL_COLUMNS + ("mode1", "sp1", "mode2", "sp2") if c in idx]
     cols: dict[str, list] = {c: [] for c in numeric}
@@ -196,15 +204,23 @@ def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) ->
         notes=tuple(notes))
 
 
+def _data_rows_absent(path: Path) -> bool:
+    """True if a signals CSV holds no complete data row (a run killed before its first flush)."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    return head.count(b"\n") < 2
+
+
 def resolve_recording(arg: str | Path) -> tuple[Path, Path | None]:
     """Map a RUN_FOLDER or SIGNALS.csv argument to (signals path, run folder or None)."""
     p = Path(arg)
     if p.is_dir():
         sig = p / "signals.csv"
-        if not sig.exists():
-            if (p / "can.log").exists():
-                return p / "can.log", p  # the raw CAN traffic alone
-            raise RecordingError(f"{p}: run folder without signals.csv or can.log")
+        log = p / "can.log"
+        if not sig.exists() or (_data_rows_absent(sig) and log.exists() and log.stat().st_size > 0):
+            if log.exists():
+                return log, p  # the raw CAN traffic alone
+            raise IncompleteRecordingError(f"{p}: run folder without signals.csv or can.log")
         return sig, p
     if not p.exists():
         raise RecordingError(f"{p}: no such file or folder")

@@ -109,12 +109,17 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
         while True:
             viol = sup.check(smp, sp1, sp2)
             if viol is not None:
+                if "safety" not in meta:
+                    meta["safety"] = {"limit": viol.limit, "detail": viol.detail, "t_s": viol.t_s,
+                                      "value": viol.value, "threshold": viol.threshold}
                 out: CycleOutput = seq.abort(smp.t_s, f"safety limit {viol.limit}: {viol.detail}")
             elif smp.t_s - t_start > limit:
                 out = seq.abort(smp.t_s, f"check exceeded {limit:.0f} s")
             else:
                 out = seq.step(smp)
             writer.write(smp, out.sp1, out.sp2, out.step.value)
+            if smp.t_s - writer.flushed_t_s >= FLUSH_PERIOD_S:
+                writer.flush(smp.t_s)
             if out.events:
                 for ev in out.events:
                     for v in steps.values():
@@ -123,7 +128,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                     steps.setdefault(ev.step.value, [ev.t_s])
                     if ev.kind == "aborted":
                         link.abort()
-                writer.flush()
+                writer.flush(smp.t_s, sync=True)
                 meta["steps"] = steps
                 write_json_atomic(meta_path, meta)
             if on_cycle is not None:
@@ -134,6 +139,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                 break
             smp = link.exchange(sp1, sp2)
         link.close()
+        stop_note = _record_safe_state(link, meta)
     except BaseException as exc:
         # fail closed: stop both drives, keep the log, record why, re-raise
         reason = f"error: {type(exc).__name__}: {exc}"
@@ -150,6 +156,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                 link.close()
             except Exception as exc3:
                 secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
+            secondary += _record_safe_state(link, meta)
             writer.close()
             meta.update(status="aborted", reason=reason + secondary, ended_utc=_now_iso(), steps=steps,
                         samples=writer.rows)
@@ -157,10 +164,33 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
         raise
     writer.close()
     status = "done" if seq.step_now == Step.DONE else "aborted"
-    meta.update(status=status, reason=seq.abort_reason, ended_utc=_now_iso(), steps=steps,
+    reason = (seq.abort_reason + stop_note) if seq.abort_reason else stop_note.lstrip("; ")
+    meta.update(status=status, reason=reason, ended_utc=_now_iso(), steps=steps,
                 samples=writer.rows, duration_s=smp.t_s - t_start)
     write_json_atomic(meta_path, meta)
-    return LoopOutcome(status, seq.abort_reason, writer.rows, smp.t_s - t_start, steps)
+    return LoopOutcome(status, reason, writer.rows, smp.t_s - t_start, steps)
+
+
+#: The run folder's signals are flushed to the OS at least every this much check time [s]
+#: (and fsynced at every step change): a killed master loses at most this much.
+FLUSH_PERIOD_S = 0.5
+
+
+def _record_safe_state(link, meta: dict) -> str:
+    """Put the drives' final states (:attr:`CanopenLink.final_states`) into meta; returns a
+    note for the abort reason naming any drive that could not be brought to the safe state."""
+    final = getattr(link, "final_states", None)
+    if not final:
+        return ""
+    meta["drives_final"] = final
+    errs = getattr(link, "close_errors", None)
+    if errs:
+        meta["stop_errors"] = errs[:10]
+    bad = [f"EMA {k[-1]} (node {v['node']}) "
+           + ("unreachable (heartbeat lost), last known state " if not v["reachable"] else
+              "state not confirmed (no statusword), last known " if not v["confirmed"] else "in ")
+           + v["state"] for k, v in final.items() if not v["safe"]]
+    return f"; not in the safe state: {', '.join(bad)}" if bad else ""
 
 
 def seeded_rng(seed: int) -> np.random.Generator:

@@ -69,30 +69,6 @@ class LvdtCorrection:
 # ---------------------------------------------------------------------- calibration
 
 
-def correct_lvdt(cal: LvdtCalibration, s_mm: np.ndarray) -> np.ndarray:
-    """``cal.correct(s_mm)`` polished by Newton steps until ``P(x) = s`` to 1e-10 mm everywhere.
-
-    Works around a defect of :meth:`blf.calibration.LvdtCalibration.correct`
-    on long arrays: its vectorised iteration can move an element that has
-    already converged to the bisection midpoint in the last iteration (the
-    convergence test uses the residual before the step), leaving a few
-    samples per thousand several mm off. The calibration polynomial is
-    monotone and nearly linear, so Newton's method from there converges in a
-    few steps.
-    """
-    s = np.asarray(s_mm, dtype=float)
-    x = np.array(cal.correct(s), dtype=float)
-    c = np.asarray(cal.coefficients, dtype=float)
-    dc = c[1:] * np.arange(1, c.size)
-    for _ in range(30):
-        r = np.polynomial.polynomial.polyval(x, c) - s
-        if not np.any(np.abs(r) > 1e-10):
-            break
-        bad = np.abs(r) > 1e-10
-        x[bad] -= r[bad] / np.polynomial.polynomial.polyval(x[bad], dc)
-    return x
-
-
 def _linear(pitch: float, offset: float, s: np.ndarray) -> np.ndarray:
     return (s - offset) / pitch
 
@@ -176,7 +152,7 @@ def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
         s = {}
         res_err = []
         for k, raw in (("ema1", sig.s1), ("ema2", sig.s2)):
-            s[k] = correct_lvdt(cals[k], raw)
+            s[k] = cals[k].correct(raw)
             res_err.append(cals[k].coefficient_sigmas[1] / cals[k].pitch)
         return LvdtCorrection(source, {"ema1": "polynomial", "ema2": "polynomial"},
                               {k: float(cals[k].pitch) for k in cals}, {k: float(cals[k].offset_mm) for k in cals},

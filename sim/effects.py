@@ -40,6 +40,10 @@ __all__ = [
     "Viscoelastic",
     "LvdtDrift",
     "TimeSkew",
+    "StribeckFriction",
+    "AsymmetricFriction",
+    "LeadError",
+    "StiffnessBump",
     "COLUMNS",
     "N_COLUMNS",
     "WHERE_ROW",
@@ -60,6 +64,14 @@ COLUMNS = (
     "ve_time_constant_s",  # tau (kept for diagnostics, not read by the kernel)
     "lvdt_drift_per_s",  # relative LVDT gain change per second
     "lvdt_delay_s",  # LVDT sampling delay relative to the resolver
+    "stribeck_extra_N",  # static friction above the Coulomb level
+    "stribeck_velocity_m_per_s",  # Stribeck velocity
+    "friction_asym_N",  # half the difference extend minus retract of the Coulomb level
+    "lead_error_m",  # amplitude of the periodic ballscrew lead error
+    "lead_period_m",  # period of the lead error along the motor-side stroke
+    "bump_rel",  # relative internal stiffness increase at the bump centre
+    "bump_center_m",  # motor-side position of the stiffness bump
+    "bump_width_m",  # Gaussian width of the stiffness bump
 )
 N_COLUMNS = len(COLUMNS)
 COL_COULOMB_N = COLUMNS.index("coulomb_force_N")
@@ -70,6 +82,14 @@ COL_VE_ALPHA = COLUMNS.index("ve_alpha")
 COL_VE_TAU = COLUMNS.index("ve_time_constant_s")
 COL_LVDT_DRIFT = COLUMNS.index("lvdt_drift_per_s")
 COL_LVDT_DELAY = COLUMNS.index("lvdt_delay_s")
+COL_STRIBECK_N = COLUMNS.index("stribeck_extra_N")
+COL_STRIBECK_V = COLUMNS.index("stribeck_velocity_m_per_s")
+COL_FRIC_ASYM = COLUMNS.index("friction_asym_N")
+COL_LEAD_AMP = COLUMNS.index("lead_error_m")
+COL_LEAD_PERIOD = COLUMNS.index("lead_period_m")
+COL_BUMP_REL = COLUMNS.index("bump_rel")
+COL_BUMP_CENTER = COLUMNS.index("bump_center_m")
+COL_BUMP_WIDTH = COLUMNS.index("bump_width_m")
 
 _EMA_ONLY = ("ema1", "ema2")
 
@@ -138,7 +158,7 @@ class CoulombFriction:
                       "mm/s", lo=0.0, lo_open=True)
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
-        table[row, COL_COULOMB_N] = float(self.force_N)
+        table[row, COL_COULOMB_N] += float(self.force_N)
         table[row, COL_COULOMB_BAND] = float(self.velocity_band_mm_per_s) * 1e-3
 
 
@@ -289,7 +309,167 @@ class TimeSkew:
         table[row, COL_LVDT_DELAY] = float(self.delay_s)
 
 
-_KNOWN = (CoulombFriction, ViscousFriction, Viscoelastic, LvdtDrift, TimeSkew)
+def _set_band(table: np.ndarray, row: int, band_mm_per_s: float) -> None:
+    """Velocity band of the smooth sign shared by the friction effects (first one wins)."""
+    if table[row, COL_COULOMB_BAND] <= 0.0:
+        table[row, COL_COULOMB_BAND] = float(band_mm_per_s) * 1e-3
+
+
+@dataclass(frozen=True)
+class StribeckFriction:
+    """Stribeck friction: extra static friction decaying with speed, on the motor-side motion.
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    extra_force_N : float
+        Static friction above the Coulomb level at standstill, >= 0 N.
+    stribeck_velocity_mm_per_s : float
+        Decay speed :math:`v_s`, > 0 mm/s.
+    velocity_band_mm_per_s : float
+        Width of the smooth sign, > 0 mm/s (default 0.1).
+
+    Notes
+    -----
+    Adds :math:`F_S e^{-(v/v_s)^2} \\tanh(v/v_\\varepsilon)` [N] to the
+    friction of :class:`CoulombFriction` (same place and sign convention).
+    """
+
+    NAME: ClassVar[str] = "stribeck_friction"  #: machine name in profiles
+
+    where: str
+    extra_force_N: float
+    stribeck_velocity_mm_per_s: float
+    velocity_band_mm_per_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        _check_where("StribeckFriction", self.where, _EMA_ONLY)
+        _check_number("StribeckFriction", "extra_force_N", self.extra_force_N, "N", lo=0.0, lo_open=False)
+        _check_number("StribeckFriction", "stribeck_velocity_mm_per_s", self.stribeck_velocity_mm_per_s,
+                      "mm/s", lo=0.0, lo_open=True)
+        _check_number("StribeckFriction", "velocity_band_mm_per_s", self.velocity_band_mm_per_s,
+                      "mm/s", lo=0.0, lo_open=True)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_STRIBECK_N] = float(self.extra_force_N)
+        table[row, COL_STRIBECK_V] = float(self.stribeck_velocity_mm_per_s) * 1e-3
+        _set_band(table, row, self.velocity_band_mm_per_s)
+
+
+@dataclass(frozen=True)
+class AsymmetricFriction:
+    """Coulomb friction that differs with the direction of motion.
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    force_extend_N, force_retract_N : float
+        Friction level when the ram extends (v > 0) and retracts (v < 0), >= 0 N.
+    velocity_band_mm_per_s : float
+        Width of the smooth sign, > 0 mm/s (default 0.1).
+
+    Notes
+    -----
+    :math:`F_f = (\\bar F + \\Delta F \\tanh(v/v_\\varepsilon)) \\tanh(v/v_\\varepsilon)`
+    with :math:`\\bar F = (F_+ + F_-)/2`, :math:`\\Delta F = (F_+ - F_-)/2`;
+    added to any :class:`CoulombFriction` at the same place.
+    """
+
+    NAME: ClassVar[str] = "asymmetric_friction"  #: machine name in profiles
+
+    where: str
+    force_extend_N: float
+    force_retract_N: float
+    velocity_band_mm_per_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        _check_where("AsymmetricFriction", self.where, _EMA_ONLY)
+        for f in ("force_extend_N", "force_retract_N"):
+            _check_number("AsymmetricFriction", f, getattr(self, f), "N", lo=0.0, lo_open=False)
+        _check_number("AsymmetricFriction", "velocity_band_mm_per_s", self.velocity_band_mm_per_s,
+                      "mm/s", lo=0.0, lo_open=True)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_COULOMB_N] += 0.5 * (float(self.force_extend_N) + float(self.force_retract_N))
+        table[row, COL_FRIC_ASYM] = 0.5 * (float(self.force_extend_N) - float(self.force_retract_N))
+        _set_band(table, row, self.velocity_band_mm_per_s)
+
+
+@dataclass(frozen=True)
+class LeadError:
+    """Periodic ballscrew lead error: the ram-side motion deviates periodically from phi/i_total.
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    amplitude_mm : float
+        Amplitude of the error, >= 0 mm.
+    period_mm : float
+        Period along the stroke, > 0 mm (one lead = 5 mm on the rig).
+
+    Notes
+    -----
+    The motor-side position entering the load path is
+    :math:`x_m = \\varphi/i_{total} + A \\sin(2\\pi (\\varphi/i_{total})/p)` [m].
+    """
+
+    NAME: ClassVar[str] = "lead_error"  #: machine name in profiles
+
+    where: str
+    amplitude_mm: float
+    period_mm: float = 5.0
+
+    def __post_init__(self) -> None:
+        _check_where("LeadError", self.where, _EMA_ONLY)
+        _check_number("LeadError", "amplitude_mm", self.amplitude_mm, "mm", lo=0.0, lo_open=False)
+        _check_number("LeadError", "period_mm", self.period_mm, "mm", lo=0.0, lo_open=True)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_LEAD_AMP] = float(self.amplitude_mm) * 1e-3
+        table[row, COL_LEAD_PERIOD] = float(self.period_mm) * 1e-3
+
+
+@dataclass(frozen=True)
+class StiffnessBump:
+    """Internal stiffness that rises locally along the stroke (a tight spot of the ballscrew).
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    relative_increase : float
+        Relative increase of both flank stiffnesses at the centre, >= 0.
+    center_mm : float
+        Motor-side position of the centre, mm.
+    width_mm : float
+        Gaussian width, > 0 mm.
+
+    Notes
+    -----
+    :math:`k(x_m) = k\\,(1 + a\\,e^{-((x_m - x_0)/w)^2})` for both flanks.
+    """
+
+    NAME: ClassVar[str] = "stiffness_bump"  #: machine name in profiles
+
+    where: str
+    relative_increase: float
+    center_mm: float = 0.0
+    width_mm: float = 2.0
+
+    def __post_init__(self) -> None:
+        _check_where("StiffnessBump", self.where, _EMA_ONLY)
+        _check_number("StiffnessBump", "relative_increase", self.relative_increase, "(dimensionless)",
+                      lo=0.0, lo_open=False)
+        _check_number("StiffnessBump", "center_mm", self.center_mm, "mm", lo=-math.inf, lo_open=True)
+        _check_number("StiffnessBump", "width_mm", self.width_mm, "mm", lo=0.0, lo_open=True)
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_BUMP_REL] = float(self.relative_increase)
+        table[row, COL_BUMP_CENTER] = float(self.center_mm) * 1e-3
+        table[row, COL_BUMP_WIDTH] = float(self.width_mm) * 1e-3
+
+
+_KNOWN = (CoulombFriction, ViscousFriction, Viscoelastic, LvdtDrift, TimeSkew,
+          StribeckFriction, AsymmetricFriction, LeadError, StiffnessBump)
 
 #: Machine name (profiles, diagnosis) -> effect class.
 EFFECTS = {cls.NAME: cls for cls in _KNOWN}

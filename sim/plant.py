@@ -106,8 +106,16 @@ from hil.types import DriveMode, Sample, Setpoint
 from sim import effects as _fx
 from sim.effects import (
     COL_COULOMB_BAND,
+    COL_BUMP_CENTER,
+    COL_BUMP_REL,
+    COL_BUMP_WIDTH,
     COL_COULOMB_N,
+    COL_FRIC_ASYM,
+    COL_LEAD_AMP,
+    COL_LEAD_PERIOD,
     COL_LVDT_DELAY,
+    COL_STRIBECK_N,
+    COL_STRIBECK_V,
     COL_LVDT_DRIFT,
     COL_VE_ALPHA,
     COL_VE_K,
@@ -225,9 +233,18 @@ def _solve_chains(X, P, E, dm):
     for e in range(2):
         b = S_N + e * SE_N
         p = G_N + e * E_N
+        xm = X[b + SE_PHI] / im
+        kc = P[p + E_KC]
+        kt = P[p + E_KT]
+        if E[e, COL_BUMP_REL] > 0.0:
+            g = 1.0 + E[e, COL_BUMP_REL] * math.exp(-((xm - E[e, COL_BUMP_CENTER]) / E[e, COL_BUMP_WIDTH]) ** 2)
+            kc *= g
+            kt *= g
+        if E[e, COL_LEAD_AMP] > 0.0:
+            xm += E[e, COL_LEAD_AMP] * math.sin(2.0 * math.pi * xm / E[e, COL_LEAD_PERIOD])
         f, r, h, dmc, dmt = _chain(
-            X[b + SE_PHI] / im, y, X[b + SE_R], X[b + SE_ZC], X[b + SE_ZT],
-            P[p + E_BI], P[p + E_BB], P[p + E_KC], P[p + E_KT], P[p + E_KB], P[p + E_KH],
+            xm, y, X[b + SE_R], X[b + SE_ZC], X[b + SE_ZT],
+            P[p + E_BI], P[p + E_BB], kc, kt, P[p + E_KB], P[p + E_KH],
             E[e, COL_VE_K],
         )
         X[b + SE_F] = f
@@ -268,11 +285,23 @@ def _kick(X, P, E, e, mode, val, wff, hk, implicit):
     c_lin = P[G_B] + E[e, COL_VISCOUS] / (im * im)
     t_rest = -(X[b + SE_F] + fstop) / im
     fc = E[e, COL_COULOMB_N]
-    if fc > 0.0:
+    fs = E[e, COL_STRIBECK_N]
+    fa = E[e, COL_FRIC_ASYM]
+    if fc > 0.0 or fs > 0.0 or fa != 0.0:
         band = E[e, COL_COULOMB_BAND]
-        th = math.tanh(w / im / band)
-        dtf = fc * (1.0 - th * th) / band / (im * im)
-        t_rest -= fc * th / im - dtf * w
+        v = w / im
+        th = math.tanh(v / band)
+        dth = (1.0 - th * th) / band
+        level = fc + fa * th
+        dlevel = fa * dth
+        if fs > 0.0:
+            vs = E[e, COL_STRIBECK_V]
+            gs = math.exp(-(v / vs) ** 2)
+            level += fs * gs
+            dlevel -= 2.0 * fs * gs * v / (vs * vs)
+        # linearised in the velocity; a falling (Stribeck) slope stays explicit
+        dtf = max(level * dth + th * dlevel, 0.0) / (im * im)
+        t_rest -= level * th / im - dtf * w
         c_lin += dtf
     sat = False
     if not implicit:
@@ -627,7 +656,7 @@ def _build_vectors(params: RigParams) -> tuple[np.ndarray, np.ndarray, float]:
     kch = []
     for e in range(2):
         p = G_N + e * E_N
-        kint = max(P[p + E_KC], P[p + E_KT]) + table[e, _fx.COL_VE_K]
+        kint = max(P[p + E_KC], P[p + E_KT]) * (1.0 + table[e, _fx.COL_BUMP_REL]) + table[e, _fx.COL_VE_K]
         kch.append(1.0 / (1.0 / P[p + E_KH] + 1.0 / P[p + E_KB] + 1.0 / kint))
     w2 = max(
         (P[G_KP] * im * im + 2.0 * max(kch) + P[G_KSTOP]) / M,

@@ -91,7 +91,6 @@ import math
 import operator
 import struct
 from dataclasses import dataclass, field
-from enum import IntEnum
 from typing import Any, Callable
 
 import canopen
@@ -101,6 +100,7 @@ from canopen.sdo import SdoAbortedError
 from hil.cia402 import DriveStateMachine, IllegalTransition, OperationMode, State, Statusword, state_word
 from hil.drive_od import check_drive_od, load_drive_od
 from hil.errors import InputError, ProfileError
+from hil.nmt import NmtCommand, NmtState
 from hil.pdo import (
     COB_ID_INVALID,
     HEARTBEAT_COB_ID_BASE,
@@ -176,25 +176,6 @@ _SIM_REQUIRED = ((0x1001, 0), (0x1005, 0), (0x1014, 0), (0x1017, 0), (0x6040, 0)
                  (0x6060, 0), (0x6061, 0), (0x6064, 0), (0x6071, 0), (0x6072, 0), (0x6076, 0),
                  (0x6077, 0), (0x607A, 0), (0x607D, 1), (0x607D, 2), (0x608F, 1), (0x608F, 2),
                  (0x2100, 0), (0x2101, 0), (0x2102, 0))
-
-
-class NmtState(IntEnum):
-    """NMT states of a CANopen slave, valued as the heartbeat state byte."""
-
-    INITIALISING = 0x00  #: also the boot-up message
-    STOPPED = 0x04
-    OPERATIONAL = 0x05
-    PRE_OPERATIONAL = 0x7F
-
-
-class NmtCommand(IntEnum):
-    """NMT command specifiers (byte 0 of the NMT frame, COB-ID 0)."""
-
-    START = 0x01
-    STOP = 0x02
-    ENTER_PRE_OPERATIONAL = 0x80
-    RESET_NODE = 0x81
-    RESET_COMMUNICATION = 0x82
 
 
 def error_register_bits(code: int) -> int:
@@ -481,6 +462,9 @@ class SimDrive:
         self.nmt_state = NmtState.INITIALISING
         self.state_machine = DriveStateMachine(remote=True)
         self.heartbeat_enabled = True
+        #: fault hook (:mod:`sim.faults`): ``f(node, t, mode, value) -> (mode, value)`` replaces the
+        #: plant command the drive computed at each SYNC (e.g. a runaway drive); None = no fault
+        self.command_override: Callable[["SimDrive", float, int, float], tuple[int, float]] | None = None
         self._now = 0.0
         self._phi_rad = 0.0
         self._s_mm = 0.0
@@ -1724,6 +1708,10 @@ class SimDrivePair:
             n1._apply_latched()
         mode1, value1 = n0._cycle()
         mode2, value2 = n1._cycle()
+        if n0.command_override is not None:
+            mode1, value1 = n0.command_override(n0, t, mode1, value1)
+        if n1.command_override is not None:
+            mode2, value2 = n1.command_override(n1, t, mode2, value2)
         self._step(mode1, value1, mode2, value2)
 
     def tick(self, t: float) -> list[Frame]:

@@ -32,7 +32,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from blf.calibration import fit_lvdt_calibration  # noqa: E402
 from blf.serv import BlfServMonitor, blf_serv, design_serv_filters  # noqa: E402
 from hil.profiles import load_simrig  # noqa: E402
-from hil.serv_cmd import correct_lvdt  # noqa: E402
 from sim import scenarios as sc  # noqa: E402
 
 CHANNELS = ("int1", "int2", "ext")
@@ -40,8 +39,8 @@ FS = 500.0
 
 
 def d_channels(rec, i_total, cal1, cal2):
-    s1 = rec.s1_mm if cal1 is None else correct_lvdt(cal1, rec.s1_mm)
-    s2 = rec.s2_mm if cal2 is None else correct_lvdt(cal2, rec.s2_mm)
+    s1 = rec.s1_mm if cal1 is None else cal1.correct(rec.s1_mm)
+    s2 = rec.s2_mm if cal2 is None else cal2.correct(rec.s2_mm)
     return {"int1": s1 - rec.phi1_rad / i_total, "int2": s2 - rec.phi2_rad / i_total, "ext": s2 - s1}
 
 

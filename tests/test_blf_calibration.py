@@ -92,6 +92,18 @@ def test_correct_inverts_exactly_and_removes_the_lvdt_error():
     assert cal.correct(np.array([s_end + 0.5]))[0] == pytest.approx(18.0 + 0.5 / slope_end, abs=1e-12)
 
 
+def test_correct_converges_for_every_element_of_a_long_random_array():
+    # elements converge at different iterations; a converged one must stay put
+    # (a former defect moved a few per thousand to the bisection midpoint)
+    rng = np.random.default_rng(11)
+    x, s = sweep(rng)
+    cal = fit_lvdt_calibration(x, s)
+    lo, hi = cal.evaluate(np.array([cal.x_min_mm, cal.x_max_mm]))
+    readings = rng.uniform(lo, hi, 200_000)
+    back = cal.correct(readings)
+    assert np.max(np.abs(cal.evaluate(back) - readings)) < 1e-10
+
+
 def test_pitch_correction_makes_d_int_flat_over_the_stroke():
     """Paper 2.3: an uncorrected 7.5 % pitch error ruins D_int over the stroke."""
     rng = np.random.default_rng(3)

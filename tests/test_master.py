@@ -204,9 +204,9 @@ def test_heartbeat_timeout_and_emcy_raise(actuation, pair):
     m, p = _preflight(actuation, pair)
     p.sync()
     t_hb = max(d.last_heartbeat_s for d in m.drives.values())
-    m.poll(t_hb + 0.149)
-    with pytest.raises(HeartbeatLost, match=r"node \d: heartbeat lost .*timeout 0.150 s"):
-        m.poll(t_hb + 0.151)
+    m.poll(t_hb + 0.148)  # the last SYNC-grid poll before the timeout
+    with pytest.raises(HeartbeatLost, match=r"node \d \(EMA \d\): heartbeat lost .*timeout 0.150 s"):
+        m.poll(t_hb + 0.150)  # fires on the grid poll at the timeout (within T/2 of it)
     m2, p2 = _preflight(actuation, SimDrivePair(RigPlant(pair.plant.params, np.random.default_rng(3)),
                                                  lambda node_id=None: load_drive_od(None, node_id=node_id)))
     p2.sync()

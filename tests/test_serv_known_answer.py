@@ -15,7 +15,6 @@ import pytest
 from blf.calibration import fit_lvdt_calibration
 from blf.serv import BlfServMonitor, blf_serv, estimate_noise_std_mm
 from hil.errors import InputError
-from hil.serv_cmd import correct_lvdt
 from sim import scenarios as sc
 
 SEEDS = range(5)
@@ -29,8 +28,8 @@ def params(simrig):
 
 
 def _d(rec, i_total, cal1=None, cal2=None):
-    s1 = rec.s1_mm if cal1 is None else correct_lvdt(cal1, rec.s1_mm)
-    s2 = rec.s2_mm if cal2 is None else correct_lvdt(cal2, rec.s2_mm)
+    s1 = rec.s1_mm if cal1 is None else cal1.correct(rec.s1_mm)
+    s2 = rec.s2_mm if cal2 is None else cal2.correct(rec.s2_mm)
     return {"int1": s1 - rec.phi1_rad / i_total, "int2": s2 - rec.phi2_rad / i_total, "ext": s2 - s1}
 
 

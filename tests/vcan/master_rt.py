@@ -16,6 +16,10 @@ from __future__ import annotations
 
 import gc
 import sys
+from pathlib import Path
+
+# the checkout under test, not whatever emacheck is installed (sys.path[0] is tests/vcan here)
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import hil.canopen_link  # noqa: F401  (the run's modules are loaded before locking)
 import hil.commands  # noqa: F401

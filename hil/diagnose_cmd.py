@@ -1,0 +1,196 @@
+"""``emacheck diagnose``: simulation versus recording (IO shell around :mod:`blf.diagnose`).
+
+Loads a run folder, a signals CSV (dual-EMA) or a .mat/CSV single-axis
+recording, builds the replay model, runs the diagnosis, prints the answer and
+writes ``diagnosis.json`` and ``diagnosis_report.html``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import io
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hil.errors import RecordingError
+
+__all__ = ["cmd_diagnose", "load_model", "diagnosis_dict"]
+
+
+def _load_dual(path: Path, profile: Path | None):
+    from hil.commands import load_recording
+    from hil.profiles import load_actuation
+    from sim.replay import DualEmaReplay
+
+    run_dir = path if path.is_dir() else None
+    sig_path = path / "signals.csv" if run_dir else path
+    if run_dir and not sig_path.exists() and (path / "can.log").exists():
+        sig_path = path / "can.log"
+    meta = None
+    if run_dir and (path / "meta.json").exists():
+        meta = json.loads((path / "meta.json").read_text())
+    act = load_actuation(profile)
+    sig = load_recording(sig_path, act, meta)
+    period = float(np.median(np.diff(sig.t)))
+    model = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2,
+                          act.i_total_rad_per_mm, period, sig.mode1, sig.sp1, sig.mode2, sig.sp2)
+    return model, period
+
+
+def _load_single(path: Path):
+    from sim.single_axis import SingleAxisReplay
+    if path.suffix.lower() == ".mat":
+        from scipy.io import loadmat
+        try:
+            d = loadmat(path)
+        except (OSError, ValueError) as exc:
+            raise RecordingError(f"{path}: not a readable .mat file ({exc})") from None
+        missing = [k for k in ("t", "qm", "qg", "vir", "gtau") if k not in d]
+        if missing:
+            raise RecordingError(f"{path}: missing key(s) {', '.join(missing)}; expected t, qm, qg, vir, gtau")
+        t = d["t"].ravel()
+        force = float(np.ravel(d["gtau"])[0]) * d["vir"].ravel()
+        q, qref = d["qm"].ravel(), d["qg"].ravel()
+    else:
+        try:
+            arr = np.genfromtxt(path, delimiter=",", names=True)
+        except (OSError, ValueError) as exc:
+            raise RecordingError(f"{path}: not a readable CSV ({exc})") from None
+        need = ("t", "q", "q_ref", "force")
+        if arr.dtype.names is None or any(c not in arr.dtype.names for c in need):
+            raise RecordingError(f"{path}: line 1: need columns t,q,q_ref,force (s, m, m, N)")
+        t, q, qref, force = (arr[c] for c in need)
+    period = float(np.median(np.diff(t)))
+    return SingleAxisReplay(t, q, qref, force, period), period
+
+
+def load_model(path: Path, model: str, profile: Path | None):
+    """Replay model and sample period of a recording (run folder, CSV, .mat)."""
+    if not path.exists():
+        raise RecordingError(f"{path}: no such file or folder")
+    return _load_single(path) if model == "single-axis" else _load_dual(path, profile)
+
+
+def _r(x, nd=6):
+    return None if x is None else float(f"{x:.{nd}g}")
+
+
+def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
+    """JSON shape of issue 6."""
+    eff = lambda e: {"name": e.name, "where": e.where, "words": e.words,  # noqa: E731
+                     "parameters": {k: _r(v) for k, v in e.parameters.items()},
+                     "uncertainty": {k: _r(v) for k, v in e.uncertainty.items()},
+                     "delta_bic": _r(e.delta_bic), "delta_chi2_holdout": _r(e.delta_chi2_holdout),
+                     "evidence": e.evidence}
+    return {
+        "verdict": d.verdict, "model": model_name,
+        "effects": [eff(e) for e in d.effects],
+        "partial_effects": [eff(e) for e in d.partial_effects],
+        "locations": [{"channel": l.channel, "t_start_s": _r(l.t_start_s), "t_end_s": _r(l.t_end_s),
+                       "regime": l.regime, "score": _r(l.score)} for l in d.locations],
+        "residual_rms_before": {k: _r(v) for k, v in d.residual_rms_before.items()},
+        "residual_rms_after": {k: _r(v) for k, v in d.residual_rms_after.items()},
+        "noise_floor": {k: _r(v) for k, v in d.noise_floor.items()},
+        "excess_before": {k: _r(v) for k, v in d.excess_before.items()},
+        "excess_after": {k: _r(v) for k, v in d.excess_after.items()},
+        "ic": "BIC", "ic_before": _r(d.ic_before, 9), "ic_after": _r(d.ic_after, 9),
+        "nominal": {k: _r(v) for k, v in d.nominal.items()},
+        "screening": list(d.screening),
+        "diagnosis_s": round(seconds, 2),
+    }
+
+
+def _figure(model, d, channel: str) -> str:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    t = model.t_s
+    ok = model.valid[channel]
+    stride = max(1, t.size // 6000)
+    fig, ax = plt.subplots(2, 1, figsize=(9, 4.5), sharex=True)
+    m = model.measured[channel]
+    ax[0].plot(t[ok][::stride], m[ok][::stride], ".", ms=1, color="0.6", label="recording")
+    ax[0].plot(t[ok][::stride], d.predicted_before[channel][ok][::stride], lw=0.8, label="nominal model")
+    ax[0].plot(t[ok][::stride], d.predicted_after[channel][ok][::stride], lw=0.8, label="with fitted effects")
+    ax[0].legend(fontsize=7)
+    ax[0].set_ylabel(channel)
+    from scipy.ndimage import uniform_filter1d
+    w = max(1, int(0.5 / np.median(np.diff(t))))
+    for pred, lab in ((d.predicted_before, "residual before"), (d.predicted_after, "residual after")):
+        r = np.where(ok, m - pred[channel], np.nan)
+        rs = uniform_filter1d(np.nan_to_num(r), w) 
+        ax[1].plot(t[ok][::stride], rs[ok][::stride], lw=0.8, label=lab + " (0.5 s mean)")
+    for loc in d.locations:
+        if loc.channel == channel:
+            ax[1].axvspan(loc.t_start_s, loc.t_end_s, color="red", alpha=0.1)
+    ax[1].axhline(0, color="k", lw=0.5)
+    ax[1].set_xlabel("t [s]")
+    ax[1].legend(fontsize=7)
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+def write_report(path: Path, model, d, data: dict) -> None:
+    """Self-contained HTML report: verdict, effects, table before/after, overlay and residual plots."""
+    import html
+    rows = "".join(
+        f"<tr><td>{c}</td><td>{data['residual_rms_before'][c]}</td><td>{data['residual_rms_after'][c]}</td>"
+        f"<td>{data['noise_floor'][c]}</td><td>{data['excess_before'][c]}</td><td>{data['excess_after'][c]}</td></tr>"
+        for c in model.channels if model.valid[c].any())
+    effs = "".join(
+        f"<li><b>{html.escape(e['words'])}</b> (<code>{e['name']}</code> at {e['where']}): "
+        + ", ".join(f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items())
+        + f"<br><small>{html.escape(e['evidence'])}</small></li>"
+        for e in data["effects"] + data["partial_effects"])
+    locs = "".join(f"<li>{l['channel']}: {l['t_start_s']}–{l['t_end_s']} s, {html.escape(l['regime'])}</li>"
+                   for l in data["locations"][:12])
+    figs = "".join(f"<h3>{c}</h3><img src='{_figure(model, d, c)}'>" for c in model.channels if model.valid[c].any())
+    path.write_text(
+        "<!doctype html><html><head><meta charset='utf-8'><title>emacheck diagnose</title></head><body>"
+        f"<h1>Simulation versus recording: {data['verdict']}</h1>"
+        f"<p>BIC before {data['ic_before']}, after {data['ic_after']}.</p>"
+        f"<h2>Effects</h2><ul>{effs or '<li>none</li>'}</ul><h2>Where</h2><ul>{locs or '<li>nowhere</li>'}</ul>"
+        "<h2>Residual RMS</h2><table border=1><tr><th>channel</th><th>before</th><th>after</th>"
+        f"<th>noise floor</th><th>excess before</th><th>excess after</th></tr>{rows}</table>"
+        f"<h2>Overlay and residuals</h2>{figs}</body></html>")
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """``emacheck diagnose RECORDING [--profile] [--out] [--model]``."""
+    from rich.console import Console
+
+    from blf.diagnose import diagnose
+    from hil.runfolder import write_json_atomic
+    console = Console()
+    path = Path(args.recording)
+    model, period = load_model(path, args.model, args.profile)
+    out = args.out or (path if path.is_dir() else path.parent)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    secs = time.perf_counter() - t0
+    data = diagnosis_dict(d, args.model, secs)
+    write_json_atomic(out / "diagnosis.json", data)
+    if not args.no_report:
+        write_report(out / "diagnosis_report.html", model, d, data)
+    words = {"no_mismatch": "no significant mismatch between simulation and recording",
+             "explained": "mismatch explained", "unexplained": "mismatch NOT explained by the candidate library"}
+    console.print(f"[bold]{words[d.verdict]}[/bold] ({secs:.1f} s)")
+    for e in data["effects"] + data["partial_effects"]:
+        tag = "" if d.verdict == "explained" else " (partial)"
+        console.print(f"  {e['words']}{tag}: " + ", ".join(
+            f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
+    for l in data["locations"][:6]:
+        console.print(f"  where: {l['channel']} {l['t_start_s']}-{l['t_end_s']} s, {l['regime']}")
+    console.print("  residual RMS before -> after: " + ", ".join(
+        f"{c} {data['residual_rms_before'][c]} -> {data['residual_rms_after'][c]}"
+        for c in model.channels if model.valid[c].any()))
+    console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {out / 'diagnosis.json'}")
+    return 0

@@ -1,0 +1,379 @@
+"""Fault injection for the simulated drive pair (sans-IO, deterministic for a seed).
+
+:class:`FaultInjector` wraps a :class:`sim.slave.SimDrivePair` with the same
+sans-IO interface (``power_on``, ``on_frame``, ``tick``) and applies a
+:class:`Fault` schedule to the frames going in and out of the drives and to
+the drives themselves, so the master sees exactly what a faulty rig would put
+on the bus. Faults come from the simulated-rig profile (``[[faults]]`` tables)
+or from tests.
+
+Time base: a fault's ``start_s`` is on the check's time axis, the SYNC count
+times the SYNC period (``t`` of signals.csv), except ``sdo_abort``, which
+acts during the preflight (before any SYNC). A fault is active for
+``start_s <= t < start_s + duration_s``.
+
+Kinds (``value`` is kind-specific; ``ema`` is 1 or 2):
+
+======================  =====================================================
+``heartbeat_stop``      the drive's heartbeat frames stop (the drive works on)
+``node_silent``         the drive is unreachable: sends nothing, hears nothing
+                        (keeps following the last setpoint it received)
+``emcy_over_current``   EMCY 0x2310 and the drive goes to FAULT
+``emcy_over_temperature`` EMCY 0x4310 and the drive goes to FAULT
+``drive_fault``         the drive drops to FAULT without an EMCY (0x5000)
+``tpdo_missing``        the drive's TPDOs are lost
+``tpdo_late``           the drive's TPDOs arrive ``value`` SYNC cycles late
+``rpdo_lost``           RPDOs to the drive are lost (it keeps its last target)
+``sdo_abort``           the SDO server aborts access to object ``value``
+                        (e.g. 0x1017) with 0x08000020 during the preflight
+``lvdt_stuck``          the LVDT reading freezes at its value at onset
+``lvdt_spike``          one LVDT reading offset by ``value`` mm
+``loadcell_saturation`` the load-cell reading clips at +- ``value`` N
+``resolver_wrap``       the position reading jumps by one revolution
+``runaway``             the drive ignores its target and moves at ``value``
+                        mm/s while OPERATION_ENABLED (its state machine still
+                        obeys: quick stop and disable work)
+``bus_errors``          every frame to and from the drives is lost with
+                        probability ``value`` (error frames, CRC errors)
+======================  =====================================================
+
+The injector also records the plant's truth after every SYNC
+(:attr:`FaultInjector.truth`): true forces and strokes (no sensor errors) and
+both drives' CiA 402 states, for tests and benchmarks.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from hil.cia402 import State
+from hil.errors import InputError
+from hil.pdo import Frame, Tpdo1, Tpdo2, decode_tpdo1, decode_tpdo2, encode_tpdo1, encode_tpdo2
+from hil.types import DriveMode
+
+__all__ = ["FaultKind", "Fault", "FaultInjector", "TruthTrace", "SDO_ABORT_CODE"]
+
+#: Abort code the ``sdo_abort`` fault answers with: data cannot be transferred or stored.
+SDO_ABORT_CODE = 0x08000020
+
+
+class FaultKind(Enum):
+    HEARTBEAT_STOP = "heartbeat_stop"
+    NODE_SILENT = "node_silent"
+    EMCY_OVER_CURRENT = "emcy_over_current"
+    EMCY_OVER_TEMPERATURE = "emcy_over_temperature"
+    DRIVE_FAULT = "drive_fault"
+    TPDO_MISSING = "tpdo_missing"
+    TPDO_LATE = "tpdo_late"
+    RPDO_LOST = "rpdo_lost"
+    SDO_ABORT = "sdo_abort"
+    LVDT_STUCK = "lvdt_stuck"
+    LVDT_SPIKE = "lvdt_spike"
+    LOADCELL_SATURATION = "loadcell_saturation"
+    RESOLVER_WRAP = "resolver_wrap"
+    RUNAWAY = "runaway"
+    BUS_ERRORS = "bus_errors"
+
+
+#: Default ``value`` per kind (None: the kind takes no value).
+DEFAULT_VALUE: dict[FaultKind, float | None] = {
+    FaultKind.TPDO_LATE: 3.0,  # SYNC cycles
+    FaultKind.SDO_ABORT: float(0x1017),  # object index
+    FaultKind.LVDT_SPIKE: 2.0,  # mm
+    FaultKind.LOADCELL_SATURATION: 2500.0,  # N
+    FaultKind.RUNAWAY: 5.0,  # mm/s
+    FaultKind.BUS_ERRORS: 0.5,  # loss probability
+}
+
+_EMCY_CODE = {FaultKind.EMCY_OVER_CURRENT: 0x2310, FaultKind.EMCY_OVER_TEMPERATURE: 0x4310,
+              FaultKind.DRIVE_FAULT: 0x5000}
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One scheduled fault.
+
+    Parameters
+    ----------
+    kind : str
+        A :class:`FaultKind` value, e.g. ``"heartbeat_stop"``.
+    ema : int
+        1 or 2 (ignored by ``bus_errors``, which hits every frame).
+    start_s : float
+        Onset on the check's time axis [s] (SYNC count times the SYNC period).
+    duration_s : float
+        How long it lasts [s] (``inf``: to the end; ``lvdt_spike`` lasts one cycle).
+    value : float
+        Kind-specific, see the module docstring; NaN takes :data:`DEFAULT_VALUE`.
+    """
+
+    kind: str
+    ema: int = 1
+    start_s: float = 0.0
+    duration_s: float = math.inf
+    value: float = math.nan
+
+    def __post_init__(self) -> None:
+        try:
+            FaultKind(self.kind)
+        except ValueError:
+            raise InputError(f"fault kind {self.kind!r} is not known; known: "
+                             + ", ".join(k.value for k in FaultKind)) from None
+        if self.ema not in (1, 2):
+            raise InputError(f"fault {self.kind}: ema = {self.ema!r} must be 1 or 2")
+        if not (math.isfinite(self.start_s) and self.start_s >= 0):
+            raise InputError(f"fault {self.kind}: start_s = {self.start_s!r} s must be finite and >= 0")
+        if not self.duration_s > 0:
+            raise InputError(f"fault {self.kind}: duration_s = {self.duration_s!r} s must be > 0")
+        if not (math.isnan(self.value) or math.isfinite(self.value)):
+            raise InputError(f"fault {self.kind}: value = {self.value!r} must be finite")
+
+    @property
+    def fault_kind(self) -> FaultKind:
+        return FaultKind(self.kind)
+
+    @property
+    def param(self) -> float:
+        """``value``, or the kind's default."""
+        d = DEFAULT_VALUE.get(self.fault_kind)
+        return d if math.isnan(self.value) and d is not None else self.value
+
+
+@dataclass(frozen=True)
+class TruthTrace:
+    """The plant's truth after every SYNC, arrays of shape (n,) or (n, 2) (column 0 = EMA 1).
+
+    ``t_s`` is on the check's time axis; ``F_N`` true load-path force [N],
+    ``s_mm`` true stroke [mm], ``state`` the drives' CiA 402 states (names).
+    """
+
+    t_s: np.ndarray
+    F_N: np.ndarray
+    s_mm: np.ndarray
+    state: np.ndarray = field(repr=False)
+
+
+class FaultInjector:
+    """A :class:`sim.slave.SimDrivePair` with faults, as the same sans-IO interface.
+
+    Parameters
+    ----------
+    pair : sim.slave.SimDrivePair
+    faults : sequence of Fault
+    rng : numpy.random.Generator
+        For the random frame losses of ``bus_errors``.
+    record_truth : bool
+        Record :attr:`truth` (one plant-state copy per SYNC).
+    """
+
+    def __init__(self, pair, faults=(), rng: np.random.Generator | None = None,
+                 record_truth: bool = True) -> None:
+        self.pair = pair
+        self.faults = tuple(faults)
+        for f in self.faults:
+            if not isinstance(f, Fault):
+                raise InputError(f"faults must be sim.faults.Fault, got {type(f).__name__}")
+        if any(f.fault_kind is FaultKind.BUS_ERRORS for f in self.faults) and rng is None:
+            raise InputError("a bus_errors fault needs rng (numpy.random.Generator)")
+        self.rng = rng
+        self.T = pair.plant.params.sample_period_s
+        self.syncs = 0
+        self.record_truth = record_truth
+        self._truth: list[tuple] = []
+        self._held: list[tuple[int, Frame]] = []  # (due SYNC count, frame) of late TPDOs
+        self._stuck: dict[int, int] = {}  # node -> frozen LVDT value [um]
+        self._started: set[int] = set()  # indices of faults whose onset happened
+        self.onset_s: dict[str, float] = {}  #: kind -> check time of the onset
+        self.dropped = 0
+        self._nodes = {k + 1: n for k, n in enumerate(pair.nodes)}
+
+    # ------------------------------------------------------------ delegation
+
+    def __getattr__(self, name: str):
+        return getattr(self.pair, name)
+
+    @property
+    def t_check(self) -> float:
+        """The check's time axis: SYNCs seen times the SYNC period [s]."""
+        return self.syncs * self.T
+
+    def _active(self, kind: FaultKind, node_id: int | None = None) -> list[Fault]:
+        t = self.t_check
+        out = []
+        for f in self.faults:
+            if f.fault_kind is not kind:
+                continue
+            if node_id is not None and self._nodes[f.ema].node_id != node_id and kind is not FaultKind.BUS_ERRORS:
+                continue
+            dur = self.T * 0.5 if kind is FaultKind.LVDT_SPIKE else f.duration_s
+            if kind is FaultKind.SDO_ABORT or (f.start_s - 1e-9 <= t < f.start_s + dur - 1e-9 and self.syncs > 0):
+                out.append(f)
+        return out
+
+    # ------------------------------------------------------------ onsets
+
+    def _onsets(self) -> list[Frame]:
+        """Faults that act once at their onset (EMCY, drive fault, runaway); at a SYNC."""
+        out: list[Frame] = []
+        t = self.t_check
+        for k, f in enumerate(self.faults):
+            if k in self._started or self.syncs == 0 or t < f.start_s - 1e-9:
+                continue
+            self._started.add(k)
+            self.onset_s.setdefault(f.kind, t)
+            kind = f.fault_kind
+            node = self._nodes[f.ema]
+            if kind in (FaultKind.EMCY_OVER_CURRENT, FaultKind.EMCY_OVER_TEMPERATURE):
+                out += self.pair.inject_fault(f.ema - 1, _EMCY_CODE[kind])
+            elif kind is FaultKind.DRIVE_FAULT:
+                node.state_machine.fault(_EMCY_CODE[kind])  # no EMCY: seen only in the statusword
+            elif kind is FaultKind.RUNAWAY:
+                node.command_override = _runaway(f.param, self.pair.plant.params.i_total_rad_per_mm,
+                                                 f.start_s + f.duration_s, self)
+        return out
+
+    # ------------------------------------------------------------ frames
+
+    def _inbound_dropped(self, frame: Frame) -> bool:
+        cid = frame.arbitration_id
+        node = cid & 0x7F
+        base = cid & 0x780
+        if cid != 0x080 and self._active(FaultKind.BUS_ERRORS) and self._lose():
+            return True  # (SYNC exempt: the simulated physics advances on it)
+        if base in (0x200, 0x300, 0x400, 0x500, 0x600):
+            if self._active(FaultKind.NODE_SILENT, node):
+                return True
+            if base in (0x200, 0x300) and self._active(FaultKind.RPDO_LOST, node):
+                return True
+        return False
+
+    def _lose(self) -> bool:
+        p = max(f.param for f in self._active(FaultKind.BUS_ERRORS))
+        hit = bool(self.rng.random() < p)
+        self.dropped += hit
+        return hit
+
+    def _sdo_abort(self, frame: Frame) -> Frame | None:
+        cid = frame.arbitration_id
+        if cid & 0x780 != 0x600 or len(frame.data) != 8:
+            return None
+        node = cid & 0x7F
+        index = int.from_bytes(frame.data[1:3], "little")
+        for f in self._active(FaultKind.SDO_ABORT, node):
+            if index == int(f.param):
+                self.onset_s.setdefault(f.kind, self.t_check)
+                return Frame(0x580 + node, bytes([0x80]) + frame.data[1:4] + struct.pack("<I", SDO_ABORT_CODE))
+        return None
+
+    def _outbound(self, frames: list[Frame], at_sync: bool) -> list[Frame]:
+        out: list[Frame] = []
+        if at_sync and self._held:  # late TPDOs due now, ahead of this SYNC's frames
+            out += [self._sensor_faults(f, f.arbitration_id & 0x7F) for k, f in self._held if k <= self.syncs]
+            self._held = [(k, f) for k, f in self._held if k > self.syncs]
+        for fr in frames:
+            cid = fr.arbitration_id
+            node, base = cid & 0x7F, cid & 0x780
+            if self._active(FaultKind.BUS_ERRORS) and self._lose():
+                continue
+            if node not in (n.node_id for n in self.pair.nodes):
+                out.append(fr)
+                continue
+            if self._active(FaultKind.NODE_SILENT, node):
+                continue
+            if base == 0x700 and self._active(FaultKind.HEARTBEAT_STOP, node):
+                continue
+            if base in (0x180, 0x280):
+                if self._active(FaultKind.TPDO_MISSING, node):
+                    continue
+                late = self._active(FaultKind.TPDO_LATE, node)
+                if late and at_sync:
+                    self._held.append((self.syncs + int(late[0].param), fr))
+                    continue
+                fr = self._sensor_faults(fr, node)
+            out.append(fr)
+        return out
+
+    def _sensor_faults(self, fr: Frame, node: int) -> Frame:
+        if fr.arbitration_id & 0x780 == 0x280:
+            tp = decode_tpdo2(fr)
+            lvdt, force = tp.lvdt_um, tp.force_dN
+            if self._active(FaultKind.LVDT_STUCK, node):
+                lvdt = self._stuck.setdefault(node, lvdt)
+            for f in self._active(FaultKind.LVDT_SPIKE, node):
+                lvdt += int(round(f.param * 1000))
+            for f in self._active(FaultKind.LOADCELL_SATURATION, node):
+                lim = int(round(f.param * 10))
+                force = max(-lim, min(lim, force))
+            if (lvdt, force) != (tp.lvdt_um, tp.force_dN):
+                return encode_tpdo2(node, Tpdo2(lvdt, force))
+            return fr
+        if self._active(FaultKind.RESOLVER_WRAP, node):
+            tp = decode_tpdo1(fr)
+            counts = int(round(self._node(node).counts_per_rev))
+            return encode_tpdo1(node, Tpdo1(tp.statusword, tp.position_inc + counts, tp.mode_display))
+        return fr
+
+    def _node(self, node_id: int):
+        return next(n for n in self.pair.nodes if n.node_id == node_id)
+
+    # ------------------------------------------------------------ the sans-IO interface
+
+    def power_on(self, t: float) -> list[Frame]:
+        return self._outbound(self.pair.power_on(t), at_sync=False)
+
+    def on_frame(self, frame: Frame, t: float) -> list[Frame]:
+        """As :meth:`sim.slave.SimDrivePair.on_frame`, with the faults applied."""
+        is_sync = frame.arbitration_id == 0x080 and len(frame.data) <= 1
+        if is_sync:
+            self.syncs += 1
+        pre = self._onsets() if is_sync else []
+        abort = self._sdo_abort(frame)
+        if abort is not None:
+            return [abort]
+        if self._inbound_dropped(frame):
+            return self._outbound(pre, at_sync=False) if pre else []
+        out = self.pair.on_frame(frame, t)
+        if is_sync and self.record_truth:
+            st = self.pair.plant.state()
+            self._truth.append((self.t_check + self.T, st.F_N, st.s_mm,
+                                tuple(n.state_machine.state.name for n in self.pair.nodes)))
+        return self._outbound(pre + out, at_sync=is_sync)
+
+    def tick(self, t: float) -> list[Frame]:
+        return self._outbound(self.pair.tick(t), at_sync=False)
+
+    # ------------------------------------------------------------ results
+
+    @property
+    def truth(self) -> TruthTrace:
+        """The plant's truth after every SYNC so far."""
+        if not self._truth:
+            e = np.empty((0, 2))
+            return TruthTrace(np.empty(0), e, e, np.empty((0, 2), dtype=object))
+        t, F, s, st = zip(*self._truth)
+        return TruthTrace(np.asarray(t), np.asarray(F, dtype=float), np.asarray(s, dtype=float),
+                          np.asarray(st, dtype=object))
+
+    def final_states(self) -> tuple[State, State]:
+        """Both drives' CiA 402 states now (the drives' own view)."""
+        return tuple(n.state_machine.state for n in self.pair.nodes)
+
+
+def _runaway(speed_mm_per_s: float, i_total: float, t_end: float, inj: FaultInjector):
+    """Command override of a runaway drive: in OPERATION_ENABLED it commands a ramp
+    ``phi(t) = phi_0 + v i (t - t_0)`` whatever its target (``phi_0`` its angle at onset)."""
+    start: dict = {}
+
+    def override(node, t: float, mode: int, value: float) -> tuple[int, float]:
+        if inj.t_check >= t_end - 1e-9 or node.state_machine.state is not State.OPERATION_ENABLED:
+            return mode, value
+        if "phi0" not in start:
+            start["phi0"], start["t0"] = node._phi_rad, t
+        return int(DriveMode.POSITION), start["phi0"] + speed_mm_per_s * i_total * (t - start["t0"])
+
+    return override

@@ -1,0 +1,86 @@
+"""Single-axis positioning drive (e.g. the EMPS recording) as a replay model for the diagnosis.
+
+Pure: arrays in, predicted channels out.
+
+Nominal model (rigid mass, symmetric Coulomb and viscous friction, offset),
+replayed by inverse dynamics from the measured position:
+
+.. math:: F = M\\ddot q + F_v \\dot q + F_c\\,\\mathrm{sign}(\\dot q) + F_0
+
+with :math:`\\dot q, \\ddot q` from a Savitzky-Golay filter of the measured
+position (m/s, m/s^2) and F the drive force ``gtau * vir`` (N). The channel
+compared is ``force``; driving by the measured position removes the
+controller from the comparison.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hil.errors import InputError
+
+__all__ = ["SingleAxisReplay", "single_axis_candidates"]
+
+_BAND_M_S = 1e-4  #: smooth sign width, m/s
+
+
+def single_axis_candidates() -> tuple:
+    """Candidate library of the single-axis model."""
+    from blf.diagnose import Candidate, Param
+    return (
+        Candidate("stribeck_friction", "axis", "Stribeck (static above Coulomb) friction of the ballscrew",
+                  (Param("extra_force_N", 2.0, 2.0, 0.0, 1e3), Param("stribeck_velocity_m_per_s", 0.01, 0.01, 1e-4, 1.0))),
+        Candidate("asymmetric_friction", "axis", "friction that differs with the direction of motion",
+                  (Param("asymmetry_N", 1.0, 1.0, -1e3, 1e3),)),
+        Candidate("position_dependent_friction", "axis", "friction that varies along the stroke (ballscrew wear or misalignment)",
+                  (Param("slope_N_per_m", 10.0, 10.0, -1e5, 1e5),)),
+    )
+
+
+class SingleAxisReplay:
+    """Recording of one axis and its inverse-dynamics replay, for :func:`blf.diagnose.diagnose`.
+
+    Parameters
+    ----------
+    t_s, q_m, q_ref_m, force_N : ndarray, shape (n,)
+        Time (s), measured and reference position (m), drive force (N).
+    sample_period_s : float
+    """
+
+    def __init__(self, t_s, q_m, q_ref_m, force_N, sample_period_s: float) -> None:
+        from blf.diagnose import Param
+        from scipy.signal import savgol_filter
+        arrs = [np.asarray(a, dtype=np.float64).ravel() for a in (t_s, q_m, q_ref_m, force_N)]
+        n = arrs[0].size
+        if any(a.size != n for a in arrs) or n < 200:
+            raise InputError(f"t, q, q_ref, force must be of one length >= 200; got {[a.shape for a in arrs]}")
+        if not all(np.all(np.isfinite(a)) for a in arrs):
+            raise InputError("t, q, q_ref, force must be finite (s, m, m, N)")
+        self.t_s = arrs[0]
+        self.q = arrs[1]
+        self.q_ref = arrs[2]
+        T = float(sample_period_s)
+        self.v = savgol_filter(self.q, 21, 3, deriv=1, delta=T, mode="interp")
+        self.a = savgol_filter(self.q, 21, 3, deriv=2, delta=T, mode="interp")
+        self.channels = ("force",)
+        self.measured = {"force": arrs[3]}
+        self.valid = {"force": np.ones(n, bool)}
+        self.nominal = (Param("mass_kg", 50.0, 10.0, 0.0, 1e5), Param("viscous_N_s_per_m", 100.0, 50.0, 0.0, 1e6),
+                        Param("coulomb_N", 20.0, 5.0, 0.0, 1e4), Param("offset_N", 0.0, 5.0, -1e4, 1e4))
+        self.candidates = single_axis_candidates()
+        self.regimes = {"position along the stroke": self.q - np.median(self.q), "velocity": self.v,
+                        "acceleration": self.a, "time since start": self.t_s - np.median(self.t_s)}
+
+    def predict(self, theta: np.ndarray, active: list) -> dict:
+        """Predicted drive force for nominal ``theta`` (M, Fv, Fc, F0) and the active effects."""
+        M, fv, fc, f0 = theta
+        th = np.tanh(self.v / _BAND_M_S)
+        f = M * self.a + fv * self.v + fc * th + f0
+        for cand, x in active:
+            if cand.name == "stribeck_friction":
+                f = f + x[0] * np.exp(-(self.v / x[1]) ** 2) * th
+            elif cand.name == "asymmetric_friction":
+                f = f + x[0] * th * th
+            elif cand.name == "position_dependent_friction":
+                f = f + x[0] * (self.q - np.median(self.q)) * th
+        return {"force": f}

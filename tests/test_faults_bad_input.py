@@ -1,0 +1,171 @@
+"""Supervisor limits one by one, hard caps no profile can raise, and bad input refused clearly."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from hil.cli import main
+from hil.config import HARD_MAX_FORCE_FRACTION, HARD_MAX_STALE_CYCLES
+from hil.errors import ProfileError
+from hil.profiles import default_profile_path, load_check
+from hil.supervisor import Limits, Supervisor
+from hil.types import DriveMode, Sample, Setpoint
+
+T = 0.002
+HOLD = Setpoint(DriveMode.DISABLED, 0.0)
+
+
+def _stream(n: int, rng, **override) -> list[Sample]:
+    """Samples of a rig at rest with sensor noise; ``override[k] = (index, field, value)``."""
+    out = []
+    for k in range(n):
+        f = dict(t_s=k * T, phi1_rad=0.0, phi2_rad=0.0, s1_mm=rng.uniform(-0.01, 0.01),
+                 s2_mm=rng.uniform(-0.01, 0.01), F1_N=rng.normal(0, 10), F2_N=rng.normal(0, 10))
+        for idx, name, value in override.values():
+            if k >= idx:
+                f[name] = value(k) if callable(value) else value
+        out.append(Sample(**f))
+    return out
+
+
+def _first_violation(sup: Supervisor, samples: list[Sample], sp=(HOLD, HOLD)):
+    for k, smp in enumerate(samples):
+        v = sup.check(smp, *sp)
+        if v is not None:
+            return k, v
+    return None, None
+
+
+@pytest.mark.parametrize("name,override,limit", [
+    ("force", {"a": (50, "F1_N", 8001.0)}, "max_force_N"),
+    ("fight", {"a": (50, "F1_N", 7100.0), "b": (50, "F2_N", -7100.0)}, "max_force_fight_N"),
+    ("imbalance", {"a": (50, "F1_N", 2600.0)}, "max_force_imbalance_N"),
+    ("stroke", {"a": (50, "s2_mm", -19.6), "b": (50, "phi2_rad", -19.6 * 5.026548245743669)}, "max_stroke_mm"),
+    ("velocity", {"a": (50, "phi1_rad", lambda k: (k - 50) * 0.03 * 5.026548245743669),
+                  "b": (50, "s1_mm", lambda k: (k - 50) * 0.03)}, "max_velocity_mm_per_s"),
+    ("d_plausibility", {"a": (50, "s1_mm", 0.7)}, "max_d_int_mm"),
+    ("lvdt_frozen", {"a": (50, "s2_mm", 0.004)}, "max_frozen_cycles"),
+    ("nan", {"a": (50, "F2_N", math.nan)}, "sensor_invalid"),
+])
+def test_each_limit_trips_on_the_first_sample_beyond_it(actuation, check_profile, name, override, limit):
+    sup = Supervisor(actuation, check_profile)
+    k, v = _first_violation(sup, _stream(200, np.random.default_rng(1), **override))
+    assert v is not None and v.limit == limit, v
+    lim = Limits.of(actuation, check_profile)
+    expected = {"max_frozen_cycles": 50 + lim.max_frozen_cycles + 1,
+                "max_velocity_mm_per_s": 51}.get(limit, 50)
+    assert k == expected
+    assert sup.check(_stream(1, np.random.default_rng(2))[0], HOLD, HOLD) is v  # latched
+
+
+def test_following_error_and_stale_samples(actuation, check_profile):
+    sup = Supervisor(actuation, check_profile)
+    i = actuation.mechanics.i_total_rad_per_mm
+    smp = _stream(10, np.random.default_rng(3))
+    far = Setpoint(DriveMode.POSITION, 0.51 * i)
+    assert sup.check(smp[0], far, HOLD).limit == "max_following_error_mm"
+    sup = Supervisor(actuation, check_profile)
+    assert sup.check(smp[0], HOLD, HOLD) is None
+    gap = dataclasses.replace(smp[1], t_s=smp[0].t_s + (check_profile.safety.max_stale_cycles + 2) * T)
+    assert sup.check(gap, HOLD, HOLD).limit == "max_stale_cycles"
+
+
+def test_hard_caps_hold_even_for_a_check_built_past_the_loader(actuation, check_profile):
+    s = dataclasses.replace(check_profile.safety, max_force_N=1e6, max_force_fight_N=1e6,
+                            max_force_imbalance_N=1e6, max_stroke_mm=199.0, max_velocity_mm_per_s=999.0,
+                            max_following_error_mm=9.0, max_d_int_mm=9.0, max_stale_cycles=999,
+                            max_frozen_cycles=9999)
+    lim = Limits.of(actuation, dataclasses.replace(check_profile, safety=s))
+    f_lim = actuation.mechanics.limit_load_N
+    assert lim.max_force_N == HARD_MAX_FORCE_FRACTION * f_lim == 10000.0
+    assert lim.max_force_fight_N == 0.2 * f_lim and lim.max_force_imbalance_N == 0.1 * f_lim
+    assert lim.max_stroke_mm == actuation.mechanics.stroke_limit_mm
+    assert (lim.max_velocity_mm_per_s, lim.max_following_error_mm, lim.max_d_int_mm) == (50.0, 2.0, 2.0)
+    assert (lim.max_stale_cycles, lim.max_frozen_cycles) == (HARD_MAX_STALE_CYCLES, 100)
+
+
+@pytest.mark.parametrize("line,new,message", [
+    ("max_force_fight_N = 7000.0", "max_force_fight_N = 9000.0",
+     r"field 'safety.max_force_fight_N' = 9000.0 is above the hard cap 8000 N"),
+    ("max_force_imbalance_N = 2500.0", "max_force_imbalance_N = 5000.0",
+     r"field 'safety.max_force_imbalance_N' = 5000.0 is above the hard cap 4000 N"),
+    ("max_stale_cycles = 2", "max_stale_cycles = 6", r"field 'safety.max_stale_cycles' = 6 is above the hard cap 5"),
+    ("max_frozen_cycles = 25", "max_frozen_cycles = 101",
+     r"field 'safety.max_frozen_cycles' = 101 is above the hard cap 100"),
+    ("max_force_fight_N = 7000.0", "max_force_fight_N = 5000.0",
+     r"'force_fight.amplitude_fraction_of_limit' gives 6000 N, not below safety.max_force_fight_N"),
+    ("max_stale_cycles = 2", "max_stale_cycles = 2.5", r"field 'safety.max_stale_cycles' must be an integer"),
+])
+def test_profile_values_above_hard_caps_are_refused_naming_the_field(tmp_path, actuation, line, new, message):
+    text = default_profile_path("check.toml").read_text()
+    assert line in text
+    p = tmp_path / "check.toml"
+    p.write_text(text.replace(line, new))
+    with pytest.raises(ProfileError, match=message):
+        load_check(p, actuation)
+
+
+def test_eds_of_another_drive_is_refused_before_the_bus(tmp_path, capsys):
+    eds = tmp_path / "other.eds"
+    eds.write_text(default_profile_path("ema_drive.eds").read_text().replace(
+        "[1018sub2]\nParameterName=Product code\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\n"
+        "DefaultValue=0x00000402", "[1018sub2]\nParameterName=Product code\nObjectType=0x7\nDataType=0x0007\n"
+        "AccessType=ro\nDefaultValue=0x00000999"))
+    act = tmp_path / "actuation.toml"
+    act.write_text(default_profile_path("actuation.toml").read_text().replace('eds = "ema_drive.eds"',
+                                                                              'eds = "other.eds"'))
+    rc = main(["dry-run", "--profile", str(act), "--out", str(tmp_path / "d"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 3
+    assert "identity 0x1018:02 = 0x00000999 does not match the profile's canopen.product_code = 0x00000402" in err
+    assert not (tmp_path / "d").exists()  # nothing ran, nothing was sent
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory, actuation, check_profile, simrig):
+    """A short aborted dry-run (an EMCY at 3 s) to mutate its recordings."""
+    from hil.commands import dry_run
+    from sim.faults import Fault
+    out = tmp_path_factory.mktemp("bad") / "run"
+    dry_run(actuation, check_profile, simrig, out, faults=[Fault("emcy_over_current", 1, 3.0)])
+    return out
+
+
+def _analyze_refuses(capsys, path, message):
+    assert main(["analyze", str(path)]) == 3
+    err = capsys.readouterr().err
+    assert message in err, err
+
+
+@pytest.mark.parametrize("mutate,message", [
+    (lambda L: L[:5] + [L[5].replace(L[5].split(",")[3], "nan", 1)] + L[6:], "line 6: column 's1' [mm] is nan"),
+    (lambda L: L[:5] + [L[6], L[5]] + L[7:], "line 7: time not increasing"),
+    (lambda L: [L[0].replace(",F2,", ",F2x,")] + L[1:], "line 1: missing column(s) F2"),
+    (lambda L: [L[0]] + [",".join([f"{float(r.split(',')[0]) * 1000:.1f}"] + r.split(",")[1:]) for r in L[1:]],
+     "(time in ms?)"),
+    (lambda L: [L[0]] + [",".join(r.split(",")[:3] + [f"{float(r.split(',')[3]) * 1000:.1f}"] + r.split(",")[4:])
+                         for r in L[1:]], "(stroke in um?)"),
+])
+def test_bad_recordings_are_refused_with_line_and_unit(tmp_path, capsys, short_run, mutate, message):
+    lines = (short_run / "signals.csv").read_text().splitlines()
+    p = tmp_path / "rec.csv"
+    p.write_text("\n".join(mutate(lines)) + "\n")
+    _analyze_refuses(capsys, p, message)
+
+
+def test_can_log_with_garbage_lines_is_refused_but_a_cut_last_line_is_not(tmp_path, capsys, short_run, actuation):
+    from hil.canlog import decode_can_log
+    run = tmp_path / "run"
+    shutil.copytree(short_run, run)
+    (run / "signals.csv").unlink()
+    log = (run / "can.log").read_text().splitlines()
+    (run / "can.log").write_text("\n".join(log) + "\n" + log[-1][:17])  # killed mid-line
+    dec = decode_can_log(run / "can.log", actuation)
+    assert "last line incomplete (recording cut short), dropped" in dec.signals.notes
+    (run / "can.log").write_text("\n".join(log[:100] + ["garbage ## line"] + log[100:]) + "\n")
+    _analyze_refuses(capsys, run, "line 101: not a candump frame line")
