@@ -4,26 +4,35 @@ Everything here is pure: arrays and explicit sample rates in, frozen
 dataclasses out; no plotting, logging, file IO or clocks.
 """
 
-from .accuracy import AccuracyBudget, MethodErrors, backlash_error_budget
-from .calibration import LvdtCalibration, fit_lvdt_calibration
-from .maint import (
-    BinnedCurve,
-    BlfMaintResult,
-    CentreLine,
-    ContactLine,
-    FdLines,
-    blf_maint,
-)
-from .serv import (
-    BlfServMonitor,
-    BlfServResult,
-    ServFilters,
-    ServJump,
-    blf_serv,
-    design_serv_filters,
-    estimate_noise_std_mm,
-)
-from .signals import PositionDifferences, position_differences
+import importlib
+
+#: Public name -> submodule. Imported on first use (PEP 562): ``from blf.calibration import ...``
+#: in the master's process does not pull in python-control, scipy.signal and numba (BLFserv),
+#: which cost seconds at start-up where page faults are expensive (user-mode-linux).
+_WHERE = {
+    "AccuracyBudget": "accuracy", "MethodErrors": "accuracy", "backlash_error_budget": "accuracy",
+    "LvdtCalibration": "calibration", "fit_lvdt_calibration": "calibration",
+    "BinnedCurve": "maint", "BlfMaintResult": "maint", "CentreLine": "maint", "ContactLine": "maint",
+    "FdLines": "maint", "blf_maint": "maint",
+    "BlfServMonitor": "serv", "BlfServResult": "serv", "ServFilters": "serv", "ServJump": "serv",
+    "blf_serv": "serv", "design_serv_filters": "serv", "estimate_noise_std_mm": "serv",
+    "PositionDifferences": "signals", "position_differences": "signals",
+}
+
+
+def __getattr__(name: str):
+    try:
+        mod = _WHERE[name]
+    except KeyError:
+        raise AttributeError(f"module 'blf' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(f"blf.{mod}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
 
 __all__ = [
     "AccuracyBudget",

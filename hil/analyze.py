@@ -19,8 +19,8 @@ from blf.signals import position_differences
 from hil.config import Actuation
 from hil.errors import AnalysisError, IncompleteRecordingError, RecordingError
 from hil.runfolder import Signals
+from hil.types import CHANNELS
 
-CHANNELS = ("int1", "int2", "ext")
 
 
 @dataclass(frozen=True)

@@ -71,6 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-run)")
     _add_profile_args(p, sim=False)
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "
+                        "default 0: normal scheduling). Memory is locked either way (best effort).")
 
     p = sub.add_parser("sim-serve", help="the two simulated drives on a CAN bus (until SIGINT/SIGTERM)",
                        description="Serve two simulated CiA 402 drives on a python-can bus (e.g. socketcan "

@@ -13,11 +13,11 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from hil.analyze import CHANNELS, analyze_signals, result_dict
 from hil.config import Actuation
 from hil.errors import AnalysisError, EmacheckError, IncompleteRecordingError, RecordingError
 from hil.profiles import build_dataclass, load_actuation, load_check, load_simrig, snapshot
 from hil.runfolder import read_signals, resolve_recording, write_json_atomic
+from hil.types import CHANNELS
 
 EXIT_PASS, EXIT_FAIL, EXIT_ABORTED = 0, 1, 2
 
@@ -118,6 +118,8 @@ def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
 def analyze_and_report(sig_path: Path, act: Actuation, out_dir: Path, truth: dict | None,
                        meta: dict | None, console: Console) -> dict:
     """Read the signals back, analyse, write result.json and report.html."""
+    # imported here, not at the top: `emacheck run` loads the analysis only after the cyclic loop
+    from hil.analyze import analyze_signals, result_dict
     from hil.report import write_report
     t0 = time.perf_counter()
     sig = load_recording(sig_path, act, meta)
@@ -380,12 +382,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
                                    "eds": str(eds)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
-    import gc
-
-    from hil.serve import lock_memory, realtime_priority
-    gc.collect()
-    gc.freeze()  # the set-up's objects are never scanned again: no long GC pause inside a SYNC cycle
-    console.print(f"real time: {lock_memory()}; {realtime_priority()}")
+    from hil.serve import prepare_realtime
+    console.print(f"real time: {prepare_realtime(args.rt_priority)}")
     try:
         outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
     finally:

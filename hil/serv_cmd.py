@@ -45,8 +45,8 @@ from hil.config import Actuation
 from hil.errors import AnalysisError, InputError, RecordingError
 from hil.profiles import build_dataclass, load_actuation
 from hil.runfolder import Signals, resolve_recording, write_json_atomic
+from hil.types import CHANNELS
 
-CHANNELS = ("int1", "int2", "ext")
 _LABEL = {"int1": "D_{int,1}", "int2": "D_{int,2}", "ext": "D_{ext}"}
 _MAX_POINTS = 8000
 PAPER_PITCH_ERROR = 0.075  #: the paper's uncompensated pitch error, used when no calibration says otherwise

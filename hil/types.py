@@ -42,3 +42,6 @@ class Sample:
     s2_mm: float
     F1_N: float
     F2_N: float
+
+#: The three BLF channels: EMA 1 internal, EMA 2 internal, external (paper eq. 1).
+CHANNELS = ("int1", "int2", "ext")

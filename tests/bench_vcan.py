@@ -3,8 +3,7 @@
 Runs the check over SocketCAN for at least ``--minutes`` (default 10) of
 real time: one ``sim-serve`` (SCHED_FIFO 50) for the whole time and ``run``
 repeated (each a complete check with ``--check``, default the shipped profile,
-115.5 s; started through tests/vcan/master_rt.py: memory locked, SCHED_FIFO
-40), with can-utils' ``candump -L vcan0`` recording everything. Repeating
+115.5 s; ``--rt-priority 40``: memory locked, SCHED_FIFO 40), with can-utils' ``candump -L vcan0`` recording everything. Repeating
 whole checks rather than one long check keeps every run a real check and
 includes the start-up of each (preflight, enabling), where timing is worst. Where the host kernel
 has no vcan, the benchmark runs inside user-mode-linux (see
@@ -192,8 +191,8 @@ def bench(minutes: float, check: Path | None, workdir: Path, profile: Path | Non
         k = 0
         while k == 0 or time.monotonic() - t0 < minutes * 60:
             out = workdir / f"run{k}"
-            argv = [sys.executable, str(HERE / "vcan" / "master_rt.py"), "run", "--interface", "socketcan",
-                    "--channel", CHANNEL, "--arm", "--quiet", "--out", str(out), *prof] + (
+            argv = cli + ["run", "--interface", "socketcan", "--channel", CHANNEL, "--arm", "--quiet",
+                          "--rt-priority", "40", "--out", str(out), *prof] + (
                         ["--check", str(check)] if check else [])
             c0, w0 = _children_cpu_s(), time.monotonic()
             with open(workdir / f"run{k}.out", "w") as fh:

@@ -26,6 +26,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -130,6 +131,22 @@ def build_shim(workdir: Path) -> Path:
     return out
 
 
+def precompile(root: Path = ROOT) -> None:
+    """Write the project's bytecode (``__pycache__``) on the host, before booting UML.
+
+    Inside UML every page fault costs about 0.9 ms and every system call about
+    0.12 ms; compiling the project's sources at each interpreter start (as
+    happens where PYTHONDONTWRITEBYTECODE is set, or the tree is read-only)
+    costs each process there tens of seconds. Installed packages were compiled
+    by pip.
+    """
+    dirs = [str(root / d) for d in ("hil", "blf", "sim", "profiles", "tests") if (root / d).is_dir()]
+    r = subprocess.run([sys.executable, "-m", "compileall", "-q", *dirs], capture_output=True, text=True,
+                       timeout=300)
+    if r.returncode != 0:
+        raise RuntimeError(f"compileall failed: {r.stdout[-2000:]}{r.stderr[-2000:]}")
+
+
 def _init_script(workdir: Path, command: list[str], env: dict[str, str], cwd: Path) -> Path:
     mod = uml_modules_dir()
     assert mod is not None
@@ -208,6 +225,7 @@ def run_in_uml(command: list[str], workdir: Path, timeout_s: float, *, mem: str 
     for f in ("status", "inner.log", "booted"):
         (workdir / f).unlink(missing_ok=True)
     shim = build_shim(workdir)
+    precompile(cwd)
     env = {k: v for k, v in os.environ.items() if k not in _ENV_DROP and k.isidentifier()}
     env[INSIDE_ENV] = "1"
     env.update(extra_env or {})
