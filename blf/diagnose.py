@@ -381,7 +381,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     pred_cur = pred0
     locations = locate(w0)
     significant = any(v > cfg.excess_threshold for v in excess0.values())
-    say(f"excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in excess0.items()))
+    say("excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in excess0.items()))
 
     active: list = []
     accepted: list[FittedEffect] = []

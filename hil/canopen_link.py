@@ -175,6 +175,11 @@ class InProcessTransport:
 _CAN_FRAME = struct.Struct("<IB3x8s")  # struct can_frame: id, dlc, pad, data[8]
 
 
+#: SO_TIMESTAMPNS (asm-generic/socket.h; Python's socket module does not name it)
+_SO_TIMESTAMPNS = 35
+_ANC_SPACE = socket.CMSG_SPACE(16) if hasattr(socket, "CMSG_SPACE") else 64
+
+
 class SocketcanFrames:
     """Classic CAN frames straight on a SocketCAN socket: about one system call per frame.
 
@@ -217,6 +222,23 @@ class SocketcanFrames:
         except (BlockingIOError, InterruptedError):
             return False, None
 
+    def recv_stamped_nowait(self) -> tuple[bool, Frame | None, float | None]:
+        """Like :meth:`recv_nowait`, with the kernel's receive time of the frame (CLOCK_REALTIME
+        [s], from SO_TIMESTAMPNS, which python-can enables on its sockets; None if absent).
+
+        Still one system call (``recvmsg`` instead of ``recv``).
+        """
+        try:
+            raw, anc, _flags, _addr = self.sock.recvmsg(72, _ANC_SPACE, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return False, None, None
+        ts = None
+        for level, kind, data in anc:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= 16:
+                sec, nsec = struct.unpack_from("@ll", data)
+                ts = sec + nsec * 1e-9
+        return True, self._decode(raw), ts
+
     def wait(self, timeout: float) -> bool:
         """Wait up to ``timeout`` [s] for a frame to be queued."""
         try:
@@ -255,17 +277,27 @@ class BusTransport:
         self.T = sync_period_s
         self._task = None
         self._t0 = time.monotonic()
+        #: CLOCK_REALTIME minus CLOCK_MONOTONIC: turns the kernel's receive stamps into our time base
+        self._rt_minus_mono = time.time() - time.monotonic()
         self._raw = SocketcanFrames.for_bus(bus)
         self._now = 0.0
+        #: how far the frame just taken lagged behind the clock [s] (0 when it was waited for)
+        self.lag_s = 0.0
+        self.max_lag_s = 0.0  #: the largest lag seen [s]
 
     def now(self) -> float:
-        """Monotonic time [s] since the transport was made; on SocketCAN, as of the last :meth:`receive`.
+        """Monotonic time [s] since the transport was made; on SocketCAN, the time of the last
+        event :meth:`receive` delivered.
 
-        The link asks for the time several times per frame; where reading the
-        clock is a system call (user-mode-linux has no vDSO: ~15 us each) that
-        costs more than the frame itself. The raw SocketCAN path therefore
-        reads the clock once per received frame (twice if it waited) and
-        :meth:`now` returns that time: every loop of the link receives.
+        On SocketCAN that is the kernel's receive time of the frame just taken
+        (event time): when the master has fallen behind and frames wait in the
+        socket, every frame, and every timeout judged after it (heartbeat
+        consumer, SDO, cycle end), carries the time it arrived, not the time it
+        was read; a heartbeat still queued is never judged missing. When the
+        queue was empty, it is the clock at the end of the wait. (Reading the
+        clock is a system call where there is no vDSO, as in user-mode-linux:
+        this path reads it only when it waits.) :attr:`lag_s` says how far the
+        frame just taken lagged behind the clock.
         """
         if self._raw is None:
             return time.monotonic() - self._t0
@@ -287,14 +319,32 @@ class BusTransport:
 
     def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
         if self._raw is not None:
-            t = self._clock()
-            got, f = self._raw.recv_nowait()
+            got, f, ts = self._raw.recv_stamped_nowait()
+            waited = False
             if not got:
-                if not self._raw.wait(deadline - t):
+                t = self._clock()  # the queue is empty: the clock is the event time
+                if t >= deadline or not self._raw.wait(deadline - t):
+                    self._clock()
+                    self.lag_s = 0.0
+                    return []
+                got, f, ts = self._raw.recv_stamped_nowait()
+                waited = True
+                if not got:
                     self._clock()
                     return []
-                got, f = self._raw.recv_nowait()
+            if ts is None:
                 t = self._clock()
+                self.lag_s = 0.0
+            else:
+                t = ts - self._rt_minus_mono - self._t0
+                if waited:
+                    self.lag_s = 0.0
+                else:
+                    # how far behind the bus: one clock read per frame taken from a backlog
+                    self.lag_s = max(0.0, time.monotonic() - self._t0 - t)
+                    if self.lag_s > self.max_lag_s:
+                        self.max_lag_s = self.lag_s
+                self._now = t
             if f is None:
                 return []
             return [(f, t, _to_msg(f, t, rx=True))]
@@ -337,7 +387,10 @@ class CanopenLink:
         Receives the master's events (boot-up, states, EMCY, ...).
     max_missing_cycles : int
         Sensor freshness: SYNC cycles in a row without a complete sample before
-        :class:`StaleData` is raised (the check's ``safety.max_stale_cycles``).
+        :class:`StaleData` is raised (the check's ``safety.max_stale_cycles``);
+        also, on a real bus, the longest a frame may wait in the master's
+        socket (in SYNC periods) before the master, fallen behind, aborts with
+        :class:`StaleData`.
     """
 
     def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
@@ -347,6 +400,8 @@ class CanopenLink:
         self.log = log
         self.on_event = on_event
         self.max_missing = max_missing_cycles
+        #: the longest a received frame may have waited in the socket before the master took it [s]
+        self.max_lag_s = max_missing_cycles * getattr(transport, "T", 0.0)
         self._last: Sample | None = None
         self._closed = False
         self.sync_times: list[float] = []
@@ -481,6 +536,14 @@ class CanopenLink:
         while True:
             got = self.tr.receive(self.tr.now() if inproc else cycle_end)
             if got:
+                lag = getattr(self.tr, "lag_s", 0.0)
+                if lag > self.max_lag_s:
+                    # the master has fallen behind the bus: whatever it computes now is stale
+                    err = StaleData(f"sensor data stale: the master is {lag * 1e3:.0f} ms behind the bus "
+                                    f"(frames wait in its socket; limit safety.max_stale_cycles x SYNC period "
+                                    f"= {self.max_lag_s * 1e3:.0f} ms)")
+                    self.m._latch(err)
+                    raise err
                 self._feed(got)
             self._send(self.m.poll(self.tr.now()))
             sample = self.m.take_sample()

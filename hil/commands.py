@@ -219,7 +219,6 @@ def _canopen_check(console: Console, act, check, link, out: Path, meta: dict, qu
     """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
     ...) has already stopped the drives and closed the log when it arrives here: it becomes an
     aborted outcome with the reason, and result.json says so."""
-    from hil.errors import EmacheckError
     from hil.runner import LoopOutcome, run_check
 
     t0 = time.perf_counter()
@@ -228,22 +227,25 @@ def _canopen_check(console: Console, act, check, link, out: Path, meta: dict, qu
             outcome = run_check(link, act, check, out, meta, on_cycle=live)
     except EmacheckError as exc:
         reason = f"{type(exc).__name__}: {exc}"
-        outcome = LoopOutcome("aborted", reason, 0, 0.0, meta.get("steps", {}))
+        outcome = LoopOutcome("aborted", reason, meta.get("samples", 0), meta.get("duration_s", 0.0),
+                              meta.get("steps", {}))
     wall = time.perf_counter() - t0
     return outcome, wall
 
 
-def _record_can_stats(out: Path, meta: dict, wall: float, log, master) -> None:
+def _record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=None) -> None:
     meta["wall_s"] = round(wall, 3)
     meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
                    "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
+    if transport is not None and hasattr(transport, "max_lag_s"):
+        # how far the master fell behind the bus at worst (a frame waiting in its socket) [ms]
+        meta["can"]["max_lag_ms"] = round(transport.max_lag_s * 1e3, 2)
     write_json_atomic(out / "meta.json", meta)
 
 
 def _result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -> int:
     """Analyse a finished check; an aborted one gets result.json with the reason (and the
     analysis where enough data was recorded)."""
-    from hil.errors import EmacheckError
 
     if outcome.status != "done":
         console.print(f"[red]aborted:[/red] {outcome.reason}")
@@ -376,7 +378,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     transport = BusTransport(bus, act.timing.sync_period_s)
     master = MasterCore(act)
     log = CanLogWriter(out / "can.log", channel=args.channel)
-    link = CanopenLink(master, transport, log)
+    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles)
     meta = start_meta(act, check, {"mode": "run", "interface": args.interface, "channel": args.channel,
                                    "bitrate_bps": bitrate,
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
@@ -389,7 +391,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     finally:
         transport.close()
         bus.shutdown()
-    _record_can_stats(out, meta, wall, log, master)
+    _record_can_stats(out, meta, wall, log, master, transport)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
                   f"{log.frames} CAN frames logged")
     return _result_after(out, act, None, meta, outcome, console)
@@ -402,6 +404,27 @@ def truth_dict(truth) -> dict:
             "calibration": {k: dict(v) for k, v in truth.calibration.items()}}
 
 
+def read_meta(run_dir: Path | None) -> dict | None:
+    """A run folder's meta.json, or None (no run folder, or no meta.json in it)."""
+    if run_dir is None or not (run_dir / "meta.json").exists():
+        return None
+    try:
+        return json.loads((run_dir / "meta.json").read_text())
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{run_dir / 'meta.json'}: not valid JSON: {exc}") from None
+
+
+def actuation_for(profile: Path | None, meta: dict | None) -> Actuation:
+    """The actuation to analyse a recording with: ``--profile`` if given, else the run folder's
+    snapshot (what the run used), else the shipped profile."""
+    if profile is not None:
+        return load_actuation(profile)
+    snap = ((meta or {}).get("profiles") or {}).get("actuation")
+    if snap is not None:
+        return build_dataclass(Actuation, snap, "meta.json (actuation snapshot)")
+    return load_actuation(None)
+
+
 def cmd_analyze(args: argparse.Namespace) -> int:
     """``emacheck analyze``: recompute the result from a run folder or a signals CSV."""
     console = Console()
@@ -412,18 +435,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         if not (arg.is_dir() and (arg / "meta.json").exists()):
             raise
         sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
-    meta = None
-    if run_dir is not None and (run_dir / "meta.json").exists():
-        try:
-            meta = json.loads((run_dir / "meta.json").read_text())
-        except json.JSONDecodeError as exc:
-            raise RecordingError(f"{run_dir / 'meta.json'}: not valid JSON: {exc}") from None
-    if args.profile is not None:
-        act = load_actuation(args.profile)
-    elif meta is not None and "profiles" in meta:
-        act = build_dataclass(Actuation, meta["profiles"]["actuation"], "meta.json (actuation snapshot)")
-    else:
-        act = load_actuation(None)
+    meta = read_meta(run_dir)
+    act = actuation_for(args.profile, meta)
     out = Path(args.out) if args.out is not None else (run_dir if run_dir is not None else sig_path.parent)
     truth = meta.get("truth") if meta else None
     incomplete = meta is not None and meta.get("status") == "running"

@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import base64
 import io
-import json
 import time
 from pathlib import Path
 
@@ -22,18 +21,15 @@ __all__ = ["cmd_diagnose", "load_model", "diagnosis_dict"]
 
 
 def _load_dual(path: Path, profile: Path | None):
-    from hil.commands import load_recording
-    from hil.profiles import load_actuation
+    from hil.commands import actuation_for, load_recording, read_meta
     from sim.replay import DualEmaReplay
 
     run_dir = path if path.is_dir() else None
     sig_path = path / "signals.csv" if run_dir else path
     if run_dir and not sig_path.exists() and (path / "can.log").exists():
         sig_path = path / "can.log"
-    meta = None
-    if run_dir and (path / "meta.json").exists():
-        meta = json.loads((path / "meta.json").read_text())
-    act = load_actuation(profile)
+    meta = read_meta(run_dir)
+    act = actuation_for(profile, meta)
     sig = load_recording(sig_path, act, meta)
     period = float(np.median(np.diff(sig.t)))
     model = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2,

@@ -159,7 +159,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
             secondary += _record_safe_state(link, meta)
             writer.close()
             meta.update(status="aborted", reason=reason + secondary, ended_utc=_now_iso(), steps=steps,
-                        samples=writer.rows)
+                        samples=writer.rows, duration_s=(smp.t_s - t_start) if smp is not None else 0.0)
             write_json_atomic(meta_path, meta)
         raise
     writer.close()

@@ -38,12 +38,11 @@ from rich.console import Console
 from rich.table import Table
 
 from blf.accuracy import AccuracyBudget, backlash_error_budget
-from blf.calibration import LvdtCalibration, fit_lvdt_calibration
+from blf.calibration import fit_lvdt_calibration
 from blf.serv import METHODS, BlfServResult, blf_serv
 from blf.signals import position_differences
 from hil.config import Actuation
 from hil.errors import AnalysisError, InputError, RecordingError
-from hil.profiles import build_dataclass, load_actuation
 from hil.runfolder import Signals, resolve_recording, write_json_atomic
 from hil.types import CHANNELS
 
@@ -486,7 +485,7 @@ def print_summary(console: Console, data: dict, out_dir: Path) -> None:
 def cmd_serv(args: argparse.Namespace) -> int:
     """``emacheck serv RECORDING [--profile ACTUATION.toml] [--out DIR] [--calibration RESULT.json]
     [--method improved|paper] [--no-report]``."""
-    from hil.commands import load_recording
+    from hil.commands import actuation_for, load_recording, read_meta
 
     console = Console()
     t0 = time.perf_counter()
@@ -494,18 +493,8 @@ def cmd_serv(args: argparse.Namespace) -> int:
     if method not in METHODS:
         raise RecordingError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
     sig_path, run_dir = resolve_recording(args.recording)
-    meta = None
-    if run_dir is not None and (run_dir / "meta.json").exists():
-        try:
-            meta = json.loads((run_dir / "meta.json").read_text())
-        except json.JSONDecodeError as exc:
-            raise RecordingError(f"{run_dir / 'meta.json'}: not valid JSON: {exc}") from None
-    if args.profile is not None:
-        act = load_actuation(args.profile)
-    elif meta is not None and "profiles" in meta and "actuation" in meta["profiles"]:
-        act = build_dataclass(Actuation, meta["profiles"]["actuation"], "meta.json (actuation snapshot)")
-    else:
-        act = load_actuation(None)
+    meta = read_meta(run_dir)
+    act = actuation_for(args.profile, meta)
     try:
         sig = load_recording(sig_path, act, meta)
         corr = choose_calibration(sig, act, run_dir, getattr(args, "calibration", None))

@@ -1,0 +1,114 @@
+"""Event time on a real bus: frames carry the kernel's receive time, not the time the master read them.
+
+A master that has fallen behind (frames waiting in its socket) must judge its timeouts
+(heartbeat consumer) at the time each frame arrived; and when it lags more than
+``safety.max_stale_cycles`` SYNC periods behind the bus it must stop (stale data).
+No SocketCAN needed: the socket is replaced by a queue of stamped frames.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import can
+import pytest
+
+from hil.canopen_link import BusTransport, CanopenLink, StaleData
+from hil.master import MasterCore
+from hil.pdo import Frame
+
+
+class QueuedSocket:
+    """Stands in for :class:`hil.canopen_link.SocketcanFrames`: frames with CLOCK_REALTIME stamps."""
+
+    def __init__(self) -> None:
+        self.q: deque = deque()
+        self.sent: list[Frame] = []
+
+    def put(self, frame: Frame, realtime_s: float) -> None:
+        self.q.append((frame, realtime_s))
+
+    def recv_stamped_nowait(self):
+        if not self.q:
+            return False, None, None
+        f, ts = self.q.popleft()
+        return True, f, ts
+
+    def wait(self, timeout: float) -> bool:
+        return bool(self.q)
+
+    def send(self, f: Frame) -> None:
+        self.sent.append(f)
+
+
+@pytest.fixture
+def transport():
+    bus = can.Bus(interface="virtual", channel="emacheck-event-time")
+    tr = BusTransport(bus, 0.002)
+    tr._raw = QueuedSocket()
+    yield tr
+    bus.shutdown()
+
+
+def _realtime_of(tr: BusTransport, t_rel: float) -> float:
+    return t_rel + tr._t0 + tr._rt_minus_mono
+
+
+def test_backlog_frames_carry_their_arrival_time(transport):
+    tr = transport
+    now = time.monotonic() - tr._t0
+    # three heartbeats that arrived 0.9, 0.5 and 0.1 s ago, all still queued
+    for age in (0.9, 0.5, 0.1):
+        tr._raw.put(Frame(0x701, b"\x05"), _realtime_of(tr, now - age))
+    times = []
+    for _ in range(3):
+        got = tr.receive(deadline=now + 1.0)
+        assert len(got) == 1
+        times.append(got[0][1])
+        assert tr.now() == got[0][1]  # timeouts judged after this frame use its time
+    assert times == pytest.approx([now - 0.9, now - 0.5, now - 0.1], abs=1e-6)
+    assert tr.max_lag_s == pytest.approx(0.9, abs=0.05)
+    # queue empty: the clock is the event time again, and no lag
+    assert tr.receive(deadline=tr.now()) == []
+    assert tr.lag_s == 0.0 and tr.now() >= now
+
+
+def test_heartbeat_in_the_backlog_is_not_judged_lost(transport, actuation):
+    """The consumer fires only if no heartbeat *arrived* within the timeout (1.5 periods)."""
+    tr = transport
+    m = MasterCore(actuation)
+    hb = actuation.canopen.heartbeat_period_s
+    from hil.master import Phase
+    m.phase = Phase.CYCLIC
+    now = time.monotonic() - tr._t0
+    start = now - 4 * hb  # the consumer started 4 periods ago; heartbeats came every period
+    for d in m.drives.values():
+        d.last_heartbeat_s = start
+        d.nmt_state = 0x05
+    for k in range(1, 5):
+        for n in m.drives:
+            tr._raw.put(Frame(0x700 + n, b"\x05"), _realtime_of(tr, start + k * hb - 0.01))
+    while True:
+        got = tr.receive(deadline=tr.now())
+        if not got:
+            break
+        for f, t, _msg in got:
+            m.on_frame(f, t)
+        m.poll(tr.now())  # judged at the frame's time: never more than one period since the last
+    assert m.fault is None
+    # judged at read time instead (what the master did before), the first heartbeat alone would
+    # have been 3 periods old when read: the consumer would have fired
+    assert (now - (start + hb)) > m.hb_timeout_s
+
+
+def test_master_behind_the_bus_stops_with_stale_data(transport, actuation):
+    tr = transport
+    m = MasterCore(actuation)
+    link = CanopenLink(m, tr, max_missing_cycles=5)
+    assert link.max_lag_s == pytest.approx(5 * 0.002)
+    now = time.monotonic() - tr._t0
+    tr._raw.put(Frame(0x080, b""), _realtime_of(tr, now - 0.5))  # a SYNC that waited 0.5 s
+    with pytest.raises(StaleData, match="behind the bus"):
+        link._cycle(stop_at_sample=True)
+    assert isinstance(m.fault, StaleData) and m.quick_stop
