@@ -17,7 +17,6 @@ simulated or real. Two transports move the frames:
 
 from __future__ import annotations
 
-import select
 import socket
 import struct
 import time
@@ -28,6 +27,7 @@ from can.interfaces.virtual import VirtualBus
 
 from hil.canlog import CanLogWriter
 from hil.cia402 import State
+from hil.config import HARD_MAX_LAG_S
 from hil.errors import EmacheckError
 from hil.master import MasterCore, PreflightError
 from hil.nmt import NmtCommand
@@ -180,23 +180,31 @@ _SO_TIMESTAMPNS = 35
 _ANC_SPACE = socket.CMSG_SPACE(16) if hasattr(socket, "CMSG_SPACE") else 64
 
 
+def _stamp(anc: list) -> float | None:
+    """The SO_TIMESTAMPNS receive time [s, CLOCK_REALTIME] in a ``recvmsg`` ancillary list, or None."""
+    for level, kind, data in anc:
+        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = struct.unpack_from("@ll", data)
+            return sec + nsec * 1e-9
+    return None
+
+
 class SocketcanFrames:
-    """Classic CAN frames straight on a SocketCAN socket: about one system call per frame.
+    """Classic CAN frames straight on a SocketCAN socket: one system call per frame.
 
     python-can's ``recv`` costs ``time()``, ``select`` and ``recvmsg`` (with a
     timestamp) per frame plus as many for the empty probe that ends a drain,
-    and ``send`` a ``select`` plus ``send``. Where a system call costs ~15 us
-    (user-mode-linux, small embedded masters) that alone takes half of a 2 ms
-    SYNC cycle. Here a frame already queued costs one non-blocking ``recv``,
-    a frame waited for a ``select`` more, and ``send`` one ``send``.
-    Extended, remote, error and CAN FD frames are dropped (counted in
-    :attr:`ignored`).
+    and ``send`` a ``select`` plus ``send``. Where a system call is expensive
+    (user-mode-linux: ~0.12 ms on the CI machines; small embedded masters)
+    that alone fills a SYNC cycle. Here a frame costs one blocking ``recvmsg``
+    with a receive timeout (queued or waited for alike) and ``send`` one
+    ``send``. Extended, remote, error and CAN FD frames are dropped (counted
+    in :attr:`ignored`).
     """
 
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
         self.ignored = 0
-        self._sel = (sock,)
         self._rcvtimeo: float | None = None
         sock.setblocking(True)
 
@@ -215,43 +223,29 @@ class SocketcanFrames:
             return None
         return Frame.trusted(cid, raw[8:8 + raw[4]])
 
-    def recv_nowait(self) -> tuple[bool, Frame | None]:
-        """(True, frame or None if ignored) if a frame was queued, (False, None) if not."""
+    def recv_stamped(self, timeout: float) -> tuple[bool, Frame | None, float | None]:
+        """One frame, waiting up to ``timeout`` [s] (SO_RCVTIMEO, set only when it changes), with
+        the kernel's receive time (CLOCK_REALTIME [s], from SO_TIMESTAMPNS, which python-can
+        enables on its sockets; None if absent): (True, frame or None if ignored, stamp) or
+        (False, None, None) after the timeout. One system call, whether the frame was queued or
+        came while waiting."""
+        self._set_rcvtimeo(timeout)
         try:
-            return True, self._decode(self.sock.recv(72, socket.MSG_DONTWAIT))
-        except (BlockingIOError, InterruptedError):
-            return False, None
-
-    def recv_stamped_nowait(self) -> tuple[bool, Frame | None, float | None]:
-        """Like :meth:`recv_nowait`, with the kernel's receive time of the frame (CLOCK_REALTIME
-        [s], from SO_TIMESTAMPNS, which python-can enables on its sockets; None if absent).
-
-        Still one system call (``recvmsg`` instead of ``recv``).
-        """
-        try:
-            raw, anc, _flags, _addr = self.sock.recvmsg(72, _ANC_SPACE, socket.MSG_DONTWAIT)
-        except (BlockingIOError, InterruptedError):
+            raw, anc, _flags, _addr = self.sock.recvmsg(72, _ANC_SPACE)
+        except (BlockingIOError, InterruptedError, TimeoutError):
             return False, None, None
-        ts = None
-        for level, kind, data in anc:
-            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= 16:
-                sec, nsec = struct.unpack_from("@ll", data)
-                ts = sec + nsec * 1e-9
-        return True, self._decode(raw), ts
+        return True, self._decode(raw), _stamp(anc)
 
-    def wait(self, timeout: float) -> bool:
-        """Wait up to ``timeout`` [s] for a frame to be queued."""
-        try:
-            return bool(select.select(self._sel, (), (), max(0.0, timeout))[0])
-        except InterruptedError:
-            return False
-
-    def recv_blocking(self, timeout: float) -> tuple[bool, Frame | None]:
-        """Like :meth:`recv_nowait`, waiting up to ``timeout`` [s] (SO_RCVTIMEO, set only when it changes)."""
+    def _set_rcvtimeo(self, timeout: float) -> None:
         if timeout != self._rcvtimeo:
             us = max(1, int(timeout * 1e6))  # 0 would mean "forever"
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("ll", us // 1000000, us % 1000000))
             self._rcvtimeo = timeout
+
+    def recv_blocking(self, timeout: float) -> tuple[bool, Frame | None]:
+        """One frame without its stamp (as :meth:`recv_stamped`): (True, frame or None if ignored)
+        or (False, None) after ``timeout`` [s]."""
+        self._set_rcvtimeo(timeout)
         try:
             return True, self._decode(self.sock.recv(72))
         except (BlockingIOError, InterruptedError, TimeoutError):
@@ -284,6 +278,9 @@ class BusTransport:
         #: how far the frame just taken lagged behind the clock [s] (0 when it was waited for)
         self.lag_s = 0.0
         self.max_lag_s = 0.0  #: the largest lag seen [s]
+        #: longest single wait for a frame [s]: a receive may end this much after its deadline
+        self._slice = sync_period_s / 4
+        self._sync_started = 0.0  #: when start_sync() returned [s]
 
     def now(self) -> float:
         """Monotonic time [s] since the transport was made; on SocketCAN, the time of the last
@@ -296,8 +293,9 @@ class BusTransport:
         was read; a heartbeat still queued is never judged missing. When the
         queue was empty, it is the clock at the end of the wait. (Reading the
         clock is a system call where there is no vDSO, as in user-mode-linux:
-        this path reads it only when it waits.) :attr:`lag_s` says how far the
-        frame just taken lagged behind the clock.
+        this path reads it only when a wait times out, and once per SYNC.)
+        :attr:`lag_s` says how long the last SYNC waited in the socket before
+        the master took it.
         """
         if self._raw is None:
             return time.monotonic() - self._t0
@@ -319,32 +317,26 @@ class BusTransport:
 
     def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
         if self._raw is not None:
-            got, f, ts = self._raw.recv_stamped_nowait()
-            waited = False
-            if not got:
-                t = self._clock()  # the queue is empty: the clock is the event time
-                if t >= deadline or not self._raw.wait(deadline - t):
-                    self._clock()
+            while True:
+                # one system call per frame, queued or waited for; the clock is read only when
+                # the wait times out and once per SYNC (to measure the lag)
+                got, f, ts = self._raw.recv_stamped(self._slice)
+                if got:
+                    break
+                if self._clock() >= deadline:
                     self.lag_s = 0.0
-                    return []
-                got, f, ts = self._raw.recv_stamped_nowait()
-                waited = True
-                if not got:
-                    self._clock()
                     return []
             if ts is None:
                 t = self._clock()
-                self.lag_s = 0.0
             else:
                 t = ts - self._rt_minus_mono - self._t0
-                if waited:
-                    self.lag_s = 0.0
-                else:
-                    # how far behind the bus: one clock read per frame taken from a backlog
-                    self.lag_s = max(0.0, time.monotonic() - self._t0 - t)
+                self._now = t
+                if f is not None and f.arbitration_id == SYNC_COB_ID:
+                    # how long the cycle's first frame waited in the socket: the master's lag
+                    # (not counting what came while start_sync() itself was setting SYNC up)
+                    self.lag_s = max(0.0, time.monotonic() - self._t0 - max(t, self._sync_started))
                     if self.lag_s > self.max_lag_s:
                         self.max_lag_s = self.lag_s
-                self._now = t
             if f is None:
                 return []
             return [(f, t, _to_msg(f, t, rx=True))]
@@ -361,6 +353,7 @@ class BusTransport:
         # kernel-timed on socketcan (Broadcast Manager), a thread elsewhere
         self._task = self.bus.send_periodic(
             can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False), self.T)
+        self._sync_started = time.monotonic() - self._t0
 
     def next_sync(self) -> float | None:
         return None  # SYNC comes from the periodic task; the master sees it on the bus
@@ -387,21 +380,25 @@ class CanopenLink:
         Receives the master's events (boot-up, states, EMCY, ...).
     max_missing_cycles : int
         Sensor freshness: SYNC cycles in a row without a complete sample before
-        :class:`StaleData` is raised (the check's ``safety.max_stale_cycles``);
-        also, on a real bus, the longest a frame may wait in the master's
-        socket (in SYNC periods) before the master, fallen behind, aborts with
-        :class:`StaleData`.
+        :class:`StaleData` is raised (the check's ``safety.max_stale_cycles``).
+    max_lag_s : float, optional
+        On a real bus, the longest a SYNC may wait in the master's socket before
+        the master takes it [s] (``safety.max_lag_s``); beyond it the master has
+        fallen behind the bus (or the computer stalled) and stops with
+        :class:`StaleData`. Default: ``max_missing_cycles`` SYNC periods.
     """
 
     def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
-                 on_event: Callable | None = None, max_missing_cycles: int = 5) -> None:
+                 on_event: Callable | None = None, max_missing_cycles: int = 5,
+                 max_lag_s: float | None = None) -> None:
         self.m = master
         self.tr = transport
         self.log = log
         self.on_event = on_event
         self.max_missing = max_missing_cycles
-        #: the longest a received frame may have waited in the socket before the master took it [s]
-        self.max_lag_s = max_missing_cycles * getattr(transport, "T", 0.0)
+        #: the longest a SYNC may have waited in the socket before the master took it [s]
+        lag = max_lag_s if max_lag_s is not None else max_missing_cycles * getattr(transport, "T", 0.0)
+        self.max_lag_s = min(lag, HARD_MAX_LAG_S)  # applied again here, whatever the caller passed
         self._last: Sample | None = None
         self._closed = False
         self.sync_times: list[float] = []
@@ -537,11 +534,11 @@ class CanopenLink:
             got = self.tr.receive(self.tr.now() if inproc else cycle_end)
             if got:
                 lag = getattr(self.tr, "lag_s", 0.0)
-                if lag > self.max_lag_s:
+                # (once stopping after a fault, the safe-state sequence goes on whatever the lag)
+                if lag > self.max_lag_s and self.m.fault is None:
                     # the master has fallen behind the bus: whatever it computes now is stale
                     err = StaleData(f"sensor data stale: the master is {lag * 1e3:.0f} ms behind the bus "
-                                    f"(frames wait in its socket; limit safety.max_stale_cycles x SYNC period "
-                                    f"= {self.max_lag_s * 1e3:.0f} ms)")
+                                    f"(frames wait in its socket; safety.max_lag_s = {self.max_lag_s * 1e3:.0f} ms)")
                     self.m._latch(err)
                     raise err
                 self._feed(got)

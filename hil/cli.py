@@ -72,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "
-                        "default 0: normal scheduling). Memory is locked either way (best effort).")
+                        "default 0: normal scheduling); analysis and report run at normal priority "
+                        "after it. Memory is locked either way (best effort).")
 
     p = sub.add_parser("sim-serve", help="the two simulated drives on a CAN bus (until SIGINT/SIGTERM)",
                        description="Serve two simulated CiA 402 drives on a python-can bus (e.g. socketcan "

@@ -233,6 +233,13 @@ def _canopen_check(console: Console, act, check, link, out: Path, meta: dict, qu
     return outcome, wall
 
 
+def _page_faults() -> int:
+    """Page faults of this process so far (minor and major)."""
+    import resource
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_minflt + r.ru_majflt
+
+
 def _record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=None) -> None:
     meta["wall_s"] = round(wall, 3)
     meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
@@ -322,7 +329,8 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                                    realtime=realtime)
     master = MasterCore(act)
     log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
-    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles)
+    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
+                       max_lag_s=check.safety.max_lag_s)
     console.print(f"emacheck dry-run: two simulated CiA 402 drives (nodes {act.canopen.node_ids}) on an "
                   f"in-process virtual CAN bus, seed {seed}, bus load {load.load_worst:.1%} worst case"
                   + (f", {len(faults)} injected fault(s)" if faults else "") + f"; run folder {out}")
@@ -378,20 +386,25 @@ def cmd_run(args: argparse.Namespace) -> int:
     transport = BusTransport(bus, act.timing.sync_period_s)
     master = MasterCore(act)
     log = CanLogWriter(out / "can.log", channel=args.channel)
-    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles)
+    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
+                       max_lag_s=check.safety.max_lag_s)
     meta = start_meta(act, check, {"mode": "run", "interface": args.interface, "channel": args.channel,
                                    "bitrate_bps": bitrate,
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
                                    "eds": str(eds)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
-    from hil.serve import prepare_realtime
+    from hil.serve import normal_scheduling, prepare_realtime
     console.print(f"real time: {prepare_realtime(args.rt_priority)}")
+    faults0 = _page_faults()
     try:
         outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
     finally:
         transport.close()
         bus.shutdown()
+        normal_scheduling()  # the analysis and the report run at normal priority
     _record_can_stats(out, meta, wall, log, master, transport)
+    meta["can"]["page_faults"] = _page_faults() - faults0  # during the check (each costs time)
+    write_json_atomic(out / "meta.json", meta)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
                   f"{log.frames} CAN frames logged")
     return _result_after(out, act, None, meta, outcome, console)

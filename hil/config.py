@@ -94,6 +94,7 @@ HARD_MAX_D_INT_MM = 2.0
 HARD_LVDT_GAIN_TOLERANCE = 0.10  #: D plausibility allows this LVDT pitch error (the paper's is 7.5 %)
 HARD_MAX_STALE_CYCLES = 5  #: SYNC cycles a sample may be missing before it is stale
 HARD_MAX_FROZEN_CYCLES = 100  #: cycles a noisy sensor may repeat the same value
+HARD_MAX_LAG_S = 0.5  #: longest a received frame may wait before the master takes it [s]
 
 
 @dataclass(frozen=True)
@@ -139,6 +140,9 @@ class Safety:
     max_stale_cycles: int = field(default=2, metadata=_rng(1, 1000, hard_max=HARD_MAX_STALE_CYCLES))
     #: sensor freshness: cycles a noisy LVDT or load cell may repeat exactly the same value
     max_frozen_cycles: int = field(default=25, metadata=_rng(3, 10_000, hard_max=HARD_MAX_FROZEN_CYCLES))
+    #: master lag: the longest a SYNC may wait in the master's socket before it is taken [s]
+    #: (the master fell behind the bus, or the computer stalled); real bus only
+    max_lag_s: float = field(default=0.02, metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_LAG_S))
 
 
 @dataclass(frozen=True)

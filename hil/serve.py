@@ -247,6 +247,15 @@ def realtime_priority(priority: int = 50) -> str:
     return f"SCHED_FIFO {priority}"
 
 
+def normal_scheduling() -> None:
+    """Back to SCHED_OTHER (after the cyclic loop: analysis and plotting must not run real-time)."""
+    try:
+        if os.sched_getscheduler(0) != os.SCHED_OTHER:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (OSError, AttributeError):
+        pass
+
+
 def prepare_realtime(priority: int) -> str:
     """Set this process up for a cyclic loop: memory locked, GC frozen, SCHED_FIFO ``priority`` if > 0.
 

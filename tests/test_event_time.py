@@ -29,14 +29,11 @@ class QueuedSocket:
     def put(self, frame: Frame, realtime_s: float) -> None:
         self.q.append((frame, realtime_s))
 
-    def recv_stamped_nowait(self):
+    def recv_stamped(self, timeout: float):
         if not self.q:
             return False, None, None
         f, ts = self.q.popleft()
         return True, f, ts
-
-    def wait(self, timeout: float) -> bool:
-        return bool(self.q)
 
     def send(self, f: Frame) -> None:
         self.sent.append(f)
@@ -47,6 +44,7 @@ def transport():
     bus = can.Bus(interface="virtual", channel="emacheck-event-time")
     tr = BusTransport(bus, 0.002)
     tr._raw = QueuedSocket()
+    tr._sync_started = float("-inf")  # SYNC was started long ago
     yield tr
     bus.shutdown()
 
@@ -58,9 +56,9 @@ def _realtime_of(tr: BusTransport, t_rel: float) -> float:
 def test_backlog_frames_carry_their_arrival_time(transport):
     tr = transport
     now = time.monotonic() - tr._t0
-    # three heartbeats that arrived 0.9, 0.5 and 0.1 s ago, all still queued
-    for age in (0.9, 0.5, 0.1):
-        tr._raw.put(Frame(0x701, b"\x05"), _realtime_of(tr, now - age))
+    # a SYNC and two heartbeats that arrived 0.9, 0.5 and 0.1 s ago, all still queued
+    for age, f in ((0.9, Frame(0x080, b"")), (0.5, Frame(0x701, b"\x05")), (0.1, Frame(0x701, b"\x05"))):
+        tr._raw.put(f, _realtime_of(tr, now - age))
     times = []
     for _ in range(3):
         got = tr.receive(deadline=now + 1.0)
@@ -68,6 +66,7 @@ def test_backlog_frames_carry_their_arrival_time(transport):
         times.append(got[0][1])
         assert tr.now() == got[0][1]  # timeouts judged after this frame use its time
     assert times == pytest.approx([now - 0.9, now - 0.5, now - 0.1], abs=1e-6)
+    # the lag is measured on the SYNC (the first frame of a cycle)
     assert tr.max_lag_s == pytest.approx(0.9, abs=0.05)
     # queue empty: the clock is the event time again, and no lag
     assert tr.receive(deadline=tr.now()) == []
@@ -112,3 +111,6 @@ def test_master_behind_the_bus_stops_with_stale_data(transport, actuation):
     with pytest.raises(StaleData, match="behind the bus"):
         link._cycle(stop_at_sample=True)
     assert isinstance(m.fault, StaleData) and m.quick_stop
+    # stopping after the fault is not interrupted by the lag: the safe-state cycle goes on
+    tr._raw.put(Frame(0x080, b""), _realtime_of(tr, time.monotonic() - tr._t0 - 0.5))
+    link._cycle(stop_at_sample=False)

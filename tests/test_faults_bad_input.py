@@ -100,6 +100,8 @@ def test_hard_caps_hold_even_for_a_check_built_past_the_loader(actuation, check_
     ("max_force_fight_N = 7000.0", "max_force_fight_N = 5000.0",
      r"'force_fight.amplitude_fraction_of_limit' gives 6000 N, not below safety.max_force_fight_N"),
     ("max_stale_cycles = 2", "max_stale_cycles = 2.5", r"field 'safety.max_stale_cycles' must be an integer"),
+    ("max_lag_s = 0.02", "max_lag_s = 0.6", r"field 'safety.max_lag_s' = 0.6 is above the hard cap 0.5"),
+    ("max_lag_s = 0.02", "max_lag_ms = 20", r"max_lag_ms.*did you mean 'max_lag_s'"),
 ])
 def test_profile_values_above_hard_caps_are_refused_naming_the_field(tmp_path, actuation, line, new, message):
     text = default_profile_path("check.toml").read_text()
