@@ -17,6 +17,7 @@ simulated or real. Two transports move the frames:
 
 from __future__ import annotations
 
+import queue
 import socket
 import struct
 import time
@@ -81,6 +82,15 @@ class SharedVirtualBus(VirtualBus):
                 continue
             bus_queue.put_nowait(msg)
 
+    def recv_nowait(self) -> can.Message | None:
+        """The next queued message or None, straight from this bus's queue: the synchronous
+        frame pump of a dry-run never waits, so python-can's ``recv`` (clock, filters, timed
+        wait) is skipped; no filters are set on these buses."""
+        try:
+            return self.queue.get_nowait()
+        except queue.Empty:
+            return None
+
 
 def _to_msg(f: Frame, t: float, rx: bool = False) -> can.Message:
     return can.Message(timestamp=t, arbitration_id=f.arbitration_id, data=f.data, is_extended_id=False,
@@ -121,7 +131,7 @@ class InProcessTransport:
         bus = self.slave_bus
         pair = self.pair
         while True:
-            msg = bus.recv(0.0)
+            msg = bus.recv_nowait()
             if msg is None:
                 return
             out = pair.on_frame(Frame.trusted(msg.arbitration_id, bytes(msg.data)), self.t)
@@ -134,7 +144,7 @@ class InProcessTransport:
         got = []
         bus = self.master_bus
         while True:
-            msg = bus.recv(0.0)
+            msg = bus.recv_nowait()
             if msg is None:
                 break
             got.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), msg.timestamp, msg))

@@ -393,15 +393,15 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
                                    "eds": str(eds)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
-    from hil.serve import normal_scheduling, prepare_realtime
-    console.print(f"real time: {prepare_realtime(args.rt_priority)}")
+    from hil.serve import end_realtime, prepare_realtime
+    console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")
     faults0 = _page_faults()
     try:
         outcome, wall = _canopen_check(console, act, check, link, out, meta, args.quiet)
     finally:
         transport.close()
         bus.shutdown()
-        normal_scheduling()  # the analysis and the report run at normal priority
+        end_realtime()  # the analysis and the report run at normal priority, GC on
     _record_can_stats(out, meta, wall, log, master, transport)
     meta["can"]["page_faults"] = _page_faults() - faults0  # during the check (each costs time)
     write_json_atomic(out / "meta.json", meta)

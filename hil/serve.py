@@ -247,8 +247,10 @@ def realtime_priority(priority: int = 50) -> str:
     return f"SCHED_FIFO {priority}"
 
 
-def normal_scheduling() -> None:
-    """Back to SCHED_OTHER (after the cyclic loop: analysis and plotting must not run real-time)."""
+def end_realtime() -> None:
+    """After a bounded cyclic loop (:func:`prepare_realtime` with ``bounded=True``): the garbage
+    collector back on, SCHED_OTHER (analysis and plotting must not run real-time)."""
+    gc.enable()
     try:
         if os.sched_getscheduler(0) != os.SCHED_OTHER:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
@@ -256,18 +258,24 @@ def normal_scheduling() -> None:
         pass
 
 
-def prepare_realtime(priority: int) -> str:
+def prepare_realtime(priority: int, *, bounded: bool = False) -> str:
     """Set this process up for a cyclic loop: memory locked, GC frozen, SCHED_FIFO ``priority`` if > 0.
 
     ``gc.freeze`` moves every object made so far (profiles, object dictionaries,
     imported modules) out of the collector's reach, so no collection inside a
-    SYNC cycle scans them. Returns what was done, for the terminal.
+    SYNC cycle scans them. ``bounded`` (a loop that ends, like the check of
+    ``emacheck run``): the cyclic collector is switched off until
+    :func:`end_realtime` (reference counting still frees the loop's objects;
+    no collection pause can fall into a SYNC cycle). Returns what was done,
+    for the terminal.
     """
     memory = lock_memory()
     sched = realtime_priority(priority) if priority > 0 else "normal scheduling"
     gc.collect()
     gc.freeze()
-    return f"memory {memory}, {sched}"
+    if bounded:
+        gc.disable()
+    return f"memory {memory}, {sched}" + (", garbage collector off" if bounded else "")
 
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:

@@ -331,6 +331,8 @@ class FaultInjector:
         is_sync = frame.arbitration_id == 0x080 and len(frame.data) <= 1
         if is_sync:
             self.syncs += 1
+        if not self.faults and not self.record_truth:
+            return self.pair.on_frame(frame, t)  # nothing scheduled: the pair as it is
         pre = self._onsets() if is_sync else []
         abort = self._sdo_abort(frame)
         if abort is not None:
@@ -345,6 +347,8 @@ class FaultInjector:
         return self._outbound(pre + out, at_sync=is_sync)
 
     def tick(self, t: float) -> list[Frame]:
+        if not self.faults:
+            return self.pair.tick(t)
         return self._outbound(self.pair.tick(t), at_sync=False)
 
     # ------------------------------------------------------------ results
