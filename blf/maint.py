@@ -32,7 +32,8 @@ __all__ = [
     "blf_maint",
 ]
 
-_MIN_SAMPLES = 200
+MIN_SAMPLES = 200  #: fewest force-fight samples BLFmaint accepts
+_MIN_SAMPLES = MIN_SAMPLES
 _MAX_BINS = 100_000
 _FLAT_TO_STEEP_MAX = 0.25  # flat (backlash) slope level must be < 25 % of the contact level
 

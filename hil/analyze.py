@@ -14,7 +14,7 @@ import numpy as np
 from scipy import ndimage
 
 from blf.calibration import LvdtCalibration, fit_lvdt_calibration
-from blf.maint import BlfMaintResult, blf_maint
+from blf.maint import MIN_SAMPLES, BlfMaintResult, blf_maint
 from blf.signals import position_differences
 from hil.config import Actuation
 from hil.errors import AnalysisError, IncompleteRecordingError, RecordingError
@@ -173,6 +173,10 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
         s_corr[k] = c.correct(s)
     d = position_differences(sig.phi1, sig.phi2, s_corr[1], s_corr[2], i)
     ff = seg.force_fight
+    if int(np.count_nonzero(ff)) < MIN_SAMPLES:
+        # e.g. a run killed or aborted just after the force fight began
+        raise AnalysisError(f"force-fight segment too short for BLFmaint: {int(np.count_nonzero(ff))} samples "
+                            f"(need >= {MIN_SAMPLES})")
     rate = 1.0 / sig.sample_period_s
     pairs = {
         "int1": (d.d_int1_mm, sig.F1),

@@ -114,3 +114,22 @@ def test_safety_violation_aborts_with_reason_and_exit_2(tmp_path):
     last = lines[-1].split(",")
     assert last[-1] == "aborted" and last[7] == "0" and last[9] == "0"
     assert len(lines) > 2
+
+
+def test_run_cut_just_after_the_force_fight_began_is_incomplete_not_a_crash(default_run, tmp_path):
+    """A master killed a few samples into the force fight: `analyze` reports the run incomplete and
+    why (too few force-fight samples), exit 2, result.json written."""
+    src, _ = default_run
+    out = tmp_path / "cut"
+    out.mkdir()
+    lines = (src / "signals.csv").read_text().splitlines()
+    step = lines[0].split(",").index("step")
+    first_ff = next(k for k, ln in enumerate(lines) if k and ln.split(",")[step] == "force_fight")
+    (out / "signals.csv").write_text("\n".join(lines[: first_ff + 5]) + "\n")
+    meta = json.loads((src / "meta.json").read_text())
+    meta["status"] = "running"
+    (out / "meta.json").write_text(json.dumps(meta))
+    assert main(["analyze", str(out)]) == 2
+    res = json.loads((out / "result.json").read_text())
+    assert res["status"] == "incomplete"
+    assert "force-fight segment too short for BLFmaint: 5 samples (need >= 200)" in res["analysis_error"]

@@ -29,7 +29,8 @@ from hil.runfolder import read_signals, resolve_recording
 
 SEED = 20261122
 N_KILLS = 20
-RUN_WALL_S = 2.5  # wall time of the short check's cyclic part on this machine (about 3 s)
+#: kill instants are drawn in [0, KILL_WINDOW) times the measured wall time of the cyclic part
+KILL_WINDOW = 0.9
 
 SHORT_CHECK = """
 [approach]
@@ -76,8 +77,21 @@ def _start_child(args: list[str]) -> int:
 def test_twenty_kills_leave_analysable_run_folders(tmp_path, capsys):
     chk = tmp_path / "short_check.toml"
     chk.write_text(SHORT_CHECK)
+    # the cyclic part's wall time on this machine, from one run left alone: from meta.json
+    # (written before the first frame) until its status leaves "running"
+    probe = tmp_path / "probe"
+    pid = _start_child(["dry-run", "--check", str(chk), "--out", str(probe), "--quiet"])
+    t0 = time.monotonic()
+    while not (probe / "meta.json").exists() and time.monotonic() - t0 < 30:
+        time.sleep(0.002)
+    t1 = time.monotonic()
+    while json.loads((probe / "meta.json").read_text())["status"] == "running" and time.monotonic() - t1 < 60:
+        time.sleep(0.002)
+    run_wall_s = time.monotonic() - t1
+    _, status = os.waitpid(pid, 0)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) in (0, 1), status
     rng = np.random.default_rng(SEED)
-    delays = rng.uniform(0.0, RUN_WALL_S, N_KILLS)
+    delays = rng.uniform(0.0, KILL_WINDOW, N_KILLS) * run_wall_s
     killed_mid_run = 0
     for k, delay in enumerate(delays):
         out = tmp_path / f"run{k:02d}"
@@ -106,4 +120,5 @@ def test_twenty_kills_leave_analysable_run_folders(tmp_path, capsys):
                 t_last = read_signals(sig_path).t[-1]
                 assert t_last >= max(v[0] for v in steps.values()) - 1e-9
     assert killed_mid_run == N_KILLS
-    print(f"kill test: seed {SEED}, {N_KILLS} kills at {np.round(delays, 3).tolist()} s", file=sys.stderr)
+    print(f"kill test: seed {SEED}, cyclic part {run_wall_s:.2f} s, {N_KILLS} kills at "
+          f"{np.round(delays, 3).tolist()} s", file=sys.stderr)
