@@ -252,15 +252,6 @@ class SocketcanFrames:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("ll", us // 1000000, us % 1000000))
             self._rcvtimeo = timeout
 
-    def recv_blocking(self, timeout: float) -> tuple[bool, Frame | None]:
-        """One frame without its stamp (as :meth:`recv_stamped`): (True, frame or None if ignored)
-        or (False, None) after ``timeout`` [s]."""
-        self._set_rcvtimeo(timeout)
-        try:
-            return True, self._decode(self.sock.recv(72))
-        except (BlockingIOError, InterruptedError, TimeoutError):
-            return False, None
-
     def send(self, f: Frame) -> None:
         try:
             self.sock.send(_CAN_FRAME.pack(f.arbitration_id, len(f.data), f.data))
@@ -285,7 +276,7 @@ class BusTransport:
         self._rt_minus_mono = time.time() - time.monotonic()
         self._raw = SocketcanFrames.for_bus(bus)
         self._now = 0.0
-        #: how far the frame just taken lagged behind the clock [s] (0 when it was waited for)
+        #: how long the last SYNC waited in the socket before it was taken [s]
         self.lag_s = 0.0
         self.max_lag_s = 0.0  #: the largest lag seen [s]
         #: longest single wait for a frame [s]: a receive may end this much after its deadline
@@ -438,8 +429,9 @@ class CanopenLink:
             out = on_frame(f, now())
             if out:
                 self._send(out)
+        events = self.m.drain_events()  # drained always: the master's list must not grow in the loop
         if self.on_event is not None:
-            for ev in self.m.drain_events():
+            for ev in events:
                 self.on_event(ev)
 
     def _sync(self) -> None:

@@ -113,7 +113,7 @@ class _RawIO:
         return self.raw.ignored
 
     def recv(self, timeout: float) -> Frame | None:
-        return self.raw.recv_blocking(timeout)[1]
+        return self.raw.recv_stamped(timeout)[1]
 
     def send(self, f: Frame) -> bool:
         try:
