@@ -12,6 +12,8 @@ Method
    the nominal residual (rolling RMS over ``noise_window_s``,
    :math:`\\sigma = \\mathrm{rms}(\\Delta^2 r)/\\sqrt 6`): white measurement
    noise passes, slow model error does not. Residuals are weighted by it.
+   A channel valid only on a coarser grid (block means) is handled on that
+   grid, over at least 31 of its values.
 3. **Significance.** Per channel, the weighted residual is averaged over
    windows of ``window_s``; under "noise only" the window scores
    :math:`z_b = \\sum w_i/\\sqrt{n_b}` are standard normal. The channel differs
@@ -27,11 +29,16 @@ Method
    variable projection); one is accepted only if its BIC improves by more
    than ``bic_margin`` on the fit half *and* its chi-square improves by more
    than ``holdout_margin`` on the held-out half. Forward selection, up to
-   ``max_effects``.
+   ``max_effects``: it goes on while a candidate passes both tests, also
+   after the window test stops flagging (a second effect can hide below it
+   and still be significant over the whole recording).
 6. **Verdict.** ``no_mismatch`` if no channel differs after the nominal fit
    and no candidate is accepted (a concealed effect below the window test
    can still be found by the chi-square of the whole recording);
-   ``explained`` if effects were accepted and no channel differs any more;
+   ``explained`` if effects were accepted, no channel differs any more and
+   every channel that differed lost at least ``min_explained_fraction`` of
+   its excess over 1 (an effect that only nudges a channel under the
+   threshold has not explained it);
    ``unexplained`` otherwise (the accepted effects are then reported as
    partial, and the locations still stand).
 """
@@ -85,6 +92,10 @@ class ReplayModel(Protocol):
 
     def predict(self, theta: np.ndarray, active: list) -> dict: ...
 
+    # Optional: ``derived(channels) -> {name: ndarray}`` and ``derived_valid`` ({name: bool
+    # ndarray}): signals computed from the channels (e.g. the paper's D signals), reported
+    # (excess, locations, RMS) but not fitted, so nothing is counted twice.
+
 
 @dataclass(frozen=True)
 class DiagnoseConfig:
@@ -98,7 +109,7 @@ class DiagnoseConfig:
     holdout_margin: float = 10.0
     max_effects: int = 2
     refit_top: int = 3
-    min_explained_fraction: float = 0.0
+    min_explained_fraction: float = 0.5  #: of each flagged channel's excess above 1, for "explained"
 
 
 @dataclass(frozen=True)
@@ -132,6 +143,8 @@ class Diagnosis:
     locations: tuple
     residual_rms_before: dict
     residual_rms_after: dict
+    residual_rms_holdout_before: dict  #: on the held-out half only (never fitted)
+    residual_rms_holdout_after: dict
     noise_floor: dict
     excess_before: dict
     excess_after: dict
@@ -141,22 +154,40 @@ class Diagnosis:
     screening: tuple
     predicted_before: dict = field(repr=False)
     predicted_after: dict = field(repr=False)
+    measured: dict = field(repr=False, default_factory=dict)  #: all reported channels, derived included
+    valid: dict = field(repr=False, default_factory=dict)
 
 
 # ------------------------------------------------------------------ helpers
 
 
 def _noise_floor(r: np.ndarray, valid: np.ndarray, win: int) -> np.ndarray:
-    d2 = np.zeros_like(r)
-    d2[1:-1] = r[2:] - 2.0 * r[1:-1] + r[:-2]
-    ok = valid.copy()
-    ok[1:-1] &= valid[2:] & valid[:-2]
-    ok[0] = ok[-1] = False
-    num = uniform_filter1d(np.where(ok, d2 * d2, 0.0), win, mode="nearest")
-    den = uniform_filter1d(ok.astype(float), win, mode="nearest")
-    sig = np.sqrt(np.maximum(num, 0.0) / np.maximum(den, 1e-12) / 6.0)
-    glob = np.median(sig[ok]) if ok.any() else 1.0
-    return np.maximum(sig, 0.5 * glob) if glob > 0 else np.maximum(sig, 1e-12)
+    """Per-sample noise sigma from second differences of consecutive valid samples.
+
+    A channel valid only every ``step`` samples (block means) is handled on
+    its own grid: second differences are taken between valid samples spaced
+    ``step`` apart (not across gaps) and the rolling window shrinks by ``step``.
+    """
+    n = r.size
+    idx = np.flatnonzero(valid)
+    if idx.size < 5:
+        return np.ones(n)
+    gaps = np.diff(idx)
+    step = int(np.median(gaps))
+    rv = r[idx]
+    d2 = np.zeros(idx.size)
+    d2[1:-1] = rv[2:] - 2.0 * rv[1:-1] + rv[:-2]
+    ok = np.zeros(idx.size, bool)
+    ok[1:-1] = (gaps[1:] == step) & (gaps[:-1] == step)
+    w = max(31, win // step) if step > 1 else win  # a sparse channel needs more values per estimate
+    num = uniform_filter1d(np.where(ok, d2 * d2, 0.0), w, mode="nearest")
+    den = uniform_filter1d(ok.astype(float), w, mode="nearest")
+    sv = np.sqrt(np.maximum(num, 0.0) / np.maximum(den, 1e-12) / 6.0)
+    glob = float(np.median(sv[ok])) if ok.any() else 1.0
+    sv = np.maximum(sv, 0.5 * glob) if glob > 0 else np.maximum(sv, 1e-12)
+    sig = np.full(n, glob if glob > 0 else 1.0)
+    sig[idx] = sv
+    return sig
 
 
 def _window_scores(w: np.ndarray, valid: np.ndarray, nwin: int) -> tuple[np.ndarray, np.ndarray]:
@@ -164,7 +195,7 @@ def _window_scores(w: np.ndarray, valid: np.ndarray, nwin: int) -> tuple[np.ndar
     m = n // nwin
     ww = np.where(valid, w, 0.0)[: m * nwin].reshape(m, nwin)
     cnt = valid[: m * nwin].reshape(m, nwin).sum(1)
-    z = np.where(cnt > 10, ww.sum(1) / np.sqrt(np.maximum(cnt, 1)), np.nan)
+    z = np.where(cnt >= 5, ww.sum(1) / np.sqrt(np.maximum(cnt, 1)), np.nan)
     return z, np.arange(m) * nwin
 
 
@@ -348,21 +379,45 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     set_floor(pred0)
     w0 = p.weighted(pred0)
     nwin = max(2, int(round(cfg.window_s / sample_period_s)))
-    excess0 = {c: _excess(_window_scores(w0[c], model.valid[c], nwin)[0]) for c in model.channels}
     k_nom = len(model.nominal)
     lnN = float(np.log(max(p.nfit, 2)))
     ic0 = p.chi2(w0, p.fit_mask) + k_nom * lnN
-    floor = {c: float(np.sqrt(np.mean(p.sig[c][model.valid[c]] ** 2))) if model.valid[c].any() else None
-             for c in model.channels}
+    # reported channels: the model's and its derived signals (not fitted)
+    derive = getattr(model, "derived", None)
 
-    def rms(pred):
-        return {c: (float(np.sqrt(np.mean((model.measured[c] - pred[c])[model.valid[c]] ** 2)))
-                    if model.valid[c].any() else None) for c in model.channels}
+    def full(pred):
+        return {**pred, **derive(pred)} if derive else dict(pred)
 
-    def locate(w):
+    meas = full(model.measured)
+    valid = {**model.valid, **(model.derived_valid if derive else {})}
+    sig = dict(p.sig)
+    pred0_all = full(pred0)
+    for c in meas:
+        if c not in p.sig:
+            sig[c] = _noise_floor(np.where(valid[c], meas[c] - pred0_all[c], 0.0), valid[c], win)
+
+    def wall(pred_all):
+        return {c: np.where(valid[c], (meas[c] - pred_all[c]) / sig[c], 0.0) for c in meas}
+
+    def excess_all(pred_all):
+        w = wall(pred_all)
+        return {c: _excess(_window_scores(w[c], valid[c], nwin)[0]) for c in meas}
+
+    excess0 = excess_all(pred0_all)
+    floor = {c: float(np.sqrt(np.mean(sig[c][valid[c]] ** 2))) if valid[c].any() else None for c in meas}
+
+    def rms(pred_all, part=None):
+        out = {}
+        for c in meas:
+            sel = valid[c] if part is None else valid[c] & part
+            out[c] = float(np.sqrt(np.mean((meas[c] - pred_all[c])[sel] ** 2))) if sel.any() else None
+        return out
+
+    def locate(pred_all):
+        w = wall(pred_all)
         locs = []
-        for c in model.channels:
-            z, starts = _window_scores(w[c], model.valid[c], nwin)
+        for c in meas:
+            z, starts = _window_scores(w[c], valid[c], nwin)
             bad = np.where(np.abs(np.nan_to_num(z)) > 4.0)[0]
             if bad.size == 0 or _excess(z) <= cfg.excess_threshold:
                 continue
@@ -372,15 +427,15 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
             for g in groups[:5]:
                 i0, i1 = starts[g[0]], min(starts[g[-1]] + nwin, model.t_s.size)
                 idx = np.arange(i0, i1)
-                idx = idx[model.valid[c][idx]]
-                r = (model.measured[c] - pred_cur[c])
+                idx = idx[valid[c][idx]]
+                r = meas[c] - pred_all[c]
                 locs.append(Location(c, float(model.t_s[i0]), float(model.t_s[i1 - 1]),
                                      _regime_words(idx, r, model.regimes), float(np.sum(z[g] ** 2))))
         return locs
 
     pred_cur = pred0
-    locations = locate(w0)
-    significant = any(v > cfg.excess_threshold for v in excess0.values())
+    locations = locate(pred0_all)
+    significant = any(excess0[c] > cfg.excess_threshold for c in model.channels)
     say("excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in excess0.items()))
 
     active: list = []
@@ -454,25 +509,26 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
                                      {q.name: float(u) for q, u in zip(cand.params, unc)},
                                      float(dbic), float(dval), ev))
         pred_cur = model.predict(theta, active)
-        wc = p.weighted(pred_cur)
-        excess_cur = {c: _excess(_window_scores(wc[c], model.valid[c], nwin)[0]) for c in model.channels}
+        excess_cur = excess_all(full(pred_cur))
         say(f"accepted {cand.name} at {cand.where}; excess now " +
             ", ".join(f"{c} {v:.2f}" for c, v in excess_cur.items()))
-        if not any(v > cfg.excess_threshold for v in excess_cur.values()):
-            break
-    still = any(v > cfg.excess_threshold for v in excess_cur.values())
-    if accepted and not still:
+    still = any(excess_cur[c] > cfg.excess_threshold for c in model.channels)
+    # an effect that only nudges a flagged channel under the threshold has not explained it
+    flagged = [c for c in model.channels if excess0[c] > cfg.excess_threshold]
+    removed = all(excess0[c] - excess_cur[c] >= cfg.min_explained_fraction * (excess0[c] - 1.0) for c in flagged)
+    if accepted and not still and removed:
         verdict, eff, part = "explained", tuple(accepted), ()
     elif not accepted and not significant:
         verdict, eff, part = "no_mismatch", (), ()
     else:
         verdict, eff, part = "unexplained", (), tuple(accepted)
-    wc = p.weighted(pred_cur)
+    cur_all = full(pred_cur)
     if still:
-        locations = locate(wc) or locations
-    return Diagnosis(verdict, eff, part, tuple(locations), rms(pred0), rms(pred_cur), floor, excess0,
+        locations = locate(cur_all) or locations
+    return Diagnosis(verdict, eff, part, tuple(locations), rms(pred0_all), rms(cur_all),
+                     rms(pred0_all, ~p.fit_mask), rms(cur_all, ~p.fit_mask), floor, excess0,
                      excess_cur, float(ic0), float(ic_cur), _named(model.nominal, theta),
-                     tuple(screening_log), pred0, pred_cur)
+                     tuple(screening_log), pred0_all, cur_all, meas, valid)
 
 
 def _named(params: tuple, theta: np.ndarray) -> dict:

@@ -33,7 +33,7 @@ def _load_dual(path: Path, profile: Path | None):
     sig = load_recording(sig_path, act, meta)
     period = float(np.median(np.diff(sig.t)))
     model = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2,
-                          act.i_total_rad_per_mm, period, sig.mode1, sig.sp1, sig.mode2, sig.sp2)
+                          act.mechanics.i_total_rad_per_mm, period, sig.mode1, sig.sp1, sig.mode2, sig.sp2)
     return model, period
 
 
@@ -90,6 +90,8 @@ def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
                        "regime": l.regime, "score": _r(l.score)} for l in d.locations],
         "residual_rms_before": {k: _r(v) for k, v in d.residual_rms_before.items()},
         "residual_rms_after": {k: _r(v) for k, v in d.residual_rms_after.items()},
+        "residual_rms_holdout_before": {k: _r(v) for k, v in d.residual_rms_holdout_before.items()},
+        "residual_rms_holdout_after": {k: _r(v) for k, v in d.residual_rms_holdout_after.items()},
         "noise_floor": {k: _r(v) for k, v in d.noise_floor.items()},
         "excess_before": {k: _r(v) for k, v in d.excess_before.items()},
         "excess_after": {k: _r(v) for k, v in d.excess_after.items()},
@@ -105,10 +107,10 @@ def _figure(model, d, channel: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     t = model.t_s
-    ok = model.valid[channel]
+    ok = d.valid[channel]
     stride = max(1, t.size // 6000)
     fig, ax = plt.subplots(2, 1, figsize=(9, 4.5), sharex=True)
-    m = model.measured[channel]
+    m = d.measured[channel]
     ax[0].plot(t[ok][::stride], m[ok][::stride], ".", ms=1, color="0.6", label="recording")
     ax[0].plot(t[ok][::stride], d.predicted_before[channel][ok][::stride], lw=0.8, label="nominal model")
     ax[0].plot(t[ok][::stride], d.predicted_after[channel][ok][::stride], lw=0.8, label="with fitted effects")
@@ -138,8 +140,9 @@ def write_report(path: Path, model, d, data: dict) -> None:
     import html
     rows = "".join(
         f"<tr><td>{c}</td><td>{data['residual_rms_before'][c]}</td><td>{data['residual_rms_after'][c]}</td>"
+        f"<td>{data['residual_rms_holdout_before'][c]}</td><td>{data['residual_rms_holdout_after'][c]}</td>"
         f"<td>{data['noise_floor'][c]}</td><td>{data['excess_before'][c]}</td><td>{data['excess_after'][c]}</td></tr>"
-        for c in model.channels if model.valid[c].any())
+        for c in d.measured if d.valid[c].any())
     effs = "".join(
         f"<li><b>{html.escape(e['words'])}</b> (<code>{e['name']}</code> at {e['where']}): "
         + ", ".join(f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items())
@@ -147,13 +150,14 @@ def write_report(path: Path, model, d, data: dict) -> None:
         for e in data["effects"] + data["partial_effects"])
     locs = "".join(f"<li>{l['channel']}: {l['t_start_s']}–{l['t_end_s']} s, {html.escape(l['regime'])}</li>"
                    for l in data["locations"][:12])
-    figs = "".join(f"<h3>{c}</h3><img src='{_figure(model, d, c)}'>" for c in model.channels if model.valid[c].any())
+    figs = "".join(f"<h3>{c}</h3><img src='{_figure(model, d, c)}'>" for c in d.measured if d.valid[c].any())
     path.write_text(
         "<!doctype html><html><head><meta charset='utf-8'><title>emacheck diagnose</title></head><body>"
         f"<h1>Simulation versus recording: {data['verdict']}</h1>"
         f"<p>BIC before {data['ic_before']}, after {data['ic_after']}.</p>"
         f"<h2>Effects</h2><ul>{effs or '<li>none</li>'}</ul><h2>Where</h2><ul>{locs or '<li>nowhere</li>'}</ul>"
         "<h2>Residual RMS</h2><table border=1><tr><th>channel</th><th>before</th><th>after</th>"
+        "<th>held-out before</th><th>held-out after</th>"
         f"<th>noise floor</th><th>excess before</th><th>excess after</th></tr>{rows}</table>"
         f"<h2>Overlay and residuals</h2>{figs}</body></html>")
 
@@ -187,6 +191,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         console.print(f"  where: {l['channel']} {l['t_start_s']}-{l['t_end_s']} s, {l['regime']}")
     console.print("  residual RMS before -> after: " + ", ".join(
         f"{c} {data['residual_rms_before'][c]} -> {data['residual_rms_after'][c]}"
-        for c in model.channels if model.valid[c].any()))
+        for c in d.measured if d.valid[c].any()))
+    console.print("  on the held-out half (never fitted): " + ", ".join(
+        f"{c} {data['residual_rms_holdout_before'][c]} -> {data['residual_rms_holdout_after'][c]}"
+        for c in d.measured if d.valid[c].any()))
     console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {out / 'diagnosis.json'}")
     return 0

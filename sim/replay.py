@@ -280,6 +280,8 @@ def drive_force(target_N: np.ndarray, accel_mm_s2: np.ndarray, friction_N: np.nd
 # ====================================================================== diagnosis model
 
 _FULL_SCALE_MM = 20.0
+_TRANSIENT_S = 1.0  #: s, after a drive-mode change, where s and F are not compared
+_FD_BLOCK_S = 0.1  #: the drive-force channels are compared as means over blocks of this length
 
 
 def _cand(name, where, words, *params):
@@ -325,9 +327,19 @@ class DualEmaReplay:
 
     Channels: ``s1, s2`` (LVDT, mm), ``F1, F2`` (load cells, N) from the
     replayed load paths, and ``Fd1, Fd2`` (N): the load-cell force an EMA in
-    FORCE mode should show by the torque balance of its motor
-    (:func:`drive_force`), only where the recording carries the drive modes
-    and setpoints. Nominal parameters: per EMA internal play, stiffness
+    FORCE mode should show by the momentum balance of its motor, only where
+    the recording carries the drive modes and setpoints. ``Fd`` is compared
+    as means over blocks of 0.1 s (valid at the block centres only):
+
+    .. math:: \\bar F = \\overline{F_{target} - F_f(v) - c\\,v}
+              - M\\,\\frac{v(t_{end}) - v(t_{start})}{t_{end} - t_{start}}
+
+    so the motor acceleration is never differentiated from the quantised
+    angle (per sample that error is as large as the load-cell noise); the
+    measured side is the trapezoidal time mean of the load cell over the same
+    interval. Where modes are recorded, s and F are not compared in the 1 s
+    after a drive-mode change (the quasi-static surface does not model the
+    ringing after the impact that follows). Nominal parameters: per EMA internal play, stiffness
     (equal in tension and compression), bearing play, bearing-plus-housing
     compliance; the reflected motor mass and the drive's viscous loss (so
     motor-side viscous friction is nominal here, not a candidate: the two
@@ -356,12 +368,12 @@ class DualEmaReplay:
         self.T = float(sample_period_s)
         self.xm = (arrs[1] / i_total_rad_per_mm, arrs[2] / i_total_rad_per_mm)
         self.channels = ("s1", "s2", "F1", "F2", "Fd1", "Fd2")
-        self.measured = {"s1": arrs[3], "s2": arrs[4], "F1": arrs[5], "F2": arrs[6],
-                         "Fd1": arrs[5], "Fd2": arrs[6]}
+        self.measured = {"s1": arrs[3], "s2": arrs[4], "F1": arrs[5], "F2": arrs[6]}
         self.v = tuple(_savgol(x, self.T, 1) for x in self.xm)
-        self.a = tuple(_savgol(x, self.T, 2) for x in self.xm)
         valid = {c: np.ones(n, bool) for c in ("s1", "s2", "F1", "F2")}
         self.target = []
+        self.blocks = []
+        blk = max(2, int(round(_FD_BLOCK_S / self.T)))
         for e, (mode, sp) in enumerate(((mode1, sp1), (mode2, sp2))):
             ok = np.zeros(n, bool)
             tgt = np.zeros(n)
@@ -376,9 +388,36 @@ class DualEmaReplay:
                 start = np.where(ok & ~np.r_[False, ok[:-1]])[0]
                 for k in start:
                     ok[k:k + int(0.3 / self.T)] = False
-            valid[f"Fd{e + 1}"] = ok
+            # blocks of `blk` samples inside each FORCE run (the remainder of a run is dropped)
+            k0 = []
+            edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
+            for a, b in zip(edges[::2], edges[1::2]):
+                k0.extend(range(max(a, 1), b - blk + 1, blk))
+            k0 = np.asarray(k0, dtype=np.int64)
+            centre = k0 + blk // 2
+            vmask = np.zeros(n, bool)
+            vmask[centre] = True
+            meas = np.zeros(n)
+            # time mean of the load-cell force over [t_{k0-1}, t_{k0+blk-1}] (trapezoid), the
+            # interval over which the drive's momentum balance is taken
+            F = arrs[5 + e]
+            cs = np.r_[0.0, np.cumsum(F)]
+            meas[centre] = (cs[k0 + blk] - cs[k0] + 0.5 * (F[k0 - 1] - F[k0 + blk - 1])) / blk
+            self.measured[f"Fd{e + 1}"] = meas
+            valid[f"Fd{e + 1}"] = vmask
             self.target.append(tgt)
+            self.blocks.append((k0, centre, blk))
+        if mode1 is not None and mode2 is not None:
+            # the quasi-static surface does not model the 50 Hz ringing after a drive enters or
+            # leaves FORCE mode (free flight across the play, impact): not compared for 1 s
+            change = np.zeros(n, bool)
+            change[1:] = (np.diff(np.asarray(mode1, dtype=float)) != 0) | (np.diff(np.asarray(mode2, dtype=float)) != 0)
+            k = int(round(_TRANSIENT_S / self.T))
+            transient = np.convolve(change, np.ones(k), mode="full")[:n] > 0
+            for c in ("s1", "s2", "F1", "F2"):
+                valid[c] &= ~transient
         self.valid = valid
+        self.derived_valid = {"Dint1": valid["s1"], "Dint2": valid["s2"], "Dext": valid["s1"] & valid["s2"]}
         self.nominal = (
             Param("backlash_int1_mm", 0.1, 0.01, 0.0, 2.0), Param("stiffness_int1_N_per_mm", 8e4, 1e4, 1e3, 1e7),
             Param("backlash_bearing1_mm", 0.05, 0.01, 0.0, 2.0),
@@ -400,6 +439,28 @@ class DualEmaReplay:
             "time since start": self.t_s - 0.5 * (self.t_s[0] + self.t_s[-1]),
         }
         self._cache: dict = {}
+
+    def derived(self, ch: dict) -> dict:
+        """The paper's D signals (mm): D_int,i = s_i - phi_i / i_total, D_ext = s2 - s1."""
+        return {"Dint1": ch["s1"] - self.xm[0], "Dint2": ch["s2"] - self.xm[1], "Dext": ch["s2"] - ch["s1"]}
+
+    def _block_drive_force(self, e: int, friction_N: np.ndarray, reflected_mass_kg: float) -> np.ndarray:
+        """Block means of :func:`drive_force`, at the block centres (zeros elsewhere)."""
+        k0, centre, blk = self.blocks[e]
+        out = np.zeros(self.t_s.size)
+        if k0.size == 0:
+            return out
+        k1 = k0 + blk - 1
+        # over [t_{k0-1}, t_{k1}]: the target is held per period (tgt[k] over (t_{k-1}, t_k]);
+        # friction is sampled, so its time mean is the trapezoid
+        gt = np.r_[0.0, np.cumsum(self.target[e])]
+        gf = np.r_[0.0, np.cumsum(friction_N)]
+        fric = (gf[k0 + blk] - gf[k0] + 0.5 * (friction_N[k0 - 1] - friction_N[k1])) / blk
+        v = self.v[e]
+        # momentum over the block: M (v(t_{k1}) - v(t_{k0-1})) / (B T), M in kg, v in mm/s
+        dv = v[k1] - v[k0 - 1]
+        out[centre] = (gt[k0 + blk] - gt[k0]) / blk - fric - reflected_mass_kg * 1e-3 * dv / (blk * self.T)
+        return out
 
     def predict(self, theta: np.ndarray, active: list) -> dict:
         """Predicted channels for nominal ``theta`` and the active effects [(Candidate, params)]."""
@@ -447,5 +508,5 @@ class DualEmaReplay:
                 fk["coulomb_N"] = fk.get("coulomb_N", 0.0) + 0.5 * (fp + fm)
                 fk["asym_N"] = 0.5 * (fp - fm)
             ff = friction_force(self.v[e], viscous_N_s_per_mm=th[9], **fk)
-            out[f"Fd{e + 1}"] = lg * drive_force(self.target[e], self.a[e], ff, th[8])
+            out[f"Fd{e + 1}"] = lg * self._block_drive_force(e, ff, th[8])
         return out

@@ -11,6 +11,17 @@ with :math:`\\dot q, \\ddot q` from a Savitzky-Golay filter of the measured
 position (m/s, m/s^2) and F the drive force ``gtau * vir`` (N). The channel
 compared is ``force``; driving by the measured position removes the
 controller from the comparison.
+
+Candidates (added to F; :math:`\\tilde q = q - \\mathrm{median}(q)`,
+:math:`s = \\tanh(\\dot q / 10^{-4})`):
+
+* ``stribeck_friction``: :math:`F_s e^{-(\\dot q/v_s)^2} s`;
+* ``asymmetric_friction``: :math:`\\Delta F_v |\\dot q|`, viscous friction
+  :math:`F_v \\pm \\Delta F_v` in the two directions (a Coulomb asymmetry
+  is the offset, already nominal);
+* ``position_dependent_friction``: :math:`a\\,\\tilde q\\,s`;
+* ``position_dependent_force``: :math:`b_1 \\tilde q + b_2 \\tilde q^2`
+  (a spring, cable carrier or gravity component).
 """
 
 from __future__ import annotations
@@ -30,10 +41,14 @@ def single_axis_candidates() -> tuple:
     return (
         Candidate("stribeck_friction", "axis", "Stribeck (static above Coulomb) friction of the ballscrew",
                   (Param("extra_force_N", 2.0, 2.0, 0.0, 1e3), Param("stribeck_velocity_m_per_s", 0.01, 0.01, 1e-4, 1.0))),
-        Candidate("asymmetric_friction", "axis", "friction that differs with the direction of motion",
-                  (Param("asymmetry_N", 1.0, 1.0, -1e3, 1e3),)),
+        Candidate("asymmetric_friction", "axis",
+                  "viscous friction that differs with the direction of motion",
+                  (Param("viscous_asymmetry_N_s_per_m", 10.0, 10.0, -1e5, 1e5),)),
         Candidate("position_dependent_friction", "axis", "friction that varies along the stroke (ballscrew wear or misalignment)",
                   (Param("slope_N_per_m", 10.0, 10.0, -1e5, 1e5),)),
+        Candidate("position_dependent_force", "axis",
+                  "a force that depends on the position along the stroke (spring, cable carrier or gravity)",
+                  (Param("linear_N_per_m", 10.0, 10.0, -1e6, 1e6), Param("quadratic_N_per_m2", 100.0, 100.0, -1e8, 1e8))),
     )
 
 
@@ -68,7 +83,8 @@ class SingleAxisReplay:
         self.nominal = (Param("mass_kg", 50.0, 10.0, 0.0, 1e5), Param("viscous_N_s_per_m", 100.0, 50.0, 0.0, 1e6),
                         Param("coulomb_N", 20.0, 5.0, 0.0, 1e4), Param("offset_N", 0.0, 5.0, -1e4, 1e4))
         self.candidates = single_axis_candidates()
-        self.regimes = {"position along the stroke": self.q - np.median(self.q), "velocity": self.v,
+        self.qc = self.q - np.median(self.q)
+        self.regimes = {"position along the stroke": self.qc, "velocity": self.v,
                         "acceleration": self.a, "time since start": self.t_s - np.median(self.t_s)}
 
     def predict(self, theta: np.ndarray, active: list) -> dict:
@@ -80,7 +96,9 @@ class SingleAxisReplay:
             if cand.name == "stribeck_friction":
                 f = f + x[0] * np.exp(-(self.v / x[1]) ** 2) * th
             elif cand.name == "asymmetric_friction":
-                f = f + x[0] * th * th
+                f = f + x[0] * np.abs(self.v)
             elif cand.name == "position_dependent_friction":
-                f = f + x[0] * (self.q - np.median(self.q)) * th
+                f = f + x[0] * self.qc * th
+            elif cand.name == "position_dependent_force":
+                f = f + x[0] * self.qc + x[1] * self.qc * self.qc
         return {"force": f}

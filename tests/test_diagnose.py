@@ -79,7 +79,11 @@ def test_concealed_coulomb_friction_found(tmp_path):
     assert [(e.name, e.where) for e in d.effects] == [("coulomb_friction", "ema1")]
     true_f = truths[0]["parameters"]["force_N"]
     fit = d.effects[0].parameters["force_N"]
-    assert abs(fit - true_f) < 0.2 * true_f, (fit, true_f)
+    unc = d.effects[0].uncertainty["force_N"]
+    # concealed means ~1 N against 10 N of load-cell noise: the estimate is good to its
+    # stated uncertainty (which must itself be small enough to mean something)
+    assert abs(fit - true_f) < 3.0 * unc, (fit, unc, true_f)
+    assert unc < 0.3 * true_f, (unc, true_f)
     assert d.ic_after < d.ic_before
     assert d.residual_rms_after["Fd1"] < d.residual_rms_before["Fd1"]
 
@@ -101,6 +105,13 @@ def test_emps_cli(tmp_path):
     named = data["effects"] + data["partial_effects"]
     assert named, data["verdict"]
     assert all(e["delta_chi2_holdout"] < -10 for e in named)
+    # the dominant missing physics: viscous friction that differs with the direction of motion
+    assert (named[0]["name"], named[0]["where"]) == ("asymmetric_friction", "axis")
+    asym = named[0]["parameters"]["viscous_asymmetry_N_s_per_m"]
+    assert abs(asym) > 10 * named[0]["uncertainty"]["viscous_asymmetry_N_s_per_m"]
+    # and the fit improves by >= 10 % on the half it was never fitted on
+    hb, ha = data["residual_rms_holdout_before"]["force"], data["residual_rms_holdout_after"]["force"]
+    assert ha < 0.9 * hb, (hb, ha)
     assert data["ic_after"] < data["ic_before"]
     assert data["residual_rms_after"]["force"] < data["residual_rms_before"]["force"]
     assert data["locations"]
@@ -111,3 +122,60 @@ def test_cli_bad_recording(tmp_path):
     bad = tmp_path / "x.csv"
     bad.write_text("t,phi1\n0,0\n")
     assert main(["diagnose", str(bad), "--out", str(tmp_path)]) == 3
+
+
+def test_noise_floor_on_a_sparse_grid():
+    """A channel valid every 50th sample (block means) gets its white-noise sigma from its own grid."""
+    from blf.diagnose import _noise_floor
+    rng = np.random.default_rng(7)
+    n = 50_000
+    valid = np.zeros(n, bool)
+    valid[25::50] = True
+    r = np.where(valid, 1.5 * rng.standard_normal(n) + 0.2 * np.sin(np.arange(n) / 4000.0), 0.0)
+    sig = _noise_floor(r, valid, 100)
+    assert abs(np.median(sig[valid]) - 1.5) < 0.1, np.median(sig[valid])
+    dense = _noise_floor(1.5 * rng.standard_normal(n), np.ones(n, bool), 100)
+    assert abs(np.median(dense) - 1.5) < 0.05
+
+
+def test_drive_force_blocks_balance_momentum():
+    """Known answer: a motion whose drive target is exactly the chain force plus M a + c v
+    (continuous time) gives block means of the replayed drive force equal to those of the
+    chain force, without differentiating the angle twice."""
+    T, n, i_tot = 0.002, 20_000, B.I_TOTAL
+    t = np.arange(n) * T
+    M, c = 2500.0, 75.0  # kg, N s/mm
+    w = 2 * np.pi * 0.7
+    x = 3.0 * np.sin(w * t)  # mm
+    F_chain = 2000.0 + 500.0 * np.sin(0.9 * t)
+    # the setpoint of sample k acts over (t_k, t_k+1]: its mean target over that period
+    tm = t + 0.5 * T
+    tgt_mid = 2000.0 + 500.0 * np.sin(0.9 * tm) + M * 1e-3 * (-3.0 * w * w * np.sin(w * tm)) \
+        + c * 3.0 * w * np.cos(w * tm)
+    mode = np.full(n, 10.0)
+    mode[:10] = 8.0
+    m = DualEmaReplay(t, x * i_tot, x * i_tot, x, x, F_chain, F_chain, i_tot, T, mode, tgt_mid, mode, tgt_mid)
+    th = np.array([q.x0 for q in m.nominal])
+    th[8], th[9] = M, c
+    pred = m.predict(th, [])
+    ok = m.valid["Fd1"]
+    assert ok.sum() > 300
+    err = pred["Fd1"][ok] - m.measured["Fd1"][ok]
+    assert np.sqrt(np.mean(err ** 2)) < 0.05, (np.sqrt(np.mean(err ** 2)), np.abs(err).max())  # N; M a swings +-145 N
+
+
+def test_cli_on_a_run_folder(tmp_path, short):
+    """End to end on a run folder the tool made (no effect): JSON of issue 6's shape, the D
+    signals reported beside the fitted channels, the HTML report written."""
+    run = tmp_path / "run"
+    B.record(B.base_params(), 31005, run, short)
+    out = tmp_path / "diag"
+    assert main(["diagnose", str(run), "--out", str(out), "--quiet"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    assert data["verdict"] == "no_mismatch", data["excess_before"]
+    assert set(data["residual_rms_before"]) == {"s1", "s2", "F1", "F2", "Fd1", "Fd2", "Dint1", "Dint2", "Dext"}
+    # D_int,1 = s1 - phi1/i_total with phi1 an input of the replay: same residual as s1
+    assert data["residual_rms_before"]["Dint1"] == pytest.approx(data["residual_rms_before"]["s1"], rel=1e-6)
+    assert 0.8 < data["residual_rms_after"]["s1"] / data["noise_floor"]["s1"] < 1.2
+    html = (out / "diagnosis_report.html").read_text()
+    assert "Dext" in html and html.count("data:image/png;base64,") == 9
