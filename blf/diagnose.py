@@ -23,7 +23,9 @@ Method
 4. **Screening.** Each candidate effect (a switchable physics term of the
    model) is linearised by finite differences of replays; the chi-square it
    removes together with the re-adjusted nominal parameters (their Jacobian
-   is projected out) ranks it, penalised by BIC per parameter.
+   is projected out) ranks it, penalised by BIC per parameter with the
+   number of observations the term acts on (a drive-force term touches only
+   the FORCE-mode blocks, not every sample of every channel).
 5. **Refit and acceptance.** The best candidates are refitted (candidate
    parameters nonlinear, nominal parameters re-adjusted linearly, i.e.
    variable projection); one is accepted only if its BIC improves by more
@@ -156,6 +158,7 @@ class Diagnosis:
     predicted_after: dict = field(repr=False)
     measured: dict = field(repr=False, default_factory=dict)  #: all reported channels, derived included
     valid: dict = field(repr=False, default_factory=dict)
+    held_out: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, bool))  #: samples never fitted
 
 
 # ------------------------------------------------------------------ helpers
@@ -355,10 +358,11 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     Notes
     -----
     Information criterion (Gaussian, noise floor known):
-    :math:`\\mathrm{BIC} = \\chi^2 + k \\ln N` with :math:`\\chi^2 = \\sum (r/\\sigma)^2`
-    over the fit half, :math:`k` the number of fitted parameters and
-    :math:`N` the number of fitted samples. See the module docstring for the
-    steps.
+    :math:`\mathrm{BIC} = \chi^2 + k_0 \ln N + \sum_j k_j \ln N_j` with
+    :math:`\chi^2 = \sum (r/\sigma)^2` over the fit half, :math:`k_0` nominal
+    parameters over all :math:`N` fitted samples and :math:`k_j` parameters
+    of accepted effect j over the :math:`N_j` samples that effect changes.
+    See the module docstring for the steps.
     """
     cfg = config or DiagnoseConfig()
     if not (np.isfinite(sample_period_s) and sample_period_s > 0):
@@ -444,7 +448,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     chi_fit_cur = p.chi2(w0, p.fit_mask)
     chi_val_cur = p.chi2(w0, ~p.fit_mask)
     ic_cur = ic0
-    k_cur = k_nom
+    pen_cur = k_nom * lnN
     excess_cur = excess0
     for _round in range(cfg.max_effects):
         base_pred = model.predict(theta, active)
@@ -456,6 +460,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         # screening: linearised chi-square reduction per candidate
         say("screening candidates")
         scores = []
+        pen: dict = {}
         taken = {(e.name, e.where) for e in accepted}
         for cand in model.candidates:
             if (cand.name, cand.where) in taken:
@@ -469,12 +474,17 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
                 wmi = p.weighted(model.predict(theta, active + [(cand, xc2)]))
                 cols.append((p.vec(wpl, p.fit_mask) - p.vec(wmi, p.fit_mask)) / (xc[j] - xc2[j] or 1.0))
             A = np.stack(cols, axis=1)
+            # BIC's N for this term: the observations it acts on (a drive-force term touches only
+            # the FORCE-mode blocks, not every sample of every channel)
+            amax = float(np.max(np.abs(A))) if A.size else 0.0
+            n_eff = int(np.count_nonzero(np.any(np.abs(A) > 1e-6 * amax, axis=1))) if amax > 0 else 2
+            pen[(cand.name, cand.where)] = len(cand.params) * float(np.log(max(n_eff, 2)))
             A = A - proj.Q @ (proj.Q.T @ A)
             b = proj.Q @ (proj.Q.T @ rf_b)  # rf_b is already orthogonal; keep for clarity
             rhs = rf_b - b
             coef, *_ = np.linalg.lstsq(A, rhs, rcond=None)
             red = float(rhs @ rhs - (rhs - A @ coef) @ (rhs - A @ coef))
-            scores.append((red - len(cand.params) * lnN, red, cand))
+            scores.append((red - pen[(cand.name, cand.where)], red, cand))
         scores.sort(key=lambda s: -s[0])
         screening_log.append([{"name": c.name, "where": c.where, "delta_chi2_linear": round(r, 1),
                                "delta_bic_linear": round(-s, 1)} for s, r, c in scores])
@@ -484,7 +494,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
                 break
             say(f"refit {cand.name} at {cand.where}")
             x, unc, beta, chi_f, chi_v = _fit_candidate(p, proj, theta, active, cand)
-            dbic = (chi_f - chi_fit_cur) + len(cand.params) * lnN
+            dbic = (chi_f - chi_fit_cur) + pen[(cand.name, cand.where)]
             dval = chi_v - chi_val_cur
             if best is None or dbic < best[0]:
                 best = (dbic, dval, cand, x, unc, beta, chi_f, chi_v)
@@ -498,8 +508,8 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
             break
         theta = theta + beta * np.array([q.scale for q in model.nominal]) * 1.0
         active.append((cand, x))
-        k_cur += len(cand.params)
-        ic_cur = chi_f + k_cur * lnN
+        pen_cur += pen[(cand.name, cand.where)]
+        ic_cur = chi_f + pen_cur
         ev = (f"chi-square on the fit half reduced by {chi_fit_cur - chi_f:.0f} "
               f"(BIC {dbic:+.0f}), on the held-out half by {-dval:.0f}; "
               + (f"next best candidate {runner[2].name} at {runner[2].where} explains "
@@ -528,7 +538,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     return Diagnosis(verdict, eff, part, tuple(locations), rms(pred0_all), rms(cur_all),
                      rms(pred0_all, ~p.fit_mask), rms(cur_all, ~p.fit_mask), floor, excess0,
                      excess_cur, float(ic0), float(ic_cur), _named(model.nominal, theta),
-                     tuple(screening_log), pred0_all, cur_all, meas, valid)
+                     tuple(screening_log), pred0_all, cur_all, meas, valid, ~p.fit_mask)
 
 
 def _named(params: tuple, theta: np.ndarray) -> dict:

@@ -115,16 +115,25 @@ def _figure(model, d, channel: str) -> str:
     ax[0].plot(t[ok][::stride], d.predicted_before[channel][ok][::stride], lw=0.8, label="nominal model")
     ax[0].plot(t[ok][::stride], d.predicted_after[channel][ok][::stride], lw=0.8, label="with fitted effects")
     ax[0].legend(fontsize=7)
-    ax[0].set_ylabel(channel)
+    unit = "N" if channel.startswith("F") or channel == "force" else ("m" if channel in ("q", "q_ref") else "mm")
+    ax[0].set_ylabel(f"{channel} [{unit}]")
     from scipy.ndimage import uniform_filter1d
     w = max(1, int(0.5 / np.median(np.diff(t))))
     for pred, lab in ((d.predicted_before, "residual before"), (d.predicted_after, "residual after")):
         r = np.where(ok, m - pred[channel], np.nan)
         rs = uniform_filter1d(np.nan_to_num(r), w) 
         ax[1].plot(t[ok][::stride], rs[ok][::stride], lw=0.8, label=lab + " (0.5 s mean)")
+    ax[1].set_ylabel(f"residual [{unit}]")
     for loc in d.locations:
         if loc.channel == channel:
             ax[1].axvspan(loc.t_start_s, loc.t_end_s, color="red", alpha=0.1)
+    # held-out blocks (never fitted): grey
+    ho = np.asarray(d.held_out, dtype=bool)
+    if ho.size == t.size and ho.any():
+        edges = np.flatnonzero(np.diff(np.r_[0, ho.astype(np.int8), 0]))
+        for k, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+            ax[1].axvspan(t[a], t[b - 1], color="0.5", alpha=0.12, lw=0,
+                          label="held out (not fitted)" if k == 0 else None)
     ax[1].axhline(0, color="k", lw=0.5)
     ax[1].set_xlabel("t [s]")
     ax[1].legend(fontsize=7)
