@@ -358,8 +358,8 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     Notes
     -----
     Information criterion (Gaussian, noise floor known):
-    :math:`\mathrm{BIC} = \chi^2 + k_0 \ln N + \sum_j k_j \ln N_j` with
-    :math:`\chi^2 = \sum (r/\sigma)^2` over the fit half, :math:`k_0` nominal
+    :math:`\\mathrm{BIC} = \\chi^2 + k_0 \\ln N + \\sum_j k_j \\ln N_j` with
+    :math:`\\chi^2 = \\sum (r/\\sigma)^2` over the fit half, :math:`k_0` nominal
     parameters over all :math:`N` fitted samples and :math:`k_j` parameters
     of accepted effect j over the :math:`N_j` samples that effect changes.
     See the module docstring for the steps.
