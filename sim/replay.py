@@ -18,7 +18,7 @@ bearing play and stiffness, housing spring). The sensors are applied after:
 :func:`lvdt_model` and the load-cell gain.
 
 An EMA in FORCE mode gives one more channel: the force the drive delivers,
-from the torque balance of its motor (:func:`drive_force`).
+from the momentum balance of its motor over short blocks (:func:`block_means`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from numba import njit
 from hil.errors import InputError
 from sim.plant import _chain
 
-__all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "drive_force"]
+__all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "block_means"]
 
 
 @dataclass(frozen=True)
@@ -264,17 +264,32 @@ def friction_force(v_mm_s: np.ndarray, *, coulomb_N: float = 0.0, viscous_N_s_pe
     return level * th + viscous_N_s_per_mm * v
 
 
-def drive_force(target_N: np.ndarray, accel_mm_s2: np.ndarray, friction_N: np.ndarray,
-                reflected_mass_kg: float) -> np.ndarray:
-    """Load-path force an EMA in FORCE mode delivers, from the torque balance of its motor, N.
+def block_means(x: np.ndarray, k0: np.ndarray, block: int) -> np.ndarray:
+    """Time means of a sampled signal over the intervals :math:`[t_{k_0-1}, t_{k_0+B-1}]`.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Signal sampled at :math:`t_k`.
+    k0 : ndarray of int, shape (m,)
+        First sample of each block (>= 1).
+    block : int
+        Samples per block, B (>= 1).
+
+    Returns
+    -------
+    ndarray, shape (m,)
 
     Notes
     -----
-    :math:`F = F_{target} - M\\,a - F_f` with :math:`M = J i_{total}^2` the
-    reflected mass (kg) and :math:`a` the motor-side acceleration (mm/s^2,
-    converted to m/s^2).
+    Trapezoidal rule over the B periods ending at samples
+    :math:`k_0 \\ldots k_0 + B - 1`:
+    :math:`\\bar x = \\frac{1}{B}\\left(\\sum_{k=k_0}^{k_0+B-1} x_k + \\tfrac12 (x_{k_0-1} - x_{k_0+B-1})\\right)`.
+    A drive's momentum balance over the same interval needs no acceleration:
+    :math:`\\bar F = \\bar F_{target} - \\bar F_f - M (v_{k_0+B-1} - v_{k_0-1}) / (B T)`.
     """
-    return np.asarray(target_N) - reflected_mass_kg * 1e-3 * np.asarray(accel_mm_s2) - np.asarray(friction_N)
+    cs = np.r_[0.0, np.cumsum(x)]
+    return (cs[k0 + block] - cs[k0] + 0.5 * (x[k0 - 1] - x[k0 + block - 1])) / block
 
 
 # ====================================================================== diagnosis model
@@ -339,8 +354,10 @@ class DualEmaReplay:
     measured side is the trapezoidal time mean of the load cell over the same
     interval. Where modes are recorded, s and F are not compared in the 1 s
     after a drive-mode change (the quasi-static surface does not model the
-    ringing after the impact that follows). Nominal parameters: per EMA internal play, stiffness
-    (equal in tension and compression), bearing play, bearing-plus-housing
+    ringing after the impact that follows).
+
+    Nominal parameters: per EMA internal play, stiffness (equal in tension
+    and compression), bearing play, bearing-plus-housing
     compliance; the reflected motor mass and the drive's viscous loss (so
     motor-side viscous friction is nominal here, not a candidate: the two
     cannot be told apart from these channels). Sensors ideal.
@@ -398,11 +415,8 @@ class DualEmaReplay:
             vmask = np.zeros(n, bool)
             vmask[centre] = True
             meas = np.zeros(n)
-            # time mean of the load-cell force over [t_{k0-1}, t_{k0+blk-1}] (trapezoid), the
-            # interval over which the drive's momentum balance is taken
-            F = arrs[5 + e]
-            cs = np.r_[0.0, np.cumsum(F)]
-            meas[centre] = (cs[k0 + blk] - cs[k0] + 0.5 * (F[k0 - 1] - F[k0 + blk - 1])) / blk
+            # time mean of the load cell over the interval of the drive's momentum balance
+            meas[centre] = block_means(arrs[5 + e], k0, blk)
             self.measured[f"Fd{e + 1}"] = meas
             valid[f"Fd{e + 1}"] = vmask
             self.target.append(tgt)
@@ -445,17 +459,17 @@ class DualEmaReplay:
         return {"Dint1": ch["s1"] - self.xm[0], "Dint2": ch["s2"] - self.xm[1], "Dext": ch["s2"] - ch["s1"]}
 
     def _block_drive_force(self, e: int, friction_N: np.ndarray, reflected_mass_kg: float) -> np.ndarray:
-        """Block means of :func:`drive_force`, at the block centres (zeros elsewhere)."""
+        """Load-path force the FORCE-mode drive delivers, as block means at the block centres
+        (zeros elsewhere); see :func:`block_means`."""
         k0, centre, blk = self.blocks[e]
         out = np.zeros(self.t_s.size)
         if k0.size == 0:
             return out
         k1 = k0 + blk - 1
-        # over [t_{k0-1}, t_{k1}]: the target is held per period (tgt[k] over (t_{k-1}, t_k]);
-        # friction is sampled, so its time mean is the trapezoid
+        # over [t_{k0-1}, t_{k1}]: the target is held per period (tgt[k] over (t_{k-1}, t_k]),
+        # so its mean is a plain sum; friction is sampled: trapezoid
         gt = np.r_[0.0, np.cumsum(self.target[e])]
-        gf = np.r_[0.0, np.cumsum(friction_N)]
-        fric = (gf[k0 + blk] - gf[k0] + 0.5 * (friction_N[k0 - 1] - friction_N[k1])) / blk
+        fric = block_means(friction_N, k0, blk)
         v = self.v[e]
         # momentum over the block: M (v(t_{k1}) - v(t_{k0-1})) / (B T), M in kg, v in mm/s
         dv = v[k1] - v[k0 - 1]

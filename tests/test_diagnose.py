@@ -179,3 +179,13 @@ def test_cli_on_a_run_folder(tmp_path, short):
     assert 0.8 < data["residual_rms_after"]["s1"] / data["noise_floor"]["s1"] < 1.2
     html = (out / "diagnosis_report.html").read_text()
     assert "Dext" in html and html.count("data:image/png;base64,") == 9
+
+
+def test_block_means_is_the_trapezoid_over_the_block():
+    from sim.replay import block_means
+    x = np.arange(100, dtype=float) ** 2  # x_k = k^2
+    k0 = np.array([1, 11, 50])
+    got = block_means(x, k0, 10)
+    # exact time mean of the piecewise-linear interpolant of k^2 over [k0 - 1, k0 + 9]
+    want = [np.mean([0.5 * (k * k + (k + 1) ** 2) for k in range(a - 1, a + 9)]) for a in k0]
+    assert np.allclose(got, want, rtol=0, atol=1e-9), (got, want)
