@@ -33,7 +33,6 @@ __all__ = [
 ]
 
 MIN_SAMPLES = 200  #: fewest force-fight samples BLFmaint accepts
-_MIN_SAMPLES = MIN_SAMPLES
 _MAX_BINS = 100_000
 _FLAT_TO_STEEP_MAX = 0.25  # flat (backlash) slope level must be < 25 % of the contact level
 
@@ -369,9 +368,9 @@ def blf_maint(
     d = _as_1d_finite(d_mm, "d_mm", "mm")
     f = _as_1d_finite(f_N, "f_N", "N")
     _same_shape((d, "d_mm", "mm"), (f, "f_N", "N"))
-    if d.size < _MIN_SAMPLES:
+    if d.size < MIN_SAMPLES:
         raise InputError(
-            f"d_mm and f_N need at least {_MIN_SAMPLES} samples (mm, N); got shape {d.shape}"
+            f"d_mm and f_N need at least {MIN_SAMPLES} samples (mm, N); got shape {d.shape}"
         )
     fs = _positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
     wc = _positive_scalar(lowpass_rad_s, "lowpass_rad_s", "rad/s")

@@ -240,20 +240,22 @@ def _page_faults() -> int:
     return r.ru_minflt + r.ru_majflt
 
 
-def _record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=None) -> None:
+def _record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=None,
+                      page_faults: int | None = None) -> None:
     meta["wall_s"] = round(wall, 3)
     meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
                    "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
     if transport is not None and hasattr(transport, "max_lag_s"):
         # how far the master fell behind the bus at worst (a frame waiting in its socket) [ms]
         meta["can"]["max_lag_ms"] = round(transport.max_lag_s * 1e3, 2)
+    if page_faults is not None:
+        meta["can"]["page_faults"] = page_faults  # during the check (each costs time)
     write_json_atomic(out / "meta.json", meta)
 
 
 def _result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -> int:
     """Analyse a finished check; an aborted one gets result.json with the reason (and the
     analysis where enough data was recorded)."""
-
     if outcome.status != "done":
         console.print(f"[red]aborted:[/red] {outcome.reason}")
         meta["status"], meta["reason"] = "aborted", meta.get("reason") or outcome.reason
@@ -402,9 +404,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         transport.close()
         bus.shutdown()
         end_realtime()  # the analysis and the report run at normal priority, GC on
-    _record_can_stats(out, meta, wall, log, master, transport)
-    meta["can"]["page_faults"] = _page_faults() - faults0  # during the check (each costs time)
-    write_json_atomic(out / "meta.json", meta)
+    _record_can_stats(out, meta, wall, log, master, transport, _page_faults() - faults0)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
                   f"{log.frames} CAN frames logged")
     return _result_after(out, act, None, meta, outcome, console)

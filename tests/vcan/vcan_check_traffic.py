@@ -241,6 +241,9 @@ def test_whole_check_over_vcan_recovers_truth(full_check, actuation):
     cycles = meta["duration_s"] / T
     assert meta["can"]["bad_frames"] == 0
     assert meta["can"]["missing_cycles"] <= 0.02 * cycles, meta["can"]
+    # run's lag and page-fault counters are recorded, and the lag stayed within safety.max_lag_s
+    assert 0 <= meta["can"]["max_lag_ms"] <= 1e3 * meta["profiles"]["check"]["safety"]["max_lag_s"], meta["can"]
+    assert meta["can"]["page_faults"] >= 0, meta["can"]
     # sim-serve's stats line: it stepped the plant once per SYNC it received
     last = res["serve_out"].splitlines()[-1]
     syncs = int(last.split(" SYNCs")[0].split()[-1])
