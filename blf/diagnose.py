@@ -20,6 +20,21 @@ Method
    when :math:`\\sum z_b^2/n_b` exceeds ``excess_threshold``; windows with
    :math:`|z_b| > 4` are the locations, described by the operating regime
    where their residual concentrates.
+   A second test looks for a mismatch spread thinly along the recording but
+   tied to the operating regime (a stiffness that changes along the stroke):
+   samples are grouped in cells (stroke-position quantiles x sign of velocity
+   x sign of force), and the cell sums of the weighted residual are formed
+   separately on the fit and the held-out half,
+   :math:`z_{f,b} = \\sum_{fit} w_i / \\sqrt{\\phi n_{f,b}}` (likewise
+   :math:`z_{h,b}`). The regime score
+   :math:`S = \\sum_b z_{f,b} z_{h,b} / \\sqrt{B}` is about standard normal
+   under noise only (the halves are independent) and grows with a mismatch
+   that repeats wherever the regime repeats. :math:`\\phi` is the
+   over-dispersion of the per-block cell sums around their cell mean
+   (correlated noise and imperfect weights widen it, a repeated mismatch
+   does not), so the score does not depend on the noise floor being exact,
+   which the window test does. A channel differs when S exceeds
+   ``regime_threshold``; the cells with the largest products are located.
 4. **Screening.** Each candidate effect (a switchable physics term of the
    model) is linearised by finite differences of replays; the chi-square it
    removes together with the re-adjusted nominal parameters (their Jacobian
@@ -37,10 +52,11 @@ Method
 6. **Verdict.** ``no_mismatch`` if no channel differs after the nominal fit
    and no candidate is accepted (a concealed effect below the window test
    can still be found by the chi-square of the whole recording);
-   ``explained`` if effects were accepted, no channel differs any more and
-   every channel that differed lost at least ``min_explained_fraction`` of
-   its excess over 1 (an effect that only nudges a channel under the
-   threshold has not explained it);
+   ``explained`` if effects were accepted, no channel differs any more (by
+   either test) and every channel that differed lost at least
+   ``min_explained_fraction`` of its excess over 1 and of its regime score
+   (an effect that only nudges a channel under the threshold has not
+   explained it);
    ``unexplained`` otherwise (the accepted effects are then reported as
    partial, and the locations still stand).
 """
@@ -57,7 +73,7 @@ from scipy.optimize import least_squares
 from hil.errors import InputError
 
 __all__ = ["Param", "Candidate", "ReplayModel", "DiagnoseConfig", "Location", "FittedEffect",
-           "Diagnosis", "diagnose"]
+           "Diagnosis", "diagnose", "RegimeScore", "regime_score"]
 
 
 @dataclass(frozen=True)
@@ -112,6 +128,8 @@ class DiagnoseConfig:
     max_effects: int = 2
     refit_top: int = 3
     min_explained_fraction: float = 0.5  #: of each flagged channel's excess above 1, for "explained"
+    regime_bins: int = 10  #: position bins of the regime test (x 2 velocity signs x 2 force signs)
+    regime_threshold: float = 5.0  #: regime score S above which a channel differs (S ~ N(0, 1) under noise)
 
 
 @dataclass(frozen=True)
@@ -121,6 +139,7 @@ class Location:
     t_end_s: float
     regime: str
     score: float
+    test: str = "window"  #: "window" (a time window) or "regime" (a regime cell, first to last visit)
 
 
 @dataclass(frozen=True)
@@ -159,6 +178,10 @@ class Diagnosis:
     measured: dict = field(repr=False, default_factory=dict)  #: all reported channels, derived included
     valid: dict = field(repr=False, default_factory=dict)
     held_out: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, bool))  #: samples never fitted
+    regime_before: dict = field(default_factory=dict)  #: regime-test score per channel (step 3)
+    regime_after: dict = field(default_factory=dict)
+    regime_cells: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, int))  #: cell per sample
+    regime_labels: tuple = ()  #: description of each cell
 
 
 # ------------------------------------------------------------------ helpers
@@ -224,6 +247,103 @@ def _regime_words(idx: np.ndarray, r: np.ndarray, regimes: dict) -> str:
     return best
 
 
+def _regime_cells(regimes: dict, nbins: int) -> tuple[np.ndarray, list]:
+    """Cell index per sample: position bin (quantiles) x sign of velocity x sign of force.
+
+    Uses the regime variables ``"position along the stroke"``, ``"velocity"``
+    and the first ``"force ..."`` one that are present; returns the cell of
+    every sample and a description of each cell.
+    """
+    pos = regimes.get("position along the stroke")
+    if pos is None:
+        return np.full(next(iter(regimes.values())).size, -1), []
+    edges = np.unique(np.round(np.quantile(pos, np.linspace(0.0, 1.0, nbins + 1)), 9))
+    if edges.size < 2:
+        edges = np.array([edges[0] - 1.0, edges[0] + 1.0])
+    nbins = edges.size - 1  # a stroke position held for long (the force fight) fills several quantiles
+    cell = np.clip(np.searchsorted(edges[1:-1], pos, side="right"), 0, nbins - 1)
+    labels = [f"position along the stroke {edges[b]:+.3g}..{edges[b + 1]:+.3g}" for b in range(nbins)]
+    frc = next((k for k in regimes if k.startswith("force") and "rate" not in k), None)
+    for key in ("velocity", frc):
+        if key is None or key not in regimes:
+            continue
+        cell = 2 * cell + (regimes[key] > 0)
+        labels = [f"{lab}, {key} {sgn} 0" for lab in labels for sgn in ("<=", ">")]
+    return cell, labels
+
+
+@dataclass(frozen=True)
+class RegimeScore:
+    """Result of :func:`regime_score`: the score S and the cell scores of each half
+    (NaN where a cell has too few valid samples in either half)."""
+
+    score: float
+    z_fit: np.ndarray
+    z_held: np.ndarray
+
+    @property
+    def products(self) -> np.ndarray:
+        return self.z_fit * self.z_held
+
+
+def regime_score(w: np.ndarray, valid: np.ndarray, fit: np.ndarray, block: np.ndarray,
+                 cell: np.ndarray, ncell: int) -> RegimeScore:
+    """Cross-validated regime statistic of a weighted residual (see :func:`diagnose`, step 3).
+
+    Parameters
+    ----------
+    w : ndarray, shape (n,)
+        Residual over its noise floor (dimensionless).
+    valid : ndarray of bool, shape (n,)
+    fit : ndarray of bool, shape (n,)
+        True on the fit half, False on the held-out half.
+    block : ndarray of int, shape (n,)
+        Block index of each sample (the alternating blocks of the halves).
+    cell : ndarray of int, shape (n,)
+        Regime cell of each sample, -1 for none.
+    ncell : int
+
+    Returns
+    -------
+    RegimeScore
+
+    Notes
+    -----
+    :math:`z_{f,b} = \\sum_{i \\in b, fit} w_i / \\sqrt{\\phi n_{f,b}}`, likewise
+    :math:`z_{h,b}` on the held-out half, and
+    :math:`S = \\sum_b z_{f,b} z_{h,b} / \\sqrt{B}` over the B cells with at least
+    20 valid samples in each half (5 for a channel valid only on a coarser grid).
+    :math:`\\phi` is the pooled variance of the per-block cell sums around their
+    cell mean, per sample: 1 for white noise of unit variance, more for correlated
+    noise, and not raised by a mismatch that repeats within the cell.
+    """
+    nan = np.full(ncell, np.nan)
+    sel = valid & (cell >= 0)
+    if np.count_nonzero(sel) < 10 or ncell == 0:
+        return RegimeScore(0.0, nan, nan.copy())
+    min_n = 20 if int(np.median(np.diff(np.flatnonzero(sel)))) == 1 else 5
+    key = 2 * cell[sel] + fit[sel].astype(int)  # cell x half
+    piece = key.astype(np.int64) * (int(block.max()) + 1) + block[sel]
+    upiece, inv = np.unique(piece, return_inverse=True)
+    s_p = np.bincount(inv, w[sel])
+    n_p = np.bincount(inv).astype(float)
+    k_p = upiece // (int(block.max()) + 1)
+    s_k = np.bincount(key, w[sel], minlength=2 * ncell)
+    n_k = np.bincount(key, minlength=2 * ncell).astype(float)
+    mu = np.where(n_k > 0, s_k / np.maximum(n_k, 1.0), 0.0)
+    dof = upiece.size - int(np.count_nonzero(n_k))
+    # over-dispersion of piece sums around their cell-half mean: correlated noise and
+    # imperfect weights widen it, a mismatch that repeats in the cell does not
+    phi = float(np.sum((s_p - mu[k_p] * n_p) ** 2 / n_p) / dof) if dof >= 10 else 1.0
+    n_h, n_f = n_k[0::2], n_k[1::2]
+    ok = (n_h >= min_n) & (n_f >= min_n)
+    zf, zh = nan.copy(), nan.copy()
+    zf[ok] = s_k[1::2][ok] / np.sqrt(phi * n_f[ok])
+    zh[ok] = s_k[0::2][ok] / np.sqrt(phi * n_h[ok])
+    nb = int(ok.sum())
+    return RegimeScore(float(np.nansum(zf * zh) / np.sqrt(nb)) if nb else 0.0, zf, zh)
+
+
 # ------------------------------------------------------------------ core
 
 
@@ -234,7 +354,8 @@ class _Problem:
         self.T = period_s
         n = model.t_s.size
         blk = max(1, int(round(cfg.block_s / period_s)))
-        self.fit_mask = ((np.arange(n) // blk) % 2) == 0
+        self.block = np.arange(n) // blk
+        self.fit_mask = (self.block % 2) == 0
         self.sig = {c: np.ones(n) for c in model.channels}
         self.nfit = sum(int((model.valid[c] & self.fit_mask).sum()) for c in model.channels)
 
@@ -408,6 +529,36 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         return {c: _excess(_window_scores(w[c], valid[c], nwin)[0]) for c in meas}
 
     excess0 = excess_all(pred0_all)
+    # a cell chosen by the sign of a measured force would pick that channel's noise (its cell
+    # means would be biased by selection): force regimes of fitted channels use the nominal model
+    cell_regimes = {k: (pred0[k.split()[-1]] if k.startswith("force ") and k.split()[-1] in pred0 else x)
+                    for k, x in model.regimes.items()}
+    cells, cell_labels = _regime_cells(cell_regimes, cfg.regime_bins)
+
+    def regime_all(pred_all):
+        w = wall(pred_all)
+        return {c: regime_score(w[c], valid[c], p.fit_mask, p.block, cells, len(cell_labels)).score for c in meas}
+
+    regime0 = regime_all(pred0_all)
+
+    def locate_regime(pred_all, scores):
+        """The cells that carry the regime score of each flagged fitted channel."""
+        w = wall(pred_all)
+        locs = []
+        for c in model.channels:
+            if scores[c] <= cfg.regime_threshold:
+                continue
+            prod = regime_score(w[c], valid[c], p.fit_mask, p.block, cells, len(cell_labels)).products
+            r = meas[c] - pred_all[c]
+            for b in np.argsort(-np.nan_to_num(prod, nan=-np.inf))[:3]:
+                sel = np.flatnonzero(valid[c] & (cells == b))
+                if not np.isfinite(prod[b]) or prod[b] < 4.0 or sel.size == 0:
+                    continue
+                locs.append(Location(c, float(model.t_s[sel[0]]), float(model.t_s[sel[-1]]),
+                                     f"{cell_labels[b]} (mean residual {r[sel].mean():+.3g}, "
+                                     f"repeated in fit and held-out halves)", float(prod[b]), "regime"))
+        return locs
+
     floor = {c: float(np.sqrt(np.mean(sig[c][valid[c]] ** 2))) if valid[c].any() else None for c in meas}
 
     def rms(pred_all, part=None):
@@ -438,9 +589,11 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         return locs
 
     pred_cur = pred0
-    locations = locate(pred0_all)
-    significant = any(excess0[c] > cfg.excess_threshold for c in model.channels)
+    locations = locate(pred0_all) + locate_regime(pred0_all, regime0)
+    flag_r0 = [c for c in model.channels if regime0[c] > cfg.regime_threshold]
+    significant = any(excess0[c] > cfg.excess_threshold for c in model.channels) or bool(flag_r0)
     say("excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in excess0.items()))
+    say("regime score: " + ", ".join(f"{c} {v:.1f}" for c, v in regime0.items()))
 
     active: list = []
     accepted: list[FittedEffect] = []
@@ -522,23 +675,27 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         excess_cur = excess_all(full(pred_cur))
         say(f"accepted {cand.name} at {cand.where}; excess now " +
             ", ".join(f"{c} {v:.2f}" for c, v in excess_cur.items()))
-    still = any(excess_cur[c] > cfg.excess_threshold for c in model.channels)
+    cur_all = full(pred_cur)
+    regime_cur = regime_all(cur_all)
+    still = (any(excess_cur[c] > cfg.excess_threshold for c in model.channels)
+             or any(regime_cur[c] > cfg.regime_threshold for c in model.channels))
     # an effect that only nudges a flagged channel under the threshold has not explained it
     flagged = [c for c in model.channels if excess0[c] > cfg.excess_threshold]
-    removed = all(excess0[c] - excess_cur[c] >= cfg.min_explained_fraction * (excess0[c] - 1.0) for c in flagged)
+    removed = (all(excess0[c] - excess_cur[c] >= cfg.min_explained_fraction * (excess0[c] - 1.0) for c in flagged)
+               and all(regime0[c] - regime_cur[c] >= cfg.min_explained_fraction * regime0[c] for c in flag_r0))
     if accepted and not still and removed:
         verdict, eff, part = "explained", tuple(accepted), ()
     elif not accepted and not significant:
         verdict, eff, part = "no_mismatch", (), ()
     else:
         verdict, eff, part = "unexplained", (), tuple(accepted)
-    cur_all = full(pred_cur)
     if still:
-        locations = locate(cur_all) or locations
+        locations = (locate(cur_all) + locate_regime(cur_all, regime_cur)) or locations
     return Diagnosis(verdict, eff, part, tuple(locations), rms(pred0_all), rms(cur_all),
                      rms(pred0_all, ~p.fit_mask), rms(cur_all, ~p.fit_mask), floor, excess0,
                      excess_cur, float(ic0), float(ic_cur), _named(model.nominal, theta),
-                     tuple(screening_log), pred0_all, cur_all, meas, valid, ~p.fit_mask)
+                     tuple(screening_log), pred0_all, cur_all, meas, valid, ~p.fit_mask,
+                     regime0, regime_cur, cells, tuple(cell_labels))
 
 
 def _named(params: tuple, theta: np.ndarray) -> dict:

@@ -87,7 +87,7 @@ def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
         "effects": [eff(e) for e in d.effects],
         "partial_effects": [eff(e) for e in d.partial_effects],
         "locations": [{"channel": l.channel, "t_start_s": _r(l.t_start_s), "t_end_s": _r(l.t_end_s),
-                       "regime": l.regime, "score": _r(l.score)} for l in d.locations],
+                       "regime": l.regime, "score": _r(l.score), "test": l.test} for l in d.locations],
         "residual_rms_before": {k: _r(v) for k, v in d.residual_rms_before.items()},
         "residual_rms_after": {k: _r(v) for k, v in d.residual_rms_after.items()},
         "residual_rms_holdout_before": {k: _r(v) for k, v in d.residual_rms_holdout_before.items()},
@@ -95,6 +95,8 @@ def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
         "noise_floor": {k: _r(v) for k, v in d.noise_floor.items()},
         "excess_before": {k: _r(v) for k, v in d.excess_before.items()},
         "excess_after": {k: _r(v) for k, v in d.excess_after.items()},
+        "regime_score_before": {k: _r(v) for k, v in d.regime_before.items()},
+        "regime_score_after": {k: _r(v) for k, v in d.regime_after.items()},
         "ic": "BIC", "ic_before": _r(d.ic_before, 9), "ic_after": _r(d.ic_after, 9),
         "nominal": {k: _r(v) for k, v in d.nominal.items()},
         "screening": list(d.screening),
@@ -125,7 +127,7 @@ def _figure(model, d, channel: str) -> str:
         ax[1].plot(t[ok][::stride], rs[ok][::stride], lw=0.8, label=lab + " (0.5 s mean)")
     ax[1].set_ylabel(f"residual [{unit}]")
     for loc in d.locations:
-        if loc.channel == channel:
+        if loc.channel == channel and loc.test == "window":  # a regime cell spans many visits
             ax[1].axvspan(loc.t_start_s, loc.t_end_s, color="red", alpha=0.1)
     # held-out blocks (never fitted): grey
     ho = np.asarray(d.held_out, dtype=bool)
@@ -144,22 +146,71 @@ def _figure(model, d, channel: str) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
+def _regime_figure(d, channel: str) -> str:
+    """Regime cells of one channel: cell score on the fit half against the held-out half,
+    before and after the fitted effects (a mismatch tied to the regime lies on the diagonal)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from blf.diagnose import regime_score
+    ho = np.asarray(d.held_out, dtype=bool)
+    block = np.r_[0, np.cumsum(ho[1:] != ho[:-1])]
+    ok = d.valid[channel]
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    lim = 3.0
+    for pred, lab, col in ((d.predicted_before, "nominal model", "C0"), (d.predicted_after, "with fitted effects", "C1")):
+        w = np.where(ok, (d.measured[channel] - pred[channel]) / d.noise_floor[channel], 0.0)
+        rs = regime_score(w, ok, ~ho, block, d.regime_cells, len(d.regime_labels))
+        ax.plot(rs.z_fit, rs.z_held, "o", ms=4, color=col, alpha=0.7, label=f"{lab}: S = {rs.score:.1f}")
+        lim = max(lim, float(np.nanmax(np.abs(np.r_[rs.z_fit, rs.z_held, 0.0]))) * 1.1)
+        if pred is d.predicted_before:
+            for b in np.argsort(-np.nan_to_num(rs.products, nan=-np.inf))[:3]:
+                if np.isfinite(rs.products[b]) and rs.products[b] > 4.0:
+                    ax.annotate(d.regime_labels[b].replace("position along the stroke", "x").replace(", ", "\n"),
+                                (rs.z_fit[b], rs.z_held[b]), fontsize=6)
+    ax.plot([-lim, lim], [-lim, lim], "k", lw=0.5)
+    ax.axhline(0, color="0.7", lw=0.5)
+    ax.axvline(0, color="0.7", lw=0.5)
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    ax.set_xlabel("cell score, fit half")
+    ax.set_ylabel("cell score, held-out half")
+    ax.set_title(f"{channel}: regime cells", fontsize=9)
+    ax.legend(fontsize=7)
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=80)
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
 def write_report(path: Path, model, d, data: dict) -> None:
     """Self-contained HTML report: verdict, effects, table before/after, overlay and residual plots."""
     import html
     rows = "".join(
         f"<tr><td>{c}</td><td>{data['residual_rms_before'][c]}</td><td>{data['residual_rms_after'][c]}</td>"
         f"<td>{data['residual_rms_holdout_before'][c]}</td><td>{data['residual_rms_holdout_after'][c]}</td>"
-        f"<td>{data['noise_floor'][c]}</td><td>{data['excess_before'][c]}</td><td>{data['excess_after'][c]}</td></tr>"
+        f"<td>{data['noise_floor'][c]}</td><td>{data['excess_before'][c]}</td><td>{data['excess_after'][c]}</td>"
+        f"<td>{data['regime_score_before'][c]}</td><td>{data['regime_score_after'][c]}</td></tr>"
         for c in d.measured if d.valid[c].any())
     effs = "".join(
         f"<li><b>{html.escape(e['words'])}</b> (<code>{e['name']}</code> at {e['where']}): "
         + ", ".join(f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items())
         + f"<br><small>{html.escape(e['evidence'])}</small></li>"
         for e in data["effects"] + data["partial_effects"])
-    locs = "".join(f"<li>{l['channel']}: {l['t_start_s']}–{l['t_end_s']} s, {html.escape(l['regime'])}</li>"
+    locs = "".join(f"<li>{l['channel']}: {l['t_start_s']}–{l['t_end_s']} s ({l['test']} test), "
+                   f"{html.escape(l['regime'])}</li>"
                    for l in data["locations"][:12])
     figs = "".join(f"<h3>{c}</h3><img src='{_figure(model, d, c)}'>" for c in d.measured if d.valid[c].any())
+    from blf.diagnose import DiagnoseConfig
+    thr = DiagnoseConfig().regime_threshold
+    flagged = [c for c in model.channels if max(d.regime_before.get(c, 0.0), d.regime_after.get(c, 0.0)) > thr]
+    if flagged and d.regime_labels:
+        figs += ("<h2>Regime test</h2><p>Each point is a regime cell (stroke position x sign of velocity x "
+                 "sign of force); a mismatch tied to the operating regime repeats in both halves and lies "
+                 "on the diagonal, noise scatters around the origin.</p>"
+                 + "".join(f"<img src='{_regime_figure(d, c)}'>" for c in flagged))
     path.write_text(
         "<!doctype html><html><head><meta charset='utf-8'><title>emacheck diagnose</title></head><body>"
         f"<h1>Simulation versus recording: {data['verdict']}</h1>"
@@ -167,7 +218,8 @@ def write_report(path: Path, model, d, data: dict) -> None:
         f"<h2>Effects</h2><ul>{effs or '<li>none</li>'}</ul><h2>Where</h2><ul>{locs or '<li>nowhere</li>'}</ul>"
         "<h2>Residual RMS</h2><table border=1><tr><th>channel</th><th>before</th><th>after</th>"
         "<th>held-out before</th><th>held-out after</th>"
-        f"<th>noise floor</th><th>excess before</th><th>excess after</th></tr>{rows}</table>"
+        f"<th>noise floor</th><th>excess before</th><th>excess after</th>"
+        f"<th>regime score before</th><th>regime score after</th></tr>{rows}</table>"
         f"<h2>Overlay and residuals</h2>{figs}</body></html>")
 
 
@@ -197,7 +249,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         console.print(f"  {e['words']}{tag}: " + ", ".join(
             f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
     for l in data["locations"][:6]:
-        console.print(f"  where: {l['channel']} {l['t_start_s']}-{l['t_end_s']} s, {l['regime']}")
+        console.print(f"  where: {l['channel']} {l['t_start_s']}-{l['t_end_s']} s ({l['test']} test), {l['regime']}")
     console.print("  residual RMS before -> after: " + ", ".join(
         f"{c} {data['residual_rms_before'][c]} -> {data['residual_rms_after'][c]}"
         for c in d.measured if d.valid[c].any()))

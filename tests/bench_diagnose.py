@@ -3,10 +3,13 @@
 Not collected by pytest (no test_ functions; the file name does not match).
 Usage::
 
-    python tests/bench_diagnose.py [out.json] [--jobs N] [--only NAME,...] [--dev] [--readme README.md]
+    python tests/bench_diagnose.py [out.json] [--jobs N] [--only NAME,...] [--dev | --first-seed N]
+                                   [--cache DIR] [--readme README.md]
 
 ``--readme`` rewrites the table between the ``bench_diagnose`` markers of the
-README (the figures there come from this one command). ``--dev`` runs the
+README (the figures there come from this one command). ``--cache DIR`` keeps
+each generated recording (keyed by case and seed) so that a second run only
+diagnoses: for development, never for the reported run. ``--dev`` runs the
 same cases on development seeds (20001..), for tuning; the reported run uses
 :data:`FIRST_SEED` onwards, seeds never run before the method was frozen.
 
@@ -45,6 +48,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -402,9 +406,24 @@ def score(case: dict, truths: list, d) -> dict:
     return out
 
 
-def run_case(case: dict) -> dict:
+def _generate_cached(case: dict, cache: Path | None):
+    """:func:`generate`, or its earlier result from ``cache`` (signals CSV + JSON, keyed by id and seed)."""
+    if cache is not None:
+        stem = cache / f"{case['seed']}-{case['id']}"
+        if stem.with_suffix(".json").exists():
+            meta = json.loads(stem.with_suffix(".json").read_text())
+            return read_signals(stem.with_suffix(".csv")), meta["truths"], meta["snr"], meta["snr_all"]
     with tempfile.TemporaryDirectory() as tmp:
         sig, truths, s, s_all = generate(case, Path(tmp))
+        if cache is not None:
+            cache.mkdir(parents=True, exist_ok=True)
+            shutil.copy(Path(tmp) / "rec" / "signals.csv", stem.with_suffix(".csv"))
+            stem.with_suffix(".json").write_text(json.dumps({"truths": truths, "snr": s, "snr_all": s_all}))
+    return sig, truths, s, s_all
+
+
+def run_case(case: dict, cache: Path | None = None) -> dict:
+    sig, truths, s, s_all = _generate_cached(case, cache)
     t0 = time.perf_counter()
     d = diagnose_signals(sig)
     secs = time.perf_counter() - t0
@@ -417,7 +436,10 @@ def run_case(case: dict) -> dict:
            "effects": [{"name": e.name, "where": e.where, "parameters": e.parameters,
                         "uncertainty": e.uncertainty} for e in d.effects],
            "partial": [(e.name, e.where) for e in d.partial_effects],
-           "excess_before": {k: round(v, 2) for k, v in d.excess_before.items()}}
+           "excess_before": {k: round(v, 2) for k, v in d.excess_before.items()},
+           "excess_after": {k: round(v, 2) for k, v in d.excess_after.items()},
+           "regime_before": {k: round(v, 2) for k, v in d.regime_before.items()},
+           "regime_after": {k: round(v, 2) for k, v in d.regime_after.items()}}
     res.update(score(case, truths, d))
     print(f"{case['id']:<48} {res['verdict']:<12} {'ok' if res['ok'] else 'WRONG':<6} {secs:5.1f} s "
           f"named {res['named']} partial {res['partial']}", flush=True)
@@ -443,7 +465,7 @@ def summary(results: list) -> dict:
         "rms_after_within_1p2_floor": (sum(x <= 1.2 for x in rms), len(rms)),
         "seconds_median": float(np.median([r["seconds"] for r in results])),
         "seconds_max": float(np.max([r["seconds"] for r in results])),
-        "max_snr_any_case": float(max(max(r["snr_max"].values()) for r in results if r["truth"])),
+        "max_snr_any_case": max((max(r["snr_max"].values()) for r in results if r["truth"]), default=0.0),
     }
 
 
@@ -534,7 +556,9 @@ def write_readme(path: Path, block: str) -> None:
 def main(argv: list[str]) -> int:
     out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose.json"))
     jobs = int(argv[argv.index("--jobs") + 1]) if "--jobs" in argv else 1
-    cases = case_list(FIRST_DEV_SEED if "--dev" in argv else FIRST_SEED)
+    first = int(argv[argv.index("--first-seed") + 1]) if "--first-seed" in argv else None
+    cases = case_list(first or (FIRST_DEV_SEED if "--dev" in argv else FIRST_SEED))
+    cache = Path(argv[argv.index("--cache") + 1]) if "--cache" in argv else None
     if "--only" in argv:
         keep = argv[argv.index("--only") + 1].split(",")
         cases = [c for c in cases if any(k in c["id"] for k in keep)]
@@ -542,9 +566,9 @@ def main(argv: list[str]) -> int:
     if jobs > 1:
         from multiprocessing import Pool
         with Pool(jobs) as pool:
-            results = pool.map(run_case, cases, chunksize=1)
+            results = pool.starmap(run_case, [(c, cache) for c in cases], chunksize=1)
     else:
-        results = [run_case(c) for c in cases]
+        results = [run_case(c, cache) for c in cases]
     summ = summary(results)
     emps = run_emps()
     print(json.dumps(summ, indent=1))

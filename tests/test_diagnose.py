@@ -189,3 +189,53 @@ def test_block_means_is_the_trapezoid_over_the_block():
     # exact time mean of the piecewise-linear interpolant of k^2 over [k0 - 1, k0 + 9]
     want = [np.mean([0.5 * (k * k + (k + 1) ** 2) for k in range(a - 1, a + 9)]) for a in k0]
     assert np.allclose(got, want, rtol=0, atol=1e-9), (got, want)
+
+
+def _regime_setup(n=60000):
+    from blf.diagnose import _regime_cells
+    t = np.arange(n) * 0.002
+    pos = 10.0 * np.abs(((t / 4.3) % 2.0) - 1.0) - 5.0  # triangle sweeps, mm (not in step with the blocks)
+    regimes = {"position along the stroke": pos, "velocity": np.gradient(pos, t),
+               "force F1": np.sin(2 * np.pi * t / 11.0)}
+    cells, labels = _regime_cells(regimes, 10)
+    block = np.arange(n) // 1000
+    return cells, labels, block, block % 2 == 0
+
+
+def test_regime_score_is_standard_under_white_and_correlated_noise():
+    """Under noise only the regime score has mean 0 and unit spread, also when the noise is
+    correlated (AR(1), a = 0.8: sums 9x wider than white) -- the over-dispersion is estimated."""
+    from scipy.signal import lfilter
+
+    from blf.diagnose import regime_score
+    cells, labels, block, fit = _regime_setup()
+    rng = np.random.default_rng(5)
+    valid = np.ones(cells.size, bool)
+    for a in (0.0, 0.8):
+        S = []
+        for _ in range(150):
+            e = lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.normal(size=cells.size))
+            S.append(regime_score(e, valid, fit, block, cells, len(labels)).score)
+        S = np.array(S)
+        assert abs(S.mean()) < 0.25, (a, S.mean())
+        assert 0.8 < S.std() < 1.3, (a, S.std())
+        assert S.max() < 4.5, (a, S.max())
+
+
+def test_regime_score_sees_a_mismatch_repeated_in_a_cell_and_not_one_that_flips():
+    """An offset of 0.15 sigma in the samples of a few cells (invisible per sample; a 1 s
+    window holds at most 0.43 s of it: below 1.5 sigma) is found when it repeats in both halves; one whose sign flips
+    between the halves (not a property of the regime) scores negative."""
+    from blf.diagnose import regime_score
+    cells, labels, block, fit = _regime_setup()
+    rng = np.random.default_rng(6)
+    e = rng.normal(size=cells.size)
+    valid = np.ones(cells.size, bool)
+    hit = np.isin(cells, [3, 4, 5, 6])
+    rep = regime_score(e + 0.15 * hit, valid, fit, block, cells, len(labels))
+    S_rep, prod = rep.score, rep.products
+    S_flip = regime_score(e + 0.15 * hit * np.where(fit, 1.0, -1.0), valid, fit, block, cells, len(labels)).score
+    S_none = regime_score(e, valid, fit, block, cells, len(labels)).score
+    assert S_rep > 5.0 and S_rep > S_none + 4.0, (S_rep, S_none)
+    assert S_flip < S_none - 2.0, (S_flip, S_none)
+    assert set(np.argsort(-np.nan_to_num(prod, nan=-1e9))[:2]) <= {3, 4, 5, 6}
