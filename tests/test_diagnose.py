@@ -239,3 +239,25 @@ def test_regime_score_sees_a_mismatch_repeated_in_a_cell_and_not_one_that_flips(
     assert S_rep > 5.0 and S_rep > S_none + 4.0, (S_rep, S_none)
     assert S_flip < S_none - 2.0, (S_flip, S_none)
     assert set(np.argsort(-np.nan_to_num(prod, nan=-1e9))[:2]) <= {3, 4, 5, 6}
+
+
+def test_regime_cells_chosen_by_the_measured_force_would_bias_its_residual():
+    """Why diagnose forms the force cells from the model's force: a cell chosen by the sign
+    of a noisy measurement selects that measurement's noise, and pure noise then scores as a
+    repeated mismatch; cells from the noise-free force do not."""
+    from blf.diagnose import _regime_cells, regime_score
+    cells0, labels, block, fit = _regime_setup()
+    n = cells0.size
+    t = np.arange(n) * 0.002
+    rng = np.random.default_rng(7)
+    noise = rng.normal(0.0, 10.0, n)  # N
+    f_true = 8.0 * np.sin(2 * np.pi * t / 11.0)  # N, often below the noise
+    pos = 10.0 * np.abs(((t / 4.3) % 2.0) - 1.0) - 5.0
+    valid = np.ones(n, bool)
+    out = {}
+    for name, f in (("measured", f_true + noise), ("model", f_true)):
+        cells, labels = _regime_cells({"position along the stroke": pos, "velocity": np.gradient(pos, t),
+                                       "force F1": f}, 10)
+        out[name] = regime_score(noise / 10.0, valid, fit, block, cells, len(labels)).score
+    assert out["measured"] > 10.0, out
+    assert abs(out["model"]) < 4.0, out
