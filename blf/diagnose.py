@@ -180,7 +180,8 @@ class Diagnosis:
     held_out: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, bool))  #: samples never fitted
     regime_before: dict = field(default_factory=dict)  #: regime-test score per channel (step 3)
     regime_after: dict = field(default_factory=dict)
-    regime_cells: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, int))  #: cell per sample
+    regime_cells_before: dict = field(repr=False, default_factory=dict)  #: channel -> RegimeScore
+    regime_cells_after: dict = field(repr=False, default_factory=dict)
     regime_labels: tuple = ()  #: description of each cell
 
 
@@ -537,18 +538,18 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
 
     def regime_all(pred_all):
         w = wall(pred_all)
-        return {c: regime_score(w[c], valid[c], p.fit_mask, p.block, cells, len(cell_labels)).score for c in meas}
+        return {c: regime_score(w[c], valid[c], p.fit_mask, p.block, cells, len(cell_labels)) for c in meas}
 
-    regime0 = regime_all(pred0_all)
+    rs0 = regime_all(pred0_all)
+    regime0 = {c: r.score for c, r in rs0.items()}
 
-    def locate_regime(pred_all, scores):
+    def locate_regime(pred_all, rs):
         """The cells that carry the regime score of each flagged fitted channel."""
-        w = wall(pred_all)
         locs = []
         for c in model.channels:
-            if scores[c] <= cfg.regime_threshold:
+            if rs[c].score <= cfg.regime_threshold:
                 continue
-            prod = regime_score(w[c], valid[c], p.fit_mask, p.block, cells, len(cell_labels)).products
+            prod = rs[c].products
             r = meas[c] - pred_all[c]
             for b in np.argsort(-np.nan_to_num(prod, nan=-np.inf))[:3]:
                 sel = np.flatnonzero(valid[c] & (cells == b))
@@ -589,7 +590,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         return locs
 
     pred_cur = pred0
-    locations = locate(pred0_all) + locate_regime(pred0_all, regime0)
+    locations = locate(pred0_all) + locate_regime(pred0_all, rs0)
     flag_r0 = [c for c in model.channels if regime0[c] > cfg.regime_threshold]
     significant = any(excess0[c] > cfg.excess_threshold for c in model.channels) or bool(flag_r0)
     say("excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in excess0.items()))
@@ -676,7 +677,8 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         say(f"accepted {cand.name} at {cand.where}; excess now " +
             ", ".join(f"{c} {v:.2f}" for c, v in excess_cur.items()))
     cur_all = full(pred_cur)
-    regime_cur = regime_all(cur_all)
+    rs_cur = regime_all(cur_all)
+    regime_cur = {c: r.score for c, r in rs_cur.items()}
     still = (any(excess_cur[c] > cfg.excess_threshold for c in model.channels)
              or any(regime_cur[c] > cfg.regime_threshold for c in model.channels))
     # an effect that only nudges a flagged channel under the threshold has not explained it
@@ -690,12 +692,12 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     else:
         verdict, eff, part = "unexplained", (), tuple(accepted)
     if still:
-        locations = (locate(cur_all) + locate_regime(cur_all, regime_cur)) or locations
+        locations = (locate(cur_all) + locate_regime(cur_all, rs_cur)) or locations
     return Diagnosis(verdict, eff, part, tuple(locations), rms(pred0_all), rms(cur_all),
                      rms(pred0_all, ~p.fit_mask), rms(cur_all, ~p.fit_mask), floor, excess0,
                      excess_cur, float(ic0), float(ic_cur), _named(model.nominal, theta),
                      tuple(screening_log), pred0_all, cur_all, meas, valid, ~p.fit_mask,
-                     regime0, regime_cur, cells, tuple(cell_labels))
+                     regime0, regime_cur, rs0, rs_cur, tuple(cell_labels))
 
 
 def _named(params: tuple, theta: np.ndarray) -> dict:

@@ -153,18 +153,13 @@ def _regime_figure(d, channel: str) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from blf.diagnose import regime_score
-    ho = np.asarray(d.held_out, dtype=bool)
-    block = np.r_[0, np.cumsum(ho[1:] != ho[:-1])]
-    ok = d.valid[channel]
     fig, ax = plt.subplots(figsize=(5.5, 5))
     lim = 3.0
-    for pred, lab, col in ((d.predicted_before, "nominal model", "C0"), (d.predicted_after, "with fitted effects", "C1")):
-        w = np.where(ok, (d.measured[channel] - pred[channel]) / d.noise_floor[channel], 0.0)
-        rs = regime_score(w, ok, ~ho, block, d.regime_cells, len(d.regime_labels))
+    for rs, lab, col in ((d.regime_cells_before[channel], "nominal model", "C0"),
+                         (d.regime_cells_after[channel], "with fitted effects", "C1")):
         ax.plot(rs.z_fit, rs.z_held, "o", ms=4, color=col, alpha=0.7, label=f"{lab}: S = {rs.score:.1f}")
         lim = max(lim, float(np.nanmax(np.abs(np.r_[rs.z_fit, rs.z_held, 0.0]))) * 1.1)
-        if pred is d.predicted_before:
+        if rs is d.regime_cells_before[channel]:
             for b in np.argsort(-np.nan_to_num(rs.products, nan=-np.inf))[:3]:
                 if np.isfinite(rs.products[b]) and rs.products[b] > 4.0:
                     ax.annotate(d.regime_labels[b].replace("position along the stroke", "x").replace(", ", "\n"),
