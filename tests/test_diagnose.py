@@ -261,3 +261,44 @@ def test_regime_cells_chosen_by_the_measured_force_would_bias_its_residual():
         out[name] = regime_score(noise / 10.0, valid, fit, block, cells, len(labels)).score
     assert out["measured"] > 10.0, out
     assert abs(out["model"]) < 4.0, out
+
+
+class _BandModel:
+    """A minimal replay model: one force channel F = gain x reference + white noise (sigma 1),
+    plus ``offset`` wherever the stroke position is inside +-1 (a regime-tied mismatch that
+    no candidate explains: the library is empty)."""
+
+    def __init__(self, offset: float, seed: int = 11):
+        from blf.diagnose import Param
+        n = 60000
+        self.t_s = np.arange(n) * 0.002
+        pos = 10.0 * np.abs(((self.t_s / 4.3) % 2.0) - 1.0) - 5.0
+        self.ref = 100.0 * np.sin(2 * np.pi * self.t_s / 11.0)
+        rng = np.random.default_rng(seed)
+        self.channels = ("F",)
+        self.measured = {"F": 1.02 * self.ref + rng.normal(size=n) + offset * (np.abs(pos) < 1.0)}
+        self.valid = {"F": np.ones(n, bool)}
+        self.nominal = (Param("gain", 1.0, 0.1, 0.5, 2.0),)
+        self.candidates = ()
+        self.regimes = {"position along the stroke": pos, "velocity": np.gradient(pos, self.t_s),
+                        "force F": self.measured["F"]}
+
+    def predict(self, theta, active):
+        return {"F": theta[0] * self.ref}
+
+
+def test_regime_test_localises_a_mismatch_the_window_test_misses():
+    """A 0.12-sigma offset over a fifth of the stroke: the window test stays under its threshold,
+    the regime test flags it, the verdict is unexplained (empty library) with regime locations
+    inside the band; without the offset the same model is no_mismatch."""
+    d = diagnose(_BandModel(0.12), 0.002)
+    assert d.excess_before["F"] < 3.0, d.excess_before
+    assert d.regime_before["F"] > 8.0, d.regime_before
+    assert d.verdict == "unexplained" and d.effects == ()
+    reg = [loc for loc in d.locations if loc.test == "regime"]
+    assert reg and all("position along the stroke -1" in loc.regime or "position along the stroke +0" in loc.regime
+                       or "position along the stroke -0" in loc.regime for loc in reg), [l.regime for l in reg]
+    assert abs(d.nominal["gain"] - 1.02) < 1e-3
+    d0 = diagnose(_BandModel(0.0), 0.002)
+    assert d0.verdict == "no_mismatch", (d0.excess_before, d0.regime_before)
+    assert abs(d0.regime_before["F"]) < 4.0
