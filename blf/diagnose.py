@@ -178,11 +178,19 @@ class Diagnosis:
     measured: dict = field(repr=False, default_factory=dict)  #: all reported channels, derived included
     valid: dict = field(repr=False, default_factory=dict)
     held_out: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, bool))  #: samples never fitted
-    regime_before: dict = field(default_factory=dict)  #: regime-test score per channel (step 3)
-    regime_after: dict = field(default_factory=dict)
-    regime_cells_before: dict = field(repr=False, default_factory=dict)  #: channel -> RegimeScore
+    regime_cells_before: dict = field(repr=False, default_factory=dict)  #: channel -> RegimeScore (step 3)
     regime_cells_after: dict = field(repr=False, default_factory=dict)
     regime_labels: tuple = ()  #: description of each cell
+
+    @property
+    def regime_before(self) -> dict:
+        """Regime-test score S per channel after the nominal fit."""
+        return {c: r.score for c, r in self.regime_cells_before.items()}
+
+    @property
+    def regime_after(self) -> dict:
+        """Regime-test score S per channel with the accepted effects."""
+        return {c: r.score for c, r in self.regime_cells_after.items()}
 
 
 # ------------------------------------------------------------------ helpers
@@ -525,22 +533,21 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     def wall(pred_all):
         return {c: np.where(valid[c], (meas[c] - pred_all[c]) / sig[c], 0.0) for c in meas}
 
-    def excess_all(pred_all):
-        w = wall(pred_all)
+    def excess_all(w):
         return {c: _excess(_window_scores(w[c], valid[c], nwin)[0]) for c in meas}
 
-    excess0 = excess_all(pred0_all)
+    w0_all = wall(pred0_all)
+    excess0 = excess_all(w0_all)
     # a cell chosen by the sign of a measured force would pick that channel's noise (its cell
     # means would be biased by selection): force regimes of fitted channels use the nominal model
     cell_regimes = {k: (pred0[k.split()[-1]] if k.startswith("force ") and k.split()[-1] in pred0 else x)
                     for k, x in model.regimes.items()}
     cells, cell_labels = _regime_cells(cell_regimes, cfg.regime_bins)
 
-    def regime_all(pred_all):
-        w = wall(pred_all)
+    def regime_all(w):
         return {c: regime_score(w[c], valid[c], p.fit_mask, p.block, cells, len(cell_labels)) for c in meas}
 
-    rs0 = regime_all(pred0_all)
+    rs0 = regime_all(w0_all)
     regime0 = {c: r.score for c, r in rs0.items()}
 
     def locate_regime(pred_all, rs):
@@ -569,8 +576,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
             out[c] = float(np.sqrt(np.mean((meas[c] - pred_all[c])[sel] ** 2))) if sel.any() else None
         return out
 
-    def locate(pred_all):
-        w = wall(pred_all)
+    def locate(pred_all, w):
         locs = []
         for c in meas:
             z, starts = _window_scores(w[c], valid[c], nwin)
@@ -590,7 +596,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         return locs
 
     pred_cur = pred0
-    locations = locate(pred0_all) + locate_regime(pred0_all, rs0)
+    locations = locate(pred0_all, w0_all) + locate_regime(pred0_all, rs0)
     flag_r0 = [c for c in model.channels if regime0[c] > cfg.regime_threshold]
     significant = any(excess0[c] > cfg.excess_threshold for c in model.channels) or bool(flag_r0)
     say("excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in excess0.items()))
@@ -673,11 +679,12 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
                                      {q.name: float(u) for q, u in zip(cand.params, unc)},
                                      float(dbic), float(dval), ev))
         pred_cur = model.predict(theta, active)
-        excess_cur = excess_all(full(pred_cur))
+        excess_cur = excess_all(wall(full(pred_cur)))
         say(f"accepted {cand.name} at {cand.where}; excess now " +
             ", ".join(f"{c} {v:.2f}" for c, v in excess_cur.items()))
     cur_all = full(pred_cur)
-    rs_cur = regime_all(cur_all)
+    w_cur = wall(cur_all)
+    rs_cur = regime_all(w_cur)
     regime_cur = {c: r.score for c, r in rs_cur.items()}
     still = (any(excess_cur[c] > cfg.excess_threshold for c in model.channels)
              or any(regime_cur[c] > cfg.regime_threshold for c in model.channels))
@@ -692,12 +699,12 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     else:
         verdict, eff, part = "unexplained", (), tuple(accepted)
     if still:
-        locations = (locate(cur_all) + locate_regime(cur_all, rs_cur)) or locations
+        locations = (locate(cur_all, w_cur) + locate_regime(cur_all, rs_cur)) or locations
     return Diagnosis(verdict, eff, part, tuple(locations), rms(pred0_all), rms(cur_all),
                      rms(pred0_all, ~p.fit_mask), rms(cur_all, ~p.fit_mask), floor, excess0,
                      excess_cur, float(ic0), float(ic_cur), _named(model.nominal, theta),
                      tuple(screening_log), pred0_all, cur_all, meas, valid, ~p.fit_mask,
-                     regime0, regime_cur, rs0, rs_cur, tuple(cell_labels))
+                     rs0, rs_cur, tuple(cell_labels))
 
 
 def _named(params: tuple, theta: np.ndarray) -> dict:

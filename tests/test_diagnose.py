@@ -191,12 +191,14 @@ def test_block_means_is_the_trapezoid_over_the_block():
     assert np.allclose(got, want, rtol=0, atol=1e-9), (got, want)
 
 
-def _regime_setup(n=60000):
+def _regime_setup(n=60000, force=None):
+    """Cells of triangle sweeps (mm, not in step with the 2 s blocks) x velocity sign x the sign of
+    ``force`` (default a slow sine), the blocks and the fit half."""
     from blf.diagnose import _regime_cells
     t = np.arange(n) * 0.002
-    pos = 10.0 * np.abs(((t / 4.3) % 2.0) - 1.0) - 5.0  # triangle sweeps, mm (not in step with the blocks)
+    pos = 10.0 * np.abs(((t / 4.3) % 2.0) - 1.0) - 5.0
     regimes = {"position along the stroke": pos, "velocity": np.gradient(pos, t),
-               "force F1": np.sin(2 * np.pi * t / 11.0)}
+               "force F1": np.sin(2 * np.pi * t / 11.0) if force is None else force}
     cells, labels = _regime_cells(regimes, 10)
     block = np.arange(n) // 1000
     return cells, labels, block, block % 2 == 0
@@ -245,19 +247,16 @@ def test_regime_cells_chosen_by_the_measured_force_would_bias_its_residual():
     """Why diagnose forms the force cells from the model's force: a cell chosen by the sign
     of a noisy measurement selects that measurement's noise, and pure noise then scores as a
     repeated mismatch; cells from the noise-free force do not."""
-    from blf.diagnose import _regime_cells, regime_score
-    cells0, labels, block, fit = _regime_setup()
-    n = cells0.size
+    from blf.diagnose import regime_score
+    n = 60000
     t = np.arange(n) * 0.002
     rng = np.random.default_rng(7)
     noise = rng.normal(0.0, 10.0, n)  # N
     f_true = 8.0 * np.sin(2 * np.pi * t / 11.0)  # N, often below the noise
-    pos = 10.0 * np.abs(((t / 4.3) % 2.0) - 1.0) - 5.0
     valid = np.ones(n, bool)
     out = {}
     for name, f in (("measured", f_true + noise), ("model", f_true)):
-        cells, labels = _regime_cells({"position along the stroke": pos, "velocity": np.gradient(pos, t),
-                                       "force F1": f}, 10)
+        cells, labels, block, fit = _regime_setup(n, force=f)
         out[name] = regime_score(noise / 10.0, valid, fit, block, cells, len(labels)).score
     assert out["measured"] > 10.0, out
     assert abs(out["model"]) < 4.0, out
