@@ -20,10 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.errors import InputError
+from blf.errors import InputError
 
 from .serv import design_serv_filters
-from .signals import _positive_scalar
+from blf.validate import positive_scalar
 
 __all__ = ["MethodErrors", "AccuracyBudget", "backlash_error_budget"]
 
@@ -179,7 +179,7 @@ def backlash_error_budget(
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Negative, non-finite or non-scalar arguments.
 
     Notes
@@ -218,12 +218,12 @@ def backlash_error_budget(
     s = _nonneg(stroke_mm, "stroke_mm", "mm")
     p = _nonneg(pitch_error, "pitch_error", "(relative)")
     sig = _nonneg(lvdt_noise_std_mm, "lvdt_noise_std_mm", "mm")
-    fs = _positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
-    b = _positive_scalar(backlash_mm, "backlash_mm", "mm")
+    fs = positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
+    b = positive_scalar(backlash_mm, "backlash_mm", "mm")
     pr = _nonneg(residual_pitch_error, "residual_pitch_error", "(relative)")
     tau = _nonneg(temperature_error, "temperature_error", "(relative)")
     jb = s / 10.0 if jump_bound_mm is None else _nonneg(jump_bound_mm, "jump_bound_mm", "mm")
-    plat = _positive_scalar(plateau_s, "plateau_s", "s")
+    plat = positive_scalar(plateau_s, "plateau_s", "s")
     gb = _nonneg(guard_before_s, "guard_before_s", "s")
     ga = _nonneg(guard_after_s, "guard_after_s", "s")
     ev = _nonneg(event_s, "event_s", "s")

@@ -17,9 +17,9 @@ from math import comb
 
 import numpy as np
 
-from hil.errors import AnalysisError, InputError
+from blf.errors import AnalysisError, InputError
 
-from .signals import _as_1d_finite, _same_shape
+from blf.validate import as_1d_finite, same_shape
 
 __all__ = ["LvdtCalibration", "fit_lvdt_calibration"]
 
@@ -103,9 +103,9 @@ class LvdtCalibration:
 
         Raises
         ------
-        hil.errors.InputError
+        blf.errors.InputError
             If ``s_mm`` contains NaN or inf.
-        hil.errors.AnalysisError
+        blf.errors.AnalysisError
             If the polynomial is not strictly monotone on the swept range.
 
         Notes
@@ -159,10 +159,10 @@ def fit_lvdt_calibration(
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Bad shapes, NaN/inf, fewer than 50 samples, a bad ``degree`` or a
         swept range shorter than ``min_span_mm``.
-    hil.errors.AnalysisError
+    blf.errors.AnalysisError
         If the regression is rank deficient.
 
     Notes
@@ -188,9 +188,9 @@ def fit_lvdt_calibration(
     true stroke is :math:`x - d`; :math:`d` only shifts :math:`c_0` and the
     corrected strokes by a constant, which cancels in backlash and stiffness.
     """
-    x = _as_1d_finite(x_mm, "x_mm", "mm")
-    s = _as_1d_finite(s_mm, "s_mm", "mm")
-    _same_shape((x, "x_mm", "mm"), (s, "s_mm", "mm"))
+    x = as_1d_finite(x_mm, "x_mm", "mm")
+    s = as_1d_finite(s_mm, "s_mm", "mm")
+    same_shape((x, "x_mm", "mm"), (s, "s_mm", "mm"))
     if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or not 1 <= degree <= 5:
         raise InputError(f"degree must be an integer in 1..5 (dimensionless); got {degree!r}")
     degree = int(degree)

@@ -70,7 +70,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 from scipy.optimize import least_squares
 
-from hil.errors import InputError
+from blf.errors import InputError
 
 __all__ = ["Param", "Candidate", "ReplayModel", "DiagnoseConfig", "Location", "FittedEffect",
            "Diagnosis", "diagnose", "RegimeScore", "regime_score"]

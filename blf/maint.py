@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
-from hil.errors import AnalysisError, InputError
+from blf.errors import AnalysisError, InputError
 
-from .signals import _as_1d_finite, _positive_scalar, _readonly, _same_shape
+from blf.validate import as_1d_finite, positive_scalar, readonly, same_shape
 
 __all__ = [
     "BinnedCurve",
@@ -277,7 +277,7 @@ def blf_maint(
         coefficients, s (default 0.05 s = 25 samples at 500 Hz).
     min_contact_points, min_centre_points : int, optional
         Minimum samples in each contact region (default 50) and in the centre
-        region (default 10); fewer raise :class:`~hil.errors.AnalysisError`.
+        region (default 10); fewer raise :class:`~blf.errors.AnalysisError`.
 
     Returns
     -------
@@ -287,10 +287,10 @@ def blf_maint(
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Bad shapes (not 1-D, unequal), NaN/inf, fewer than 200 samples, or
         bad options.
-    hil.errors.AnalysisError
+    blf.errors.AnalysisError
         No F-D relation, no distinct backlash region, backlash not traversed
         (contact reached on one side only), or a region with too few samples.
 
@@ -365,21 +365,21 @@ def blf_maint(
     (simulated rig, 2 kN/s ramps, arm 40 kN/mm in parallel with 80 kN/mm:
     tau 0.1 s gives +0.7 % and +0.2 um, tau 0.5 s gives +15 % and +9 um).
     """
-    d = _as_1d_finite(d_mm, "d_mm", "mm")
-    f = _as_1d_finite(f_N, "f_N", "N")
-    _same_shape((d, "d_mm", "mm"), (f, "f_N", "N"))
+    d = as_1d_finite(d_mm, "d_mm", "mm")
+    f = as_1d_finite(f_N, "f_N", "N")
+    same_shape((d, "d_mm", "mm"), (f, "f_N", "N"))
     if d.size < MIN_SAMPLES:
         raise InputError(
             f"d_mm and f_N need at least {MIN_SAMPLES} samples (mm, N); got shape {d.shape}"
         )
-    fs = _positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
-    wc = _positive_scalar(lowpass_rad_s, "lowpass_rad_s", "rad/s")
+    fs = positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
+    wc = positive_scalar(lowpass_rad_s, "lowpass_rad_s", "rad/s")
     if wc >= np.pi * fs:
         raise InputError(
             f"lowpass_rad_s must be below the Nyquist frequency pi*sample_rate_Hz = "
             f"{np.pi * fs:.4g} rad/s; got {wc:g} rad/s (shape ())"
         )
-    bw = _positive_scalar(bin_width_mm, "bin_width_mm", "mm")
+    bw = positive_scalar(bin_width_mm, "bin_width_mm", "mm")
     half_win = _int_option(slope_window_bins, "slope_window_bins", 1)
     min_count = _int_option(min_bin_count, "min_bin_count", 1)
     min_contact = _int_option(min_contact_points, "min_contact_points", 3)
@@ -515,7 +515,7 @@ def blf_maint(
         side="left",
         d_at_zero_force_mm=float(a_l),
         compliance_mm_per_N=float(sign * b_l),
-        cov=_readonly(flip @ cov_l @ flip),
+        cov=readonly(flip @ cov_l @ flip),
         n=n_left,
         f_min_N=float(f[idx_l].min()),
         f_max_N=float(f[idx_l].max()),
@@ -525,7 +525,7 @@ def blf_maint(
         side="right",
         d_at_zero_force_mm=float(a_r),
         compliance_mm_per_N=float(sign * b_r),
-        cov=_readonly(flip @ cov_r @ flip),
+        cov=readonly(flip @ cov_r @ flip),
         n=n_right,
         f_min_N=float(f[idx_r].min()),
         f_max_N=float(f[idx_r].max()),
@@ -534,7 +534,7 @@ def blf_maint(
     centre_line = CentreLine(
         f_at_zero_d_N=float(sign * c0),
         slope_N_per_mm=float(sign * c1),
-        cov=_readonly(cov_c),
+        cov=readonly(cov_c),
         n=n_centre,
         d_min_mm=float(d[idx_c].min()),
         d_max_mm=float(d[idx_c].max()),
@@ -550,10 +550,10 @@ def blf_maint(
         f_right_N=float(sign * (c0 + c1 * dr)),
     )
     curve = BinnedCurve(
-        d_mm=_readonly(cd),
-        f_N=_readonly(sign * cg),
-        dfdd_N_per_mm=_readonly(sign * slope),
-        count=_readonly(counts),
+        d_mm=readonly(cd),
+        f_N=readonly(sign * cg),
+        dfdd_N_per_mm=readonly(sign * slope),
+        count=readonly(counts),
         bin_width_mm=bw,
         threshold_N_per_mm=float(sign * level),
     )
@@ -573,9 +573,9 @@ def blf_maint(
         n_left=n_left,
         n_centre=n_centre,
         n_right=n_right,
-        mask_left=_readonly(mask_left),
-        mask_centre=_readonly(mask_centre),
-        mask_right=_readonly(mask_right),
+        mask_left=readonly(mask_left),
+        mask_centre=readonly(mask_centre),
+        mask_right=readonly(mask_right),
     )
 
 

@@ -45,9 +45,9 @@ import numpy as np
 from numba import njit
 from scipy import signal
 
-from hil.errors import AnalysisError, InputError
+from blf.errors import AnalysisError, InputError
 
-from .signals import _as_1d_finite, _positive_scalar, _readonly
+from blf.validate import as_1d_finite, positive_scalar, readonly
 
 __all__ = [
     "METHODS",
@@ -169,7 +169,7 @@ def design_serv_filters(
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Non-positive rate or corners, corners at or above the Nyquist
         frequency, unknown discretisation.
 
@@ -194,9 +194,9 @@ def design_serv_filters(
     measured from the instant half-way between them). For Tustin it is
     :math:`(1/\\omega_c + 1/\\omega_d) f_s` (the DC group delay of the chain).
     """
-    fs = _positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
-    wc = _positive_scalar(lowpass_rad_s, "lowpass_rad_s", "rad/s")
-    wd = _positive_scalar(dt1_rad_s, "dt1_rad_s", "rad/s")
+    fs = positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
+    wc = positive_scalar(lowpass_rad_s, "lowpass_rad_s", "rad/s")
+    wd = positive_scalar(dt1_rad_s, "dt1_rad_s", "rad/s")
     nyq = math.pi * fs
     for name, w in (("lowpass_rad_s", wc), ("dt1_rad_s", wd)):
         if w >= nyq:
@@ -255,9 +255,9 @@ def estimate_noise_std_mm(d_mm: np.ndarray) -> float:
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Bad shape, NaN/inf, fewer than 10 samples.
-    hil.errors.AnalysisError
+    blf.errors.AnalysisError
         If the estimate is below 1e-6 mm (a noise-free signal: pass the
         noise level explicitly).
 
@@ -280,7 +280,7 @@ def estimate_noise_std_mm(d_mm: np.ndarray) -> float:
     On the simulated rig it returns 0.0042 mm for the 0.025 mm peak-to-peak
     LVDT noise (0.025/6) of ``D_int``, and sqrt(2) times that for ``D_ext``.
     """
-    d = _as_1d_finite(d_mm, "d_mm", "mm")
+    d = as_1d_finite(d_mm, "d_mm", "mm")
     if d.size < 10:
         raise InputError(f"d_mm needs at least 10 samples (mm) to estimate its noise; got shape {d.shape}")
     return _noise_std(d)
@@ -661,7 +661,7 @@ class BlfServMonitor:
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Bad rate, noise level or options.
 
     Notes
@@ -680,7 +680,7 @@ class BlfServMonitor:
             raise InputError(f"unknown option(s) {unknown}; known: {sorted(_DEFAULTS)}")
         opt = dict(_DEFAULTS)
         opt.update(options)
-        fs = _positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
+        fs = positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
         if method not in METHODS:
             raise InputError(f"method must be one of {METHODS} (no unit); got {method!r}")
         try:
@@ -695,7 +695,7 @@ class BlfServMonitor:
                              f"{noise_std_mm!r} (shape {np.shape(noise_std_mm)})")
         self._filters = design_serv_filters(fs, lowpass_rad_s=opt["lowpass_rad_s"], dt1_rad_s=opt["dt1_rad_s"],
                                             discretisation=opt["discretisation"])
-        kf = _positive_scalar(opt["threshold_factor"], "threshold_factor", "(dimensionless)")
+        kf = positive_scalar(opt["threshold_factor"], "threshold_factor", "(dimensionless)")
         secs = {}
         for key in ("plateau_s", "min_plateau_s", "guard_before_s", "guard_after_s", "merge_gap_s", "max_event_s"):
             v = opt[key]
@@ -712,7 +712,7 @@ class BlfServMonitor:
         if secs["min_plateau_s"] > secs["plateau_s"]:
             raise InputError(f"min_plateau_s ({secs['min_plateau_s']} s) must not exceed plateau_s "
                              f"({secs['plateau_s']} s)")
-        rq = _positive_scalar(opt["max_residual_factor"], "max_residual_factor", "(dimensionless)")
+        rq = positive_scalar(opt["max_residual_factor"], "max_residual_factor", "(dimensionless)")
         self.k = int(sig.size)
         self.sample_rate_Hz = fs
         self.method = method
@@ -784,7 +784,7 @@ class BlfServMonitor:
 
         Raises
         ------
-        hil.errors.InputError
+        blf.errors.InputError
             Wrong shape or NaN/inf.
         """
         return self._feed(self._as_block(d_mm))[0]
@@ -921,7 +921,7 @@ class BlfServMonitor:
             b, n, s = b_pap, len(pac), None
         df = d1 = d2 = None
         if arrays is not None:
-            df, d1, d2 = (_readonly(a) for a in arrays)
+            df, d1, d2 = (readonly(a) for a in arrays)
         return BlfServResult(
             backlash_mm=b, traversals=n, method=self.method, backlash_sigma_mm=s,
             backlash_improved_mm=b_imp, backlash_paper_mm=b_pap, traversals_improved=len(acc),
@@ -1014,9 +1014,9 @@ def blf_serv(
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Bad shape, NaN/inf, fewer than 10 samples, bad options.
-    hil.errors.AnalysisError
+    blf.errors.AnalysisError
         If the noise level cannot be estimated (noise-free D; pass
         ``noise_std_mm``).
 
@@ -1108,13 +1108,13 @@ def blf_serv(
     jumps of 0.03 to 0.2 mm in both methods. Calibrate first
     (:mod:`blf.calibration`).
     """
-    d = _as_1d_finite(d_mm, "d_mm", "mm")
+    d = as_1d_finite(d_mm, "d_mm", "mm")
     if d.size < 10:
         raise InputError(f"d_mm needs at least 10 samples (mm); got shape {d.shape}")
     if noise_std_mm is None:
         sig = _noise_std(d)
     else:
-        sig = _positive_scalar(noise_std_mm, "noise_std_mm", "mm")
+        sig = positive_scalar(noise_std_mm, "noise_std_mm", "mm")
     mon = BlfServMonitor(
         sample_rate_Hz, sig, method=method, t0_s=t0_s, lowpass_rad_s=lowpass_rad_s, dt1_rad_s=dt1_rad_s,
         discretisation=discretisation, threshold_factor=threshold_factor, min_jump_mm=min_jump_mm,

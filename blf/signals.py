@@ -1,7 +1,6 @@
 """Position differences of the dual-EMA actuation (paper eq. 1).
 
-Pure functions: arrays in, frozen dataclasses out, no IO. The private
-validators at the end of this module are shared by the other ``blf`` modules.
+Pure functions: arrays in, frozen dataclasses out, no IO.
 """
 
 from __future__ import annotations
@@ -10,9 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.errors import InputError
+from blf.validate import as_1d_finite, positive_scalar, readonly, same_shape
 
-__all__ = ["PositionDifferences", "position_differences"]
+__all__ = ["CHANNELS", "PositionDifferences", "position_differences"]
+
+#: The three BLF channels: EMA 1 internal, EMA 2 internal, external (paper eq. 1).
+CHANNELS = ("int1", "int2", "ext")
 
 
 @dataclass(frozen=True)
@@ -61,7 +63,7 @@ def position_differences(
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         If the arrays are not 1-D, differ in shape, are empty or not finite, or
         if ``i_total_rad_per_mm`` is not a finite positive number.
 
@@ -87,88 +89,19 @@ def position_differences(
     >>> round(float(pd.d_int1_mm[0]), 6), round(float(pd.d_ext_mm[0]), 6)
     (0.01, -0.99)
     """
-    phi1 = _as_1d_finite(phi1_rad, "phi1_rad", "rad")
-    phi2 = _as_1d_finite(phi2_rad, "phi2_rad", "rad")
-    s1 = _as_1d_finite(s1_mm, "s1_mm", "mm")
-    s2 = _as_1d_finite(s2_mm, "s2_mm", "mm")
-    _same_shape(
+    phi1 = as_1d_finite(phi1_rad, "phi1_rad", "rad")
+    phi2 = as_1d_finite(phi2_rad, "phi2_rad", "rad")
+    s1 = as_1d_finite(s1_mm, "s1_mm", "mm")
+    s2 = as_1d_finite(s2_mm, "s2_mm", "mm")
+    same_shape(
         (phi1, "phi1_rad", "rad"),
         (phi2, "phi2_rad", "rad"),
         (s1, "s1_mm", "mm"),
         (s2, "s2_mm", "mm"),
     )
-    i_total = _positive_scalar(i_total_rad_per_mm, "i_total_rad_per_mm", "rad/mm")
+    i_total = positive_scalar(i_total_rad_per_mm, "i_total_rad_per_mm", "rad/mm")
     return PositionDifferences(
-        d_int1_mm=_readonly(s1 - phi1 / i_total),
-        d_int2_mm=_readonly(s2 - phi2 / i_total),
-        d_ext_mm=_readonly(s2 - s1),
+        d_int1_mm=readonly(s1 - phi1 / i_total),
+        d_int2_mm=readonly(s2 - phi2 / i_total),
+        d_ext_mm=readonly(s2 - s1),
     )
-
-
-# --------------------------------------------------------------------------
-# shared private validators (used by blf.calibration and blf.maint)
-# --------------------------------------------------------------------------
-
-
-def _as_1d_finite(value, name: str, unit: str, *, min_len: int = 1) -> np.ndarray:
-    """Return ``value`` as a float64 1-D array or raise InputError naming it."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(
-            f"{name} must be a 1-D numeric array in {unit}; got {type(value).__name__} "
-            f"that cannot be converted to float ({exc})"
-        ) from None
-    if arr.ndim != 1:
-        raise InputError(
-            f"{name} must be a 1-D array in {unit}; got shape {arr.shape}"
-        )
-    if arr.size < min_len:
-        raise InputError(
-            f"{name} must have at least {min_len} samples in {unit}; got shape {arr.shape}"
-        )
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.count_nonzero(~np.isfinite(arr)))
-        raise InputError(
-            f"{name} must be finite (in {unit}); got {bad} NaN/inf value(s) in shape {arr.shape}"
-        )
-    return arr
-
-
-def _same_shape(*items: tuple[np.ndarray, str, str]) -> None:
-    """Raise InputError unless all (array, name, unit) items share one shape."""
-    ref, ref_name, ref_unit = items[0]
-    for arr, name, unit in items[1:]:
-        if arr.shape != ref.shape:
-            raise InputError(
-                f"{name} (in {unit}) must have the same shape as {ref_name} (in {ref_unit}); "
-                f"got {name} shape {arr.shape} and {ref_name} shape {ref.shape}"
-            )
-
-
-def _positive_scalar(value, name: str, unit: str) -> float:
-    """Return ``value`` as a finite positive float or raise InputError naming it."""
-    if np.ndim(value) != 0 or isinstance(value, bool):
-        raise InputError(
-            f"{name} must be a finite positive scalar in {unit}; got {value!r} "
-            f"(shape {np.shape(value)})"
-        )
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InputError(
-            f"{name} must be a finite positive number in {unit}; got {value!r} "
-            f"(shape {np.shape(value)})"
-        ) from None
-    if not np.isfinite(x) or x <= 0.0:
-        raise InputError(
-            f"{name} must be a finite positive number in {unit}; got {x!r} (shape ())"
-        )
-    return x
-
-
-def _readonly(arr: np.ndarray) -> np.ndarray:
-    """Return a read-only copy-owned array (for frozen result dataclasses)."""
-    out = np.array(arr, copy=True)
-    out.flags.writeable = False
-    return out

@@ -19,22 +19,12 @@ from pathlib import Path
 import can
 import numpy as np
 
-from hil.cia402 import OperationMode
+from hil.canopen.cia402 import OperationMode
 from hil.config import Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.pdo import (
-    SYNC_COB_ID,
-    Frame,
-    PdoError,
-    decode_rpdo1,
-    decode_rpdo2,
-    decode_tpdo1,
-    decode_tpdo2,
-    force_dN_to_newton,
-    increments_to_rad,
-    lvdt_um_to_mm,
-    permille_to_force_N,
-)
+from hil.canopen.frame import SYNC_COB_ID, Frame
+from hil.canopen.pdo import PdoError, decode_rpdo1, decode_rpdo2, decode_tpdo1, decode_tpdo2
+from hil.canopen.units import force_dN_to_newton, increments_to_rad, lvdt_um_to_mm, permille_to_force_N
 from hil.runfolder import Signals
 
 

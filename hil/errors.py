@@ -1,14 +1,28 @@
-"""Typed exception tree of emacheck.
+"""Typed exception tree of the controller (hil/).
 
-Every error the tool raises on purpose derives from :class:`EmacheckError` and
-mixes in the builtin that describes its nature, so callers can catch either.
+Every error the tool raises on purpose derives from one of three roots, each
+mixing in the builtin that describes its nature, so callers can catch either:
+
+* :class:`EmacheckError` (here): profiles, recordings, the check sequence,
+  the master and the link;
+* :class:`hil.canopen.errors.CanopenError`: the CANopen vocabulary (frames,
+  PDOs, SDO aborts and timeouts, CiA 402 transitions, EDS files), shared with
+  the simulated drives and importing nothing from the rest of hil;
+* :class:`blf.errors.BlfError`: the pure analysis and the physics (bad arrays,
+  data that do not support an analysis).
+
+:data:`KNOWN_ERRORS` is the three together: what the command layer turns
+into a one-line message and a documented exit status.
 """
 
 from __future__ import annotations
 
+from blf.errors import BlfError
+from hil.canopen.errors import CanopenError
+
 
 class EmacheckError(Exception):
-    """Base of all emacheck errors."""
+    """Base of the controller's errors."""
 
 
 class ProfileError(EmacheckError, ValueError):
@@ -23,16 +37,9 @@ class IncompleteRecordingError(RecordingError):
     """A recording that is well-formed but ends too early or holds no data (e.g. a killed run)."""
 
 
-class AnalysisError(EmacheckError, ValueError):
-    """The data do not support the requested analysis (e.g. no backlash traversal)."""
-
-
 class SequenceError(EmacheckError, RuntimeError):
     """The check sequence reached a state it cannot continue from."""
 
 
-class InputError(EmacheckError, ValueError):
-    """Bad arrays or arguments passed to a pure function of blf/ or sim/.
-
-    The message quotes the offending argument, its shape and its unit.
-    """
+#: Every error raised on purpose, whichever package raised it.
+KNOWN_ERRORS: tuple[type[Exception], ...] = (EmacheckError, CanopenError, BlfError)

@@ -3,7 +3,7 @@
 :class:`MasterCore` is fed every frame seen on the bus (including the SYNC
 frames, whoever sends them) with a time value, and returns the frames to
 transmit. It never touches a bus, a thread or a clock: the shells in
-:mod:`hil.canopen_link` move frames over python-can, pace SYNC and pass time.
+:mod:`hil.link` move frames over python-can, pace SYNC and pass time.
 
 Life cycle::
 
@@ -13,16 +13,16 @@ Life cycle::
                resolution 0x608F against the profile, rated/max torque,
                heartbeat producer 0x1017, interpolation period 0x60C2,
                software position limits 0x607D (the stroke limits), quick stop
-               option 0x605A, PDO mapping of :data:`hil.pdo.DEFAULT_LAYOUT`
+               option 0x605A, PDO mapping of :data:`hil.canopen.pdo.DEFAULT_LAYOUT`
                -> NMT start.
-    CYCLIC     SYNC -> TPDO1/TPDO2 of both drives -> one :class:`~hil.types.Sample`;
+    CYCLIC     SYNC -> TPDO1/TPDO2 of both drives -> one :class:`~hil.canopen.process.Sample`;
                setpoints -> RPDO2 (mode, only on change) and RPDO1 (controlword,
                targets) before the next SYNC. Heartbeat consumer with a timeout
                per drive, EMCY consumer.
 
 Errors are typed and name the drive: :class:`PreflightError` (identity,
-device type, ...), :class:`~hil.sdo.SdoAbortError` (code and meaning),
-:class:`~hil.sdo.SdoTimeout`, :class:`DriveFault` (EMCY, fault state),
+device type, ...), :class:`~hil.canopen.sdo.SdoAbortError` (code and meaning),
+:class:`~hil.canopen.sdo.SdoTimeout`, :class:`DriveFault` (EMCY, fault state),
 :class:`HeartbeatLost`.
 """
 
@@ -34,31 +34,15 @@ from dataclasses import dataclass, field
 from enum import Enum, IntEnum
 from typing import Generator
 
-from hil.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
+from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
 from hil.config import Actuation
 from hil.errors import EmacheckError
-from hil.nmt import NmtCommand, NmtState
-from hil.pdo import (
-    DEFAULT_LAYOUT,
-    EMCY_COB_ID_BASE,
-    HEARTBEAT_COB_ID_BASE,
-    SYNC_COB_ID,
-    Frame,
-    PdoError,
-    Rpdo1,
-    Rpdo2,
-    decode_tpdo1,
-    decode_tpdo2,
-    encode_rpdo1,
-    encode_rpdo2,
-    force_dN_to_newton,
-    force_to_permille,
-    increments_to_rad,
-    lvdt_um_to_mm,
-    rad_to_increments,
-)
-from hil.sdo import SdoClient, SdoEvent
-from hil.types import DriveMode, Sample, Setpoint
+from hil.canopen.nmt import NmtCommand, NmtState
+from hil.canopen.pdo import DEFAULT_LAYOUT, PdoError, Rpdo1, Rpdo2, decode_tpdo1, decode_tpdo2, encode_rpdo1, encode_rpdo2
+from hil.canopen.frame import EMCY_COB_ID_BASE, HEARTBEAT_COB_ID_BASE, SYNC_COB_ID, Frame
+from hil.canopen.units import force_dN_to_newton, force_to_permille, increments_to_rad, lvdt_um_to_mm, rad_to_increments
+from hil.canopen.sdo import SdoClient, SdoEvent
+from hil.canopen.process import DriveMode, Sample, Setpoint
 
 
 class PreflightError(EmacheckError, RuntimeError):

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.types import Sample, Setpoint
+from hil.canopen.process import Sample, Setpoint
 
 SIGNAL_COLUMNS = ("t", "phi1", "phi2", "s1", "s2", "F1", "F2")
 EXTRA_COLUMNS = ("mode1", "sp1", "mode2", "sp2", "step")
@@ -39,14 +39,15 @@ def write_json_atomic(path: Path, obj: Any) -> None:
     """Write JSON via a temporary file and rename, so a crash never leaves half a file."""
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w") as fh:
-        json.dump(obj, fh, indent=2, sort_keys=False, default=_json_default)
+        json.dump(obj, fh, indent=2, sort_keys=False, default=json_default)
         fh.write("\n")
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
 
 
-def _json_default(o: Any) -> Any:
+def json_default(o: Any) -> Any:
+    """JSON form of numpy scalars and arrays (``json.dump(..., default=json_default)``)."""
     if isinstance(o, (np.floating, np.integer)):
         return o.item()
     if isinstance(o, np.ndarray):

@@ -21,7 +21,7 @@ from hil.profiles import snapshot
 from hil.runfolder import SignalsWriter, write_json_atomic
 from hil.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.supervisor import Supervisor
-from hil.types import DriveMode, Sample, Setpoint
+from hil.canopen.process import DriveMode, Sample, Setpoint
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
 

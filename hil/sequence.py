@@ -1,7 +1,7 @@
 """The maintenance-check sequence as a sans-IO core.
 
-:class:`CheckSequence` is fed one measured :class:`~hil.types.Sample` per
-SYNC cycle and returns the two drives' :class:`~hil.types.Setpoint` for the
+:class:`CheckSequence` is fed one measured :class:`~hil.canopen.process.Sample` per
+SYNC cycle and returns the two drives' :class:`~hil.canopen.process.Setpoint` for the
 next cycle plus events. It never reads a clock (time is ``sample.t_s``), never
 touches a bus, and knows nothing about whether the drives are simulated: the
 same object drives the plant directly (``emacheck simulate``) and two CiA 402
@@ -34,7 +34,7 @@ from enum import Enum
 
 from hil.config import Actuation, Check
 from hil.errors import SequenceError
-from hil.types import DriveMode, Sample, Setpoint
+from hil.canopen.process import DriveMode, Sample, Setpoint
 
 
 class Step(Enum):

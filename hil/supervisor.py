@@ -52,7 +52,7 @@ from hil.config import (
     Actuation,
     Check,
 )
-from hil.types import DriveMode, Sample, Setpoint
+from hil.canopen.process import DriveMode, Sample, Setpoint
 
 
 @dataclass(frozen=True, slots=True)

@@ -32,7 +32,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from hil.errors import InputError
+from blf.errors import InputError
 
 __all__ = [
     "CoulombFriction",
@@ -496,7 +496,7 @@ def compile_effects(effects: tuple, sample_period_s: float, substeps: int) -> np
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         Unknown effect type, duplicate (class, where) or out-of-range parameter.
 
     Notes

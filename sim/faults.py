@@ -1,6 +1,6 @@
 """Fault injection for the simulated drive pair (sans-IO, deterministic for a seed).
 
-:class:`FaultInjector` wraps a :class:`sim.slave.SimDrivePair` with the same
+:class:`FaultInjector` wraps a :class:`sim.drives.SimDrivePair` with the same
 sans-IO interface (``power_on``, ``on_frame``, ``tick``) and applies a
 :class:`Fault` schedule to the frames going in and out of the drives and to
 the drives themselves, so the master sees exactly what a faulty rig would put
@@ -51,10 +51,11 @@ from enum import Enum
 
 import numpy as np
 
-from hil.cia402 import State
-from hil.errors import InputError
-from hil.pdo import Frame, Tpdo1, Tpdo2, decode_tpdo1, decode_tpdo2, encode_tpdo1, encode_tpdo2
-from hil.types import DriveMode
+from hil.canopen.cia402 import State
+from blf.errors import InputError
+from hil.canopen.frame import Frame
+from hil.canopen.pdo import Tpdo1, Tpdo2, decode_tpdo1, decode_tpdo2, encode_tpdo1, encode_tpdo2
+from hil.canopen.process import DriveMode
 
 __all__ = ["FaultKind", "Fault", "FaultInjector", "TruthTrace", "SDO_ABORT_CODE"]
 
@@ -159,11 +160,11 @@ class TruthTrace:
 
 
 class FaultInjector:
-    """A :class:`sim.slave.SimDrivePair` with faults, as the same sans-IO interface.
+    """A :class:`sim.drives.SimDrivePair` with faults, as the same sans-IO interface.
 
     Parameters
     ----------
-    pair : sim.slave.SimDrivePair
+    pair : sim.drives.SimDrivePair
     faults : sequence of Fault
     rng : numpy.random.Generator
         For the random frame losses of ``bus_errors``.
@@ -327,7 +328,7 @@ class FaultInjector:
         return self._outbound(self.pair.power_on(t), at_sync=False)
 
     def on_frame(self, frame: Frame, t: float) -> list[Frame]:
-        """As :meth:`sim.slave.SimDrivePair.on_frame`, with the faults applied."""
+        """As :meth:`sim.drives.SimDrivePair.on_frame`, with the faults applied."""
         is_sync = frame.arbitration_id == 0x080 and len(frame.data) <= 1
         if is_sync:
             self.syncs += 1

@@ -101,8 +101,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from hil.errors import InputError
-from hil.types import DriveMode, Sample, Setpoint
+from blf.errors import InputError
+from hil.canopen.process import DriveMode, Sample, Setpoint
 from sim import effects as _fx
 from sim.effects import (
     COL_COULOMB_BAND,
@@ -530,7 +530,7 @@ class PlantState:
 class PlantTrace:
     """Record of a batch :meth:`RigPlant.run`: measured samples and true states.
 
-    Measured arrays, shape (n,), same fields and units as :class:`hil.types.Sample`:
+    Measured arrays, shape (n,), same fields and units as :class:`hil.canopen.process.Sample`:
     ``t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N``.
 
     True arrays, shape (n, 2) per EMA (column 0 = EMA1): ``true_phi_rad``,
@@ -690,7 +690,7 @@ class RigPlant:
     Parameters
     ----------
     params : RigParams
-        Rig parameters (validated here; :class:`hil.errors.InputError` names the field).
+        Rig parameters (validated here; :class:`blf.errors.InputError` names the field).
     rng : numpy.random.Generator
         Source of all sensor noise.
     s0_mm : float, optional
@@ -738,7 +738,7 @@ class RigPlant:
         Parameters
         ----------
         mode1, mode2 : int
-            Drive modes as :class:`hil.types.DriveMode` values (0, 8, 10).
+            Drive modes as :class:`hil.canopen.process.DriveMode` values (0, 8, 10).
         value1, value2 : float
             Motor angle target (rad) for POSITION, ram force target (N) for
             FORCE, ignored for DISABLED.
@@ -778,25 +778,25 @@ class RigPlant:
 
         Parameters
         ----------
-        sp1, sp2 : hil.types.Setpoint
+        sp1, sp2 : hil.canopen.process.Setpoint
             Commands of drive 1 and 2, held over the period.
         load_N : float, optional
             External force on the surface, N (+ towards +y), held over the period.
 
         Returns
         -------
-        hil.types.Sample
+        hil.canopen.process.Sample
             Measured (quantised, noisy, miscalibrated) sample at ``t_s = k * period``.
 
         Raises
         ------
-        hil.errors.InputError
+        blf.errors.InputError
             ``sp1``/``sp2`` not a Setpoint, unknown mode, non-finite value or load.
         """
         if not isinstance(sp1, Setpoint):
-            raise InputError(f"sp1 must be a hil.types.Setpoint, got {type(sp1).__name__}")
+            raise InputError(f"sp1 must be a hil.canopen.process.Setpoint, got {type(sp1).__name__}")
         if not isinstance(sp2, Setpoint):
-            raise InputError(f"sp2 must be a hil.types.Setpoint, got {type(sp2).__name__}")
+            raise InputError(f"sp2 must be a hil.canopen.process.Setpoint, got {type(sp2).__name__}")
         try:
             return Sample(*self.step_raw(sp1.mode, sp1.value, sp2.mode, sp2.value, load_N))
         except InputError as exc:
@@ -828,7 +828,7 @@ class RigPlant:
 
         Raises
         ------
-        hil.errors.InputError
+        blf.errors.InputError
             Shapes that do not broadcast to one length n >= 1, unknown modes,
             non-finite values.
         """

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from hil.errors import InputError
+from blf.errors import InputError
 from sim.plant import _chain
 
 __all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "block_means"]

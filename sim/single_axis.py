@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hil.errors import InputError
+from blf.errors import InputError
 
 __all__ = ["SingleAxisReplay", "single_axis_candidates"]
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hil.errors import InputError
+from blf.errors import InputError
 from sim.params import EmaMechanics, RigParams
 
 __all__ = ["RigTruth", "rig_truth"]
@@ -57,7 +57,7 @@ def rig_truth(params: RigParams) -> RigTruth:
 
     Raises
     ------
-    hil.errors.InputError
+    blf.errors.InputError
         If ``params`` is not a RigParams or a stiffness is not > 0 N/mm.
 
     Notes

@@ -29,7 +29,7 @@ def simrig():
 
 def simulate_run(out: Path, act, check, simrig_profile, seed: int):
     """The check on the plant, as `emacheck simulate` runs it, without the terminal."""
-    from hil.commands import truth_dict
+    from hil.cli.check import truth_dict
     from hil.runner import PlantLink, run_check, start_meta
     from sim.plant import RigPlant
     from sim.truth import rig_truth

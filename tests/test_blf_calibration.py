@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.errors import AnalysisError, InputError
+from blf.errors import AnalysisError, InputError
 from blf import LvdtCalibration, fit_lvdt_calibration, position_differences
 
 # The simulator's LVDT law (sim/params.py SensorParams), paper values:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from hil.errors import AnalysisError, InputError
+from blf.errors import AnalysisError, InputError
 from blf import BlfMaintResult, blf_maint
 
 FS_HZ = 500.0

@@ -16,7 +16,7 @@ from scipy import signal
 
 from blf.accuracy import AccuracyBudget, backlash_error_budget
 from blf.serv import BlfServMonitor, BlfServResult, blf_serv, design_serv_filters, estimate_noise_std_mm
-from hil.errors import AnalysisError, InputError
+from blf.errors import AnalysisError, InputError
 
 FS = 500.0
 T = 1.0 / FS

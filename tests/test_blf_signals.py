@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.errors import InputError
+from blf.errors import InputError
 from blf import PositionDifferences, position_differences
 
 I_TOTAL = 2 * np.pi * 4 / 5  # 5.0265 rad/mm

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hil.analyze import CHANNELS, analyze_signals, result_dict
+from blf.signals import CHANNELS
+from hil.analysis.maint import analyze_signals, result_dict
 from hil.runfolder import read_signals
 
 from conftest import simulate_run

@@ -8,25 +8,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hil.cia402 import (
-    TRANSITIONS,
-    Command,
-    Controlword,
-    DriveStateMachine,
-    IllegalTransition,
-    OperationMode,
-    State,
-    Statusword,
-    controlword,
-    decode_command,
-    decode_state,
-    match_state,
-    next_command,
-    path,
-    state_word,
-)
-from hil.errors import EmacheckError, InputError
-from hil.types import DriveMode
+from hil.canopen.cia402 import TRANSITIONS, Command, Controlword, DriveStateMachine, IllegalTransition, OperationMode, State, Statusword, controlword, decode_command, decode_state, match_state, next_command, path, state_word
+from hil.canopen.errors import CanopenError, InputError
+from hil.canopen.process import DriveMode
 
 S = State
 C = Command
@@ -91,7 +75,7 @@ def test_every_state_and_command(state, cmd):
 
 
 def test_illegal_transition_is_typed():
-    assert issubclass(IllegalTransition, EmacheckError) and issubclass(IllegalTransition, ValueError)
+    assert issubclass(IllegalTransition, CanopenError) and issubclass(IllegalTransition, ValueError)
 
 
 def test_controlword_bit_patterns():

@@ -1,4 +1,4 @@
-"""Tests of ``emacheck diagnose`` (blf.diagnose, sim.replay, sim.single_axis, hil.diagnose_cmd).
+"""Tests of ``emacheck diagnose`` (blf.diagnose, sim.replay, sim.single_axis, hil.cli.diagnose).
 
 Recordings are short simulated checks (~40 s, see ``bench_diagnose.short_check``)
 with concealed effects generated as in the benchmark, with their own seeds
@@ -17,10 +17,10 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-import bench_diagnose as B  # noqa: E402
+from bench import bench_diagnose as B  # noqa: E402
 from blf.diagnose import diagnose  # noqa: E402
 from hil.cli import main  # noqa: E402
-from hil.errors import InputError  # noqa: E402
+from blf.errors import InputError  # noqa: E402
 from sim.replay import ChainParams, DualEmaReplay, replay_chains  # noqa: E402
 
 EMPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"

@@ -16,7 +16,7 @@ import can
 import numpy as np
 import pytest
 
-from hil.analyze import CHANNELS
+from blf.signals import CHANNELS
 from hil.canlog import decode_can_log
 from hil.cli import main
 from hil.profiles import default_profile_path

@@ -8,17 +8,9 @@ from pathlib import Path
 import pytest
 from canopen.objectdictionary import ODRecord
 
-from hil.drive_od import (
-    REQUIRED_OBJECTS,
-    check_drive_od,
-    decode_value,
-    default_eds_path,
-    encode_value,
-    load_drive_od,
-    od_variable,
-)
-from hil.errors import ProfileError
-from hil.pdo import DEFAULT_LAYOUT
+from hil.canopen.od import REQUIRED_OBJECTS, check_drive_od, decode_value, default_eds_path, encode_value, load_drive_od, od_variable
+from hil.canopen.errors import EdsError
+from hil.canopen.pdo import DEFAULT_LAYOUT
 
 
 @pytest.fixture(scope="module")
@@ -78,9 +70,9 @@ def test_value_codec(od):
     assert encode_value(od, 0x60C2, 2, -3) == b"\xfd"
     assert decode_value(od, 0x2102, 0, struct.pack("<f", 5.0265482)) == pytest.approx(5.0265482, rel=1e-7)
     assert decode_value(od, 0x1008, 0, b"EMA drive\x00") == "EMA drive"
-    with pytest.raises(ProfileError, match="cannot encode 70000"):
+    with pytest.raises(EdsError, match="cannot encode 70000"):
         encode_value(od, 0x1017, 0, 70000)
-    with pytest.raises(ProfileError, match="0x1016:05 is not in the object dictionary"):
+    with pytest.raises(EdsError, match="0x1016:05 is not in the object dictionary"):
         od_variable(od, 0x1016, 5)  # canopen would synthesise array members; we do not
 
 
@@ -117,7 +109,7 @@ def _broken(tmp_path: Path, section: str, key: str | None = None, value: str = "
 def test_broken_eds_refused_with_object_named(tmp_path, section, key, value, message):
     path = _broken(tmp_path, section, key, value)
     od = load_drive_od(path, node_id=1)
-    with pytest.raises(ProfileError, match=message) as exc:
+    with pytest.raises(EdsError, match=message) as exc:
         check_drive_od(od, source=str(path))
     assert str(exc.value).startswith(f"{path}: ")
     assert str(exc.value).count("; ") == 0  # exactly one problem reported
@@ -130,9 +122,9 @@ def test_unchanged_copy_passes(tmp_path):
 
 
 def test_missing_or_garbage_eds(tmp_path):
-    with pytest.raises(ProfileError, match="EDS not found"):
+    with pytest.raises(EdsError, match="EDS not found"):
         load_drive_od(tmp_path / "nope.eds")
     bad = tmp_path / "bad.eds"
     bad.write_text("[DeviceInfo]\nVendorName=x\n\n[6041]\nObjectType=0x7\n")  # no ParameterName
-    with pytest.raises(ProfileError, match="bad.eds: not a valid EDS"):
+    with pytest.raises(EdsError, match="bad.eds: not a valid EDS"):
         load_drive_od(bad)

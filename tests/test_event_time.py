@@ -14,13 +14,14 @@ from collections import deque
 import can
 import pytest
 
-from hil.canopen_link import BusTransport, CanopenLink, StaleData
+from hil.transport import BusTransport
+from hil.link import CanopenLink, StaleData
 from hil.master import MasterCore
-from hil.pdo import Frame
+from hil.canopen.frame import Frame
 
 
 class QueuedSocket:
-    """Stands in for :class:`hil.canopen_link.SocketcanFrames`: frames with CLOCK_REALTIME stamps."""
+    """Stands in for :class:`hil.link.SocketcanFrames`: frames with CLOCK_REALTIME stamps."""
 
     def __init__(self) -> None:
         self.q: deque = deque()

@@ -14,7 +14,7 @@ from hil.config import HARD_MAX_FORCE_FRACTION, HARD_MAX_STALE_CYCLES
 from hil.errors import ProfileError
 from hil.profiles import default_profile_path, load_check
 from hil.supervisor import Limits, Supervisor
-from hil.types import DriveMode, Sample, Setpoint
+from hil.canopen.process import DriveMode, Sample, Setpoint
 
 T = 0.002
 HOLD = Setpoint(DriveMode.DISABLED, 0.0)
@@ -131,7 +131,7 @@ def test_eds_of_another_drive_is_refused_before_the_bus(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory, actuation, check_profile, simrig):
     """A short aborted dry-run (an EMCY at 3 s) to mutate its recordings."""
-    from hil.commands import dry_run
+    from hil.cli.dry_run import dry_run
     from sim.faults import Fault
     out = tmp_path_factory.mktemp("bad") / "run"
     dry_run(actuation, check_profile, simrig, out, faults=[Fault("emcy_over_current", 1, 3.0)])

@@ -12,14 +12,14 @@ import struct
 import numpy as np
 import pytest
 
-from hil.cia402 import State
-from hil.drive_od import load_drive_od
+from hil.canopen.cia402 import State
+from hil.canopen.od import load_drive_od
 from hil.master import DriveFault, HeartbeatLost, MasterCore, PreflightError
-from hil.pdo import Frame, sync_frame
-from hil.sdo import SdoAbortError
-from hil.types import DriveMode, Setpoint
+from hil.canopen.frame import Frame, sync_frame
+from hil.canopen.sdo import SdoAbortError
+from hil.canopen.process import DriveMode, Setpoint
 from sim.plant import RigPlant
-from sim.slave import SimDrivePair
+from sim.drives import SimDrivePair
 
 
 class Pump:

@@ -7,7 +7,7 @@ import pytest
 
 from hil.errors import RecordingError
 from hil.runfolder import SignalsWriter, read_signals
-from hil.types import DriveMode, Sample, Setpoint
+from hil.canopen.process import DriveMode, Sample, Setpoint
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2\n"
 

@@ -8,20 +8,10 @@ import canopen
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
-from hil.drive_od import load_drive_od
-from hil.errors import EmacheckError
-from hil.pdo import Frame
-from hil.sdo import (
-    SdoAbortCode,
-    SdoAbortError,
-    SdoClient,
-    SdoEvent,
-    SdoTimeout,
-    SdoTransfer,
-    SdoUsageError,
-    abort_frame,
-    describe,
-)
+from hil.canopen.od import load_drive_od
+from hil.canopen.errors import CanopenError
+from hil.canopen.frame import Frame
+from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent, SdoTimeout, SdoTransfer, SdoUsageError, abort_frame, describe
 
 
 def F(can_id: int, hexdata: str) -> Frame:
@@ -89,7 +79,7 @@ def test_server_abort_decoded_with_meaning():
     assert str(e) == "node 2: SDO abort 0x06090030 (value range of parameter exceeded) on 0x607D:01"
     assert e.code is SdoAbortCode.VALUE_RANGE_EXCEEDED and e.abort_frame is None
     assert (e.node_id, e.index, e.subindex) == (2, 0x607D, 1)
-    assert isinstance(e, EmacheckError) and isinstance(e, IOError)
+    assert isinstance(e, CanopenError) and isinstance(e, IOError)
     assert not c.busy
 
 
@@ -170,7 +160,7 @@ def test_timeout_with_explicit_time():
     e = exc.value
     assert e.abort_frame == F(0x602, "80 08 10 00 00 00 04 05")
     assert "node 2: SDO timeout, no response within 0.5 s on 0x1008:00" == str(e)
-    assert isinstance(e, TimeoutError) and isinstance(e, EmacheckError)
+    assert isinstance(e, TimeoutError) and isinstance(e, CanopenError)
     assert not c.busy
     assert c.on_frame(F(0x582, "41 08 10 00 09 00 00 00"), t=10.6) is None  # late answer dropped
 

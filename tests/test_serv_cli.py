@@ -11,9 +11,10 @@ import pytest
 from blf.calibration import fit_lvdt_calibration
 from hil.canlog import CanLogWriter
 from hil.cli import main
-from hil.pdo import (Tpdo1, Tpdo2, encode_tpdo1, encode_tpdo2, mm_to_lvdt_um, newton_to_force_dN,
-                     rad_to_increments, sync_frame)
-from sim import scenarios as sc
+from hil.canopen.pdo import Tpdo1, Tpdo2, encode_tpdo1, encode_tpdo2
+from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
+from hil.canopen.frame import sync_frame
+from support import scenarios as sc
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2"
 

@@ -1,4 +1,4 @@
-"""BLFserv on simulated normal operation against the simulator's truth (sim.scenarios).
+"""BLFserv on simulated normal operation against the simulator's truth (support.scenarios).
 
 Default rig (simrig.toml): LVDT noise 0.025 mm peak to peak, 7.5 % pitch error
 on LVDT 1, 2 % on LVDT 2, offsets and cubic non-linearity; internal backlash
@@ -14,8 +14,8 @@ import pytest
 
 from blf.calibration import fit_lvdt_calibration
 from blf.serv import BlfServMonitor, blf_serv, estimate_noise_std_mm
-from hil.errors import InputError
-from sim import scenarios as sc
+from blf.errors import InputError
+from support import scenarios as sc
 
 SEEDS = range(5)
 FS = 500.0

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from hil.errors import InputError
-from hil.types import DriveMode, Sample, Setpoint
+from blf.errors import InputError
+from hil.canopen.process import DriveMode, Sample, Setpoint
 from sim.effects import (
     CoulombFriction,
     LvdtDrift,

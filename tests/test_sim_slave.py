@@ -1,9 +1,9 @@
-"""Tests of the simulated CiA 402 drive pair (sim.slave): golden frames and closed-loop numbers.
+"""Tests of the simulated CiA 402 drive pair (sim.drives): golden frames and closed-loop numbers.
 
 Known answers: the EDS defaults (identity, heartbeat, PDO layout), the CiA 301
 frame formats (boot-up, heartbeat, EMCY, SDO abort), the CiA 402 statuswords
-of hil.cia402, the sensor model of sim.plant at rest (noise-free LVDT
-s_meas = offset, force 0), and the unit conversions of hil.pdo.
+of hil.canopen.cia402, the sensor model of sim.plant at rest (noise-free LVDT
+s_meas = offset, force 0), and the unit conversions of hil.canopen.pdo.
 """
 
 from __future__ import annotations
@@ -14,31 +14,16 @@ import struct
 import numpy as np
 import pytest
 
-from hil.cia402 import State, controlword, decode_state, next_command
-from hil.errors import InputError
-from hil.pdo import (
-    DEFAULT_LAYOUT,
-    Frame,
-    Rpdo1,
-    Rpdo2,
-    decode_tpdo1,
-    decode_tpdo2,
-    encode_rpdo1,
-    encode_rpdo2,
-    permille_to_force_N,
-    sync_frame,
-)
-from hil.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
-from hil.types import DriveMode
+from hil.canopen.cia402 import State, controlword, decode_state, next_command
+from hil.canopen.errors import InputError
+from hil.canopen.pdo import DEFAULT_LAYOUT, Rpdo1, Rpdo2, decode_tpdo1, decode_tpdo2, encode_rpdo1, encode_rpdo2
+from hil.canopen.frame import Frame, sync_frame
+from hil.canopen.units import permille_to_force_N
+from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
+from hil.canopen.process import DriveMode
 from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams
 from sim.plant import RigPlant
-from sim.slave import (
-    QUICK_STOP_HOLD_S,
-    TARGET_WINDOW_INC,
-    NmtState,
-    SimDrivePair,
-    error_register_bits,
-)
+from sim.drives import QUICK_STOP_HOLD_S, TARGET_WINDOW_INC, NmtState, SimDrivePair, error_register_bits
 
 I_TOTAL = 2 * math.pi * 4 / 5  # rad/mm
 T_S = 0.002

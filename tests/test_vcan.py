@@ -84,17 +84,17 @@ def test_vcan_stage(tmp_path):
 
 
 def test_serve_answers_sync_and_stops_on_event():
-    """hil.serve.serve on a python-can virtual bus: boot-up, one TPDO set per SYNC, clean stop."""
+    """hil.sim_server.serve on a python-can virtual bus: boot-up, one TPDO set per SYNC, clean stop."""
     import threading
 
     import can
     import numpy as np
 
-    from hil.drive_od import load_drive_od
+    from hil.canopen.od import load_drive_od
     from hil.profiles import load_simrig
-    from hil.serve import serve
+    from hil.sim_server import serve
     from sim.plant import RigPlant
-    from sim.slave import SimDrivePair
+    from sim.drives import SimDrivePair
 
     simrig = load_simrig()
     pair = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(1)),

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.analyze import CHANNELS
+from blf.signals import CHANNELS
 from hil.canlog import decode_can_log
 from hil.profiles import load_actuation, load_simrig
 from hil.runfolder import read_signals

@@ -1,0 +1,76 @@
+"""Validators of the pure analysis and the physics: one place, one message style.
+
+Each returns the value converted or raises :class:`blf.errors.InputError`
+quoting the argument's name, its shape and its unit, e.g. ``d_mm must be a
+1-D array in mm; got shape (3, 2)``. Used by every module of :mod:`blf` and
+by the pure physics of :mod:`sim`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from blf.errors import InputError
+
+def as_1d_finite(value, name: str, unit: str, *, min_len: int = 1) -> np.ndarray:
+    """Return ``value`` as a float64 1-D array or raise InputError naming it."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            f"{name} must be a 1-D numeric array in {unit}; got {type(value).__name__} "
+            f"that cannot be converted to float ({exc})"
+        ) from None
+    if arr.ndim != 1:
+        raise InputError(
+            f"{name} must be a 1-D array in {unit}; got shape {arr.shape}"
+        )
+    if arr.size < min_len:
+        raise InputError(
+            f"{name} must have at least {min_len} samples in {unit}; got shape {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
+        raise InputError(
+            f"{name} must be finite (in {unit}); got {bad} NaN/inf value(s) in shape {arr.shape}"
+        )
+    return arr
+
+
+def same_shape(*items: tuple[np.ndarray, str, str]) -> None:
+    """Raise InputError unless all (array, name, unit) items share one shape."""
+    ref, ref_name, ref_unit = items[0]
+    for arr, name, unit in items[1:]:
+        if arr.shape != ref.shape:
+            raise InputError(
+                f"{name} (in {unit}) must have the same shape as {ref_name} (in {ref_unit}); "
+                f"got {name} shape {arr.shape} and {ref_name} shape {ref.shape}"
+            )
+
+
+def positive_scalar(value, name: str, unit: str) -> float:
+    """Return ``value`` as a finite positive float or raise InputError naming it."""
+    if np.ndim(value) != 0 or isinstance(value, bool):
+        raise InputError(
+            f"{name} must be a finite positive scalar in {unit}; got {value!r} "
+            f"(shape {np.shape(value)})"
+        )
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(
+            f"{name} must be a finite positive number in {unit}; got {value!r} "
+            f"(shape {np.shape(value)})"
+        ) from None
+    if not np.isfinite(x) or x <= 0.0:
+        raise InputError(
+            f"{name} must be a finite positive number in {unit}; got {x!r} (shape ())"
+        )
+    return x
+
+
+def readonly(arr: np.ndarray) -> np.ndarray:
+    """Return a read-only copy-owned array (for frozen result dataclasses)."""
+    out = np.array(arr, copy=True)
+    out.flags.writeable = False
+    return out

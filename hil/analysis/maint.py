@@ -1,0 +1,242 @@
+"""From a recording to the check's result: segments, LVDT calibration, BLFmaint.
+
+Pure orchestration over :mod:`blf` (no file IO here; the commands read and
+write files). Works on a run folder's signals (with the step column) and on a
+bare signals CSV recorded elsewhere, whose calibration sweeps and force-fight
+segments it finds itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from blf.calibration import LvdtCalibration, fit_lvdt_calibration
+from blf.maint import MIN_SAMPLES, BlfMaintResult, blf_maint
+from blf.signals import position_differences
+from hil.config import Actuation
+from blf.errors import AnalysisError
+from hil.errors import IncompleteRecordingError, RecordingError
+from hil.runfolder import Signals
+from blf.signals import CHANNELS
+
+
+
+@dataclass(frozen=True)
+class Segments:
+    """Boolean masks over the samples; ``source`` says how they were found."""
+
+    cal1: np.ndarray | None  #: samples of the calibration sweep of EMA 1 (None: no sweep)
+    cal2: np.ndarray | None
+    force_fight: np.ndarray
+    source: str  #: "step column" or "detected"
+
+
+@dataclass(frozen=True)
+class Analysis:
+    segments: Segments
+    calibration: dict  #: "ema1"/"ema2" -> LvdtCalibration or None
+    s1_corr: np.ndarray
+    s2_corr: np.ndarray
+    d_int1: np.ndarray
+    d_int2: np.ndarray
+    d_ext: np.ndarray
+    maint: dict  #: "int1"/"int2"/"ext" -> BlfMaintResult, or an error message (str)
+    status: str  #: "pass" | "fail"
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _smooth_speed(x_mm: np.ndarray, period_s: float, window_s: float = 0.2) -> np.ndarray:
+    v = np.gradient(x_mm, period_s)
+    n = max(1, int(round(window_s / period_s)))
+    return ndimage.uniform_filter1d(v, n, mode="nearest")
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Contiguous True runs as (start, stop) index pairs."""
+    m = np.concatenate(([False], mask, [False])).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def find_segments(sig: Signals, act: Actuation) -> Segments:
+    """Calibration sweeps and force-fight samples of a recording.
+
+    With a step column: ``cal1_sweep``, ``cal2_sweep`` and ``force_fight``.
+    Without one: sweeps are stretches where the rams move faster than
+    0.5 mm/s (0.2 s moving average of the resolver-derived speed) over more
+    than a quarter of the stroke; the first such sweep calibrates EMA 1, the
+    second EMA 2 (both LVDTs see constant load-path deflection in either, so
+    with only one sweep both use it). Force fight: after the last sweep, where
+    both rams are still (< 0.5 mm/s) and ``|F1 - F2|/2`` exceeds 20 % of its
+    maximum, from its first to its last occurrence.
+    """
+    if sig.step is not None:
+        cal1 = sig.step == "cal1_sweep"
+        cal2 = sig.step == "cal2_sweep"
+        ff = sig.step == "force_fight"
+        if not ff.any():
+            raise AnalysisError("the recording's step column has no 'force_fight' samples")
+        return Segments(cal1 if cal1.any() else None, cal2 if cal2.any() else None, ff, "step column")
+    i = act.mechanics.i_total_rad_per_mm
+    T = sig.sample_period_s
+    x1, x2 = sig.phi1 / i, sig.phi2 / i
+    moving = (np.abs(_smooth_speed(x1, T)) > 0.5) | (np.abs(_smooth_speed(x2, T)) > 0.5)
+    # bridge short stops (sweep reversals)
+    gap = int(round(1.0 / T))
+    moving = ndimage.binary_closing(moving, structure=np.ones(gap, bool)) | moving
+    sweeps = []
+    for a, b in _runs(moving):
+        span = max(np.ptp(x1[a:b]), np.ptp(x2[a:b]))
+        if span > 0.25 * 2 * act.mechanics.stroke_limit_mm:
+            sweeps.append((a, b))
+    masks = []
+    for a, b in sweeps[:2]:
+        m = np.zeros(sig.n, bool)
+        m[a:b] = True
+        masks.append(m)
+    cal1 = masks[0] if masks else None
+    cal2 = masks[1] if len(masks) > 1 else cal1
+    start = sweeps[-1][1] if sweeps else 0
+    still = ~moving
+    still[:start] = False
+    fff = np.abs(0.5 * (sig.F1 - sig.F2))
+    if not still.any():
+        raise AnalysisError("no stationary stretch for the force fight found in the recording")
+    big = still & (fff > 0.2 * fff[still].max())
+    idx = np.flatnonzero(big)
+    if idx.size < 100:
+        raise AnalysisError("no force-fight segment found (|F1 - F2|/2 never rises while the rams are still)")
+    ff = np.zeros(sig.n, bool)
+    ff[idx[0]:idx[-1] + 1] = True
+    ff &= still
+    return Segments(cal1, cal2, ff, "detected")
+
+
+def _trim(mask: np.ndarray, frac: float = 0.02) -> np.ndarray:
+    """Drop the first and last ``frac`` of each run (acceleration at the ends)."""
+    out = np.zeros_like(mask)
+    for a, b in _runs(mask):
+        k = int((b - a) * frac)
+        out[a + k:b - k] = True
+    return out
+
+
+def check_units(sig: Signals, act: Actuation) -> None:
+    """Refuse a recording whose columns are plainly in other units than the file format's.
+
+    Time [s]: the median sample period must be within a factor 2 of the actuation's SYNC
+    period (a column in ms is 1000 times too large). Stroke [mm]: |s| must stay within twice
+    the stroke limit (a column in um is 1000 times too large). Force [N]: |F| must stay within
+    the limit load (in kN, a check's forces would stay below 10 "N", which is noted, not
+    refused: an unloaded recording looks the same).
+    """
+    T = act.timing.sync_period_s
+    dt = sig.sample_period_s
+    if not 0.5 * T <= dt <= 2.0 * T:
+        hint = " (time in ms?)" if 500 * T <= dt <= 2000 * T else ""
+        raise RecordingError(f"column 't' [s]: median sample period {dt:g} s does not match the actuation's "
+                             f"SYNC period timing.sync_period_s = {T:g} s{hint}")
+    lim = act.mechanics.stroke_limit_mm
+    for name in ("s1", "s2"):
+        peak = float(np.max(np.abs(getattr(sig, name))))
+        if peak > 2.0 * lim:
+            raise RecordingError(f"column '{name}' [mm]: |{name}| reaches {peak:g}, beyond twice the stroke limit "
+                                 f"{lim:g} mm (stroke in um?)")
+    for name in ("F1", "F2"):
+        peak = float(np.max(np.abs(getattr(sig, name))))
+        if peak > act.mechanics.limit_load_N:
+            raise RecordingError(f"column '{name}' [N]: |{name}| reaches {peak:g}, beyond the limit load "
+                                 f"{act.mechanics.limit_load_N:g} N (force in another unit?)")
+
+
+def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
+    """Calibrate the LVDTs, form the D signals and run BLFmaint on all three channels."""
+    if sig.n < 1000:
+        raise IncompleteRecordingError(f"recording too short for the check: {sig.n} samples (need >= 1000)")
+    check_units(sig, act)
+    seg = find_segments(sig, act)
+    i = act.mechanics.i_total_rad_per_mm
+    notes = list(sig.notes)
+    cal: dict[str, LvdtCalibration | None] = {}
+    s_corr = {}
+    for k, (mask, phi, s) in enumerate(((seg.cal1, sig.phi1, sig.s1), (seg.cal2, sig.phi2, sig.s2)), start=1):
+        if mask is None:
+            cal[f"ema{k}"] = None
+            s_corr[k] = s
+            notes.append(f"no calibration sweep for EMA {k}: LVDT {k} used uncorrected")
+            continue
+        m = _trim(mask)
+        c = fit_lvdt_calibration(phi[m] / i, s[m])
+        cal[f"ema{k}"] = c
+        s_corr[k] = c.correct(s)
+    d = position_differences(sig.phi1, sig.phi2, s_corr[1], s_corr[2], i)
+    ff = seg.force_fight
+    if int(np.count_nonzero(ff)) < MIN_SAMPLES:
+        # e.g. a run killed or aborted just after the force fight began
+        raise AnalysisError(f"force-fight segment too short for BLFmaint: {int(np.count_nonzero(ff))} samples "
+                            f"(need >= {MIN_SAMPLES})")
+    rate = 1.0 / sig.sample_period_s
+    pairs = {
+        "int1": (d.d_int1_mm, sig.F1),
+        "int2": (d.d_int2_mm, sig.F2),
+        "ext": (d.d_ext_mm, sig.F2 - sig.F1),
+    }
+    maint: dict[str, BlfMaintResult | str] = {}
+    for ch, (dd, ff_force) in pairs.items():
+        try:
+            maint[ch] = blf_maint(dd[ff], ff_force[ff], rate)
+        except AnalysisError as exc:
+            maint[ch] = str(exc)
+            notes.append(f"{ch}: {exc}")
+    spec = {"int1": act.mechanics.backlash_spec_int_mm, "int2": act.mechanics.backlash_spec_int_mm,
+            "ext": act.mechanics.backlash_spec_ext_mm}
+    ok = all(isinstance(maint[ch], BlfMaintResult) and maint[ch].backlash_mm <= spec[ch] for ch in CHANNELS)
+    return Analysis(seg, cal, s_corr[1], s_corr[2], d.d_int1_mm, d.d_int2_mm, d.d_ext_mm, maint,
+                    "pass" if ok else "fail", tuple(notes))
+
+
+def _f(x: float) -> float:
+    return float(x)
+
+
+def result_dict(an: Analysis, act: Actuation, truth: dict | None = None) -> dict:
+    """result.json content (names and units as in the README)."""
+    bl, bls, st, stsig, extra = {}, {}, {}, {}, {}
+    for ch in CHANNELS:
+        r = an.maint[ch]
+        if isinstance(r, BlfMaintResult):
+            bl[ch] = _f(r.backlash_mm)
+            bls[ch] = _f(r.backlash_sigma_mm)
+            st[ch] = {"left": _f(r.stiffness_left_N_per_mm), "right": _f(r.stiffness_right_N_per_mm)}
+            stsig[ch] = {"left": _f(r.stiffness_left_sigma_N_per_mm), "right": _f(r.stiffness_right_sigma_N_per_mm)}
+            extra[ch] = {"d_lc_mm": _f(r.d_lc_mm), "d_rc_mm": _f(r.d_rc_mm), "slope_sign": int(r.slope_sign)}
+        else:
+            bl[ch] = bls[ch] = None
+            st[ch] = stsig[ch] = {"left": None, "right": None}
+            extra[ch] = {"error": r}
+    calib = {}
+    for k in ("ema1", "ema2"):
+        c = an.calibration[k]
+        calib[k] = None if c is None else {
+            "pitch": _f(c.pitch), "offset_mm": _f(c.offset_mm), "nonlinearity_mm": _f(c.nonlinearity_mm),
+            "rmse_mm": _f(c.rmse_mm)}
+    out = {
+        "status": an.status,
+        "backlash_mm": bl,
+        "backlash_sigma_mm": bls,
+        "stiffness_N_per_mm": st,
+        "stiffness_sigma_N_per_mm": stsig,
+        "calibration": calib,
+        "spec": {"backlash_int_mm": act.mechanics.backlash_spec_int_mm,
+                 "backlash_ext_mm": act.mechanics.backlash_spec_ext_mm},
+        "blf_maint": extra,
+        "segments": {"source": an.segments.source,
+                     "force_fight_samples": int(an.segments.force_fight.sum())},
+        "notes": list(an.notes),
+    }
+    if truth is not None:
+        out["truth"] = truth
+    return out

@@ -1,0 +1,270 @@
+"""BLFserv on a recording: the LVDT calibration to use, the analysis, serv.json (for ``emacheck serv``).
+
+Input: a run folder (``signals.csv``, or ``can.log`` alone), a bare signals
+CSV (columns ``t,phi1,phi2,s1,s2,F1,F2``) or a raw CAN log (``*.log``,
+candump ``-L`` format, decoded by :func:`hil.canlog.decode_can_log`).
+
+LVDT calibration, first that applies:
+
+1. ``--calibration RESULT.json``: pitch and offset of both LVDTs from a
+   maintenance check's result.json (a linear correction);
+2. a run folder whose signals carry the check's calibration sweeps (step
+   column ``cal1_sweep``/``cal2_sweep``): the full cubic calibration is fitted
+   again from them (:func:`blf.calibration.fit_lvdt_calibration`);
+3. the run folder's ``result.json`` calibration (pitch and offset, linear);
+4. a slow sweep under load found in the recording itself (per EMA: ram
+   speed 0.3 to 10 mm/s over at least half the stroke limit, its force of
+   one sign, mean above 200 N, :func:`find_sweep`): cubic fit on it;
+5. none: the LVDT data are used uncorrected, and serv.json and the report
+   say so (a pitch error then shows as spurious jumps, paper 2.3).
+
+Outputs in ``--out`` (default: the run folder, or the CSV's folder):
+``serv.json`` and ``serv_report.html`` (not with ``--no-report``). Exit
+status 0, or 3 for bad input.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from blf.accuracy import AccuracyBudget, backlash_error_budget
+from blf.calibration import fit_lvdt_calibration
+from blf.errors import AnalysisError, InputError
+from blf.serv import blf_serv
+from blf.signals import CHANNELS, position_differences
+from hil.config import Actuation
+from hil.errors import RecordingError
+from hil.runfolder import Signals
+
+
+PAPER_PITCH_ERROR = 0.075  #: the paper's uncompensated pitch error, used when no calibration says otherwise
+
+
+@dataclass(frozen=True)
+class LvdtCorrection:
+    """How the LVDT strokes of one recording were corrected."""
+
+    source: str  #: where the calibration came from (see the module docstring)
+    kind: dict  #: "ema1"/"ema2" -> "polynomial" | "linear" | "none"
+    pitch: dict  #: "ema1"/"ema2" -> pitch or None
+    offset_mm: dict  #: "ema1"/"ema2" -> offset or None
+    residual_pitch_error: float | None  #: relative pitch uncertainty left (for the accuracy budget)
+    s1_mm: np.ndarray
+    s2_mm: np.ndarray
+    notes: tuple
+
+
+def _linear(pitch: float, offset: float, s: np.ndarray) -> np.ndarray:
+    return (s - offset) / pitch
+
+
+def _from_result_json(path: Path) -> dict:
+    try:
+        res = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise RecordingError(f"{path}: no such file") from None
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
+    cal = res.get("calibration") if isinstance(res, dict) else None
+    if not isinstance(cal, dict):
+        raise RecordingError(f"{path}: no 'calibration' object (expected a maintenance check's result.json)")
+    out = {}
+    for k in ("ema1", "ema2"):
+        c = cal.get(k)
+        if c is None:
+            out[k] = None
+            continue
+        try:
+            pitch, off = float(c["pitch"]), float(c["offset_mm"])
+        except (KeyError, TypeError, ValueError):
+            raise RecordingError(f"{path}: calibration.{k} needs numeric 'pitch' and 'offset_mm'") from None
+        if not (math.isfinite(pitch) and pitch > 0 and math.isfinite(off)):
+            raise RecordingError(f"{path}: calibration.{k}: pitch {pitch!r} must be > 0, offset finite")
+        out[k] = (pitch, off)
+    return out
+
+
+def _smooth_speed(x: np.ndarray, period_s: float, window_s: float = 0.2) -> np.ndarray:
+    v = np.gradient(x, period_s)
+    n = max(1, int(round(window_s / period_s)))
+    return np.convolve(v, np.ones(n) / n, mode="same")
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    m = np.concatenate(([False], mask, [False])).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def find_sweep(x_mm: np.ndarray, f_N: np.ndarray, period_s: float, stroke_limit_mm: float) -> slice | None:
+    """Longest slow sweep under a steady one-sided force, as a slice (trimmed 2 % each end), or None.
+
+    Slow: 0.3 to 10 mm/s (0.2 s moving average of the motor-side speed); long:
+    at least half the stroke limit of travel; steady load: mean force above
+    200 N, the same sign in 99 % of the samples and a standard deviation
+    below half the mean, so the internal path stays in contact on one flank
+    and its deflection is constant on average (paper 2.3; the opposing EMA in
+    force mode rings at a few Hz, which the regression averages out).
+    """
+    v = np.abs(_smooth_speed(x_mm, period_s))
+    slow = (v >= 0.3) & (v <= 10.0)
+    best = None
+    for a, b in _runs(slow):
+        if b - a < 50:
+            continue
+        xs, fs = x_mm[a:b], f_N[a:b]
+        if np.ptp(xs) < 0.5 * stroke_limit_mm:
+            continue
+        fm = float(np.mean(fs))
+        if abs(fm) < 200.0 or np.mean(np.sign(fs) == np.sign(fm)) < 0.99 or np.std(fs) > 0.5 * abs(fm):
+            continue
+        if best is None or b - a > best[1] - best[0]:
+            best = (a, b)
+    if best is None:
+        return None
+    a, b = best
+    k = int(0.02 * (b - a))
+    return slice(a + k, b - k)
+
+
+def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
+                       calibration_file: Path | None) -> LvdtCorrection:
+    """Pick the LVDT calibration for a recording (order in the module docstring) and apply it."""
+    i = act.mechanics.i_total_rad_per_mm
+    notes: list[str] = []
+
+    def poly(cals: dict, source: str) -> LvdtCorrection:
+        s = {}
+        res_err = []
+        for k, raw in (("ema1", sig.s1), ("ema2", sig.s2)):
+            s[k] = cals[k].correct(raw)
+            res_err.append(cals[k].coefficient_sigmas[1] / cals[k].pitch)
+        return LvdtCorrection(source, {"ema1": "polynomial", "ema2": "polynomial"},
+                              {k: float(cals[k].pitch) for k in cals}, {k: float(cals[k].offset_mm) for k in cals},
+                              max(1e-4, float(max(res_err))), s["ema1"], s["ema2"], tuple(notes))
+
+    def linear(lin: dict, source: str) -> LvdtCorrection:
+        return LvdtCorrection(source, {"ema1": "linear", "ema2": "linear"},
+                              {k: lin[k][0] for k in lin}, {k: lin[k][1] for k in lin}, 1e-3,
+                              _linear(*lin["ema1"], sig.s1), _linear(*lin["ema2"], sig.s2), tuple(notes))
+
+    if calibration_file is not None:
+        lin = _from_result_json(Path(calibration_file))
+        if lin["ema1"] is None or lin["ema2"] is None:
+            raise RecordingError(f"{calibration_file}: calibration of both LVDTs needed (ema1, ema2)")
+        return linear(lin, f"--calibration {calibration_file}")
+    if sig.step is not None:
+        m1, m2 = sig.step == "cal1_sweep", sig.step == "cal2_sweep"
+        if m1.sum() >= 100 and m2.sum() >= 100:
+            cals = {"ema1": fit_lvdt_calibration(sig.phi1[m1] / i, sig.s1[m1]),
+                    "ema2": fit_lvdt_calibration(sig.phi2[m2] / i, sig.s2[m2])}
+            return poly(cals, "calibration sweeps of the run folder (step column)")
+    if run_dir is not None and (run_dir / "result.json").exists():
+        try:
+            lin = _from_result_json(run_dir / "result.json")
+        except RecordingError as exc:
+            notes.append(f"result.json not usable for calibration: {exc}")
+            lin = None
+        if lin is not None and lin["ema1"] is not None and lin["ema2"] is not None:
+            return linear(lin, "run folder result.json (pitch, offset)")
+    T = sig.sample_period_s
+    cals = {}
+    for k, phi, s, f in (("ema1", sig.phi1, sig.s1, sig.F1), ("ema2", sig.phi2, sig.s2, sig.F2)):
+        sl = find_sweep(phi / i, f, T, act.mechanics.stroke_limit_mm)
+        if sl is not None:
+            try:
+                cals[k] = fit_lvdt_calibration(phi[sl] / i, s[sl])
+            except (InputError, AnalysisError) as exc:
+                notes.append(f"sweep of {k} found but not usable: {exc}")
+    if len(cals) == 2:
+        return poly(cals, "slow sweeps under load detected in the recording")
+    notes.append("no LVDT calibration (no --calibration, no calibration sweep, no result.json): LVDT data "
+                 "uncorrected; a pitch error makes the stroke's acceleration phases look like jumps "
+                 "(paper 2.3: +-20 mm x 7.5 % = +-1.5 mm over the full stroke)")
+    return LvdtCorrection("none", {"ema1": "none", "ema2": "none"}, {"ema1": None, "ema2": None},
+                          {"ema1": None, "ema2": None}, None, sig.s1, sig.s2, tuple(notes))
+
+
+@dataclass(frozen=True)
+class ServAnalysis:
+    sig: Signals
+    correction: LvdtCorrection
+    d: dict  #: channel -> D array, mm
+    results: dict  #: channel -> BlfServResult
+    budget: AccuracyBudget
+    method: str
+
+
+def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: str) -> ServAnalysis:
+    """Position differences from the corrected strokes, BLFserv on each, and the error budget."""
+    if sig.n < 100:
+        raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= 100)")
+    i = act.mechanics.i_total_rad_per_mm
+    pd = position_differences(sig.phi1, sig.phi2, correction.s1_mm, correction.s2_mm, i)
+    d = {"int1": pd.d_int1_mm, "int2": pd.d_int2_mm, "ext": pd.d_ext_mm}
+    rate = 1.0 / sig.sample_period_s
+    results = {ch: blf_serv(d[ch], rate, method=method, t0_s=float(sig.t[0])) for ch in CHANNELS}
+    pitches = [abs(p - 1.0) for p in correction.pitch.values() if p is not None]
+    pitch_err = max(pitches) if pitches else PAPER_PITCH_ERROR
+    budget = backlash_error_budget(
+        act.mechanics.stroke_limit_mm, pitch_err, act.sensors.lvdt_noise_pp_mm / 6.0, rate,
+        backlash_mm=act.mechanics.backlash_spec_int_mm,
+        residual_pitch_error=correction.residual_pitch_error if correction.residual_pitch_error is not None else 1e-3)
+    return ServAnalysis(sig, correction, d, results, budget, method)
+
+
+def _f(x):
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def serv_dict(an: ServAnalysis, truth: dict | None, source: str) -> dict:
+    """serv.json content."""
+    res = an.results
+    c = an.correction
+    out = {
+        "backlash_mm": {ch: _f(res[ch].backlash_mm) for ch in CHANNELS},
+        "traversals": {ch: int(res[ch].traversals) for ch in CHANNELS},
+        "method": an.method,
+        "backlash_sigma_mm": {ch: _f(res[ch].backlash_sigma_mm) for ch in CHANNELS},
+        "backlash_improved_mm": {ch: _f(res[ch].backlash_improved_mm) for ch in CHANNELS},
+        "backlash_paper_mm": {ch: _f(res[ch].backlash_paper_mm) for ch in CHANNELS},
+        "traversals_improved": {ch: int(res[ch].traversals_improved) for ch in CHANNELS},
+        "traversals_paper": {ch: int(res[ch].traversals_paper) for ch in CHANNELS},
+        "jumps": {ch: [{"t_s": round(j.t_jump_s, 4), "height_mm": _f(j.height_mm),
+                        "height_sigma_mm": _f(j.height_sigma_mm), "paper_delta_mm": _f(j.paper_delta_mm),
+                        "accepted": bool(j.accepted), "paper_accepted": bool(j.paper_accepted),
+                        "reason": j.reason} for j in res[ch].jumps] for ch in CHANNELS},
+        "noise_std_mm": {ch: res[ch].noise_std_mm for ch in CHANNELS},
+        "thresholds": {ch: {"d1_mm_per_s": res[ch].threshold_d1_mm_per_s,
+                            "d2_mm_per_s2": res[ch].threshold_d2_mm_per_s2,
+                            "min_jump_mm": res[ch].min_jump_mm} for ch in CHANNELS},
+        "filters": {"lowpass_rad_s": res["int1"].filters.lowpass_rad_s, "dt1_rad_s": res["int1"].filters.dt1_rad_s,
+                    "discretisation": res["int1"].filters.discretisation},
+        "calibration": {"source": c.source, **{k: {"kind": c.kind[k], "pitch": c.pitch[k],
+                                                    "offset_mm": c.offset_mm[k]} for k in ("ema1", "ema2")}},
+        "accuracy": budget_dict(an.budget),
+        "recording": {"source": source, "samples": int(an.sig.n),
+                      "duration_s": float(an.sig.t[-1] - an.sig.t[0]),
+                      "sample_period_s": float(an.sig.sample_period_s)},
+        "notes": list(an.sig.notes) + list(c.notes),
+    }
+    if truth is not None:
+        out["truth"] = truth
+    return out
+
+
+def budget_dict(b: AccuracyBudget) -> dict:
+    def m(x):
+        return {"travel_mm": x.travel_mm, "pitch_uncompensated_mm": x.pitch_uncompensated_mm,
+                "pitch_compensated_mm": x.pitch_compensated_mm, "noise_mm": x.noise_mm, "jump_mm": x.jump_mm,
+                "temperature_mm": x.temperature_mm, "total_compensated_mm": x.total_compensated_mm,
+                "total_uncompensated_mm": x.total_uncompensated_mm}
+    return {"stroke_mm": b.stroke_mm, "pitch_error": b.pitch_error, "residual_pitch_error": b.residual_pitch_error,
+            "lvdt_noise_std_mm": b.lvdt_noise_std_mm, "filtered_noise_std_mm": b.filtered_noise_std_mm,
+            "temperature_error": b.temperature_error, "backlash_mm": b.backlash_mm, "target_mm": b.target_mm,
+            "BLFmaint": m(b.maint), "BLFserv_paper": m(b.serv_paper), "BLFserv_improved": m(b.serv_improved)}

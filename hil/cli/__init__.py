@@ -1,0 +1,99 @@
+"""The command line of emacheck: one module per command, dispatched by argparse's ``set_defaults``.
+
+Each command module (``dry_run``, ``run``, ``simulate``, ``analyze``,
+``serv``, ``diagnose``, ``sim_serve``) registers its sub-parser with a
+``register(sub)`` function and keeps its heavy imports (analysis, plotting,
+python-control, numba) inside the command, so ``emacheck run`` loads no more
+than its cyclic loop needs before the first SYNC. Shared pieces are in
+:mod:`hil.cli.common` (exit codes, output folders, loaders) and
+:mod:`hil.cli.check` (running a check and turning it into a result).
+
+Exit status (:class:`hil.cli.common.ExitCode`): 0 pass, 1 fail (backlash
+above B_spec), 2 aborted, 3 bad input (profile, recording, EDS, arguments),
+4 internal error. Any error, expected or not, is one line on the console;
+an unexpected one leaves its traceback in a file whose path that line names.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import NoReturn
+
+from hil import __version__
+from hil.cli import analyze, diagnose, dry_run, run, serv, sim_serve, simulate
+from hil.cli.common import EPILOG, ExitCode
+
+#: The commands in the order ``--help`` lists them.
+COMMANDS = (dry_run, run, simulate, analyze, serv, diagnose, sim_serve)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the documented exit status for bad arguments (3, not argparse's 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        self.exit(ExitCode.INPUT, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The whole command line (every sub-command registered by its module)."""
+    ap = _Parser(
+        prog="emacheck",
+        description="Maintenance check of a dual-EMA flight-control actuation: LVDT calibration "
+                    "under opposing force, force-fight excursions to +-15 %% of limit load, then "
+                    "backlash and stiffness by BLFmaint (Schallert et al.).",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--version", action="version", version=f"emacheck {__version__}")
+    sub = ap.add_subparsers(dest="cmd", metavar="COMMAND", parser_class=_Parser)
+    for module in COMMANDS:
+        module.register(sub)
+    return ap
+
+
+def _internal_error(exc: BaseException) -> int:
+    """One line for an unexpected exception; its traceback goes to a file that line names."""
+    import datetime as _dt
+    import tempfile
+    import traceback
+    from pathlib import Path
+
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    where = Path(tempfile.gettempdir()) / f"emacheck-internal-error-{stamp}.txt"
+    try:
+        where.write_text("".join(traceback.format_exception(exc)))
+        saved = f"; traceback in {where}"
+    except OSError:
+        saved = ""
+    print(f"emacheck: internal error: {type(exc).__name__}: {exc}{saved}", file=sys.stderr)
+    return ExitCode.INTERNAL
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns its exit status (see the module docstring)."""
+    from blf.errors import BlfError
+    from hil.canopen.errors import CanopenError, EdsError
+    from hil.errors import EmacheckError, ProfileError, RecordingError
+
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if args.cmd is None:
+        ap.print_help()
+        return ExitCode.INPUT
+    try:
+        return int(args.handler(args))
+    except (ProfileError, RecordingError, EdsError) as exc:
+        print(f"emacheck: error: {exc}", file=sys.stderr)
+        return ExitCode.INPUT
+    except (EmacheckError, CanopenError, BlfError) as exc:
+        print(f"emacheck: error: {exc}", file=sys.stderr)
+        return ExitCode.ABORTED
+    except KeyboardInterrupt:
+        print("emacheck: interrupted", file=sys.stderr)
+        return ExitCode.ABORTED
+    except Exception as exc:  # noqa: BLE001 - the catch-all: one line and exit 4, never a traceback
+        return _internal_error(exc)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,64 @@
+"""``emacheck analyze``: the check's result again from a run folder, a signals CSV or a CAN log."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from rich.console import Console
+
+from blf.errors import AnalysisError
+from hil.cli.check import INCOMPLETE_REASON, analyze_and_report, exit_for, print_summary
+from hil.cli.common import ExitCode, actuation_for, add_parser, read_meta
+from hil.errors import IncompleteRecordingError
+from hil.runfolder import resolve_recording, write_json_atomic
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    """``emacheck analyze``: recompute the result from a run folder or a signals CSV."""
+    console = Console()
+    arg = Path(args.recording)
+    try:
+        sig_path, run_dir = resolve_recording(arg)
+    except IncompleteRecordingError:
+        if not (arg.is_dir() and (arg / "meta.json").exists()):
+            raise
+        sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
+    meta = read_meta(run_dir)
+    act = actuation_for(args.profile, meta)
+    out = Path(args.out) if args.out is not None else (run_dir if run_dir is not None else sig_path.parent)
+    truth = meta.get("truth") if meta else None
+    incomplete = meta is not None and meta.get("status") == "running"
+    try:
+        result = analyze_and_report(sig_path, act, out, truth, meta, console)
+    except (IncompleteRecordingError, AnalysisError) as exc:
+        # (bad content, e.g. garbage lines or NaN, is refused whatever the run's status)
+        if not incomplete and not (meta is not None and meta.get("status") == "aborted"):
+            raise
+        # an interrupted run with too little data for the analysis: say so, keep what is known
+        result = {"status": "incomplete" if incomplete else "aborted",
+                  "reason": INCOMPLETE_REASON if incomplete else meta.get("reason", ""),
+                  "analysis_error": f"{type(exc).__name__}: {exc}", "recording": str(sig_path)}
+        if truth is not None:
+            result["truth"] = truth
+        out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(out / "result.json", result)
+        console.print(f"[yellow]{result['status']}:[/yellow] {result['reason']}; no analysis: {exc}")
+        return ExitCode.ABORTED
+    if incomplete:
+        console.print(f"[yellow]incomplete:[/yellow] {INCOMPLETE_REASON}")
+    print_summary(console, result, out)
+    return exit_for(result)
+
+
+def register(sub) -> None:
+    p = add_parser(sub, "analyze", handler=cmd_analyze, help="BLFmaint on a run folder or a signals CSV",
+                   description="Recompute calibration, backlash and stiffness from a run folder "
+                               "or a bare signals CSV (columns t,phi1,phi2,s1,s2,F1,F2 in s, rad, mm, N). "
+                               "Without a step column the calibration sweeps and force-fight "
+                               "segments are found automatically.")
+    p.add_argument("recording", metavar="RUN_FOLDER|SIGNALS.csv", type=Path)
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
+                   help="actuation profile (default: the run folder's snapshot, else the shipped one)")
+    p.add_argument("--out", metavar="DIR", type=Path,
+                   help="where result.json and report.html go (default: the run folder, or next to the CSV)")

@@ -1,0 +1,225 @@
+"""Running the check and turning it into a result: shared by dry-run, run, simulate and analyze.
+
+The terminal progress display, the summary table, the EDS and bus-load
+checks before anything is sent, the check loop over CANopen with its abort
+handling, and the analysis plus report at the end.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from blf.signals import CHANNELS
+from hil.cli.common import ExitCode, load_recording
+from hil.config import Actuation
+from hil.errors import KNOWN_ERRORS
+from hil.runfolder import write_json_atomic
+
+
+class LiveProgress:
+    """Terminal progress of a running check: step, progress, forces and strokes."""
+
+    def __init__(self, console: Console, total_s: float, enabled: bool) -> None:
+        self.enabled = enabled and console.is_terminal
+        self._p = Progress(TextColumn("[bold]{task.fields[step]:<12}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                           TextColumn("{task.fields[values]}"), TimeElapsedColumn(), console=console,
+                           transient=False, disable=not self.enabled, refresh_per_second=8)
+        self._task = self._p.add_task("check", total=1.0, step="", values="")
+        self._n = 0
+
+    def __enter__(self) -> "LiveProgress":
+        self._p.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._p.__exit__(*exc)
+
+    def __call__(self, prog, smp) -> None:
+        self._n += 1
+        if not self.enabled or self._n % 25:
+            return
+        vals = (f"F1 {smp.F1_N / 1e3:+6.2f} kN  F2 {smp.F2_N / 1e3:+6.2f} kN  "
+                f"s1 {smp.s1_mm:+7.3f} mm  s2 {smp.s2_mm:+7.3f} mm  t {smp.t_s:6.1f} s")
+        self._p.update(self._task, completed=prog.total_fraction, step=prog.step.value, values=vals)
+
+
+def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
+    """The result as a table, truth beside it when known."""
+    truth = result.get("truth")
+    tab = Table(title=f"BLFmaint result: [bold]{result['status'].upper()}[/bold]")
+    tab.add_column("channel")
+    tab.add_column("backlash mm", justify="right")
+    tab.add_column("± 1σ", justify="right")
+    tab.add_column("c_left N/mm", justify="right")
+    tab.add_column("c_right N/mm", justify="right")
+    if truth:
+        tab.add_column("truth B mm", justify="right")
+        tab.add_column("truth c_l / c_r", justify="right")
+    for ch in CHANNELS:
+        b = result["backlash_mm"][ch]
+        row = [ch, "—" if b is None else f"{b:.4f}",
+               "—" if b is None else f"{result['backlash_sigma_mm'][ch]:.4f}",
+               "—" if b is None else f"{result['stiffness_N_per_mm'][ch]['left']:.0f}",
+               "—" if b is None else f"{result['stiffness_N_per_mm'][ch]['right']:.0f}"]
+        if truth:
+            row += [f"{truth['backlash_mm'][ch]:.4f}",
+                    f"{truth['stiffness_N_per_mm'][ch]['left']:.0f} / {truth['stiffness_N_per_mm'][ch]['right']:.0f}"]
+        tab.add_row(*row)
+    console.print(tab)
+    for k in ("ema1", "ema2"):
+        c = result["calibration"][k]
+        if c is None:
+            console.print(f"LVDT {k[-1]}: not calibrated (no sweep)")
+        else:
+            tr = truth["calibration"][k]["pitch"] if truth else None
+            console.print(f"LVDT {k[-1]}: pitch {c['pitch']:.5f}" + (f" (truth {tr:.5f})" if tr else "")
+                          + f", offset {c['offset_mm']:+.4f} mm, rmse {c['rmse_mm']:.4f} mm")
+    for n in result.get("notes", []):
+        console.print(f"[yellow]note:[/yellow] {n}")
+    if out_dir is not None:
+        console.print(f"run folder: {out_dir}")
+
+
+def analyze_and_report(sig_path: Path, act: Actuation, out_dir: Path, truth: dict | None,
+                       meta: dict | None, console: Console) -> dict:
+    """Read the signals back, analyse, write result.json and report.html."""
+    # imported here, not at the top: `emacheck run` loads the analysis only after the cyclic loop
+    from hil.analysis.maint import analyze_signals, result_dict
+    from hil.report.maint import write_report
+    t0 = time.perf_counter()
+    sig = load_recording(sig_path, act, meta)
+    an = analyze_signals(sig, act)
+    result = result_dict(an, act, truth)
+    if meta is not None and meta.get("status") == "aborted":
+        result["status"] = "aborted"
+        result["reason"] = meta.get("reason", "")
+    elif meta is not None and meta.get("status") == "running":
+        result["status"] = "incomplete"
+        result["reason"] = INCOMPLETE_REASON
+    if sig.notes:
+        result.setdefault("notes", [])
+        result["notes"] = list(result["notes"]) + [n for n in sig.notes if n not in result["notes"]]
+    result["analysis_s"] = round(time.perf_counter() - t0, 3)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out_dir / "result.json", result)
+    write_report(out_dir / "report.html", sig, an, result, act, meta)
+    return result
+
+
+INCOMPLETE_REASON = ("the run did not finish (meta.json still says running: the master was killed or lost "
+                     "power); analysed what was logged up to its last flush")
+
+
+def exit_for(result: dict) -> int:
+    return {"pass": ExitCode.PASS, "fail": ExitCode.FAIL}.get(result["status"], ExitCode.ABORTED)
+
+
+def truth_dict(truth) -> dict:
+    """The simulator's truth in result.json's shape."""
+    return {"backlash_mm": dict(truth.backlash_mm),
+            "stiffness_N_per_mm": {k: dict(v) for k, v in truth.stiffness_N_per_mm.items()},
+            "calibration": {k: dict(v) for k, v in truth.calibration.items()}}
+
+
+def master_setup(act, profile_path, out: Path):
+    """Checks before anything touches a bus: EDS against the layout, bus load."""
+    from hil.canopen.od import check_drive_od, load_drive_od
+    from hil.canopen.pdo import DEFAULT_LAYOUT
+    from hil.canopen.busload import bus_load
+    from hil.profiles import resolve_eds
+
+    eds = resolve_eds(act, profile_path)
+    od = load_drive_od(eds)
+    check_drive_od(od, source=str(eds))
+    c = act.canopen
+    check_eds_identity(od, c, eds)
+    load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, act.timing.sync_period_s, c.heartbeat_period_s)
+    if load.load_worst >= 0.5:
+        from hil.errors import ProfileError
+        raise ProfileError(f"bus load of the PDO layout at canopen.bitrate_bps = {c.bitrate_bps} is "
+                           f"{load.load_worst:.1%} (worst case), not below 50 %")
+    return eds, load
+
+
+def check_eds_identity(od, c, eds) -> None:
+    """The EDS must describe the drive the profile expects (identity 0x1018:01/02/03 defaults)."""
+    from hil.errors import ProfileError
+
+    ident = od[0x1018] if 0x1018 in od else None
+    for sub, field_name, want, cmp in ((1, "vendor_id", c.vendor_id, "=="), (2, "product_code", c.product_code, "=="),
+                                       (3, "revision_min", c.revision_min, ">=")):
+        var = ident.subindices.get(sub) if ident is not None else None
+        have = getattr(var, "default", None)
+        if have is None:
+            raise ProfileError(f"EDS {eds}: identity 0x1018:{sub:02X} has no default value; cannot check it "
+                               f"against the profile's canopen.{field_name}")
+        ok = have == want if cmp == "==" else have >= want
+        if not ok:
+            raise ProfileError(f"EDS {eds}: identity 0x1018:{sub:02X} = 0x{have:08X} does not match the profile's "
+                               f"canopen.{field_name} = 0x{want:08X}: the EDS describes another drive")
+
+
+def canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):
+    """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
+    ...) has already stopped the drives and closed the log when it arrives here: it becomes an
+    aborted outcome with the reason, and result.json says so."""
+    from hil.runner import LoopOutcome, run_check
+
+    t0 = time.perf_counter()
+    try:
+        with LiveProgress(console, 0.0, not quiet) as live:
+            outcome = run_check(link, act, check, out, meta, on_cycle=live)
+    except KNOWN_ERRORS as exc:
+        reason = f"{type(exc).__name__}: {exc}"
+        outcome = LoopOutcome("aborted", reason, meta.get("samples", 0), meta.get("duration_s", 0.0),
+                              meta.get("steps", {}))
+    wall = time.perf_counter() - t0
+    return outcome, wall
+
+
+def page_faults() -> int:
+    """Page faults of this process so far (minor and major)."""
+    import resource
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_minflt + r.ru_majflt
+
+
+def record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=None,
+                      page_faults: int | None = None) -> None:
+    meta["wall_s"] = round(wall, 3)
+    meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
+                   "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
+    if transport is not None and hasattr(transport, "max_lag_s"):
+        # how far the master fell behind the bus at worst (a frame waiting in its socket) [ms]
+        meta["can"]["max_lag_ms"] = round(transport.max_lag_s * 1e3, 2)
+    if page_faults is not None:
+        meta["can"]["page_faults"] = page_faults  # during the check (each costs time)
+    write_json_atomic(out / "meta.json", meta)
+
+
+def result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -> int:
+    """Analyse a finished check; an aborted one gets result.json with the reason (and the
+    analysis where enough data was recorded)."""
+    if outcome.status != "done":
+        console.print(f"[red]aborted:[/red] {outcome.reason}")
+        meta["status"], meta["reason"] = "aborted", meta.get("reason") or outcome.reason
+        write_json_atomic(out / "meta.json", meta)
+        try:
+            result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+        except KNOWN_ERRORS as exc:
+            result = {"status": "aborted", "reason": meta["reason"], "analysis_error": str(exc)}
+            if truth is not None:
+                result["truth"] = truth
+            write_json_atomic(out / "result.json", result)
+            console.print(f"no analysis: {exc}")
+            return ExitCode.ABORTED
+        print_summary(console, result, out)
+        return ExitCode.ABORTED
+    result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+    print_summary(console, result, out)
+    return exit_for(result)

@@ -1,0 +1,130 @@
+"""Shared pieces of the command layer: exit codes, output folders, loading recordings and profiles.
+
+Every command module of :mod:`hil.cli` takes what it shares from here (and
+from :mod:`hil.cli.check`), never from another command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+from enum import IntEnum
+from pathlib import Path
+
+from hil.config import Actuation
+from hil.errors import RecordingError
+from hil.profiles import build_dataclass, load_actuation
+from hil.runfolder import read_signals
+
+
+class ExitCode(IntEnum):
+    """Exit status of every command (README, "Exit status")."""
+
+    PASS = 0  #: the check passed (analyze, dry-run, run, simulate); done (serv, diagnose, sim-serve)
+    FAIL = 1  #: a backlash above B_spec
+    ABORTED = 2  #: the check aborted or the run is incomplete; result.json says why
+    INPUT = 3  #: bad input: profile, recording, EDS or arguments; the message names file, field or line
+    INTERNAL = 4  #: an internal error (a bug): one line on the console, the traceback in the log
+
+
+EPILOG = """\
+exit status: 0 pass (serv, diagnose, sim-serve: done), 1 fail (a backlash above B_spec),
+2 check aborted or run incomplete (result.json says why), 3 bad input (profile,
+recording, EDS, arguments: the message names the file, field or line), 4 internal error.
+Profiles default to the ones shipped in the package (profiles/*.toml)."""
+
+
+def add_parser(sub, name: str, *, help: str, description: str, handler) -> argparse.ArgumentParser:
+    """A sub-command's parser with the common epilog; ``handler(args) -> int`` runs it."""
+    p = sub.add_parser(name, help=help, description=description, epilog=EPILOG,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.set_defaults(handler=handler)
+    return p
+
+
+def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: bool = False) -> None:
+    """``--profile`` (and ``--check``, ``--sim``, ``--seed``): the profiles a command reads."""
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
+                   help="actuation profile (gear ratio, stroke, F_limit, B_spec, SYNC period, node ids, EDS)")
+    if check:
+        p.add_argument("--check", metavar="CHECK.toml", type=Path,
+                       help="check profile (sweep, opposing force, force fight, safety limits)")
+    if sim:
+        p.add_argument("--sim", metavar="SIMRIG.toml", type=Path,
+                       help="simulated-rig profile (physical parameters, sensor errors, seed)")
+        p.add_argument("--seed", type=_seed, help="noise seed, an integer >= 0 (default: the simulated-rig "
+                                                  "profile's); recorded in meta.json")
+
+
+def add_bus_args(p: argparse.ArgumentParser, interfaces: str) -> None:
+    """``--interface``, ``--channel``, ``--bitrate``: a python-can bus."""
+    p.add_argument("--interface", required=True, help=f"python-can interface, e.g. {interfaces}")
+    p.add_argument("--channel", required=True, help="channel, e.g. can0 or vcan0")
+    p.add_argument("--bitrate", type=int, metavar="BPS", help="bit rate (default: the actuation profile's)")
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{v} is negative; a seed is an integer >= 0")
+    return v
+
+
+def default_out(kind: str) -> Path:
+    """``emacheck-runs/<local time>-<kind>``: where a command writes when ``--out`` is not given."""
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    return Path("emacheck-runs") / f"{stamp}-{kind}"
+
+
+def out_dir(args: argparse.Namespace, kind: str) -> Path:
+    """``--out`` if given, else :func:`default_out`."""
+    if args.out is not None:
+        return Path(args.out)
+    return default_out(kind)
+
+
+def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
+    """Signals from a CSV, or decoded from a raw CAN log (``*.log``), step labels from meta.json."""
+    if sig_path.suffix != ".log":
+        return read_signals(sig_path)
+    from hil.canlog import decode_can_log
+    import dataclasses
+    import numpy as np
+
+    dec = decode_can_log(sig_path, act)
+    sig = dec.signals
+    steps = (meta or {}).get("steps") or {}
+    if steps:
+        label = np.full(sig.n, "", dtype=object)
+        for name, span in steps.items():
+            t0 = span[0]
+            t1 = span[1] if len(span) > 1 else np.inf
+            label[(sig.t >= t0 - 1e-9) & (sig.t < t1 - 1e-9)] = name
+        sig = dataclasses.replace(sig, step=label.astype(str),
+                                  notes=sig.notes + ("step labels from meta.json step times",))
+    return sig
+
+
+def read_meta(run_dir: Path | None) -> dict | None:
+    """A run folder's meta.json, or None (no run folder, or no meta.json in it)."""
+    if run_dir is None or not (run_dir / "meta.json").exists():
+        return None
+    try:
+        return json.loads((run_dir / "meta.json").read_text())
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{run_dir / 'meta.json'}: not valid JSON: {exc}") from None
+
+
+def actuation_for(profile: Path | None, meta: dict | None) -> Actuation:
+    """The actuation to analyse a recording with: ``--profile`` if given, else the run folder's
+    snapshot (what the run used), else the shipped profile."""
+    if profile is not None:
+        return load_actuation(profile)
+    snap = ((meta or {}).get("profiles") or {}).get("actuation")
+    if snap is not None:
+        return build_dataclass(Actuation, snap, "meta.json (actuation snapshot)")
+    return load_actuation(None)

@@ -1,0 +1,68 @@
+"""``emacheck diagnose``: simulation versus recording; locate the mismatch, name the missing physics, fit it."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from hil.cli.common import add_parser
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """``emacheck diagnose RECORDING [--profile] [--out] [--model]``."""
+    from rich.console import Console
+
+    from blf.diagnose import diagnose
+    from hil.analysis.diagnose import diagnosis_dict, load_model
+    from hil.report.diagnose import write_report
+    from hil.runfolder import write_json_atomic
+    console = Console()
+    path = Path(args.recording)
+    model, period = load_model(path, args.model, args.profile)
+    out = args.out or (path if path.is_dir() else path.parent)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    secs = time.perf_counter() - t0
+    data = diagnosis_dict(d, args.model, secs)
+    write_json_atomic(out / "diagnosis.json", data)
+    if not args.no_report:
+        write_report(out / "diagnosis_report.html", model, d, data)
+    words = {"no_mismatch": "no significant mismatch between simulation and recording",
+             "explained": "mismatch explained", "unexplained": "mismatch NOT explained by the candidate library"}
+    console.print(f"[bold]{words[d.verdict]}[/bold] ({secs:.1f} s)")
+    for e in data["effects"] + data["partial_effects"]:
+        tag = "" if d.verdict == "explained" else " (partial)"
+        console.print(f"  {e['words']}{tag}: " + ", ".join(
+            f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
+    for l in data["locations"][:6]:
+        console.print(f"  where: {l['channel']} {l['t_start_s']}-{l['t_end_s']} s ({l['test']} test), {l['regime']}")
+    console.print("  residual RMS before -> after: " + ", ".join(
+        f"{c} {data['residual_rms_before'][c]} -> {data['residual_rms_after'][c]}"
+        for c in d.measured if d.valid[c].any()))
+    console.print("  on the held-out half (never fitted): " + ", ".join(
+        f"{c} {data['residual_rms_holdout_before'][c]} -> {data['residual_rms_holdout_after'][c]}"
+        for c in d.measured if d.valid[c].any()))
+    console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {out / 'diagnosis.json'}")
+    return 0
+
+
+def register(sub) -> None:
+    p = add_parser(sub, "diagnose", handler=cmd_diagnose,
+                   help="simulation versus recording: locate the mismatch, name the missing physics",
+                   description="Replay a recording through the simulation driven by the measured motor "
+                               "angles, fit the nominal model, localise where they differ, screen a library "
+                               "of candidate physics terms, refit the best and accept it only if BIC and a "
+                               "held-out half of the recording both improve. Writes diagnosis.json and "
+                               "diagnosis_report.html.")
+    p.add_argument("recording", metavar="RECORDING", type=Path,
+                   help="run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2), CAN log; single-axis: .mat or "
+                        "CSV t,q,q_ref,force")
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path, help="actuation profile (gear ratio)")
+    p.add_argument("--out", metavar="DIR", type=Path,
+                   help="where diagnosis.json and diagnosis_report.html go (default: the run folder, or next to the file)")
+    p.add_argument("--model", choices=("dual-ema", "single-axis"), default="dual-ema",
+                   help="dual-EMA rig (default) or a single positioning axis (e.g. EMPS)")
+    p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")

@@ -1,0 +1,79 @@
+"""``emacheck run``: the check on real drives (the dry-run's code path, wall-clock SYNC)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from rich.console import Console
+
+from hil.cli.check import canopen_check, master_setup, page_faults, record_can_stats, result_after
+from hil.cli.common import ExitCode, add_bus_args, add_parser, add_profile_args, out_dir
+from hil.profiles import load_actuation, load_check
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """``emacheck run``: the check on real drives (same code path as dry-run, wall-clock SYNC)."""
+    import can
+
+    from hil.canlog import CanLogWriter
+    from hil.transport import BusTransport
+    from hil.link import CanopenLink
+    from hil.master import MasterCore
+    from hil.runner import start_meta
+
+    console = Console()
+    act = load_actuation(args.profile)
+    check = load_check(args.check, act)
+    eds, load = master_setup(act, args.profile, None)
+    if not args.arm:
+        console.print("[red]refusing to move anything:[/red] `emacheck run` drives real actuators; "
+                      "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
+        return ExitCode.INPUT
+    out = out_dir(args, "run")
+    out.mkdir(parents=True, exist_ok=True)
+    bitrate = args.bitrate or act.canopen.bitrate_bps
+    kwargs = {"interface": args.interface, "channel": args.channel}
+    if args.interface not in ("virtual", "socketcan"):
+        kwargs["bitrate"] = bitrate
+    if args.interface == "virtual":
+        kwargs["receive_own_messages"] = True  # the SYNC task's frames are part of the traffic
+    bus = can.Bus(**kwargs)
+    transport = BusTransport(bus, act.timing.sync_period_s)
+    master = MasterCore(act)
+    log = CanLogWriter(out / "can.log", channel=args.channel)
+    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
+                       max_lag_s=check.safety.max_lag_s)
+    meta = start_meta(act, check, {"mode": "run", "interface": args.interface, "channel": args.channel,
+                                   "bitrate_bps": bitrate,
+                                   "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
+                                   "eds": str(eds)})
+    console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
+    from hil.cli.realtime import end_realtime, prepare_realtime
+    console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")
+    faults0 = page_faults()
+    try:
+        outcome, wall = canopen_check(console, act, check, link, out, meta, args.quiet)
+    finally:
+        transport.close()
+        bus.shutdown()
+        end_realtime()  # the analysis and the report run at normal priority, GC on
+    record_can_stats(out, meta, wall, log, master, transport, page_faults() - faults0)
+    console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
+                  f"{log.frames} CAN frames logged")
+    return result_after(out, act, None, meta, outcome, console)
+
+
+def register(sub) -> None:
+    p = add_parser(sub, "run", handler=cmd_run, help="the check on real drives (needs --arm)",
+                   description="Run the check on two real CiA 402 drives on a CAN bus: the same code path "
+                               "as dry-run, SYNC on the wall clock (kernel-timed on SocketCAN).")
+    add_bus_args(p, "socketcan, pcan, kvaser")
+    p.add_argument("--arm", action="store_true", help="confirm that the actuators may move")
+    p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-run)")
+    add_profile_args(p)
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "
+                        "default 0: normal scheduling); analysis and report run at normal priority "
+                        "after it. Memory is locked either way (best effort).")

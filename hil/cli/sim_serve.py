@@ -1,0 +1,72 @@
+"""``emacheck sim-serve``: the two simulated drives on a CAN bus until SIGINT/SIGTERM."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import signal
+import threading
+
+from hil.cli.common import add_bus_args, add_parser
+from hil.cli.realtime import prepare_realtime
+
+
+def cmd_sim_serve(args: argparse.Namespace) -> int:
+    """``emacheck sim-serve``: the two simulated drives on a CAN bus until SIGINT/SIGTERM."""
+    import numpy as np
+
+    import can
+
+    from hil.canopen.od import check_drive_od, load_drive_od
+    from hil.sim_server import serve
+    from hil.profiles import load_actuation, load_simrig, resolve_eds
+    from sim.plant import RigPlant
+    from sim.drives import SimDrivePair
+
+    act = load_actuation(args.profile)
+    simrig = load_simrig(args.sim)
+    eds = resolve_eds(act, args.profile)
+    check_drive_od(load_drive_od(eds), source=str(eds))
+    seed = simrig.seed if args.seed is None else args.seed
+    plant = RigPlant(simrig.params, np.random.default_rng(seed))
+    pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id),
+                        node_ids=act.canopen.node_ids)
+    kwargs = {"interface": args.interface, "channel": args.channel}
+    if args.interface not in ("virtual", "socketcan"):
+        kwargs["bitrate"] = args.bitrate or act.canopen.bitrate_bps
+    bus = can.Bus(**kwargs)
+
+    stop = threading.Event()
+
+    def _stop(signum, _frame) -> None:
+        stop.set()
+
+    old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    rt = prepare_realtime(args.rt_priority)
+    n1, n2 = act.canopen.node_ids
+
+    def ready() -> None:
+        print(f"sim-serve: nodes {n1}, {n2} on {args.interface}:{args.channel}, seed {seed}, {rt}; ready",
+              flush=True)
+
+    try:
+        stats = serve(bus, pair, stop=stop, on_ready=ready)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    print(stats.line(), flush=True)
+    return 0
+
+
+def register(sub) -> None:
+    p = add_parser(sub, "sim-serve", handler=cmd_sim_serve,
+                   help="the two simulated drives on a CAN bus (until SIGINT/SIGTERM)",
+                   description="Serve two simulated CiA 402 drives on a python-can bus (e.g. socketcan "
+                               "vcan0) for `emacheck run` in another process; the plant steps on each "
+                               "SYNC received. SIGINT/SIGTERM end it cleanly.")
+    add_bus_args(p, "socketcan, virtual")
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path, help="actuation profile (node ids, EDS)")
+    p.add_argument("--sim", metavar="SIMRIG.toml", type=Path, help="simulated-rig profile")
+    p.add_argument("--seed", type=int, help="noise seed (default: the simulated-rig profile's)")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")

@@ -1,0 +1,270 @@
+"""The CANopen link: the master core over a transport, as the check loop's :class:`hil.runner.Link`.
+
+:class:`CanopenLink` implements the :class:`hil.runner.Link` protocol, so the
+check loop and the sequence core run unchanged whether the drives are
+simulated or real; the transports of :mod:`hil.transport` move the frames.
+It feeds every frame to the sans-IO :class:`hil.master.MasterCore`, logs it,
+runs the SYNC cycle, watches sensor freshness and the master's lag, and
+brings the drives to the safe state on close.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import can
+
+from hil.canopen.cia402 import State
+from hil.canopen.frame import Frame, sync_frame
+from hil.canopen.nmt import NmtCommand
+from hil.canopen.process import DriveMode, Sample, Setpoint
+from hil.canopen.sdo import SdoAbortError, SdoTimeout
+from hil.canlog import CanLogWriter
+from hil.config import HARD_MAX_LAG_S
+from hil.errors import KNOWN_ERRORS, EmacheckError
+from hil.master import MasterCore, PreflightError
+from hil.transport import InProcessTransport
+
+
+DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
+
+
+#: Safe-state cycles after which a drive still in OPERATION_ENABLED gets the quick stop by SDO
+#: (and again every as many cycles): its RPDOs are not getting through.
+SDO_FALLBACK_CYCLES = 5
+
+
+class LinkError(EmacheckError, RuntimeError):
+    """The cyclic exchange with the drives broke down (no samples)."""
+
+
+class StaleData(LinkError):
+    """Sensor freshness: no complete sample for more SYNC cycles than ``safety.max_stale_cycles``."""
+
+
+class CanopenLink:
+    """The drives over CANopen, as a :class:`hil.runner.Link`.
+
+    Parameters
+    ----------
+    master : MasterCore
+    transport : InProcessTransport or BusTransport
+    log : CanLogWriter, optional
+        Every frame sent and received is logged as it happens.
+    on_event : callable, optional
+        Receives the master's events (boot-up, states, EMCY, ...).
+    max_missing_cycles : int
+        Sensor freshness: SYNC cycles in a row without a complete sample before
+        :class:`StaleData` is raised (the check's ``safety.max_stale_cycles``).
+    max_lag_s : float, optional
+        On a real bus, the longest a SYNC may wait in the master's socket before
+        the master takes it [s] (``safety.max_lag_s``); beyond it the master has
+        fallen behind the bus (or the computer stalled) and stops with
+        :class:`StaleData`. Default: ``max_missing_cycles`` SYNC periods.
+    """
+
+    def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
+                 on_event: Callable | None = None, max_missing_cycles: int = 5,
+                 max_lag_s: float | None = None) -> None:
+        self.m = master
+        self.tr = transport
+        self.log = log
+        self.on_event = on_event
+        self.max_missing = max_missing_cycles
+        #: the longest a SYNC may have waited in the socket before the master took it [s]
+        lag = max_lag_s if max_lag_s is not None else max_missing_cycles * getattr(transport, "T", 0.0)
+        self.max_lag_s = min(lag, HARD_MAX_LAG_S)  # applied again here, whatever the caller passed
+        self._last: Sample | None = None
+        self._closed = False
+        self.sync_times: list[float] = []
+        self.final_states: dict | None = None  #: per EMA, after :meth:`close`
+        self._safe_cycles = 0
+        self.close_errors: list[str] = []  #: errors met while stopping the drives (recorded, not raised)
+
+    # -------------------------------------------------------------- plumbing
+
+    def _send(self, frames: list[Frame]) -> None:
+        if not frames:
+            return
+        msgs = self.tr.send(frames, self.tr.now())
+        if self.log is not None:
+            for m in msgs:
+                self.log.write_msg(m)
+
+    def _feed(self, got: list[tuple[Frame, float, can.Message]]) -> None:
+        log = self.log
+        on_frame = self.m.on_frame
+        now = self.tr.now
+        for f, t, msg in got:
+            if log is not None:
+                if msg.timestamp != t:
+                    msg.timestamp = t  # log the time the master saw it
+                log.write_msg(msg)
+            out = on_frame(f, now())
+            if out:
+                self._send(out)
+        events = self.m.drain_events()  # drained always: the master's list must not grow in the loop
+        if self.on_event is not None:
+            for ev in events:
+                self.on_event(ev)
+
+    def _sync(self) -> None:
+        t = self.tr.next_sync()
+        if t is not None:
+            self.sync_times.append(t)
+            # the SYNC we sent is part of the traffic the master follows
+            if self.log is not None:
+                self.log.write(sync_frame(), t, rx=False)
+            self.m.on_frame(sync_frame(), t)
+
+    # --------------------------------------------------------------- phases
+
+    def preflight(self) -> None:
+        """Boot, identify and configure both drives (SDO), then NMT start."""
+        t0 = self.tr.now()
+        try:
+            self._send(self.m.start(t0))
+            limit = t0 + self.m.act.canopen.boot_timeout_s + 30.0
+            while not self.m.preflight_done:
+                now = self.tr.now()
+                if now > limit:
+                    raise PreflightError("preflight did not complete within "
+                                         f"{limit - t0:.0f} s")
+                self._feed(self.tr.receive(now + 0.01))
+                self._send(self.m.poll(self.tr.now()))
+        except (SdoAbortError, SdoTimeout) as exc:
+            if getattr(exc, "abort_frame", None) is not None:
+                self._send([exc.abort_frame])
+            raise
+
+    def _next_sample(self) -> Sample:
+        """Run one SYNC cycle and return its sample (SYNC, TPDOs of both drives)."""
+        missing = 0
+        while True:
+            sample = self._cycle(stop_at_sample=True)
+            if sample is not None:
+                self._last = sample
+                return sample
+            missing += 1
+            if missing > self.max_missing:
+                err = StaleData(f"sensor data stale: no complete sample for {missing} SYNC cycles "
+                                f"(safety.max_stale_cycles = {self.max_missing}); missing: "
+                                + ", ".join(f"node {n} TPDO{k}" for n, d in self.m.drives.items()
+                                            for k, tp in ((1, d.tpdo1), (2, d.tpdo2)) if tp is None)
+                                + f"; drive states {[d.state.name for d in self.m.drives.values()]}")
+                self.m._latch(err)
+                raise err
+
+    def first_sample(self) -> Sample:
+        """Preflight, start SYNC, enable both drives in CSP holding their position."""
+        self.preflight()
+        self.tr.start_sync()
+        smp = self._next_sample()
+        deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
+        while not self.m.all_in(State.OPERATION_ENABLED):
+            if self.tr.now() > deadline:
+                states = {n: d.state.name for n, d in self.m.drives.items()}
+                raise PreflightError(f"drives not in OPERATION_ENABLED within canopen.enable_timeout_s = "
+                                     f"{self.m.act.canopen.enable_timeout_s} s: {states}")
+            hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
+            self._send(self.m.setpoint_frames(*hold, smp))
+            smp = self._next_sample()
+        return smp
+
+    def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
+        if self.m.fault is not None and sp1.mode is DriveMode.DISABLED and sp2.mode is DriveMode.DISABLED:
+            # stopping after a fault: one safe-state cycle, no complete sample required
+            self._safe_cycle()
+            return self._last
+        self._send(self.m.setpoint_frames(sp1, sp2, self._last))
+        return self._next_sample()
+
+    def abort(self) -> None:
+        """The check aborted: drives go down by quick stop."""
+        self.m.quick_stop = True
+
+    def _safe_cycle(self) -> None:
+        """One SYNC cycle of the safe-state sequence: DISABLED setpoints (quick stop when aborting),
+        SYNC, whatever the drives answer; no complete sample needed (a drive may be gone)."""
+        if self._last is not None:
+            self._send(self.m.setpoint_frames(DISABLED, DISABLED, self._last))
+        self._safe_cycles += 1
+        if self._safe_cycles % SDO_FALLBACK_CYCLES == 0:  # a drive that ignores its RPDOs: by SDO
+            self._send(self.m.fallback_stop_frames(self.tr.now()))
+        sample = self._cycle(stop_at_sample=False)
+        if sample is not None:
+            self._last = sample
+
+    def _cycle(self, stop_at_sample: bool) -> Sample | None:
+        """SYNC, then the frames of this cycle; returns the cycle's sample if it completed.
+
+        In-process: deliver what is in flight (time stands still until the next SYNC); on a
+        bus: wait for frames until the cycle would end (or, with ``stop_at_sample``, until the
+        sample is complete).
+        """
+        self._sync()
+        inproc = isinstance(self.tr, InProcessTransport)
+        cycle_end = self.tr.now() + self.tr.T
+        found = None
+        while True:
+            got = self.tr.receive(self.tr.now() if inproc else cycle_end)
+            if got:
+                lag = getattr(self.tr, "lag_s", 0.0)
+                # (once stopping after a fault, the safe-state sequence goes on whatever the lag)
+                if lag > self.max_lag_s and self.m.fault is None:
+                    # the master has fallen behind the bus: whatever it computes now is stale
+                    err = StaleData(f"sensor data stale: the master is {lag * 1e3:.0f} ms behind the bus "
+                                    f"(frames wait in its socket; safety.max_lag_s = {self.max_lag_s * 1e3:.0f} ms)")
+                    self.m._latch(err)
+                    raise err
+                self._feed(got)
+            self._send(self.m.poll(self.tr.now()))
+            sample = self.m.take_sample()
+            if sample is not None:
+                found = sample
+                if stop_at_sample:
+                    return found
+            if not got or (not inproc and self.tr.now() >= cycle_end):
+                return found
+
+    def close(self) -> None:
+        """Bring both drives down to the safe state, stop SYNC, NMT pre-operational, close the log.
+
+        Orderly (disable operation, shutdown, disable voltage) after a finished check, quick stop
+        then disable after an abort. A drive that cannot be reached (heartbeat lost, no statusword)
+        does not hold up the other. Every step runs even if an earlier one fails; the first error
+        is re-raised at the end. :attr:`final_states` then holds each drive's last known state.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        errors: list[BaseException] = []
+        try:
+            if self._last is not None and self.m.preflight_done:
+                deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
+                while not self.m.in_safe_state(self.tr.now()) and self.tr.now() < deadline:
+                    try:
+                        self._safe_cycle()
+                    except KNOWN_ERRORS as exc:  # recorded; keep stopping the drives
+                        errors.append(exc)
+                        if len(errors) > 50:
+                            break
+        except BaseException as exc:
+            errors.append(exc)
+        self.final_states = self.m.safe_state_report(self.tr.now())
+        self.close_errors = [f"{type(e).__name__}: {e}" for e in errors]
+        for step in (self.tr.stop_sync,
+                     lambda: self._send(self.m.nmt_frames(NmtCommand.PRE_OPERATIONAL)),
+                     lambda: self._feed(self.tr.receive(self.tr.now()))):
+            try:
+                step()
+            except BaseException as exc:
+                errors.append(exc)
+        if self.log is not None:
+            try:
+                self.log.close()
+            except BaseException as exc:
+                errors.append(exc)
+        fatal = [e for e in errors if not isinstance(e, KNOWN_ERRORS)]
+        if fatal:
+            raise fatal[0]

@@ -1,0 +1,202 @@
+"""Self-contained HTML report with the paper's figures (matplotlib, embedded PNG).
+
+Figures: force and D versus time (paper Fig. 3), F versus D with dF/dD, its
+median, D_lc and D_rc (Fig. 4), the three regression lines with backlash and
+stiffness (Figs. 5 and 6), the LVDT calibration regression (Fig. 9), and a
+summary table with truth where the data came from the simulator.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from blf.maint import BlfMaintResult
+from blf.signals import CHANNELS
+from hil.analysis.maint import Analysis
+from hil.config import Actuation
+from hil.report.shell import column, esc, fmt, img, json_details, notes, pyplot, table, write_page
+from hil.runfolder import Signals
+
+_LABEL = {"int1": ("F_1", "D_{int,1}"), "int2": ("F_2", "D_{int,2}"), "ext": ("F_2 - F_1", "D_{ext}")}
+_MAX_POINTS = 6000
+
+
+def _thin(n: int) -> slice:
+    return slice(None, None, max(1, n // _MAX_POINTS))
+
+
+def _channel_data(sig: Signals, an: Analysis, ch: str) -> tuple[np.ndarray, np.ndarray]:
+    ff = an.segments.force_fight
+    if ch == "int1":
+        return an.d_int1[ff], sig.F1[ff]
+    if ch == "int2":
+        return an.d_int2[ff], sig.F2[ff]
+    return an.d_ext[ff], (sig.F2 - sig.F1)[ff]
+
+
+def figure_time(sig: Signals, an: Analysis, act: Actuation):
+    """Paper Figure 3: forces and D signals versus time during the force fight."""
+    ff = an.segments.force_fight
+    t = sig.t[ff]
+    sl = _thin(t.size)
+    fig, axes = pyplot().subplots(2, 3, figsize=(13, 5.5), sharex=True)
+    for j, ch in enumerate(CHANNELS):
+        d, f = _channel_data(sig, an, ch)
+        fl, dl = _LABEL[ch]
+        axes[0, j].plot(t[sl], f[sl] / 1e3, lw=0.6)
+        axes[0, j].set_ylabel(f"${fl}$ [kN]")
+        axes[0, j].set_title(ch)
+        axes[1, j].plot(t[sl], d[sl], lw=0.4, color="C1")
+        axes[1, j].set_ylabel(f"${dl}$ [mm]")
+        axes[1, j].set_xlabel("t [s]")
+        for a in axes[:, j]:
+            a.grid(alpha=0.3)
+    fig.suptitle(f"Force fight: forces and position differences (F_limit = {act.mechanics.limit_load_N / 1e3:g} kN)")
+    fig.tight_layout()
+    return fig
+
+
+def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
+    """Paper Figure 4: F versus D and the binned derivative dF/dD with median, D_lc, D_rc."""
+    fl, dl = _LABEL[ch]
+    sl = _thin(d.size)
+    fig, (a0, a1) = pyplot().subplots(2, 1, figsize=(6.5, 6), sharex=True)
+    a0.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.3, label="samples")
+    a0.plot(r.curve.d_mm, r.curve.f_N / 1e3, "-", color="k", lw=1, label="binned (median per bin)")
+    a0.set_ylabel(f"${fl}$ [kN]")
+    a1.plot(r.curve.d_mm, r.curve.dfdd_N_per_mm / 1e3, "-", color="C2", label="dF/dD (binned)")
+    a1.axhline(r.dfdd_median / 1e3, color="C3", ls="--", label=f"median {r.dfdd_median / 1e3:.1f} kN/mm")
+    a1.axhline(r.curve.threshold_N_per_mm / 1e3, color="C4", ls=":",
+               label=f"contact threshold {r.curve.threshold_N_per_mm / 1e3:.1f} kN/mm")
+    for a in (a0, a1):
+        a.axvline(r.d_lc_mm, color="gray", ls="--", lw=0.8)
+        a.axvline(r.d_rc_mm, color="gray", ls="--", lw=0.8)
+        a.grid(alpha=0.3)
+        a.legend(fontsize=7, loc="best")
+    a1.set_ylabel("dF/dD [kN/mm]")
+    a1.set_xlabel(f"${dl}$ [mm]   (dashed verticals: D_lc = {r.d_lc_mm:.4f}, D_rc = {r.d_rc_mm:.4f})")
+    a0.set_title(f"{ch}: F versus D and its derivative (paper Fig. 4)")
+    fig.tight_layout()
+    return fig
+
+
+def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth: dict | None):
+    """Paper Figures 5/6: the three regression lines, backlash and stiffness."""
+    fl, dl = _LABEL[ch]
+    sl = _thin(d.size)
+    L = r.lines
+    fig, ax = pyplot().subplots(figsize=(6.5, 4.5))
+    ax.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.25, color="C0", label="samples")
+    for line, col in ((L.left, "C3"), (L.right, "C2")):
+        fr = np.linspace(min(line.f_min_N, 0.0), max(line.f_max_N, 0.0), 50)
+        ax.plot(line.d_mm(fr), fr / 1e3, color=col, lw=1.5,
+                label=f"c_{line.side} = {abs(1.0 / line.compliance_mm_per_N) / 1e3:.1f} kN/mm")
+    dr = np.linspace(L.d_left_mm, L.d_right_mm, 20)
+    ax.plot(dr, L.centre.f_N(dr) / 1e3, color="k", lw=1.5, label="c_center")
+    ax.plot([L.d_left_mm, L.d_right_mm], [L.f_left_N / 1e3, L.f_right_N / 1e3], "ko", ms=5)
+    ax.annotate("", xy=(L.d_right_mm, 0), xytext=(L.d_left_mm, 0),
+                arrowprops=dict(arrowstyle="<->", color="k"))
+    txt = f"B = {r.backlash_mm:.4f} ± {r.backlash_sigma_mm:.4f} mm"
+    if truth is not None:
+        txt += f"\ntruth {truth['backlash_mm'][ch]:.4f} mm"
+    ax.text(0.02, 0.04, txt, transform=ax.transAxes, fontsize=9,
+            bbox=dict(facecolor="white", alpha=0.8, edgecolor="none"))
+    ax.set_xlabel(f"${dl}$ [mm]")
+    ax.set_ylabel(f"${fl}$ [kN]")
+    ax.set_title(f"{ch}: backlash and stiffness (paper Fig. {'6' if ch == 'ext' else '5'})")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    return fig
+
+
+def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
+    """Paper Figure 9: LVDT stroke versus motor angle referred to the ram, and residuals."""
+    i = act.mechanics.i_total_rad_per_mm
+    fig, axes = pyplot().subplots(2, 2, figsize=(12, 6), sharex="col")
+    for j, (k, mask, phi, s) in enumerate((("ema1", an.segments.cal1, sig.phi1, sig.s1),
+                                           ("ema2", an.segments.cal2, sig.phi2, sig.s2))):
+        c = an.calibration[k]
+        ax, axr = axes[0, j], axes[1, j]
+        if c is None or mask is None:
+            ax.text(0.5, 0.5, "no calibration sweep", ha="center", transform=ax.transAxes)
+            continue
+        x, y = phi[mask] / i, s[mask]
+        sl = _thin(x.size)
+        ax.plot(x[sl], y[sl], ".", ms=1, alpha=0.4, label="LVDT s (raw)")
+        xx = np.linspace(x.min(), x.max(), 200)
+        ax.plot(xx, c.evaluate(xx), "k-", lw=1, label=f"regression, pitch {c.pitch:.4f}")
+        ax.plot(xx, xx, "--", color="gray", lw=0.8, label="s = φ/i_total")
+        ax.set_ylabel("s [mm]")
+        ax.set_title(f"LVDT {k[-1]} calibration (paper Fig. 9)")
+        ax.legend(fontsize=8)
+        axr.plot(x[sl], (y - c.evaluate(x))[sl], ".", ms=1, alpha=0.4)
+        axr.set_ylabel("residual [mm]")
+        axr.set_xlabel("φ / i_total [mm]")
+        axr.set_title(f"rmse {c.rmse_mm:.4f} mm, nonlinearity {c.nonlinearity_mm:.4f} mm", fontsize=9)
+        for a in (ax, axr):
+            a.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def summary_table(result: dict) -> str:
+    """Backlash and stiffness per channel (truth beside it for simulated data), then the LVDT calibration."""
+    truth = result.get("truth")
+    cols = [column("channel"), column("backlash", "mm"), column("±1σ", "mm"), column("c_left", "N/mm"),
+            column("c_right", "N/mm")]
+    if truth:
+        cols += [column("truth backlash", "mm"), column("truth c_left / c_right", "N/mm"), column("error", "mm")]
+    rows = []
+    for ch in CHANNELS:
+        b = result["backlash_mm"][ch]
+        st = result["stiffness_N_per_mm"][ch]
+        cells = [ch, fmt(b), fmt(result["backlash_sigma_mm"][ch]), fmt(st["left"], 0), fmt(st["right"], 0)]
+        if truth:
+            tb = truth["backlash_mm"][ch]
+            ts = truth["stiffness_N_per_mm"][ch]
+            cells += [fmt(tb), f"{ts['left']:.0f} / {ts['right']:.0f}", fmt(None if b is None else b - tb)]
+        rows.append(cells)
+    cal_rows = []
+    for k in ("ema1", "ema2"):
+        c = result["calibration"][k]
+        if c is None:
+            cal_rows.append([k, "not calibrated", "", "", ""])
+            continue
+        tp = f" (truth {truth['calibration'][k]['pitch']:.5f})" if truth else ""
+        cal_rows.append([k, f"{c['pitch']:.5f}{tp}", f"{c['offset_mm']:+.4f}", f"{c['nonlinearity_mm']:.4f}",
+                         f"{c['rmse_mm']:.4f}"])
+    return (table(cols, rows) + "<h3>LVDT calibration</h3>"
+            + table([column("LVDT"), column("pitch"), column("offset", "mm"), column("non-linearity", "mm"),
+                     column("rmse", "mm")], cal_rows))
+
+
+def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: dict | None) -> None:
+    """Write the self-contained HTML report."""
+    status = result["status"]
+    parts = [f"<h1>emacheck maintenance check: <span class='{status}'>{status.upper()}</span></h1>",
+             f"<p>Actuation: {esc(getattr(act, 'name', ''))}; B_spec internal {act.mechanics.backlash_spec_int_mm} mm, "
+             f"external {act.mechanics.backlash_spec_ext_mm} mm; {sig.n} samples, "
+             f"{sig.t[-1] - sig.t[0]:.1f} s; segments from the {esc(an.segments.source)}.</p>"]
+    if result.get("reason"):
+        parts.append(f"<p class='aborted'>Aborted: {esc(result['reason'])}</p>")
+    if meta is not None and "seed" in meta:
+        parts.append(f"<p>Simulated rig, seed {meta['seed']}.</p>")
+    parts.append("<h2>Summary</h2>" + summary_table(result))
+    parts.append(notes(result.get("notes", []), css=""))
+    parts.append(f"<h2>Force fight (paper Fig. 3)</h2>{img(figure_time(sig, an, act), dpi=90, tight=True)}")
+    truth = result.get("truth")
+    for ch in CHANNELS:
+        r = an.maint[ch]
+        parts.append(f"<h2>{ch}</h2>")
+        if not isinstance(r, BlfMaintResult):
+            parts.append(f"<p class='fail'>BLFmaint failed: {esc(r)}</p>")
+            continue
+        d, f = _channel_data(sig, an, ch)
+        parts.append(img(figure_dfdd(ch, d, f, r), dpi=90, tight=True)
+                     + img(figure_lines(ch, d, f, r, truth), dpi=90, tight=True))
+    parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
+    parts.append(json_details("result.json", result))
+    write_page(path, "emacheck report", parts)

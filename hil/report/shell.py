@@ -1,0 +1,94 @@
+"""The report shell: one page style, figure embedding and tables with units for every HTML report.
+
+The maintenance report (:mod:`hil.report.maint`), the BLFserv report
+(:mod:`hil.report.serv`) and the diagnosis report (:mod:`hil.report.diagnose`)
+are self-contained HTML files (figures embedded as PNG data URIs) built from
+these pieces, so they look alike and a change of style is made once.
+matplotlib is imported only when a figure is drawn (never in the cyclic loop
+of ``emacheck run``).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+from hil.runfolder import json_default
+
+CSS = """body{font-family:sans-serif;max-width:1300px;margin:1em auto;color:#222;line-height:1.35}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}
+th{background:#eee}td:first-child,th:first-child{text-align:left}img{max-width:100%}
+.pass{color:#070}.fail{color:#b00}.aborted,.incomplete{color:#b60}.warn{color:#b60}
+details{margin:1em 0}summary{cursor:pointer;color:#555}pre{font-size:85%;background:#f6f6f6;padding:.5em}
+small{color:#555}"""
+
+
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (no display), imported on first use."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def figure_uri(fig: Any, *, dpi: int = 80, tight: bool = False) -> str:
+    """PNG data URI of a laid-out matplotlib figure; closes the figure.
+
+    ``tight`` crops to the drawn area (``bbox_inches="tight"``).
+    """
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, **({"bbox_inches": "tight"} if tight else {}))
+    pyplot().close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def img(fig: Any, *, dpi: int = 80, tight: bool = False) -> str:
+    """An ``<img>`` element showing ``fig`` (see :func:`figure_uri`)."""
+    return f"<img src='{figure_uri(fig, dpi=dpi, tight=tight)}'>"
+
+
+def fmt(x: float | None, nd: int = 4) -> str:
+    """A number with ``nd`` decimals, "—" for None."""
+    return "—" if x is None else f"{x:.{nd}f}"
+
+
+def esc(text: object) -> str:
+    """HTML-escaped text."""
+    return html.escape(str(text))
+
+
+def column(name: str, unit: str | None = None) -> str:
+    """A column heading with its unit: ``backlash [mm]``."""
+    return f"{name} [{unit}]" if unit else name
+
+
+def table(columns: Sequence[str], rows: Iterable[Sequence[object]], *, raw: bool = False) -> str:
+    """An HTML table; ``columns`` as from :func:`column`, cells escaped unless ``raw``."""
+    cell = (lambda c: str(c)) if raw else esc
+    head = "".join(f"<th>{esc(c)}</th>" for c in columns)
+    body = "".join("<tr>" + "".join(f"<td>{cell(c)}</td>" for c in r) + "</tr>" for r in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def notes(items: Iterable[str], *, css: str = "warn") -> str:
+    """One paragraph per note."""
+    return "".join(f"<p class='{css}'><b>note:</b> {esc(n)}</p>" for n in items)
+
+
+def json_details(name: str, obj: Any) -> str:
+    """The machine-readable result, folded away under its file name."""
+    return (f"<details><summary>{esc(name)} (the machine-readable result)</summary><pre>"
+            f"{esc(json.dumps(obj, indent=1, default=json_default))}</pre></details>")
+
+
+def write_page(path: Path, title: str, parts: Iterable[str]) -> None:
+    """Write a self-contained HTML page: the shell's style, then ``parts`` in order."""
+    head = (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}</title>"
+            f"<style>{CSS}</style></head><body>")
+    Path(path).write_text("\n".join([head, *parts, "</body></html>"]))

@@ -1,0 +1,214 @@
+"""The simulated drive pair as its own process on a CAN bus (``emacheck sim-serve``).
+
+:func:`serve` is the thin IO shell around the sans-IO
+:class:`sim.drives.SimDrivePair`: it powers the pair on, then receives the
+frames of any python-can bus (SocketCAN ``vcan0``, a real interface, the
+``virtual`` bus in tests), feeds them to the pair and transmits the replies;
+it lets time pass for the heartbeats by calling ``pair.tick`` on the clock.
+The plant steps on each SYNC received (inside the pair), so the master's SYNC
+paces the simulated rig exactly as it paces real drives.
+
+Time given to the pair is the monotonic clock relative to the start of
+:func:`serve` [s]. The loop ends when ``stop`` is set (the CLI sets it from
+SIGINT/SIGTERM) and shuts the bus down.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import can
+
+from hil.canopen.frame import Frame
+from hil.transport import SocketcanFrames
+
+
+#: Longest wait for a frame [s] (fixed, so SocketCAN needs no timeout change per frame):
+#: how late a stop request or a tick may be seen.
+RECV_SLICE_S = 0.002
+
+
+#: Interval of ``pair.tick`` calls [s] (heartbeats are due at multiples of 0x1017).
+TICK_PERIOD_S = 0.002
+
+
+#: Interval of ``on_stats`` calls while serving [s].
+STATS_PERIOD_S = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class ServeStats:
+    """What a :func:`serve` loop did (a snapshot).
+
+    Attributes
+    ----------
+    duration_s : float
+        Time since :func:`serve` started [s].
+    frames_rx, frames_tx : int
+        Frames received from / transmitted on the bus.
+    frames_ignored : int
+        Received messages that are not classic 11-bit data frames (extended,
+        remote, error frames, DLC over 8); never given to the pair.
+    send_errors : int
+        Transmissions python-can refused (e.g. a full transmit queue).
+    syncs, plant_steps, tpdos_sent, rpdos_late, heartbeats_sent : int
+        The pair's counters (:class:`sim.drives.SimPairStats`).
+    """
+
+    duration_s: float = 0.0
+    frames_rx: int = 0
+    frames_tx: int = 0
+    frames_ignored: int = 0
+    send_errors: int = 0
+    syncs: int = 0
+    plant_steps: int = 0
+    tpdos_sent: int = 0
+    rpdos_late: int = 0
+    heartbeats_sent: int = 0
+
+    def line(self) -> str:
+        """The one-line summary ``sim-serve`` prints at the end."""
+        return (f"sim-serve: {self.duration_s:.1f} s, {self.syncs} SYNCs, {self.plant_steps} plant steps, "
+                f"{self.rpdos_late} late RPDOs, {self.frames_rx} frames in, {self.frames_tx} out, "
+                f"{self.send_errors} send errors, {self.frames_ignored} ignored")
+
+
+class _PythonCanIO:
+    """Frames through the python-can API (any interface)."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        self.bus = bus
+        self.ignored = 0
+
+    def recv(self, timeout: float) -> Frame | None:
+        """One classic data frame, or None after ``timeout`` [s] (or for an ignored message)."""
+        msg = self.bus.recv(timeout)
+        if msg is None:
+            return None
+        if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.dlc > 8:
+            self.ignored += 1
+            return None
+        return Frame.trusted(msg.arbitration_id, bytes(msg.data))
+
+    def send(self, f: Frame) -> bool:
+        try:
+            self.bus.send(can.Message(arbitration_id=f.arbitration_id, data=f.data, is_extended_id=False,
+                                      check=False), timeout=0.01)
+            return True
+        except can.CanError:
+            return False
+
+
+class _RawIO:
+    """Frames on a SocketCAN socket through :class:`hil.link.SocketcanFrames`."""
+
+    def __init__(self, raw: SocketcanFrames) -> None:
+        self.raw = raw
+
+    @property
+    def ignored(self) -> int:
+        return self.raw.ignored
+
+    def recv(self, timeout: float) -> Frame | None:
+        return self.raw.recv_stamped(timeout)[1]
+
+    def send(self, f: Frame) -> bool:
+        try:
+            self.raw.send(f)
+            return True
+        except can.CanError:  # ENOBUFS: transmit queue full
+            return False
+
+
+def _io_for(bus: can.BusABC):
+    raw = SocketcanFrames.for_bus(bus)
+    return _RawIO(raw) if raw is not None else _PythonCanIO(bus)
+
+
+def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
+          clock: Callable[[], float] = time.monotonic,
+          on_stats: Callable[[ServeStats], None] | None = None,
+          on_ready: Callable[[], None] | None = None) -> ServeStats:
+    """Run the simulated drive pair on ``bus`` until ``stop`` is set.
+
+    Parameters
+    ----------
+    bus : can.BusABC
+        Any python-can bus; it is shut down when the loop ends. On SocketCAN
+        the frames go through the bus's socket directly (about one system call
+        per frame, see :class:`hil.link.SocketcanFrames`).
+    pair : sim.drives.SimDrivePair
+        The two simulated drives (fresh or already powered).
+    stop : threading.Event, optional
+        Ends the loop when set (checked at least every :data:`RECV_SLICE_S`).
+        None: serve until KeyboardInterrupt.
+    clock : callable, optional
+        Monotonic time [s]; the pair sees ``clock() - clock()_at_start``.
+    on_stats : callable, optional
+        Called with a :class:`ServeStats` every :data:`STATS_PERIOD_S` and once at the end.
+    on_ready : callable, optional
+        Called once after power-on (boot-up frames sent), before the first receive.
+
+    Returns
+    -------
+    ServeStats
+        The counters at the end.
+
+    Notes
+    -----
+    Each frame received at time :math:`t` [s] goes to ``pair.on_frame(frame, t)``
+    and its replies are sent at once; ``pair.tick(t)`` runs when
+    :data:`TICK_PERIOD_S` has passed since the last tick, so heartbeats
+    leave within :data:`TICK_PERIOD_S` plus one receive of their due time.
+    """
+    stop = stop if stop is not None else threading.Event()
+    io = _io_for(bus)
+    t0 = clock()
+    rx = tx = send_errors = 0
+
+    def send(frames: list[Frame]) -> None:
+        nonlocal tx, send_errors
+        for f in frames:
+            if io.send(f):
+                tx += 1
+            else:
+                send_errors += 1
+
+    def snapshot() -> ServeStats:
+        s = pair.stats
+        return ServeStats(duration_s=clock() - t0, frames_rx=rx, frames_tx=tx, frames_ignored=io.ignored,
+                          send_errors=send_errors, syncs=s.syncs, plant_steps=s.plant_steps,
+                          tpdos_sent=s.tpdos_sent, rpdos_late=s.rpdos_late, heartbeats_sent=s.heartbeats_sent)
+
+    try:
+        send(pair.power_on(clock() - t0))
+        if on_ready is not None:
+            on_ready()
+        t = clock() - t0
+        next_tick = t + TICK_PERIOD_S
+        next_stats = t + STATS_PERIOD_S
+        while not stop.is_set():
+            f = io.recv(RECV_SLICE_S)
+            t = clock() - t0
+            if f is not None:
+                rx += 1
+                out = pair.on_frame(f, t)
+                if out:
+                    send(out)
+            if t >= next_tick:
+                out = pair.tick(t)
+                if out:
+                    send(out)
+                next_tick = t + TICK_PERIOD_S
+                if on_stats is not None and t >= next_stats:
+                    on_stats(snapshot())
+                    next_stats = t + STATS_PERIOD_S
+    finally:
+        final = snapshot()
+        bus.shutdown()
+    if on_stats is not None:
+        on_stats(final)
+    return final

@@ -1,0 +1,350 @@
+"""Transports: how frames get between the master and the drives (the thin IO shell, python-can).
+
+Two transports move the frames of :class:`hil.link.CanopenLink`:
+
+* :class:`InProcessTransport` (``emacheck dry-run``): the master's bus and the
+  simulated drive pair's bus are python-can ``virtual`` buses on one channel;
+  frames are pumped synchronously in this thread and the SYNC is sent once per
+  cycle on simulated time, so a dry-run is deterministic for a seed and runs as
+  fast as the CPU allows (``realtime=True`` paces SYNC at the SYNC period on
+  the monotonic clock).
+* :class:`BusTransport` (``emacheck run``): any python-can bus; SYNC by
+  ``send_periodic`` (kernel-timed Broadcast Manager on SocketCAN), frames
+  received on this thread, time from the monotonic clock or, on SocketCAN,
+  the kernel's receive stamp of each frame (event time).
+
+Both implement :class:`Transport`, the one seam between the link and a bus.
+"""
+
+from __future__ import annotations
+
+import queue
+import socket
+import struct
+import time
+from typing import Protocol
+
+import can
+from can.interfaces.virtual import VirtualBus
+
+from hil.canopen.frame import SYNC_COB_ID, Frame, sync_frame
+
+
+class Transport(Protocol):
+    def now(self) -> float: ...
+
+    def send(self, frames: list[Frame], t: float) -> None: ...
+
+    def receive(self, deadline: float) -> list[tuple[Frame, float]]: ...
+
+    def start_sync(self) -> None: ...
+
+    def next_sync(self) -> float | None: ...
+
+    def stop_sync(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class SharedVirtualBus(VirtualBus):
+    """python-can's in-process virtual bus, minus the deep copy of every message per recipient.
+
+    The stock ``VirtualBus.send`` deep-copies each message for each receiver
+    (about half of a dry-run's time). The link never mutates a message after
+    sending it, so the receivers may share it. Everything else (channels,
+    queues, ``recv``) is python-can's.
+    """
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._check_if_open()
+        for bus_queue in self.channel:
+            if bus_queue is self.queue and not self.receive_own_messages:
+                continue
+            bus_queue.put_nowait(msg)
+
+    def recv_nowait(self) -> can.Message | None:
+        """The next queued message or None, straight from this bus's queue: the synchronous
+        frame pump of a dry-run never waits, so python-can's ``recv`` (clock, filters, timed
+        wait) is skipped; no filters are set on these buses."""
+        try:
+            return self.queue.get_nowait()
+        except queue.Empty:
+            return None
+
+
+def _to_msg(f: Frame, t: float, rx: bool = False) -> can.Message:
+    return can.Message(timestamp=t, arbitration_id=f.arbitration_id, data=f.data, is_extended_id=False,
+                       is_rx=rx, check=False)
+
+
+class InProcessTransport:
+    """Master bus and simulated drive pair on an in-process python-can virtual bus.
+
+    ``pair`` is a :class:`sim.drives.SimDrivePair`; its frames are produced in
+    this thread as soon as the master's frames reach its bus.
+    """
+
+    def __init__(self, pair, sync_period_s: float, channel: str = "emacheck-dry-run",
+                 realtime: bool = False) -> None:
+        self.pair = pair
+        self.T = sync_period_s
+        self.t = 0.0
+        self.realtime = realtime
+        self.master_bus = SharedVirtualBus(channel=channel, preserve_timestamps=True)
+        self.slave_bus = SharedVirtualBus(channel=channel, preserve_timestamps=True)
+        self._sync_on = False
+        self._t0_wall: float | None = None
+        self._pending: list[tuple[Frame, float]] = []
+        for f in pair.power_on(self.t):
+            self.slave_bus.send(_to_msg(f, self.t, rx=True))
+
+    def now(self) -> float:
+        return self.t
+
+    def send(self, frames: list[Frame], t: float) -> list[can.Message]:
+        msgs = [_to_msg(f, t) for f in frames]
+        for m in msgs:
+            self.master_bus.send(m)
+        return msgs
+
+    def _pump_slaves(self) -> None:
+        bus = self.slave_bus
+        pair = self.pair
+        while True:
+            msg = bus.recv_nowait()
+            if msg is None:
+                return
+            out = pair.on_frame(Frame.trusted(msg.arbitration_id, bytes(msg.data)), self.t)
+            for f in out:
+                bus.send(_to_msg(f, self.t, rx=True))
+
+    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
+        """Deliver everything in flight; simulated time advances to ``deadline`` if idle."""
+        self._pump_slaves()
+        got = []
+        bus = self.master_bus
+        while True:
+            msg = bus.recv_nowait()
+            if msg is None:
+                break
+            got.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), msg.timestamp, msg))
+        if not got and deadline > self.t:
+            # nothing in flight: let simulated time pass (heartbeats, boot-up)
+            self.t = min(deadline, self.t + self.T)
+            for f in self.pair.tick(self.t):
+                self.slave_bus.send(_to_msg(f, self.t, rx=True))
+            self._pump_slaves()
+        return got
+
+    def start_sync(self) -> None:
+        self._sync_on = True
+        self._t0_wall = time.monotonic()
+
+    def next_sync(self) -> float | None:
+        """Advance one SYNC period and send SYNC (the pair steps its plant on it)."""
+        if not self._sync_on:
+            return None
+        self.t += self.T
+        if self.realtime and self._t0_wall is not None:
+            delay = self._t0_wall + self.t - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        for f in self.pair.tick(self.t):
+            self.slave_bus.send(_to_msg(f, self.t, rx=True))
+        self.master_bus.send(_to_msg(sync_frame(), self.t))
+        return self.t
+
+    def stop_sync(self) -> None:
+        self._sync_on = False
+
+    def close(self) -> None:
+        self.master_bus.shutdown()
+        self.slave_bus.shutdown()
+
+
+_CAN_FRAME = struct.Struct("<IB3x8s")  # struct can_frame: id, dlc, pad, data[8]
+
+
+#: SO_TIMESTAMPNS (asm-generic/socket.h; Python's socket module does not name it)
+_SO_TIMESTAMPNS = 35
+
+
+_ANC_SPACE = socket.CMSG_SPACE(16) if hasattr(socket, "CMSG_SPACE") else 64
+
+
+def _stamp(anc: list) -> float | None:
+    """The SO_TIMESTAMPNS receive time [s, CLOCK_REALTIME] in a ``recvmsg`` ancillary list, or None."""
+    for level, kind, data in anc:
+        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = struct.unpack_from("@ll", data)
+            return sec + nsec * 1e-9
+    return None
+
+
+class SocketcanFrames:
+    """Classic CAN frames straight on a SocketCAN socket: one system call per frame.
+
+    python-can's ``recv`` costs ``time()``, ``select`` and ``recvmsg`` (with a
+    timestamp) per frame plus as many for the empty probe that ends a drain,
+    and ``send`` a ``select`` plus ``send``. Where a system call is expensive
+    (user-mode-linux: ~0.12 ms on the CI machines; small embedded masters)
+    that alone fills a SYNC cycle. Here a frame costs one blocking ``recvmsg``
+    with a receive timeout (queued or waited for alike) and ``send`` one
+    ``send``. Extended, remote, error and CAN FD frames are dropped (counted
+    in :attr:`ignored`).
+    """
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.ignored = 0
+        self._rcvtimeo: float | None = None
+        sock.setblocking(True)
+
+    @classmethod
+    def for_bus(cls, bus: can.BusABC) -> "SocketcanFrames | None":
+        """The fast path for a python-can SocketCAN bus, None for any other bus."""
+        sock = getattr(bus, "socket", None)
+        if isinstance(sock, socket.socket) and sock.family == getattr(socket, "AF_CAN", None):
+            return cls(sock)
+        return None
+
+    def _decode(self, raw: bytes) -> Frame | None:
+        cid = int.from_bytes(raw[0:4], "little")
+        if len(raw) != 16 or cid & 0xE0000000 or raw[4] > 8:
+            self.ignored += 1
+            return None
+        return Frame.trusted(cid, raw[8:8 + raw[4]])
+
+    def recv_stamped(self, timeout: float) -> tuple[bool, Frame | None, float | None]:
+        """One frame, waiting up to ``timeout`` [s] (SO_RCVTIMEO, set only when it changes), with
+        the kernel's receive time (CLOCK_REALTIME [s], from SO_TIMESTAMPNS, which python-can
+        enables on its sockets; None if absent): (True, frame or None if ignored, stamp) or
+        (False, None, None) after the timeout. One system call, whether the frame was queued or
+        came while waiting."""
+        self._set_rcvtimeo(timeout)
+        try:
+            raw, anc, _flags, _addr = self.sock.recvmsg(72, _ANC_SPACE)
+        except (BlockingIOError, InterruptedError, TimeoutError):
+            return False, None, None
+        return True, self._decode(raw), _stamp(anc)
+
+    def _set_rcvtimeo(self, timeout: float) -> None:
+        if timeout != self._rcvtimeo:
+            us = max(1, int(timeout * 1e6))  # 0 would mean "forever"
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, struct.pack("ll", us // 1000000, us % 1000000))
+            self._rcvtimeo = timeout
+
+    def send(self, f: Frame) -> None:
+        try:
+            self.sock.send(_CAN_FRAME.pack(f.arbitration_id, len(f.data), f.data))
+        except OSError as exc:
+            raise can.CanOperationError(f"Failed to transmit: {exc.strerror}", exc.errno) from exc
+
+
+class BusTransport:
+    """A real python-can bus (SocketCAN, or any interface python-can knows).
+
+    On SocketCAN, frames go through the bus's socket directly
+    (:class:`SocketcanFrames`, one frame per :meth:`receive`); elsewhere
+    through python-can.
+    """
+
+    def __init__(self, bus: can.BusABC, sync_period_s: float) -> None:
+        self.bus = bus
+        self.T = sync_period_s
+        self._task = None
+        self._t0 = time.monotonic()
+        #: CLOCK_REALTIME minus CLOCK_MONOTONIC: turns the kernel's receive stamps into our time base
+        self._rt_minus_mono = time.time() - time.monotonic()
+        self._raw = SocketcanFrames.for_bus(bus)
+        self._now = 0.0
+        #: how long the last SYNC waited in the socket before it was taken [s]
+        self.lag_s = 0.0
+        self.max_lag_s = 0.0  #: the largest lag seen [s]
+        #: longest single wait for a frame [s]: a receive may end this much after its deadline
+        self._slice = sync_period_s / 4
+        self._sync_started = 0.0  #: when start_sync() returned [s]
+
+    def now(self) -> float:
+        """Monotonic time [s] since the transport was made; on SocketCAN, the time of the last
+        event :meth:`receive` delivered.
+
+        On SocketCAN that is the kernel's receive time of the frame just taken
+        (event time): when the master has fallen behind and frames wait in the
+        socket, every frame, and every timeout judged after it (heartbeat
+        consumer, SDO, cycle end), carries the time it arrived, not the time it
+        was read; a heartbeat still queued is never judged missing. When the
+        queue was empty, it is the clock at the end of the wait. (Reading the
+        clock is a system call where there is no vDSO, as in user-mode-linux:
+        this path reads it only when a wait times out, and once per SYNC.)
+        :attr:`lag_s` says how long the last SYNC waited in the socket before
+        the master took it.
+        """
+        if self._raw is None:
+            return time.monotonic() - self._t0
+        return self._now
+
+    def _clock(self) -> float:
+        self._now = time.monotonic() - self._t0
+        return self._now
+
+    def send(self, frames: list[Frame], t: float) -> list[can.Message]:
+        msgs = [_to_msg(f, t) for f in frames]
+        if self._raw is not None:
+            for f in frames:
+                self._raw.send(f)
+            return msgs
+        for m in msgs:
+            self.bus.send(m)
+        return msgs
+
+    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
+        if self._raw is not None:
+            while True:
+                # one system call per frame, queued or waited for; the clock is read only when
+                # the wait times out and once per SYNC (to measure the lag)
+                got, f, ts = self._raw.recv_stamped(self._slice)
+                if got:
+                    break
+                if self._clock() >= deadline:
+                    self.lag_s = 0.0
+                    return []
+            if ts is None:
+                t = self._clock()
+            else:
+                t = ts - self._rt_minus_mono - self._t0
+                self._now = t
+                if f is not None and f.arbitration_id == SYNC_COB_ID:
+                    # how long the cycle's first frame waited in the socket: the master's lag
+                    # (not counting what came while start_sync() itself was setting SYNC up)
+                    self.lag_s = max(0.0, time.monotonic() - self._t0 - max(t, self._sync_started))
+                    if self.lag_s > self.max_lag_s:
+                        self.max_lag_s = self.lag_s
+            if f is None:
+                return []
+            return [(f, t, _to_msg(f, t, rx=True))]
+        timeout = max(0.0, deadline - self.now())
+        msg = self.bus.recv(timeout)
+        out = []
+        while msg is not None:
+            if not msg.is_extended_id and not msg.is_error_frame and not msg.is_remote_frame and msg.dlc <= 8:
+                out.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), self.now(), msg))
+            msg = self.bus.recv(0.0)
+        return out
+
+    def start_sync(self) -> None:
+        # kernel-timed on socketcan (Broadcast Manager), a thread elsewhere
+        self._task = self.bus.send_periodic(
+            can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False), self.T)
+        self._sync_started = time.monotonic() - self._t0
+
+    def next_sync(self) -> float | None:
+        return None  # SYNC comes from the periodic task; the master sees it on the bus
+
+    def stop_sync(self) -> None:
+        if self._task is not None:
+            self._task.stop()
+            self._task = None
+
+    def close(self) -> None:
+        self.stop_sync()

@@ -1,0 +1,105 @@
+"""Benchmark (not a test): every injected fault in a dry-run; reaction time, peak true force, data kept.
+
+    python tests/bench_faults.py [--json bench_faults.json]
+
+For each fault of :mod:`sim.faults` (the cases of tests/test_faults.py plus the
+force- and stroke-limit runaways) it prints: what detected it, the reaction
+time from the onset (the fault's start; for the limit cases from the first
+sample beyond the limit), when the quick stop / disable reached the drives,
+the peak true force and stroke after the onset (plant truth, no sensor
+errors), the drives' final states and the data kept in the run folder
+(signals rows, the last sample time, CAN frames logged).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from test_faults import CASES, T, _t_detect, _t_safe_command  # noqa: E402
+
+from hil.cli.dry_run import dry_run  # noqa: E402
+from hil.profiles import default_profile_path, load_actuation, load_check, load_simrig  # noqa: E402
+from hil.runfolder import read_signals  # noqa: E402
+from sim.faults import Fault  # noqa: E402
+
+
+def _limit_checks(act, tmp: Path):
+    text = default_profile_path("check.toml").read_text()
+    f = tmp / "force.toml"
+    f.write_text(text.replace("max_following_error_mm = 0.5", "max_following_error_mm = 2.0")
+                 .replace("max_force_fight_N = 7000.0", "max_force_fight_N = 7900.0")
+                 .replace("max_force_imbalance_N = 2500.0", "max_force_imbalance_N = 4000.0"))
+    s = tmp / "stroke.toml"
+    s.write_text(text.replace("sweep_amplitude_mm = 17.0", "sweep_amplitude_mm = 2.5")
+                 .replace("max_stroke_mm = 19.5", "max_stroke_mm = 3.0")
+                 .replace("max_following_error_mm = 0.5", "max_following_error_mm = 2.0"))
+    return load_check(f, act), load_check(s, act)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", default="bench_faults.json")
+    args = ap.parse_args()
+    act = load_actuation()
+    chk = load_check(None, act)
+    sim = load_simrig()
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        f_chk, s_chk = _limit_checks(act, tmp)
+        cases = [(c[0], chk, c[0].kind) for c in CASES] + [
+            (Fault("node_silent", 2, 2.0), chk, "node_silent"),
+            (Fault("sdo_abort", 2, value=float(0x1017)), chk, "sdo_abort"),
+            (Fault("runaway", 1, 0.6, value=5.0), f_chk, "runaway -> force limit"),
+            (Fault("runaway", 1, 2.7, value=5.0), s_chk, "runaway -> stroke limit"),
+        ]
+        for k, (fault, check, name) in enumerate(cases):
+            r = dry_run(act, check, sim, tmp / f"run{k}", faults=[fault])
+            meta = json.loads((r.out / "meta.json").read_text())
+            tr = r.injector.truth
+            row = {"fault": name, "ema": fault.ema, "status": meta["status"],
+                   "detected_by": meta.get("safety", {}).get("limit") or meta["reason"].split(":")[1].strip(),
+                   "frames_logged": meta["can"]["frames_logged"]}
+            if r.injector.syncs == 0:
+                row.update(reaction_ms=None, stop_ms=None, peak_F_N=0.0, peak_s_mm=float("nan"), rows=0)
+            else:
+                onset = r.injector.onset_s.get(fault.kind, fault.start_s)
+                t_det = _t_detect(r, meta)
+                sig = read_signals(r.out / "signals.csv")
+                if "limit" in name:
+                    lim = meta["safety"]["threshold"]
+                    q = {"max_force_N": np.maximum(np.abs(sig.F1), np.abs(sig.F2)),
+                         "max_force_fight_N": np.abs(sig.F1 - sig.F2) / 2,
+                         "max_stroke_mm": np.maximum(np.abs(sig.s1), np.abs(sig.s2))}[meta["safety"]["limit"]]
+                    onset = float(sig.t[np.flatnonzero(q > lim)[0]])
+                reach = (0,) if fault.kind == "node_silent" else ((2 - fault.ema,) if fault.kind == "rpdo_lost"
+                                                                  else (0, 1))
+                m = tr.t_s >= onset
+                row.update(reaction_ms=round((t_det - onset) * 1e3, 1),
+                           stop_ms=round((_t_safe_command(tr, t_det, reach) - t_det) * 1e3, 1),
+                           peak_F_N=round(float(np.abs(tr.F_N[m]).max()), 0),
+                           peak_s_mm=round(float(np.abs(tr.s_mm[m]).max()), 3),
+                           rows=int(sig.n), last_t_s=float(sig.t[-1]), t_detect_s=round(t_det, 4))
+            row["final"] = " / ".join(s.name for s in r.injector.final_states())
+            rows.append(row)
+    hdr = (f"{'fault':<26}{'detected by':<26}{'reaction ms':>12}{'stop ms':>9}{'peak |F| N':>11}"
+           f"{'peak |s| mm':>12}{'rows':>7}{'frames':>8}  final states")
+    print(hdr)
+    for r in rows:
+        print(f"{r['fault']:<26}{r['detected_by'][:25]:<26}{str(r['reaction_ms']):>12}{str(r['stop_ms']):>9}"
+              f"{r['peak_F_N']:>11.0f}{r['peak_s_mm']:>12.3f}{r['rows']:>7}{r['frames_logged']:>8}  {r['final']}")
+    Path(args.json).write_text(json.dumps({"sync_period_ms": T * 1e3, "faults": rows}, indent=2))
+    print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,936 @@
+"""Normal-operation profiles of the dual-EMA aileron and their simulation.
+
+In service both EMAs run in POSITION mode and follow the same surface
+command (active-active); a slow force-fight compensation equalises their
+forces by small opposite offsets; the air load on the surface changes with
+its deflection (hinge moment) and with gusts. Backlash is crossed only where
+a load-path force changes sign, so every manoeuvre here is built around a
+sign change of the load (or, for the external play, of the force fight).
+
+Pure: parameters and an explicit ``numpy.random.Generator`` in, frozen
+dataclasses out; no clocks, no IO. Two kinds of functions:
+
+* profile generators (:func:`full_stroke_profile`,
+  :func:`small_manoeuvre_profile`, :func:`gust_profile`,
+  :func:`cruise_profile`, :func:`ext_crossing_profile`): sample arrays of
+  the surface command, the external load and optionally a scheduled
+  force-fight offset, as an :class:`OperationProfile`;
+* :func:`simulate_operation`: runs an :class:`OperationProfile` on a
+  :class:`sim.plant.RigPlant`, closing the force-fight compensation loop on the
+  measured forces sample by sample, and returns the measured signals and the
+  simulator's truth as an :class:`OperationRecord`;
+
+plus :func:`simulate_calibration_sweep`, the slow LVDT calibration sweep under
+an opposing force (paper 2.3), to calibrate the LVDTs before BLFserv.
+
+Sign conventions are those of :mod:`sim.plant`: positions on the ram axis,
+positive extended; forces positive in compression (the EMA pushes the
+surface towards +y); the load ``load_N`` pushes the surface towards +y.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import signal
+
+from blf.errors import InputError
+from hil.canopen.process import DriveMode
+from sim.params import RigParams
+from sim.plant import RigPlant
+from sim.truth import RigTruth, rig_truth
+
+__all__ = [
+    "OperationProfile",
+    "OperationRecord",
+    "CalibrationSweep",
+    "full_stroke_profile",
+    "small_manoeuvre_profile",
+    "gust_profile",
+    "cruise_profile",
+    "ext_crossing_profile",
+    "simulate_operation",
+    "simulate_calibration_sweep",
+    "chain_stiffness_N_per_mm",
+    "force_fight_play_mm",
+]
+
+_POS = int(DriveMode.POSITION)
+_FRC = int(DriveMode.FORCE)
+
+#: Minimum |F| on both sides of a sign change for it to count as a traversal, N.
+CONTACT_FORCE_N = 20.0
+
+
+# ====================================================================== types
+
+
+@dataclass(frozen=True)
+class OperationProfile:
+    """What the flight control computer and the air do during one manoeuvre.
+
+    Attributes
+    ----------
+    name : str
+        Short name (``"full_stroke"``, ``"small_manoeuvres"``, ...).
+    description : str
+        One sentence on what happens physically.
+    sample_period_s : float
+        Sample period of the arrays, s.
+    command_mm : ndarray, shape (n,)
+        Surface command on the ram axis per sample, mm (both EMAs).
+    load_N : ndarray, shape (n,)
+        External surface force per sample apart from the deflection-dependent
+        hinge load (gusts, trim bias), N, + towards +y.
+    aero_stiffness_N_per_mm : float
+        Hinge-load stiffness, N/mm: the air adds
+        ``-aero_stiffness_N_per_mm * (y - zero_load_mm)`` to the surface force.
+    zero_load_mm : float
+        Surface position at which the hinge load is zero, mm.
+    offset_mm : ndarray, shape (n,), or None
+        Scheduled relative offset ``delta`` of the two motors, mm (EMA 1 at
+        ``command + delta/2``, EMA 2 at ``command - delta/2``); None: the
+        force-fight compensation loop sets it (see :func:`simulate_operation`).
+    lag2_samples : int
+        Transport delay of EMA 2's command, samples (0: none).
+    ff_bandwidth_rad_s : float
+        Bandwidth of the force-fight compensation loop, rad/s (0: off).
+    warmup_s : float
+        Settling time simulated before the record starts (drives engaged,
+        load applied), s; not part of the arrays above.
+
+    Arrays are read-only.
+    """
+
+    name: str
+    description: str
+    sample_period_s: float
+    command_mm: np.ndarray
+    load_N: np.ndarray
+    aero_stiffness_N_per_mm: float
+    zero_load_mm: float
+    offset_mm: np.ndarray | None
+    lag2_samples: int
+    ff_bandwidth_rad_s: float
+    warmup_s: float
+
+    @property
+    def n(self) -> int:
+        """Number of recorded samples."""
+        return int(self.command_mm.size)
+
+
+@dataclass(frozen=True)
+class OperationRecord:
+    """Measured signals of a simulated manoeuvre, with the simulator's truth.
+
+    Attributes
+    ----------
+    name : str
+        The profile's name.
+    t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N : ndarray, shape (n,)
+        The measured samples (run-folder columns ``t,phi1,phi2,s1,s2,F1,F2``):
+        time in s, motor angles in rad, raw LVDT strokes in mm (with the
+        profile's pitch, offset, non-linearity and noise), load-cell forces in N.
+    true_F_N : ndarray, shape (n, 2)
+        True load-path forces of EMA 1 and 2, N.
+    true_s_mm : ndarray, shape (n, 2)
+        True strokes, mm.
+    offset_mm : ndarray, shape (n,)
+        Relative motor offset actually commanded (compensation or schedule), mm.
+    truth : sim.truth.RigTruth
+        Backlash, stiffness and LVDT law of the rig.
+    traversed : dict
+        ``{"int1": bool, "int2": bool, "ext": bool}``: whether the true
+        forces crossed the play (see Notes of :func:`simulate_operation`).
+    expected_backlash_mm : dict
+        ``{"int1": B or None, ...}``: the truth's backlash where traversed,
+        None where not; what BLFserv should report.
+    sample_period_s : float
+        s.
+
+    Arrays are read-only.
+    """
+
+    name: str
+    t_s: np.ndarray
+    phi1_rad: np.ndarray
+    phi2_rad: np.ndarray
+    s1_mm: np.ndarray
+    s2_mm: np.ndarray
+    F1_N: np.ndarray
+    F2_N: np.ndarray
+    true_F_N: np.ndarray
+    true_s_mm: np.ndarray
+    offset_mm: np.ndarray
+    truth: RigTruth
+    traversed: dict
+    expected_backlash_mm: dict
+    sample_period_s: float
+
+
+@dataclass(frozen=True)
+class CalibrationSweep:
+    """One EMA's slow sweep under a constant opposing force (paper 2.3, Fig. 9).
+
+    Attributes
+    ----------
+    ema : int
+        1 or 2.
+    x_mm : ndarray, shape (n,)
+        Motor angle referred to the ram, ``phi / i_total``, mm.
+    s_mm : ndarray, shape (n,)
+        Raw LVDT stroke, mm.
+    opposing_force_N : float
+        Force of the other EMA (FORCE mode), N.
+    t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N : ndarray, shape (n,)
+        The measured samples of both EMAs during the sweep (run-folder
+        columns), with ``t_s`` from 0.
+
+    Feed ``x_mm, s_mm`` to :func:`blf.calibration.fit_lvdt_calibration`.
+    Arrays are read-only.
+    """
+
+    ema: int
+    x_mm: np.ndarray
+    s_mm: np.ndarray
+    opposing_force_N: float
+    t_s: np.ndarray
+    phi1_rad: np.ndarray
+    phi2_rad: np.ndarray
+    s1_mm: np.ndarray
+    s2_mm: np.ndarray
+    F1_N: np.ndarray
+    F2_N: np.ndarray
+
+
+# ====================================================================== helpers
+
+
+def _ro(a) -> np.ndarray:
+    out = np.array(a, dtype=np.float64, copy=True)
+    out.flags.writeable = False
+    return out
+
+
+def _num(value, name: str, unit: str, *, lo: float = -math.inf, lo_open: bool = False,
+         hi: float = math.inf) -> float:
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    v = float(value) if ok else float("nan")
+    if not (ok and math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi):
+        lb = "(" if lo_open else "["
+        raise InputError(f"{name} must be a finite scalar in {lb}{lo}, {hi}] {unit} (shape ()), got {value!r}")
+    return v
+
+
+def _params(params) -> RigParams:
+    if not isinstance(params, RigParams):
+        raise InputError(f"params must be a sim.params.RigParams, got {type(params).__name__}")
+    return params
+
+
+def _rng(rng) -> np.random.Generator:
+    if not isinstance(rng, np.random.Generator):
+        raise InputError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    return rng
+
+
+def _series(*k: float) -> float:
+    return 1.0 / sum(1.0 / x for x in k)
+
+
+def chain_stiffness_N_per_mm(params: RigParams) -> tuple[float, float]:
+    """Contact stiffness of each EMA's whole load path, structure to surface.
+
+    Parameters
+    ----------
+    params : RigParams
+
+    Returns
+    -------
+    tuple of float
+        ``(k_1, k_2)`` in N/mm.
+
+    Notes
+    -----
+    Housing spring, internal path (mean of compression and tension) and
+    bearing in series: :math:`k_i = (1/k_h + 1/k_{int} + 1/k_b)^{-1}` [N/mm]
+    (14 815 N/mm with the default rig).
+    """
+    p = _params(params)
+    out = []
+    for m in (p.ema1, p.ema2):
+        kint = 0.5 * (m.stiffness_compression_N_per_mm + m.stiffness_tension_N_per_mm)
+        out.append(_series(m.housing_stiffness_N_per_mm, kint, m.bearing_stiffness_N_per_mm))
+    return out[0], out[1]
+
+
+def force_fight_play_mm(params: RigParams) -> float:
+    """Relative motor offset at which the force fight starts, mm.
+
+    Parameters
+    ----------
+    params : RigParams
+
+    Returns
+    -------
+    float
+        Half the total play between the two motors,
+        :math:`(B_{int,1} + B_{b,1} + B_{int,2} + B_{b,2})/2` [mm]
+        (0.16 mm with the default rig): with the surface free and no air load,
+        :math:`F_1 = -F_2 = k_s(\\delta - \\text{this})` for
+        :math:`\\delta` above it, :math:`k_s = (1/k_1 + 1/k_2)^{-1}`.
+    """
+    p = _params(params)
+    return 0.5 * (p.ema1.backlash_int_mm + p.ema1.bearing_backlash_mm
+                  + p.ema2.backlash_int_mm + p.ema2.bearing_backlash_mm)
+
+
+def _trapezoid_move(t: np.ndarray, t0: float, y0: float, y1: float, rate: float, accel: float) -> tuple:
+    """Positions of a rate- and acceleration-limited move from y0 to y1 starting at t0; and its end time."""
+    d = abs(y1 - y0)
+    sgn = 1.0 if y1 >= y0 else -1.0
+    ta = rate / accel
+    v = rate
+    if d < v * ta:
+        ta = math.sqrt(d / accel)
+        v = accel * ta
+    tc = (d - v * ta) / v if v > 0 else 0.0
+    tau = t - t0
+    s = np.where(tau <= 0, 0.0, 0.0)
+    s = np.where((tau > 0) & (tau <= ta), 0.5 * accel * tau**2, s)
+    s = np.where((tau > ta) & (tau <= ta + tc), 0.5 * accel * ta**2 + v * (tau - ta), s)
+    r = 2 * ta + tc - tau
+    s = np.where((tau > ta + tc) & (tau <= 2 * ta + tc), d - 0.5 * accel * r**2, s)
+    s = np.where(tau > 2 * ta + tc, d, s)
+    return y0 + sgn * s, t0 + 2 * ta + tc
+
+
+def _smooth_noise(rng: np.random.Generator, n: int, std: float, bandwidth_rad_s: float,
+                  period_s: float) -> np.ndarray:
+    """Stationary second-order (critically damped) Gauss-Markov sequence of standard deviation ``std``.
+
+    White noise through two identical first-order low-passes with corner
+    ``bandwidth_rad_s`` (exact pole ``a = exp(-w T)``), scaled by the filter's
+    noise gain to ``std``; ``ceil(10 / (w T))`` leading samples are discarded so
+    the sequence starts in steady state.
+    """
+    a = math.exp(-bandwidth_rad_s * period_s)
+    nw = int(math.ceil(10.0 / (bandwidth_rad_s * period_s)))
+    e = rng.standard_normal(n + nw)
+    b1 = np.array([1.0 - a])
+    a1 = np.array([1.0, -a])
+    x = signal.lfilter(b1, a1, signal.lfilter(b1, a1, e))
+    # noise gain of the cascade (1 - a)^2 / (1 - a z^-1)^2: sum h_k^2 = (1-a)^4 (1 + a^2) / (1 - a^2)^3
+    gain = (1.0 - a) ** 2 * math.sqrt((1.0 + a * a) / (1.0 - a * a) ** 3)
+    return x[nw:] * (std / gain)
+
+
+def _profile(name, description, period, command, load, aero_k, zero_mm, offset, lag, ff_bw, warmup):
+    return OperationProfile(
+        name=name, description=description, sample_period_s=float(period),
+        command_mm=_ro(command), load_N=_ro(load), aero_stiffness_N_per_mm=float(aero_k),
+        zero_load_mm=float(zero_mm), offset_mm=None if offset is None else _ro(offset),
+        lag2_samples=int(lag), ff_bandwidth_rad_s=float(ff_bw), warmup_s=float(warmup))
+
+
+# ====================================================================== profile generators
+
+
+def full_stroke_profile(
+    params: RigParams,
+    *,
+    rate_mm_per_s: float = 40.0,
+    accel_mm_per_s2: float = 400.0,
+    stroke_fraction: float = 0.9,
+    cycles: int = 1,
+    dwell_s: float = 1.0,
+    aero_stiffness_N_per_mm: float = 1000.0,
+    zero_load_mm: float = 2.0,
+    ff_bandwidth_rad_s: float = 1.0,
+) -> OperationProfile:
+    """Full stroke at full rate with force-fight compensation (paper Figure 7).
+
+    Parameters
+    ----------
+    params : RigParams
+        The rig (stroke limit, sample period).
+    rate_mm_per_s : float, optional
+        Surface rate on the ram axis, mm/s (default 40, below the 50 mm/s cap).
+    accel_mm_per_s2 : float, optional
+        Acceleration limit of the command, mm/s^2 (default 400).
+    stroke_fraction : float, optional
+        The surface moves between ``-/+ stroke_fraction * stroke_limit_mm``
+        (default 0.9, i.e. +-18 mm).
+    cycles : int, optional
+        Number of out-and-back strokes (default 1).
+    dwell_s : float, optional
+        Hold at each end and at the start, s (default 1).
+    aero_stiffness_N_per_mm : float, optional
+        Hinge-load stiffness, N/mm (default 1000: +-18 kN at the ends).
+    zero_load_mm : float, optional
+        Deflection of zero hinge load, mm (default 2): the load changes sign
+        once on every stroke, there the backlash is crossed.
+    ff_bandwidth_rad_s : float, optional
+        Force-fight compensation bandwidth, rad/s (default 1).
+
+    Returns
+    -------
+    OperationProfile
+
+    Notes
+    -----
+    Command: rate- and acceleration-limited moves (trapezoidal velocity)
+    :math:`-A \\to +A \\to -A`, :math:`A` = ``stroke_fraction`` x
+    ``stroke_limit_mm``. Air load on the surface
+    :math:`L = -k_a (y - y_0)` [N] with :math:`k_a` in N/mm, :math:`y`,
+    :math:`y_0` in mm; the EMAs share it, :math:`F_1 \\approx F_2 \\approx
+    -(L + m\\ddot y)/2`. Both forces change sign as :math:`y` passes
+    :math:`y_0`; the surface then floats through the play of both chains
+    under the small, growing net load (about 20 ms here) and hits the other
+    flank; both internal plays are crossed, the external one is not (same-
+    sense change, :math:`D_{ext}` jumps by :math:`B_{b,2} - B_{b,1} = 0`).
+    """
+    p = _params(params)
+    rate = _num(rate_mm_per_s, "rate_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
+    acc = _num(accel_mm_per_s2, "accel_mm_per_s2", "mm/s^2", lo=0.0, lo_open=True)
+    frac = _num(stroke_fraction, "stroke_fraction", "(fraction of stroke_limit_mm)", lo=0.0, lo_open=True, hi=0.95)
+    if isinstance(cycles, bool) or not isinstance(cycles, (int, np.integer)) or not 1 <= cycles <= 100:
+        raise InputError(f"cycles must be an int in [1, 100] (count), got {cycles!r}")
+    dwell = _num(dwell_s, "dwell_s", "s", lo=0.0)
+    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
+    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
+    T = p.sample_period_s
+    a = frac * p.stroke_limit_mm
+    # plan the moves
+    moves = []
+    t0 = dwell
+    ya = -a
+    for _ in range(int(cycles)):
+        for yb in (a, -a):
+            tt = np.array([0.0])
+            _, t_end = _trapezoid_move(tt, t0, ya, yb, rate, acc)
+            moves.append((t0, ya, yb))
+            t0 = t_end + dwell
+            ya = yb
+    n = int(math.ceil(t0 / T))
+    t = np.arange(1, n + 1) * T
+    y = np.full(n, -a)
+    for (ts, ya, yb) in moves:
+        pos, te = _trapezoid_move(t, ts, ya, yb, rate, acc)
+        m = t > ts
+        y[m] = pos[m]
+    load = np.full(n, ka * y0)  # L = -ka*y (plant load stiffness) + ka*y0
+    return _profile("full_stroke",
+                    f"full stroke +-{a:g} mm at {rate:g} mm/s, hinge load {ka:g} N/mm, zero load at {y0:g} mm",
+                    T, y, load, ka, y0, None, 0, ffb, 1.5)
+
+
+def small_manoeuvre_profile(
+    params: RigParams,
+    *,
+    amplitude_mm: float = 1.5,
+    frequencies_Hz: tuple = (0.5, 1.0, 1.5, 0.75),
+    dwell_s: float = 0.8,
+    trim_mm: float = 2.5,
+    aero_stiffness_N_per_mm: float = 1000.0,
+    zero_load_mm: float = 2.0,
+    ff_bandwidth_rad_s: float = 1.0,
+) -> OperationProfile:
+    """Small-amplitude manoeuvres about a trim where the hinge load is near zero.
+
+    Parameters
+    ----------
+    params : RigParams
+    amplitude_mm : float, optional
+        Amplitude of each manoeuvre, mm (default 1.5).
+    frequencies_Hz : tuple of float, optional
+        One full sine period per entry, at that frequency, Hz (default
+        0.5, 1, 1.5, 0.75 Hz).
+    dwell_s : float, optional
+        Hold at trim before, between and after the manoeuvres, s (default 0.8).
+    trim_mm : float, optional
+        Trim deflection, mm (default 2.5: 500 N of hinge load, both chains
+        in contact at trim).
+    aero_stiffness_N_per_mm, zero_load_mm : float, optional
+        Hinge load :math:`L = -k_a (y - y_0)` (defaults 1000 N/mm, 2 mm).
+    ff_bandwidth_rad_s : float, optional
+        Force-fight compensation bandwidth, rad/s (default 1).
+
+    Returns
+    -------
+    OperationProfile
+
+    Notes
+    -----
+    Command :math:`y = y_{trim} + A \\sin(2\\pi f (t - t_j))` over one period
+    per manoeuvre. The hinge load :math:`-k_a (y - y_0)` (-500 N at trim,
+    -2 kN to +1 kN during a manoeuvre) changes sign twice per manoeuvre, at
+    rates up to :math:`2\\pi f k_a A` = 4.7 to 14 kN/s; both internal plays are
+    crossed at each sign change.
+    """
+    p = _params(params)
+    amp = _num(amplitude_mm, "amplitude_mm", "mm", lo=0.0, lo_open=True, hi=0.5 * p.stroke_limit_mm)
+    freqs = np.asarray(frequencies_Hz, dtype=float)
+    if freqs.ndim != 1 or freqs.size < 1 or not np.all(np.isfinite(freqs)) or np.any(freqs <= 0) or np.any(freqs > 10):
+        raise InputError(f"frequencies_Hz must be a 1-D sequence of values in (0, 10] Hz, got {frequencies_Hz!r} "
+                         f"(shape {np.shape(frequencies_Hz)})")
+    dwell = _num(dwell_s, "dwell_s", "s", lo=0.0)
+    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm + amp, hi=p.stroke_limit_mm - amp)
+    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
+    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
+    T = p.sample_period_s
+    total = dwell + float(np.sum(1.0 / freqs + dwell))
+    n = int(math.ceil(total / T))
+    t = np.arange(1, n + 1) * T
+    y = np.full(n, trim)
+    ts = dwell
+    for f in freqs:
+        m = (t > ts) & (t <= ts + 1.0 / f)
+        y[m] = trim + amp * np.sin(2 * np.pi * f * (t[m] - ts))
+        ts += 1.0 / f + dwell
+    load = np.full(n, ka * y0)
+    return _profile("small_manoeuvres",
+                    f"{freqs.size} sine manoeuvres of {amp:g} mm at {', '.join(f'{f:g}' for f in freqs)} Hz "
+                    f"about trim {trim:g} mm (hinge load zero at {y0:g} mm)",
+                    T, y, load, ka, y0, None, 0, ffb, 1.5)
+
+
+def gust_profile(
+    params: RigParams,
+    rng: np.random.Generator,
+    *,
+    duration_s: float = 20.0,
+    gust_std_N: float = 1500.0,
+    gust_bandwidth_rad_s: float = 3.0,
+    trim_mm: float = 2.0,
+    aero_stiffness_N_per_mm: float = 1000.0,
+    zero_load_mm: float = 2.0,
+    ff_bandwidth_rad_s: float = 1.0,
+) -> OperationProfile:
+    """Surface held at trim, random gust load (turbulence).
+
+    Parameters
+    ----------
+    params : RigParams
+    rng : numpy.random.Generator
+        Source of the gust sequence.
+    duration_s : float, optional
+        s (default 20).
+    gust_std_N : float, optional
+        Standard deviation of the gust force on the surface, N (default 1500).
+    gust_bandwidth_rad_s : float, optional
+        Corner of the (second-order) gust spectrum, rad/s (default 3).
+    trim_mm, aero_stiffness_N_per_mm, zero_load_mm, ff_bandwidth_rad_s : float, optional
+        As in :func:`small_manoeuvre_profile` (trim at the zero-load deflection,
+        so the mean load is zero and the gusts change its sign at random).
+
+    Returns
+    -------
+    OperationProfile
+
+    Notes
+    -----
+    Gust force: a stationary, critically damped second-order Gauss-Markov
+    process (white noise through :math:`\\omega_g^2/(s + \\omega_g)^2`, the
+    surface's aerodynamic lag smoothing the turbulence; exact discretisation),
+    scaled to ``gust_std_N`` [N]. Its path is differentiable, so the load
+    passes zero at a definite rate; a first-order (Ornstein-Uhlenbeck) gust
+    would be a random walk on short time scales and chatter through zero.
+    With the trim at the zero-load deflection the mean load is zero and the
+    gusts change its sign at random times and rates.
+    """
+    p = _params(params)
+    r = _rng(rng)
+    dur = _num(duration_s, "duration_s", "s", lo=0.0, lo_open=True, hi=3600.0)
+    gs = _num(gust_std_N, "gust_std_N", "N", lo=0.0)
+    gb = _num(gust_bandwidth_rad_s, "gust_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
+    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
+    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
+    T = p.sample_period_s
+    n = int(math.ceil(dur / T))
+    gust = _smooth_noise(r, n, gs, gb, T)
+    y = np.full(n, trim)
+    load = ka * y0 + gust
+    return _profile("gusts", f"surface at trim {trim:g} mm, gusts {gs:g} N rms, {gb:g} rad/s",
+                    T, y, load, ka, y0, None, 0, ffb, 1.5)
+
+
+def cruise_profile(
+    params: RigParams,
+    rng: np.random.Generator,
+    *,
+    duration_s: float = 20.0,
+    trim_mm: float = -2.0,
+    turbulence_std_N: float = 200.0,
+    turbulence_bandwidth_rad_s: float = 3.0,
+    command_jitter_mm: float = 0.05,
+    aero_stiffness_N_per_mm: float = 1000.0,
+    zero_load_mm: float = 2.0,
+    ff_bandwidth_rad_s: float = 1.0,
+) -> OperationProfile:
+    """Quiet cruise: trim away from zero load, light turbulence; backlash never crossed.
+
+    Parameters
+    ----------
+    params : RigParams
+    rng : numpy.random.Generator
+        Source of the turbulence and of the small command corrections.
+    duration_s : float, optional
+        s (default 20).
+    trim_mm : float, optional
+        Trim deflection, mm (default -2: 4 kN of hinge load, 2 kN per EMA).
+    turbulence_std_N : float, optional
+        Standard deviation of the turbulence force, N (default 200).
+    turbulence_bandwidth_rad_s : float, optional
+        Corner of the turbulence spectrum, rad/s (default 3; second order as
+        in :func:`gust_profile`).
+    command_jitter_mm : float, optional
+        Standard deviation of slow autopilot corrections of the command, mm
+        (default 0.05; bandwidth 1 rad/s).
+    aero_stiffness_N_per_mm, zero_load_mm, ff_bandwidth_rad_s : float, optional
+        As in :func:`full_stroke_profile`.
+
+    Returns
+    -------
+    OperationProfile
+
+    Notes
+    -----
+    Surface force :math:`L = -k_a (y - y_0) + g(t)` with
+    :math:`k_a (y_0 - y_{trim})` = 4 kN against a turbulence of 200 N rms
+    (a 20-sigma margin): the forces never change sign, so no play is
+    crossed and BLFserv must report "not traversed".
+    """
+    p = _params(params)
+    r = _rng(rng)
+    dur = _num(duration_s, "duration_s", "s", lo=0.0, lo_open=True, hi=3600.0)
+    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    ts = _num(turbulence_std_N, "turbulence_std_N", "N", lo=0.0)
+    tb = _num(turbulence_bandwidth_rad_s, "turbulence_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
+    cj = _num(command_jitter_mm, "command_jitter_mm", "mm", lo=0.0, hi=1.0)
+    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
+    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
+    T = p.sample_period_s
+    n = int(math.ceil(dur / T))
+    turb = _smooth_noise(r, n, ts, tb, T)
+    y = trim + _smooth_noise(r, n, cj, 1.0, T)
+    load = ka * y0 + turb
+    return _profile("cruise", f"cruise at trim {trim:g} mm, turbulence {ts:g} N rms (no sign change)",
+                    T, y, load, ka, y0, None, 0, ffb, 1.5)
+
+
+def ext_crossing_profile(
+    params: RigParams,
+    *,
+    force_fight_N: float = 1500.0,
+    ramp_s: float = 1.5,
+    crossing_rate_mm_per_s: float = 30.0,
+    reversals: int = 2,
+    dwell_s: float = 0.5,
+    trim_mm: float = 0.0,
+) -> OperationProfile:
+    """Force-fight reversal on the ground: both forces change sign in opposite sense.
+
+    Parameters
+    ----------
+    params : RigParams
+        The rig; its plays and stiffnesses place the crossing (see Notes).
+    force_fight_N : float, optional
+        Force fight at the ends of the ramps, N (default 1500).
+    ramp_s : float, optional
+        Duration of each ramp from the end force fight to zero, s (default 1.5).
+    crossing_rate_mm_per_s : float, optional
+        Rate of the relative offset while crossing the play, mm/s (default 30).
+    reversals : int, optional
+        Number of force-fight reversals (default 2: there and back).
+    dwell_s : float, optional
+        Hold at the start, between reversals and at the end, s (default 0.5).
+    trim_mm : float, optional
+        Surface position, mm (default 0).
+
+    Returns
+    -------
+    OperationProfile
+        With a scheduled ``offset_mm`` (the compensation loop is off) and no
+        air load.
+
+    Notes
+    -----
+    On the ground (no air load) the surface is held at trim while the
+    force-fight compensator reverses the force fight. With the relative offset
+    :math:`\\delta` (EMA 1 at :math:`+\\delta/2`, EMA 2 at :math:`-\\delta/2`),
+    :math:`F_1 = -F_2 = k_s(\\delta - \\delta_p)` for
+    :math:`\\delta > \\delta_p` (EMA 1 pushes, EMA 2 holds back) and
+    :math:`F_1 = -F_2 = k_s(\\delta + \\delta_p)` for
+    :math:`\\delta < -\\delta_p`, slack in between, with
+    :math:`\\delta_p` = :func:`force_fight_play_mm` (0.16 mm) and
+    :math:`k_s = (1/k_1 + 1/k_2)^{-1}` (7.4 kN/mm) from
+    :func:`chain_stiffness_N_per_mm`. The schedule ramps the force fight
+    linearly to zero (the compensator's integral action), crosses the
+    :math:`2\\delta_p` of slack at ``crossing_rate_mm_per_s`` (the
+    compensator's rate limit: in the slack the force error is all there is,
+    nothing opposes), then ramps the opposite force fight up. Both forces
+    change sign in opposite sense at the same instant: the rams swap flanks
+    in both bearings and :math:`D_{ext} = s_2 - s_1` jumps by
+    :math:`B_{b,1} + B_{b,2}` (both internal plays are crossed too), while the
+    elastic part :math:`-2F_1/k_{s,ext}` only ramps and is removed by
+    BLFserv's plateau fits.
+
+    Why not simply a lagging drive at a rate reversal: there the relative
+    offset sweeps straight through the slack at the same rate as through the
+    contact, and the elastic change of :math:`D_{ext}` per mm of relative
+    offset in contact (:math:`2k_s/k_{s,ext}` = 0.81 mm/mm here, housing
+    springs included in the LVDT stroke) exceeds that in the slack
+    (:math:`B_{ext}/2\\delta_p` = 0.31 mm/mm): the external play shows as a
+    flattening of :math:`D_{ext}`, not as a jump, and no force-free method can
+    separate it from the elastic change (BLFmaint does, with the forces).
+    """
+    p = _params(params)
+    ff = _num(force_fight_N, "force_fight_N", "N", lo=0.0, lo_open=True, hi=20000.0)
+    ramp = _num(ramp_s, "ramp_s", "s", lo=0.0, lo_open=True, hi=60.0)
+    rate = _num(crossing_rate_mm_per_s, "crossing_rate_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
+    if isinstance(reversals, bool) or not isinstance(reversals, (int, np.integer)) or not 1 <= reversals <= 100:
+        raise InputError(f"reversals must be an int in [1, 100] (count), got {reversals!r}")
+    dwell = _num(dwell_s, "dwell_s", "s", lo=0.0)
+    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    T = p.sample_period_s
+    k1, k2 = chain_stiffness_N_per_mm(p)
+    ks = _series(k1, k2)
+    dp = force_fight_play_mm(p)
+    d_end = dp + ff / ks
+    # one reversal: ramp d_end -> dp, cross to -dp, ramp -dp -> -d_end
+    t_cross = 2 * dp / rate
+    seg = [dwell]
+    for _ in range(int(reversals)):
+        seg.append(ramp + t_cross + ramp + dwell)
+    total = float(sum(seg))
+    n = int(math.ceil(total / T))
+    t = np.arange(1, n + 1) * T
+    delta = np.full(n, d_end)
+    ts = dwell
+    sgn = 1.0
+    for _ in range(int(reversals)):
+        tau = t - ts
+        a = sgn * (d_end - (d_end - dp) * tau / ramp)
+        b = sgn * (dp - rate * (tau - ramp))
+        c = sgn * (-dp - (d_end - dp) * np.minimum(tau - ramp - t_cross, ramp) / ramp)
+        m = tau > 0
+        delta = np.where(m & (tau <= ramp), a, delta)
+        delta = np.where(m & (tau > ramp) & (tau <= ramp + t_cross), b, delta)
+        delta = np.where(m & (tau > ramp + t_cross), c, delta)
+        ts += ramp + t_cross + ramp + dwell
+        sgn = -sgn
+    y = np.full(n, trim)
+    load = np.zeros(n)
+    return _profile("ext_crossing",
+                    f"ground, no air load: force fight +-{ff:g} N reversed {int(reversals)}x, play crossed at "
+                    f"{rate:g} mm/s relative offset",
+                    T, y, load, 0.0, trim, delta, 0, 0.0, 1.5)
+
+
+# ====================================================================== simulation
+
+
+def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.random.Generator) -> OperationRecord:
+    """Run a normal-operation profile on the simulated rig.
+
+    Parameters
+    ----------
+    params : RigParams
+        The rig (sensor errors and noise included).
+    profile : OperationProfile
+        From one of the generators of this module.
+    rng : numpy.random.Generator
+        Source of the sensor noise (handed to :class:`sim.plant.RigPlant`).
+
+    Returns
+    -------
+    OperationRecord
+
+    Raises
+    ------
+    blf.errors.InputError
+        Bad arguments, or a profile whose sample period differs from the rig's.
+
+    Notes
+    -----
+    Both drives in POSITION: EMA 1 at :math:`(c_k + \\delta_k/2)\\,i_{total}`,
+    EMA 2 at :math:`(c_{k-l} - \\delta_k/2)\\,i_{total}` [rad] with the
+    command :math:`c` [mm], the lag :math:`l` and the relative offset
+    :math:`\\delta` [mm]. Unless scheduled, :math:`\\delta` comes from the
+    force-fight compensation, a slow integral loop on the measured forces:
+
+    .. math:: \\delta_{k+1} = \\delta_k - T\\,\\omega_{ff}\\,\\frac{F_{1,k} - F_{2,k}}{2 k_s}
+
+    with :math:`k_s` the series stiffness of the two chains
+    (:func:`chain_stiffness_N_per_mm`), so that :math:`F_1 - F_2` decays with
+    the bandwidth :math:`\\omega_{ff}` [rad/s] while both chains are in
+    contact; :math:`|\\delta| \\le 1` mm.
+
+    The air load enters the plant as an extra surface load stiffness
+    :math:`k_a` (added to ``params.surface.load_stiffness_N_per_mm``) and the
+    load array :math:`k_a y_0 + g`; the truth (:func:`sim.truth.rig_truth`)
+    is that of ``params``. ``profile.warmup_s`` of settling at the first
+    command is simulated first and not recorded.
+
+    Traversal truth, from the true forces: an internal play counts as crossed
+    when :math:`F_i` is seen below :math:`-F_c` and above :math:`+F_c`
+    (:data:`CONTACT_FORCE_N` = 20 N); the external play when both
+    configurations :math:`(F_1 > F_c, F_2 < -F_c)` and
+    :math:`(F_1 < -F_c, F_2 > F_c)` occur (a change of sign of both forces in
+    opposite sense; a same-sense change moves :math:`D_{ext}` by
+    :math:`B_{b,2} - B_{b,1}` only).
+    """
+    p = _params(params)
+    if not isinstance(profile, OperationProfile):
+        raise InputError(f"profile must be an OperationProfile, got {type(profile).__name__}")
+    r = _rng(rng)
+    T = p.sample_period_s
+    if abs(profile.sample_period_s - T) > 1e-12:
+        raise InputError(f"profile.sample_period_s = {profile.sample_period_s} s differs from "
+                         f"params.sample_period_s = {T} s")
+    i_tot = p.i_total_rad_per_mm
+    ka = profile.aero_stiffness_N_per_mm
+    run_params = replace(p, surface=replace(p.surface, load_stiffness_N_per_mm=p.surface.load_stiffness_N_per_mm + ka))
+    cmd = np.asarray(profile.command_mm, dtype=float)
+    load = np.asarray(profile.load_N, dtype=float)
+    sched = None if profile.offset_mm is None else np.asarray(profile.offset_mm, dtype=float)
+    lag = int(profile.lag2_samples)
+    nw = int(round(profile.warmup_s / T))
+    n = profile.n
+    # prepend the warm-up at the first command; the air load and a scheduled offset are faded in
+    # smoothly (raised cosine over 70 % of it) so that the lightly damped surface is not set ringing
+    ramp = np.ones(nw)
+    nr = int(0.7 * nw)
+    if nr > 0:
+        ramp[:nr] = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, nr + 1) / nr)
+    cmd_all = np.concatenate([np.full(nw, cmd[0]), cmd])
+    # the plant's load stiffness -ka*y acts in full from the start: the warm-up load
+    # ramp*load[0] + (1 - ramp)*ka*cmd[0] makes the total ramp*(load[0] - ka*y) (y ~ cmd[0])
+    load_all = np.concatenate([ramp * load[0] + (1.0 - ramp) * ka * cmd[0], load])
+    sched_all = None if sched is None else np.concatenate([ramp * sched[0], sched])
+    cmd2_all = np.concatenate([np.full(lag, cmd_all[0]), cmd_all[:cmd_all.size - lag]]) if lag else cmd_all
+    k1, k2 = chain_stiffness_N_per_mm(p)
+    ks = _series(k1, k2)
+    gain = T * profile.ff_bandwidth_rad_s / (2.0 * ks)
+    # start near the equilibrium deflection under the initial load to keep the warm-up short
+    plant = RigPlant(run_params, r, s0_mm=float(np.clip(cmd_all[0], -p.stroke_limit_mm, p.stroke_limit_mm)))
+    ntot = cmd_all.size
+    meas = np.empty((ntot, 7))
+    true_f = np.empty((ntot, 2))
+    true_s = np.empty((ntot, 2))
+    offs = np.empty(ntot)
+    delta = 0.0 if sched_all is None else float(sched_all[0])
+    step = plant.step_raw
+    state = plant.state
+    for k in range(ntot):
+        if sched_all is not None:
+            delta = float(sched_all[k])
+        offs[k] = delta
+        o = step(_POS, (cmd_all[k] + 0.5 * delta) * i_tot, _POS, (cmd2_all[k] - 0.5 * delta) * i_tot,
+                 float(load_all[k]))
+        meas[k] = o
+        st = state()
+        true_f[k] = st.F_N
+        true_s[k] = st.s_mm
+        if sched_all is None and gain > 0.0:
+            delta -= gain * (o[5] - o[6])
+            delta = min(max(delta, -1.0), 1.0)
+    sl = slice(nw, ntot)
+    F = true_f[sl]
+    fc = CONTACT_FORCE_N
+    trav = {
+        "int1": bool(np.any(F[:, 0] > fc) and np.any(F[:, 0] < -fc)),
+        "int2": bool(np.any(F[:, 1] > fc) and np.any(F[:, 1] < -fc)),
+        "ext": bool(np.any((F[:, 0] > fc) & (F[:, 1] < -fc)) and np.any((F[:, 0] < -fc) & (F[:, 1] > fc))),
+    }
+    truth = rig_truth(p)
+    expected = {ch: (truth.backlash_mm[ch] if trav[ch] else None) for ch in ("int1", "int2", "ext")}
+    return OperationRecord(
+        name=profile.name, t_s=_ro(meas[sl, 0] - meas[nw - 1, 0] if nw else meas[sl, 0]),
+        phi1_rad=_ro(meas[sl, 1]), phi2_rad=_ro(meas[sl, 2]), s1_mm=_ro(meas[sl, 3]), s2_mm=_ro(meas[sl, 4]),
+        F1_N=_ro(meas[sl, 5]), F2_N=_ro(meas[sl, 6]), true_F_N=_ro(F), true_s_mm=_ro(true_s[sl]),
+        offset_mm=_ro(offs[sl]), truth=truth, traversed=trav, expected_backlash_mm=expected,
+        sample_period_s=float(T))
+
+
+def simulate_calibration_sweep(
+    params: RigParams,
+    rng: np.random.Generator,
+    *,
+    ema: int = 1,
+    amplitude_mm: float = 17.0,
+    speed_mm_per_s: float = 5.0,
+    opposing_force_N: float = 2000.0,
+    force_ramp_s: float = 1.0,
+) -> CalibrationSweep:
+    """Slow LVDT calibration sweep of one EMA under a constant opposing force.
+
+    Parameters
+    ----------
+    params : RigParams
+    rng : numpy.random.Generator
+        Sensor noise.
+    ema : {1, 2}, optional
+        The EMA swept in POSITION mode; the other holds ``opposing_force_N``
+        in FORCE mode (default 1).
+    amplitude_mm : float, optional
+        Sweep ``0 -> +A -> -A -> 0``, mm (default 17).
+    speed_mm_per_s : float, optional
+        Sweep speed, mm/s (default 5).
+    opposing_force_N : float, optional
+        Force of the other EMA (compression), N (default 2000).
+    force_ramp_s : float, optional
+        Ramp of the opposing force before the sweep, s (default 1).
+
+    Returns
+    -------
+    CalibrationSweep
+        The sweep samples only (ramp excluded).
+
+    Notes
+    -----
+    Paper 2.3: under a constant opposing force :math:`F` the swept EMA's
+    internal deflection :math:`D_{int} = -(F/k + \\mathrm{sign}(F) B/2)` is
+    constant, so :math:`x = \\varphi/i_{total}` is the stroke up to a
+    constant and the regression of :math:`s` on :math:`x` is the LVDT law.
+    """
+    p = _params(params)
+    r = _rng(rng)
+    if ema not in (1, 2) or isinstance(ema, bool):
+        raise InputError(f"ema must be 1 or 2 (no unit), got {ema!r}")
+    amp = _num(amplitude_mm, "amplitude_mm", "mm", lo=0.0, lo_open=True, hi=0.95 * p.stroke_limit_mm)
+    v = _num(speed_mm_per_s, "speed_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
+    f = _num(opposing_force_N, "opposing_force_N", "N", lo=0.0, lo_open=True, hi=20000.0)
+    tr = _num(force_ramp_s, "force_ramp_s", "s", lo=0.0, lo_open=True, hi=60.0)
+    T = p.sample_period_s
+    i_tot = p.i_total_rad_per_mm
+    nr = int(round(tr / T))
+    period = 4.0 * amp / v
+    ns = int(round(period / T))
+    t = np.arange(1, ns + 1) * T
+    x = amp * (1.0 - 2.0 * np.abs(2.0 * ((t / period + 0.25) % 1.0) - 1.0))  # triangle 0 -> A -> -A -> 0
+    settle = int(round(0.5 / T))
+    pos = np.concatenate([np.zeros(nr + settle), x]) * i_tot
+    frc = np.concatenate([np.linspace(0.0, f, nr), np.full(settle + ns, f)])
+    plant = RigPlant(p, r)
+    if ema == 1:
+        trc = plant.run(_POS, pos, _FRC, frc, 0.0)
+        phi, s = trc.phi1_rad, trc.s1_mm
+    else:
+        trc = plant.run(_FRC, frc, _POS, pos, 0.0)
+        phi, s = trc.phi2_rad, trc.s2_mm
+    sl = slice(nr + settle, None)
+    return CalibrationSweep(
+        ema=int(ema), x_mm=_ro(phi[sl] / i_tot), s_mm=_ro(s[sl]), opposing_force_N=f,
+        t_s=_ro(trc.t_s[sl] - trc.t_s[nr + settle - 1]), phi1_rad=_ro(trc.phi1_rad[sl]),
+        phi2_rad=_ro(trc.phi2_rad[sl]), s1_mm=_ro(trc.s1_mm[sl]), s2_mm=_ro(trc.s2_mm[sl]),
+        F1_N=_ro(trc.F1_N[sl]), F2_N=_ro(trc.F2_N[sl]))
