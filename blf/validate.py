@@ -74,3 +74,48 @@ def readonly(arr: np.ndarray) -> np.ndarray:
     out = np.array(arr, copy=True)
     out.flags.writeable = False
     return out
+
+
+def is_real(value) -> bool:
+    """True for an int or float (numpy's included), not a bool."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
+def scalar(value, name: str, unit: str, *, lo: float = -np.inf, lo_open: bool = False,
+           hi: float = np.inf, hi_open: bool = False) -> float:
+    """``value`` as a finite float in the interval ``lo..hi`` (open or closed ends), else InputError
+    quoting the interval and the unit: ``name must be a finite scalar in (0.0, inf] mm, got -1``."""
+    ok = is_real(value) and np.isfinite(float(value))
+    if ok:
+        v = float(value)
+        ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    if not ok:
+        lb = "(" if lo_open else "["
+        hb = ")" if hi_open else "]"
+        raise InputError(f"{name} must be a finite scalar in {lb}{lo}, {hi}{hb} {unit}, got {value!r}")
+    return float(value)
+
+
+def count(value, name: str, lo: int, hi: int | None = None) -> int:
+    """``value`` as an int count in ``lo..hi`` (no upper bound when ``hi`` is None), else InputError."""
+    ok = not isinstance(value, bool) and isinstance(value, (int, np.integer))
+    if ok:
+        ok = int(value) >= lo and (hi is None or int(value) <= hi)
+    if not ok:
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise InputError(f"{name} must be an int {rng} (count), got {value!r}")
+    return int(value)
+
+
+def generator(rng, name: str = "rng") -> np.random.Generator:
+    """``rng`` if it is a ``numpy.random.Generator`` (explicit randomness), else InputError."""
+    if not isinstance(rng, np.random.Generator):
+        raise InputError(f"{name} must be a numpy.random.Generator, got {type(rng).__name__}")
+    return rng
+
+
+def one_of(value, name: str, allowed: tuple, what: str = "a str, no unit"):
+    """``value`` if it is one of ``allowed``, else InputError listing them."""
+    if value not in allowed or isinstance(value, bool):
+        raise InputError(f"{name} must be one of {allowed} ({what}), got {value!r}")
+    return value
