@@ -11,11 +11,12 @@ import importlib
 #: which cost seconds at start-up where page faults are expensive (user-mode-linux).
 _WHERE = {
     "AccuracyBudget": "accuracy", "MethodErrors": "accuracy", "backlash_error_budget": "accuracy",
-    "LvdtCalibration": "calibration", "fit_lvdt_calibration": "calibration",
+    "LvdtCalibration": "calibration", "correct_linear": "calibration", "fit_lvdt_calibration": "calibration",
     "BinnedCurve": "maint", "BlfMaintResult": "maint", "CentreLine": "maint", "ContactLine": "maint",
     "FdLines": "maint", "blf_maint": "maint",
-    "BlfServMonitor": "serv", "BlfServResult": "serv", "ServFilters": "serv", "ServJump": "serv",
-    "blf_serv": "serv", "design_serv_filters": "serv", "estimate_noise_std_mm": "serv",
+    "BlfServMonitor": "serv", "BlfServResult": "serv", "ServJump": "serv", "blf_serv": "serv",
+    "ServFilters": "serv_filters", "design_serv_filters": "serv_filters", "estimate_noise_std_mm": "serv_filters",
+    "Segments": "segments", "find_segments": "segments", "find_sweep": "segments",
     "PositionDifferences": "signals", "position_differences": "signals",
 }
 
@@ -53,6 +54,10 @@ __all__ = [
     "LvdtCalibration",
     "PositionDifferences",
     "blf_maint",
+    "correct_linear",
     "fit_lvdt_calibration",
     "position_differences",
+    "Segments",
+    "find_segments",
+    "find_sweep",
 ]

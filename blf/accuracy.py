@@ -18,12 +18,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
-from blf.errors import InputError
-
-from .serv import design_serv_filters
-from blf.validate import positive_scalar
+from blf.serv_filters import design_serv_filters
+from blf.validate import positive_scalar, scalar
 
 __all__ = ["MethodErrors", "AccuracyBudget", "backlash_error_budget"]
 
@@ -106,18 +102,6 @@ class AccuracyBudget:
     target_mm: float
 
 
-def _nonneg(value, name: str, unit: str) -> float:
-    """``value`` as a finite float >= 0, else InputError naming it."""
-    ok = np.ndim(value) == 0 and not isinstance(value, (bool, str, bytes))
-    try:
-        x = float(value) if ok else float("nan")
-    except (TypeError, ValueError):
-        x = float("nan")
-    if not (math.isfinite(x) and x >= 0.0):
-        raise InputError(f"{name} must be a finite scalar >= 0 in {unit} (shape ()); got {value!r}")
-    return x
-
-
 def _line_value_variance(n: int, dist: int) -> float:
     """Variance factor of a least-squares line over n consecutive samples evaluated ``dist`` samples
     before the first (or after the last) of them."""
@@ -167,7 +151,7 @@ def backlash_error_budget(
         Largest D jump BLFserv reads, mm (default ``stroke_mm / 10``: the
         paper's "a tenth of the full mechanical stroke, i.e. 2 mm").
     lowpass_rad_s, dt1_rad_s : float, optional
-        BLFserv filters (:func:`blf.serv.design_serv_filters`).
+        BLFserv filters (:func:`blf.serv_filters.design_serv_filters`).
     plateau_s, guard_before_s, guard_after_s : float, optional
         Plateau fits of the improved BLFserv (:func:`blf.serv.blf_serv`).
     event_s : float, optional
@@ -197,7 +181,7 @@ def backlash_error_budget(
     calibrated).
 
     **Noise.** :math:`g_0` = RMS of the low-pass impulse response
-    (:attr:`blf.serv.ServFilters.noise_gain`), :math:`\\sigma_f = g_0\\sigma`.
+    (:attr:`blf.serv_filters.ServFilters.noise_gain`), :math:`\\sigma_f = g_0\\sigma`.
     A difference of two low-passed readings far apart (the paper's
     :math:`\\Delta D`; BLFmaint's corner readings before regression
     averaging, an upper bound) has :math:`\\sqrt 2\\,\\sigma_f`. The improved
@@ -215,18 +199,18 @@ def backlash_error_budget(
 
     Totals are root sums of squares; ``target_mm`` is :math:`B/10`.
     """
-    s = _nonneg(stroke_mm, "stroke_mm", "mm")
-    p = _nonneg(pitch_error, "pitch_error", "(relative)")
-    sig = _nonneg(lvdt_noise_std_mm, "lvdt_noise_std_mm", "mm")
+    s = scalar(stroke_mm, "stroke_mm", "mm", lo=0.0)
+    p = scalar(pitch_error, "pitch_error", "(relative)", lo=0.0)
+    sig = scalar(lvdt_noise_std_mm, "lvdt_noise_std_mm", "mm", lo=0.0)
     fs = positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
     b = positive_scalar(backlash_mm, "backlash_mm", "mm")
-    pr = _nonneg(residual_pitch_error, "residual_pitch_error", "(relative)")
-    tau = _nonneg(temperature_error, "temperature_error", "(relative)")
-    jb = s / 10.0 if jump_bound_mm is None else _nonneg(jump_bound_mm, "jump_bound_mm", "mm")
+    pr = scalar(residual_pitch_error, "residual_pitch_error", "(relative)", lo=0.0)
+    tau = scalar(temperature_error, "temperature_error", "(relative)", lo=0.0)
+    jb = s / 10.0 if jump_bound_mm is None else scalar(jump_bound_mm, "jump_bound_mm", "mm", lo=0.0)
     plat = positive_scalar(plateau_s, "plateau_s", "s")
-    gb = _nonneg(guard_before_s, "guard_before_s", "s")
-    ga = _nonneg(guard_after_s, "guard_after_s", "s")
-    ev = _nonneg(event_s, "event_s", "s")
+    gb = scalar(guard_before_s, "guard_before_s", "s", lo=0.0)
+    ga = scalar(guard_after_s, "guard_after_s", "s", lo=0.0)
+    ev = scalar(event_s, "event_s", "s", lo=0.0)
     filt = design_serv_filters(fs, lowpass_rad_s=lowpass_rad_s, dt1_rad_s=dt1_rad_s)
     sig_f = filt.noise_gain[0] * sig
     diff_noise = math.sqrt(2.0) * sig_f

@@ -7,6 +7,9 @@ stroke up to a constant. A polynomial regression of the LVDT reading ``s``
 on ``x`` captures the LVDT's offset, pitch (gain) and non-linearity; its
 inverse maps later LVDT readings back onto the motor-angle scale.
 
+A calibration known only by its pitch and offset (a maintenance check's
+result.json) is applied by :func:`correct_linear`.
+
 Pure: arrays in, frozen dataclass out, no IO.
 """
 
@@ -19,9 +22,9 @@ import numpy as np
 
 from blf.errors import AnalysisError, InputError
 
-from blf.validate import as_1d_finite, same_shape
+from blf.validate import as_1d_finite, as_finite, count, positive_scalar, same_shape, scalar
 
-__all__ = ["LvdtCalibration", "fit_lvdt_calibration"]
+__all__ = ["LvdtCalibration", "fit_lvdt_calibration", "correct_linear"]
 
 _GRID_POINTS = 2001  # dense grid for the non-linearity figure
 
@@ -85,7 +88,7 @@ class LvdtCalibration:
         ndarray
             ``s = sum_k c_k x**k`` in mm, same shape as ``x_mm``.
         """
-        x = _as_finite_any_shape(x_mm, "x_mm", "mm")
+        x = as_finite(x_mm, "x_mm", "mm")
         return _polyval(self.coefficients, x)
 
     def correct(self, s_mm) -> np.ndarray:
@@ -119,7 +122,7 @@ class LvdtCalibration:
         the end slope :math:`P'` (continuous, monotone; the cubic is not
         trusted outside the sweep).
         """
-        s = _as_finite_any_shape(s_mm, "s_mm", "mm")
+        s = as_finite(s_mm, "s_mm", "mm")
         if not self.monotone:
             raise AnalysisError(
                 "LVDT calibration polynomial is not strictly monotone on the swept range "
@@ -191,17 +194,12 @@ def fit_lvdt_calibration(
     x = as_1d_finite(x_mm, "x_mm", "mm")
     s = as_1d_finite(s_mm, "s_mm", "mm")
     same_shape((x, "x_mm", "mm"), (s, "s_mm", "mm"))
-    if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or not 1 <= degree <= 5:
-        raise InputError(f"degree must be an integer in 1..5 (dimensionless); got {degree!r}")
-    degree = int(degree)
+    degree = count(degree, "degree", 1, 5)
     if x.size < 50:
         raise InputError(
             f"x_mm and s_mm must have at least 50 samples (mm); got shape {x.shape}"
         )
-    try:
-        span_min = float(min_span_mm)
-    except (TypeError, ValueError):
-        raise InputError(f"min_span_mm must be a number in mm; got {min_span_mm!r}") from None
+    span_min = scalar(min_span_mm, "min_span_mm", "mm")
     x_min, x_max = float(np.min(x)), float(np.max(x))
     if not (x_max - x_min >= span_min and x_max > x_min):
         raise InputError(
@@ -265,24 +263,45 @@ def fit_lvdt_calibration(
     )
 
 
+def correct_linear(s_mm, pitch: float, offset_mm: float) -> np.ndarray:
+    """Map LVDT readings onto the motor-angle scale with a linear calibration.
+
+    Parameters
+    ----------
+    s_mm : array_like
+        Raw LVDT readings, mm, any shape.
+    pitch : float
+        LVDT pitch ``ds/dx`` (dimensionless, > 0; 1.075 for a reading 7.5 % high).
+    offset_mm : float
+        LVDT reading at ``x = 0``, mm.
+
+    Returns
+    -------
+    ndarray
+        ``x`` in mm, same shape as ``s_mm``.
+
+    Raises
+    ------
+    blf.errors.InputError
+        NaN/inf readings, a pitch that is not a finite number > 0, a
+        non-finite offset.
+
+    Notes
+    -----
+    The inverse of the straight line :math:`s = o + p\\,x` (the first two
+    terms of :class:`LvdtCalibration`, as result.json carries them):
+
+    .. math:: x = (s - o) / p \\quad [mm]
+    """
+    s = as_finite(s_mm, "s_mm", "mm")
+    p = positive_scalar(pitch, "pitch", "(dimensionless)")
+    o = scalar(offset_mm, "offset_mm", "mm")
+    return (s - o) / p
+
+
 # --------------------------------------------------------------------------
 # private helpers
 # --------------------------------------------------------------------------
-
-
-def _as_finite_any_shape(value, name: str, unit: str) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(
-            f"{name} must be a numeric array in {unit}; got {type(value).__name__}"
-        ) from None
-    if not np.all(np.isfinite(arr)):
-        bad = int(np.count_nonzero(~np.isfinite(arr)))
-        raise InputError(
-            f"{name} must be finite (in {unit}); got {bad} NaN/inf value(s) in shape {arr.shape}"
-        )
-    return arr
 
 
 def _polyval(coeffs, x: np.ndarray) -> np.ndarray:

@@ -21,7 +21,8 @@ from scipy import ndimage, signal
 
 from blf.errors import AnalysisError, InputError
 
-from blf.validate import as_1d_finite, positive_scalar, readonly, same_shape
+from blf.segments import runs
+from blf.validate import as_1d_finite, below_nyquist, count, positive_scalar, readonly, same_shape, scalar
 
 __all__ = [
     "BinnedCurve",
@@ -373,26 +374,17 @@ def blf_maint(
             f"d_mm and f_N need at least {MIN_SAMPLES} samples (mm, N); got shape {d.shape}"
         )
     fs = positive_scalar(sample_rate_Hz, "sample_rate_Hz", "Hz")
-    wc = positive_scalar(lowpass_rad_s, "lowpass_rad_s", "rad/s")
-    if wc >= np.pi * fs:
-        raise InputError(
-            f"lowpass_rad_s must be below the Nyquist frequency pi*sample_rate_Hz = "
-            f"{np.pi * fs:.4g} rad/s; got {wc:g} rad/s (shape ())"
-        )
+    wc = below_nyquist(lowpass_rad_s, "lowpass_rad_s", fs)
     bw = positive_scalar(bin_width_mm, "bin_width_mm", "mm")
-    half_win = _int_option(slope_window_bins, "slope_window_bins", 1)
-    min_count = _int_option(min_bin_count, "min_bin_count", 1)
-    min_contact = _int_option(min_contact_points, "min_contact_points", 3)
-    min_centre = _int_option(min_centre_points, "min_centre_points", 3)
-    c_margin = _fraction_option(contact_margin_frac, "contact_margin_frac")
-    m_margin = _fraction_option(centre_margin_frac, "centre_margin_frac")
-    try:
-        lag_s = float(hac_lag_s) if np.ndim(hac_lag_s) == 0 else float("nan")
-    except (TypeError, ValueError):
-        lag_s = float("nan")
-    if not (np.isfinite(lag_s) and lag_s >= 0.0):
-        raise InputError(f"hac_lag_s must be a finite number >= 0 in s (shape ()); got {hac_lag_s!r}")
-    max_lag = int(round(lag_s * fs))
+    half_win = count(slope_window_bins, "slope_window_bins", 1)
+    min_count = count(min_bin_count, "min_bin_count", 1)
+    min_contact = count(min_contact_points, "min_contact_points", 3)
+    min_centre = count(min_centre_points, "min_centre_points", 3)
+    c_margin = scalar(contact_margin_frac, "contact_margin_frac", "(fraction, dimensionless)", lo=0.0, hi=0.5,
+                      hi_open=True)
+    m_margin = scalar(centre_margin_frac, "centre_margin_frac", "(fraction, dimensionless)", lo=0.0, hi=0.5,
+                      hi_open=True)
+    max_lag = int(round(scalar(hac_lag_s, "hac_lag_s", "s", lo=0.0) * fs))
     n_total = d.size
 
     # 1. identical zero-phase low-pass of D and F (segmentation only)
@@ -511,26 +503,15 @@ def blf_maint(
     sk_r = float(np.sqrt(cov_r[1, 1])) / b_r**2
 
     flip = np.array([[1.0, 0.0], [0.0, float(sign)]])
-    left_line = ContactLine(
-        side="left",
-        d_at_zero_force_mm=float(a_l),
-        compliance_mm_per_N=float(sign * b_l),
-        cov=readonly(flip @ cov_l @ flip),
-        n=n_left,
-        f_min_N=float(f[idx_l].min()),
-        f_max_N=float(f[idx_l].max()),
-        rmse_mm=rms_l,
-    )
-    right_line = ContactLine(
-        side="right",
-        d_at_zero_force_mm=float(a_r),
-        compliance_mm_per_N=float(sign * b_r),
-        cov=readonly(flip @ cov_r @ flip),
-        n=n_right,
-        f_min_N=float(f[idx_r].min()),
-        f_max_N=float(f[idx_r].max()),
-        rmse_mm=rms_r,
-    )
+
+    def contact_line(side: str, a: float, b: float, cov: np.ndarray, idx: np.ndarray, rms: float) -> ContactLine:
+        """The line in the original sign of F (the fit was on G = sign * F)."""
+        return ContactLine(side=side, d_at_zero_force_mm=float(a), compliance_mm_per_N=float(sign * b),
+                           cov=readonly(flip @ cov @ flip), n=int(idx.size), f_min_N=float(f[idx].min()),
+                           f_max_N=float(f[idx].max()), rmse_mm=rms)
+
+    left_line = contact_line("left", a_l, b_l, cov_l, idx_l, rms_l)
+    right_line = contact_line("right", a_r, b_r, cov_r, idx_r, rms_r)
     centre_line = CentreLine(
         f_at_zero_d_N=float(sign * c0),
         slope_N_per_mm=float(sign * c1),
@@ -584,22 +565,6 @@ def blf_maint(
 # --------------------------------------------------------------------------
 
 
-def _int_option(value, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name} must be an integer >= {minimum} (count); got {value!r}")
-    return int(value)
-
-
-def _fraction_option(value, name: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        x = float("nan")
-    if np.ndim(value) != 0 or not 0.0 <= x < 0.5:
-        raise InputError(f"{name} must be a fraction in [0, 0.5) (dimensionless); got {value!r}")
-    return x
-
-
 def _local_slope(x: np.ndarray, y: np.ndarray, half_win: int) -> np.ndarray:
     """Slope of a local least-squares line over +-half_win neighbouring points."""
     m = x.size
@@ -639,15 +604,12 @@ def _two_cluster_level(v: np.ndarray) -> tuple[float, float, float]:
 
 def _widest_run(mask: np.ndarray, x: np.ndarray) -> tuple[int, int]:
     """First and last index of the run of True with the largest extent in x."""
-    idx = np.flatnonzero(mask)
-    if idx.size == 0:
+    stretches = runs(mask)
+    if not stretches:
         raise AnalysisError("no flat (backlash) part found in the binned F-D slope")
-    breaks = np.flatnonzero(np.diff(idx) > 1)
-    starts = np.concatenate(([idx[0]], idx[breaks + 1]))
-    stops = np.concatenate((idx[breaks], [idx[-1]]))
-    ext = x[stops] - x[starts]
-    k = int(np.argmax(ext))
-    return int(starts[k]), int(stops[k])
+    k = int(np.argmax([x[b - 1] - x[a] for a, b in stretches]))
+    a, b = stretches[k]
+    return int(a), int(b - 1)
 
 
 def _crossing(x0: float, x1: float, y0: float, y1: float, level: float) -> float:

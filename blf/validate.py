@@ -12,6 +12,7 @@ import numpy as np
 
 from blf.errors import InputError
 
+
 def as_1d_finite(value, name: str, unit: str, *, min_len: int = 1) -> np.ndarray:
     """Return ``value`` as a float64 1-D array or raise InputError naming it."""
     try:
@@ -29,11 +30,22 @@ def as_1d_finite(value, name: str, unit: str, *, min_len: int = 1) -> np.ndarray
         raise InputError(
             f"{name} must have at least {min_len} samples in {unit}; got shape {arr.shape}"
         )
+    return _finite(arr, name, unit)
+
+
+def as_finite(value, name: str, unit: str) -> np.ndarray:
+    """Return ``value`` as a float64 array of any shape, all finite, or raise InputError naming it."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a numeric array in {unit}; got {type(value).__name__}") from None
+    return _finite(arr, name, unit)
+
+
+def _finite(arr: np.ndarray, name: str, unit: str) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         bad = int(np.count_nonzero(~np.isfinite(arr)))
-        raise InputError(
-            f"{name} must be finite (in {unit}); got {bad} NaN/inf value(s) in shape {arr.shape}"
-        )
+        raise InputError(f"{name} must be finite (in {unit}); got {bad} NaN/inf value(s) in shape {arr.shape}")
     return arr
 
 
@@ -69,6 +81,17 @@ def positive_scalar(value, name: str, unit: str) -> float:
     return x
 
 
+def below_nyquist(value, name: str, sample_rate_Hz: float) -> float:
+    """``value`` as a finite positive angular frequency (rad/s) below the Nyquist frequency
+    ``pi * sample_rate_Hz``, else InputError naming it."""
+    w = positive_scalar(value, name, "rad/s")
+    nyq = np.pi * sample_rate_Hz
+    if w >= nyq:
+        raise InputError(f"{name} must be below the Nyquist frequency pi*sample_rate_Hz = {nyq:.4g} rad/s; "
+                         f"got {w:g} rad/s (shape ())")
+    return w
+
+
 def readonly(arr: np.ndarray) -> np.ndarray:
     """Return a read-only copy-owned array (for frozen result dataclasses)."""
     out = np.array(arr, copy=True)
@@ -84,16 +107,26 @@ def is_real(value) -> bool:
 def scalar(value, name: str, unit: str, *, lo: float = -np.inf, lo_open: bool = False,
            hi: float = np.inf, hi_open: bool = False) -> float:
     """``value`` as a finite float in the interval ``lo..hi`` (open or closed ends), else InputError
-    quoting the interval and the unit: ``name must be a finite scalar in (0.0, inf] mm, got -1``."""
+    quoting the bound and the unit: ``name must be a finite scalar > 0.0 mm, got -1`` (one bound),
+    ``... in [0.0, 0.5) (dimensionless), got 0.7`` (two bounds)."""
     ok = is_real(value) and np.isfinite(float(value))
     if ok:
         v = float(value)
         ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
     if not ok:
-        lb = "(" if lo_open else "["
-        hb = ")" if hi_open else "]"
-        raise InputError(f"{name} must be a finite scalar in {lb}{lo}, {hi}{hb} {unit}, got {value!r}")
+        raise InputError(f"{name} must be a finite scalar {_bounds(lo, lo_open, hi, hi_open)}{unit}, got {value!r}")
     return float(value)
+
+
+def _bounds(lo: float, lo_open: bool, hi: float, hi_open: bool) -> str:
+    """The allowed range in words, ready to stand before the unit."""
+    if np.isinf(lo) and np.isinf(hi):
+        return "in "
+    if np.isinf(hi):
+        return f"{'>' if lo_open else '>='} {lo} "
+    if np.isinf(lo):
+        return f"{'<' if hi_open else '<='} {hi} "
+    return f"in {'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'} "
 
 
 def count(value, name: str, lo: int, hi: int | None = None) -> int:
@@ -105,6 +138,13 @@ def count(value, name: str, lo: int, hi: int | None = None) -> int:
         rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
         raise InputError(f"{name} must be an int {rng} (count), got {value!r}")
     return int(value)
+
+
+def instance_of(value, cls: type, name: str, what: str | None = None):
+    """``value`` if it is an instance of ``cls``, else InputError naming the argument and the type got."""
+    if not isinstance(value, cls):
+        raise InputError(f"{name} must be {what or 'a ' + cls.__name__}, got {type(value).__name__}")
+    return value
 
 
 def generator(rng, name: str = "rng") -> np.random.Generator:

@@ -20,11 +20,21 @@ import can
 import numpy as np
 
 from hil.canopen.cia402 import OperationMode
+from hil.canopen.frame import SYNC_COB_ID, Frame, split_cob_id
+from hil.canopen.pdo import (
+    RPDO1,
+    RPDO2,
+    TPDO1,
+    TPDO2,
+    PdoError,
+    decode_rpdo1,
+    decode_rpdo2,
+    decode_tpdo1,
+    decode_tpdo2,
+)
+from hil.canopen.units import force_dN_to_newton, increments_to_rad, lvdt_um_to_mm, permille_to_force_N
 from hil.config import Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.canopen.frame import SYNC_COB_ID, Frame
-from hil.canopen.pdo import PdoError, decode_rpdo1, decode_rpdo2, decode_tpdo1, decode_tpdo2
-from hil.canopen.units import force_dN_to_newton, increments_to_rad, lvdt_um_to_mm, permille_to_force_N
 from hil.runfolder import Signals
 
 
@@ -170,18 +180,18 @@ def decode_can_log(path: str | Path, act: Actuation, rated_torque_Nm: float = 1.
                     tp1.clear()
                     tp2.clear()
                     continue
-                base, node = cid & 0x780, cid & 0x7F
+                base, node = split_cob_id(cid)
                 if node not in (n1, n2):
                     continue
-                if base == 0x180:
+                if base == TPDO1.cob_id_base:
                     tp1[node] = decode_tpdo1(f)
                     form_row()
-                elif base == 0x280:
+                elif base == TPDO2.cob_id_base:
                     tp2[node] = decode_tpdo2(f)
                     form_row()
-                elif base == 0x300:
+                elif base == RPDO2.cob_id_base:
                     mode[node] = decode_rpdo2(f).mode
-                elif base == 0x200 and pending is not None:
+                elif base == RPDO1.cob_id_base and pending is not None:
                     r = decode_rpdo1(f)
                     k = 0 if node == n1 else 2
                     m = mode[node]

@@ -14,17 +14,16 @@ from typing import Callable
 
 import can
 
+from hil.canlog import CanLogWriter
 from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.sdo import SdoAbortError, SdoTimeout
-from hil.canlog import CanLogWriter
 from hil.config import HARD_MAX_LAG_S
 from hil.errors import KNOWN_ERRORS, EmacheckError
 from hil.master import MasterCore, PreflightError
 from hil.transport import InProcessTransport
-
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
 
@@ -152,7 +151,7 @@ class CanopenLink:
                                 + ", ".join(f"node {n} TPDO{k}" for n, d in self.m.drives.items()
                                             for k, tp in ((1, d.tpdo1), (2, d.tpdo2)) if tp is None)
                                 + f"; drive states {[d.state.name for d in self.m.drives.values()]}")
-                self.m._latch(err)
+                self.m.latch(err)
                 raise err
 
     def first_sample(self) -> Sample:
@@ -215,7 +214,7 @@ class CanopenLink:
                     # the master has fallen behind the bus: whatever it computes now is stale
                     err = StaleData(f"sensor data stale: the master is {lag * 1e3:.0f} ms behind the bus "
                                     f"(frames wait in its socket; safety.max_lag_s = {self.max_lag_s * 1e3:.0f} ms)")
-                    self.m._latch(err)
+                    self.m.latch(err)
                     raise err
                 self._feed(got)
             self._send(self.m.poll(self.tr.now()))

@@ -31,18 +31,45 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass, field
-from enum import Enum, IntEnum
+from enum import Enum
 from typing import Generator
 
 from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
+from hil.canopen.emcy import Emcy, EmcyCode, decode_emcy
+from hil.canopen.frame import (
+    EMCY_COB_ID_BASE,
+    HEARTBEAT_COB_ID_BASE,
+    NMT_COB_ID,
+    SDO_RX_COB_ID_BASE,
+    SDO_TX_COB_ID_BASE,
+    SYNC_COB_ID,
+    Frame,
+    split_cob_id,
+)
+from hil.canopen.nmt import NmtCommand, NmtState, nmt_frame
+from hil.canopen.pdo import (
+    DEFAULT_LAYOUT,
+    RPDO1,
+    RPDO2,
+    TPDO1,
+    TPDO2,
+    PdoError,
+    Rpdo1,
+    Rpdo2,
+    decode_tpdo1,
+    decode_tpdo2,
+    encode_rpdo1,
+    encode_rpdo2,
+)
+from hil.canopen.process import DriveMode, Sample, Setpoint
+from hil.canopen.sdo import SdoClient, SdoEvent, expedited_download_frame
+from hil.canopen.units import force_dN_to_newton, force_to_permille, increments_to_rad, lvdt_um_to_mm, rad_to_increments
 from hil.config import Actuation
 from hil.errors import EmacheckError
-from hil.canopen.nmt import NmtCommand, NmtState
-from hil.canopen.pdo import DEFAULT_LAYOUT, PdoError, Rpdo1, Rpdo2, decode_tpdo1, decode_tpdo2, encode_rpdo1, encode_rpdo2
-from hil.canopen.frame import EMCY_COB_ID_BASE, HEARTBEAT_COB_ID_BASE, SYNC_COB_ID, Frame
-from hil.canopen.units import force_dN_to_newton, force_to_permille, increments_to_rad, lvdt_um_to_mm, rad_to_increments
-from hil.canopen.sdo import SdoClient, SdoEvent
-from hil.canopen.process import DriveMode, Sample, Setpoint
+
+_TPDO1, _TPDO2 = TPDO1.cob_id_base, TPDO2.cob_id_base
+#: The function codes of the frames the master only sees go by: its own RPDOs and SDO requests.
+_OWN_TRAFFIC = frozenset((RPDO1.cob_id_base, RPDO2.cob_id_base, SDO_TX_COB_ID_BASE))
 
 
 class PreflightError(EmacheckError, RuntimeError):
@@ -57,64 +84,27 @@ class HeartbeatLost(EmacheckError, RuntimeError):
     """A drive's heartbeat did not arrive within its timeout."""
 
 
-class EmcyCode(IntEnum):
-    """Common CiA 301 / CiA 402 emergency error codes (0x603F / EMCY bytes 0-1)."""
+class EventKind(Enum):
+    """What a :class:`MasterEvent` reports."""
 
-    NO_ERROR = 0x0000
-    GENERIC = 0x1000
-    CURRENT = 0x2000
-    OVER_CURRENT = 0x2310
-    SHORT_CIRCUIT = 0x2320
-    VOLTAGE = 0x3000
-    DC_LINK_OVER_VOLTAGE = 0x3210
-    DC_LINK_UNDER_VOLTAGE = 0x3220
-    TEMPERATURE = 0x4000
-    DRIVE_OVER_TEMPERATURE = 0x4310
-    MOTOR_OVER_TEMPERATURE = 0x4410
-    DEVICE_HARDWARE = 0x5000
-    SOFTWARE = 0x6000
-    MONITORING = 0x8000
-    COMMUNICATION = 0x8100
-    CAN_OVERRUN = 0x8110
-    CAN_PASSIVE = 0x8120
-    LIFE_GUARD_OR_HEARTBEAT = 0x8130
-    CAN_BUS_OFF_RECOVERED = 0x8140
-    PDO_LENGTH = 0x8210
-    PDO_LENGTH_EXCEEDED = 0x8220
-    SYNC_LENGTH = 0x8240
-    RPDO_TIMEOUT = 0x8250
-    FOLLOWING_ERROR = 0x8611
-    SENSOR = 0x7300
-    POSITION_SENSOR = 0x7320
-
-
-def describe_emcy(code: int) -> str:
-    try:
-        return EmcyCode(code).name.replace("_", " ").lower()
-    except ValueError:
-        try:
-            return EmcyCode(code & 0xFF00).name.replace("_", " ").lower() + " (class)"
-        except ValueError:
-            return "manufacturer specific" if code >= 0xFF00 else "unknown"
-
-
-@dataclass(frozen=True, slots=True)
-class Emcy:
-    t_s: float
-    node_id: int
-    code: int
-    error_register: int
-    data: bytes
-
-    def __str__(self) -> str:
-        return (f"node {self.node_id}: EMCY 0x{self.code:04X} ({describe_emcy(self.code)}), "
-                f"error register 0x{self.error_register:02X}")
+    NMT = "nmt"  #: an NMT command sent
+    BOOT = "boot"  #: a drive's boot-up message
+    SDO = "sdo"  #: an SDO sent outside the preflight (the quick stop by SDO)
+    PREFLIGHT = "preflight"  #: a drive identified and configured
+    STATE = "state"  #: a drive's CiA 402 state changed
+    EMCY = "emcy"  #: an emergency message
+    MISSING = "missing"  #: a SYNC cycle whose TPDOs were incomplete at the next SYNC
+    BAD_FRAME = "bad_frame"  #: a malformed PDO, counted and ignored
+    HEARTBEAT = "heartbeat"  #: a drive's heartbeat lost
+    FAULT = "fault"  #: a fault after the first one (recorded, not raised again)
 
 
 @dataclass(frozen=True, slots=True)
 class MasterEvent:
+    """Something the master saw or did, for the log (the core never prints)."""
+
     t_s: float
-    kind: str  #: "nmt", "boot", "sdo", "preflight", "state", "emcy", "missing", "bad_frame", "heartbeat"
+    kind: EventKind
     node_id: int
     detail: str
 
@@ -220,7 +210,7 @@ class MasterCore:
 
     # ---------------------------------------------------------------- events
 
-    def _event(self, t: float, kind: str, node: int, detail: str) -> None:
+    def _event(self, t: float, kind: EventKind, node: int, detail: str) -> None:
         self.events.append(MasterEvent(t, kind, node, detail))
 
     def drain_events(self) -> list[MasterEvent]:
@@ -294,7 +284,7 @@ class MasterCore:
             yield _SdoWrite(n, 0x1006, 0, struct.pack("<I", period_us), "communication cycle period")
             for w in DEFAULT_LAYOUT.configuration_writes(n):
                 yield _SdoWrite(n, w.index, w.subindex, w.data, w.what)
-            self._event(0.0, "preflight", n, f"configured: identity {d.identity}, rated torque "
+            self._event(0.0, EventKind.PREFLIGHT, n, f"configured: identity {d.identity}, rated torque "
                                              f"{d.rated_torque_Nm} Nm, heartbeat {hb_ms} ms")
         yield _Nmt(NmtCommand.START)
 
@@ -316,8 +306,8 @@ class MasterCore:
             result = None
             self._pending = req
             if isinstance(req, _Nmt):
-                out.append(Frame(0x000, bytes([int(req.command), 0])))
-                self._event(t, "nmt", 0, f"NMT {req.command.name} to all nodes")
+                out.append(nmt_frame(req.command))
+                self._event(t, EventKind.NMT, 0, f"NMT {req.command.name} to all nodes")
                 if req.command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
                     for d in self.drives.values():
                         d.booted = False
@@ -350,10 +340,14 @@ class MasterCore:
         try:
             return self._on_frame(frame, t)
         except BaseException as exc:
-            self._latch(exc)
+            self.latch(exc)
             raise
 
-    def _latch(self, exc: BaseException) -> None:
+    def latch(self, exc: BaseException) -> None:
+        """Latch ``exc`` as the fault (the first one stays) and stop by quick stop: fail closed.
+
+        Called by the core on any exception and by the link for the faults it
+        detects itself (stale data, the master's lag)."""
         if self.fault is None:
             self.fault = exc
             self.fault_cycle = self.cycle
@@ -366,7 +360,7 @@ class MasterCore:
         if self.fault is None:
             raise exc
         self.later_faults.append(f"{type(exc).__name__}: {exc}")
-        self._event(t, "fault", node, str(exc))
+        self._event(t, EventKind.FAULT, node, str(exc))
 
     def _on_frame(self, frame: Frame, t: float) -> list[Frame]:
         cid = frame.arbitration_id
@@ -374,32 +368,32 @@ class MasterCore:
             if cid == SYNC_COB_ID:
                 self._on_sync(t)
                 return []
-            base, node = cid & 0x780, cid & 0x07F
+            base, node = split_cob_id(cid)
             if node in self.drives:
+                if base == _TPDO1:
+                    self._on_tpdo1(self.drives[node], decode_tpdo1(frame), t)
+                    self._check_complete(t)
+                    return []
+                if base == _TPDO2:
+                    self.drives[node].tpdo2 = decode_tpdo2(frame)
+                    self._check_complete(t)
+                    return []
                 if base == HEARTBEAT_COB_ID_BASE:
                     return self._on_heartbeat(node, frame.data, t)
                 if base == EMCY_COB_ID_BASE:
                     self._on_emcy(node, frame.data, t)
                     return []
-                if base == 0x580:
+                if base == SDO_RX_COB_ID_BASE:
                     return self._on_sdo(node, frame, t)
-                if base == 0x180:
-                    self._on_tpdo1(self.drives[node], decode_tpdo1(frame), t)
-                    self._check_complete(t)
-                    return []
-                if base == 0x280:
-                    self.drives[node].tpdo2 = decode_tpdo2(frame)
-                    self._check_complete(t)
-                    return []
-                if base in (0x200, 0x300, 0x600):
+                if base in _OWN_TRAFFIC:
                     return []  # our own RPDOs / SDO requests seen on the bus
-            if cid == 0x000:
+            if cid == NMT_COB_ID:
                 return []  # NMT (ours)
             self.unknown_frames += 1
             return []
         except PdoError as exc:
             self.bad_frames += 1
-            self._event(t, "bad_frame", cid & 0x7F, str(exc))
+            self._event(t, EventKind.BAD_FRAME, split_cob_id(cid)[1], str(exc))
             return []
 
     def _on_sdo(self, node: int, frame: Frame, t: float) -> list[Frame]:
@@ -421,7 +415,7 @@ class MasterCore:
         d.last_heartbeat_s = t
         if state == NmtState.BOOT_UP:
             d.booted = True
-            self._event(t, "boot", node, "boot-up")
+            self._event(t, EventKind.BOOT, node, "boot-up")
             if self.phase is Phase.PREFLIGHT and isinstance(self._pending, _WaitBoot) and \
                     all(x.booted for x in self.drives.values()):
                 return self._advance(True, t)
@@ -434,14 +428,13 @@ class MasterCore:
         return []
 
     def _on_emcy(self, node: int, data: bytes, t: float) -> None:
-        if len(data) != 8:
+        e = decode_emcy(node, data, t)
+        if e is None:
             self.bad_frames += 1
             return
-        code, reg = struct.unpack_from("<HB", data)
-        e = Emcy(t, node, code, reg, bytes(data[3:]))
         self.emcy.append(e)
-        self._event(t, "emcy", node, str(e))
-        if code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
+        self._event(t, EventKind.EMCY, node, str(e))
+        if e.code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
             self._fail(DriveFault(str(e)), t, node)
 
     # ------------------------------------------------------------------ timing
@@ -451,7 +444,7 @@ class MasterCore:
         try:
             return self._poll(t)
         except BaseException as exc:
-            self._latch(exc)
+            self.latch(exc)
             raise
 
     def _poll(self, t: float) -> list[Frame]:
@@ -470,7 +463,7 @@ class MasterCore:
             for n, d in self.drives.items():
                 if not d.lost and d.last_heartbeat_s is not None and t - d.last_heartbeat_s > limit:
                     d.lost = True
-                    self._event(t, "heartbeat", n, "heartbeat lost")
+                    self._event(t, EventKind.HEARTBEAT, n, "heartbeat lost")
                     self._fail(HeartbeatLost(f"node {n} (EMA {self.order.index(n) + 1}): heartbeat lost "
                                              f"(none for {t - d.last_heartbeat_s:.3f} s, "
                                              f"timeout {self.hb_timeout_s:.3f} s)"), t, n)
@@ -483,7 +476,7 @@ class MasterCore:
             return
         if self.cycle > 0 and not self._complete:
             self.missing_cycles += 1
-            self._event(t, "missing", 0, f"cycle {self.cycle}: TPDOs incomplete at the next SYNC")
+            self._event(t, EventKind.MISSING, 0, f"cycle {self.cycle}: TPDOs incomplete at the next SYNC")
         self.cycle += 1
         self._complete = False
         self._sample = None
@@ -500,7 +493,7 @@ class MasterCore:
         d.statusword = tp.statusword
         new = decode_state(d.statusword)
         if new != d.state:
-            self._event(t, "state", d.node_id, f"{d.state.name} -> {new.name}")
+            self._event(t, EventKind.STATE, d.node_id, f"{d.state.name} -> {new.name}")
             d.state = new
         d.mode_display = tp.mode_display
         if new in (State.FAULT, State.FAULT_REACTION_ACTIVE):
@@ -576,7 +569,7 @@ class MasterCore:
         return out
 
     def nmt_frames(self, command: NmtCommand) -> list[Frame]:
-        return [Frame(0x000, bytes([int(command), 0]))]
+        return [nmt_frame(command)]
 
     def fallback_stop_frames(self, t: float) -> list[Frame]:
         """Quick stop by SDO for drives still in OPERATION_ENABLED although the RPDOs asked for it.
@@ -589,8 +582,8 @@ class MasterCore:
         out = []
         for n, d in self.drives.items():
             if self.quick_stop and d.state is State.OPERATION_ENABLED and self._confirmed(d, t):
-                out.append(Frame(0x600 + n, struct.pack("<BHBH2x", 0x2B, 0x6040, 0, controlword(Command.QUICK_STOP))))
-                self._event(t, "sdo", n, "quick stop by SDO (0x6040): the drive did not follow the RPDOs")
+                out.append(expedited_download_frame(n, 0x6040, 0, struct.pack("<H", controlword(Command.QUICK_STOP))))
+                self._event(t, EventKind.SDO, n, "quick stop by SDO (0x6040): the drive did not follow the RPDOs")
         return out
 
     def unreachable(self, t: float) -> list[int]:

@@ -27,12 +27,12 @@ from typing import Any
 
 import numpy as np
 
+from hil.canopen.process import MEASURED_CHANNELS, Sample, Setpoint
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.canopen.process import Sample, Setpoint
 
-SIGNAL_COLUMNS = ("t", "phi1", "phi2", "s1", "s2", "F1", "F2")
+SIGNAL_COLUMNS = tuple(name for name, _ in MEASURED_CHANNELS)
 EXTRA_COLUMNS = ("mode1", "sp1", "mode2", "sp2", "step")
-COLUMN_UNITS = {"t": "s", "phi1": "rad", "phi2": "rad", "s1": "mm", "s2": "mm", "F1": "N", "F2": "N"}
+COLUMN_UNITS = dict(MEASURED_CHANNELS)
 
 
 def write_json_atomic(path: Path, obj: Any) -> None:

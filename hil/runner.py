@@ -16,12 +16,12 @@ from typing import Callable, Protocol
 import numpy as np
 
 from hil import __version__
+from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import Actuation, Check
 from hil.profiles import snapshot
 from hil.runfolder import SignalsWriter, write_json_atomic
 from hil.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.supervisor import Supervisor
-from hil.canopen.process import DriveMode, Sample, Setpoint
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
 
@@ -126,7 +126,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                         if len(v) == 1:
                             v.append(ev.t_s)
                     steps.setdefault(ev.step.value, [ev.t_s])
-                    if ev.kind == "aborted":
+                    if ev.step is Step.ABORTED:
                         link.abort()
                 writer.flush(smp.t_s, sync=True)
                 meta["steps"] = steps

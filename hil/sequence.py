@@ -32,9 +32,9 @@ import math
 from dataclasses import dataclass
 from enum import Enum
 
+from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import Actuation, Check
 from hil.errors import SequenceError
-from hil.canopen.process import DriveMode, Sample, Setpoint
 
 
 class Step(Enum):
@@ -70,10 +70,9 @@ TERMINAL = frozenset({Step.DONE, Step.ABORTED})
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    """Something the shell should log: a step change, an abort, the end."""
+    """A step change for the shell to log: the step entered (ABORTED: an abort, DONE: the end) and why."""
 
     t_s: float
-    kind: str  # "step" | "aborted" | "done"
     step: Step
     detail: str = ""
 
@@ -226,8 +225,7 @@ class CheckSequence:
             raise SequenceError(f"illegal step transition {self._step.name} -> {new.name}")
         self._step = new
         self._t0 = t_s
-        kind = "aborted" if new == Step.ABORTED else ("done" if new == Step.DONE else "step")
-        self._events.append(Event(t_s, kind, new, detail))
+        self._events.append(Event(t_s, new, detail))
 
     def _pos(self, k: int) -> Setpoint:
         return Setpoint(DriveMode.POSITION, self._phi_hold[k])

@@ -25,7 +25,6 @@ import can
 from hil.canopen.frame import Frame
 from hil.transport import SocketcanFrames
 
-
 #: Longest wait for a frame [s] (fixed, so SocketCAN needs no timeout change per frame):
 #: how late a stop request or a tick may be seen.
 RECV_SLICE_S = 0.002

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import (
     HARD_LVDT_GAIN_TOLERANCE,
     HARD_MAX_D_INT_MM,
@@ -52,7 +53,6 @@ from hil.config import (
     Actuation,
     Check,
 )
-from hil.canopen.process import DriveMode, Sample, Setpoint
 
 
 @dataclass(frozen=True, slots=True)

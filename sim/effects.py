@@ -33,6 +33,7 @@ from typing import ClassVar
 import numpy as np
 
 from blf.errors import InputError
+from blf.validate import count, instance_of, one_of, scalar
 
 __all__ = [
     "CoulombFriction",
@@ -94,29 +95,22 @@ COL_BUMP_WIDTH = COLUMNS.index("bump_width_m")
 _EMA_ONLY = ("ema1", "ema2")
 
 
-def _check_where(cls_name: str, where: object, allowed: tuple[str, ...]) -> None:
-    if not isinstance(where, str) or where not in allowed:
-        raise InputError(
-            f"{cls_name}.where must be one of {allowed} (a str, no unit), got {where!r}"
-        )
+class _Effect:
+    """Validation shared by the effects: ``where`` in ``_WHERE`` and every field of ``_LIMITS``
+    a finite number in its range: ``(field, unit, lower bound, lower bound open)``."""
 
+    _WHERE: ClassVar[tuple] = _EMA_ONLY
+    _LIMITS: ClassVar[tuple] = ()
 
-def _check_number(cls_name: str, field: str, value: object, unit: str, *, lo: float,
-                  lo_open: bool, hi: float = math.inf, hi_open: bool = True) -> None:
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
-    if ok:
-        v = float(value)
-        ok = math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
-    if not ok:
-        lo_b = "(" if lo_open else "["
-        hi_b = ")" if hi_open else "]"
-        raise InputError(
-            f"{cls_name}.{field} must be a finite scalar in {lo_b}{lo}, {hi}{hi_b} {unit}, got {value!r}"
-        )
+    def __post_init__(self) -> None:
+        cls = type(self).__name__
+        one_of(self.where, f"{cls}.where", self._WHERE)
+        for field, unit, lo, lo_open in self._LIMITS:
+            scalar(getattr(self, field), f"{cls}.{field}", unit, lo=lo, lo_open=lo_open, hi_open=True)
 
 
 @dataclass(frozen=True)
-class CoulombFriction:
+class CoulombFriction(_Effect):
     """Coulomb friction of the ballscrew/nut, acting on the motor-side motion.
 
     Parameters
@@ -151,11 +145,10 @@ class CoulombFriction:
     force_N: float
     velocity_band_mm_per_s: float = 0.1
 
-    def __post_init__(self) -> None:
-        _check_where("CoulombFriction", self.where, _EMA_ONLY)
-        _check_number("CoulombFriction", "force_N", self.force_N, "N", lo=0.0, lo_open=False)
-        _check_number("CoulombFriction", "velocity_band_mm_per_s", self.velocity_band_mm_per_s,
-                      "mm/s", lo=0.0, lo_open=True)
+    _LIMITS: ClassVar[tuple] = (
+        ("force_N", "N", 0.0, False),
+        ("velocity_band_mm_per_s", "mm/s", 0.0, True),
+    )
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_COULOMB_N] += float(self.force_N)
@@ -163,7 +156,7 @@ class CoulombFriction:
 
 
 @dataclass(frozen=True)
-class ViscousFriction:
+class ViscousFriction(_Effect):
     """Viscous friction on the motor-side motion of one EMA.
 
     Parameters
@@ -184,17 +177,14 @@ class ViscousFriction:
     where: str
     coeff_N_s_per_mm: float
 
-    def __post_init__(self) -> None:
-        _check_where("ViscousFriction", self.where, _EMA_ONLY)
-        _check_number("ViscousFriction", "coeff_N_s_per_mm", self.coeff_N_s_per_mm, "N s/mm",
-                      lo=0.0, lo_open=False)
+    _LIMITS: ClassVar[tuple] = (("coeff_N_s_per_mm", "N s/mm", 0.0, False),)
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_VISCOUS] = float(self.coeff_N_s_per_mm) * 1e3
 
 
 @dataclass(frozen=True)
-class Viscoelastic:
+class Viscoelastic(_Effect):
     """Maxwell arm in parallel with the internal contact spring of one EMA.
 
     Parameters
@@ -231,12 +221,10 @@ class Viscoelastic:
     stiffness_N_per_mm: float
     time_constant_s: float
 
-    def __post_init__(self) -> None:
-        _check_where("Viscoelastic", self.where, _EMA_ONLY)
-        _check_number("Viscoelastic", "stiffness_N_per_mm", self.stiffness_N_per_mm, "N/mm",
-                      lo=0.0, lo_open=True)
-        _check_number("Viscoelastic", "time_constant_s", self.time_constant_s, "s",
-                      lo=0.0, lo_open=True)
+    _LIMITS: ClassVar[tuple] = (
+        ("stiffness_N_per_mm", "N/mm", 0.0, True),
+        ("time_constant_s", "s", 0.0, True),
+    )
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_VE_K] = float(self.stiffness_N_per_mm) * 1e3
@@ -245,7 +233,7 @@ class Viscoelastic:
 
 
 @dataclass(frozen=True)
-class LvdtDrift:
+class LvdtDrift(_Effect):
     """LVDT gain drifting linearly with time (temperature).
 
     Parameters
@@ -265,17 +253,14 @@ class LvdtDrift:
     where: str
     gain_drift_per_s: float
 
-    def __post_init__(self) -> None:
-        _check_where("LvdtDrift", self.where, _EMA_ONLY)
-        _check_number("LvdtDrift", "gain_drift_per_s", self.gain_drift_per_s, "1/s",
-                      lo=-math.inf, lo_open=True)
+    _LIMITS: ClassVar[tuple] = (("gain_drift_per_s", "1/s", -math.inf, True),)
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_LVDT_DRIFT] = float(self.gain_drift_per_s)
 
 
 @dataclass(frozen=True)
-class TimeSkew:
+class TimeSkew(_Effect):
     """The LVDT of one EMA is latched ``delay_s`` earlier than the resolver sample.
 
     Parameters
@@ -297,9 +282,7 @@ class TimeSkew:
     where: str
     delay_s: float
 
-    def __post_init__(self) -> None:
-        _check_where("TimeSkew", self.where, _EMA_ONLY)
-        _check_number("TimeSkew", "delay_s", self.delay_s, "s", lo=0.0, lo_open=False)
+    _LIMITS: ClassVar[tuple] = (("delay_s", "s", 0.0, False),)
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         if not float(self.delay_s) < sample_period_s:
@@ -316,7 +299,7 @@ def _set_band(table: np.ndarray, row: int, band_mm_per_s: float) -> None:
 
 
 @dataclass(frozen=True)
-class StribeckFriction:
+class StribeckFriction(_Effect):
     """Stribeck friction: extra static friction decaying with speed, on the motor-side motion.
 
     Parameters
@@ -342,13 +325,11 @@ class StribeckFriction:
     stribeck_velocity_mm_per_s: float
     velocity_band_mm_per_s: float = 0.1
 
-    def __post_init__(self) -> None:
-        _check_where("StribeckFriction", self.where, _EMA_ONLY)
-        _check_number("StribeckFriction", "extra_force_N", self.extra_force_N, "N", lo=0.0, lo_open=False)
-        _check_number("StribeckFriction", "stribeck_velocity_mm_per_s", self.stribeck_velocity_mm_per_s,
-                      "mm/s", lo=0.0, lo_open=True)
-        _check_number("StribeckFriction", "velocity_band_mm_per_s", self.velocity_band_mm_per_s,
-                      "mm/s", lo=0.0, lo_open=True)
+    _LIMITS: ClassVar[tuple] = (
+        ("extra_force_N", "N", 0.0, False),
+        ("stribeck_velocity_mm_per_s", "mm/s", 0.0, True),
+        ("velocity_band_mm_per_s", "mm/s", 0.0, True),
+    )
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_STRIBECK_N] = float(self.extra_force_N)
@@ -357,7 +338,7 @@ class StribeckFriction:
 
 
 @dataclass(frozen=True)
-class AsymmetricFriction:
+class AsymmetricFriction(_Effect):
     """Coulomb friction that differs with the direction of motion.
 
     Parameters
@@ -382,12 +363,11 @@ class AsymmetricFriction:
     force_retract_N: float
     velocity_band_mm_per_s: float = 0.1
 
-    def __post_init__(self) -> None:
-        _check_where("AsymmetricFriction", self.where, _EMA_ONLY)
-        for f in ("force_extend_N", "force_retract_N"):
-            _check_number("AsymmetricFriction", f, getattr(self, f), "N", lo=0.0, lo_open=False)
-        _check_number("AsymmetricFriction", "velocity_band_mm_per_s", self.velocity_band_mm_per_s,
-                      "mm/s", lo=0.0, lo_open=True)
+    _LIMITS: ClassVar[tuple] = (
+        ("force_extend_N", "N", 0.0, False),
+        ("force_retract_N", "N", 0.0, False),
+        ("velocity_band_mm_per_s", "mm/s", 0.0, True),
+    )
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_COULOMB_N] += 0.5 * (float(self.force_extend_N) + float(self.force_retract_N))
@@ -396,7 +376,7 @@ class AsymmetricFriction:
 
 
 @dataclass(frozen=True)
-class LeadError:
+class LeadError(_Effect):
     """Periodic ballscrew lead error: the ram-side motion deviates periodically from phi/i_total.
 
     Parameters
@@ -419,10 +399,10 @@ class LeadError:
     amplitude_mm: float
     period_mm: float = 5.0
 
-    def __post_init__(self) -> None:
-        _check_where("LeadError", self.where, _EMA_ONLY)
-        _check_number("LeadError", "amplitude_mm", self.amplitude_mm, "mm", lo=0.0, lo_open=False)
-        _check_number("LeadError", "period_mm", self.period_mm, "mm", lo=0.0, lo_open=True)
+    _LIMITS: ClassVar[tuple] = (
+        ("amplitude_mm", "mm", 0.0, False),
+        ("period_mm", "mm", 0.0, True),
+    )
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_LEAD_AMP] = float(self.amplitude_mm) * 1e-3
@@ -430,7 +410,7 @@ class LeadError:
 
 
 @dataclass(frozen=True)
-class StiffnessBump:
+class StiffnessBump(_Effect):
     """Internal stiffness that rises locally along the stroke (a tight spot of the ballscrew).
 
     Parameters
@@ -455,12 +435,11 @@ class StiffnessBump:
     center_mm: float = 0.0
     width_mm: float = 2.0
 
-    def __post_init__(self) -> None:
-        _check_where("StiffnessBump", self.where, _EMA_ONLY)
-        _check_number("StiffnessBump", "relative_increase", self.relative_increase, "(dimensionless)",
-                      lo=0.0, lo_open=False)
-        _check_number("StiffnessBump", "center_mm", self.center_mm, "mm", lo=-math.inf, lo_open=True)
-        _check_number("StiffnessBump", "width_mm", self.width_mm, "mm", lo=0.0, lo_open=True)
+    _LIMITS: ClassVar[tuple] = (
+        ("relative_increase", "(dimensionless)", 0.0, False),
+        ("center_mm", "mm", -math.inf, True),
+        ("width_mm", "mm", 0.0, True),
+    )
 
     def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
         table[row, COL_BUMP_REL] = float(self.relative_increase)
@@ -504,12 +483,9 @@ def compile_effects(effects: tuple, sample_period_s: float, substeps: int) -> np
     The substep is :math:`h = T_s / n`; time-constant effects store
     :math:`1 - e^{-h/\\tau}` so the kernel's update is exact for a frozen input.
     """
-    if not isinstance(effects, tuple):
-        raise InputError(f"effects must be a tuple of effect objects, got {type(effects).__name__}")
-    if not (math.isfinite(sample_period_s) and sample_period_s > 0):
-        raise InputError(f"sample_period_s must be finite and > 0 s, got {sample_period_s!r}")
-    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
-        raise InputError(f"substeps must be an int >= 1 (count), got {substeps!r}")
+    instance_of(effects, tuple, "effects", "a tuple of effect objects")
+    period = scalar(sample_period_s, "sample_period_s", "s", lo=0.0, lo_open=True)
+    nsub = count(substeps, "substeps", 1)
     table = np.zeros((3, N_COLUMNS), dtype=np.float64)
     seen: set[tuple[type, str]] = set()
     for k, eff in enumerate(effects):
@@ -523,6 +499,5 @@ def compile_effects(effects: tuple, sample_period_s: float, substeps: int) -> np
                 f"effects[{k}]: duplicate {type(eff).__name__} at where={eff.where!r}; combine them into one"
             )
         seen.add(key)
-        eff._compile(table, WHERE_ROW[eff.where], float(sample_period_s),
-                     float(sample_period_s) / int(substeps))
+        eff._compile(table, WHERE_ROW[eff.where], period, period / nsub)
     return table

@@ -378,7 +378,7 @@ def _runaway(speed_mm_per_s: float, i_total: float, t_end: float, inj: FaultInje
         if inj.t_check >= t_end - 1e-9 or node.state_machine.state is not State.OPERATION_ENABLED:
             return mode, value
         if "phi0" not in start:
-            start["phi0"], start["t0"] = node._phi_rad, t
+            start["phi0"], start["t0"] = node.motor_angle_rad, t
         return int(DriveMode.POSITION), start["phi0"] + speed_mm_per_s * i_total * (t - start["t0"])
 
     return override

@@ -8,8 +8,9 @@ Coordinates and signs
 ---------------------
 All positions lie on the ram axis, positive when the ram extends; forces are
 positive in compression (the EMA pushes the surface towards +y). The public
-API uses mm, N, rad, s; the numba kernel works in SI (m, N, rad, s) and
-converts at the boundary (``i_total`` in rad/m = 1000 x rad/mm).
+API uses mm, N, rad, s; the numba kernel (:mod:`sim.plant_kernel`) works in
+SI (m, N, rad, s) and converts at the boundary (``i_total`` in rad/m = 1000 x
+rad/mm).
 
 Per EMA i in {1, 2}:
 
@@ -99,29 +100,17 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from blf.errors import InputError
+from blf.validate import count, generator, instance_of, scalar
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from sim import effects as _fx
-from sim.effects import (
-    COL_COULOMB_BAND,
-    COL_BUMP_CENTER,
-    COL_BUMP_REL,
-    COL_BUMP_WIDTH,
-    COL_COULOMB_N,
-    COL_FRIC_ASYM,
-    COL_LEAD_AMP,
-    COL_LEAD_PERIOD,
-    COL_LVDT_DELAY,
-    COL_STRIBECK_N,
-    COL_STRIBECK_V,
-    COL_LVDT_DRIFT,
-    COL_VE_ALPHA,
-    COL_VE_K,
-    COL_VISCOUS,
-)
 from sim.params import RigParams
+from sim.plant_kernel import (E_BB, E_BI, E_FS, E_GAIN, E_KB, E_KC, E_KH, E_KT, E_LCG, E_LCSIG, E_LSIG, E_N, E_NL,
+                              E_OFF, G_B, G_CS, G_H, G_IM, G_J, G_KD, G_KI, G_KLOAD, G_KP, G_KSTOP, G_MS, G_N,
+                              G_NSUB, G_PERIOD, G_Q, G_TLIM, G_XLIM, P_LEN, S_K, S_N, S_V, S_Y, SE_F, SE_H, SE_I,
+                              SE_N, SE_PHI, SE_R, SE_S, SE_T, SE_W, TR_F, TR_H, TR_N, TR_PHI, TR_R, TR_S, TR_T,
+                              TR_TMAX, TR_V, TR_W, TR_Y, X_LEN, advance, run_batch)
 from sim.truth import RigTruth, rig_truth
 
 __all__ = ["RigPlant", "PlantState", "PlantTrace", "END_STOP_STIFFNESS_N_PER_MM", "NOISE_BLOCK"]
@@ -135,353 +124,6 @@ _DISABLED = int(DriveMode.DISABLED)
 _POSITION = int(DriveMode.POSITION)
 _FORCE = int(DriveMode.FORCE)
 _MODES = frozenset((_DISABLED, _POSITION, _FORCE))
-
-# ---------------------------------------------------------------- parameter vector P (SI)
-G_IM = 0  # i_total, rad/m
-G_J = 1  # motor inertia, kg m^2
-G_B = 2  # motor viscous, N m s/rad
-G_TLIM = 3  # torque limit, N m
-G_KP = 4  # N m/rad
-G_KD = 5  # N m s/rad
-G_KI = 6  # N m/(rad s)
-G_MS = 7  # surface mass, kg
-G_CS = 8  # surface damping, N s/m
-G_KLOAD = 9  # load stiffness, N/m
-G_XLIM = 10  # stroke limit, m
-G_KSTOP = 11  # end-stop stiffness, N/m
-G_H = 12  # substep, s
-G_NSUB = 13  # substeps per sample
-G_PERIOD = 14  # sample period, s
-G_Q = 15  # resolver quantum, rad
-G_N = 16
-# per-EMA block, base G_N + e * E_N
-E_BI = 0  # internal play, m
-E_BB = 1  # bearing play, m
-E_KC = 2  # internal compression stiffness, N/m
-E_KT = 3  # internal tension stiffness, N/m
-E_KB = 4  # bearing stiffness, N/m
-E_KH = 5  # housing stiffness, N/m
-E_GAIN = 6  # LVDT gain
-E_OFF = 7  # LVDT offset, mm
-E_NL = 8  # LVDT cubic term at full scale, mm
-E_FS = 9  # LVDT full scale, mm
-E_LSIG = 10  # LVDT noise std, mm
-E_LCG = 11  # load cell gain
-E_LCSIG = 12  # load cell noise std, N
-E_N = 13
-P_LEN = G_N + 2 * E_N
-
-# ---------------------------------------------------------------- state vector X (SI)
-S_K = 0  # samples done
-S_Y = 1  # surface position, m
-S_V = 2  # surface velocity, m/s
-S_N = 3
-SE_PHI = 0  # motor angle, rad
-SE_W = 1  # motor speed, rad/s
-SE_I = 2  # integral of the position error, rad s
-SE_R = 3  # ram position, m
-SE_H = 4  # housing position, m
-SE_F = 5  # load-path force, N
-SE_S = 6  # stroke r - h, m
-SE_ZC = 7  # Maxwell dashpot state, compression flank, m
-SE_ZT = 8  # Maxwell dashpot state, tension flank, m
-SE_PT = 9  # previous POSITION target, rad
-SE_PV = 10  # previous target valid (1.0) or not (0.0)
-SE_T = 11  # drive torque of the last substep, N m
-SE_TMAX = 12  # max |torque| over the last sample, N m
-SE_N = 13
-X_LEN = S_N + 2 * SE_N
-
-# ---------------------------------------------------------------- truth record columns (batch)
-TR_PHI, TR_W, TR_S, TR_F, TR_R, TR_H, TR_T, TR_TMAX = 0, 2, 4, 6, 8, 10, 12, 14
-TR_Y, TR_V = 16, 17
-TR_N = 18
-
-
-@njit(cache=True)
-def _chain(xm, y, r_prev, zc, zt, bi, bb, kc, kt, kb, kh, kv):
-    """Closed-form load path of one EMA (SI). Returns F, r, h, dmc, dmt."""
-    u = xm - y
-    kcv = kc + kv
-    ktv = kt + kv
-    dc0 = kv * zc / kcv  # free material deflection of the compression flank (>= 0)
-    dt0 = kv * zt / ktv  # ... of the tension flank (<= 0)
-    half = 0.5 * (bi + bb)
-    ac = half + dc0
-    at = -half + dt0
-    if u > ac:
-        f = (u - ac) / (1.0 / kh + 1.0 / kb + 1.0 / kcv)
-        h = -f / kh
-        r = y + f / kb + 0.5 * bb
-        return f, r, h, (f + kv * zc) / kcv, dt0
-    if u < at:
-        f = (u - at) / (1.0 / kh + 1.0 / kb + 1.0 / ktv)
-        h = -f / kh
-        r = y + f / kb - 0.5 * bb
-        return f, r, h, dc0, (f + kv * zt) / ktv
-    lo = max(xm - 0.5 * bi - dc0, y - 0.5 * bb)
-    hi = min(xm + 0.5 * bi - dt0, y + 0.5 * bb)
-    r = min(max(r_prev, lo), hi)
-    return 0.0, r, 0.0, dc0, dt0
-
-
-@njit(cache=True)
-def _solve_chains(X, P, E, dm):
-    """Chain solve of both EMAs at the current positions; fills X[F, R, H, S] and dm."""
-    im = P[G_IM]
-    y = X[S_Y]
-    for e in range(2):
-        b = S_N + e * SE_N
-        p = G_N + e * E_N
-        xm = X[b + SE_PHI] / im
-        kc = P[p + E_KC]
-        kt = P[p + E_KT]
-        if E[e, COL_BUMP_REL] > 0.0:
-            g = 1.0 + E[e, COL_BUMP_REL] * math.exp(-((xm - E[e, COL_BUMP_CENTER]) / E[e, COL_BUMP_WIDTH]) ** 2)
-            kc *= g
-            kt *= g
-        if E[e, COL_LEAD_AMP] > 0.0:
-            xm += E[e, COL_LEAD_AMP] * math.sin(2.0 * math.pi * xm / E[e, COL_LEAD_PERIOD])
-        f, r, h, dmc, dmt = _chain(
-            xm, y, X[b + SE_R], X[b + SE_ZC], X[b + SE_ZT],
-            P[p + E_BI], P[p + E_BB], kc, kt, P[p + E_KB], P[p + E_KH],
-            E[e, COL_VE_K],
-        )
-        X[b + SE_F] = f
-        X[b + SE_R] = r
-        X[b + SE_H] = h
-        X[b + SE_S] = r - h
-        dm[2 * e] = dmc
-        dm[2 * e + 1] = dmt
-
-
-@njit(cache=True)
-def _kick(X, P, E, e, mode, val, wff, hk, implicit):
-    """Half-kick of motor ``e`` over ``hk`` s.
-
-    Velocity terms (drive D-gain, viscous losses, linearised friction) are
-    explicit in the first half-kick and implicit in the second (together the
-    trapezoidal rule). Uses the chain force stored in X (current positions)
-    and the CSP integrator state; returns (torque, saturated).
-    """
-    b = S_N + e * SE_N
-    if mode == 0:
-        X[b + SE_W] = 0.0
-        return 0.0, False
-    im = P[G_IM]
-    J = P[G_J]
-    tlim = P[G_TLIM]
-    kd = P[G_KD]
-    phi = X[b + SE_PHI]
-    w = X[b + SE_W]
-    # explicit load torque: chain + end stop
-    xm = phi / im
-    fstop = 0.0
-    if xm > P[G_XLIM]:
-        fstop = P[G_KSTOP] * (xm - P[G_XLIM])
-    elif xm < -P[G_XLIM]:
-        fstop = P[G_KSTOP] * (xm + P[G_XLIM])
-    # passive velocity terms (implicit): motor viscous, ram viscous, Coulomb (linearised)
-    c_lin = P[G_B] + E[e, COL_VISCOUS] / (im * im)
-    t_rest = -(X[b + SE_F] + fstop) / im
-    fc = E[e, COL_COULOMB_N]
-    fs = E[e, COL_STRIBECK_N]
-    fa = E[e, COL_FRIC_ASYM]
-    if fc > 0.0 or fs > 0.0 or fa != 0.0:
-        band = E[e, COL_COULOMB_BAND]
-        v = w / im
-        th = math.tanh(v / band)
-        dth = (1.0 - th * th) / band
-        level = fc + fa * th
-        dlevel = fa * dth
-        if fs > 0.0:
-            vs = E[e, COL_STRIBECK_V]
-            gs = math.exp(-(v / vs) ** 2)
-            level += fs * gs
-            dlevel -= 2.0 * fs * gs * v / (vs * vs)
-        # linearised in the velocity; a falling (Stribeck) slope stays explicit
-        dtf = max(level * dth + th * dlevel, 0.0) / (im * im)
-        t_rest -= level * th / im - dtf * w
-        c_lin += dtf
-    sat = False
-    if not implicit:
-        # explicit: all terms at the current speed
-        t_rest -= c_lin * w
-        c_lin = 0.0
-    if mode == 8:
-        t_lin = P[G_KP] * (val - phi) + kd * wff + P[G_KI] * X[b + SE_I]
-        if implicit:
-            w_new = (J * w + hk * (t_lin + t_rest)) / (J + hk * (c_lin + kd))
-            torque = t_lin - kd * w_new
-        else:
-            torque = t_lin - kd * w
-        if torque > tlim or torque < -tlim:
-            sat = True
-            torque = tlim if torque > 0.0 else -tlim
-            w_new = (J * w + hk * (torque + t_rest)) / (J + hk * c_lin)
-        elif not implicit:
-            w_new = w + hk * (torque + t_rest) / J
-    else:
-        torque = val / im
-        if torque > tlim:
-            torque = tlim
-        elif torque < -tlim:
-            torque = -tlim
-        w_new = (J * w + hk * (torque + t_rest)) / (J + hk * c_lin)
-    X[b + SE_W] = w_new
-    X[b + SE_T] = torque
-    if abs(torque) > X[b + SE_TMAX]:
-        X[b + SE_TMAX] = abs(torque)
-    return torque, sat
-
-
-@njit(cache=True)
-def _kick_surface(X, P, hk, load, implicit):
-    fsum = X[S_N + SE_F] + X[S_N + SE_N + SE_F]
-    ms = P[G_MS]
-    if implicit:
-        X[S_V] = (ms * X[S_V] + hk * (fsum - P[G_KLOAD] * X[S_Y] + load)) / (ms + hk * P[G_CS])
-    else:
-        X[S_V] += hk * (fsum - P[G_KLOAD] * X[S_Y] + load - P[G_CS] * X[S_V]) / ms
-
-
-@njit(cache=True)
-def _advance(X, P, E, sbuf, dm, mode1, val1, mode2, val2, load, noise, kn):
-    """Advance one sample period in place; return the measured sample tuple."""
-    im = P[G_IM]
-    h = P[G_H]
-    hh = 0.5 * h
-    n = int(P[G_NSUB])
-    period = P[G_PERIOD]
-    ki = P[G_KI]
-
-    # velocity feed-forward of each drive (held over the period)
-    wff0 = 0.0
-    wff1 = 0.0
-    for e in range(2):
-        b = S_N + e * SE_N
-        mode = mode1 if e == 0 else mode2
-        val = val1 if e == 0 else val2
-        wff = 0.0
-        if mode == 8:
-            if X[b + SE_PV] > 0.5:
-                wff = (val - X[b + SE_PT]) / period
-        else:
-            X[b + SE_I] = 0.0
-        if e == 0:
-            wff0 = wff
-        else:
-            wff1 = wff
-        X[b + SE_TMAX] = 0.0
-
-    _solve_chains(X, P, E, dm)
-    for j in range(n):
-        sbuf[0, j] = X[S_N + SE_S]
-        sbuf[1, j] = X[S_N + SE_N + SE_S]
-        # Maxwell arms: exact exponential update with the deflection frozen over the substep
-        for e in range(2):
-            alpha = E[e, COL_VE_ALPHA]
-            if alpha > 0.0:
-                b = S_N + e * SE_N
-                X[b + SE_ZC] += (dm[2 * e] - X[b + SE_ZC]) * alpha
-                X[b + SE_ZT] += (dm[2 * e + 1] - X[b + SE_ZT]) * alpha
-        # kick (h/2) with the forces at the current positions
-        _, sat0 = _kick(X, P, E, 0, mode1, val1, wff0, hh, False)
-        _, sat1 = _kick(X, P, E, 1, mode2, val2, wff1, hh, False)
-        _kick_surface(X, P, hh, load, False)
-        # drift (h), CSP integrator by the trapezoidal rule, conditional anti-windup
-        for e in range(2):
-            b = S_N + e * SE_N
-            phi = X[b + SE_PHI]
-            phin = phi + h * X[b + SE_W]
-            X[b + SE_PHI] = phin
-            mode = mode1 if e == 0 else mode2
-            if mode == 8 and ki > 0.0:
-                val = val1 if e == 0 else val2
-                err = 0.5 * ((val - phi) + (val - phin))
-                sat = sat0 if e == 0 else sat1
-                if (not sat) or err * X[b + SE_T] < 0.0:
-                    X[b + SE_I] += err * h
-        X[S_Y] += h * X[S_V]
-        # forces at the new positions, second kick (h/2)
-        _solve_chains(X, P, E, dm)
-        _kick(X, P, E, 0, mode1, val1, wff0, hh, True)
-        _kick(X, P, E, 1, mode2, val2, wff1, hh, True)
-        _kick_surface(X, P, hh, load, True)
-
-    sbuf[0, n] = X[S_N + SE_S]
-    sbuf[1, n] = X[S_N + SE_N + SE_S]
-    k = X[S_K] + 1.0
-    X[S_K] = k
-    t = k * period
-
-    # drive memory for the velocity feed-forward
-    for e in range(2):
-        b = S_N + e * SE_N
-        mode = mode1 if e == 0 else mode2
-        if mode == 8:
-            X[b + SE_PT] = val1 if e == 0 else val2
-            X[b + SE_PV] = 1.0
-        else:
-            X[b + SE_PV] = 0.0
-
-    # sensors
-    q = P[G_Q]
-    phim0 = math.floor(X[S_N + SE_PHI] / q + 0.5) * q
-    phim1 = math.floor(X[S_N + SE_N + SE_PHI] / q + 0.5) * q
-    smeas0 = 0.0
-    smeas1 = 0.0
-    fmeas0 = 0.0
-    fmeas1 = 0.0
-    for e in range(2):
-        b = S_N + e * SE_N
-        p = G_N + e * E_N
-        delay = E[e, COL_LVDT_DELAY]
-        if delay > 0.0:
-            x = n - delay / h
-            j0 = int(math.floor(x))
-            if j0 >= n:
-                s_true = sbuf[e, n]
-            else:
-                fr = x - j0
-                s_true = sbuf[e, j0] * (1.0 - fr) + sbuf[e, j0 + 1] * fr
-        else:
-            s_true = X[b + SE_S]
-        s_mm = s_true * 1e3
-        gain = P[p + E_GAIN] * (1.0 + E[e, COL_LVDT_DRIFT] * t)
-        rel = s_mm / P[p + E_FS]
-        sm = P[p + E_OFF] + gain * s_mm + P[p + E_NL] * rel * rel * rel + P[p + E_LSIG] * noise[kn, e]
-        fm = P[p + E_LCG] * X[b + SE_F] + P[p + E_LCSIG] * noise[kn, 2 + e]
-        if e == 0:
-            smeas0 = sm
-            fmeas0 = fm
-        else:
-            smeas1 = sm
-            fmeas1 = fm
-    return t, phim0, phim1, smeas0, smeas1, fmeas0, fmeas1
-
-
-@njit(cache=True)
-def _run(X, P, E, sbuf, dm, modes1, vals1, modes2, vals2, loads, noise, kn0, meas, truth, i0):
-    """Batch of samples: rows i0.. of meas (n, 7) and truth (n, TR_N)."""
-    m = modes1.shape[0]
-    for i in range(m):
-        out = _advance(X, P, E, sbuf, dm, modes1[i], vals1[i], modes2[i], vals2[i], loads[i], noise, kn0 + i)
-        row = i0 + i
-        for c in range(7):
-            meas[row, c] = out[c]
-        for e in range(2):
-            b = S_N + e * SE_N
-            truth[row, TR_PHI + e] = X[b + SE_PHI]
-            truth[row, TR_W + e] = X[b + SE_W]
-            truth[row, TR_S + e] = X[b + SE_S] * 1e3
-            truth[row, TR_F + e] = X[b + SE_F]
-            truth[row, TR_R + e] = X[b + SE_R] * 1e3
-            truth[row, TR_H + e] = X[b + SE_H] * 1e3
-            truth[row, TR_T + e] = X[b + SE_T]
-            truth[row, TR_TMAX + e] = X[b + SE_TMAX]
-        truth[row, TR_Y] = X[S_Y] * 1e3
-        truth[row, TR_V] = X[S_V] * 1e3
 
 
 # ====================================================================== public types
@@ -561,49 +203,25 @@ class PlantTrace:
 # ====================================================================== validation
 
 
-def _num(value: Any) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-
-
-def _check(value: Any, name: str, unit: str, *, lo: float = -math.inf, lo_open: bool = False,
-           hi: float = math.inf, hi_open: bool = False) -> float:
-    ok = _num(value) and math.isfinite(float(value))
-    if ok:
-        v = float(value)
-        ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
-    if not ok:
-        lb = "(" if lo_open else "["
-        hb = ")" if hi_open else "]"
-        raise InputError(f"{name} must be a finite scalar in {lb}{lo}, {hi}{hb} {unit}, got {value!r}")
-    return float(value)
-
-
-def _check_int(value: Any, name: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
-        raise InputError(f"{name} must be an int in [{lo}, {hi}] (count), got {value!r}")
-    return int(value)
-
-
 def _build_vectors(params: RigParams) -> tuple[np.ndarray, np.ndarray, float]:
     """Validate ``params`` and pack them into the kernel's P vector and effect table."""
-    if not isinstance(params, RigParams):
-        raise InputError(f"params must be a RigParams, got {type(params).__name__}")
+    instance_of(params, RigParams, "params")
     P = np.zeros(P_LEN, dtype=np.float64)
-    i_mm = _check(params.i_total_rad_per_mm, "params.i_total_rad_per_mm", "rad/mm", lo=0.0, lo_open=True)
-    xlim = _check(params.stroke_limit_mm, "params.stroke_limit_mm", "mm", lo=0.0, lo_open=True)
-    period = _check(params.sample_period_s, "params.sample_period_s", "s", lo=0.0, lo_open=True)
-    nsub = _check_int(params.substeps, "params.substeps", 1, 100_000)
+    i_mm = scalar(params.i_total_rad_per_mm, "params.i_total_rad_per_mm", "rad/mm", lo=0.0, lo_open=True)
+    xlim = scalar(params.stroke_limit_mm, "params.stroke_limit_mm", "mm", lo=0.0, lo_open=True)
+    period = scalar(params.sample_period_s, "params.sample_period_s", "s", lo=0.0, lo_open=True)
+    nsub = count(params.substeps, "params.substeps", 1, 100_000)
     d = params.drive
-    J = _check(d.motor_inertia_kg_m2, "params.drive.motor_inertia_kg_m2", "kg m^2", lo=0.0, lo_open=True)
-    bm = _check(d.motor_viscous_Nm_s_per_rad, "params.drive.motor_viscous_Nm_s_per_rad", "N m s/rad", lo=0.0)
-    tlim = _check(d.torque_limit_Nm, "params.drive.torque_limit_Nm", "N m", lo=0.0, lo_open=True)
-    wn = _check(d.position_bandwidth_rad_s, "params.drive.position_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
-    zeta = _check(d.position_damping, "params.drive.position_damping", "(dimensionless)", lo=0.0)
-    ti = _check(d.position_integral_time_s, "params.drive.position_integral_time_s", "s", lo=0.0)
+    J = scalar(d.motor_inertia_kg_m2, "params.drive.motor_inertia_kg_m2", "kg m^2", lo=0.0, lo_open=True)
+    bm = scalar(d.motor_viscous_Nm_s_per_rad, "params.drive.motor_viscous_Nm_s_per_rad", "N m s/rad", lo=0.0)
+    tlim = scalar(d.torque_limit_Nm, "params.drive.torque_limit_Nm", "N m", lo=0.0, lo_open=True)
+    wn = scalar(d.position_bandwidth_rad_s, "params.drive.position_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
+    zeta = scalar(d.position_damping, "params.drive.position_damping", "(dimensionless)", lo=0.0)
+    ti = scalar(d.position_integral_time_s, "params.drive.position_integral_time_s", "s", lo=0.0)
     sf = params.surface
-    ms = _check(sf.mass_kg, "params.surface.mass_kg", "kg", lo=0.0, lo_open=True)
-    cs = _check(sf.damping_N_s_per_mm, "params.surface.damping_N_s_per_mm", "N s/mm", lo=0.0)
-    kload = _check(sf.load_stiffness_N_per_mm, "params.surface.load_stiffness_N_per_mm", "N/mm", lo=0.0)
+    ms = scalar(sf.mass_kg, "params.surface.mass_kg", "kg", lo=0.0, lo_open=True)
+    cs = scalar(sf.damping_N_s_per_mm, "params.surface.damping_N_s_per_mm", "N s/mm", lo=0.0)
+    kload = scalar(sf.load_stiffness_N_per_mm, "params.surface.load_stiffness_N_per_mm", "N/mm", lo=0.0)
 
     im = i_mm * 1e3
     h = period / nsub
@@ -629,20 +247,20 @@ def _build_vectors(params: RigParams) -> tuple[np.ndarray, np.ndarray, float]:
         s = getattr(params, sname)
         p = G_N + e * E_N
         pre = f"params.{mname}."
-        P[p + E_BI] = _check(m.backlash_int_mm, pre + "backlash_int_mm", "mm", lo=0.0) * 1e-3
-        P[p + E_BB] = _check(m.bearing_backlash_mm, pre + "bearing_backlash_mm", "mm", lo=0.0) * 1e-3
+        P[p + E_BI] = scalar(m.backlash_int_mm, pre + "backlash_int_mm", "mm", lo=0.0) * 1e-3
+        P[p + E_BB] = scalar(m.bearing_backlash_mm, pre + "bearing_backlash_mm", "mm", lo=0.0) * 1e-3
         for col, f in ((E_KC, "stiffness_compression_N_per_mm"), (E_KT, "stiffness_tension_N_per_mm"),
                        (E_KB, "bearing_stiffness_N_per_mm"), (E_KH, "housing_stiffness_N_per_mm")):
-            P[p + col] = _check(getattr(m, f), pre + f, "N/mm", lo=0.0, lo_open=True) * 1e3
+            P[p + col] = scalar(getattr(m, f), pre + f, "N/mm", lo=0.0, lo_open=True) * 1e3
         pre = f"params.{sname}."
-        P[p + E_GAIN] = _check(s.lvdt_gain, pre + "lvdt_gain", "(mm/mm)", lo=0.0, lo_open=True)
-        P[p + E_OFF] = _check(s.lvdt_offset_mm, pre + "lvdt_offset_mm", "mm")
-        P[p + E_NL] = _check(s.lvdt_nonlinearity_mm, pre + "lvdt_nonlinearity_mm", "mm")
-        P[p + E_FS] = _check(s.lvdt_full_scale_mm, pre + "lvdt_full_scale_mm", "mm", lo=0.0, lo_open=True)
-        P[p + E_LSIG] = _check(s.lvdt_noise_pp_mm, pre + "lvdt_noise_pp_mm", "mm", lo=0.0) / 6.0
-        P[p + E_LCG] = _check(s.loadcell_gain, pre + "loadcell_gain", "(N/N)", lo=0.0, lo_open=True)
-        P[p + E_LCSIG] = _check(s.loadcell_noise_std_N, pre + "loadcell_noise_std_N", "N", lo=0.0)
-        b = _check_int(s.resolver_bits, pre + "resolver_bits", 1, 40)
+        P[p + E_GAIN] = scalar(s.lvdt_gain, pre + "lvdt_gain", "(mm/mm)", lo=0.0, lo_open=True)
+        P[p + E_OFF] = scalar(s.lvdt_offset_mm, pre + "lvdt_offset_mm", "mm")
+        P[p + E_NL] = scalar(s.lvdt_nonlinearity_mm, pre + "lvdt_nonlinearity_mm", "mm")
+        P[p + E_FS] = scalar(s.lvdt_full_scale_mm, pre + "lvdt_full_scale_mm", "mm", lo=0.0, lo_open=True)
+        P[p + E_LSIG] = scalar(s.lvdt_noise_pp_mm, pre + "lvdt_noise_pp_mm", "mm", lo=0.0) / 6.0
+        P[p + E_LCG] = scalar(s.loadcell_gain, pre + "loadcell_gain", "(N/N)", lo=0.0, lo_open=True)
+        P[p + E_LCSIG] = scalar(s.loadcell_noise_std_N, pre + "loadcell_noise_std_N", "N", lo=0.0)
+        b = count(s.resolver_bits, pre + "resolver_bits", 1, 40)
         if bits is not None and b != bits:
             raise InputError(f"params.sensors2.resolver_bits must equal params.sensors1.resolver_bits "
                              f"(one resolver quantum per rig), got {b} and {bits}")
@@ -707,9 +325,8 @@ class RigPlant:
 
     def __init__(self, params: RigParams, rng: np.random.Generator, *, s0_mm: float = 0.0) -> None:
         P, table, hw = _build_vectors(params)
-        if not isinstance(rng, np.random.Generator):
-            raise InputError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        s0 = _check(s0_mm, "s0_mm", "mm", lo=-params.stroke_limit_mm, hi=params.stroke_limit_mm)
+        generator(rng)
+        s0 = scalar(s0_mm, "s0_mm", "mm", lo=-params.stroke_limit_mm, hi=params.stroke_limit_mm)
         self._params = params
         self._rng = rng
         self._P = P
@@ -768,7 +385,7 @@ class RigPlant:
         if self._kn >= NOISE_BLOCK:
             self._noise = self._rng.standard_normal((NOISE_BLOCK, 4))
             self._kn = 0
-        out = _advance(self._X, self._P, self._E, self._sbuf, self._dm, int(mode1), float(value1),
+        out = advance(self._X, self._P, self._E, self._sbuf, self._dm, int(mode1), float(value1),
                        int(mode2), float(value2), float(load_N), self._noise, self._kn)
         self._kn += 1
         return out
@@ -872,7 +489,7 @@ class RigPlant:
                 self._kn = 0
             m = min(n - i, NOISE_BLOCK - self._kn)
             sl = slice(i, i + m)
-            _run(self._X, self._P, self._E, self._sbuf, self._dm, mm[0][sl], vv[0][sl], mm[1][sl],
+            run_batch(self._X, self._P, self._E, self._sbuf, self._dm, mm[0][sl], vv[0][sl], mm[1][sl],
                  vv[1][sl], ld[sl], self._noise, self._kn, meas, truth, i)
             self._kn += m
             i += m

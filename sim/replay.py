@@ -12,7 +12,7 @@ sample it sits where the two chain forces and the load spring balance,
 
 and where both chains are slack (the force passes zero) it stays where it was
 (the nearest point of the zero-force interval). The chains are the closed-form
-dead-zone springs of :func:`sim.plant._chain` (internal play, tension and
+dead-zone springs of :func:`sim.plant_kernel.chain` (internal play, tension and
 compression stiffness, Maxwell arm of :class:`sim.effects.Viscoelastic`,
 bearing play and stiffness, housing spring). The sensors are applied after:
 :func:`lvdt_model` and the load-cell gain.
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from blf.errors import InputError
-from sim.plant import _chain
+from blf.validate import as_1d_finite, instance_of, positive_scalar, same_shape, scalar
+from sim.plant_kernel import chain
 
 __all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "block_means"]
 
@@ -70,8 +70,8 @@ def _g(xm, y, r, zc, zt, P, e, kload, mq, cq, c0):
     tot = c0 - (kload + mq + cq) * y
     for j in range(2):
         q = e[j]
-        f, _, _, _, _ = _chain(xm[j], y, r[j], zc[j], zt[j], P[q, 0], P[q, 1], P[q, 2], P[q, 3],
-                               P[q, 4], P[q, 5], P[q, 6])
+        f, _, _, _, _ = chain(xm[j], y, r[j], zc[j], zt[j], P[q, 0], P[q, 1], P[q, 2], P[q, 3],
+                              P[q, 4], P[q, 5], P[q, 6])
         tot += f
     return tot
 
@@ -134,8 +134,8 @@ def _replay(xm1, xm2, P, kload, mass, damping, period):
         y2 = y1
         y1 = y
         for j in range(2):
-            f, rr, hh, dmc, dmt = _chain(xm[j], y, r[j], zc[j], zt[j], P[j, 0], P[j, 1], P[j, 2],
-                                         P[j, 3], P[j, 4], P[j, 5], P[j, 6])
+            f, rr, hh, dmc, dmt = chain(xm[j], y, r[j], zc[j], zt[j], P[j, 0], P[j, 1], P[j, 2],
+                                        P[j, 3], P[j, 4], P[j, 5], P[j, 6])
             r[j] = rr
             s[k, j] = rr - hh
             F[k, j] = f
@@ -145,19 +145,19 @@ def _replay(xm1, xm2, P, kload, mass, damping, period):
     return s, F, Y
 
 
+#: ChainParams fields: (name, unit, strictly positive)
+_CHAIN_FIELDS = (
+    ("backlash_int_mm", "mm", False), ("bearing_backlash_mm", "mm", False),
+    ("stiffness_compression_N_per_mm", "N/mm", True), ("stiffness_tension_N_per_mm", "N/mm", True),
+    ("series_compliance_mm_per_N", "mm/N", True), ("ve_stiffness_N_per_mm", "N/mm", False),
+    ("ve_time_constant_s", "s", True),
+)
+
+
 def _chain_row(c: ChainParams, name: str) -> list[float]:
-    if not isinstance(c, ChainParams):
-        raise InputError(f"{name} must be a ChainParams, got {type(c).__name__}")
-    vals = [c.backlash_int_mm, c.bearing_backlash_mm, c.stiffness_compression_N_per_mm,
-            c.stiffness_tension_N_per_mm, c.series_compliance_mm_per_N, c.ve_stiffness_N_per_mm,
-            c.ve_time_constant_s]
-    if not all(math.isfinite(float(v)) for v in vals):
-        raise InputError(f"{name}: every field must be finite, got {c!r}")
-    if min(c.stiffness_compression_N_per_mm, c.stiffness_tension_N_per_mm) <= 0 \
-            or c.series_compliance_mm_per_N <= 0 or c.ve_time_constant_s <= 0 \
-            or c.backlash_int_mm < 0 or c.bearing_backlash_mm < 0 or c.ve_stiffness_N_per_mm < 0:
-        raise InputError(f"{name}: stiffness, compliance and time constant must be > 0, backlash "
-                         f"and Maxwell stiffness >= 0 (mm, N/mm, s), got {c!r}")
+    instance_of(c, ChainParams, name)
+    for field, unit, positive in _CHAIN_FIELDS:
+        scalar(getattr(c, field), f"{name}.{field}", unit, lo=0.0, lo_open=positive)
     # SI row: bi, bb, kc, kt, kb, kh, kv, tau (kb, kh split evenly: only their series counts)
     ks = 1e3 / c.series_compliance_mm_per_N  # N/m
     return [c.backlash_int_mm * 1e-3, c.bearing_backlash_mm * 1e-3,
@@ -191,26 +191,18 @@ def replay_chains(xm1_mm: np.ndarray, xm2_mm: np.ndarray, ema1: ChainParams, ema
     Surface :math:`F_1 + F_2 = k_{load} y + m\\,\\ddot y + c\\,\\dot y` with
     backward differences (implicit, so the 50 Hz surface mode is damped
     numerically rather than resolved), solved by safeguarded Newton
-    (bisection fallback) to 1e-13 m each sample (the residual function is non-increasing in y); chain per :func:`sim.plant._chain`; Maxwell states updated once per
+    (bisection fallback) to 1e-13 m each sample (the residual function is non-increasing in y); chain per :func:`sim.plant_kernel.chain`; Maxwell states updated once per
     sample, :math:`z \\leftarrow z + (\\delta - z)(1 - e^{-T_s/\\tau})`.
     """
-    x1 = np.ascontiguousarray(xm1_mm, dtype=np.float64)
-    x2 = np.ascontiguousarray(xm2_mm, dtype=np.float64)
-    if x1.ndim != 1 or x1.shape != x2.shape or x1.size < 2:
-        raise InputError(f"xm1_mm and xm2_mm must be 1-D arrays of one shape (mm), >= 2 samples; "
-                         f"got {x1.shape} and {x2.shape}")
-    if not (np.all(np.isfinite(x1)) and np.all(np.isfinite(x2))):
-        raise InputError("xm1_mm and xm2_mm must be finite (mm)")
-    if not (math.isfinite(sample_period_s) and sample_period_s > 0):
-        raise InputError(f"sample_period_s must be finite and > 0 s, got {sample_period_s!r}")
-    if not (math.isfinite(load_stiffness_N_per_mm) and load_stiffness_N_per_mm >= 0):
-        raise InputError(f"load_stiffness_N_per_mm must be finite and >= 0 N/mm, got {load_stiffness_N_per_mm!r}")
-    if not (surface_mass_kg >= 0 and surface_damping_N_s_per_mm >= 0):
-        raise InputError(f"surface_mass_kg and surface_damping_N_s_per_mm must be >= 0 (kg, N s/mm), "
-                         f"got {surface_mass_kg!r}, {surface_damping_N_s_per_mm!r}")
+    x1 = np.ascontiguousarray(as_1d_finite(xm1_mm, "xm1_mm", "mm", min_len=2))
+    x2 = np.ascontiguousarray(as_1d_finite(xm2_mm, "xm2_mm", "mm", min_len=2))
+    same_shape((x1, "xm1_mm", "mm"), (x2, "xm2_mm", "mm"))
+    T = positive_scalar(sample_period_s, "sample_period_s", "s")
+    k_load = scalar(load_stiffness_N_per_mm, "load_stiffness_N_per_mm", "N/mm", lo=0.0)
+    mass = scalar(surface_mass_kg, "surface_mass_kg", "kg", lo=0.0)
+    damping = scalar(surface_damping_N_s_per_mm, "surface_damping_N_s_per_mm", "N s/mm", lo=0.0)
     P = np.array([_chain_row(ema1, "ema1"), _chain_row(ema2, "ema2")], dtype=np.float64)
-    s, F, y = _replay(x1 * 1e-3, x2 * 1e-3, P, float(load_stiffness_N_per_mm) * 1e3, float(surface_mass_kg),
-                      float(surface_damping_N_s_per_mm) * 1e3, float(sample_period_s))
+    s, F, y = _replay(x1 * 1e-3, x2 * 1e-3, P, k_load * 1e3, mass, damping * 1e3, T)
     return ReplayTrace(s_mm=s * 1e3, F_N=F, y_mm=y * 1e3)
 
 
@@ -233,12 +225,10 @@ def lvdt_model(s_mm: np.ndarray, t_s: np.ndarray, *, gain: float = 1.0, offset_m
         :math:`o + g(1 + d\\,t)\\,\\tilde s + n_3(\\tilde s/s_{fs})^3` mm with
         :math:`\\tilde s = s - \\Delta\\,\\dot s` (first order in the delay).
     """
-    s = np.asarray(s_mm, dtype=np.float64)
-    t = np.asarray(t_s, dtype=np.float64)
-    if s.ndim != 1 or s.shape != t.shape:
-        raise InputError(f"s_mm and t_s must be 1-D of one shape (mm, s), got {s.shape} and {t.shape}")
-    if not full_scale_mm > 0:
-        raise InputError(f"full_scale_mm must be > 0 mm, got {full_scale_mm!r}")
+    s = as_1d_finite(s_mm, "s_mm", "mm")
+    t = as_1d_finite(t_s, "t_s", "s")
+    same_shape((s, "s_mm", "mm"), (t, "t_s", "s"))
+    positive_scalar(full_scale_mm, "full_scale_mm", "mm")
     if delay_s != 0.0:
         s = s - delay_s * np.gradient(s, t)
     out = gain * s if drift_per_s == 0.0 else gain * (1.0 + drift_per_s * (t - t[0])) * s
@@ -374,16 +364,16 @@ class DualEmaReplay:
     def __init__(self, t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N, i_total_rad_per_mm: float,
                  sample_period_s: float, mode1=None, sp1=None, mode2=None, sp2=None) -> None:
         from blf.diagnose import Param
-        arrs = [np.asarray(a, dtype=np.float64) for a in (t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N)]
+        items = [(as_1d_finite(a, name, unit, min_len=200), name, unit) for a, name, unit in (
+            (t_s, "t_s", "s"), (phi1_rad, "phi1_rad", "rad"), (phi2_rad, "phi2_rad", "rad"), (s1_mm, "s1_mm", "mm"),
+            (s2_mm, "s2_mm", "mm"), (F1_N, "F1_N", "N"), (F2_N, "F2_N", "N"))]
+        same_shape(*items)
+        arrs = [a for a, _, _ in items]
         n = arrs[0].size
-        if any(a.shape != (n,) for a in arrs) or n < 200:
-            raise InputError(f"t, phi1, phi2, s1, s2, F1, F2 must be 1-D of one shape, >= 200 samples; "
-                             f"got {[a.shape for a in arrs]}")
-        if not all(np.all(np.isfinite(a)) for a in arrs):
-            raise InputError("t, phi1, phi2, s1, s2, F1, F2 must be finite (s, rad, mm, N)")
+        i_total = positive_scalar(i_total_rad_per_mm, "i_total_rad_per_mm", "rad/mm")
         self.t_s = arrs[0]
-        self.T = float(sample_period_s)
-        self.xm = (arrs[1] / i_total_rad_per_mm, arrs[2] / i_total_rad_per_mm)
+        self.T = positive_scalar(sample_period_s, "sample_period_s", "s")
+        self.xm = (arrs[1] / i_total, arrs[2] / i_total)
         self.channels = ("s1", "s2", "F1", "F2", "Fd1", "Fd2")
         self.measured = {"s1": arrs[3], "s2": arrs[4], "F1": arrs[5], "F2": arrs[6]}
         self.v = tuple(_savgol(x, self.T, 1) for x in self.xm)

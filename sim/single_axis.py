@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from blf.errors import InputError
+from blf.validate import as_1d_finite, positive_scalar, same_shape
 
 __all__ = ["SingleAxisReplay", "single_axis_candidates"]
 
@@ -65,16 +65,16 @@ class SingleAxisReplay:
     def __init__(self, t_s, q_m, q_ref_m, force_N, sample_period_s: float) -> None:
         from blf.diagnose import Param
         from scipy.signal import savgol_filter
-        arrs = [np.asarray(a, dtype=np.float64).ravel() for a in (t_s, q_m, q_ref_m, force_N)]
+        # any shape, flattened (a .mat file holds columns)
+        items = [(as_1d_finite(np.ravel(a), name, unit, min_len=200), name, unit) for a, name, unit in (
+            (t_s, "t_s", "s"), (q_m, "q_m", "m"), (q_ref_m, "q_ref_m", "m"), (force_N, "force_N", "N"))]
+        same_shape(*items)
+        arrs = [a for a, _, _ in items]
         n = arrs[0].size
-        if any(a.size != n for a in arrs) or n < 200:
-            raise InputError(f"t, q, q_ref, force must be of one length >= 200; got {[a.shape for a in arrs]}")
-        if not all(np.all(np.isfinite(a)) for a in arrs):
-            raise InputError("t, q, q_ref, force must be finite (s, m, m, N)")
         self.t_s = arrs[0]
         self.q = arrs[1]
         self.q_ref = arrs[2]
-        T = float(sample_period_s)
+        T = positive_scalar(sample_period_s, "sample_period_s", "s")
         self.v = savgol_filter(self.q, 21, 3, deriv=1, delta=T, mode="interp")
         self.a = savgol_filter(self.q, 21, 3, deriv=2, delta=T, mode="interp")
         self.channels = ("force",)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from blf.errors import InputError
+from blf.validate import instance_of, scalar
 from sim.params import EmaMechanics, RigParams
 
 __all__ = ["RigTruth", "rig_truth"]
@@ -82,16 +82,13 @@ def rig_truth(params: RigParams) -> RigTruth:
     A :class:`sim.effects.Viscoelastic` arm does not change these static
     values (its force relaxes to zero at constant deflection).
     """
-    if not isinstance(params, RigParams):
-        raise InputError(f"params must be a RigParams, got {type(params).__name__}")
+    instance_of(params, RigParams, "params")
 
     def mech(name: str) -> EmaMechanics:
         m = getattr(params, name)
         for f in ("stiffness_compression_N_per_mm", "stiffness_tension_N_per_mm",
                   "bearing_stiffness_N_per_mm", "housing_stiffness_N_per_mm"):
-            v = getattr(m, f)
-            if not (isinstance(v, (int, float)) and v > 0):
-                raise InputError(f"params.{name}.{f} must be > 0 N/mm, got {v!r}")
+            scalar(getattr(m, f), f"params.{name}.{f}", "N/mm", lo=0.0, lo_open=True)
         return m
 
     m1, m2 = mech("ema1"), mech("ema2")

@@ -43,7 +43,9 @@ def simulate_run(out: Path, act, check, simrig_profile, seed: int):
 
 @pytest.fixture(scope="session")
 def default_run(tmp_path_factory, actuation, check_profile, simrig):
-    """Run folder of one simulated check with the shipped profiles and seed."""
+    """Run folder of one simulated check with the shipped profiles and seed.
+
+    Its users are marked ``slow`` (a whole simulated check): the fast loop never runs it."""
     out = tmp_path_factory.mktemp("run") / "default"
     outcome, truth = simulate_run(out, actuation, check_profile, simrig, simrig.seed)
     assert outcome.status == "done", outcome.reason

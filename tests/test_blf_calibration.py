@@ -7,6 +7,7 @@ import pytest
 
 from blf.errors import AnalysisError, InputError
 from blf import LvdtCalibration, fit_lvdt_calibration, position_differences
+from blf.calibration import correct_linear
 
 # The simulator's LVDT law (sim/params.py SensorParams), paper values:
 GAIN = 1.075  # 7.5 % pitch error
@@ -166,3 +167,21 @@ def test_frozen():
     cal = fit_lvdt_calibration(*sweep(np.random.default_rng(5), n=200))
     with pytest.raises(AttributeError):
         cal.pitch = 1.0  # type: ignore[misc]
+
+
+def test_linear_correction_inverts_pitch_and_offset():
+    """result.json's calibration (pitch, offset): x = (s - offset) / pitch, any shape."""
+    x = np.linspace(-18.0, 18.0, 12).reshape(3, 4)
+    s = OFFSET_MM + GAIN * x
+    np.testing.assert_allclose(correct_linear(s, GAIN, OFFSET_MM), x, rtol=0, atol=1e-12)
+    # the straight line of the full calibration: the same correction up to the non-linearity
+    cal = fit_lvdt_calibration(*sweep(np.random.default_rng(6)))
+    xs = np.linspace(-15.0, 15.0, 7)
+    lin = correct_linear(cal.evaluate(xs), cal.pitch, cal.offset_mm)
+    assert np.max(np.abs(lin - xs)) < 0.05
+    with pytest.raises(InputError, match="pitch"):
+        correct_linear(s, 0.0, OFFSET_MM)
+    with pytest.raises(InputError, match="offset_mm"):
+        correct_linear(s, GAIN, float("nan"))
+    with pytest.raises(InputError, match=r"s_mm must be finite \(in mm\)"):
+        correct_linear(np.array([np.nan]), GAIN, OFFSET_MM)

@@ -16,6 +16,9 @@ from hil.runfolder import read_signals
 
 from conftest import simulate_run
 
+#: every test here runs or reads a whole simulated check: not in the fast loop (-m "not slow")
+pytestmark = pytest.mark.slow
+
 
 def _result(run_dir, act, truth):
     sig = read_signals(run_dir / "signals.csv")

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import json
-import shutil
 
-import numpy as np
 import pytest
 
 from hil.cli import main
-from hil.profiles import default_profile_path
+from support.profiles import write_profile_variant
 
 
+@pytest.mark.slow
 def test_simulate_writes_run_folder_and_passes(tmp_path):
     out = tmp_path / "run"
     rc = main(["simulate", "--out", str(out), "--seed", "7", "--quiet"])
@@ -28,6 +27,7 @@ def test_simulate_writes_run_folder_and_passes(tmp_path):
     assert html.count("data:image/png;base64,") == 8 and "PASS" in html
 
 
+@pytest.mark.slow
 def test_analyze_run_folder_reproduces_result(default_run, tmp_path):
     run_dir, truth = default_run
     rc = main(["analyze", str(run_dir), "--out", str(tmp_path)])
@@ -37,6 +37,7 @@ def test_analyze_run_folder_reproduces_result(default_run, tmp_path):
     assert res["truth"] == truth  # carried in meta.json
 
 
+@pytest.mark.slow
 def test_analyze_bare_csv_finds_segments_itself(default_run, tmp_path):
     """A CSV recorded elsewhere: only t,phi1,phi2,s1,s2,F1,F2, no step column."""
     run_dir, truth = default_run
@@ -53,6 +54,7 @@ def test_analyze_bare_csv_finds_segments_itself(default_run, tmp_path):
         assert res["calibration"][k]["pitch"] == pytest.approx(truth["calibration"][k]["pitch"], rel=1e-3)
 
 
+@pytest.mark.slow
 def test_analyze_force_fight_only_says_uncorrected(default_run, tmp_path):
     run_dir, truth = default_run
     lines = (run_dir / "signals.csv").read_text().splitlines()
@@ -68,20 +70,17 @@ def test_analyze_force_fight_only_says_uncorrected(default_run, tmp_path):
     assert any("uncorrected" in n for n in res["notes"])
 
 
+@pytest.mark.slow
 def test_fail_against_spec_exits_1(default_run, tmp_path):
     run_dir, _ = default_run
-    act = default_profile_path("actuation.toml").read_text().replace(
-        "backlash_spec_int_mm = 0.20", "backlash_spec_int_mm = 0.11")
-    p = tmp_path / "tight.toml"
-    p.write_text(act)
+    p = write_profile_variant("actuation.toml", tmp_path / "tight.toml", {"mechanics": {"backlash_spec_int_mm": 0.11}})
     rc = main(["analyze", str(run_dir), "--profile", str(p), "--out", str(tmp_path / "a")])
     assert rc == 1  # int2 has 0.12 mm > 0.11 mm
     assert json.loads((tmp_path / "a" / "result.json").read_text())["status"] == "fail"
 
 
 def test_bad_input_exit_3_and_message(tmp_path, capsys):
-    bad = tmp_path / "check.toml"
-    bad.write_text(default_profile_path("check.toml").read_text().replace("cycles = 3", "cycles = 0"))
+    bad = write_profile_variant("check.toml", tmp_path / "check.toml", {"force_fight": {"cycles": 0}})
     assert main(["simulate", "--check", str(bad), "--out", str(tmp_path / "x"), "--quiet"]) == 3
     err = capsys.readouterr().err
     assert "check.toml: field 'force_fight.cycles' = 0 must be >= 1" in err
@@ -99,9 +98,7 @@ def test_help_lists_commands(capsys):
 
 
 def test_safety_violation_aborts_with_reason_and_exit_2(tmp_path):
-    chk = tmp_path / "check.toml"
-    chk.write_text(default_profile_path("check.toml").read_text().replace(
-        "max_following_error_mm = 0.5", "max_following_error_mm = 0.002"))
+    chk = write_profile_variant("check.toml", tmp_path / "check.toml", {"safety": {"max_following_error_mm": 0.002}})
     out = tmp_path / "run"
     rc = main(["simulate", "--check", str(chk), "--out", str(out), "--quiet"])
     assert rc == 2
@@ -116,6 +113,7 @@ def test_safety_violation_aborts_with_reason_and_exit_2(tmp_path):
     assert len(lines) > 2
 
 
+@pytest.mark.slow
 def test_run_cut_just_after_the_force_fight_began_is_incomplete_not_a_crash(default_run, tmp_path):
     """A master killed a few samples into the force fight: `analyze` reports the run incomplete and
     why (too few force-fight samples), exit 2, result.json written."""

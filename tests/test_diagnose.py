@@ -1,53 +1,53 @@
 """Tests of ``emacheck diagnose`` (blf.diagnose, sim.replay, sim.single_axis, hil.cli.diagnose).
 
-Recordings are short simulated checks (~40 s, see ``bench_diagnose.short_check``)
-with concealed effects generated as in the benchmark, with their own seeds
-(31001..), never the benchmark's. The full >= 30-case benchmark is
-``python tests/bench_diagnose.py``.
+Recordings are short simulated checks (~40 s, see ``support.diagnose_cases.short_check``)
+with concealed effects generated as in the benchmark (``support.diagnose_cases``), with
+their own seeds (31001..), never the benchmark's. The full >= 30-case benchmark is
+``python tests/bench/bench_diagnose.py``. The tests that simulate a recording (or read
+the EMPS one through the command line) are ``slow``; the statistics of the method on
+synthetic residuals stay in the fast loop.
 """
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from bench import bench_diagnose as B  # noqa: E402
-from blf.diagnose import diagnose  # noqa: E402
-from hil.cli import main  # noqa: E402
-from blf.errors import InputError  # noqa: E402
-from sim.replay import ChainParams, DualEmaReplay, replay_chains  # noqa: E402
+from blf.diagnose import diagnose
+from blf.errors import InputError
+from hil.cli import main
+from sim.replay import ChainParams, DualEmaReplay, replay_chains
+from support import diagnose_cases as dc
 
 EMPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 
 
 @pytest.fixture(scope="module")
 def short(tmp_path_factory):
-    return B.short_check()
+    return dc.short_check()
 
 
-def _case(kind_effects, seed, tmp, check):
+def _case(kind_effects, seed, tmp, check, size=1.0):
     case = {"id": "t", "kind": "single", "effects": kind_effects, "seed": seed}
-    sig, truths, s, _ = B.generate(case, tmp, check)
+    sig, truths, s, _ = dc.generate(case, tmp, check, size=size)
     return sig, truths, s
 
 
 def _diag(sig):
-    m = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2, B.I_TOTAL, 0.002,
+    m = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2, dc.I_TOTAL, 0.002,
                       sig.mode1, sig.sp1, sig.mode2, sig.sp2)
     return diagnose(m, 0.002)
 
 
+@pytest.mark.slow
 def test_replay_reproduces_plant_within_noise(tmp_path, short):
     """Driven by the measured motor angles with the true parameters, the replay leaves only noise in s."""
-    sig = B.record(B.base_params(), 31001, tmp_path, short)
+    sig = dc.record(dc.base_params(), 31001, tmp_path, short)
     ks = 1 / 200000 + 1 / 20000
-    tr = replay_chains(sig.phi1 / B.I_TOTAL, sig.phi2 / B.I_TOTAL, ChainParams(0.10, 8e4, 8e4, 0.05, ks),
+    tr = replay_chains(sig.phi1 / dc.I_TOTAL, sig.phi2 / dc.I_TOTAL, ChainParams(0.10, 8e4, 8e4, 0.05, ks),
                        ChainParams(0.12, 8e4, 8e4, 0.05, ks), 0.002, 0.0, 300.0, 0.5)
     sigma = 0.025 / 6
     for j, s in enumerate((sig.s1, sig.s2)):
@@ -63,6 +63,7 @@ def test_replay_refuses_bad_input():
         replay_chains(np.zeros(5), np.zeros(5), ChainParams(0.1, -1.0, 8e4, 0.05, 5e-5), c, 0.002)
 
 
+@pytest.mark.slow
 def test_null_is_no_mismatch(tmp_path, short):
     sig, _, _ = _case([], 31002, tmp_path, short)
     d = _diag(sig)
@@ -70,6 +71,7 @@ def test_null_is_no_mismatch(tmp_path, short):
     assert d.effects == ()
 
 
+@pytest.mark.slow
 def test_concealed_coulomb_friction_found(tmp_path):
     """A full-length check: the concealed friction needs the whole recording to stand out."""
     sig, truths, s = _case([("coulomb_friction", "ema1")], 31003, tmp_path, None)
@@ -88,13 +90,24 @@ def test_concealed_coulomb_friction_found(tmp_path):
     assert d.residual_rms_after["Fd1"] < d.residual_rms_before["Fd1"]
 
 
+@pytest.mark.slow
 def test_out_of_library_is_unexplained(tmp_path, short):
-    sig, _, _ = _case([("lead_error", "ema1")], 31004, tmp_path, short)
+    """A screw lead error (periodic along the stroke: no effect of the library has that shape) is
+    found, called unexplained with its locations, and no library effect is named for it.
+
+    At its largest concealed size the short recording carries it only at the detection threshold
+    (window excess 3.5 against 3.0 at this seed; 1 of 4 seeds tried gave no_mismatch): it is
+    recorded at twice that size (the magnitude drawn from this test's own seed, the per-sample
+    signature about 2 noise sigmas), so that a detector that never detects fails here."""
+    sig, _, s = _case([("lead_error", "ema1")], 31004, tmp_path, short, size=2.0)
+    assert 1.0 < max(s.values()) < 2.5, s  # above the noise per sample, but not by much
     d = _diag(sig)
-    assert d.verdict in ("unexplained", "no_mismatch"), [e.name for e in d.effects]
+    assert d.verdict == "unexplained", (d.verdict, d.excess_before, [e.name for e in d.effects])
     assert d.effects == ()
+    assert d.locations, (d.excess_before, d.regime_before)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not EMPS.exists(), reason=f"EMPS recording not present at {EMPS} (../shared/data)")
 def test_emps_cli(tmp_path):
     rc = main(["diagnose", str(EMPS), "--model", "single-axis", "--out", str(tmp_path), "--quiet"])
@@ -126,15 +139,15 @@ def test_cli_bad_recording(tmp_path):
 
 def test_noise_floor_on_a_sparse_grid():
     """A channel valid every 50th sample (block means) gets its white-noise sigma from its own grid."""
-    from blf.diagnose import _noise_floor
+    from blf.mismatch import noise_floor
     rng = np.random.default_rng(7)
     n = 50_000
     valid = np.zeros(n, bool)
     valid[25::50] = True
     r = np.where(valid, 1.5 * rng.standard_normal(n) + 0.2 * np.sin(np.arange(n) / 4000.0), 0.0)
-    sig = _noise_floor(r, valid, 100)
+    sig = noise_floor(r, valid, 100)
     assert abs(np.median(sig[valid]) - 1.5) < 0.1, np.median(sig[valid])
-    dense = _noise_floor(1.5 * rng.standard_normal(n), np.ones(n, bool), 100)
+    dense = noise_floor(1.5 * rng.standard_normal(n), np.ones(n, bool), 100)
     assert abs(np.median(dense) - 1.5) < 0.05
 
 
@@ -142,7 +155,7 @@ def test_drive_force_blocks_balance_momentum():
     """Known answer: a motion whose drive target is exactly the chain force plus M a + c v
     (continuous time) gives block means of the replayed drive force equal to those of the
     chain force, without differentiating the angle twice."""
-    T, n, i_tot = 0.002, 20_000, B.I_TOTAL
+    T, n, i_tot = 0.002, 20_000, dc.I_TOTAL
     t = np.arange(n) * T
     M, c = 2500.0, 75.0  # kg, N s/mm
     w = 2 * np.pi * 0.7
@@ -164,11 +177,12 @@ def test_drive_force_blocks_balance_momentum():
     assert np.sqrt(np.mean(err ** 2)) < 0.05, (np.sqrt(np.mean(err ** 2)), np.abs(err).max())  # N; M a swings +-145 N
 
 
+@pytest.mark.slow
 def test_cli_on_a_run_folder(tmp_path, short):
     """End to end on a run folder the tool made (no effect): JSON of issue 6's shape, the D
     signals reported beside the fitted channels, the HTML report written."""
     run = tmp_path / "run"
-    B.record(B.base_params(), 31005, run, short)
+    dc.record(dc.base_params(), 31005, run, short)
     out = tmp_path / "diag"
     assert main(["diagnose", str(run), "--out", str(out), "--quiet"]) == 0
     data = json.loads((out / "diagnosis.json").read_text())
@@ -194,12 +208,12 @@ def test_block_means_is_the_trapezoid_over_the_block():
 def _regime_setup(n=60000, force=None):
     """Cells of triangle sweeps (mm, not in step with the 2 s blocks) x velocity sign x the sign of
     ``force`` (default a slow sine), the blocks and the fit half."""
-    from blf.diagnose import _regime_cells
+    from blf.mismatch import regime_cells
     t = np.arange(n) * 0.002
     pos = 10.0 * np.abs(((t / 4.3) % 2.0) - 1.0) - 5.0
     regimes = {"position along the stroke": pos, "velocity": np.gradient(pos, t),
                "force F1": np.sin(2 * np.pi * t / 11.0) if force is None else force}
-    cells, labels = _regime_cells(regimes, 10)
+    cells, labels = regime_cells(regimes, 10)
     block = np.arange(n) // 1000
     return cells, labels, block, block % 2 == 0
 
@@ -209,7 +223,7 @@ def test_regime_score_is_standard_under_white_and_correlated_noise():
     correlated (AR(1), a = 0.8: sums 9x wider than white) -- the over-dispersion is estimated."""
     from scipy.signal import lfilter
 
-    from blf.diagnose import regime_score
+    from blf.mismatch import regime_score
     cells, labels, block, fit = _regime_setup()
     rng = np.random.default_rng(5)
     valid = np.ones(cells.size, bool)
@@ -228,7 +242,7 @@ def test_regime_score_sees_a_mismatch_repeated_in_a_cell_and_not_one_that_flips(
     """An offset of 0.15 sigma in the samples of a few cells (invisible per sample; a 1 s
     window holds at most 0.43 s of it: below 1.5 sigma) is found when it repeats in both halves; one whose sign flips
     between the halves (not a property of the regime) scores negative."""
-    from blf.diagnose import regime_score
+    from blf.mismatch import regime_score
     cells, labels, block, fit = _regime_setup()
     rng = np.random.default_rng(6)
     e = rng.normal(size=cells.size)
@@ -247,7 +261,7 @@ def test_regime_cells_chosen_by_the_measured_force_would_bias_its_residual():
     """Why diagnose forms the force cells from the model's force: a cell chosen by the sign
     of a noisy measurement selects that measurement's noise, and pure noise then scores as a
     repeated mismatch; cells from the noise-free force do not."""
-    from blf.diagnose import regime_score
+    from blf.mismatch import regime_score
     n = 60000
     t = np.arange(n) * 0.002
     rng = np.random.default_rng(7)

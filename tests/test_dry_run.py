@@ -5,6 +5,9 @@ Acceptance of issue "The maintenance check over CANopen": backlash within
 7.5 % LVDT pitch error on); the raw CAN log alone decodes into the same
 signals as the CSV; SYNC/TPDO/RPDO order within every cycle; nothing is sent
 before the profiles validated; `run` without --arm refuses.
+
+The tests on the whole dry-run are ``slow`` (deselected by ``-m "not slow"``); the
+refusals before anything is sent stay in the fast loop.
 """
 
 from __future__ import annotations
@@ -19,8 +22,8 @@ import pytest
 from blf.signals import CHANNELS
 from hil.canlog import decode_can_log
 from hil.cli import main
-from hil.profiles import default_profile_path
 from hil.runfolder import read_signals
+from support.profiles import write_profile_variant
 
 
 @pytest.fixture(scope="session")
@@ -30,6 +33,7 @@ def dry_run(tmp_path_factory):
     return out, rc
 
 
+@pytest.mark.slow
 def test_dry_run_recovers_truth_through_canopen(dry_run):
     out, rc = dry_run
     assert rc == 0
@@ -48,6 +52,7 @@ def test_dry_run_recovers_truth_through_canopen(dry_run):
     assert meta["can"]["missing_cycles"] == 0 and meta["can"]["bad_frames"] == 0
 
 
+@pytest.mark.slow
 def test_can_log_decodes_into_the_csv_signals(dry_run, actuation):
     out, _ = dry_run
     csv = read_signals(out / "signals.csv")
@@ -67,6 +72,7 @@ def test_can_log_decodes_into_the_csv_signals(dry_run, actuation):
     np.testing.assert_allclose(sig.sp1[k0:k0 + n - 1][pos], csv.sp1[:-1][pos], atol=2 * np.pi / 4096)
 
 
+@pytest.mark.slow
 def test_every_cycle_sync_then_tpdos_then_rpdos(dry_run):
     out, _ = dry_run
     lines = (out / "can.log").read_text().splitlines()
@@ -88,6 +94,7 @@ def test_every_cycle_sync_then_tpdos_then_rpdos(dry_run):
     assert bad == 0
 
 
+@pytest.mark.slow
 def test_analyze_from_can_log_alone(dry_run, tmp_path):
     out, _ = dry_run
     run = tmp_path / "run"
@@ -106,9 +113,8 @@ def test_analyze_from_can_log_alone(dry_run, tmp_path):
 def test_nothing_sent_before_profiles_validate_and_run_needs_arm(tmp_path, capsys):
     listener = can.Bus(interface="virtual", channel="emacheck-test-arm")
     try:
-        bad = tmp_path / "check.toml"
-        bad.write_text(default_profile_path("check.toml").read_text().replace(
-            "amplitude_fraction_of_limit = 0.15", "amplitude_fraction_of_limit = 0.3"))
+        bad = write_profile_variant("check.toml", tmp_path / "check.toml",
+                                    {"force_fight": {"amplitude_fraction_of_limit": 0.3}})
         rc = main(["run", "--interface", "virtual", "--channel", "emacheck-test-arm", "--arm",
                    "--check", str(bad), "--out", str(tmp_path / "r1")])
         assert rc == 3

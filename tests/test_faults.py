@@ -19,6 +19,9 @@ Stated reaction bounds (T = SYNC period 2 ms, P = heartbeat period 0.1 s):
 Overshoot margin on the true force and stroke: what the fastest true rate seen
 in the run allows during 2 T, plus the sensor noise (5 sigma of the load cell,
 the LVDT's peak-to-peak noise).
+
+Every test that runs a dry-run is ``slow`` (fault-injection end to end); the
+check that every fault kind has a case stays in the fast loop.
 """
 
 from __future__ import annotations
@@ -34,10 +37,11 @@ from hil.canlog import decode_can_log
 from hil.link import SDO_FALLBACK_CYCLES
 from hil.canopen.cia402 import State
 from hil.cli.dry_run import dry_run
-from hil.profiles import default_profile_path, load_actuation, load_check, load_simrig
+from hil.profiles import load_actuation, load_check, load_simrig
 from hil.runfolder import read_signals
 from hil.supervisor import Limits
 from sim.faults import Fault, FaultKind
+from support.profiles import write_profile_variant
 
 T = 0.002
 P_HB = 0.1
@@ -50,15 +54,9 @@ def profiles():
     return act, load_check(None, act), load_simrig()
 
 
-def _check_with(tmp_path: Path, act, **safety) -> object:
-    text = default_profile_path("check.toml").read_text()
-    for k, v in safety.items():
-        lines = [ln for ln in text.splitlines() if ln.split("=")[0].strip() == k]
-        if lines:
-            text = text.replace(lines[0], f"{k} = {v}")
-    p = tmp_path / "check.toml"
-    p.write_text(text)
-    return load_check(p, act)
+def _check_with(tmp_path: Path, act, **overrides) -> object:
+    """The shipped check profile with ``overrides`` ({table: {key: value}}), loaded against ``act``."""
+    return load_check(write_profile_variant("check.toml", tmp_path / "check.toml", overrides), act)
 
 
 def _run(tmp_path, profiles, fault: Fault, check=None):
@@ -130,6 +128,7 @@ CASES = [
 
 
 @pytest.mark.parametrize("fault,words,bound", CASES, ids=[c[0].kind for c in CASES])
+@pytest.mark.slow
 def test_fault_reaction_safe_state_and_run_folder(tmp_path, profiles, fault, words, bound):
     act, chk, _ = profiles
     r, meta = _run(tmp_path, profiles, fault)
@@ -154,6 +153,7 @@ def test_fault_reaction_safe_state_and_run_folder(tmp_path, profiles, fault, wor
     _assert_run_folder(r, meta, t_det, act)
 
 
+@pytest.mark.slow
 def test_unreachable_drive_other_goes_safe_and_reason_names_it(tmp_path, profiles):
     act, chk, _ = profiles
     r, meta = _run(tmp_path, profiles, Fault("node_silent", 2, 2.0))
@@ -168,6 +168,7 @@ def test_unreachable_drive_other_goes_safe_and_reason_names_it(tmp_path, profile
     _assert_run_folder(r, meta, t_det, act)
 
 
+@pytest.mark.slow
 def test_heartbeat_loss_detected_within_1p5_periods_of_the_last_heartbeat(tmp_path, profiles):
     act, chk, _ = profiles
     r, meta = _run(tmp_path, profiles, Fault("heartbeat_stop", 1, 2.05))
@@ -185,6 +186,7 @@ def _t0_of_sync(out: Path) -> float:
     return syncs[0] - T
 
 
+@pytest.mark.slow
 def test_sdo_abort_in_preflight_aborts_before_anything_moves(tmp_path, profiles):
     r, meta = _run(tmp_path, profiles, Fault("sdo_abort", 2, value=float(0x1017)))
     assert r.exit_code == 2
@@ -196,11 +198,12 @@ def test_sdo_abort_in_preflight_aborts_before_anything_moves(tmp_path, profiles)
     assert res["status"] == "aborted"
 
 
+@pytest.mark.slow
 def test_force_limit_reaction_within_two_cycles(tmp_path, profiles):
     """A runaway drive against the other one holding position: the force limit trips."""
     act, _, _ = profiles
-    chk = _check_with(tmp_path, act, max_following_error_mm=2.0, max_force_fight_N=7900.0,
-                      max_force_imbalance_N=4000.0)
+    chk = _check_with(tmp_path, act, safety={"max_following_error_mm": 2.0, "max_force_fight_N": 7900.0,
+                                             "max_force_imbalance_N": 4000.0})
     r, meta = _run(tmp_path, profiles, Fault("runaway", 1, 0.6, value=5.0), check=chk)
     assert meta["safety"]["limit"] in ("max_force_N", "max_force_fight_N"), meta["reason"]
     lim = Limits.of(act, chk)
@@ -218,15 +221,11 @@ def test_force_limit_reaction_within_two_cycles(tmp_path, profiles):
     assert set(r.injector.final_states()) <= SAFE
 
 
+@pytest.mark.slow
 def test_stroke_limit_reaction_within_two_cycles(tmp_path, profiles):
     act, _, _ = profiles
-    text = default_profile_path("check.toml").read_text()
-    text = text.replace("sweep_amplitude_mm = 17.0", "sweep_amplitude_mm = 2.5")
-    text = text.replace("max_stroke_mm = 19.5", "max_stroke_mm = 3.0")
-    text = text.replace("max_following_error_mm = 0.5", "max_following_error_mm = 2.0")
-    p = tmp_path / "check.toml"
-    p.write_text(text)
-    chk = load_check(p, act)
+    chk = _check_with(tmp_path, act, calibration={"sweep_amplitude_mm": 2.5},
+                      safety={"max_stroke_mm": 3.0, "max_following_error_mm": 2.0})
     r, meta = _run(tmp_path, profiles, Fault("runaway", 1, 2.7, value=5.0), check=chk)
     assert meta["safety"]["limit"] == "max_stroke_mm", meta["reason"]
     sig = read_signals(r.out / "signals.csv")
@@ -239,10 +238,10 @@ def test_stroke_limit_reaction_within_two_cycles(tmp_path, profiles):
     assert set(r.injector.final_states()) <= SAFE
 
 
+@pytest.mark.slow
 def test_faults_from_the_simrig_profile(tmp_path):
-    text = default_profile_path("simrig.toml").read_text()
-    p = tmp_path / "simrig.toml"
-    p.write_text(text + '\n[[faults]]\nkind = "emcy_over_temperature"\nema = 1\nstart_s = 1.0\n')
+    p = write_profile_variant("simrig.toml", tmp_path / "simrig.toml",
+                              add={"faults": [{"kind": "emcy_over_temperature", "ema": 1, "start_s": 1.0}]})
     sim = load_simrig(p)
     assert sim.faults == (Fault("emcy_over_temperature", 1, 1.0),)
     from hil.cli import main
@@ -250,8 +249,7 @@ def test_faults_from_the_simrig_profile(tmp_path):
     assert rc == 2
     meta = json.loads((tmp_path / "run" / "meta.json").read_text())
     assert "EMCY 0x4310" in meta["reason"] and meta["faults"][0]["kind"] == "emcy_over_temperature"
-    bad = tmp_path / "bad.toml"
-    bad.write_text(text + '\n[[faults]]\nkind = "hartbeat_stop"\n')
+    bad = write_profile_variant("simrig.toml", tmp_path / "bad.toml", add={"faults": [{"kind": "hartbeat_stop"}]})
     with pytest.raises(ValueError, match=r"faults\[0\]\.kind.*did you mean 'heartbeat_stop'"):
         load_simrig(bad)
 

@@ -15,6 +15,7 @@ from hil.errors import ProfileError
 from hil.profiles import default_profile_path, load_check
 from hil.supervisor import Limits, Supervisor
 from hil.canopen.process import DriveMode, Sample, Setpoint
+from support.profiles import write_profile_variant
 
 T = 0.002
 HOLD = Setpoint(DriveMode.DISABLED, 0.0)
@@ -89,38 +90,37 @@ def test_hard_caps_hold_even_for_a_check_built_past_the_loader(actuation, check_
     assert (lim.max_stale_cycles, lim.max_frozen_cycles) == (HARD_MAX_STALE_CYCLES, 100)
 
 
-@pytest.mark.parametrize("line,new,message", [
-    ("max_force_fight_N = 7000.0", "max_force_fight_N = 9000.0",
+@pytest.mark.parametrize("variant,message", [
+    (dict(overrides={"safety": {"max_force_fight_N": 9000.0}}),
      r"field 'safety.max_force_fight_N' = 9000.0 is above the hard cap 8000 N"),
-    ("max_force_imbalance_N = 2500.0", "max_force_imbalance_N = 5000.0",
+    (dict(overrides={"safety": {"max_force_imbalance_N": 5000.0}}),
      r"field 'safety.max_force_imbalance_N' = 5000.0 is above the hard cap 4000 N"),
-    ("max_stale_cycles = 2", "max_stale_cycles = 6", r"field 'safety.max_stale_cycles' = 6 is above the hard cap 5"),
-    ("max_frozen_cycles = 25", "max_frozen_cycles = 101",
+    (dict(overrides={"safety": {"max_stale_cycles": 6}}), r"field 'safety.max_stale_cycles' = 6 is above the hard cap 5"),
+    (dict(overrides={"safety": {"max_frozen_cycles": 101}}),
      r"field 'safety.max_frozen_cycles' = 101 is above the hard cap 100"),
-    ("max_force_fight_N = 7000.0", "max_force_fight_N = 5000.0",
+    (dict(overrides={"safety": {"max_force_fight_N": 5000.0}}),
      r"'force_fight.amplitude_fraction_of_limit' gives 6000 N, not below safety.max_force_fight_N"),
-    ("max_stale_cycles = 2", "max_stale_cycles = 2.5", r"field 'safety.max_stale_cycles' must be an integer"),
-    ("max_lag_s = 0.02", "max_lag_s = 0.6", r"field 'safety.max_lag_s' = 0.6 is above the hard cap 0.5"),
-    ("max_lag_s = 0.02", "max_lag_ms = 20", r"max_lag_ms.*did you mean 'max_lag_s'"),
+    (dict(overrides={"safety": {"max_stale_cycles": 2.5}}), r"field 'safety.max_stale_cycles' must be an integer"),
+    (dict(overrides={"safety": {"max_lag_s": 0.6}}), r"field 'safety.max_lag_s' = 0.6 is above the hard cap 0.5"),
+    (dict(rename={"safety.max_lag_s": "max_lag_ms"}), r"max_lag_ms.*did you mean 'max_lag_s'"),
 ])
-def test_profile_values_above_hard_caps_are_refused_naming_the_field(tmp_path, actuation, line, new, message):
-    text = default_profile_path("check.toml").read_text()
-    assert line in text
-    p = tmp_path / "check.toml"
-    p.write_text(text.replace(line, new))
+def test_profile_values_above_hard_caps_are_refused_naming_the_field(tmp_path, actuation, variant, message):
+    p = write_profile_variant("check.toml", tmp_path / "check.toml", **variant)
     with pytest.raises(ProfileError, match=message):
         load_check(p, actuation)
 
 
+_EDS_PRODUCT_CODE = ("[1018sub2]\nParameterName=Product code\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\n"
+                     "DefaultValue=0x00000402")
+
+
 def test_eds_of_another_drive_is_refused_before_the_bus(tmp_path, capsys):
+    # the EDS is not TOML: its text is edited, and the edit must have found its line
+    text = default_profile_path("ema_drive.eds").read_text()
+    assert _EDS_PRODUCT_CODE in text
     eds = tmp_path / "other.eds"
-    eds.write_text(default_profile_path("ema_drive.eds").read_text().replace(
-        "[1018sub2]\nParameterName=Product code\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\n"
-        "DefaultValue=0x00000402", "[1018sub2]\nParameterName=Product code\nObjectType=0x7\nDataType=0x0007\n"
-        "AccessType=ro\nDefaultValue=0x00000999"))
-    act = tmp_path / "actuation.toml"
-    act.write_text(default_profile_path("actuation.toml").read_text().replace('eds = "ema_drive.eds"',
-                                                                              'eds = "other.eds"'))
+    eds.write_text(text.replace(_EDS_PRODUCT_CODE, _EDS_PRODUCT_CODE.replace("0x00000402", "0x00000999")))
+    act = write_profile_variant("actuation.toml", tmp_path / "actuation.toml", {"canopen": {"eds": "other.eds"}})
     rc = main(["dry-run", "--profile", str(act), "--out", str(tmp_path / "d"), "--quiet"])
     err = capsys.readouterr().err
     assert rc == 3

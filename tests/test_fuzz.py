@@ -3,14 +3,21 @@
 The master may refuse a frame only with a typed emacheck error (fail closed:
 it latches and quick-stops); any other exception is a crash. Garbage with
 COB-IDs no drive uses must not stop the cyclic exchange. Profile loaders may
-refuse a file only with :class:`hil.errors.ProfileError`.
+refuse a file only with :class:`hil.errors.ProfileError` naming the file and the
+field; text that is no profile by construction must be refused so, and variants
+that are valid by construction must load.
 """
 
 from __future__ import annotations
 
+import math
+import re
+import tomllib
+
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+import tomli_w
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from hil.link import CanopenLink
@@ -19,10 +26,11 @@ from hil.canopen.od import load_drive_od
 from hil.errors import KNOWN_ERRORS, ProfileError
 from hil.master import MasterCore
 from hil.canopen.frame import Frame
-from hil.profiles import default_profile_path, load_actuation, load_check, load_simrig
+from hil.profiles import load_actuation, load_check, load_simrig
 from hil.canopen.process import DriveMode, Setpoint
 from sim.plant import RigPlant
 from sim.drives import SimDrivePair
+from support.profiles import load_profile_data, write_profile_variant
 
 ACT = load_actuation()
 SIM = load_simrig()
@@ -97,50 +105,82 @@ def test_garbage_bursts_on_foreign_cob_ids_do_not_stall_the_cycle(cyclic, burst)
 
 _TOML_TEXT = st.text(alphabet=st.sampled_from(list("[]=.\"'#\n abcdefghijklmnopqrstuvwxyz_0123456789-+e")),
                      max_size=300)
-
-
-@settings(max_examples=80, deadline=None)
-@given(_TOML_TEXT)
-def test_random_profile_text_is_refused_with_a_profile_error(tmp_path_factory, text):
-    p = tmp_path_factory.mktemp("fz") / "p.toml"
-    p.write_text(text)
-    for load in (load_actuation, load_check, load_simrig):
-        try:
-            load(p)
-        except ProfileError:
-            pass
-
+#: a line no TOML document holds wherever it comes (after a key, in a comment's next line, in an
+#: array, in an unterminated string): text that ends with it is not TOML, whatever precedes it
+_NOT_TOML = "\n[[[\n"
 
 _scalars = st.one_of(st.integers(-10**12, 10**12), st.floats(allow_nan=True, allow_infinity=True),
                      st.booleans(), st.text(st.characters(min_codepoint=32, max_codepoint=126), max_size=5))
+
+_LOADERS = (("actuation.toml", load_actuation), ("check.toml", load_check), ("simrig.toml", load_simrig))
+#: what every profile of that kind must have: the top-level keys of the shipped one (all required)
+_REQUIRED = {name: frozenset(load_profile_data(name)) for name, _ in _LOADERS}
+#: the table and field names of the shipped profiles, so that random documents come near them
+_NAMES = sorted({k for name, _ in _LOADERS for t, v in load_profile_data(name).items()
+                 for k in ([t] + (list(v) if isinstance(v, dict) else []))})
+_keys = st.one_of(st.sampled_from(_NAMES), st.from_regex(r"[a-z_][a-z0-9_]{0,11}", fullmatch=True))
+#: valid TOML with a random structure of profile-like names
+_TOML_DOCS = st.dictionaries(_keys, st.one_of(_scalars, st.dictionaries(_keys, _scalars, max_size=6)),
+                             max_size=8).map(tomli_w.dumps)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.one_of(_TOML_TEXT.map(lambda t: t + _NOT_TOML), _TOML_TEXT, _TOML_DOCS))
+def test_random_profile_text_is_refused_with_a_profile_error(tmp_path_factory, text):
+    """Text that is no profile by construction, checked without the loaders: not TOML (random text
+    ending in a line no TOML holds, or random text tomllib refuses), or TOML that lacks a top-level
+    table or field every profile of that kind has. Each loader must refuse it with a ProfileError
+    naming the file, and for TOML the field."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError:
+        doc = None
+    if text.endswith(_NOT_TOML):
+        assert doc is None, text  # the construction holds
+    if doc is not None:  # a random document with every required key of a profile is not "invalid by construction"
+        assume(all(not req <= set(doc) for req in _REQUIRED.values()))
+    p = tmp_path_factory.mktemp("fz") / "p.toml"
+    p.write_text(text)
+    for name, load in _LOADERS:
+        with pytest.raises(ProfileError) as exc:
+            load(p)
+        msg = str(exc.value)
+        if doc is None:
+            assert msg.startswith(f"{p}: not valid TOML"), (name, msg)
+        else:
+            assert msg.startswith(f"{p.name}: ") and re.search(r"'[^']+'", msg), (name, msg)
 
 
 @settings(max_examples=80, deadline=None)
 @given(st.data())
 def test_mutated_check_profile_is_loaded_or_refused_naming_the_field(tmp_path_factory, data):
-    import tomllib
-    base = tomllib.loads(default_profile_path("check.toml").read_text())
+    base = load_profile_data("check.toml")
     table = data.draw(st.sampled_from(sorted(base)))
     key = data.draw(st.sampled_from(sorted(base[table])))
     value = data.draw(_scalars)
-    lines = []
-    for t, kv in base.items():
-        lines.append(f"[{t}]")
-        for k, v in kv.items():
-            v = value if (t, k) == (table, key) else v
-            if isinstance(v, bool):
-                lit = "true" if v else "false"
-            elif isinstance(v, float) and not np.isfinite(v):
-                lit = "nan" if np.isnan(v) else ("inf" if v > 0 else "-inf")
-            elif isinstance(v, str):
-                lit = '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-            else:
-                lit = repr(v)
-            lines.append(f"{k} = {lit}")
-    p = tmp_path_factory.mktemp("fz") / "check.toml"
-    p.write_text("\n".join(lines) + "\n")
+    p = write_profile_variant("check.toml", tmp_path_factory.mktemp("fz") / "check.toml", {table: {key: value}})
     try:
         load_check(p, ACT)
     except ProfileError as exc:
         assert f"{table}." in str(exc) or "safety." in str(exc) or "force_fight." in str(exc) \
             or "calibration." in str(exc) or "approach." in str(exc), str(exc)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.data())
+def test_valid_check_variants_load_with_the_values_written(tmp_path_factory, data):
+    """Every value of the check profile moved at once to within 10 % below the shipped one stays
+    inside every range and cross-check (the force fight below its limits, the sweep inside the
+    stroke limit, the speeds below the velocity limit): valid by construction, the variant loads,
+    with exactly the values written."""
+    overrides: dict = {}
+    for table, kv in load_profile_data("check.toml").items():
+        for key, v in kv.items():
+            assert isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0, (table, key, v)
+            new = data.draw(st.integers(math.ceil(0.9 * v), v) if isinstance(v, int) else st.floats(0.9 * v, v))
+            overrides.setdefault(table, {})[key] = new
+    p = write_profile_variant("check.toml", tmp_path_factory.mktemp("fz") / "check.toml", overrides)
+    chk = load_check(p, ACT)
+    for table, kv in overrides.items():
+        for key, v in kv.items():
+            assert getattr(getattr(chk, table), key) == v, (table, key)

@@ -27,6 +27,9 @@ import pytest
 from hil.cli import main
 from hil.runfolder import read_signals, resolve_recording
 
+#: twenty dry-runs killed and analysed: not in the fast loop (-m "not slow")
+pytestmark = pytest.mark.slow
+
 SEED = 20261122
 N_KILLS = 20
 #: kill instants are drawn in [0, KILL_WINDOW) times the measured wall time of the cyclic part

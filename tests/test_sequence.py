@@ -82,6 +82,7 @@ def test_force_fight_demand_triangle():
     assert _triangle(1.5, 6000.0, 12.0) == pytest.approx(3000.0)
 
 
+@pytest.mark.slow  # the session's whole simulated check
 def test_run_goes_through_all_steps_in_order(default_run):
     import json
     run_dir, _ = default_run

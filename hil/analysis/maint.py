@@ -11,27 +11,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 
 from blf.calibration import LvdtCalibration, fit_lvdt_calibration
-from blf.maint import MIN_SAMPLES, BlfMaintResult, blf_maint
-from blf.signals import position_differences
-from hil.config import Actuation
 from blf.errors import AnalysisError
+from blf.maint import MIN_SAMPLES, BlfMaintResult, blf_maint
+from blf.segments import Segments, trim
+from blf.segments import find_segments as blf_find_segments
+from blf.signals import CHANNELS, position_differences
+from hil.config import Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import Signals
-from blf.signals import CHANNELS
-
-
-
-@dataclass(frozen=True)
-class Segments:
-    """Boolean masks over the samples; ``source`` says how they were found."""
-
-    cal1: np.ndarray | None  #: samples of the calibration sweep of EMA 1 (None: no sweep)
-    cal2: np.ndarray | None
-    force_fight: np.ndarray
-    source: str  #: "step column" or "detected"
 
 
 @dataclass(frozen=True)
@@ -48,80 +37,15 @@ class Analysis:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
 
-def _smooth_speed(x_mm: np.ndarray, period_s: float, window_s: float = 0.2) -> np.ndarray:
-    v = np.gradient(x_mm, period_s)
-    n = max(1, int(round(window_s / period_s)))
-    return ndimage.uniform_filter1d(v, n, mode="nearest")
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """Contiguous True runs as (start, stop) index pairs."""
-    m = np.concatenate(([False], mask, [False])).astype(np.int8)
-    d = np.diff(m)
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
-
-
 def find_segments(sig: Signals, act: Actuation) -> Segments:
-    """Calibration sweeps and force-fight samples of a recording.
+    """Calibration sweeps and force-fight samples of a recording (:func:`blf.segments.find_segments`).
 
-    With a step column: ``cal1_sweep``, ``cal2_sweep`` and ``force_fight``.
-    Without one: sweeps are stretches where the rams move faster than
-    0.5 mm/s (0.2 s moving average of the resolver-derived speed) over more
-    than a quarter of the stroke; the first such sweep calibrates EMA 1, the
-    second EMA 2 (both LVDTs see constant load-path deflection in either, so
-    with only one sweep both use it). Force fight: after the last sweep, where
-    both rams are still (< 0.5 mm/s) and ``|F1 - F2|/2`` exceeds 20 % of its
-    maximum, from its first to its last occurrence.
+    From the step column when the recording has one, else detected from the
+    ram motion (motor angles) and the force fight ``|F1 - F2|/2``.
     """
-    if sig.step is not None:
-        cal1 = sig.step == "cal1_sweep"
-        cal2 = sig.step == "cal2_sweep"
-        ff = sig.step == "force_fight"
-        if not ff.any():
-            raise AnalysisError("the recording's step column has no 'force_fight' samples")
-        return Segments(cal1 if cal1.any() else None, cal2 if cal2.any() else None, ff, "step column")
     i = act.mechanics.i_total_rad_per_mm
-    T = sig.sample_period_s
-    x1, x2 = sig.phi1 / i, sig.phi2 / i
-    moving = (np.abs(_smooth_speed(x1, T)) > 0.5) | (np.abs(_smooth_speed(x2, T)) > 0.5)
-    # bridge short stops (sweep reversals)
-    gap = int(round(1.0 / T))
-    moving = ndimage.binary_closing(moving, structure=np.ones(gap, bool)) | moving
-    sweeps = []
-    for a, b in _runs(moving):
-        span = max(np.ptp(x1[a:b]), np.ptp(x2[a:b]))
-        if span > 0.25 * 2 * act.mechanics.stroke_limit_mm:
-            sweeps.append((a, b))
-    masks = []
-    for a, b in sweeps[:2]:
-        m = np.zeros(sig.n, bool)
-        m[a:b] = True
-        masks.append(m)
-    cal1 = masks[0] if masks else None
-    cal2 = masks[1] if len(masks) > 1 else cal1
-    start = sweeps[-1][1] if sweeps else 0
-    still = ~moving
-    still[:start] = False
-    fff = np.abs(0.5 * (sig.F1 - sig.F2))
-    if not still.any():
-        raise AnalysisError("no stationary stretch for the force fight found in the recording")
-    big = still & (fff > 0.2 * fff[still].max())
-    idx = np.flatnonzero(big)
-    if idx.size < 100:
-        raise AnalysisError("no force-fight segment found (|F1 - F2|/2 never rises while the rams are still)")
-    ff = np.zeros(sig.n, bool)
-    ff[idx[0]:idx[-1] + 1] = True
-    ff &= still
-    return Segments(cal1, cal2, ff, "detected")
-
-
-def _trim(mask: np.ndarray, frac: float = 0.02) -> np.ndarray:
-    """Drop the first and last ``frac`` of each run (acceleration at the ends)."""
-    out = np.zeros_like(mask)
-    for a, b in _runs(mask):
-        k = int((b - a) * frac)
-        out[a + k:b - k] = True
-    return out
+    return blf_find_segments(sig.phi1 / i, sig.phi2 / i, sig.F1, sig.F2, sig.sample_period_s,
+                             act.mechanics.stroke_limit_mm, step=sig.step)
 
 
 def check_units(sig: Signals, act: Actuation) -> None:
@@ -168,7 +92,7 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
             s_corr[k] = s
             notes.append(f"no calibration sweep for EMA {k}: LVDT {k} used uncorrected")
             continue
-        m = _trim(mask)
+        m = trim(mask)
         c = fit_lvdt_calibration(phi[m] / i, s[m])
         cal[f"ema{k}"] = c
         s_corr[k] = c.correct(s)

@@ -14,7 +14,7 @@ LVDT calibration, first that applies:
 3. the run folder's ``result.json`` calibration (pitch and offset, linear);
 4. a slow sweep under load found in the recording itself (per EMA: ram
    speed 0.3 to 10 mm/s over at least half the stroke limit, its force of
-   one sign, mean above 200 N, :func:`find_sweep`): cubic fit on it;
+   one sign, mean above 200 N, :func:`blf.segments.find_sweep`): cubic fit on it;
 5. none: the LVDT data are used uncorrected, and serv.json and the report
    say so (a pitch error then shows as spurious jumps, paper 2.3).
 
@@ -33,8 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from blf.accuracy import AccuracyBudget, backlash_error_budget
-from blf.calibration import fit_lvdt_calibration
+from blf.calibration import correct_linear, fit_lvdt_calibration
 from blf.errors import AnalysisError, InputError
+from blf.segments import find_sweep
 from blf.serv import blf_serv
 from blf.signals import CHANNELS, position_differences
 from hil.config import Actuation
@@ -57,10 +58,6 @@ class LvdtCorrection:
     s1_mm: np.ndarray
     s2_mm: np.ndarray
     notes: tuple
-
-
-def _linear(pitch: float, offset: float, s: np.ndarray) -> np.ndarray:
-    return (s - offset) / pitch
 
 
 def _from_result_json(path: Path) -> dict:
@@ -89,49 +86,6 @@ def _from_result_json(path: Path) -> dict:
     return out
 
 
-def _smooth_speed(x: np.ndarray, period_s: float, window_s: float = 0.2) -> np.ndarray:
-    v = np.gradient(x, period_s)
-    n = max(1, int(round(window_s / period_s)))
-    return np.convolve(v, np.ones(n) / n, mode="same")
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    m = np.concatenate(([False], mask, [False])).astype(np.int8)
-    d = np.diff(m)
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
-
-
-def find_sweep(x_mm: np.ndarray, f_N: np.ndarray, period_s: float, stroke_limit_mm: float) -> slice | None:
-    """Longest slow sweep under a steady one-sided force, as a slice (trimmed 2 % each end), or None.
-
-    Slow: 0.3 to 10 mm/s (0.2 s moving average of the motor-side speed); long:
-    at least half the stroke limit of travel; steady load: mean force above
-    200 N, the same sign in 99 % of the samples and a standard deviation
-    below half the mean, so the internal path stays in contact on one flank
-    and its deflection is constant on average (paper 2.3; the opposing EMA in
-    force mode rings at a few Hz, which the regression averages out).
-    """
-    v = np.abs(_smooth_speed(x_mm, period_s))
-    slow = (v >= 0.3) & (v <= 10.0)
-    best = None
-    for a, b in _runs(slow):
-        if b - a < 50:
-            continue
-        xs, fs = x_mm[a:b], f_N[a:b]
-        if np.ptp(xs) < 0.5 * stroke_limit_mm:
-            continue
-        fm = float(np.mean(fs))
-        if abs(fm) < 200.0 or np.mean(np.sign(fs) == np.sign(fm)) < 0.99 or np.std(fs) > 0.5 * abs(fm):
-            continue
-        if best is None or b - a > best[1] - best[0]:
-            best = (a, b)
-    if best is None:
-        return None
-    a, b = best
-    k = int(0.02 * (b - a))
-    return slice(a + k, b - k)
-
-
 def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
                        calibration_file: Path | None) -> LvdtCorrection:
     """Pick the LVDT calibration for a recording (order in the module docstring) and apply it."""
@@ -151,7 +105,8 @@ def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
     def linear(lin: dict, source: str) -> LvdtCorrection:
         return LvdtCorrection(source, {"ema1": "linear", "ema2": "linear"},
                               {k: lin[k][0] for k in lin}, {k: lin[k][1] for k in lin}, 1e-3,
-                              _linear(*lin["ema1"], sig.s1), _linear(*lin["ema2"], sig.s2), tuple(notes))
+                              correct_linear(sig.s1, *lin["ema1"]), correct_linear(sig.s2, *lin["ema2"]),
+                              tuple(notes))
 
     if calibration_file is not None:
         lin = _from_result_json(Path(calibration_file))

@@ -13,7 +13,6 @@ from hil.canopen.errors import InputError
 from hil.canopen.pdo import PdoLayout
 from hil.canopen.validate import finite, integer, positive
 
-
 FRAME_OVERHEAD_BITS = 47
 """Bits of a standard (11-bit) data frame besides the data field, including the
 3-bit interframe space: SOF 1 + identifier 11 + RTR 1 + IDE 1 + r0 1 + DLC 4 +

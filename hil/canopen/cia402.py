@@ -313,6 +313,11 @@ class DriveStateMachine:
         self.remote = bool(remote)
         self._previous_cw = 0
 
+    @property
+    def previous_controlword(self) -> int:
+        """The controlword received last (0 before the first): bit 7 acts on its rising edge."""
+        return self._previous_cw
+
     def _go(self, new: State, number: int) -> State:
         self.state = new
         self.last_transition = number

@@ -1,7 +1,7 @@
 """Object dictionary of the EMA drives: load the EDS and check it has what the master needs.
 
 The shipped CiA 306 EDS (``profiles/ema_drive.eds``) describes the drive; the
-simulated drives load it into ``canopen.LocalNode`` and the master refuses a
+simulated drives (:mod:`sim.drives`) serve it, and the master refuses a
 drive EDS that lacks an object the PDO layout maps or the check reads or
 writes (:func:`check_drive_od`). Parsing and data-type encoding are canopen's
 (``canopen.objectdictionary``); nothing here talks to a bus.
@@ -124,8 +124,22 @@ def required_objects(layout: PdoLayout = DEFAULT_LAYOUT) -> tuple[RequiredObject
 REQUIRED_OBJECTS: tuple[RequiredObject, ...] = required_objects(DEFAULT_LAYOUT)
 
 
-def _lookup(od: cod.ObjectDictionary, index: int, subindex: int) -> cod.ODVariable | None:
-    """The variable at index:subindex, None if absent (no synthesised array members)."""
+def lookup(od: cod.ObjectDictionary, index: int, subindex: int) -> cod.ODVariable | None:
+    """The variable at ``index:subindex``, None if absent.
+
+    Parameters
+    ----------
+    od : canopen.ObjectDictionary
+        The object dictionary to search.
+    index, subindex : int
+        The object; sub-index 0 for a plain variable.
+
+    Returns
+    -------
+    canopen.objectdictionary.ODVariable or None
+        The real variable: no array member that canopen would synthesise from
+        the array's first entry, no sub-index other than 0 of a plain variable.
+    """
     if index not in od:
         return None
     obj = od[index]
@@ -134,9 +148,12 @@ def _lookup(od: cod.ObjectDictionary, index: int, subindex: int) -> cod.ODVariab
     return obj.subindices.get(subindex)
 
 
+_lookup = lookup  # the former private name
+
+
 def od_variable(od: cod.ObjectDictionary, index: int, subindex: int) -> cod.ODVariable:
     """The ``ODVariable`` at ``index:subindex``; EdsError naming it if it does not exist."""
-    var = _lookup(od, index, subindex)
+    var = lookup(od, index, subindex)
     if var is None:
         raise EdsError(f"object 0x{index:04X}:{subindex:02X} is not in the object dictionary")
     return var
@@ -188,7 +205,7 @@ def check_drive_od(od: cod.ObjectDictionary, *, layout: PdoLayout = DEFAULT_LAYO
     problems: list[str] = []
     for r in required_objects(layout):
         where = f"0x{r.index:04X}:{r.subindex:02X} ({r.name})"
-        var = _lookup(od, r.index, r.subindex)
+        var = lookup(od, r.index, r.subindex)
         if var is None:
             problems.append(f"{where} is missing")
             continue

@@ -31,7 +31,8 @@ from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.errors import CanopenError, InputError
 from hil.canopen.frame import MAX_NODE_ID, Frame
-from hil.canopen.validate import integer, node_id as _node_id
+from hil.canopen.validate import integer
+from hil.canopen.validate import node_id as _node_id
 
 # --------------------------------------------------------------------------- layout
 

@@ -45,3 +45,10 @@ class Sample:
     s2_mm: float
     F1_N: float
     F2_N: float
+
+
+#: The seven measured channels of a recording, in file order: (column name, unit). The fields of
+#: :class:`Sample` are ``f"{name}_{unit}"``; the first seven columns of a run folder's
+#: signals.csv are the names (:data:`hil.runfolder.SIGNAL_COLUMNS`).
+MEASURED_CHANNELS: tuple[tuple[str, str], ...] = (
+    ("t", "s"), ("phi1", "rad"), ("phi2", "rad"), ("s1", "mm"), ("s2", "mm"), ("F1", "N"), ("F2", "N"))

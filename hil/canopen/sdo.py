@@ -23,7 +23,8 @@ from enum import Enum, IntEnum
 
 from hil.canopen.errors import CanopenError, InputError
 from hil.canopen.frame import SDO_RX_COB_ID_BASE, SDO_TX_COB_ID_BASE, Frame
-from hil.canopen.validate import integer, node_id as _check_node_id, time_s
+from hil.canopen.validate import integer, time_s
+from hil.canopen.validate import node_id as _check_node_id
 
 # Command specifiers (bits 7..5 of byte 0).
 _CCS_SEGMENT_DOWNLOAD = 0

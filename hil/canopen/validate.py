@@ -18,7 +18,7 @@ MAX_NODE_ID = 127  #: highest CANopen node id (CiA 301)
 
 
 def integer(name: str, value: object, lo: int, hi: int, *, error: type[Exception] = InputError,
-            show: str = "{}") -> int:
+            show: str = "{}", what: str = "") -> int:
     """``value`` as an int in ``lo..hi`` (bool refused).
 
     Parameters
@@ -33,42 +33,29 @@ def integer(name: str, value: object, lo: int, hi: int, *, error: type[Exception
         Raised on failure (default :class:`InputError`).
     show : str
         Format of the value and the range in the message, e.g. ``"0x{:X}"``.
+    what : str
+        What the number is, appended to the range, e.g. ``" (16-bit word)"``.
     """
+    span = f"{show.format(lo)}..{show.format(hi)}"
     if isinstance(value, bool):
-        raise error(f"{name} must be an int, got bool")
+        raise error(f"{name} must be an int in {span}{what}, got bool")
     try:
         v = operator.index(value)
     except TypeError:
-        raise error(f"{name} must be an int, got {type(value).__name__} {value!r}") from None
+        raise error(f"{name} must be an int in {span}{what}, got {type(value).__name__} {value!r}") from None
     if not lo <= v <= hi:
-        raise error(f"{name} = {show.format(v)} is outside {show.format(lo)}..{show.format(hi)}")
+        raise error(f"{name} = {show.format(v)} is outside {span}{what}")
     return v
 
 
 def node_id(value: object, name: str = "node_id") -> int:
     """A CANopen node id, 1..127."""
-    if isinstance(value, bool):
-        raise InputError(f"{name} must be an int in 1..127, got bool")
-    try:
-        n = operator.index(value)
-    except TypeError:
-        raise InputError(f"{name} must be an int in 1..127, got {value!r}") from None
-    if not 1 <= n <= MAX_NODE_ID:
-        raise InputError(f"{name} = {n} is outside 1..127")
-    return n
+    return integer(name, value, 1, MAX_NODE_ID)
 
 
 def word16(name: str, value: object) -> int:
     """A 16-bit word (controlword, statusword), 0..0xFFFF."""
-    if isinstance(value, bool):
-        raise InputError(f"{name} must be an int in 0..0xFFFF, got bool")
-    try:
-        v = operator.index(value)
-    except TypeError:
-        raise InputError(f"{name} must be an int in 0..0xFFFF, got {value!r}") from None
-    if not 0 <= v <= 0xFFFF:
-        raise InputError(f"{name} = 0x{v:X} is outside 0..0xFFFF (16-bit word)")
-    return v
+    return integer(name, value, 0, 0xFFFF, show="0x{:X}", what=" (16-bit word)")
 
 
 def finite(name: str, value: object, unit: str) -> float:
@@ -94,26 +81,9 @@ def positive(name: str, value: object, unit: str) -> float:
 
 def time_s(value: object, name: str = "t") -> float:
     """A finite time in s (any monotonic origin)."""
-    if isinstance(value, bool):
-        raise InputError(f"{name} must be a time in s (float), got bool")
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a time in s (float), got {value!r}") from None
-    if not math.isfinite(v):
-        raise InputError(f"{name} = {v} [s] must be finite")
-    return v
+    return finite(name, value, "s")
 
 
 def error_code(value: object, name: str = "code", *, allow_zero: bool = False) -> int:
     """A 16-bit EMCY error code, 0x0001..0xFFFF (0x0000 "no error" only with ``allow_zero``)."""
-    if isinstance(value, bool):
-        raise InputError(f"{name} must be an int error code 0x0001..0xFFFF, got bool")
-    try:
-        c = operator.index(value)
-    except TypeError:
-        raise InputError(f"{name} must be an int error code 0x0001..0xFFFF, got {value!r}") from None
-    lo = 0 if allow_zero else 1
-    if not lo <= c <= 0xFFFF:
-        raise InputError(f"{name} = 0x{c:X} is outside 0x{lo:04X}..0xFFFF (16-bit EMCY error code)")
-    return c
+    return integer(name, value, 0 if allow_zero else 1, 0xFFFF, show="0x{:04X}", what=" (16-bit EMCY error code)")

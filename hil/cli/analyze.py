@@ -9,7 +9,7 @@ from rich.console import Console
 
 from blf.errors import AnalysisError
 from hil.cli.check import INCOMPLETE_REASON, analyze_and_report, exit_for, print_summary
-from hil.cli.common import ExitCode, actuation_for, add_parser, read_meta
+from hil.cli.common import ExitCode, actuation_for, add_parser, add_recording_args, read_meta
 from hil.errors import IncompleteRecordingError
 from hil.runfolder import resolve_recording, write_json_atomic
 
@@ -57,8 +57,4 @@ def register(sub) -> None:
                                "or a bare signals CSV (columns t,phi1,phi2,s1,s2,F1,F2 in s, rad, mm, N). "
                                "Without a step column the calibration sweeps and force-fight "
                                "segments are found automatically.")
-    p.add_argument("recording", metavar="RUN_FOLDER|SIGNALS.csv", type=Path)
-    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
-                   help="actuation profile (default: the run folder's snapshot, else the shipped one)")
-    p.add_argument("--out", metavar="DIR", type=Path,
-                   help="where result.json and report.html go (default: the run folder, or next to the CSV)")
+    add_recording_args(p, "result.json and report.html")

@@ -128,9 +128,9 @@ def truth_dict(truth) -> dict:
 
 def master_setup(act, profile_path, out: Path):
     """Checks before anything touches a bus: EDS against the layout, bus load."""
+    from hil.canopen.busload import bus_load
     from hil.canopen.od import check_drive_od, load_drive_od
     from hil.canopen.pdo import DEFAULT_LAYOUT
-    from hil.canopen.busload import bus_load
     from hil.profiles import resolve_eds
 
     eds = resolve_eds(act, profile_path)

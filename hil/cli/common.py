@@ -57,6 +57,16 @@ def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: boo
                                                   "profile's); recorded in meta.json")
 
 
+def add_recording_args(p: argparse.ArgumentParser, writes: str, *,
+                       recording_help: str = "run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2) or CAN log (*.log)") -> None:
+    """The recording to read, ``--profile`` to read it with and ``--out`` for what the command ``writes``."""
+    p.add_argument("recording", metavar="RECORDING", type=Path, help=recording_help)
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
+                   help="actuation profile (default: the run folder's snapshot, else the shipped one)")
+    p.add_argument("--out", metavar="DIR", type=Path,
+                   help=f"where {writes} go (default: the run folder, or next to the file)")
+
+
 def add_bus_args(p: argparse.ArgumentParser, interfaces: str) -> None:
     """``--interface``, ``--channel``, ``--bitrate``: a python-can bus."""
     p.add_argument("--interface", required=True, help=f"python-can interface, e.g. {interfaces}")
@@ -91,9 +101,11 @@ def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
     """Signals from a CSV, or decoded from a raw CAN log (``*.log``), step labels from meta.json."""
     if sig_path.suffix != ".log":
         return read_signals(sig_path)
-    from hil.canlog import decode_can_log
     import dataclasses
+
     import numpy as np
+
+    from hil.canlog import decode_can_log
 
     dec = decode_can_log(sig_path, act)
     sig = dec.signals

@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from hil.cli.common import add_parser
+from hil.cli.common import add_parser, add_recording_args
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
@@ -56,12 +56,9 @@ def register(sub) -> None:
                                "of candidate physics terms, refit the best and accept it only if BIC and a "
                                "held-out half of the recording both improve. Writes diagnosis.json and "
                                "diagnosis_report.html.")
-    p.add_argument("recording", metavar="RECORDING", type=Path,
-                   help="run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2), CAN log; single-axis: .mat or "
-                        "CSV t,q,q_ref,force")
-    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path, help="actuation profile (gear ratio)")
-    p.add_argument("--out", metavar="DIR", type=Path,
-                   help="where diagnosis.json and diagnosis_report.html go (default: the run folder, or next to the file)")
+    add_recording_args(p, "diagnosis.json and diagnosis_report.html",
+                       recording_help="run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2), CAN log; single-axis: "
+                                      ".mat or CSV t,q,q_ref,force")
     p.add_argument("--model", choices=("dual-ema", "single-axis"), default="dual-ema",
                    help="dual-EMA rig (default) or a single positioning axis (e.g. EMPS)")
     p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")

@@ -39,14 +39,14 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     import numpy as np
 
     from hil.canlog import CanLogWriter
-    from hil.link import CanopenLink
-    from hil.transport import InProcessTransport
     from hil.canopen.od import load_drive_od
+    from hil.link import CanopenLink
     from hil.master import MasterCore
     from hil.runner import start_meta
+    from hil.transport import InProcessTransport
+    from sim.drives import SimDrivePair
     from sim.faults import FaultInjector
     from sim.plant import RigPlant
-    from sim.drives import SimDrivePair
     from sim.truth import rig_truth
 
     console = console or Console(quiet=quiet)

@@ -17,10 +17,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     import can
 
     from hil.canlog import CanLogWriter
-    from hil.transport import BusTransport
     from hil.link import CanopenLink
     from hil.master import MasterCore
     from hil.runner import start_meta
+    from hil.transport import BusTransport
 
     console = Console()
     act = load_actuation(args.profile)

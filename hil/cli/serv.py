@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from blf.signals import CHANNELS
-from hil.cli.common import actuation_for, add_parser, load_recording, read_meta
+from hil.cli.common import actuation_for, add_parser, add_recording_args, load_recording, read_meta
 from hil.errors import RecordingError
 from hil.report.shell import fmt
 from hil.runfolder import resolve_recording, write_json_atomic
@@ -77,11 +77,7 @@ def register(sub) -> None:
                                "differences during normal operation (paper 2.2, no force sensors): a run "
                                "folder, a signals CSV (t,phi1,phi2,s1,s2,F1,F2) or a raw CAN log. Writes "
                                "serv.json and serv_report.html (paper Fig. 8, error budget of paper 2.3).")
-    p.add_argument("recording", metavar="RECORDING", type=Path, help="run folder, signals CSV or CAN log (*.log)")
-    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
-                   help="actuation profile (default: the run folder's snapshot, else the shipped one)")
-    p.add_argument("--out", metavar="DIR", type=Path,
-                   help="where serv.json and serv_report.html go (default: the run folder, or next to the file)")
+    add_recording_args(p, "serv.json and serv_report.html")
     p.add_argument("--calibration", metavar="RESULT.json", type=Path,
                    help="LVDT pitch and offset from a maintenance check's result.json")
     p.add_argument("--method", choices=("improved", "paper"), default="improved",

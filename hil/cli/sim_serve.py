@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 import signal
 import threading
+from pathlib import Path
 
 from hil.cli.common import add_bus_args, add_parser
 from hil.cli.realtime import prepare_realtime
@@ -13,15 +13,14 @@ from hil.cli.realtime import prepare_realtime
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:
     """``emacheck sim-serve``: the two simulated drives on a CAN bus until SIGINT/SIGTERM."""
+    import can
     import numpy as np
 
-    import can
-
     from hil.canopen.od import check_drive_od, load_drive_od
-    from hil.sim_server import serve
     from hil.profiles import load_actuation, load_simrig, resolve_eds
-    from sim.plant import RigPlant
+    from hil.sim_server import serve
     from sim.drives import SimDrivePair
+    from sim.plant import RigPlant
 
     act = load_actuation(args.profile)
     simrig = load_simrig(args.sim)

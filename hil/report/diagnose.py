@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.report.shell import column, esc, img, json_details, pyplot, table, write_page
+from hil.report.shell import column, esc, img, json_details, pyplot, table, thin, write_page
 
 
 def _unit(channel: str) -> str:
@@ -20,12 +20,12 @@ def figure_overlay(model, d, channel: str):
 
     t = model.t_s
     ok = d.valid[channel]
-    stride = max(1, t.size // 6000)
+    sl = thin(t.size)
     fig, ax = pyplot().subplots(2, 1, figsize=(9, 4.5), sharex=True)
     m = d.measured[channel]
-    ax[0].plot(t[ok][::stride], m[ok][::stride], ".", ms=1, color="0.6", label="recording")
-    ax[0].plot(t[ok][::stride], d.predicted_before[channel][ok][::stride], lw=0.8, label="nominal model")
-    ax[0].plot(t[ok][::stride], d.predicted_after[channel][ok][::stride], lw=0.8, label="with fitted effects")
+    ax[0].plot(t[ok][sl], m[ok][sl], ".", ms=1, color="0.6", label="recording")
+    ax[0].plot(t[ok][sl], d.predicted_before[channel][ok][sl], lw=0.8, label="nominal model")
+    ax[0].plot(t[ok][sl], d.predicted_after[channel][ok][sl], lw=0.8, label="with fitted effects")
     ax[0].legend(fontsize=7)
     unit = _unit(channel)
     ax[0].set_ylabel(f"{channel} [{unit}]")
@@ -33,7 +33,7 @@ def figure_overlay(model, d, channel: str):
     for pred, lab in ((d.predicted_before, "residual before"), (d.predicted_after, "residual after")):
         r = np.where(ok, m - pred[channel], np.nan)
         rs = uniform_filter1d(np.nan_to_num(r), w)
-        ax[1].plot(t[ok][::stride], rs[ok][::stride], lw=0.8, label=lab + " (0.5 s mean)")
+        ax[1].plot(t[ok][sl], rs[ok][sl], lw=0.8, label=lab + " (0.5 s mean)")
     ax[1].set_ylabel(f"residual [{unit}]")
     for loc in d.locations:
         if loc.channel == channel and loc.test == "window":  # a regime cell spans many visits

@@ -16,15 +16,10 @@ from blf.maint import BlfMaintResult
 from blf.signals import CHANNELS
 from hil.analysis.maint import Analysis
 from hil.config import Actuation
-from hil.report.shell import column, esc, fmt, img, json_details, notes, pyplot, table, write_page
+from hil.report.shell import column, esc, fmt, img, json_details, notes, pyplot, table, thin, write_page
 from hil.runfolder import Signals
 
 _LABEL = {"int1": ("F_1", "D_{int,1}"), "int2": ("F_2", "D_{int,2}"), "ext": ("F_2 - F_1", "D_{ext}")}
-_MAX_POINTS = 6000
-
-
-def _thin(n: int) -> slice:
-    return slice(None, None, max(1, n // _MAX_POINTS))
 
 
 def _channel_data(sig: Signals, an: Analysis, ch: str) -> tuple[np.ndarray, np.ndarray]:
@@ -40,7 +35,7 @@ def figure_time(sig: Signals, an: Analysis, act: Actuation):
     """Paper Figure 3: forces and D signals versus time during the force fight."""
     ff = an.segments.force_fight
     t = sig.t[ff]
-    sl = _thin(t.size)
+    sl = thin(t.size)
     fig, axes = pyplot().subplots(2, 3, figsize=(13, 5.5), sharex=True)
     for j, ch in enumerate(CHANNELS):
         d, f = _channel_data(sig, an, ch)
@@ -61,7 +56,7 @@ def figure_time(sig: Signals, an: Analysis, act: Actuation):
 def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
     """Paper Figure 4: F versus D and the binned derivative dF/dD with median, D_lc, D_rc."""
     fl, dl = _LABEL[ch]
-    sl = _thin(d.size)
+    sl = thin(d.size)
     fig, (a0, a1) = pyplot().subplots(2, 1, figsize=(6.5, 6), sharex=True)
     a0.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.3, label="samples")
     a0.plot(r.curve.d_mm, r.curve.f_N / 1e3, "-", color="k", lw=1, label="binned (median per bin)")
@@ -85,7 +80,7 @@ def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
 def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth: dict | None):
     """Paper Figures 5/6: the three regression lines, backlash and stiffness."""
     fl, dl = _LABEL[ch]
-    sl = _thin(d.size)
+    sl = thin(d.size)
     L = r.lines
     fig, ax = pyplot().subplots(figsize=(6.5, 4.5))
     ax.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.25, color="C0", label="samples")
@@ -124,7 +119,7 @@ def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
             ax.text(0.5, 0.5, "no calibration sweep", ha="center", transform=ax.transAxes)
             continue
         x, y = phi[mask] / i, s[mask]
-        sl = _thin(x.size)
+        sl = thin(x.size)
         ax.plot(x[sl], y[sl], ".", ms=1, alpha=0.4, label="LVDT s (raw)")
         xx = np.linspace(x.min(), x.max(), 200)
         ax.plot(xx, c.evaluate(xx), "k-", lw=1, label=f"regression, pitch {c.pitch:.4f}")

@@ -10,17 +10,11 @@ from blf.serv import BlfServResult
 from blf.signals import CHANNELS
 from hil.analysis.serv import ServAnalysis
 from hil.config import Actuation
-from hil.report.shell import column, esc, fmt, img, json_details, notes, pyplot, table, write_page
-
+from hil.report.shell import column, esc, fmt, img, json_details, notes, pyplot, table, thin, write_page
 
 _LABEL = {"int1": "D_{int,1}", "int2": "D_{int,2}", "ext": "D_{ext}"}
 
 
-_MAX_POINTS = 8000
-
-
-def _stride(n: int) -> int:
-    return max(1, n // _MAX_POINTS)
 
 
 def figure_serv(ch: str, t: np.ndarray, d: np.ndarray, r: BlfServResult, truth_b: float | None):
@@ -38,7 +32,7 @@ def figure_serv(ch: str, t: np.ndarray, d: np.ndarray, r: BlfServResult, truth_b
             m = (t >= focus.t_start_s - 0.5) & (t <= focus.t_end_s + 0.6)
         else:
             m = t <= t[0] + 2.0
-        sl = slice(None, None, _stride(int(m.sum())) if col == 0 else 1)
+        sl = thin(int(m.sum()), 8000) if col == 0 else slice(None)
         tt = t[m][sl]
         a0, a1, a2 = axes[:, col]
         a0.plot(tt, d[m][sl], lw=0.4, color="0.6", label="D")

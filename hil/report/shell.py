@@ -53,6 +53,11 @@ def img(fig: Any, *, dpi: int = 80, tight: bool = False) -> str:
     return f"<img src='{figure_uri(fig, dpi=dpi, tight=tight)}'>"
 
 
+def thin(n: int, max_points: int = 6000) -> slice:
+    """Every k-th of ``n`` samples so that a plot gets at most about ``max_points`` of them."""
+    return slice(None, None, max(1, n // max_points))
+
+
 def fmt(x: float | None, nd: int = 4) -> str:
     """A number with ``nd`` decimals, "—" for None."""
     return "—" if x is None else f"{x:.{nd}f}"

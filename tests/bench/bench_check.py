@@ -6,7 +6,7 @@ Prints and writes JSON:
 * analysis_s: reading signals.csv back, calibration and BLFmaint on three channels
 * report_s: the HTML report with its figures
 
-Usage: python tests/bench_check.py [--json bench_check.json] [--repeat 3]
+Usage: python tests/bench/bench_check.py [--json bench_check.json] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+TESTS = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (conftest, support)
 
 
 def main() -> int:

@@ -5,7 +5,7 @@ virtual bus, synchronous pump, CSV and CAN logging) and reports the check loop's
 wall time against the simulated duration (target: at most a tenth), plus the
 analysis and report time. Prints and writes JSON.
 
-Usage: python tests/bench_dry_run.py [--json bench_dry_run.json] [--repeat 2]
+Usage: python tests/bench/bench_dry_run.py [--json bench_dry_run.json] [--repeat 2]
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository (hil, blf, sim)
 
 
 def main() -> int:

@@ -1,6 +1,6 @@
 """Benchmark (not a test): every injected fault in a dry-run; reaction time, peak true force, data kept.
 
-    python tests/bench_faults.py [--json bench_faults.json]
+    python tests/bench/bench_faults.py [--json bench_faults.json]
 
 For each fault of :mod:`sim.faults` (the cases of tests/test_faults.py plus the
 force- and stroke-limit runaways) it prints: what detected it, the reaction
@@ -21,26 +21,25 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+TESTS = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (conftest, support)
 
 from test_faults import CASES, T, _t_detect, _t_safe_command  # noqa: E402
 
 from hil.cli.dry_run import dry_run  # noqa: E402
-from hil.profiles import default_profile_path, load_actuation, load_check, load_simrig  # noqa: E402
+from hil.profiles import load_actuation, load_check, load_simrig  # noqa: E402
 from hil.runfolder import read_signals  # noqa: E402
 from sim.faults import Fault  # noqa: E402
+from support.profiles import write_profile_variant  # noqa: E402
 
 
 def _limit_checks(act, tmp: Path):
-    text = default_profile_path("check.toml").read_text()
-    f = tmp / "force.toml"
-    f.write_text(text.replace("max_following_error_mm = 0.5", "max_following_error_mm = 2.0")
-                 .replace("max_force_fight_N = 7000.0", "max_force_fight_N = 7900.0")
-                 .replace("max_force_imbalance_N = 2500.0", "max_force_imbalance_N = 4000.0"))
-    s = tmp / "stroke.toml"
-    s.write_text(text.replace("sweep_amplitude_mm = 17.0", "sweep_amplitude_mm = 2.5")
-                 .replace("max_stroke_mm = 19.5", "max_stroke_mm = 3.0")
-                 .replace("max_following_error_mm = 0.5", "max_following_error_mm = 2.0"))
+    """The check profiles of the force- and stroke-limit runaways (as in tests/test_faults.py)."""
+    f = write_profile_variant("check.toml", tmp / "force.toml", {"safety": {
+        "max_following_error_mm": 2.0, "max_force_fight_N": 7900.0, "max_force_imbalance_N": 4000.0}})
+    s = write_profile_variant("check.toml", tmp / "stroke.toml", {
+        "calibration": {"sweep_amplitude_mm": 2.5},
+        "safety": {"max_stroke_mm": 3.0, "max_following_error_mm": 2.0}})
     return load_check(f, act), load_check(s, act)
 
 

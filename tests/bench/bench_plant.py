@@ -3,7 +3,7 @@
 Not collected by pytest (no test_ functions; the file name does not match).
 Usage::
 
-    python tests/bench_plant.py [out.json]
+    python tests/bench/bench_plant.py [out.json]
 
 Times (after a warm-up that triggers / loads the numba compilation):
 
@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))  # the repository
 
 from hil.canopen.process import DriveMode, Setpoint  # noqa: E402
 from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams  # noqa: E402

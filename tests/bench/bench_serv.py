@@ -1,4 +1,4 @@
-"""BLFserv accuracy over seeds, and its cost (not a test: ``python tests/bench_serv.py``).
+"""BLFserv accuracy over seeds, and its cost (not a test: ``python tests/bench/bench_serv.py``).
 
 1. Accuracy: for every seed, the LVDTs are calibrated from simulated slow
    sweeps under an opposing force (blf.calibration), then the normal-operation
@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+TESTS = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (support)
 
 from blf.calibration import fit_lvdt_calibration  # noqa: E402
 from blf.serv import BlfServMonitor, blf_serv, design_serv_filters  # noqa: E402

@@ -24,7 +24,7 @@ From the capture, over the cyclic phase of each run (first to last SYNC):
 
 Printed and written to JSON (``--json``, default bench_vcan.json).
 
-Usage: python tests/bench_vcan.py [--minutes 10] [--check CHECK.toml] [--profile ACTUATION.toml]
+Usage: python tests/bench/bench_vcan.py [--minutes 10] [--check CHECK.toml] [--profile ACTUATION.toml]
        [--sim SIMRIG.toml] [--json FILE]
 (tests/vcan/actuation.toml + tests/vcan/simrig.toml: the vcan stage's 250 Hz)
 """
@@ -45,9 +45,9 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(HERE / "vcan"))
+HERE = Path(__file__).resolve().parent  # tests/bench
+ROOT = HERE.parents[1]  # the repository: the working directory of the commands it starts
+sys.path[:0] = [str(ROOT), str(HERE.parent / "vcan")]
 
 import vcan_stage  # noqa: E402
 

@@ -37,12 +37,15 @@ import numpy as np
 from scipy import signal
 
 from blf.errors import InputError
+from blf.validate import count, generator, instance_of, one_of, scalar
 from hil.canopen.process import DriveMode
 from sim.params import RigParams
 from sim.plant import RigPlant
 from sim.truth import RigTruth, rig_truth
 
 __all__ = [
+    "AirLoad",
+    "AIR",
     "OperationProfile",
     "OperationRecord",
     "CalibrationSweep",
@@ -65,6 +68,30 @@ CONTACT_FORCE_N = 20.0
 
 
 # ====================================================================== types
+
+
+@dataclass(frozen=True)
+class AirLoad:
+    """The air on the surface and the force-fight compensation of a normal-operation profile.
+
+    Attributes
+    ----------
+    aero_stiffness_N_per_mm : float
+        Hinge-load stiffness :math:`k_a`, N/mm: the air adds
+        :math:`-k_a (y - y_0)` to the surface force (default 1000).
+    zero_load_mm : float
+        Surface deflection :math:`y_0` of zero hinge load, mm (default 2).
+    ff_bandwidth_rad_s : float
+        Bandwidth of the force-fight compensation loop, rad/s (default 1; 0: off).
+    """
+
+    aero_stiffness_N_per_mm: float = 1000.0
+    zero_load_mm: float = 2.0
+    ff_bandwidth_rad_s: float = 1.0
+
+
+#: The default air load of the profiles.
+AIR = AirLoad()
 
 
 @dataclass(frozen=True)
@@ -215,26 +242,25 @@ def _ro(a) -> np.ndarray:
     return out
 
 
-def _num(value, name: str, unit: str, *, lo: float = -math.inf, lo_open: bool = False,
-         hi: float = math.inf) -> float:
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-    v = float(value) if ok else float("nan")
-    if not (ok and math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi):
-        lb = "(" if lo_open else "["
-        raise InputError(f"{name} must be a finite scalar in {lb}{lo}, {hi}] {unit} (shape ()), got {value!r}")
-    return v
-
-
 def _params(params) -> RigParams:
-    if not isinstance(params, RigParams):
-        raise InputError(f"params must be a sim.params.RigParams, got {type(params).__name__}")
-    return params
+    return instance_of(params, RigParams, "params", "a sim.params.RigParams")
 
 
-def _rng(rng) -> np.random.Generator:
-    if not isinstance(rng, np.random.Generator):
-        raise InputError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    return rng
+def _air(p: RigParams, air: AirLoad) -> tuple[float, float, float]:
+    """The air-load options, validated: (k_a N/mm, y_0 mm, w_ff rad/s)."""
+    instance_of(air, AirLoad, "air", "an AirLoad")
+    return (scalar(air.aero_stiffness_N_per_mm, "air.aero_stiffness_N_per_mm", "N/mm", lo=0.0),
+            scalar(air.zero_load_mm, "air.zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm),
+            scalar(air.ff_bandwidth_rad_s, "air.ff_bandwidth_rad_s", "rad/s", lo=0.0))
+
+
+def _at_trim(params, rng, duration_s, trim_mm) -> tuple:
+    """Options of the profiles held at trim, validated: (params, rng, duration s, trim mm, period s, samples)."""
+    p = _params(params)
+    r = generator(rng)
+    dur = scalar(duration_s, "duration_s", "s", lo=0.0, lo_open=True, hi=3600.0)
+    trim = scalar(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    return p, r, dur, trim, p.sample_period_s, int(math.ceil(dur / p.sample_period_s))
 
 
 def _series(*k: float) -> float:
@@ -347,9 +373,7 @@ def full_stroke_profile(
     stroke_fraction: float = 0.9,
     cycles: int = 1,
     dwell_s: float = 1.0,
-    aero_stiffness_N_per_mm: float = 1000.0,
-    zero_load_mm: float = 2.0,
-    ff_bandwidth_rad_s: float = 1.0,
+    air: AirLoad = AIR,
 ) -> OperationProfile:
     """Full stroke at full rate with force-fight compensation (paper Figure 7).
 
@@ -368,13 +392,10 @@ def full_stroke_profile(
         Number of out-and-back strokes (default 1).
     dwell_s : float, optional
         Hold at each end and at the start, s (default 1).
-    aero_stiffness_N_per_mm : float, optional
-        Hinge-load stiffness, N/mm (default 1000: +-18 kN at the ends).
-    zero_load_mm : float, optional
-        Deflection of zero hinge load, mm (default 2): the load changes sign
-        once on every stroke, there the backlash is crossed.
-    ff_bandwidth_rad_s : float, optional
-        Force-fight compensation bandwidth, rad/s (default 1).
+    air : AirLoad, optional
+        Hinge load and force-fight compensation (default :data:`AIR`:
+        1000 N/mm, +-18 kN at the ends; zero load at 2 mm, so the load changes
+        sign once on every stroke, there the backlash is crossed).
 
     Returns
     -------
@@ -394,15 +415,12 @@ def full_stroke_profile(
     sense change, :math:`D_{ext}` jumps by :math:`B_{b,2} - B_{b,1} = 0`).
     """
     p = _params(params)
-    rate = _num(rate_mm_per_s, "rate_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
-    acc = _num(accel_mm_per_s2, "accel_mm_per_s2", "mm/s^2", lo=0.0, lo_open=True)
-    frac = _num(stroke_fraction, "stroke_fraction", "(fraction of stroke_limit_mm)", lo=0.0, lo_open=True, hi=0.95)
-    if isinstance(cycles, bool) or not isinstance(cycles, (int, np.integer)) or not 1 <= cycles <= 100:
-        raise InputError(f"cycles must be an int in [1, 100] (count), got {cycles!r}")
-    dwell = _num(dwell_s, "dwell_s", "s", lo=0.0)
-    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
-    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
-    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
+    rate = scalar(rate_mm_per_s, "rate_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
+    acc = scalar(accel_mm_per_s2, "accel_mm_per_s2", "mm/s^2", lo=0.0, lo_open=True)
+    frac = scalar(stroke_fraction, "stroke_fraction", "(fraction of stroke_limit_mm)", lo=0.0, lo_open=True, hi=0.95)
+    cycles = count(cycles, "cycles", 1, 100)
+    dwell = scalar(dwell_s, "dwell_s", "s", lo=0.0)
+    ka, y0, ffb = _air(p, air)
     T = p.sample_period_s
     a = frac * p.stroke_limit_mm
     # plan the moves
@@ -436,9 +454,7 @@ def small_manoeuvre_profile(
     frequencies_Hz: tuple = (0.5, 1.0, 1.5, 0.75),
     dwell_s: float = 0.8,
     trim_mm: float = 2.5,
-    aero_stiffness_N_per_mm: float = 1000.0,
-    zero_load_mm: float = 2.0,
-    ff_bandwidth_rad_s: float = 1.0,
+    air: AirLoad = AIR,
 ) -> OperationProfile:
     """Small-amplitude manoeuvres about a trim where the hinge load is near zero.
 
@@ -455,10 +471,9 @@ def small_manoeuvre_profile(
     trim_mm : float, optional
         Trim deflection, mm (default 2.5: 500 N of hinge load, both chains
         in contact at trim).
-    aero_stiffness_N_per_mm, zero_load_mm : float, optional
-        Hinge load :math:`L = -k_a (y - y_0)` (defaults 1000 N/mm, 2 mm).
-    ff_bandwidth_rad_s : float, optional
-        Force-fight compensation bandwidth, rad/s (default 1).
+    air : AirLoad, optional
+        Hinge load :math:`L = -k_a (y - y_0)` and force-fight compensation
+        (default :data:`AIR`: 1000 N/mm, 2 mm, 1 rad/s).
 
     Returns
     -------
@@ -473,16 +488,14 @@ def small_manoeuvre_profile(
     crossed at each sign change.
     """
     p = _params(params)
-    amp = _num(amplitude_mm, "amplitude_mm", "mm", lo=0.0, lo_open=True, hi=0.5 * p.stroke_limit_mm)
+    amp = scalar(amplitude_mm, "amplitude_mm", "mm", lo=0.0, lo_open=True, hi=0.5 * p.stroke_limit_mm)
     freqs = np.asarray(frequencies_Hz, dtype=float)
     if freqs.ndim != 1 or freqs.size < 1 or not np.all(np.isfinite(freqs)) or np.any(freqs <= 0) or np.any(freqs > 10):
         raise InputError(f"frequencies_Hz must be a 1-D sequence of values in (0, 10] Hz, got {frequencies_Hz!r} "
                          f"(shape {np.shape(frequencies_Hz)})")
-    dwell = _num(dwell_s, "dwell_s", "s", lo=0.0)
-    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm + amp, hi=p.stroke_limit_mm - amp)
-    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
-    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
-    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
+    dwell = scalar(dwell_s, "dwell_s", "s", lo=0.0)
+    trim = scalar(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm + amp, hi=p.stroke_limit_mm - amp)
+    ka, y0, ffb = _air(p, air)
     T = p.sample_period_s
     total = dwell + float(np.sum(1.0 / freqs + dwell))
     n = int(math.ceil(total / T))
@@ -508,9 +521,7 @@ def gust_profile(
     gust_std_N: float = 1500.0,
     gust_bandwidth_rad_s: float = 3.0,
     trim_mm: float = 2.0,
-    aero_stiffness_N_per_mm: float = 1000.0,
-    zero_load_mm: float = 2.0,
-    ff_bandwidth_rad_s: float = 1.0,
+    air: AirLoad = AIR,
 ) -> OperationProfile:
     """Surface held at trim, random gust load (turbulence).
 
@@ -525,9 +536,11 @@ def gust_profile(
         Standard deviation of the gust force on the surface, N (default 1500).
     gust_bandwidth_rad_s : float, optional
         Corner of the (second-order) gust spectrum, rad/s (default 3).
-    trim_mm, aero_stiffness_N_per_mm, zero_load_mm, ff_bandwidth_rad_s : float, optional
-        As in :func:`small_manoeuvre_profile` (trim at the zero-load deflection,
-        so the mean load is zero and the gusts change its sign at random).
+    trim_mm : float, optional
+        Trim deflection, mm (default 2: at the zero-load deflection, so the
+        mean load is zero and the gusts change its sign at random).
+    air : AirLoad, optional
+        As in :func:`small_manoeuvre_profile`.
 
     Returns
     -------
@@ -544,17 +557,10 @@ def gust_profile(
     With the trim at the zero-load deflection the mean load is zero and the
     gusts change its sign at random times and rates.
     """
-    p = _params(params)
-    r = _rng(rng)
-    dur = _num(duration_s, "duration_s", "s", lo=0.0, lo_open=True, hi=3600.0)
-    gs = _num(gust_std_N, "gust_std_N", "N", lo=0.0)
-    gb = _num(gust_bandwidth_rad_s, "gust_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
-    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
-    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
-    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
-    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
-    T = p.sample_period_s
-    n = int(math.ceil(dur / T))
+    p, r, dur, trim, T, n = _at_trim(params, rng, duration_s, trim_mm)
+    gs = scalar(gust_std_N, "gust_std_N", "N", lo=0.0)
+    gb = scalar(gust_bandwidth_rad_s, "gust_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
+    ka, y0, ffb = _air(p, air)
     gust = _smooth_noise(r, n, gs, gb, T)
     y = np.full(n, trim)
     load = ka * y0 + gust
@@ -571,9 +577,7 @@ def cruise_profile(
     turbulence_std_N: float = 200.0,
     turbulence_bandwidth_rad_s: float = 3.0,
     command_jitter_mm: float = 0.05,
-    aero_stiffness_N_per_mm: float = 1000.0,
-    zero_load_mm: float = 2.0,
-    ff_bandwidth_rad_s: float = 1.0,
+    air: AirLoad = AIR,
 ) -> OperationProfile:
     """Quiet cruise: trim away from zero load, light turbulence; backlash never crossed.
 
@@ -594,7 +598,7 @@ def cruise_profile(
     command_jitter_mm : float, optional
         Standard deviation of slow autopilot corrections of the command, mm
         (default 0.05; bandwidth 1 rad/s).
-    aero_stiffness_N_per_mm, zero_load_mm, ff_bandwidth_rad_s : float, optional
+    air : AirLoad, optional
         As in :func:`full_stroke_profile`.
 
     Returns
@@ -608,18 +612,11 @@ def cruise_profile(
     (a 20-sigma margin): the forces never change sign, so no play is
     crossed and BLFserv must report "not traversed".
     """
-    p = _params(params)
-    r = _rng(rng)
-    dur = _num(duration_s, "duration_s", "s", lo=0.0, lo_open=True, hi=3600.0)
-    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
-    ts = _num(turbulence_std_N, "turbulence_std_N", "N", lo=0.0)
-    tb = _num(turbulence_bandwidth_rad_s, "turbulence_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
-    cj = _num(command_jitter_mm, "command_jitter_mm", "mm", lo=0.0, hi=1.0)
-    ka = _num(aero_stiffness_N_per_mm, "aero_stiffness_N_per_mm", "N/mm", lo=0.0)
-    y0 = _num(zero_load_mm, "zero_load_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
-    ffb = _num(ff_bandwidth_rad_s, "ff_bandwidth_rad_s", "rad/s", lo=0.0)
-    T = p.sample_period_s
-    n = int(math.ceil(dur / T))
+    p, r, dur, trim, T, n = _at_trim(params, rng, duration_s, trim_mm)
+    ts = scalar(turbulence_std_N, "turbulence_std_N", "N", lo=0.0)
+    tb = scalar(turbulence_bandwidth_rad_s, "turbulence_bandwidth_rad_s", "rad/s", lo=0.0, lo_open=True)
+    cj = scalar(command_jitter_mm, "command_jitter_mm", "mm", lo=0.0, hi=1.0)
+    ka, y0, ffb = _air(p, air)
     turb = _smooth_noise(r, n, ts, tb, T)
     y = trim + _smooth_noise(r, n, cj, 1.0, T)
     load = ka * y0 + turb
@@ -694,13 +691,12 @@ def ext_crossing_profile(
     separate it from the elastic change (BLFmaint does, with the forces).
     """
     p = _params(params)
-    ff = _num(force_fight_N, "force_fight_N", "N", lo=0.0, lo_open=True, hi=20000.0)
-    ramp = _num(ramp_s, "ramp_s", "s", lo=0.0, lo_open=True, hi=60.0)
-    rate = _num(crossing_rate_mm_per_s, "crossing_rate_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
-    if isinstance(reversals, bool) or not isinstance(reversals, (int, np.integer)) or not 1 <= reversals <= 100:
-        raise InputError(f"reversals must be an int in [1, 100] (count), got {reversals!r}")
-    dwell = _num(dwell_s, "dwell_s", "s", lo=0.0)
-    trim = _num(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
+    ff = scalar(force_fight_N, "force_fight_N", "N", lo=0.0, lo_open=True, hi=20000.0)
+    ramp = scalar(ramp_s, "ramp_s", "s", lo=0.0, lo_open=True, hi=60.0)
+    rate = scalar(crossing_rate_mm_per_s, "crossing_rate_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
+    reversals = count(reversals, "reversals", 1, 100)
+    dwell = scalar(dwell_s, "dwell_s", "s", lo=0.0)
+    trim = scalar(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
     T = p.sample_period_s
     k1, k2 = chain_stiffness_N_per_mm(p)
     ks = _series(k1, k2)
@@ -790,9 +786,8 @@ def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.ran
     :math:`B_{b,2} - B_{b,1}` only).
     """
     p = _params(params)
-    if not isinstance(profile, OperationProfile):
-        raise InputError(f"profile must be an OperationProfile, got {type(profile).__name__}")
-    r = _rng(rng)
+    instance_of(profile, OperationProfile, "profile", "an OperationProfile")
+    r = generator(rng)
     T = p.sample_period_s
     if abs(profile.sample_period_s - T) > 1e-12:
         raise InputError(f"profile.sample_period_s = {profile.sample_period_s} s differs from "
@@ -805,7 +800,6 @@ def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.ran
     sched = None if profile.offset_mm is None else np.asarray(profile.offset_mm, dtype=float)
     lag = int(profile.lag2_samples)
     nw = int(round(profile.warmup_s / T))
-    n = profile.n
     # prepend the warm-up at the first command; the air load and a scheduled offset are faded in
     # smoothly (raised cosine over 70 % of it) so that the lightly damped surface is not set ringing
     ramp = np.ones(nw)
@@ -904,13 +898,12 @@ def simulate_calibration_sweep(
     constant and the regression of :math:`s` on :math:`x` is the LVDT law.
     """
     p = _params(params)
-    r = _rng(rng)
-    if ema not in (1, 2) or isinstance(ema, bool):
-        raise InputError(f"ema must be 1 or 2 (no unit), got {ema!r}")
-    amp = _num(amplitude_mm, "amplitude_mm", "mm", lo=0.0, lo_open=True, hi=0.95 * p.stroke_limit_mm)
-    v = _num(speed_mm_per_s, "speed_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
-    f = _num(opposing_force_N, "opposing_force_N", "N", lo=0.0, lo_open=True, hi=20000.0)
-    tr = _num(force_ramp_s, "force_ramp_s", "s", lo=0.0, lo_open=True, hi=60.0)
+    r = generator(rng)
+    one_of(ema, "ema", (1, 2), "1 or 2, no unit")
+    amp = scalar(amplitude_mm, "amplitude_mm", "mm", lo=0.0, lo_open=True, hi=0.95 * p.stroke_limit_mm)
+    v = scalar(speed_mm_per_s, "speed_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
+    f = scalar(opposing_force_N, "opposing_force_N", "N", lo=0.0, lo_open=True, hi=20000.0)
+    tr = scalar(force_ramp_s, "force_ramp_s", "s", lo=0.0, lo_open=True, hi=60.0)
     T = p.sample_period_s
     i_tot = p.i_total_rad_per_mm
     nr = int(round(tr / T))

@@ -1,0 +1,486 @@
+"""The CiA 402 drive behaviour of a simulated EMA drive.
+
+The controlword is handled by :class:`hil.canopen.cia402.DriveStateMachine`
+(remote bit 9 reported); this module adds what a drive does around it: the
+statusword, the quick-stop hold, the plant command of each SYNC cycle and the
+live values served from the plant's sample (position, LVDT, force, torque).
+Scaling is :mod:`hil.canopen.units` (the unchecked kernels on the hot path,
+falling back to the validated function, which raises its own error, when a
+value is not finite).
+
+Choices (CiA 402 leaves them open or this drive restricts them)
+---------------------------------------------------------------
+* Modes of operation: CSP (8) and CST (10). An SDO write of another value to
+  0x6060 is aborted (0x06090030); an RPDO cannot be refused, so a drive whose
+  0x6060 holds another value keeps 0x6061 unchanged, clears statusword bit 12
+  and commands DISABLED (holding brake), even in OPERATION_ENABLED.
+* Quick stop (option code 2): the drive holds the motor angle measured when
+  the quick stop began for :data:`QUICK_STOP_HOLD_S` (a fixed 50 ms, counted
+  in SYNC cycles of the plant's sample period; 0x6085 is not used), then
+  takes transition 12 to SWITCH_ON_DISABLED (brake).
+* Fault reaction: FAULT_REACTION_ACTIVE lasts until the next SYNC, then FAULT;
+  both command DISABLED. A fault reset (rising edge of controlword bit 7)
+  sends EMCY 0x0000.
+* Illegal controlwords leave the state unchanged and are counted
+  (``stats.illegal_commands``), no EMCY. A repeated controlword is a no-op.
+  Bit 8 (halt) is not implemented.
+* Software position limits 0x607D: a write that makes max < min is aborted
+  (0x06090036). Rated torque 0x6076 and 0x608F must be > 0 (0x06090032).
+* Statusword: bit 12 (drive follows the command) in OPERATION_ENABLED with a
+  supported mode, bit 11 when the last target was clipped (0x607D in CSP,
+  0x6072 in CST), bit 10 in CSP when the effective target is within
+  :data:`TARGET_WINDOW_INC` of the position.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable
+
+from hil.canopen.cia402 import (
+    DriveStateMachine,
+    IllegalTransition,
+    OperationMode,
+    State,
+    Statusword,
+    state_word,
+)
+from hil.canopen.errors import InputError
+from hil.canopen.process import DriveMode, Setpoint
+from hil.canopen.sdo import SdoAbortCode
+from hil.canopen.units import (
+    N_from_permille,
+    dN_from_N,
+    inc_from_rad,
+    increments_per_rad,
+    increments_to_rad,
+    mm_to_lvdt_um,
+    newton_to_force_dN,
+    permille_from_torque,
+    permille_to_force_N,
+    rad_from_inc,
+    rad_to_increments,
+    um_from_mm,
+)
+from sim.drives.nmt_slave import EMCY_NO_ERROR
+from sim.drives.store import abort
+
+__all__ = ["QUICK_STOP_HOLD_S", "SUPPORTED_MODES", "TARGET_WINDOW_INC", "Cia402Drive"]
+
+#: How long a quick stop holds the motor angle before SWITCH_ON_DISABLED [s].
+QUICK_STOP_HOLD_S = 0.05
+#: CSP target reached (statusword bit 10) when |target - actual| <= this [increments].
+TARGET_WINDOW_INC = 20
+#: Modes of operation (0x6060) the drive supports: CSP and CST.
+SUPPORTED_MODES = frozenset((int(OperationMode.CSP), int(OperationMode.CST)))
+
+# Hot-path constants (plain ints and identities instead of enum arithmetic and hashing).
+_CSP = int(OperationMode.CSP)
+_CST = int(OperationMode.CST)
+_MODE_DISABLED = int(DriveMode.DISABLED)
+_MODE_POSITION = int(DriveMode.POSITION)
+_MODE_FORCE = int(DriveMode.FORCE)
+_REMOTE = int(Statusword.REMOTE)
+_SW_FOLLOWS = int(Statusword.DRIVE_FOLLOWS_COMMAND)
+_SW_LIMIT = int(Statusword.INTERNAL_LIMIT_ACTIVE)
+_SW_REACHED = int(Statusword.TARGET_REACHED)
+_OE = State.OPERATION_ENABLED
+_QSA = State.QUICK_STOP_ACTIVE
+_FRA = State.FAULT_REACTION_ACTIVE
+_K_CONTROLWORD = (0x6040, 0)
+_K_MODE = (0x6060, 0)
+_K_TARGET_POS = (0x607A, 0)
+_K_POS_MIN = (0x607D, 1)
+_K_POS_MAX = (0x607D, 2)
+_K_TARGET_TORQUE = (0x6071, 0)
+_K_MAX_TORQUE = (0x6072, 0)
+_K_RATED_TORQUE = (0x6076, 0)
+
+
+class Cia402Drive:
+    """Mixin of :class:`sim.drives.drive.SimDrive`: the CiA 402 drive and its live values.
+
+    The attributes below are the ones this part owns (set in
+    :meth:`_init_drive`, :meth:`_reset_drive` and :meth:`_measure`; the
+    pair writes ``_torque_fetch`` once and ``_torque_val`` /
+    ``_torque_stale`` when it fetches the torques). It uses ``ema_index``,
+    ``store``, ``_int``, ``_icache``, ``_store`` and ``_counters`` of the
+    drive, and ``_emcy`` and ``error_register`` of
+    :class:`~sim.drives.nmt_slave.NmtSlave`.
+
+    Attributes
+    ----------
+    state_machine : hil.canopen.cia402.DriveStateMachine
+        The CiA 402 power drive state machine (remote bit 9 reported).
+    command_override : callable or None
+        Fault hook (:mod:`sim.faults`): ``f(node, t, mode, value) -> (mode, value)``
+        replaces the plant command the drive computed at each SYNC (e.g. a
+        runaway drive); None = no fault.
+    _i_total : float
+        The plant's gear ratio [rad/mm] (0x2102).
+    _cpr_override : int or None
+        The drive's own 0x608F:01, written at power-on and reset node.
+    _qs_cycles : int
+        Quick-stop hold in SYNC cycles.
+    _phi_rad, _s_mm, _F_N : float
+        This EMA's motor angle [rad], LVDT stroke [mm] and load-cell force
+        [N] of the current sample (:meth:`_measure`).
+    _torque_val : float
+        Drive torque [N m], valid unless ``_torque_stale``.
+    _torque_stale : bool
+        The torque of the current sample is not fetched yet.
+    _torque_fetch : callable
+        Fetches it (:meth:`sim.drives.SimDrivePair._fetch_torque`).
+    _inc_per_rad : float or None
+        Increments per rad, None until needed after a change of 0x608F.
+    _pos_memo, _um_memo, _dN_memo : int or None
+        0x6064, 0x2100 and 0x2101 of the current sample, None until needed.
+    _sw_state : State or None
+        The state whose statusword bits ``_sw_base`` holds.
+    _sw_base : int
+        Statusword bits of ``_sw_state``.
+    _cw_noop : dict
+        Controlword -> states in which receiving it again was seen to be a no-op.
+    _sp_mode, _sp_value, _sp_obj
+        The plant command of the last SYNC (a DriveMode value, rad or N) and
+        its Setpoint (None until :attr:`setpoint` builds it).
+    _mode_display : int
+        Modes of operation display 0x6061.
+    _limit_active : bool
+        The last target was clipped (statusword bit 11).
+    _target_eff_inc : int or None
+        The clipped CSP target [increments] of the last SYNC.
+    _qs_phi_rad : float
+        The angle a quick stop holds [rad].
+    _qs_left : int
+        SYNC cycles of the hold left.
+    """
+
+    def _init_drive(self, gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float) -> None:
+        """Initial state: drive in SWITCH_ON_DISABLED, no sample yet (see :class:`~sim.drives.drive.SimDrive`)."""
+        self._i_total = float(gear_ratio_rad_per_mm)
+        self._cpr_override = counts_per_rev
+        self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9))
+        self.state_machine = DriveStateMachine(remote=True)
+        self.command_override: Callable[[Cia402Drive, float, int, float], tuple[int, float]] | None = None
+        self._phi_rad = 0.0
+        self._s_mm = 0.0
+        self._F_N = 0.0
+        self._torque_val = 0.0
+        self._torque_stale = False
+        self._torque_fetch: Callable[[], None] = self._no_torque_source  # set by SimDrivePair
+        self._inc_per_rad: float | None = None
+        self._pos_memo: int | None = None
+        self._um_memo: int | None = None
+        self._dN_memo: int | None = None
+        self._sw_state: State | None = None  # statusword bits of this state: _sw_base
+        self._sw_base = 0
+        # controlword -> states in which receiving it again (same word as the previous one)
+        # was seen to leave the state machine unchanged (a pure function of state and words)
+        self._cw_noop: dict[int, tuple[State, ...]] = {}
+        self._sp_mode = _MODE_DISABLED
+        self._sp_value = 0.0
+        self._sp_obj: Setpoint | None = None
+        self._reset_drive()
+
+    def _live_objects(self) -> dict[tuple[int, int], Callable[[], int | float]]:
+        """The objects whose value the drive computes when read, with their getters."""
+        return {
+            (0x6041, 0): self._statusword_now,
+            (0x6061, 0): lambda: self._mode_display,
+            (0x6064, 0): self._position_now,
+            (0x6077, 0): lambda: self.torque_actual_permille,
+            (0x2100, 0): self._lvdt_um_now,
+            (0x2101, 0): self._force_dN_now,
+            (0x2102, 0): lambda: self._i_total,
+            (0x603F, 0): lambda: self.state_machine.error_code,
+            (0x1001, 0): lambda: self.error_register,
+        }
+
+    # ------------------------------------------------------------------ reset and own data
+
+    def _reset_drive(self) -> None:
+        """Power-on / reset node: SWITCH_ON_DISABLED, 0x6061 from the EDS, plant command DISABLED."""
+        self.state_machine = DriveStateMachine(remote=True)
+        self.state_machine.boot_done()
+        self._mode_display = int(self.store.object_dictionary[0x6061].default or 0)
+        self._limit_active = False
+        self._target_eff_inc: int | None = None
+        self._qs_phi_rad = 0.0
+        self._qs_left = 0
+        self._set_setpoint(_MODE_DISABLED, 0.0)
+
+    def _apply_own_data(self) -> None:
+        if self._cpr_override is not None:
+            self._store(0x608F, 1, struct.pack("<I", self._cpr_override))
+            self._store(0x608F, 2, struct.pack("<I", 1))
+
+    def _check_drive_write(self, index: int, subindex: int, value: float | None) -> None:
+        """Validate an SDO write of a drive object (raise SdoAbortedError to refuse)."""
+        if index == 0x6060:
+            if value not in SUPPORTED_MODES:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif index == 0x607D and subindex in (1, 2):
+            lo = value if subindex == 1 else self._int(0x607D, 1)
+            hi = value if subindex == 2 else self._int(0x607D, 2)
+            if hi < lo:
+                raise abort(SdoAbortCode.MAX_LESS_THAN_MIN)
+        elif index in (0x6076, 0x608F):
+            if value is not None and value <= 0:
+                raise abort(SdoAbortCode.VALUE_TOO_LOW)
+
+    def _mode_written(self) -> None:
+        """0x6060 written: a supported mode shows in 0x6061 (another one is ignored)."""
+        mode = self._int(0x6060)
+        if mode in SUPPORTED_MODES:
+            self._mode_display = mode
+
+    # ------------------------------------------------------------------ live values
+
+    def _measure(self, raw: tuple) -> None:
+        """Take this EMA's values of a plant sample ``(t_s, phi1, phi2, s1, s2, F1, F2)``.
+
+        The drive torque is fetched from the plant only when it is first needed
+        (0x6077), see :meth:`sim.drives.SimDrivePair._fetch_torque`.
+        """
+        k = self.ema_index
+        self._phi_rad = raw[1 + k]
+        self._s_mm = raw[3 + k]
+        self._F_N = raw[5 + k]
+        self._pos_memo = self._um_memo = self._dN_memo = None
+        self._torque_stale = True
+
+    def _no_torque_source(self) -> None:
+        self._torque_stale = False
+
+    @property
+    def _torque_Nm(self) -> float:
+        """Drive torque [N m] of the current sample."""
+        if self._torque_stale:
+            self._torque_fetch()
+        return self._torque_val
+
+    @property
+    def motor_angle_rad(self) -> float:
+        """Motor angle [rad] of the current sample (what 0x6064 is computed from)."""
+        return self._phi_rad
+
+    def _cpr_changed(self) -> None:
+        """0x608F (may have) changed: drop the values derived from the counts per revolution."""
+        self._inc_per_rad = None
+        self._pos_memo = None
+
+    def _k_inc(self) -> float:
+        """Increments per rad, :func:`hil.canopen.units.increments_per_rad` of :attr:`counts_per_rev` (cached)."""
+        k = self._inc_per_rad
+        if k is None:
+            k = self._inc_per_rad = increments_per_rad(self.counts_per_rev)
+        return k
+
+    @property
+    def counts_per_rev(self) -> float:
+        """Position increments per motor revolution, 0x608F:01 / 0x608F:02."""
+        return self._int(0x608F, 1) / self._int(0x608F, 2)
+
+    @property
+    def position_inc(self) -> int:
+        """Position actual value 0x6064 [increments] of the current sample."""
+        return self._position_now()
+
+    def _position_now(self) -> int:
+        v = self._pos_memo
+        if v is None:
+            phi = self._phi_rad
+            try:
+                k = self._inc_per_rad
+                if k is None:
+                    k = self._k_inc()
+                v = inc_from_rad(phi, k)
+            except (ValueError, ArithmeticError):  # (InputError is a ValueError)
+                return rad_to_increments(phi, self.counts_per_rev)  # raises its own error
+            self._pos_memo = v
+        return v
+
+    def _lvdt_um_now(self) -> int:
+        v = self._um_memo
+        if v is None:
+            s_mm = self._s_mm
+            try:
+                v = um_from_mm(s_mm)
+            except (ValueError, OverflowError):
+                return mm_to_lvdt_um(s_mm)  # raises its own error
+            self._um_memo = v
+        return v
+
+    def _force_dN_now(self) -> int:
+        v = self._dN_memo
+        if v is None:
+            F_N = self._F_N
+            try:
+                v = dN_from_N(F_N)
+            except (ValueError, OverflowError):
+                return newton_to_force_dN(F_N)  # raises its own error
+            self._dN_memo = v
+        return v
+
+    @property
+    def torque_actual_permille(self) -> int:
+        """Torque actual value 0x6077 [per mille of the rated torque 0x6076]."""
+        return permille_from_torque(self._torque_Nm, self._int(0x6076) / 1000.0)
+
+    @property
+    def statusword(self) -> int:
+        """Statusword 0x6041 now.
+
+        State bits from the state machine, remote (bit 9) always; in
+        OPERATION_ENABLED with a supported mode: bit 12 (drive follows the
+        command), bit 11 when the last target was clipped (software position
+        limits 0x607D in CSP, max torque 0x6072 in CST), bit 10 in CSP when
+        ``|effective target - position actual| <= TARGET_WINDOW_INC``.
+        """
+        return self._statusword_now()
+
+    def _statusword_now(self) -> int:
+        # = sm.statusword(extra): hil.canopen.cia402.state_word of the state | remote bit | extra
+        sm = self.state_machine
+        state = sm.state
+        extra = 0
+        if state is _OE:
+            mode = self._icache.get(_K_MODE)
+            if mode is None:
+                mode = self._int(0x6060)
+            if mode in SUPPORTED_MODES:
+                extra = _SW_FOLLOWS
+                if self._limit_active:
+                    extra |= _SW_LIMIT
+                eff = self._target_eff_inc
+                if (mode == _CSP and eff is not None
+                        and abs(eff - self._position_now()) <= TARGET_WINDOW_INC):
+                    extra |= _SW_REACHED
+        if state is not self._sw_state:
+            self._sw_base = state_word(state)
+            self._sw_state = state
+        return self._sw_base | extra | (_REMOTE if sm.remote else 0)
+
+    @property
+    def setpoint(self) -> Setpoint:
+        """What the drive commanded the plant at the last SYNC."""
+        sp = self._sp_obj
+        if sp is None:
+            sp = self._sp_obj = Setpoint(DriveMode(self._sp_mode), self._sp_value)
+        return sp
+
+    def _set_setpoint(self, mode: int, value: float) -> None:
+        """The plant command of this cycle (``mode`` a DriveMode value); :attr:`setpoint` builds it."""
+        self._sp_mode = mode
+        self._sp_value = value
+        self._sp_obj = None
+
+    # ------------------------------------------------------------------ the state machine
+
+    def _inject_fault(self, code: int) -> None:
+        """Transition 13 with error ``code`` and its EMCY."""
+        self.state_machine.fault(code)
+        self._emcy(code)
+
+    def _controlword(self) -> None:
+        """Apply the controlword 0x6040 just written (by RPDO or SDO)."""
+        sm = self.state_machine
+        old = sm.state
+        cw = self._icache.get(_K_CONTROLWORD)
+        if cw is None:
+            cw = self._int(0x6040)
+        # The master repeats the controlword every cycle: the same word as the previous
+        # one in a state where that was seen to be a no-op is a no-op again (the outcome
+        # of on_controlword depends only on the state, the previous and this word).
+        repeated = cw == sm.previous_controlword
+        if repeated:
+            seen = self._cw_noop.get(cw)
+            if seen is not None and old in seen:
+                return
+            before = (sm.last_transition, sm.error_code)
+        try:
+            sm.on_controlword(cw)
+        except IllegalTransition:
+            self._counters.illegal_commands += 1
+            return
+        new = sm.state
+        if repeated and new is old and (sm.last_transition, sm.error_code) == before:
+            self._cw_noop[cw] = self._cw_noop.get(cw, ()) + (old,)
+        if new is State.QUICK_STOP_ACTIVE and old is not State.QUICK_STOP_ACTIVE:
+            self._qs_phi_rad = self._phi_rad
+            self._qs_left = self._qs_cycles
+        if old is State.FAULT and new is State.SWITCH_ON_DISABLED:
+            self._emcy(EMCY_NO_ERROR)
+
+    def _cycle(self) -> tuple[int, float]:
+        """The drive's control cycle at a SYNC: internal transitions and the plant command.
+
+        Returns the plant command ``(mode, value)`` (a DriveMode value and rad / N),
+        also kept as :attr:`setpoint`.
+        """
+        sm = self.state_machine
+        if sm.state is _FRA:
+            sm.fault_reaction_done()
+        if sm.state is _QSA:
+            if self._qs_left > 0:
+                self._qs_left -= 1
+                self._limit_active = False
+                self._target_eff_inc = None
+                value = self._qs_phi_rad
+                self._set_setpoint(_MODE_POSITION, value)
+                return _MODE_POSITION, value
+            sm.quick_stop_done()
+        self._limit_active = False
+        self._target_eff_inc = None
+        mode_out, value = _MODE_DISABLED, 0.0
+        if sm.state is _OE:
+            ic = self._icache
+            mode = ic.get(_K_MODE)
+            if mode is None:
+                mode = self._int(0x6060)
+            if mode == _CSP:  # (a supported mode, so the effective one)
+                target = ic.get(_K_TARGET_POS)
+                if target is None:
+                    target = self._int(0x607A)
+                lo = ic.get(_K_POS_MIN)
+                if lo is None:
+                    lo = self._int(0x607D, 1)
+                hi = ic.get(_K_POS_MAX)
+                if hi is None:
+                    hi = self._int(0x607D, 2)
+                eff = min(max(target, lo), hi)
+                self._limit_active = eff != target
+                self._target_eff_inc = eff
+                try:
+                    k = self._inc_per_rad
+                    if k is None:
+                        k = self._k_inc()
+                    value = rad_from_inc(eff, k)  # (an int divided by a float: float(eff) / k)
+                except (ArithmeticError, InputError):
+                    value = increments_to_rad(eff, self.counts_per_rev)  # raises its own error
+                mode_out = _MODE_POSITION
+            elif mode == _CST:
+                tau = ic.get(_K_TARGET_TORQUE)
+                if tau is None:
+                    tau = self._int(0x6071)
+                tmax = ic.get(_K_MAX_TORQUE)
+                if tmax is None:
+                    tmax = self._int(0x6072)
+                eff = min(max(tau, -tmax), tmax)
+                self._limit_active = eff != tau
+                rated = ic.get(_K_RATED_TORQUE)
+                if rated is None:
+                    rated = self._int(0x6076)
+                rated_Nm = rated / 1000.0
+                i_total = self._i_total
+                if 0.0 < rated_Nm < math.inf and 0.0 < i_total < math.inf:
+                    value = N_from_permille(eff, i_total, rated_Nm)
+                else:
+                    value = permille_to_force_N(eff, i_total, rated_Nm)  # raises its own error
+                mode_out = _MODE_FORCE
+        self._sp_mode = mode_out  # (_set_setpoint inlined)
+        self._sp_value = value
+        self._sp_obj = None
+        return mode_out, value

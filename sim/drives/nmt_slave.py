@@ -1,0 +1,224 @@
+"""NMT slave, heartbeat producer, EMCY producer and error history of a simulated drive.
+
+The CiA 301 services of :class:`sim.drives.drive.SimDrive` besides SDO
+(:mod:`sim.drives.store`) and PDO (:mod:`sim.drives.pdo_engine`): boot-up,
+NMT commands and state, the heartbeat (0x1017), the EMCY (0x1014) and the
+pre-defined error field 0x1003. The frames are those of
+:mod:`hil.canopen.nmt` and :mod:`hil.canopen.emcy`.
+
+Choices (CiA 301 leaves them open or this drive restricts them)
+---------------------------------------------------------------
+* Power-on: the drive's application boots instantly (CiA 402 transition 1
+  at power-on, NMT INITIALISING -> boot-up frame -> PRE-OPERATIONAL).
+* NMT reset node restores every object to its EDS default (plus the drive's
+  own data, see ``counts_per_rev``) and the drive state to
+  SWITCH_ON_DISABLED; reset communication restores 0x1000..0x1FFF and keeps
+  the drive state. Leaving OPERATIONAL does not change the drive state: the
+  drive keeps following the last values received. Entering OPERATIONAL
+  restarts every PDO's runtime state; leaving it drops latched RPDOs.
+* Heartbeat: sent at the first tick at or after each multiple of the
+  producer time 0x1017 since boot-up (or since 0x1017 was written); if ticks
+  are farther apart than the period, one heartbeat is sent and the schedule
+  restarts from that tick. The consumer heartbeat 0x1016 is stored but not
+  monitored.
+* EMCY: COB-ID from 0x1014 (bit 31 = not sent), sent in PRE-OPERATIONAL and
+  OPERATIONAL only; data = error code u16, error register 0x1001 u8, five
+  zero manufacturer bytes. Error codes other than 0 are pushed into the
+  pre-defined error field 0x1003 (4 entries; writing 0 to 0x1003:00 clears
+  it).
+* Error register 0x1001: the bits of the latched fault
+  (:func:`hil.canopen.emcy.error_register_bits`) plus bits 0 and 4 while an
+  RPDO length error stands.
+* SYNC consumer (0x1005): the node is no SYNC producer (bit 30 refused),
+  11-bit COB-IDs only. EMCY COB-ID (0x1014): the CAN-ID cannot change while
+  the EMCY is valid.
+"""
+
+from __future__ import annotations
+
+import struct
+
+from hil.canopen.cia402 import State
+from hil.canopen.emcy import EmcyCode, emcy_frame, error_register_bits
+from hil.canopen.frame import EMCY_COB_ID_BASE, SYNC_COB_ID
+from hil.canopen.nmt import NmtCommand, NmtState, heartbeat_frame
+from hil.canopen.pdo import COB_ID_INVALID
+from hil.canopen.sdo import SdoAbortCode
+from sim.drives.store import abort
+
+__all__ = [
+    "EMCY_NO_ERROR",
+    "EMCY_PDO_LENGTH_ERROR",
+    "EMCY_PDO_LENGTH_EXCEEDED",
+    "ERROR_HISTORY_LEN",
+    "TIME_EPS_S",
+    "NmtSlave",
+]
+
+#: EMCY error code "error reset or no error".
+EMCY_NO_ERROR = int(EmcyCode.NO_ERROR)
+#: EMCY error code "PDO not processed due to length error".
+EMCY_PDO_LENGTH_ERROR = int(EmcyCode.PDO_LENGTH)
+#: EMCY error code "PDO length exceeded".
+EMCY_PDO_LENGTH_EXCEEDED = int(EmcyCode.PDO_LENGTH_EXCEEDED)
+#: Entries of the pre-defined error field 0x1003.
+ERROR_HISTORY_LEN = 4
+#: Tolerance of the time comparisons (heartbeat, inhibit and event timers) [s].
+TIME_EPS_S = 1e-9
+
+_FAULTY = (State.FAULT_REACTION_ACTIVE, State.FAULT)
+_TALKING = (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL)
+
+
+class NmtSlave:
+    """Mixin of :class:`sim.drives.drive.SimDrive`: NMT slave, heartbeat, EMCY, error history.
+
+    The attributes below are the ones this part owns (set in
+    :meth:`_init_nmt`). It uses ``node_id``, ``_now``, ``_out``,
+    ``_counters``, ``store``, ``sdo``, ``_icache``, ``_int`` and ``_store``
+    of the drive, ``state_machine`` and the reset hooks (``_cpr_changed``,
+    ``_apply_own_data``, ``_reset_drive``) of
+    :class:`~sim.drives.cia402_drive.Cia402Drive`, and ``_comm_error``,
+    the PDO lists, ``_refresh_pdos``, ``_restart_pdos``, ``_drop_latched``
+    and ``_timed_tpdos`` of :class:`~sim.drives.pdo_engine.PdoEngine`.
+
+    Attributes
+    ----------
+    nmt_state : NmtState
+        Current NMT state.
+    heartbeat_enabled : bool
+        Fault hook: False suppresses the heartbeat frames (the producer
+        timer keeps running, so re-enabling resumes in phase).
+    _hb_period_s : float
+        Heartbeat producer time 0x1017 [s].
+    _hb_next : float or None
+        Time of the next heartbeat [s], None when the producer is off.
+    _sync_cob_id : int
+        COB-ID of the SYNC this node consumes (0x1005).
+    _emcy_cob_id : int or None
+        COB-ID of its EMCY (0x1014), None when invalid.
+    """
+
+    def _init_nmt(self) -> None:
+        """Initial state (INITIALISING until the pair powers the node on)."""
+        self.nmt_state = NmtState.INITIALISING
+        self.heartbeat_enabled = True
+        self._hb_period_s = 0.0
+        self._hb_next: float | None = None
+        self._sync_cob_id = SYNC_COB_ID
+        self._emcy_cob_id: int | None = EMCY_COB_ID_BASE + self.node_id
+
+    # ------------------------------------------------------------------ boot and NMT commands
+
+    def _boot(self, t: float, *, communication_only: bool) -> None:
+        """Power-on / reset: restore defaults, boot-up frame, PRE-OPERATIONAL."""
+        self._now = t
+        self.store.reset(communication_only=communication_only)
+        self._cpr_changed()
+        if not communication_only:
+            self._apply_own_data()
+            self._reset_drive()
+        self._comm_error = False
+        self.sdo.reset()
+        self.nmt_state = NmtState.INITIALISING
+        self._out.append(heartbeat_frame(self.node_id, NmtState.BOOT_UP))
+        self.nmt_state = NmtState.PRE_OPERATIONAL
+        self._refresh_comm(restart_heartbeat=True)
+
+    def _nmt(self, cs: int, t: float) -> None:
+        """Apply NMT command specifier ``cs`` (a valid :class:`NmtCommand` value) at time ``t``."""
+        self._now = t
+        if cs == NmtCommand.START:
+            if self.nmt_state is not NmtState.OPERATIONAL:
+                self.nmt_state = NmtState.OPERATIONAL
+                self._restart_pdos()
+        elif cs == NmtCommand.STOP:
+            self.nmt_state = NmtState.STOPPED
+            self._drop_latched()
+        elif cs == NmtCommand.ENTER_PRE_OPERATIONAL:
+            self.nmt_state = NmtState.PRE_OPERATIONAL
+            self._drop_latched()
+        elif cs == NmtCommand.RESET_NODE:
+            self._boot(t, communication_only=False)
+        elif cs == NmtCommand.RESET_COMMUNICATION:
+            self._boot(t, communication_only=True)
+
+    def _refresh_comm(self, *, restart_heartbeat: bool) -> None:
+        """Re-read the communication objects (SYNC, EMCY, heartbeat if asked, PDOs)."""
+        self._sync_cob_id = self._int(0x1005) & 0x7FF
+        emcy = self._int(0x1014)
+        self._emcy_cob_id = None if emcy & COB_ID_INVALID else emcy & 0x7FF
+        if restart_heartbeat:
+            period_ms = self._int(0x1017)
+            self._hb_period_s = period_ms / 1000.0
+            self._hb_next = self._now + self._hb_period_s if period_ms > 0 else None
+        self._refresh_pdos()
+
+    def _check_comm_object_write(self, index: int, subindex: int, value: int) -> None:
+        """Validate an SDO write of 0x1005, 0x1014 or 0x1003 (raise SdoAbortedError to refuse)."""
+        if index == 0x1005:
+            if value & ((1 << 30) | (1 << 29)) or value & 0x1FFFF800:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)  # this node is no SYNC producer; 11 bit
+        elif index == 0x1014:
+            if value & (1 << 29) or value & 0x1FFFF800:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+            old = self._int(0x1014)
+            if not (old | value) & COB_ID_INVALID and (old ^ value) & 0x7FF:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif index == 0x1003 and subindex == 0:
+            if value != 0:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+
+    # ------------------------------------------------------------------ heartbeat
+
+    def _tick(self, t: float) -> None:
+        """Time passes to ``t``: the heartbeat if due, then the timed event TPDOs."""
+        self._now = t
+        if self._hb_next is not None and t >= self._hb_next - TIME_EPS_S:
+            if self.heartbeat_enabled:
+                self._out.append(heartbeat_frame(self.node_id, self.nmt_state))
+                self._counters.heartbeats_sent += 1
+            self._hb_next += self._hb_period_s
+            if self._hb_next <= t:
+                self._hb_next = t + self._hb_period_s
+        if self._event_tpdos_list:  # (_timed_tpdos only acts on valid event-driven TPDOs)
+            self._timed_tpdos(t)
+
+    # ------------------------------------------------------------------ EMCY and error history
+
+    @property
+    def error_register(self) -> int:
+        """Error register 0x1001: bits of the latched fault plus bits 0 and 4 for a PDO length error."""
+        reg = 0
+        sm = self.state_machine
+        if sm.state in _FAULTY and sm.error_code:
+            reg |= error_register_bits(sm.error_code)
+        if self._comm_error:
+            reg |= 0x11
+        return reg
+
+    def _emcy(self, code: int) -> None:
+        """Produce EMCY ``code`` (0: error reset); a code other than 0 goes into 0x1003 first."""
+        if code:
+            self._push_error(code)
+        if self.nmt_state not in _TALKING or self._emcy_cob_id is None:
+            return
+        self._out.append(emcy_frame(self._emcy_cob_id, code, self.error_register))
+        self._counters.emcys_sent += 1
+
+    def _push_error(self, code: int) -> None:
+        store = self.store
+        if store.var(0x1003, 0) is None:
+            return
+        n = min(self._int(0x1003, 0), ERROR_HISTORY_LEN)
+        old = [store.get_data(0x1003, k) for k in range(1, n + 1)]
+        self._store(0x1003, 1, struct.pack("<I", code))
+        for k, raw in enumerate(old[:ERROR_HISTORY_LEN - 1], start=2):
+            self._store(0x1003, k, raw)
+        self._store(0x1003, 0, bytes([min(n + 1, ERROR_HISTORY_LEN)]))
+
+    def _clear_error_history(self) -> None:
+        """0 written to 0x1003:00: forget the entries."""
+        for k in range(1, ERROR_HISTORY_LEN + 1):
+            self.store.data.get(0x1003, {}).pop(k, None)
+            self._icache.pop((0x1003, k), None)
