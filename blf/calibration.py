@@ -21,7 +21,6 @@ from math import comb
 import numpy as np
 
 from blf.errors import AnalysisError, InputError
-
 from blf.validate import as_1d_finite, as_finite, count, positive_scalar, same_shape, scalar
 
 __all__ = ["LvdtCalibration", "fit_lvdt_calibration", "correct_linear"]

@@ -69,8 +69,7 @@ from typing import Callable, Protocol
 import numpy as np
 from scipy.optimize import least_squares
 
-from blf.mismatch import (RegimeScore, excess, noise_floor, regime_cells, regime_score,  # noqa: F401
-                           regime_words, window_scores)
+from blf.mismatch import RegimeScore, excess, noise_floor, regime_cells, regime_score, regime_words, window_scores  # noqa: F401
 from blf.validate import positive_scalar
 
 __all__ = ["Param", "Candidate", "ReplayModel", "DiagnoseConfig", "Location", "FittedEffect",

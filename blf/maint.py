@@ -20,7 +20,6 @@ import numpy as np
 from scipy import ndimage, signal
 
 from blf.errors import AnalysisError, InputError
-
 from blf.segments import runs
 from blf.validate import as_1d_finite, below_nyquist, count, positive_scalar, readonly, same_shape, scalar
 

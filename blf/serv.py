@@ -45,8 +45,26 @@ import numpy as np
 from scipy import signal
 
 from blf.errors import InputError
-from blf.serv_detect import (O_CH, O_HEIGHT, O_LAST, O_N, O_NPOST, O_NPRE, O_PAPER, O_RPOST, O_RPRE, O_SIGF,
-                             O_START, O_STATUS, O_TC, ST_TOO_LONG, detect, flush, new_state, params_vector)
+from blf.serv_detect import (
+    O_CH,
+    O_HEIGHT,
+    O_LAST,
+    O_N,
+    O_NPOST,
+    O_NPRE,
+    O_PAPER,
+    O_RPOST,
+    O_RPRE,
+    O_SIGF,
+    O_START,
+    O_STATUS,
+    O_TC,
+    ST_TOO_LONG,
+    detect,
+    flush,
+    new_state,
+    params_vector,
+)
 from blf.serv_filters import ServFilters, design_serv_filters, estimate_noise_std_mm, robust_noise_std
 from blf.validate import as_1d_finite, as_finite, count, one_of, positive_scalar, readonly, scalar
 

@@ -51,8 +51,8 @@ from enum import Enum
 
 import numpy as np
 
-from hil.canopen.cia402 import State
 from blf.errors import InputError
+from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame
 from hil.canopen.pdo import Tpdo1, Tpdo2, decode_tpdo1, decode_tpdo2, encode_tpdo1, encode_tpdo2
 from hil.canopen.process import DriveMode

@@ -63,8 +63,9 @@ class SingleAxisReplay:
     """
 
     def __init__(self, t_s, q_m, q_ref_m, force_N, sample_period_s: float) -> None:
-        from blf.diagnose import Param
         from scipy.signal import savgol_filter
+
+        from blf.diagnose import Param
         # any shape, flattened (a .mat file holds columns)
         items = [(as_1d_finite(np.ravel(a), name, unit, min_len=200), name, unit) for a, name, unit in (
             (t_s, "t_s", "s"), (q_m, "q_m", "m"), (q_ref_m, "q_ref_m", "m"), (force_N, "force_N", "N"))]

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blf.errors import AnalysisError, InputError
 from blf import LvdtCalibration, fit_lvdt_calibration, position_differences
 from blf.calibration import correct_linear
+from blf.errors import AnalysisError, InputError
 
 # The simulator's LVDT law (sim/params.py SensorParams), paper values:
 GAIN = 1.075  # 7.5 % pitch error

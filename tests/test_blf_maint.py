@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from blf.errors import AnalysisError, InputError
 from blf import BlfMaintResult, blf_maint
+from blf.errors import AnalysisError, InputError
 
 FS_HZ = 500.0
 SIGMA_D_MM = 0.0042  # LVDT noise (0.025 mm pp)

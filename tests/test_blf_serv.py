@@ -15,8 +15,8 @@ import pytest
 from scipy import signal
 
 from blf.accuracy import AccuracyBudget, backlash_error_budget
-from blf.serv import BlfServMonitor, BlfServResult, blf_serv, design_serv_filters, estimate_noise_std_mm
 from blf.errors import AnalysisError, InputError
+from blf.serv import BlfServMonitor, BlfServResult, blf_serv, design_serv_filters, estimate_noise_std_mm
 
 FS = 500.0
 T = 1.0 / FS

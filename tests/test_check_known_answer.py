@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import simulate_run
 
 from blf.signals import CHANNELS
 from hil.analysis.maint import analyze_signals, result_dict
 from hil.runfolder import read_signals
-
-from conftest import simulate_run
 
 #: every test here runs or reads a whole simulated check: not in the fast loop (-m "not slow")
 pytestmark = pytest.mark.slow

@@ -8,7 +8,23 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hil.canopen.cia402 import TRANSITIONS, Command, Controlword, DriveStateMachine, IllegalTransition, OperationMode, State, Statusword, controlword, decode_command, decode_state, match_state, next_command, path, state_word
+from hil.canopen.cia402 import (
+    TRANSITIONS,
+    Command,
+    Controlword,
+    DriveStateMachine,
+    IllegalTransition,
+    OperationMode,
+    State,
+    Statusword,
+    controlword,
+    decode_command,
+    decode_state,
+    match_state,
+    next_command,
+    path,
+    state_word,
+)
 from hil.canopen.errors import CanopenError, InputError
 from hil.canopen.process import DriveMode
 

@@ -79,3 +79,13 @@ def test_the_seven_measured_channels_are_declared_once():
     assert [f.name for f in dataclasses.fields(Sample)] == [f"{n}_{u}" for n, u in MEASURED_CHANNELS]
     assert SIGNAL_COLUMNS == tuple(n for n, _ in MEASURED_CHANNELS) and COLUMN_UNITS == dict(MEASURED_CHANNELS)
     assert [f.name for f in dataclasses.fields(Signals)][:7] == list(SIGNAL_COLUMNS)
+
+
+def test_python_dash_m_runs_the_command_line():
+    """``python -m hil.cli`` (what the vcan stage and the benchmarks start) and ``python -m hil``."""
+    import subprocess
+    import sys
+
+    for mod in ("hil.cli", "hil"):
+        r = subprocess.run([sys.executable, "-m", mod, "--version"], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0 and r.stdout.startswith("emacheck "), (mod, r.stdout, r.stderr)

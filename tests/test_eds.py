@@ -8,8 +8,16 @@ from pathlib import Path
 import pytest
 from canopen.objectdictionary import ODRecord
 
-from hil.canopen.od import REQUIRED_OBJECTS, check_drive_od, decode_value, default_eds_path, encode_value, load_drive_od, od_variable
 from hil.canopen.errors import EdsError
+from hil.canopen.od import (
+    REQUIRED_OBJECTS,
+    check_drive_od,
+    decode_value,
+    default_eds_path,
+    encode_value,
+    load_drive_od,
+    od_variable,
+)
 from hil.canopen.pdo import DEFAULT_LAYOUT
 
 

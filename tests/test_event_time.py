@@ -14,10 +14,10 @@ from collections import deque
 import can
 import pytest
 
-from hil.transport import BusTransport
+from hil.canopen.frame import Frame
 from hil.link import CanopenLink, StaleData
 from hil.master import MasterCore
-from hil.canopen.frame import Frame
+from hil.transport import BusTransport
 
 
 class QueuedSocket:

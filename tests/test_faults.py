@@ -34,9 +34,9 @@ import numpy as np
 import pytest
 
 from hil.canlog import decode_can_log
-from hil.link import SDO_FALLBACK_CYCLES
 from hil.canopen.cia402 import State
 from hil.cli.dry_run import dry_run
+from hil.link import SDO_FALLBACK_CYCLES
 from hil.profiles import load_actuation, load_check, load_simrig
 from hil.runfolder import read_signals
 from hil.supervisor import Limits

@@ -9,12 +9,12 @@ import shutil
 import numpy as np
 import pytest
 
+from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.cli import main
 from hil.config import HARD_MAX_FORCE_FRACTION, HARD_MAX_STALE_CYCLES
 from hil.errors import ProfileError
 from hil.profiles import default_profile_path, load_check
 from hil.supervisor import Limits, Supervisor
-from hil.canopen.process import DriveMode, Sample, Setpoint
 from support.profiles import write_profile_variant
 
 T = 0.002

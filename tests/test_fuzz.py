@@ -20,16 +20,16 @@ import tomli_w
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from hil.link import CanopenLink
-from hil.transport import InProcessTransport, _to_msg
-from hil.canopen.od import load_drive_od
-from hil.errors import KNOWN_ERRORS, ProfileError
-from hil.master import MasterCore
 from hil.canopen.frame import Frame
-from hil.profiles import load_actuation, load_check, load_simrig
+from hil.canopen.od import load_drive_od
 from hil.canopen.process import DriveMode, Setpoint
-from sim.plant import RigPlant
+from hil.errors import KNOWN_ERRORS, ProfileError
+from hil.link import CanopenLink
+from hil.master import MasterCore
+from hil.profiles import load_actuation, load_check, load_simrig
+from hil.transport import InProcessTransport, _to_msg
 from sim.drives import SimDrivePair
+from sim.plant import RigPlant
 from support.profiles import load_profile_data, write_profile_variant
 
 ACT = load_actuation()

@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 from hil.canopen.cia402 import State
-from hil.canopen.od import load_drive_od
-from hil.master import DriveFault, HeartbeatLost, MasterCore, PreflightError
 from hil.canopen.frame import Frame, sync_frame
-from hil.canopen.sdo import SdoAbortError
+from hil.canopen.od import load_drive_od
 from hil.canopen.process import DriveMode, Setpoint
-from sim.plant import RigPlant
+from hil.canopen.sdo import SdoAbortError
+from hil.master import DriveFault, HeartbeatLost, MasterCore, PreflightError
 from sim.drives import SimDrivePair
+from sim.plant import RigPlant
 
 
 class Pump:

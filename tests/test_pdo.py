@@ -10,13 +10,40 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hil.canopen.od import load_drive_od
-from hil.canopen.errors import CanopenError, InputError
-from hil.canopen.pdo import DEFAULT_LAYOUT, Direction, PdoError, PdoLengthError, Rpdo1, Rpdo2, Tpdo1, Tpdo2, decode_rpdo1, decode_rpdo2, decode_tpdo1, decode_tpdo2, encode_rpdo1, encode_rpdo2, encode_tpdo1, encode_tpdo2
-from hil.canopen.frame import Frame, FrameError, sync_frame
 from hil.canopen.busload import bus_load, frame_bits
-from hil.canopen.units import force_dN_to_newton, force_to_permille, increments_per_rad, increments_to_rad, lvdt_um_to_mm, mm_to_lvdt_um, newton_to_force_dN, permille_to_force_N, rad_to_increments
+from hil.canopen.errors import CanopenError, InputError
+from hil.canopen.frame import Frame, FrameError, sync_frame
+from hil.canopen.od import load_drive_od
+from hil.canopen.pdo import (
+    DEFAULT_LAYOUT,
+    Direction,
+    PdoError,
+    PdoLengthError,
+    Rpdo1,
+    Rpdo2,
+    Tpdo1,
+    Tpdo2,
+    decode_rpdo1,
+    decode_rpdo2,
+    decode_tpdo1,
+    decode_tpdo2,
+    encode_rpdo1,
+    encode_rpdo2,
+    encode_tpdo1,
+    encode_tpdo2,
+)
 from hil.canopen.sdo import SdoClient, SdoEvent
+from hil.canopen.units import (
+    force_dN_to_newton,
+    force_to_permille,
+    increments_per_rad,
+    increments_to_rad,
+    lvdt_um_to_mm,
+    mm_to_lvdt_um,
+    newton_to_force_dN,
+    permille_to_force_N,
+    rad_to_increments,
+)
 
 I_TOTAL = 2 * math.pi * 4 / 5  # rad/mm, the default actuation (gearbox 4:1, lead 5 mm)
 

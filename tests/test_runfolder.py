@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.errors import RecordingError
 from hil.runfolder import SignalsWriter, read_signals
-from hil.canopen.process import DriveMode, Sample, Setpoint
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2\n"
 

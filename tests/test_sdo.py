@@ -8,10 +8,20 @@ import canopen
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
-from hil.canopen.od import load_drive_od
 from hil.canopen.errors import CanopenError
 from hil.canopen.frame import Frame
-from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent, SdoTimeout, SdoTransfer, SdoUsageError, abort_frame, describe
+from hil.canopen.od import load_drive_od
+from hil.canopen.sdo import (
+    SdoAbortCode,
+    SdoAbortError,
+    SdoClient,
+    SdoEvent,
+    SdoTimeout,
+    SdoTransfer,
+    SdoUsageError,
+    abort_frame,
+    describe,
+)
 
 
 def F(can_id: int, hexdata: str) -> Frame:

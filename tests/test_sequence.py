@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from hil.canopen.process import DriveMode, Sample
 from hil.errors import SequenceError
 from hil.sequence import TRANSITIONS, CheckSequence, Step, _triangle
-from hil.canopen.process import DriveMode, Sample
 
 
 def _smp(t, phi1=0.0, phi2=0.0, s1=0.0, s2=0.0, F1=0.0, F2=0.0):

@@ -10,10 +10,10 @@ import pytest
 
 from blf.calibration import fit_lvdt_calibration
 from hil.canlog import CanLogWriter
-from hil.cli import main
+from hil.canopen.frame import sync_frame
 from hil.canopen.pdo import Tpdo1, Tpdo2, encode_tpdo1, encode_tpdo2
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
-from hil.canopen.frame import sync_frame
+from hil.cli import main
 from support import scenarios as sc
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2"

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from blf.calibration import fit_lvdt_calibration
-from blf.serv import BlfServMonitor, blf_serv, estimate_noise_std_mm
 from blf.errors import InputError
+from blf.serv import BlfServMonitor, blf_serv, estimate_noise_std_mm
 from support import scenarios as sc
 
 SEEDS = range(5)

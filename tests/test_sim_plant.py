@@ -8,7 +8,6 @@ and the sensor error model.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -27,38 +26,12 @@ from sim.effects import (
 from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams
 from sim.plant import PlantState, RigPlant
 from sim.truth import RigTruth, rig_truth
+from support.rigs import I_TOTAL, T_S, brief_rig, quiet
 
-I_TOTAL = 2 * math.pi * 4 / 5  # rad/mm
 POS, FRC, DIS = int(DriveMode.POSITION), int(DriveMode.FORCE), int(DriveMode.DISABLED)
-T_S = 0.002
 
 
-def make_params(**overrides) -> RigParams:
-    """Default rig of the brief; keyword overrides replace RigParams fields."""
-    base = dict(
-        i_total_rad_per_mm=I_TOTAL,
-        stroke_limit_mm=20.0,
-        sample_period_s=T_S,
-        substeps=8,
-        ema1=EmaMechanics(0.10, 80e3, 80e3, 0.05, 200e3, 20e3),
-        ema2=EmaMechanics(0.12, 80e3, 80e3, 0.05, 200e3, 20e3),
-        drive=DriveParams(1.0e-4, 1e-4, 10.0, 150.0, 0.8, 0.05),
-        surface=SurfaceParams(300.0, 0.5, 0.0),
-        sensors1=SensorParams(1.075, 0.3, 0.02, 20.0, 0.025, 1.0, 10.0, 12),
-        sensors2=SensorParams(0.98, -0.2, 0.02, 20.0, 0.025, 1.0, 10.0, 12),
-        effects=(),
-    )
-    base.update(overrides)
-    return RigParams(**base)
-
-
-def quiet(params: RigParams) -> RigParams:
-    """Same rig with noise-free LVDTs and load cells."""
-    return replace(
-        params,
-        sensors1=replace(params.sensors1, lvdt_noise_pp_mm=0.0, loadcell_noise_std_N=0.0),
-        sensors2=replace(params.sensors2, lvdt_noise_pp_mm=0.0, loadcell_noise_std_N=0.0),
-    )
+make_params = brief_rig  # the brief's rig; keyword overrides replace RigParams fields
 
 
 @pytest.fixture

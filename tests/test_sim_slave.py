@@ -16,17 +16,16 @@ import pytest
 
 from hil.canopen.cia402 import State, controlword, decode_state, next_command
 from hil.canopen.errors import InputError
-from hil.canopen.pdo import DEFAULT_LAYOUT, Rpdo1, Rpdo2, decode_tpdo1, decode_tpdo2, encode_rpdo1, encode_rpdo2
 from hil.canopen.frame import Frame, sync_frame
-from hil.canopen.units import permille_to_force_N
-from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
+from hil.canopen.pdo import DEFAULT_LAYOUT, Rpdo1, Rpdo2, decode_tpdo1, decode_tpdo2, encode_rpdo1, encode_rpdo2
 from hil.canopen.process import DriveMode
-from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams
-from sim.plant import RigPlant
+from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
+from hil.canopen.units import permille_to_force_N
 from sim.drives import QUICK_STOP_HOLD_S, TARGET_WINDOW_INC, NmtState, SimDrivePair, error_register_bits
+from sim.params import RigParams
+from sim.plant import RigPlant
+from support.rigs import I_TOTAL, T_S, brief_rig, quiet
 
-I_TOTAL = 2 * math.pi * 4 / 5  # rad/mm
-T_S = 0.002
 INC_PER_MM = I_TOTAL * 4096 / (2 * math.pi)  # 3276.8 increments per mm of stroke
 
 SW_SOD = 0x0250  # switch on disabled + remote
@@ -41,19 +40,7 @@ SW_FAULT = 0x0218
 
 def make_params() -> RigParams:
     """The default rig of tests/test_sim_plant.py with noise-free LVDTs and load cells."""
-    return RigParams(
-        i_total_rad_per_mm=I_TOTAL,
-        stroke_limit_mm=20.0,
-        sample_period_s=T_S,
-        substeps=8,
-        ema1=EmaMechanics(0.10, 80e3, 80e3, 0.05, 200e3, 20e3),
-        ema2=EmaMechanics(0.12, 80e3, 80e3, 0.05, 200e3, 20e3),
-        drive=DriveParams(1.0e-4, 1e-4, 10.0, 150.0, 0.8, 0.05),
-        surface=SurfaceParams(300.0, 0.5, 0.0),
-        sensors1=SensorParams(1.075, 0.3, 0.02, 20.0, 0.0, 1.0, 0.0, 12),
-        sensors2=SensorParams(0.98, -0.2, 0.02, 20.0, 0.0, 1.0, 0.0, 12),
-        effects=(),
-    )
+    return quiet(brief_rig())
 
 
 class Rig:

@@ -93,8 +93,8 @@ def test_serve_answers_sync_and_stops_on_event():
     from hil.canopen.od import load_drive_od
     from hil.profiles import load_simrig
     from hil.sim_server import serve
-    from sim.plant import RigPlant
     from sim.drives import SimDrivePair
+    from sim.plant import RigPlant
 
     simrig = load_simrig()
     pair = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(1)),

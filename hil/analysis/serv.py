@@ -42,7 +42,6 @@ from hil.config import Actuation
 from hil.errors import RecordingError
 from hil.runfolder import Signals
 
-
 PAPER_PITCH_ERROR = 0.075  #: the paper's uncompensated pitch error, used when no calibration says otherwise
 
 

@@ -284,9 +284,13 @@ class SimDrivePair:
         return self._now
 
     def _drain(self) -> list[Frame]:
-        out = list(self._out)
-        self._out.clear()
-        return out
+        """The frames the nodes queued, handed over (the queue is emptied; no list made when empty)."""
+        out = self._out
+        if not out:
+            return []
+        frames = out.copy()
+        out.clear()
+        return frames
 
     def _step(self, mode1: int, value1: float, mode2: int, value2: float) -> None:
         """Step the plant with both drives' commands (DriveMode values, rad / N).
@@ -414,12 +418,7 @@ class SimDrivePair:
             n0._event_tpdos(now)
         if n1._event_tpdos_list:
             n1._event_tpdos(now)
-        out = self._out
-        if out:
-            frames = out.copy()
-            out.clear()
-            return frames
-        return []
+        return self._drain()
 
     def _on_nmt(self, frame: Frame, t: float) -> None:
         if len(frame.data) != 2:
@@ -487,12 +486,7 @@ class SimDrivePair:
         if self._powered:
             for node in self.nodes:
                 node._tick(now)
-        out = self._out
-        if out:
-            frames = out.copy()
-            out.clear()
-            return frames
-        return []
+        return self._drain()
 
     # ------------------------------------------------------------------ fault hooks
 

@@ -32,11 +32,12 @@ def main() -> int:
     args = ap.parse_args()
 
     from conftest import simulate_run
+
     from hil.analysis.maint import analyze_signals, result_dict
+    from hil.canopen.process import DriveMode, Setpoint
     from hil.profiles import load_actuation, load_check, load_simrig
     from hil.report.maint import write_report
     from hil.runfolder import read_signals
-    from hil.canopen.process import DriveMode, Setpoint
     from sim.plant import RigPlant
 
     act = load_actuation()

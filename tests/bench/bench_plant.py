@@ -19,7 +19,6 @@ given on argv (default ``bench_plant.json`` in the current directory).
 from __future__ import annotations
 
 import json
-import math
 import os
 import platform
 import sys
@@ -28,28 +27,18 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))  # the repository
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests/ (support)
 
 from hil.canopen.process import DriveMode, Setpoint  # noqa: E402
-from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams  # noqa: E402
+from sim.params import RigParams  # noqa: E402
 from sim.plant import RigPlant  # noqa: E402
+from support.rigs import I_TOTAL, brief_rig  # noqa: E402
 
 N_SAMPLES = 60_000
-I_TOTAL = 2 * math.pi * 4 / 5
 
 
 def default_params() -> RigParams:
-    return RigParams(
-        i_total_rad_per_mm=I_TOTAL,
-        stroke_limit_mm=20.0,
-        sample_period_s=0.002,
-        substeps=8,
-        ema1=EmaMechanics(0.10, 80e3, 80e3, 0.05, 200e3, 20e3),
-        ema2=EmaMechanics(0.12, 80e3, 80e3, 0.05, 200e3, 20e3),
-        drive=DriveParams(1.0e-4, 1e-4, 10.0, 150.0, 0.8, 0.05),
-        surface=SurfaceParams(300.0, 0.5, 0.0),
-        sensors1=SensorParams(1.075, 0.3, 0.02, 20.0, 0.025, 1.0, 10.0, 12),
-        sensors2=SensorParams(0.98, -0.2, 0.02, 20.0, 0.025, 1.0, 10.0, 12),
-    )
+    return brief_rig()
 
 
 def trajectory(n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,7 @@
+"""``python -m hil ARGS`` is ``emacheck ARGS``."""
+
+import sys
+
+from hil.cli import main
+
+sys.exit(main())
