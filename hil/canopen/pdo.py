@@ -30,7 +30,7 @@ from enum import Enum
 from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.errors import CanopenError, InputError
-from hil.canopen.frame import MAX_NODE_ID, Frame
+from hil.canopen.frame import MAX_NODE_ID, Frame, split_cob_id
 from hil.canopen.validate import integer
 from hil.canopen.validate import node_id as _node_id
 
@@ -232,9 +232,9 @@ class PdoLayout:
 
     def find(self, cob_id: int) -> tuple[PdoSpec, int] | None:
         """The PDO and node id a COB-ID belongs to, or None if it is no PDO of this layout."""
+        base, n = split_cob_id(cob_id)
         for p in self.pdos:
-            n = cob_id - p.cob_id_base
-            if 1 <= n <= MAX_NODE_ID:
+            if p.cob_id_base == base and n >= 1:
                 return p, n
         return None
 

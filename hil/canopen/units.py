@@ -46,7 +46,8 @@ def round_clip_i16(x: float) -> int:
 
 def inc_from_rad(phi_rad: float, inc_per_rad: float) -> int:
     """Kernel of :func:`rad_to_increments`: ``round(phi k)`` clipped to i32."""
-    return round_clip_i32(phi_rad * inc_per_rad)
+    v = round(phi_rad * inc_per_rad)  # (round_clip_i32 written out: this runs twice per drive and SYNC)
+    return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
 
 
 def rad_from_inc(position_inc: float, inc_per_rad: float) -> float:
@@ -66,12 +67,14 @@ def permille_from_torque(torque_Nm: float, rated_torque_Nm: float) -> int:
 
 def um_from_mm(stroke_mm: float) -> int:
     """Kernel of :func:`mm_to_lvdt_um` [0.001 mm]."""
-    return round_clip_i32(stroke_mm * 1000.0)
+    v = round(stroke_mm * 1000.0)
+    return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
 
 
 def dN_from_N(F_N: float) -> int:
     """Kernel of :func:`newton_to_force_dN` [0.1 N]."""
-    return round_clip_i32(F_N * 10.0)
+    v = round(F_N * 10.0)
+    return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
 
 
 # --------------------------------------------------------------------------- validated

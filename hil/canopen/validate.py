@@ -36,6 +36,8 @@ def integer(name: str, value: object, lo: int, hi: int, *, error: type[Exception
     what : str
         What the number is, appended to the range, e.g. ``" (16-bit word)"``.
     """
+    if value.__class__ is int and lo <= value <= hi:  # the common case, first (hot path of the master)
+        return value
     span = f"{show.format(lo)}..{show.format(hi)}"
     if isinstance(value, bool):
         raise error(f"{name} must be an int in {span}{what}, got bool")
@@ -55,11 +57,18 @@ def node_id(value: object, name: str = "node_id") -> int:
 
 def word16(name: str, value: object) -> int:
     """A 16-bit word (controlword, statusword), 0..0xFFFF."""
+    if value.__class__ is int and 0 <= value <= 0xFFFF:  # the common case, first
+        return value
     return integer(name, value, 0, 0xFFFF, show="0x{:X}", what=" (16-bit word)")
 
 
 def finite(name: str, value: object, unit: str) -> float:
     """A finite float in ``unit``."""
+    if value.__class__ is float:  # the common case, first (hot path of the master)
+        if value - value == 0.0:  # not NaN or inf
+            return value
+    elif value.__class__ is int:
+        return float(value)
     if isinstance(value, bool):
         raise InputError(f"{name} must be a number [{unit}], got bool")
     try:

@@ -12,11 +12,13 @@ from rich.table import Table
 from blf.signals import CHANNELS
 from hil.cli.common import actuation_for, add_parser, add_recording_args, load_recording, read_meta
 from hil.errors import RecordingError
-from hil.report.shell import fmt
 from hil.runfolder import resolve_recording, write_json_atomic
 
 
 def print_summary(console: Console, data: dict, out_dir: Path) -> None:
+    """The BLFserv result as a table on the console, truth beside it when known."""
+    from hil.report.shell import fmt
+
     truth = data.get("truth")
     tab = Table(title=f"BLFserv ({data['method']})")
     for col in ("channel", "backlash mm", "traversals", "paper mm", "truth mm" if truth else None):
