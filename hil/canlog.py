@@ -44,10 +44,12 @@ class CanLogWriter:
     Flushed to the OS every ``flush_frames`` frames and whenever the frame time
     moved ``flush_period_s`` past the last flush, so a killed master loses at
     most that much of the log (the last line may be cut short: readers drop it).
+    ``time_offset_s`` is added to every stamp: ``emacheck run`` logs wall-clock
+    (UNIX) time as candump does; a dry-run logs its simulated time from 0.
     """
 
     def __init__(self, path: Path, channel: str = "can0", flush_frames: int = 2000,
-                 flush_period_s: float = 0.5) -> None:
+                 flush_period_s: float = 0.5, time_offset_s: float = 0.0) -> None:
         self.path = path
         self._w = can.io.CanutilsLogWriter(str(path), channel=channel)
         self._n = 0
@@ -55,6 +57,7 @@ class CanLogWriter:
         self._flush_period_s = flush_period_s
         self._flushed_t = 0.0
         self.frames = 0
+        self.time_offset_s = float(time_offset_s)
 
     def write(self, frame: Frame, t: float, rx: bool) -> None:
         msg = can.Message(timestamp=t, arbitration_id=frame.arbitration_id, data=frame.data,
@@ -62,13 +65,17 @@ class CanLogWriter:
         self.write_msg(msg)
 
     def write_msg(self, msg: can.Message) -> None:
-        """Log a python-can message as it is (timestamp, direction flag ``is_rx``)."""
+        """Log a python-can message (its timestamp in the transport's time, direction flag ``is_rx``)."""
+        t = msg.timestamp
+        if self.time_offset_s:
+            msg = can.Message(timestamp=t + self.time_offset_s, arbitration_id=msg.arbitration_id, data=msg.data,
+                              is_extended_id=False, is_rx=msg.is_rx, check=False)
         self._w.on_message_received(msg)
         self.frames += 1
         self._n += 1
-        if self._n >= self._flush_frames or msg.timestamp - self._flushed_t >= self._flush_period_s:
+        if self._n >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
             self.flush()
-            self._flushed_t = msg.timestamp
+            self._flushed_t = t
 
     def flush(self) -> None:
         self._w.file.flush()

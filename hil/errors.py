@@ -37,6 +37,10 @@ class IncompleteRecordingError(RecordingError):
     """A recording that is well-formed but ends too early or holds no data (e.g. a killed run)."""
 
 
+class InterfaceError(EmacheckError, OSError):
+    """A CAN interface that cannot be opened; the message names interface, channel and what to check."""
+
+
 class SequenceError(EmacheckError, RuntimeError):
     """The check sequence reached a state it cannot continue from."""
 

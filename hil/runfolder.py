@@ -133,20 +133,37 @@ class Signals:
         return Signals(notes=self.notes, **kw)
 
 
+def read_text(path: Path, what: str) -> str:
+    """A recording's text (gzip'd when the name ends in ``.gz``), or a RecordingError saying what it
+    is instead of ``what`` (a MATLAB file, binary data, nothing)."""
+    import gzip
+
+    try:
+        if path.suffix.lower() == ".gz":
+            with gzip.open(path, "rt") as fh:
+                return fh.read()
+        return path.read_text()
+    except FileNotFoundError:
+        raise IncompleteRecordingError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise RecordingError(f"{path}: a folder without signals.csv or can.log, not a recording") from None
+    except (UnicodeDecodeError, gzip.BadGzipFile, EOFError) as exc:
+        if path.suffix.lower() == ".mat":
+            raise RecordingError(f"{path}: a MATLAB file, not {what}; a single-axis recording such as EMPS's is "
+                                 f"read by `emacheck diagnose {path.name} --model single-axis`") from None
+        raise RecordingError(f"{path}: not {what} ({type(exc).__name__})") from None
+
+
 def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) -> Signals:
     """Read a signals CSV (a run folder's or one recorded elsewhere).
 
     Requires the columns ``t,phi1,phi2,s1,s2,F1,F2``; uses ``mode1,sp1,mode2,sp2,step``
     when present. Refuses NaN, non-numeric cells and non-increasing time with
-    the line number. A last line cut short by a crash is dropped and noted.
+    the line number. A last line cut short by a crash is dropped and noted. A ``.gz`` file is read
+    through gzip.
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise IncompleteRecordingError(f"{path}: no such file") from None
-    except UnicodeDecodeError:
-        raise RecordingError(f"{path}: not a text CSV file") from None
+    text = read_text(path, "a text CSV file (columns t,phi1,phi2,s1,s2,F1,F2)")
     lines = text.splitlines()
     if not lines:
         raise IncompleteRecordingError(f"{path}: empty file")

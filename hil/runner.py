@@ -9,11 +9,10 @@ is the same for all of them, so the sequence core runs unchanged on hardware.
 from __future__ import annotations
 
 import datetime as _dt
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Protocol
-
-import numpy as np
 
 from hil import __version__
 from hil.canopen.process import DriveMode, Sample, Setpoint
@@ -24,6 +23,8 @@ from hil.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.supervisor import Supervisor
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
+#: The reason recorded when the operator stops the check (Ctrl-C, SIGINT).
+INTERRUPTED = "interrupted by the operator"
 
 
 class Link(Protocol):
@@ -72,8 +73,9 @@ def _now_iso() -> str:
 
 
 def start_meta(act: Actuation, check: Check, extra: dict) -> dict:
-    """The meta.json content at the start of a run."""
+    """The meta.json content at the start of a run (with a new run id)."""
     return {
+        "run_id": uuid.uuid4().hex,
         "software": {"name": "emacheck", "version": __version__},
         "started_utc": _now_iso(),
         "status": "running",
@@ -142,7 +144,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
         stop_note = _record_safe_state(link, meta)
     except BaseException as exc:
         # fail closed: stop both drives, keep the log, record why, re-raise
-        reason = f"error: {type(exc).__name__}: {exc}"
+        reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"error: {type(exc).__name__}: {exc}"
         secondary = ""
         try:
             seq.abort(smp.t_s if smp is not None else 0.0, reason)
@@ -191,7 +193,3 @@ def _record_safe_state(link, meta: dict) -> str:
               "state not confirmed (no statusword), last known " if not v["confirmed"] else "in ")
            + v["state"] for k, v in final.items() if not v["safe"]]
     return f"; not in the safe state: {', '.join(bad)}" if bad else ""
-
-
-def seeded_rng(seed: int) -> np.random.Generator:
-    return np.random.default_rng(seed)

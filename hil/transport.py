@@ -265,6 +265,11 @@ class BusTransport:
         self._slice = sync_period_s / 4
         self._sync_started = 0.0  #: when start_sync() returned [s]
 
+    @property
+    def wall_clock_offset_s(self) -> float:
+        """Add to this transport's time to get wall-clock (UNIX) time [s]: the CAN log's stamps."""
+        return self._t0 + self._rt_minus_mono
+
     def now(self) -> float:
         """Monotonic time [s] since the transport was made; on SocketCAN, the time of the last
         event :meth:`receive` delivered.

@@ -39,7 +39,7 @@ class RigTruth:
     calibration: dict
 
 
-def _series(*stiffness_N_per_mm: float) -> float:
+def series_stiffness(*stiffness_N_per_mm: float) -> float:
     return 1.0 / sum(1.0 / k for k in stiffness_N_per_mm)
 
 
@@ -92,8 +92,8 @@ def rig_truth(params: RigParams) -> RigTruth:
         return m
 
     m1, m2 = mech("ema1"), mech("ema2")
-    ks1 = _series(m1.bearing_stiffness_N_per_mm, m1.housing_stiffness_N_per_mm)
-    ks2 = _series(m2.bearing_stiffness_N_per_mm, m2.housing_stiffness_N_per_mm)
+    ks1 = series_stiffness(m1.bearing_stiffness_N_per_mm, m1.housing_stiffness_N_per_mm)
+    ks2 = series_stiffness(m2.bearing_stiffness_N_per_mm, m2.housing_stiffness_N_per_mm)
     k_ext = 2.0 / (1.0 / ks1 + 1.0 / ks2)
     backlash = {
         "int1": float(m1.backlash_int_mm),
@@ -112,3 +112,50 @@ def rig_truth(params: RigParams) -> RigTruth:
         "ema2": {"pitch": float(params.sensors2.lvdt_gain), "offset_mm": float(params.sensors2.lvdt_offset_mm)},
     }
     return RigTruth(backlash_mm=backlash, stiffness_N_per_mm=stiffness, calibration=calibration)
+
+
+def chain_stiffness_N_per_mm(params: RigParams) -> tuple[float, float]:
+    """Contact stiffness of each EMA's whole load path, structure to surface.
+
+    Parameters
+    ----------
+    params : RigParams
+
+    Returns
+    -------
+    tuple of float
+        ``(k_1, k_2)`` in N/mm.
+
+    Notes
+    -----
+    Housing spring, internal path (mean of compression and tension) and
+    bearing in series: :math:`k_i = (1/k_h + 1/k_{int} + 1/k_b)^{-1}` [N/mm]
+    (14 815 N/mm with the default rig).
+    """
+    p = instance_of(params, RigParams, "params", "a sim.params.RigParams")
+    out = []
+    for m in (p.ema1, p.ema2):
+        kint = 0.5 * (m.stiffness_compression_N_per_mm + m.stiffness_tension_N_per_mm)
+        out.append(series_stiffness(m.housing_stiffness_N_per_mm, kint, m.bearing_stiffness_N_per_mm))
+    return out[0], out[1]
+
+
+def force_fight_play_mm(params: RigParams) -> float:
+    """Relative motor offset at which the force fight starts, mm.
+
+    Parameters
+    ----------
+    params : RigParams
+
+    Returns
+    -------
+    float
+        Half the total play between the two motors,
+        :math:`(B_{int,1} + B_{b,1} + B_{int,2} + B_{b,2})/2` [mm]
+        (0.16 mm with the default rig): with the surface free and no air load,
+        :math:`F_1 = -F_2 = k_s(\\delta - \\text{this})` for
+        :math:`\\delta` above it, :math:`k_s = (1/k_1 + 1/k_2)^{-1}`.
+    """
+    p = instance_of(params, RigParams, "params", "a sim.params.RigParams")
+    return 0.5 * (p.ema1.backlash_int_mm + p.ema1.bearing_backlash_mm
+                  + p.ema2.backlash_int_mm + p.ema2.bearing_backlash_mm)

@@ -127,7 +127,7 @@ def test_run_cut_just_after_the_force_fight_began_is_incomplete_not_a_crash(defa
     meta = json.loads((src / "meta.json").read_text())
     meta["status"] = "running"
     (out / "meta.json").write_text(json.dumps(meta))
-    assert main(["analyze", str(out)]) == 2
+    assert main(["analyze", str(out), "--out", str(out)]) == 2
     res = json.loads((out / "result.json").read_text())
     assert res["status"] == "incomplete"
     assert "force-fight segment too short for BLFmaint: 5 samples (need >= 200)" in res["analysis_error"]

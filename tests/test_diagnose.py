@@ -19,6 +19,7 @@ import pytest
 from blf.diagnose import diagnose
 from blf.errors import InputError
 from hil.cli import main
+from test_verdict import validate
 from sim.replay import ChainParams, DualEmaReplay, replay_chains
 from support import diagnose_cases as dc
 
@@ -112,7 +113,7 @@ def test_out_of_library_is_unexplained(tmp_path, short):
 def test_emps_cli(tmp_path):
     rc = main(["diagnose", str(EMPS), "--model", "single-axis", "--out", str(tmp_path), "--quiet"])
     assert rc == 0
-    data = json.loads((tmp_path / "diagnosis.json").read_text())
+    data = validate(tmp_path / "diagnosis.json", "diagnosis")
     assert set(data) >= {"verdict", "effects", "locations", "residual_rms_before", "residual_rms_after",
                          "ic_before", "ic_after"}
     named = data["effects"] + data["partial_effects"]
@@ -185,7 +186,7 @@ def test_cli_on_a_run_folder(tmp_path, short):
     dc.record(dc.base_params(), 31005, run, short)
     out = tmp_path / "diag"
     assert main(["diagnose", str(run), "--out", str(out), "--quiet"]) == 0
-    data = json.loads((out / "diagnosis.json").read_text())
+    data = validate(out / "diagnosis.json", "diagnosis")
     assert data["verdict"] == "no_mismatch", data["excess_before"]
     assert set(data["residual_rms_before"]) == {"s1", "s2", "F1", "F2", "Fd1", "Fd2", "Dint1", "Dint2", "Dext"}
     # D_int,1 = s1 - phi1/i_total with phi1 an input of the replay: same residual as s1

@@ -101,7 +101,7 @@ def test_analyze_from_can_log_alone(dry_run, tmp_path):
     run.mkdir()
     for f in ("can.log", "meta.json"):
         shutil.copy(out / f, run / f)
-    rc = main(["analyze", str(run)])
+    rc = main(["analyze", str(run), "--out", str(run)])
     assert rc == 0
     res = json.loads((run / "result.json").read_text())
     ref = json.loads((out / "result.json").read_text())

@@ -118,7 +118,7 @@ def test_twenty_kills_leave_analysable_run_folders(tmp_path, capsys):
             f"seed {SEED}, kill {k} at {delay:.3f} s: the run ended before the kill"
         killed_mid_run += 1
         delays.append(delay)
-        rc = main(["analyze", str(out)])
+        rc = main(["analyze", str(out), "--out", str(out)])
         text = capsys.readouterr().out
         res = json.loads((out / "result.json").read_text())
         assert rc == 2 and res["status"] == "incomplete", f"seed {SEED}, kill {k} at {delay:.3f} s: {res}"

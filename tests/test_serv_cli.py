@@ -14,7 +14,9 @@ from hil.canopen.frame import sync_frame
 from hil.canopen.pdo import Tpdo1, Tpdo2, encode_tpdo1, encode_tpdo2
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main
-from support import scenarios as sc
+from hil.cli.common import ExitCode
+from sim import operation as op
+from sim import scenarios as sc
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2"
 
@@ -29,9 +31,9 @@ def _write_csv(path, t, phi1, phi2, s1, s2, F1, F2) -> None:
 def sim_data(simrig):
     params = simrig.params
     rng = np.random.default_rng(77)
-    sw1 = sc.simulate_calibration_sweep(params, rng, ema=1)
-    sw2 = sc.simulate_calibration_sweep(params, rng, ema=2)
-    rec = sc.simulate_operation(params, sc.full_stroke_profile(params), rng)
+    sw1 = op.simulate_calibration_sweep(params, rng, ema=1)
+    sw2 = op.simulate_calibration_sweep(params, rng, ema=2)
+    rec = op.simulate_operation(params, sc.full_stroke_profile(params), rng)
     cal1 = fit_lvdt_calibration(sw1.x_mm, sw1.s_mm)
     cal2 = fit_lvdt_calibration(sw2.x_mm, sw2.s_mm)
     return {"params": params, "rec": rec, "sweeps": (sw1, sw2), "cal": (cal1, cal2)}
@@ -78,9 +80,12 @@ def test_run_folder_uses_its_calibration_and_finds_the_truth(run_folder, tmp_pat
     html = (out / "serv_report.html").read_text()
     assert html.count("data:image/png;base64,") == 4
     assert "paper Fig. 8" in html and "Accuracy of the backlash measurement" in html
-    # default output place: the run folder itself
-    rc = main(["serv", str(run_folder), "--no-report"])
-    assert rc == 0 and (run_folder / "serv.json").exists() and not (run_folder / "serv_report.html").exists()
+    # default output place: a new sub-folder of the run folder, twice two different ones (nothing overwritten)
+    before = (run_folder / "result.json").read_bytes()
+    assert main(["serv", str(run_folder), "--no-report"]) == 0 and main(["serv", str(run_folder), "--no-report"]) == 0
+    made = sorted(run_folder.glob("serv-*/serv.json"))
+    assert len(made) == 2 and not list(run_folder.glob("serv-*/serv_report.html"))
+    assert not (run_folder / "serv.json").exists() and (run_folder / "result.json").read_bytes() == before
 
 
 def test_bare_csv_without_calibration_says_uncorrected(run_folder, tmp_path):
@@ -113,7 +118,15 @@ def test_calibration_sweeps_found_in_the_recording(sim_data, tmp_path):
     path = tmp_path / "sweeps.csv"
     _write_csv(path, t, *cols)
     rc, data, _ = _serv(tmp_path, path)
-    assert rc == 0
+    # the sweeps' two reversals give two jumps per EMA that read ~50 % high (0.16 mm for 0.10/0.12): their U
+    # straddles B_spec, so the decision is inconclusive (exit 5), not a pass; ext is never crossed
+    assert rc == ExitCode.INCONCLUSIVE and data["status"] == "inconclusive"
+    v = data["verdict"]
+    assert v["ext"]["status"] == "not_traversed" and v["ext"]["traversals"] == 0
+    for ch in ("int1", "int2"):
+        assert v[ch]["status"] == "inconclusive" and v[ch]["traversals"] < 5
+        assert v[ch]["backlash_mm"] - v[ch]["uncertainty_mm"] <= 0.2 < v[ch]["backlash_mm"] + v[ch]["uncertainty_mm"]
+    assert any("counted traversal(s)" in n for n in data["notes"])
     assert data["calibration"]["source"] == "slow sweeps under load detected in the recording"
     assert data["calibration"]["ema1"]["pitch"] == pytest.approx(1.075, rel=2e-3)
     assert data["calibration"]["ema2"]["pitch"] == pytest.approx(0.98, rel=2e-3)

@@ -1,4 +1,4 @@
-"""BLFserv on simulated normal operation against the simulator's truth (support.scenarios).
+"""BLFserv on simulated normal operation against the simulator's truth (sim.scenarios, sim.operation).
 
 Default rig (simrig.toml): LVDT noise 0.025 mm peak to peak, 7.5 % pitch error
 on LVDT 1, 2 % on LVDT 2, offsets and cubic non-linearity; internal backlash
@@ -15,7 +15,8 @@ import pytest
 from blf.calibration import fit_lvdt_calibration
 from blf.errors import InputError
 from blf.serv import BlfServMonitor, blf_serv, estimate_noise_std_mm
-from support import scenarios as sc
+from sim import operation as op
+from sim import scenarios as sc
 
 SEEDS = range(5)
 FS = 500.0
@@ -40,8 +41,8 @@ def runs(params):
     i_total = params.i_total_rad_per_mm
     for seed in SEEDS:
         rng = np.random.default_rng(500 + seed)
-        sw1 = sc.simulate_calibration_sweep(params, rng, ema=1)
-        sw2 = sc.simulate_calibration_sweep(params, rng, ema=2)
+        sw1 = op.simulate_calibration_sweep(params, rng, ema=1)
+        sw2 = op.simulate_calibration_sweep(params, rng, ema=2)
         cal1, cal2 = fit_lvdt_calibration(sw1.x_mm, sw1.s_mm), fit_lvdt_calibration(sw2.x_mm, sw2.s_mm)
         profiles = {
             "full_stroke": sc.full_stroke_profile(params),
@@ -52,7 +53,7 @@ def runs(params):
         }
         recs, res = {}, {}
         for name, prof in profiles.items():
-            rec = sc.simulate_operation(params, prof, rng)
+            rec = op.simulate_operation(params, prof, rng)
             d = _d(rec, i_total, cal1, cal2)
             recs[name] = rec
             res[name] = {ch: blf_serv(d[ch], FS, keep_signals=False) for ch in CHANNELS}
@@ -103,9 +104,9 @@ def test_gust_profile_statistics_and_validation(params):
 
 
 def test_same_seed_same_record(params):
-    a = sc.simulate_operation(params, sc.small_manoeuvre_profile(params, frequencies_Hz=(1.0,)),
+    a = op.simulate_operation(params, sc.small_manoeuvre_profile(params, frequencies_Hz=(1.0,)),
                               np.random.default_rng(3))
-    b = sc.simulate_operation(params, sc.small_manoeuvre_profile(params, frequencies_Hz=(1.0,)),
+    b = op.simulate_operation(params, sc.small_manoeuvre_profile(params, frequencies_Hz=(1.0,)),
                               np.random.default_rng(3))
     np.testing.assert_array_equal(a.s1_mm, b.s1_mm)
     np.testing.assert_array_equal(a.F2_N, b.F2_N)

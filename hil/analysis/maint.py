@@ -12,15 +12,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from blf.accuracy import AccuracyBudget, backlash_error_budget
 from blf.calibration import LvdtCalibration, fit_lvdt_calibration
 from blf.errors import AnalysisError
 from blf.maint import MIN_SAMPLES, BlfMaintResult, blf_maint
 from blf.segments import Segments, trim
 from blf.segments import find_segments as blf_find_segments
 from blf.signals import CHANNELS, position_differences
-from hil.config import Actuation
+from blf.verdict import ChannelVerdict, UncertaintyBudget, decide, maint_uncertainty, overall
+from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
+from hil.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import Signals
+
+#: Relative pitch uncertainty of an LVDT used uncalibrated: the pitch error the supervisor tolerates,
+#: as a rectangular bound (the analysis then says so in its notes).
+UNCALIBRATED_PITCH_UNCERTAINTY = HARD_LVDT_GAIN_TOLERANCE / 3.0 ** 0.5
 
 
 @dataclass(frozen=True)
@@ -33,7 +40,10 @@ class Analysis:
     d_int2: np.ndarray
     d_ext: np.ndarray
     maint: dict  #: "int1"/"int2"/"ext" -> BlfMaintResult, or an error message (str)
-    status: str  #: "pass" | "fail"
+    uncertainty: dict  #: "int1"/"int2"/"ext" -> UncertaintyBudget (None where not measured)
+    verdicts: dict  #: "int1"/"int2"/"ext" -> ChannelVerdict
+    budget: AccuracyBudget  #: the error budget of paper 2.3 for this check's profile and calibration
+    status: str  #: "pass" | "fail" | "inconclusive" (blf.verdict.overall)
     notes: tuple[str, ...] = field(default_factory=tuple)
 
 
@@ -115,11 +125,33 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
         except AnalysisError as exc:
             maint[ch] = str(exc)
             notes.append(f"{ch}: {exc}")
-    spec = {"int1": act.mechanics.backlash_spec_int_mm, "int2": act.mechanics.backlash_spec_int_mm,
-            "ext": act.mechanics.backlash_spec_ext_mm}
-    ok = all(isinstance(maint[ch], BlfMaintResult) and maint[ch].backlash_mm <= spec[ch] for ch in CHANNELS)
-    return Analysis(seg, cal, s_corr[1], s_corr[2], d.d_int1_mm, d.d_int2_mm, d.d_ext_mm, maint,
-                    "pass" if ok else "fail", tuple(notes))
+    p_rel = {k: (UNCALIBRATED_PITCH_UNCERTAINTY if c is None else abs(c.coefficient_sigmas[1] / c.pitch))
+             for k, c in cal.items()}
+    p_ch = {"int1": p_rel["ema1"], "int2": p_rel["ema2"], "ext": (p_rel["ema1"] ** 2 + p_rel["ema2"] ** 2) ** 0.5}
+    unc: dict[str, UncertaintyBudget | None] = {}
+    verdicts: dict[str, ChannelVerdict] = {}
+    for ch in CHANNELS:
+        r = maint[ch]
+        limit = spec_mm(act, ch)
+        if isinstance(r, BlfMaintResult):
+            unc[ch] = maint_uncertainty(r.backlash_mm, r.backlash_sigma_mm, p_ch[ch])
+            verdicts[ch] = decide(r.backlash_mm, unc[ch].expanded_mm, limit)
+        else:
+            unc[ch] = None
+            verdicts[ch] = decide(None, None, limit, missing=r)
+    pitches = [abs(c.pitch - 1.0) for c in cal.values() if c is not None]
+    budget = backlash_error_budget(
+        act.mechanics.stroke_limit_mm, max(pitches) if pitches else PAPER_PITCH_ERROR,
+        act.sensors.lvdt_noise_pp_mm / 6.0, rate, backlash_mm=act.mechanics.backlash_spec_int_mm,
+        residual_pitch_error=max(max(p_rel.values()), 1e-6), temperature_error=0.0)
+    return Analysis(seg, cal, s_corr[1], s_corr[2], d.d_int1_mm, d.d_int2_mm, d.d_ext_mm, maint, unc, verdicts,
+                    budget, overall(verdicts), tuple(notes))
+
+
+def spec_mm(act: Actuation, channel: str) -> float:
+    """B_spec of a channel [mm]: internal for int1/int2, external for ext."""
+    m = act.mechanics
+    return m.backlash_spec_ext_mm if channel == "ext" else m.backlash_spec_int_mm
 
 
 def _f(x: float) -> float:
@@ -147,8 +179,20 @@ def result_dict(an: Analysis, act: Actuation, truth: dict | None = None) -> dict
         calib[k] = None if c is None else {
             "pitch": _f(c.pitch), "offset_mm": _f(c.offset_mm), "nonlinearity_mm": _f(c.nonlinearity_mm),
             "rmse_mm": _f(c.rmse_mm)}
+    verdict = {}
+    for ch in CHANNELS:
+        v, u = an.verdicts[ch], an.uncertainty[ch]
+        verdict[ch] = {"status": v.status, "backlash_mm": v.backlash_mm, "uncertainty_mm": v.uncertainty_mm,
+                       "limit_mm": v.limit_mm, "margin_mm": v.margin_mm, "reason": v.reason,
+                       "uncertainty_budget_mm": None if u is None else {
+                           "statistical": u.statistical_mm, "pitch": u.pitch_mm, "temperature": u.temperature_mm,
+                           "method": u.method_mm, "combined": u.combined_mm, "expanded": u.expanded_mm,
+                           "coverage_factor": u.coverage_factor}}
     out = {
         "status": an.status,
+        "verdict": verdict,
+        "decision_rule": "ISO 14253-1 guard band: pass if B + U <= limit on every channel, fail if B - U > "
+                         "limit on any, otherwise inconclusive; U expanded uncertainty, k = 2",
         "backlash_mm": bl,
         "backlash_sigma_mm": bls,
         "stiffness_N_per_mm": st,
@@ -156,6 +200,7 @@ def result_dict(an: Analysis, act: Actuation, truth: dict | None = None) -> dict
         "calibration": calib,
         "spec": {"backlash_int_mm": act.mechanics.backlash_spec_int_mm,
                  "backlash_ext_mm": act.mechanics.backlash_spec_ext_mm},
+        "accuracy": budget_dict(an.budget),
         "blf_maint": extra,
         "segments": {"source": an.segments.source,
                      "force_fight_samples": int(an.segments.force_fight.sum())},

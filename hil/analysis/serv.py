@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,14 +35,15 @@ import numpy as np
 from blf.accuracy import AccuracyBudget, backlash_error_budget
 from blf.calibration import correct_linear, fit_lvdt_calibration
 from blf.errors import AnalysisError, InputError
-from blf.segments import find_sweep
+from blf.segments import find_sweep, runs
 from blf.serv import blf_serv
 from blf.signals import CHANNELS, position_differences
+from blf.verdict import decide, overall, serv_uncertainty
+from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
+from hil.analysis.maint import spec_mm
 from hil.config import Actuation
 from hil.errors import RecordingError
 from hil.runfolder import Signals
-
-PAPER_PITCH_ERROR = 0.075  #: the paper's uncompensated pitch error, used when no calibration says otherwise
 
 
 @dataclass(frozen=True)
@@ -152,6 +153,7 @@ class ServAnalysis:
     results: dict  #: channel -> BlfServResult
     budget: AccuracyBudget
     method: str
+    act: Actuation
 
 
 def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: str) -> ServAnalysis:
@@ -159,7 +161,24 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
     if sig.n < 100:
         raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= 100)")
     i = act.mechanics.i_total_rad_per_mm
-    pd = position_differences(sig.phi1, sig.phi2, correction.s1_mm, correction.s2_mm, i)
+    s1, s2 = correction.s1_mm, correction.s2_mm
+    if sig.step is not None:
+        # BLFserv is for normal operation: the calibration phases of a recording (step column) are not
+        # analysed, only the longest stretch without them
+        operation = np.array([not str(x).startswith(("cal1_", "cal2_")) for x in sig.step], dtype=bool)
+        spans = runs(operation)
+        if not spans:
+            raise RecordingError("the step column marks every sample as LVDT calibration: nothing to analyse")
+        a, b = max(spans, key=lambda r: r[1] - r[0])
+        if b - a < sig.n:
+            keep = np.zeros(sig.n, bool)
+            keep[a:b] = True
+            sig = sig.select(keep)
+            s1, s2 = s1[a:b], s2[a:b]
+            correction = replace(correction, notes=correction.notes + (
+                f"BLFserv on t = {sig.t[0]:.1f}..{sig.t[-1]:.1f} s only: the step column marks the rest as "
+                "LVDT calibration, not normal operation",))
+    pd = position_differences(sig.phi1, sig.phi2, s1, s2, i)
     d = {"int1": pd.d_int1_mm, "int2": pd.d_int2_mm, "ext": pd.d_ext_mm}
     rate = 1.0 / sig.sample_period_s
     results = {ch: blf_serv(d[ch], rate, method=method, t0_s=float(sig.t[0])) for ch in CHANNELS}
@@ -169,7 +188,7 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
         act.mechanics.stroke_limit_mm, pitch_err, act.sensors.lvdt_noise_pp_mm / 6.0, rate,
         backlash_mm=act.mechanics.backlash_spec_int_mm,
         residual_pitch_error=correction.residual_pitch_error if correction.residual_pitch_error is not None else 1e-3)
-    return ServAnalysis(sig, correction, d, results, budget, method)
+    return ServAnalysis(sig, correction, d, results, budget, method, act)
 
 
 def _f(x):
@@ -207,18 +226,43 @@ def serv_dict(an: ServAnalysis, truth: dict | None, source: str) -> dict:
                       "sample_period_s": float(an.sig.sample_period_s)},
         "notes": list(an.sig.notes) + list(c.notes),
     }
+    verdicts, notes = serv_verdicts(an)
+    out["status"] = overall(verdicts)
+    out["verdict"] = {ch: {"status": v.status, "backlash_mm": v.backlash_mm, "uncertainty_mm": v.uncertainty_mm,
+                           "limit_mm": v.limit_mm, "margin_mm": v.margin_mm, "traversals": int(res[ch].traversals),
+                           "reason": v.reason} for ch, v in verdicts.items()}
+    out["decision_rule"] = ("ISO 14253-1 guard band per traversed channel: pass if B + U <= limit, fail if B - U > "
+                            "limit, otherwise inconclusive; U expanded uncertainty, k = 2; channels not traversed "
+                            "do not count unless none was")
+    out["notes"] += notes
     if truth is not None:
         out["truth"] = truth
     return out
 
 
-def budget_dict(b: AccuracyBudget) -> dict:
-    def m(x):
-        return {"travel_mm": x.travel_mm, "pitch_uncompensated_mm": x.pitch_uncompensated_mm,
-                "pitch_compensated_mm": x.pitch_compensated_mm, "noise_mm": x.noise_mm, "jump_mm": x.jump_mm,
-                "temperature_mm": x.temperature_mm, "total_compensated_mm": x.total_compensated_mm,
-                "total_uncompensated_mm": x.total_uncompensated_mm}
-    return {"stroke_mm": b.stroke_mm, "pitch_error": b.pitch_error, "residual_pitch_error": b.residual_pitch_error,
-            "lvdt_noise_std_mm": b.lvdt_noise_std_mm, "filtered_noise_std_mm": b.filtered_noise_std_mm,
-            "temperature_error": b.temperature_error, "backlash_mm": b.backlash_mm, "target_mm": b.target_mm,
-            "BLFmaint": m(b.maint), "BLFserv_paper": m(b.serv_paper), "BLFserv_improved": m(b.serv_improved)}
+#: A BLFserv reading resting on fewer counted traversals than this gets a warning.
+MIN_TRAVERSALS = 5
+
+
+def serv_verdicts(an: ServAnalysis) -> tuple[dict, list[str]]:
+    """Per channel the decision against B_spec (:mod:`blf.verdict`) and warnings about thin readings."""
+    notes = []
+    verdicts = {}
+    b = an.budget
+    m = b.serv_improved if an.method == "improved" else b.serv_paper
+    for ch in CHANNELS:
+        r = an.results[ch]
+        limit = spec_mm(an.act, ch)
+        if r.backlash_mm is None or not math.isfinite(r.backlash_mm):
+            verdicts[ch] = decide(None, None, limit, not_traversed=True,
+                                  missing="not traversed: no backlash crossing counted in this recording")
+            continue
+        sigma = r.backlash_sigma_mm if r.backlash_sigma_mm is not None and math.isfinite(r.backlash_sigma_mm) else 0.0
+        u = serv_uncertainty(r.backlash_mm, sigma, m.pitch_compensated_mm, m.temperature_mm, an.method)
+        verdicts[ch] = decide(r.backlash_mm, u.expanded_mm, limit)
+        if r.traversals < MIN_TRAVERSALS:
+            notes.append(f"{ch}: the reading rests on {r.traversals} counted traversal(s); fewer than "
+                         f"{MIN_TRAVERSALS} leave the spread of single jumps, and so its uncertainty, poorly known")
+    return verdicts, notes
+
+

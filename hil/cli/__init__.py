@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status (see the module docstring)."""
     from blf.errors import BlfError
     from hil.canopen.errors import CanopenError, EdsError
-    from hil.errors import EmacheckError, ProfileError, RecordingError
+    from hil.errors import EmacheckError, InterfaceError, ProfileError, RecordingError
 
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         return ExitCode.INPUT
     try:
         return int(args.handler(args))
-    except (ProfileError, RecordingError, EdsError) as exc:
+    except (ProfileError, RecordingError, EdsError, InterfaceError) as exc:
         print(f"emacheck: error: {exc}", file=sys.stderr)
         return ExitCode.INPUT
     except (EmacheckError, CanopenError, BlfError) as exc:

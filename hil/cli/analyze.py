@@ -5,18 +5,25 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
 from blf.errors import AnalysisError
-from hil.cli.check import INCOMPLETE_REASON, analyze_and_report, exit_for, print_summary
-from hil.cli.common import ExitCode, actuation_for, add_parser, add_recording_args, read_meta
-from hil.errors import IncompleteRecordingError
+from hil.cli.check import INCOMPLETE_REASON, analyze_and_report, exit_for, print_summary, trace_of
+from hil.cli.common import (
+    ExitCode,
+    actuation_for,
+    add_parser,
+    add_recording_args,
+    add_trace_args,
+    make_console,
+    outputs_for,
+    read_meta,
+)
+from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import resolve_recording, write_json_atomic
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
     """``emacheck analyze``: recompute the result from a run folder or a signals CSV."""
-    console = Console()
+    console = make_console()
     arg = Path(args.recording)
     try:
         sig_path, run_dir = resolve_recording(arg)
@@ -26,23 +33,28 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = read_meta(run_dir)
     act = actuation_for(args.profile, meta)
-    out = Path(args.out) if args.out is not None else (run_dir if run_dir is not None else sig_path.parent)
+    outputs = outputs_for(args.out, sig_path, run_dir, "analysis")
+    out = outputs.folder
     truth = meta.get("truth") if meta else None
     incomplete = meta is not None and meta.get("status") == "running"
+    extra = {"operator": args.operator, "work_order": args.work_order}
     try:
-        result = analyze_and_report(sig_path, act, out, truth, meta, console)
+        result = analyze_and_report(sig_path, act, outputs, truth, meta, console, trace_extra=extra)
     except (IncompleteRecordingError, AnalysisError) as exc:
         # (bad content, e.g. garbage lines or NaN, is refused whatever the run's status)
         if not incomplete and not (meta is not None and meta.get("status") == "aborted"):
-            raise
+            if str(exc).startswith(str(sig_path)):
+                raise
+            raise RecordingError(f"{sig_path}: cannot be analysed: {exc}") from None
         # an interrupted run with too little data for the analysis: say so, keep what is known
         result = {"status": "incomplete" if incomplete else "aborted",
                   "reason": INCOMPLETE_REASON if incomplete else meta.get("reason", ""),
-                  "analysis_error": f"{type(exc).__name__}: {exc}", "recording": str(sig_path)}
+                  "analysis_error": f"{type(exc).__name__}: {exc}", "recording": str(sig_path),
+                  "trace": trace_of(meta, sig_path, extra)}
         if truth is not None:
             result["truth"] = truth
         out.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(out / "result.json", result)
+        write_json_atomic(outputs.path("result.json"), result)
         console.print(f"[yellow]{result['status']}:[/yellow] {result['reason']}; no analysis: {exc}")
         return ExitCode.ABORTED
     if incomplete:
@@ -58,3 +70,4 @@ def register(sub) -> None:
                                "Without a step column the calibration sweeps and force-fight "
                                "segments are found automatically.")
     add_recording_args(p, "result.json and report.html")
+    add_trace_args(p)

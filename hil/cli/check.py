@@ -10,12 +10,13 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from rich import box
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from blf.signals import CHANNELS
-from hil.cli.common import ExitCode, load_recording
+from hil.cli.common import ExitCode, Outputs, load_recording, utc_iso
 from hil.config import Actuation
 from hil.errors import KNOWN_ERRORS
 from hil.runfolder import write_json_atomic
@@ -48,29 +49,50 @@ class LiveProgress:
         self._p.update(self._task, completed=prog.total_fraction, step=prog.step.value, values=vals)
 
 
+_STATUS_STYLE = {"pass": "green", "fail": "red", "inconclusive": "yellow", "aborted": "red", "incomplete": "yellow"}
+
+
+def styled(text: str, status: str, bold: bool = False) -> str:
+    """``text`` in the console colour of a verdict or run status (plain when it has none)."""
+    style = (("bold " if bold else "") + _STATUS_STYLE.get(status, "")).strip()
+    return f"[{style}]{text}[/]" if style else text
+
+
 def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
-    """The result as a table, truth beside it when known."""
+    """The result as a table: per channel the decision against its limit with the expanded
+    uncertainty and the margin, then stiffness; truth beside it when known."""
     truth = result.get("truth")
-    tab = Table(title=f"BLFmaint result: [bold]{result['status'].upper()}[/bold]")
-    tab.add_column("channel")
-    tab.add_column("backlash mm", justify="right")
-    tab.add_column("± 1σ", justify="right")
-    tab.add_column("c_left N/mm", justify="right")
-    tab.add_column("c_right N/mm", justify="right")
+    status = result["status"]
+    tab = Table(title=f"BLFmaint result: {styled(status.upper(), status, bold=True)}",
+                box=box.SIMPLE_HEAD, pad_edge=False)
+    for col, just in (("channel", "left"), ("backlash ± U mm", "right"), ("limit mm", "right"),
+                      ("margin mm", "right"), ("verdict", "left"), ("c_l / c_r kN/mm", "right")):
+        tab.add_column(col, justify=just)
     if truth:
         tab.add_column("truth B mm", justify="right")
-        tab.add_column("truth c_l / c_r", justify="right")
+        tab.add_column("truth c kN/mm", justify="right")
+    verdict = result.get("verdict", {})
+    kn = lambda x: "—" if x is None else f"{x / 1e3:.1f}"  # noqa: E731
     for ch in CHANNELS:
         b = result["backlash_mm"][ch]
-        row = [ch, "—" if b is None else f"{b:.4f}",
-               "—" if b is None else f"{result['backlash_sigma_mm'][ch]:.4f}",
-               "—" if b is None else f"{result['stiffness_N_per_mm'][ch]['left']:.0f}",
-               "—" if b is None else f"{result['stiffness_N_per_mm'][ch]['right']:.0f}"]
+        v = verdict.get(ch, {})
+        st = v.get("status", "")
+        u = v.get("uncertainty_mm")
+        stf = result["stiffness_N_per_mm"][ch]
+        row = [ch, "—" if b is None else f"{b:.4f}" + ("" if u is None else f" ± {u:.4f}"),
+               "—" if v.get("limit_mm") is None else f"{v['limit_mm']:.3f}",
+               "—" if v.get("margin_mm") is None else f"{v['margin_mm']:+.4f}",
+               styled(st, st) if st else "—",
+               f"{kn(stf['left'])} / {kn(stf['right'])}"]
         if truth:
-            row += [f"{truth['backlash_mm'][ch]:.4f}",
-                    f"{truth['stiffness_N_per_mm'][ch]['left']:.0f} / {truth['stiffness_N_per_mm'][ch]['right']:.0f}"]
+            ts = truth["stiffness_N_per_mm"][ch]
+            row += [f"{truth['backlash_mm'][ch]:.4f}", f"{kn(ts['left'])} / {kn(ts['right'])}"]
         tab.add_row(*row)
     console.print(tab)
+    for ch in CHANNELS:
+        v = verdict.get(ch, {})
+        if v.get("status") not in (None, "pass"):
+            console.print(f"{ch}: {v['status']}: {v['reason']}")
     for k in ("ema1", "ema2"):
         c = result["calibration"][k]
         if c is None:
@@ -81,13 +103,37 @@ def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
                           + f", offset {c['offset_mm']:+.4f} mm, rmse {c['rmse_mm']:.4f} mm")
     for n in result.get("notes", []):
         console.print(f"[yellow]note:[/yellow] {n}")
+    if result.get("reason"):
+        console.print(f"[red]{status}:[/red] {result['reason']}")
     if out_dir is not None:
-        console.print(f"run folder: {out_dir}")
+        console.print(f"written to: {out_dir}")
 
 
-def analyze_and_report(sig_path: Path, act: Actuation, out_dir: Path, truth: dict | None,
-                       meta: dict | None, console: Console) -> dict:
-    """Read the signals back, analyse, write result.json and report.html."""
+def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> dict:
+    """The traceability block of result.json: when, which software, which actuators (0x1018 read in the
+    preflight), who and for which work order, which files (SHA-256), which run and recording."""
+    from hil import __version__
+
+    meta = meta or {}
+    extra = {k: v for k, v in (extra or {}).items() if v}
+    return {
+        "run_id": meta.get("run_id"),
+        "started_utc": meta.get("started_utc"),
+        "analysed_utc": utc_iso(),
+        "software": {"name": "emacheck", "version": __version__,
+                     "check_run_with": (meta.get("software") or {}).get("version")},
+        "operator": extra.get("operator", meta.get("operator")),
+        "work_order": extra.get("work_order", meta.get("work_order")),
+        "identity": meta.get("identity") or {},
+        "files_sha256": meta.get("files_sha256") or {},
+        "recording": str(sig_path),
+        "mode": meta.get("mode"),
+    }
+
+
+def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: dict | None,
+                       meta: dict | None, console: Console, trace_extra: dict | None = None) -> dict:
+    """Read the signals back, analyse, write result.json and report.html into ``outputs``."""
     # imported here, not at the top: `emacheck run` loads the analysis only after the cyclic loop
     from hil.analysis.maint import analyze_signals, result_dict
     from hil.report.maint import write_report
@@ -104,10 +150,11 @@ def analyze_and_report(sig_path: Path, act: Actuation, out_dir: Path, truth: dic
     if sig.notes:
         result.setdefault("notes", [])
         result["notes"] = list(result["notes"]) + [n for n in sig.notes if n not in result["notes"]]
+    result["trace"] = trace_of(meta, sig_path, trace_extra)
     result["analysis_s"] = round(time.perf_counter() - t0, 3)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out_dir / "result.json", result)
-    write_report(out_dir / "report.html", sig, an, result, act, meta)
+    outputs.folder.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(outputs.path("result.json"), result)
+    write_report(outputs.path("report.html"), sig, an, result, act, meta, json_name=outputs.path("result.json").name)
     return result
 
 
@@ -116,7 +163,9 @@ INCOMPLETE_REASON = ("the run did not finish (meta.json still says running: the 
 
 
 def exit_for(result: dict) -> int:
-    return {"pass": ExitCode.PASS, "fail": ExitCode.FAIL}.get(result["status"], ExitCode.ABORTED)
+    """The exit status of a result: pass 0, fail 1, inconclusive 5, aborted or incomplete 2."""
+    return {"pass": ExitCode.PASS, "fail": ExitCode.FAIL,
+            "inconclusive": ExitCode.INCONCLUSIVE}.get(result["status"], ExitCode.ABORTED)
 
 
 def truth_dict(truth) -> dict:
@@ -147,12 +196,17 @@ def master_setup(act, profile_path, out: Path):
 
 
 def check_eds_identity(od, c, eds) -> None:
-    """The EDS must describe the drive the profile expects (identity 0x1018:01/02/03 defaults)."""
+    """The EDS must describe the drive the profile expects: its ``[DeviceInfo]`` vendor, product and
+    revision numbers and the 0x1018:01/02/03 defaults must agree with each other and with the profile's
+    ``canopen.vendor_id``, ``product_code`` and ``revision_min``."""
     from hil.errors import ProfileError
 
     ident = od[0x1018] if 0x1018 in od else None
-    for sub, field_name, want, cmp in ((1, "vendor_id", c.vendor_id, "=="), (2, "product_code", c.product_code, "=="),
-                                       (3, "revision_min", c.revision_min, ">=")):
+    info = getattr(od, "device_information", None)
+    for sub, field_name, info_name, info_key, want, cmp in (
+            (1, "vendor_id", "VendorNumber", "vendor_number", c.vendor_id, "=="),
+            (2, "product_code", "ProductNumber", "product_number", c.product_code, "=="),
+            (3, "revision_min", "RevisionNumber", "revision_number", c.revision_min, ">=")):
         var = ident.subindices.get(sub) if ident is not None else None
         have = getattr(var, "default", None)
         if have is None:
@@ -162,20 +216,24 @@ def check_eds_identity(od, c, eds) -> None:
         if not ok:
             raise ProfileError(f"EDS {eds}: identity 0x1018:{sub:02X} = 0x{have:08X} does not match the profile's "
                                f"canopen.{field_name} = 0x{want:08X}: the EDS describes another drive")
+        declared = getattr(info, info_key, None)
+        if declared is not None and declared != have:
+            raise ProfileError(f"EDS {eds}: [DeviceInfo] {info_name} = 0x{declared:08X} but the identity object "
+                               f"0x1018:{sub:02X} defaults to 0x{have:08X}: the file contradicts itself")
 
 
 def canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):
     """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
-    ...) has already stopped the drives and closed the log when it arrives here: it becomes an
-    aborted outcome with the reason, and result.json says so."""
-    from hil.runner import LoopOutcome, run_check
+    ...) or Ctrl-C has already stopped the drives and closed the log when it arrives here: it
+    becomes an aborted outcome with the reason, and result.json says so."""
+    from hil.runner import INTERRUPTED, LoopOutcome, run_check
 
     t0 = time.perf_counter()
     try:
         with LiveProgress(console, 0.0, not quiet) as live:
             outcome = run_check(link, act, check, out, meta, on_cycle=live)
-    except KNOWN_ERRORS as exc:
-        reason = f"{type(exc).__name__}: {exc}"
+    except (*KNOWN_ERRORS, KeyboardInterrupt) as exc:
+        reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
         outcome = LoopOutcome("aborted", reason, meta.get("samples", 0), meta.get("duration_s", 0.0),
                               meta.get("steps", {}))
     wall = time.perf_counter() - t0
@@ -199,20 +257,34 @@ def record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=
         meta["can"]["max_lag_ms"] = round(transport.max_lag_s * 1e3, 2)
     if page_faults is not None:
         meta["can"]["page_faults"] = page_faults  # during the check (each costs time)
+    # each EMA's identity as the drive reported it by SDO (0x1018) in the preflight
+    meta["identity"] = {f"ema{k}": ({"node": n, **master.drives[n].identity} if master.drives[n].identity else None)
+                        for k, n in enumerate(master.order, start=1)}
     write_json_atomic(out / "meta.json", meta)
+
+
+def print_drives_final(console: Console, meta: dict) -> None:
+    """Each drive's last known CiA 402 state after the check (meta.json ``drives_final``)."""
+    for ema, d in (meta.get("drives_final") or {}).items():
+        safe = "safe" if d.get("safe") else "[red]NOT confirmed safe[/red]"
+        how = "" if d.get("reachable") else ", unreachable (heartbeat lost)"
+        console.print(f"EMA {ema[-1]} (node {d.get('node')}): {d.get('state')}, {safe}{how}")
 
 
 def result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -> int:
     """Analyse a finished check; an aborted one gets result.json with the reason (and the
-    analysis where enough data was recorded)."""
+    analysis where enough data was recorded) and the console says where each drive ended."""
+    run = Outputs(out)
     if outcome.status != "done":
         console.print(f"[red]aborted:[/red] {outcome.reason}")
         meta["status"], meta["reason"] = "aborted", meta.get("reason") or outcome.reason
         write_json_atomic(out / "meta.json", meta)
+        print_drives_final(console, meta)
         try:
-            result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+            result = analyze_and_report(out / "signals.csv", act, run, truth, meta, console)
         except KNOWN_ERRORS as exc:
-            result = {"status": "aborted", "reason": meta["reason"], "analysis_error": str(exc)}
+            result = {"status": "aborted", "reason": meta["reason"], "analysis_error": str(exc),
+                      "trace": trace_of(meta, out / "signals.csv")}
             if truth is not None:
                 result["truth"] = truth
             write_json_atomic(out / "result.json", result)
@@ -220,6 +292,6 @@ def result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -
             return ExitCode.ABORTED
         print_summary(console, result, out)
         return ExitCode.ABORTED
-    result = analyze_and_report(out / "signals.csv", act, out, truth, meta, console)
+    result = analyze_and_report(out / "signals.csv", act, run, truth, meta, console)
     print_summary(console, result, out)
     return exit_for(result)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import json
+from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
 
@@ -26,13 +27,15 @@ class ExitCode(IntEnum):
     ABORTED = 2  #: the check aborted or the run is incomplete; result.json says why
     INPUT = 3  #: bad input: profile, recording, EDS or arguments; the message names file, field or line
     INTERNAL = 4  #: an internal error (a bug): one line on the console, the traceback in the log
+    INCONCLUSIVE = 5  #: a reading's uncertainty straddles its limit, or a channel was not measured
 
 
 EPILOG = """\
-exit status: 0 pass (serv, diagnose, sim-serve: done), 1 fail (a backlash above B_spec),
+exit status: 0 pass (diagnose, sim-serve: done), 1 fail (a backlash proven above B_spec),
 2 check aborted or run incomplete (result.json says why), 3 bad input (profile,
-recording, EDS, arguments: the message names the file, field or line), 4 internal error.
-Profiles default to the ones shipped in the package (profiles/*.toml)."""
+recording, EDS, CAN interface, arguments: the message names the file, field or line),
+4 internal error, 5 inconclusive (a reading whose uncertainty straddles B_spec, or a
+channel not measured). Profiles default to the shipped ones (profiles/*.toml)."""
 
 
 def add_parser(sub, name: str, *, help: str, description: str, handler) -> argparse.ArgumentParser:
@@ -64,7 +67,8 @@ def add_recording_args(p: argparse.ArgumentParser, writes: str, *,
     p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
                    help="actuation profile (default: the run folder's snapshot, else the shipped one)")
     p.add_argument("--out", metavar="DIR", type=Path,
-                   help=f"where {writes} go (default: the run folder, or next to the file)")
+                   help=f"where {writes} go (default: a new sub-folder of the run folder, or files named after "
+                        f"the recording next to it: nothing is overwritten)")
 
 
 def add_bus_args(p: argparse.ArgumentParser, interfaces: str) -> None:
@@ -72,6 +76,30 @@ def add_bus_args(p: argparse.ArgumentParser, interfaces: str) -> None:
     p.add_argument("--interface", required=True, help=f"python-can interface, e.g. {interfaces}")
     p.add_argument("--channel", required=True, help="channel, e.g. can0 or vcan0")
     p.add_argument("--bitrate", type=int, metavar="BPS", help="bit rate (default: the actuation profile's)")
+
+
+def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages: bool = False):
+    """A python-can bus, or :class:`hil.errors.InterfaceError` saying what to check (exit status 3)."""
+    import can
+
+    kwargs = {"interface": interface, "channel": channel}
+    if interface not in ("virtual", "socketcan", "udp_multicast"):
+        kwargs["bitrate"] = bitrate
+    if receive_own_messages:
+        kwargs["receive_own_messages"] = True
+    try:
+        return can.Bus(**kwargs)
+    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
+        from hil.errors import InterfaceError
+
+        hint = ("check that the interface exists and is up (`ip link show {ch}`; "
+                "`sudo ip link set {ch} up type can bitrate {br}`)" if interface == "socketcan" else
+                "check that the adapter is connected, its driver installed and the channel name right")
+        known = ", ".join(sorted(getattr(can, "VALID_INTERFACES", ()))) or "see python-can"
+        raise InterfaceError(
+            f"cannot open CAN interface {interface!r} channel {channel!r}: {type(exc).__name__}: {exc}; "
+            + hint.format(ch=channel, br=bitrate) + f"; --interface must be one python-can knows ({known})"
+        ) from None
 
 
 def _seed(text: str) -> int:
@@ -82,6 +110,97 @@ def _seed(text: str) -> int:
     if v < 0:
         raise argparse.ArgumentTypeError(f"{v} is negative; a seed is an integer >= 0")
     return v
+
+
+def utc_stamp() -> str:
+    """The current UTC time as ``20261123T141500Z`` (for folder names)."""
+    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+
+
+def utc_iso() -> str:
+    """The current UTC time, ISO 8601 to the second."""
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """Where a command writes its files: a folder and a prefix for the file names."""
+
+    folder: Path
+    prefix: str = ""
+
+    def path(self, name: str) -> Path:
+        """The path of output ``name`` (e.g. ``"result.json"``)."""
+        return self.folder / f"{self.prefix}{name}"
+
+
+_RECORDING_SUFFIXES = (".gz", ".csv", ".log", ".mat", ".txt")
+
+
+def recording_stem(path: Path) -> str:
+    """A recording's name without its recording suffixes (``flight.csv.gz`` -> ``flight``)."""
+    name = path.name
+    while True:
+        for suf in _RECORDING_SUFFIXES:
+            if name.lower().endswith(suf) and len(name) > len(suf):
+                name = name[: -len(suf)]
+                break
+        else:
+            return name
+
+
+def outputs_for(out: Path | None, recording: Path, run_dir: Path | None, kind: str) -> Outputs:
+    """Where an analysis of a recording writes, never over what is there: ``--out`` if given; for a
+    run folder a new sub-folder ``<kind>-<UTC time>/`` (the check's own result stays untouched); for
+    a bare file, files named after it next to it (``flight.csv`` -> ``flight.result.json``)."""
+    if out is not None:
+        return Outputs(Path(out))
+    if run_dir is not None:
+        folder = run_dir / f"{kind}-{utc_stamp()}"
+        k = 1
+        while folder.exists():  # two analyses within one second
+            k += 1
+            folder = run_dir / f"{kind}-{utc_stamp()}-{k}"
+        return Outputs(folder)
+    return Outputs(recording.parent, prefix=f"{recording_stem(recording)}.")
+
+
+def file_hashes(**paths: Path | None) -> dict[str, str]:
+    """SHA-256 of each named file (a profile given as None: the shipped one), for traceability."""
+    import hashlib
+
+    from hil.profiles import default_profile_path
+
+    defaults = {"actuation": "actuation.toml", "check": "check.toml", "simrig": "simrig.toml"}
+    out = {}
+    for name, path in paths.items():
+        if path is None:
+            if name not in defaults:
+                continue
+            path = default_profile_path(defaults[name])
+        try:
+            out[name] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        except OSError:
+            out[name] = ""
+    return out
+
+
+def add_trace_args(p: argparse.ArgumentParser) -> None:
+    """``--operator`` and ``--work-order``: who ran the check, for which work order (into result.json)."""
+    p.add_argument("--operator", metavar="NAME", help="who runs the check (recorded in meta.json and result.json)")
+    p.add_argument("--work-order", metavar="ID", help="the work order it is run for (recorded likewise)")
+
+
+def make_console(**kwargs):
+    """The terminal of a command (rich); 120 columns when the output is a file or a pipe, so that the
+    result table is not folded in a log."""
+    import sys
+
+    from rich.console import Console
+
+    if not sys.stdout.isatty():
+        kwargs.setdefault("width", 120)
+    return Console(**kwargs)
 
 
 def default_out(kind: str) -> Path:

@@ -6,29 +6,30 @@ import argparse
 import time
 from pathlib import Path
 
-from hil.cli.common import add_parser, add_recording_args
+from hil.cli.common import add_parser, add_recording_args, make_console, outputs_for
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """``emacheck diagnose RECORDING [--profile] [--out] [--model]``."""
-    from rich.console import Console
 
     from blf.diagnose import diagnose
     from hil.analysis.diagnose import diagnosis_dict, load_model
     from hil.report.diagnose import write_report
     from hil.runfolder import write_json_atomic
-    console = Console()
+    console = make_console()
     path = Path(args.recording)
     model, period = load_model(path, args.model, args.profile)
-    out = args.out or (path if path.is_dir() else path.parent)
+    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose")
+    out = outputs.folder
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
     secs = time.perf_counter() - t0
     data = diagnosis_dict(d, args.model, secs)
-    write_json_atomic(out / "diagnosis.json", data)
+    write_json_atomic(outputs.path("diagnosis.json"), data)
     if not args.no_report:
-        write_report(out / "diagnosis_report.html", model, d, data)
+        write_report(outputs.path("diagnosis_report.html"), model, d, data,
+                     json_name=outputs.path("diagnosis.json").name)
     words = {"no_mismatch": "no significant mismatch between simulation and recording",
              "explained": "mismatch explained", "unexplained": "mismatch NOT explained by the candidate library"}
     console.print(f"[bold]{words[d.verdict]}[/bold] ({secs:.1f} s)")
@@ -44,7 +45,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     console.print("  on the held-out half (never fitted): " + ", ".join(
         f"{c} {data['residual_rms_holdout_before'][c]} -> {data['residual_rms_holdout_after'][c]}"
         for c in d.measured if d.valid[c].any()))
-    console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {out / 'diagnosis.json'}")
+    console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {outputs.path('diagnosis.json')}")
     return 0
 
 

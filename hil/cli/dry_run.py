@@ -9,7 +9,7 @@ from pathlib import Path
 from rich.console import Console
 
 from hil.cli.check import canopen_check, master_setup, record_can_stats, result_after, truth_dict
-from hil.cli.common import add_parser, add_profile_args, out_dir
+from hil.cli.common import add_parser, add_profile_args, add_trace_args, file_hashes, make_console, out_dir
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
 from hil.runfolder import write_json_atomic
 
@@ -29,12 +29,14 @@ class DryRun:
 
 
 def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=None, realtime: bool = False,
-            quiet: bool = True, console: Console | None = None, profile_path=None) -> DryRun:
+            quiet: bool = True, console: Console | None = None, profile_path=None,
+            trace: dict | None = None) -> DryRun:
     """The check over CANopen against two simulated drives on an in-process virtual bus.
 
     ``faults`` (a :class:`sim.faults.Fault` sequence) replaces the simulated-rig profile's
     ``[[faults]]``. The profiles are validated by the caller; nothing is sent on the bus before
-    the EDS and the bus load are checked here.
+    the EDS and the bus load are checked here. ``trace`` (operator, work order, file hashes)
+    goes into meta.json and from there into result.json.
     """
     import numpy as np
 
@@ -49,7 +51,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 
-    console = console or Console(quiet=quiet)
+    console = console or make_console(quiet=quiet)
     eds, load = master_setup(act, profile_path, None)
     seed = simrig.seed if seed is None else seed
     faults = tuple(simrig.faults if faults is None else faults)
@@ -63,7 +65,8 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                                    "simrig": snapshot(simrig.params), "truth": truth,
                                    "faults": [snapshot(f) for f in faults],
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
-                                   "eds": str(eds)})
+                                   "eds": str(eds), **(trace or {})})
+    meta.setdefault("files_sha256", {}).update(file_hashes(eds=eds))
     write_json_atomic(out / "meta.json", meta)  # the run folder says "running" from the start
     # a channel of its own: python-can's virtual channels are process-global by name
     transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
@@ -88,14 +91,16 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
 
 def cmd_dry_run(args: argparse.Namespace) -> int:
     """``emacheck dry-run``: the check over CANopen against two simulated drives (virtual bus)."""
-    console = Console()
+    console = make_console()
     # every profile is validated before anything is sent on the bus
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
     out = out_dir(args, "dry-run")
+    trace = {"operator": args.operator, "work_order": args.work_order,
+             "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim)}
     return dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
-                   console=console, profile_path=args.profile).exit_code
+                   console=console, profile_path=args.profile, trace=trace).exit_code
 
 
 def register(sub) -> None:
@@ -106,5 +111,6 @@ def register(sub) -> None:
                                "and report, with the simulator's truth beside the measurement.")
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-dry-run)")
     add_profile_args(p, sim=True)
+    add_trace_args(p)
     p.add_argument("--realtime", action="store_true", help="pace SYNC at the SYNC period (default: as fast as possible)")
     p.add_argument("--quiet", action="store_true", help="no progress display")

@@ -5,24 +5,30 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from rich.console import Console
-
 from hil.cli.check import canopen_check, master_setup, page_faults, record_can_stats, result_after
-from hil.cli.common import ExitCode, add_bus_args, add_parser, add_profile_args, out_dir
+from hil.cli.common import (
+    ExitCode,
+    add_bus_args,
+    add_parser,
+    add_profile_args,
+    add_trace_args,
+    file_hashes,
+    make_console,
+    open_bus,
+    out_dir,
+)
 from hil.profiles import load_actuation, load_check
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``emacheck run``: the check on real drives (same code path as dry-run, wall-clock SYNC)."""
-    import can
-
     from hil.canlog import CanLogWriter
     from hil.link import CanopenLink
     from hil.master import MasterCore
     from hil.runner import start_meta
     from hil.transport import BusTransport
 
-    console = Console()
+    console = make_console()
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
     eds, load = master_setup(act, args.profile, None)
@@ -30,24 +36,23 @@ def cmd_run(args: argparse.Namespace) -> int:
         console.print("[red]refusing to move anything:[/red] `emacheck run` drives real actuators; "
                       "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
         return ExitCode.INPUT
+    bitrate = args.bitrate or act.canopen.bitrate_bps
+    # the bus first: an interface that cannot be opened leaves no half-made run folder behind
+    # (virtual: the SYNC task's frames are part of the traffic the master follows)
+    bus = open_bus(args.interface, args.channel, bitrate, receive_own_messages=args.interface == "virtual")
     out = out_dir(args, "run")
     out.mkdir(parents=True, exist_ok=True)
-    bitrate = args.bitrate or act.canopen.bitrate_bps
-    kwargs = {"interface": args.interface, "channel": args.channel}
-    if args.interface not in ("virtual", "socketcan"):
-        kwargs["bitrate"] = bitrate
-    if args.interface == "virtual":
-        kwargs["receive_own_messages"] = True  # the SYNC task's frames are part of the traffic
-    bus = can.Bus(**kwargs)
     transport = BusTransport(bus, act.timing.sync_period_s)
     master = MasterCore(act)
-    log = CanLogWriter(out / "can.log", channel=args.channel)
+    # wall-clock stamps in the CAN log, as candump writes them
+    log = CanLogWriter(out / "can.log", channel=args.channel, time_offset_s=transport.wall_clock_offset_s)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
     meta = start_meta(act, check, {"mode": "run", "interface": args.interface, "channel": args.channel,
                                    "bitrate_bps": bitrate,
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
-                                   "eds": str(eds)})
+                                   "eds": str(eds), "operator": args.operator, "work_order": args.work_order,
+                                   "files_sha256": file_hashes(actuation=args.profile, check=args.check, eds=eds)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
     console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")
@@ -72,6 +77,7 @@ def register(sub) -> None:
     p.add_argument("--arm", action="store_true", help="confirm that the actuators may move")
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-run)")
     add_profile_args(p)
+    add_trace_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "

@@ -6,28 +6,50 @@ import argparse
 import time
 from pathlib import Path
 
+from rich import box
 from rich.console import Console
 from rich.table import Table
 
 from blf.signals import CHANNELS
-from hil.cli.common import actuation_for, add_parser, add_recording_args, load_recording, read_meta
+from hil.cli.check import exit_for, trace_of
+from hil.cli.common import (
+    Outputs,
+    actuation_for,
+    add_parser,
+    add_recording_args,
+    add_trace_args,
+    load_recording,
+    make_console,
+    outputs_for,
+    read_meta,
+)
 from hil.errors import RecordingError
 from hil.runfolder import resolve_recording, write_json_atomic
 
 
-def print_summary(console: Console, data: dict, out_dir: Path) -> None:
-    """The BLFserv result as a table on the console, truth beside it when known."""
+def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) -> None:
+    """The BLFserv result as a table on the console: per channel the reading with U, its traversals,
+    the limit, margin and verdict (truth beside it when known)."""
+    from hil.cli.check import styled
     from hil.report.shell import fmt
 
     truth = data.get("truth")
-    tab = Table(title=f"BLFserv ({data['method']})")
-    for col in ("channel", "backlash mm", "traversals", "paper mm", "truth mm" if truth else None):
+    st = data.get("status", "")
+    tab = Table(title=f"BLFserv ({data['method']}): {styled(st.upper(), st, bold=True)}",
+                box=box.SIMPLE_HEAD, pad_edge=False)
+    for col in ("channel", "backlash ± U mm", "traversals", "limit mm", "margin mm", "verdict", "paper mm",
+                "truth mm" if truth else None):
         if col:
-            tab.add_column(col, justify="right")
+            tab.add_column(col, justify="left" if col in ("channel", "verdict") else "right")
     for ch in CHANNELS:
         b = data["backlash_mm"][ch]
-        row = [ch, "not traversed" if b is None else f"{b:.4f}", str(data["traversals"][ch]),
-               fmt(data["backlash_paper_mm"][ch])]
+        v = data.get("verdict", {}).get(ch, {})
+        u = v.get("uncertainty_mm")
+        s = v.get("status", "")
+        row = [ch, "not traversed" if b is None else f"{b:.4f}" + ("" if u is None else f" ± {u:.4f}"),
+               str(data["traversals"][ch]), fmt(v.get("limit_mm"), 3),
+               "—" if v.get("margin_mm") is None else f"{v['margin_mm']:+.4f}",
+               styled(s, s) if s else "—", fmt(data["backlash_paper_mm"][ch])]
         if truth:
             row.append(fmt(truth["backlash_mm"][ch]))
         tab.add_row(*row)
@@ -35,7 +57,8 @@ def print_summary(console: Console, data: dict, out_dir: Path) -> None:
     console.print(f"LVDT calibration: {data['calibration']['source']}")
     for n in data["notes"]:
         console.print(f"[yellow]note:[/yellow] {n}")
-    console.print(f"serv.json and serv_report.html in {out_dir}")
+    written = [outputs.path("serv.json").name] + ([outputs.path("serv_report.html").name] if report else [])
+    console.print(f"{' and '.join(written)} in {outputs.folder}")
 
 
 def cmd_serv(args: argparse.Namespace) -> int:
@@ -47,7 +70,7 @@ def cmd_serv(args: argparse.Namespace) -> int:
     from hil.analysis.serv import analyse, choose_calibration, serv_dict
     from hil.report.serv import write_serv_report
 
-    console = Console()
+    console = make_console()
     t0 = time.perf_counter()
     method = getattr(args, "method", None) or "improved"
     if method not in METHODS:
@@ -62,15 +85,17 @@ def cmd_serv(args: argparse.Namespace) -> int:
     except (InputError, AnalysisError) as exc:
         raise RecordingError(f"{sig_path}: {exc}") from None
     truth = meta.get("truth") if isinstance(meta, dict) else None
-    out = Path(args.out) if args.out is not None else (run_dir if run_dir is not None else sig_path.parent)
-    out.mkdir(parents=True, exist_ok=True)
+    outputs = outputs_for(args.out, sig_path, run_dir, "serv")
+    outputs.folder.mkdir(parents=True, exist_ok=True)
     data = serv_dict(an, truth, str(sig_path))
+    data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order})
     data["analysis_s"] = round(time.perf_counter() - t0, 3)
-    write_json_atomic(out / "serv.json", data)
-    if not getattr(args, "no_report", False):
-        write_serv_report(out / "serv_report.html", an, data, act)
-    print_summary(console, data, out)
-    return 0
+    write_json_atomic(outputs.path("serv.json"), data)
+    report = not getattr(args, "no_report", False)
+    if report:
+        write_serv_report(outputs.path("serv_report.html"), an, data, act, json_name=outputs.path("serv.json").name)
+    print_summary(console, data, outputs, report)
+    return exit_for(data)
 
 
 def register(sub) -> None:
@@ -80,6 +105,7 @@ def register(sub) -> None:
                                "folder, a signals CSV (t,phi1,phi2,s1,s2,F1,F2) or a raw CAN log. Writes "
                                "serv.json and serv_report.html (paper Fig. 8, error budget of paper 2.3).")
     add_recording_args(p, "serv.json and serv_report.html")
+    add_trace_args(p)
     p.add_argument("--calibration", metavar="RESULT.json", type=Path,
                    help="LVDT pitch and offset from a maintenance check's result.json")
     p.add_argument("--method", choices=("improved", "paper"), default="improved",

@@ -7,13 +7,12 @@ import signal
 import threading
 from pathlib import Path
 
-from hil.cli.common import add_bus_args, add_parser
+from hil.cli.common import add_bus_args, add_parser, open_bus
 from hil.cli.realtime import prepare_realtime
 
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:
     """``emacheck sim-serve``: the two simulated drives on a CAN bus until SIGINT/SIGTERM."""
-    import can
     import numpy as np
 
     from hil.canopen.od import check_drive_od, load_drive_od
@@ -30,10 +29,7 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     plant = RigPlant(simrig.params, np.random.default_rng(seed))
     pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id),
                         node_ids=act.canopen.node_ids)
-    kwargs = {"interface": args.interface, "channel": args.channel}
-    if args.interface not in ("virtual", "socketcan"):
-        kwargs["bitrate"] = args.bitrate or act.canopen.bitrate_bps
-    bus = can.Bus(**kwargs)
+    bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps)
 
     stop = threading.Event()
 

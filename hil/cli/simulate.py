@@ -6,22 +6,23 @@ import argparse
 import time
 from pathlib import Path
 
-from rich.console import Console
-
 from hil.cli.check import LiveProgress, result_after, truth_dict
-from hil.cli.common import add_parser, add_profile_args, out_dir
+from hil.cli.common import add_parser, add_profile_args, add_trace_args, file_hashes, make_console, out_dir
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    """``emacheck simulate``: the check on the plant, then analysis and report."""
+    """``emacheck simulate``: the check on the plant, then analysis and report; with ``--scenario``
+    a normal-operation recording for ``emacheck serv`` instead."""
+    if args.scenario is not None:
+        return simulate_scenario(args)
     import numpy as np
 
     from hil.runner import PlantLink, run_check, start_meta
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 
-    console = Console(stderr=False)
+    console = make_console()
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
@@ -31,7 +32,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     plant = RigPlant(simrig.params, rng)
     truth = truth_dict(rig_truth(simrig.params))
     meta = start_meta(act, check, {"mode": "simulate", "seed": seed,
-                                   "simrig": snapshot(simrig.params), "truth": truth})
+                                   "simrig": snapshot(simrig.params), "truth": truth,
+                                   "operator": args.operator, "work_order": args.work_order,
+                                   "files_sha256": file_hashes(actuation=args.profile, check=args.check,
+                                                               simrig=args.sim)})
     console.print(f"emacheck simulate: seed {seed}, run folder {out}")
     t0 = time.perf_counter()
     with LiveProgress(console, 0.0, not args.quiet) as live:
@@ -42,6 +46,57 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return result_after(out, act, truth, meta, outcome, console)
 
 
+def simulate_scenario(args: argparse.Namespace) -> int:
+    """A normal-operation recording of scenario ``--scenario`` (sim.scenarios), preceded by the two LVDT
+    calibration sweeps under opposing force, written as a run folder (signals.csv with a step column,
+    meta.json with the simulator's truth) that ``emacheck serv`` reads as it is."""
+    import numpy as np
+
+    from hil.runfolder import write_json_atomic
+    from hil.runner import start_meta
+    from sim.operation import simulate_calibration_sweep, simulate_operation
+    from sim.scenarios import SCENARIOS, scenario_profile
+
+    console = make_console()
+    act = load_actuation(args.profile)
+    check = load_check(args.check, act)
+    simrig = load_simrig(args.sim)
+    seed = simrig.seed if args.seed is None else args.seed
+    out = out_dir(args, f"simulate-{args.scenario}")
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    params = simrig.params
+    console.print(f"emacheck simulate --scenario {args.scenario}: {SCENARIOS[args.scenario]}; seed {seed}")
+    sw = [simulate_calibration_sweep(params, rng, ema=k, amplitude_mm=check.calibration.sweep_amplitude_mm,
+                                     speed_mm_per_s=check.calibration.sweep_speed_mm_per_s,
+                                     opposing_force_N=check.calibration.opposing_force_N) for k in (1, 2)]
+    rec = simulate_operation(params, scenario_profile(args.scenario, params, rng), rng)
+    parts = [(sw[0], "cal1_sweep"), (sw[1], "cal2_sweep"), (rec, args.scenario)]
+    cols = {c: np.concatenate([getattr(x, c) for x, _ in parts])
+            for c in ("phi1_rad", "phi2_rad", "s1_mm", "s2_mm", "F1_N", "F2_N")}
+    steps = np.concatenate([np.full(x.t_s.size, name, dtype=object) for x, name in parts])
+    T = params.sample_period_s
+    t = (np.arange(steps.size) + 1) * T
+    with open(out / "signals.csv", "w") as fh:
+        fh.write("t,phi1,phi2,s1,s2,F1,F2,step\n")
+        for k in range(steps.size):
+            fh.write(f"{t[k]:.4f},{cols['phi1_rad'][k]:.7f},{cols['phi2_rad'][k]:.7f},{cols['s1_mm'][k]:.6f},"
+                     f"{cols['s2_mm'][k]:.6f},{cols['F1_N'][k]:.3f},{cols['F2_N'][k]:.3f},{steps[k]}\n")
+    truth = truth_dict(rec.truth)
+    truth["traversed"] = {k: bool(v) for k, v in rec.traversed.items()}
+    meta = start_meta(act, check, {"mode": "simulate-scenario", "scenario": args.scenario, "seed": seed,
+                                   "simrig": snapshot(params), "truth": truth, "status": "done",
+                                   "operator": args.operator, "work_order": args.work_order,
+                                   "files_sha256": file_hashes(actuation=args.profile, check=args.check,
+                                                               simrig=args.sim)})
+    write_json_atomic(out / "meta.json", meta)
+    crossed = ", ".join(k for k, v in rec.traversed.items() if v) or "none"
+    console.print(f"{steps.size} samples ({steps.size * T:.1f} s: two calibration sweeps, then the scenario); "
+                  f"backlash crossed in truth: {crossed}")
+    console.print(f"recording in {out}; next: emacheck serv {out}")
+    return 0
+
+
 def register(sub) -> None:
     p = add_parser(sub, "simulate", handler=cmd_simulate,
                    help="run the check on the simulated rig, no CAN in between",
@@ -49,4 +104,10 @@ def register(sub) -> None:
                                "(no CANopen), then analyse it and write the run folder and report.")
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-simulate)")
     add_profile_args(p, sim=True)
+    add_trace_args(p)
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    from sim.scenarios import SCENARIOS
+
+    p.add_argument("--scenario", choices=tuple(SCENARIOS), metavar="NAME",
+                   help="instead of the check: a normal-operation recording for `emacheck serv`, after the two "
+                        "LVDT calibration sweeps: " + "; ".join(f"{k}: {v}" for k, v in SCENARIOS.items()))

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.report.shell import column, esc, img, json_details, pyplot, table, thin, write_page
+from hil.report.shell import column, esc, file_link, img, pyplot, table, thin, write_page
 
 
 def _unit(channel: str) -> str:
@@ -79,7 +79,7 @@ def figure_regime(d, channel: str):
     return fig
 
 
-def write_report(path: Path, model, d, data: dict) -> None:
+def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosis.json") -> None:
     """Self-contained HTML report: verdict, effects, where, residual table before/after, overlays, regime cells."""
     from blf.diagnose import DiagnoseConfig
 
@@ -115,5 +115,5 @@ def write_report(path: Path, model, d, data: dict) -> None:
                      "sign of force); a mismatch tied to the operating regime repeats in both halves and lies "
                      "on the diagonal, noise scatters around the origin.</p>"
                      + "".join(img(figure_regime(d, c)) for c in flagged))
-    parts.append(json_details("diagnosis.json", data))
+    parts.append(file_link(json_name))
     write_page(path, "emacheck diagnose", parts)

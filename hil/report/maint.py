@@ -16,7 +16,7 @@ from blf.maint import BlfMaintResult
 from blf.signals import CHANNELS
 from hil.analysis.maint import Analysis
 from hil.config import Actuation
-from hil.report.shell import column, esc, fmt, img, json_details, notes, pyplot, table, thin, write_page
+from hil.report.shell import column, esc, file_link, fmt, img, notes, pyplot, table, thin, trace_lines, write_page
 from hil.runfolder import Signals
 
 _LABEL = {"int1": ("F_1", "D_{int,1}"), "int2": ("F_2", "D_{int,2}"), "ext": ("F_2 - F_1", "D_{ext}")}
@@ -137,23 +137,33 @@ def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
     return fig
 
 
+_WORDS = {"pass": "PASS", "fail": "FAIL", "inconclusive": "INCONCLUSIVE", "aborted": "ABORTED",
+          "incomplete": "INCOMPLETE"}
+
+
 def summary_table(result: dict) -> str:
-    """Backlash and stiffness per channel (truth beside it for simulated data), then the LVDT calibration."""
+    """Per channel: the decision against the limit with U and the margin, then stiffness (truth beside
+    it for simulated data), then the LVDT calibration."""
     truth = result.get("truth")
-    cols = [column("channel"), column("backlash", "mm"), column("±1σ", "mm"), column("c_left", "N/mm"),
-            column("c_right", "N/mm")]
+    verdict = result.get("verdict", {})
+    cols = [column("channel"), column("verdict"), column("backlash", "mm"), column("U (k = 2)", "mm"),
+            column("limit B_spec", "mm"), column("margin", "mm"), column("c_left", "N/mm"), column("c_right", "N/mm")]
     if truth:
         cols += [column("truth backlash", "mm"), column("truth c_left / c_right", "N/mm"), column("error", "mm")]
     rows = []
     for ch in CHANNELS:
         b = result["backlash_mm"][ch]
         st = result["stiffness_N_per_mm"][ch]
-        cells = [ch, fmt(b), fmt(result["backlash_sigma_mm"][ch]), fmt(st["left"], 0), fmt(st["right"], 0)]
+        v = verdict.get(ch, {})
+        status = v.get("status", "")
+        cells = [ch, f"<span class='{status}'>{esc(status)}</span>", fmt(b), fmt(v.get("uncertainty_mm")),
+                 fmt(v.get("limit_mm")), fmt(v.get("margin_mm")), fmt(st["left"], 0), fmt(st["right"], 0)]
         if truth:
             tb = truth["backlash_mm"][ch]
             ts = truth["stiffness_N_per_mm"][ch]
             cells += [fmt(tb), f"{ts['left']:.0f} / {ts['right']:.0f}", fmt(None if b is None else b - tb)]
         rows.append(cells)
+    reasons = "".join(f"<li>{ch}: {esc(verdict[ch]['reason'])}</li>" for ch in CHANNELS if ch in verdict)
     cal_rows = []
     for k in ("ema1", "ema2"):
         c = result["calibration"][k]
@@ -163,35 +173,83 @@ def summary_table(result: dict) -> str:
         tp = f" (truth {truth['calibration'][k]['pitch']:.5f})" if truth else ""
         cal_rows.append([k, f"{c['pitch']:.5f}{tp}", f"{c['offset_mm']:+.4f}", f"{c['nonlinearity_mm']:.4f}",
                          f"{c['rmse_mm']:.4f}"])
-    return (table(cols, rows) + "<h3>LVDT calibration</h3>"
+    return (table(cols, rows, raw=True)
+            + f"<p>{esc(result.get('decision_rule', ''))}.</p><ul>{reasons}</ul>"
+            + "<h3>LVDT calibration</h3>"
             + table([column("LVDT"), column("pitch"), column("offset", "mm"), column("non-linearity", "mm"),
                      column("rmse", "mm")], cal_rows))
 
 
-def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: dict | None) -> None:
-    """Write the self-contained HTML report."""
+def uncertainty_section(result: dict) -> str:
+    """The uncertainty of each reading (what U is made of) and the error budget of paper 2.3."""
+    verdict = result.get("verdict", {})
+    rows = []
+    for ch in CHANNELS:
+        u = (verdict.get(ch) or {}).get("uncertainty_budget_mm")
+        if u is None:
+            rows.append([ch, "—", "—", "—", "—", "—", "—"])
+            continue
+        rows.append([ch, f"{u['statistical']:.5f}", f"{u['pitch']:.5f}", f"{u['temperature']:.5f}",
+                     f"{u['method']:.5f}", f"{u['combined']:.5f}", f"{u['expanded']:.5f}"])
+    out = ("<h2>Uncertainty of the readings</h2><p>Standard uncertainties of each backlash reading, combined "
+           "as a root sum of squares and expanded with k = 2 (U, used by the decision). Statistical: the "
+           "regression's scatter (Newey-West); pitch: the LVDT pitch left after this check's calibration over "
+           "the travel across the play; temperature: none, the calibration ran minutes before in the same "
+           "check (paper 2.3); method: BLFmaint's validated accuracy bound, max(5 um, 5 %), rectangular.</p>"
+           + table([column("channel"), column("statistical", "mm"), column("pitch", "mm"),
+                    column("temperature", "mm"), column("method", "mm"), column("combined u", "mm"),
+                    column("U (k = 2)", "mm")], rows))
+    b = result.get("accuracy")
+    if b:
+        m = b["BLFmaint"]
+        out += ("<h3>Error budget of paper 2.3 for this check</h3>"
+                f"<p>LVDT pitch error {b['pitch_error']:.2%} before calibration (as measured), "
+                f"{b['residual_pitch_error']:.3%} after; LVDT noise σ {b['lvdt_noise_std_mm']:.4f} mm; "
+                f"for a backlash of B_spec = {b['backlash_mm']:g} mm, target accuracy {b['target_mm']:.3f} mm "
+                "(a tenth of it, paper 2). Without the calibration the pitch error alone would read "
+                f"{m['pitch_uncompensated_mm']:.4f} mm into the backlash; with it {m['pitch_compensated_mm']:.5f} "
+                "mm.</p>"
+                + table([column("method"), column("LVDT travel", "mm"), column("pitch, uncompensated", "mm"),
+                         column("pitch, calibrated", "mm"), column("noise bound (1σ)", "mm"),
+                         column("temperature", "mm"), column("total, calibrated", "mm"),
+                         column("total, uncompensated", "mm")],
+                        [["BLFmaint", f"{m['travel_mm']:.3f}", f"{m['pitch_uncompensated_mm']:.4f}",
+                          f"{m['pitch_compensated_mm']:.5f}", f"{m['noise_mm']:.4f}", f"{m['temperature_mm']:.4f}",
+                          f"{m['total_compensated_mm']:.4f}", f"{m['total_uncompensated_mm']:.4f}"]])
+                + "<p>The noise bound is a single reading's before the regression averages it; the "
+                "statistical term above is what the regression actually left.</p>")
+    return out
+
+
+def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: dict | None, *,
+                 json_name: str = "result.json") -> None:
+    """Write the self-contained HTML report (``json_name``: the result file beside it, linked)."""
     status = result["status"]
-    parts = [f"<h1>emacheck maintenance check: <span class='{status}'>{status.upper()}</span></h1>",
+    source = {"step column": "the run's step column", "detected": "the recording itself (no step column)"}
+    parts = [f"<h1>emacheck maintenance check: <span class='{status}'>{_WORDS.get(status, status.upper())}</span></h1>",
              f"<p>Actuation: {esc(getattr(act, 'name', ''))}; B_spec internal {act.mechanics.backlash_spec_int_mm} mm, "
              f"external {act.mechanics.backlash_spec_ext_mm} mm; {sig.n} samples, "
-             f"{sig.t[-1] - sig.t[0]:.1f} s; segments from the {esc(an.segments.source)}.</p>"]
+             f"{sig.t[-1] - sig.t[0]:.1f} s; calibration sweeps and force fight found from "
+             f"{esc(source.get(an.segments.source, an.segments.source))}.</p>"]
     if result.get("reason"):
-        parts.append(f"<p class='aborted'>Aborted: {esc(result['reason'])}</p>")
+        parts.append(f"<p class='aborted'>{esc(status.capitalize())}: {esc(result['reason'])}</p>")
     if meta is not None and "seed" in meta:
         parts.append(f"<p>Simulated rig, seed {meta['seed']}.</p>")
     parts.append("<h2>Summary</h2>" + summary_table(result))
     parts.append(notes(result.get("notes", []), css=""))
+    parts.append(trace_lines(result.get("trace")))
+    parts.append(uncertainty_section(result))
     parts.append(f"<h2>Force fight (paper Fig. 3)</h2>{img(figure_time(sig, an, act), dpi=90, tight=True)}")
     truth = result.get("truth")
     for ch in CHANNELS:
         r = an.maint[ch]
         parts.append(f"<h2>{ch}</h2>")
         if not isinstance(r, BlfMaintResult):
-            parts.append(f"<p class='fail'>BLFmaint failed: {esc(r)}</p>")
+            parts.append(f"<p class='inconclusive'>Not measured: {esc(r)}</p>")
             continue
         d, f = _channel_data(sig, an, ch)
         parts.append(img(figure_dfdd(ch, d, f, r), dpi=90, tight=True)
                      + img(figure_lines(ch, d, f, r, truth), dpi=90, tight=True))
     parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
-    parts.append(json_details("result.json", result))
+    parts.append(file_link(json_name))
     write_page(path, "emacheck report", parts)

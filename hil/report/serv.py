@@ -10,7 +10,7 @@ from blf.serv import BlfServResult
 from blf.signals import CHANNELS
 from hil.analysis.serv import ServAnalysis
 from hil.config import Actuation
-from hil.report.shell import column, esc, fmt, img, json_details, notes, pyplot, table, thin, write_page
+from hil.report.shell import column, esc, file_link, fmt, img, notes, pyplot, table, thin, trace_lines, write_page
 
 _LABEL = {"int1": "D_{int,1}", "int2": "D_{int,2}", "ext": "D_{ext}"}
 
@@ -102,11 +102,14 @@ def figure_over_time(an: ServAnalysis, truth: dict | None):
     return fig
 
 
-def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation) -> None:
-    """The self-contained HTML report of ``emacheck serv``."""
+def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation, *,
+                      json_name: str = "serv.json") -> None:
+    """The self-contained HTML report of ``emacheck serv`` (``json_name``: serv.json beside it, linked)."""
     truth = data.get("truth")
     t = an.sig.t
-    parts = ["<h1>emacheck serv: in-service backlash (BLFserv, paper 2.2)</h1>",
+    st = data.get("status", "")
+    parts = [f"<h1>emacheck serv: in-service backlash (BLFserv, paper 2.2): <span class='{st}'>{esc(st.upper())}"
+             "</span></h1>",
              f"<p>{esc(act.name)}; recording {esc(data['recording']['source'])}: "
              f"{an.sig.n} samples, {data['recording']['duration_s']:.1f} s; method <b>{an.method}</b>; "
              f"LVDT calibration: {esc(an.correction.source)}.</p>",
@@ -126,7 +129,19 @@ def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation) 
             tb = truth["backlash_mm"][ch]
             cells += [fmt(tb), fmt(None if r.backlash_mm is None else r.backlash_mm - tb)]
         rows.append(cells)
-    parts.append("<h2>Summary</h2>" + table(cols, rows))
+    verdict = data.get("verdict", {})
+    vrows = [[ch, f"<span class='{v['status']}'>{esc(v['status'])}</span>", fmt(v["backlash_mm"]),
+              fmt(v["uncertainty_mm"]), fmt(v["limit_mm"]), fmt(v["margin_mm"]), str(v["traversals"]), esc(v["reason"])]
+             for ch, v in verdict.items()]
+    parts.append("<h2>Decision</h2>"
+                 + table([column("channel"), column("verdict"), column("backlash", "mm"), column("U (k = 2)", "mm"),
+                          column("limit B_spec", "mm"), column("margin", "mm"), column("traversals"),
+                          column("reason")], vrows, raw=True)
+                 + f"<p>{esc(data.get('decision_rule', ''))}. U combines the spread of the counted jumps, the "
+                 "LVDT pitch left after calibration over the stroke, the temperature bound of paper 2.3 and the "
+                 "method's validated accuracy.</p>")
+    parts.append(trace_lines(data.get("trace")))
+    parts.append("<h2>Readings</h2>" + table(cols, rows))
     c = an.correction
     parts.append("<h3>LVDT calibration</h3>"
                  + table([column("LVDT"), column("kind"), column("pitch"), column("offset", "mm")],
@@ -152,5 +167,5 @@ def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation) 
                            f"{m.total_uncompensated_mm:.4f}"] for m in (b.maint, b.serv_paper, b.serv_improved)])
                  + "<p>BLFmaint's temperature term is zero in practice: the calibration runs minutes before it "
                  "(paper 2.3); its noise term is the single-reading bound before regression averaging.</p>")
-    parts.append(json_details("serv.json", {k: v for k, v in data.items() if k != "jumps"}))
+    parts.append(file_link(json_name))
     write_page(path, "emacheck serv", parts)

@@ -13,11 +13,8 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
 from pathlib import Path
 from typing import Any, Iterable, Sequence
-
-from hil.runfolder import json_default
 
 CSS = """body{font-family:sans-serif;max-width:1300px;margin:1em auto;color:#222;line-height:1.35}
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}
@@ -86,10 +83,27 @@ def notes(items: Iterable[str], *, css: str = "warn") -> str:
     return "".join(f"<p class='{css}'><b>note:</b> {esc(n)}</p>" for n in items)
 
 
-def json_details(name: str, obj: Any) -> str:
-    """The machine-readable result, folded away under its file name."""
-    return (f"<details><summary>{esc(name)} (the machine-readable result)</summary><pre>"
-            f"{esc(json.dumps(obj, indent=1, default=json_default))}</pre></details>")
+def file_link(name: str, what: str = "the machine-readable result") -> str:
+    """A paragraph linking a file written next to the report (relative link)."""
+    return f"<p>{esc(what).capitalize()}: <a href='{esc(name)}'>{esc(name)}</a></p>"
+
+
+def trace_lines(trace: dict | None) -> str:
+    """The traceability block of a report: when, what software, which actuators, who, for what work order."""
+    if not trace:
+        return ""
+    rows = [["started (UTC)", trace.get("started_utc") or "—"], ["analysed (UTC)", trace.get("analysed_utc") or "—"],
+            ["software", f"{trace.get('software', {}).get('name', '')} {trace.get('software', {}).get('version', '')}"],
+            ["operator", trace.get("operator") or "—"], ["work order", trace.get("work_order") or "—"],
+            ["run id", trace.get("run_id") or "—"]]
+    for k, ident in (trace.get("identity") or {}).items():
+        if ident:
+            rows.append([f"{k} identity (0x1018)",
+                         f"vendor 0x{ident.get('vendor_id', 0):08X}, product 0x{ident.get('product_code', 0):08X}, "
+                         f"revision 0x{ident.get('revision', 0):08X}, serial {ident.get('serial', '—')}"])
+    for k, h in (trace.get("files_sha256") or {}).items():
+        rows.append([f"{k} (sha256)", h[:16] + "…" if h else "—"])
+    return "<h2>Traceability</h2>" + table(["item", "value"], rows)
 
 
 def write_page(path: Path, title: str, parts: Iterable[str]) -> None:

@@ -2,7 +2,7 @@
 
 1. Accuracy: for every seed, the LVDTs are calibrated from simulated slow
    sweeps under an opposing force (blf.calibration), then the normal-operation
-   scenarios of support.scenarios are simulated (default rig: noise, 7.5 % pitch
+   scenarios of sim.scenarios are simulated (sim.operation) (default rig: noise, 7.5 % pitch
    error on LVDT 1, ...) and BLFserv (improved and paper method) runs on
    D_int,1, D_int,2 and D_ext. Per scenario and channel: bias and standard
    deviation of the reading relative to the simulator's truth, worst seed,
@@ -33,7 +33,8 @@ sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim)
 from blf.calibration import fit_lvdt_calibration  # noqa: E402
 from blf.serv import BlfServMonitor, blf_serv, design_serv_filters  # noqa: E402
 from hil.profiles import load_simrig  # noqa: E402
-from support import scenarios as sc  # noqa: E402
+from sim import operation as op
+from sim import scenarios as sc  # noqa: E402
 
 CHANNELS = ("int1", "int2", "ext")
 FS = 500.0
@@ -59,12 +60,12 @@ def accuracy(seeds: int) -> dict:
     raw: dict = {}
     for seed in range(seeds):
         rng = np.random.default_rng(1000 + seed)
-        sw1 = sc.simulate_calibration_sweep(params, rng, ema=1)
-        sw2 = sc.simulate_calibration_sweep(params, rng, ema=2)
+        sw1 = op.simulate_calibration_sweep(params, rng, ema=1)
+        sw2 = op.simulate_calibration_sweep(params, rng, ema=2)
         cal1 = fit_lvdt_calibration(sw1.x_mm, sw1.s_mm)
         cal2 = fit_lvdt_calibration(sw2.x_mm, sw2.s_mm)
         for name, gen in gens.items():
-            rec = sc.simulate_operation(params, gen(rng), rng)
+            rec = op.simulate_operation(params, gen(rng), rng)
             d = d_channels(rec, i_total, cal1, cal2)
             for ch in CHANNELS:
                 r = blf_serv(d[ch], FS, keep_signals=False)

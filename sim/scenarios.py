@@ -1,4 +1,4 @@
-"""Normal-operation profiles of the dual-EMA aileron and their simulation.
+"""Normal-operation scenarios of the dual-EMA aileron: what the surface does in service.
 
 In service both EMAs run in POSITION mode and follow the same surface
 command (active-active); a slow force-fight compensation equalises their
@@ -7,21 +7,14 @@ its deflection (hinge moment) and with gusts. Backlash is crossed only where
 a load-path force changes sign, so every manoeuvre here is built around a
 sign change of the load (or, for the external play, of the force fight).
 
-Pure: parameters and an explicit ``numpy.random.Generator`` in, frozen
-dataclasses out; no clocks, no IO. Two kinds of functions:
-
-* profile generators (:func:`full_stroke_profile`,
-  :func:`small_manoeuvre_profile`, :func:`gust_profile`,
-  :func:`cruise_profile`, :func:`ext_crossing_profile`): sample arrays of
-  the surface command, the external load and optionally a scheduled
-  force-fight offset, as an :class:`OperationProfile`;
-* :func:`simulate_operation`: runs an :class:`OperationProfile` on a
-  :class:`sim.plant.RigPlant`, closing the force-fight compensation loop on the
-  measured forces sample by sample, and returns the measured signals and the
-  simulator's truth as an :class:`OperationRecord`;
-
-plus :func:`simulate_calibration_sweep`, the slow LVDT calibration sweep under
-an opposing force (paper 2.3), to calibrate the LVDTs before BLFserv.
+The profile generators (:func:`full_stroke_profile`,
+:func:`small_manoeuvre_profile`, :func:`gust_profile`, :func:`cruise_profile`,
+:func:`ext_crossing_profile`, listed by name in :data:`SCENARIOS`) return
+sample arrays of the surface command, the external load and optionally a
+scheduled force-fight offset, as an :class:`OperationProfile`;
+:mod:`sim.operation` runs them on the plant. ``emacheck simulate --scenario
+NAME`` writes such a recording for BLFserv. Pure: parameters and an explicit
+``numpy.random.Generator`` in, frozen dataclasses out; no clocks, no IO.
 
 Sign conventions are those of :mod:`sim.plant`: positions on the ram axis,
 positive extended; forces positive in compression (the EMA pushes the
@@ -31,44 +24,18 @@ surface towards +y); the load ``load_N`` pushes the surface towards +y.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal
 
 from blf.errors import InputError
-from blf.validate import count, generator, instance_of, one_of, scalar
-from hil.canopen.process import DriveMode
+from blf.validate import count, generator, instance_of, scalar
 from sim.params import RigParams
-from sim.plant import RigPlant
-from sim.truth import RigTruth, rig_truth
+from sim.truth import chain_stiffness_N_per_mm, force_fight_play_mm, series_stiffness
 
-__all__ = [
-    "AirLoad",
-    "AIR",
-    "OperationProfile",
-    "OperationRecord",
-    "CalibrationSweep",
-    "full_stroke_profile",
-    "small_manoeuvre_profile",
-    "gust_profile",
-    "cruise_profile",
-    "ext_crossing_profile",
-    "simulate_operation",
-    "simulate_calibration_sweep",
-    "chain_stiffness_N_per_mm",
-    "force_fight_play_mm",
-]
-
-_POS = int(DriveMode.POSITION)
-_FRC = int(DriveMode.FORCE)
-
-#: Minimum |F| on both sides of a sign change for it to count as a traversal, N.
-CONTACT_FORCE_N = 20.0
-
-
-# ====================================================================== types
-
+__all__ = ["AirLoad", "AIR", "OperationProfile", "SCENARIOS", "scenario_profile", "full_stroke_profile", "small_manoeuvre_profile",
+           "gust_profile", "cruise_profile", "ext_crossing_profile"]
 
 @dataclass(frozen=True)
 class AirLoad:
@@ -149,93 +116,6 @@ class OperationProfile:
         return int(self.command_mm.size)
 
 
-@dataclass(frozen=True)
-class OperationRecord:
-    """Measured signals of a simulated manoeuvre, with the simulator's truth.
-
-    Attributes
-    ----------
-    name : str
-        The profile's name.
-    t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N : ndarray, shape (n,)
-        The measured samples (run-folder columns ``t,phi1,phi2,s1,s2,F1,F2``):
-        time in s, motor angles in rad, raw LVDT strokes in mm (with the
-        profile's pitch, offset, non-linearity and noise), load-cell forces in N.
-    true_F_N : ndarray, shape (n, 2)
-        True load-path forces of EMA 1 and 2, N.
-    true_s_mm : ndarray, shape (n, 2)
-        True strokes, mm.
-    offset_mm : ndarray, shape (n,)
-        Relative motor offset actually commanded (compensation or schedule), mm.
-    truth : sim.truth.RigTruth
-        Backlash, stiffness and LVDT law of the rig.
-    traversed : dict
-        ``{"int1": bool, "int2": bool, "ext": bool}``: whether the true
-        forces crossed the play (see Notes of :func:`simulate_operation`).
-    expected_backlash_mm : dict
-        ``{"int1": B or None, ...}``: the truth's backlash where traversed,
-        None where not; what BLFserv should report.
-    sample_period_s : float
-        s.
-
-    Arrays are read-only.
-    """
-
-    name: str
-    t_s: np.ndarray
-    phi1_rad: np.ndarray
-    phi2_rad: np.ndarray
-    s1_mm: np.ndarray
-    s2_mm: np.ndarray
-    F1_N: np.ndarray
-    F2_N: np.ndarray
-    true_F_N: np.ndarray
-    true_s_mm: np.ndarray
-    offset_mm: np.ndarray
-    truth: RigTruth
-    traversed: dict
-    expected_backlash_mm: dict
-    sample_period_s: float
-
-
-@dataclass(frozen=True)
-class CalibrationSweep:
-    """One EMA's slow sweep under a constant opposing force (paper 2.3, Fig. 9).
-
-    Attributes
-    ----------
-    ema : int
-        1 or 2.
-    x_mm : ndarray, shape (n,)
-        Motor angle referred to the ram, ``phi / i_total``, mm.
-    s_mm : ndarray, shape (n,)
-        Raw LVDT stroke, mm.
-    opposing_force_N : float
-        Force of the other EMA (FORCE mode), N.
-    t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N : ndarray, shape (n,)
-        The measured samples of both EMAs during the sweep (run-folder
-        columns), with ``t_s`` from 0.
-
-    Feed ``x_mm, s_mm`` to :func:`blf.calibration.fit_lvdt_calibration`.
-    Arrays are read-only.
-    """
-
-    ema: int
-    x_mm: np.ndarray
-    s_mm: np.ndarray
-    opposing_force_N: float
-    t_s: np.ndarray
-    phi1_rad: np.ndarray
-    phi2_rad: np.ndarray
-    s1_mm: np.ndarray
-    s2_mm: np.ndarray
-    F1_N: np.ndarray
-    F2_N: np.ndarray
-
-
-# ====================================================================== helpers
-
-
 def _ro(a) -> np.ndarray:
     out = np.array(a, dtype=np.float64, copy=True)
     out.flags.writeable = False
@@ -261,57 +141,6 @@ def _at_trim(params, rng, duration_s, trim_mm) -> tuple:
     dur = scalar(duration_s, "duration_s", "s", lo=0.0, lo_open=True, hi=3600.0)
     trim = scalar(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
     return p, r, dur, trim, p.sample_period_s, int(math.ceil(dur / p.sample_period_s))
-
-
-def _series(*k: float) -> float:
-    return 1.0 / sum(1.0 / x for x in k)
-
-
-def chain_stiffness_N_per_mm(params: RigParams) -> tuple[float, float]:
-    """Contact stiffness of each EMA's whole load path, structure to surface.
-
-    Parameters
-    ----------
-    params : RigParams
-
-    Returns
-    -------
-    tuple of float
-        ``(k_1, k_2)`` in N/mm.
-
-    Notes
-    -----
-    Housing spring, internal path (mean of compression and tension) and
-    bearing in series: :math:`k_i = (1/k_h + 1/k_{int} + 1/k_b)^{-1}` [N/mm]
-    (14 815 N/mm with the default rig).
-    """
-    p = _params(params)
-    out = []
-    for m in (p.ema1, p.ema2):
-        kint = 0.5 * (m.stiffness_compression_N_per_mm + m.stiffness_tension_N_per_mm)
-        out.append(_series(m.housing_stiffness_N_per_mm, kint, m.bearing_stiffness_N_per_mm))
-    return out[0], out[1]
-
-
-def force_fight_play_mm(params: RigParams) -> float:
-    """Relative motor offset at which the force fight starts, mm.
-
-    Parameters
-    ----------
-    params : RigParams
-
-    Returns
-    -------
-    float
-        Half the total play between the two motors,
-        :math:`(B_{int,1} + B_{b,1} + B_{int,2} + B_{b,2})/2` [mm]
-        (0.16 mm with the default rig): with the surface free and no air load,
-        :math:`F_1 = -F_2 = k_s(\\delta - \\text{this})` for
-        :math:`\\delta` above it, :math:`k_s = (1/k_1 + 1/k_2)^{-1}`.
-    """
-    p = _params(params)
-    return 0.5 * (p.ema1.backlash_int_mm + p.ema1.bearing_backlash_mm
-                  + p.ema2.backlash_int_mm + p.ema2.bearing_backlash_mm)
 
 
 def _trapezoid_move(t: np.ndarray, t0: float, y0: float, y1: float, rate: float, accel: float) -> tuple:
@@ -360,9 +189,6 @@ def _profile(name, description, period, command, load, aero_k, zero_mm, offset, 
         command_mm=_ro(command), load_N=_ro(load), aero_stiffness_N_per_mm=float(aero_k),
         zero_load_mm=float(zero_mm), offset_mm=None if offset is None else _ro(offset),
         lag2_samples=int(lag), ff_bandwidth_rad_s=float(ff_bw), warmup_s=float(warmup))
-
-
-# ====================================================================== profile generators
 
 
 def full_stroke_profile(
@@ -699,7 +525,7 @@ def ext_crossing_profile(
     trim = scalar(trim_mm, "trim_mm", "mm", lo=-p.stroke_limit_mm, hi=p.stroke_limit_mm)
     T = p.sample_period_s
     k1, k2 = chain_stiffness_N_per_mm(p)
-    ks = _series(k1, k2)
+    ks = series_stiffness(k1, k2)
     dp = force_fight_play_mm(p)
     d_end = dp + ff / ks
     # one reversal: ramp d_end -> dp, cross to -dp, ramp -dp -> -d_end
@@ -732,198 +558,26 @@ def ext_crossing_profile(
                     T, y, load, 0.0, trim, delta, 0, 0.0, 1.5)
 
 
-# ====================================================================== simulation
+#: The scenarios ``emacheck simulate --scenario NAME`` knows: name -> what it is.
+SCENARIOS = {
+    "full-stroke": "the full stroke at full rate and back, force-fight compensation on",
+    "small-manoeuvres": "small manoeuvres about trim, each crossing a load reversal",
+    "gusts": "random gust loads at trim",
+    "ext-crossing": "a manoeuvre whose force fight crosses the external play",
+    "cruise": "quiet cruise: no backlash crossed (BLFserv must say 'not traversed')",
+}
 
 
-def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.random.Generator) -> OperationRecord:
-    """Run a normal-operation profile on the simulated rig.
-
-    Parameters
-    ----------
-    params : RigParams
-        The rig (sensor errors and noise included).
-    profile : OperationProfile
-        From one of the generators of this module.
-    rng : numpy.random.Generator
-        Source of the sensor noise (handed to :class:`sim.plant.RigPlant`).
-
-    Returns
-    -------
-    OperationRecord
-
-    Raises
-    ------
-    blf.errors.InputError
-        Bad arguments, or a profile whose sample period differs from the rig's.
-
-    Notes
-    -----
-    Both drives in POSITION: EMA 1 at :math:`(c_k + \\delta_k/2)\\,i_{total}`,
-    EMA 2 at :math:`(c_{k-l} - \\delta_k/2)\\,i_{total}` [rad] with the
-    command :math:`c` [mm], the lag :math:`l` and the relative offset
-    :math:`\\delta` [mm]. Unless scheduled, :math:`\\delta` comes from the
-    force-fight compensation, a slow integral loop on the measured forces:
-
-    .. math:: \\delta_{k+1} = \\delta_k - T\\,\\omega_{ff}\\,\\frac{F_{1,k} - F_{2,k}}{2 k_s}
-
-    with :math:`k_s` the series stiffness of the two chains
-    (:func:`chain_stiffness_N_per_mm`), so that :math:`F_1 - F_2` decays with
-    the bandwidth :math:`\\omega_{ff}` [rad/s] while both chains are in
-    contact; :math:`|\\delta| \\le 1` mm.
-
-    The air load enters the plant as an extra surface load stiffness
-    :math:`k_a` (added to ``params.surface.load_stiffness_N_per_mm``) and the
-    load array :math:`k_a y_0 + g`; the truth (:func:`sim.truth.rig_truth`)
-    is that of ``params``. ``profile.warmup_s`` of settling at the first
-    command is simulated first and not recorded.
-
-    Traversal truth, from the true forces: an internal play counts as crossed
-    when :math:`F_i` is seen below :math:`-F_c` and above :math:`+F_c`
-    (:data:`CONTACT_FORCE_N` = 20 N); the external play when both
-    configurations :math:`(F_1 > F_c, F_2 < -F_c)` and
-    :math:`(F_1 < -F_c, F_2 > F_c)` occur (a change of sign of both forces in
-    opposite sense; a same-sense change moves :math:`D_{ext}` by
-    :math:`B_{b,2} - B_{b,1}` only).
-    """
-    p = _params(params)
-    instance_of(profile, OperationProfile, "profile", "an OperationProfile")
-    r = generator(rng)
-    T = p.sample_period_s
-    if abs(profile.sample_period_s - T) > 1e-12:
-        raise InputError(f"profile.sample_period_s = {profile.sample_period_s} s differs from "
-                         f"params.sample_period_s = {T} s")
-    i_tot = p.i_total_rad_per_mm
-    ka = profile.aero_stiffness_N_per_mm
-    run_params = replace(p, surface=replace(p.surface, load_stiffness_N_per_mm=p.surface.load_stiffness_N_per_mm + ka))
-    cmd = np.asarray(profile.command_mm, dtype=float)
-    load = np.asarray(profile.load_N, dtype=float)
-    sched = None if profile.offset_mm is None else np.asarray(profile.offset_mm, dtype=float)
-    lag = int(profile.lag2_samples)
-    nw = int(round(profile.warmup_s / T))
-    # prepend the warm-up at the first command; the air load and a scheduled offset are faded in
-    # smoothly (raised cosine over 70 % of it) so that the lightly damped surface is not set ringing
-    ramp = np.ones(nw)
-    nr = int(0.7 * nw)
-    if nr > 0:
-        ramp[:nr] = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, nr + 1) / nr)
-    cmd_all = np.concatenate([np.full(nw, cmd[0]), cmd])
-    # the plant's load stiffness -ka*y acts in full from the start: the warm-up load
-    # ramp*load[0] + (1 - ramp)*ka*cmd[0] makes the total ramp*(load[0] - ka*y) (y ~ cmd[0])
-    load_all = np.concatenate([ramp * load[0] + (1.0 - ramp) * ka * cmd[0], load])
-    sched_all = None if sched is None else np.concatenate([ramp * sched[0], sched])
-    cmd2_all = np.concatenate([np.full(lag, cmd_all[0]), cmd_all[:cmd_all.size - lag]]) if lag else cmd_all
-    k1, k2 = chain_stiffness_N_per_mm(p)
-    ks = _series(k1, k2)
-    gain = T * profile.ff_bandwidth_rad_s / (2.0 * ks)
-    # start near the equilibrium deflection under the initial load to keep the warm-up short
-    plant = RigPlant(run_params, r, s0_mm=float(np.clip(cmd_all[0], -p.stroke_limit_mm, p.stroke_limit_mm)))
-    ntot = cmd_all.size
-    meas = np.empty((ntot, 7))
-    true_f = np.empty((ntot, 2))
-    true_s = np.empty((ntot, 2))
-    offs = np.empty(ntot)
-    delta = 0.0 if sched_all is None else float(sched_all[0])
-    step = plant.step_raw
-    state = plant.state
-    for k in range(ntot):
-        if sched_all is not None:
-            delta = float(sched_all[k])
-        offs[k] = delta
-        o = step(_POS, (cmd_all[k] + 0.5 * delta) * i_tot, _POS, (cmd2_all[k] - 0.5 * delta) * i_tot,
-                 float(load_all[k]))
-        meas[k] = o
-        st = state()
-        true_f[k] = st.F_N
-        true_s[k] = st.s_mm
-        if sched_all is None and gain > 0.0:
-            delta -= gain * (o[5] - o[6])
-            delta = min(max(delta, -1.0), 1.0)
-    sl = slice(nw, ntot)
-    F = true_f[sl]
-    fc = CONTACT_FORCE_N
-    trav = {
-        "int1": bool(np.any(F[:, 0] > fc) and np.any(F[:, 0] < -fc)),
-        "int2": bool(np.any(F[:, 1] > fc) and np.any(F[:, 1] < -fc)),
-        "ext": bool(np.any((F[:, 0] > fc) & (F[:, 1] < -fc)) and np.any((F[:, 0] < -fc) & (F[:, 1] > fc))),
-    }
-    truth = rig_truth(p)
-    expected = {ch: (truth.backlash_mm[ch] if trav[ch] else None) for ch in ("int1", "int2", "ext")}
-    return OperationRecord(
-        name=profile.name, t_s=_ro(meas[sl, 0] - meas[nw - 1, 0] if nw else meas[sl, 0]),
-        phi1_rad=_ro(meas[sl, 1]), phi2_rad=_ro(meas[sl, 2]), s1_mm=_ro(meas[sl, 3]), s2_mm=_ro(meas[sl, 4]),
-        F1_N=_ro(meas[sl, 5]), F2_N=_ro(meas[sl, 6]), true_F_N=_ro(F), true_s_mm=_ro(true_s[sl]),
-        offset_mm=_ro(offs[sl]), truth=truth, traversed=trav, expected_backlash_mm=expected,
-        sample_period_s=float(T))
-
-
-def simulate_calibration_sweep(
-    params: RigParams,
-    rng: np.random.Generator,
-    *,
-    ema: int = 1,
-    amplitude_mm: float = 17.0,
-    speed_mm_per_s: float = 5.0,
-    opposing_force_N: float = 2000.0,
-    force_ramp_s: float = 1.0,
-) -> CalibrationSweep:
-    """Slow LVDT calibration sweep of one EMA under a constant opposing force.
-
-    Parameters
-    ----------
-    params : RigParams
-    rng : numpy.random.Generator
-        Sensor noise.
-    ema : {1, 2}, optional
-        The EMA swept in POSITION mode; the other holds ``opposing_force_N``
-        in FORCE mode (default 1).
-    amplitude_mm : float, optional
-        Sweep ``0 -> +A -> -A -> 0``, mm (default 17).
-    speed_mm_per_s : float, optional
-        Sweep speed, mm/s (default 5).
-    opposing_force_N : float, optional
-        Force of the other EMA (compression), N (default 2000).
-    force_ramp_s : float, optional
-        Ramp of the opposing force before the sweep, s (default 1).
-
-    Returns
-    -------
-    CalibrationSweep
-        The sweep samples only (ramp excluded).
-
-    Notes
-    -----
-    Paper 2.3: under a constant opposing force :math:`F` the swept EMA's
-    internal deflection :math:`D_{int} = -(F/k + \\mathrm{sign}(F) B/2)` is
-    constant, so :math:`x = \\varphi/i_{total}` is the stroke up to a
-    constant and the regression of :math:`s` on :math:`x` is the LVDT law.
-    """
-    p = _params(params)
-    r = generator(rng)
-    one_of(ema, "ema", (1, 2), "1 or 2, no unit")
-    amp = scalar(amplitude_mm, "amplitude_mm", "mm", lo=0.0, lo_open=True, hi=0.95 * p.stroke_limit_mm)
-    v = scalar(speed_mm_per_s, "speed_mm_per_s", "mm/s", lo=0.0, lo_open=True, hi=50.0)
-    f = scalar(opposing_force_N, "opposing_force_N", "N", lo=0.0, lo_open=True, hi=20000.0)
-    tr = scalar(force_ramp_s, "force_ramp_s", "s", lo=0.0, lo_open=True, hi=60.0)
-    T = p.sample_period_s
-    i_tot = p.i_total_rad_per_mm
-    nr = int(round(tr / T))
-    period = 4.0 * amp / v
-    ns = int(round(period / T))
-    t = np.arange(1, ns + 1) * T
-    x = amp * (1.0 - 2.0 * np.abs(2.0 * ((t / period + 0.25) % 1.0) - 1.0))  # triangle 0 -> A -> -A -> 0
-    settle = int(round(0.5 / T))
-    pos = np.concatenate([np.zeros(nr + settle), x]) * i_tot
-    frc = np.concatenate([np.linspace(0.0, f, nr), np.full(settle + ns, f)])
-    plant = RigPlant(p, r)
-    if ema == 1:
-        trc = plant.run(_POS, pos, _FRC, frc, 0.0)
-        phi, s = trc.phi1_rad, trc.s1_mm
-    else:
-        trc = plant.run(_FRC, frc, _POS, pos, 0.0)
-        phi, s = trc.phi2_rad, trc.s2_mm
-    sl = slice(nr + settle, None)
-    return CalibrationSweep(
-        ema=int(ema), x_mm=_ro(phi[sl] / i_tot), s_mm=_ro(s[sl]), opposing_force_N=f,
-        t_s=_ro(trc.t_s[sl] - trc.t_s[nr + settle - 1]), phi1_rad=_ro(trc.phi1_rad[sl]),
-        phi2_rad=_ro(trc.phi2_rad[sl]), s1_mm=_ro(trc.s1_mm[sl]), s2_mm=_ro(trc.s2_mm[sl]),
-        F1_N=_ro(trc.F1_N[sl]), F2_N=_ro(trc.F2_N[sl]))
+def scenario_profile(name: str, params: RigParams, rng: np.random.Generator) -> OperationProfile:
+    """The :class:`OperationProfile` of scenario ``name`` (a key of :data:`SCENARIOS`) with its defaults."""
+    if name not in SCENARIOS:
+        raise InputError(f"scenario must be one of {', '.join(SCENARIOS)}, got {name!r}")
+    if name == "full-stroke":
+        return full_stroke_profile(params)
+    if name == "small-manoeuvres":
+        return small_manoeuvre_profile(params)
+    if name == "gusts":
+        return gust_profile(params, rng)
+    if name == "ext-crossing":
+        return ext_crossing_profile(params)
+    return cruise_profile(params, rng)
