@@ -7,7 +7,10 @@ elastic contact branches joined by a flat backlash branch (paper Figures 4-6).
 :func:`blf_maint` splits the relation into the three parts, fits a straight
 line to each and returns the backlash (horizontal distance between the two
 line intersections) and the two contact stiffnesses with standard
-uncertainties.
+uncertainties. The parts are found from the force (:mod:`blf.maint_regions`):
+contact is where |F| is large, the backlash where F stays at the gap level
+and D moves freely. docs/blfmaint.md compares this with the paper's rule and
+gives the envelope it was benchmarked over.
 
 Pure: arrays and an explicit sample rate in, frozen dataclasses out, no IO.
 """
@@ -17,11 +20,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, signal
+from scipy import signal
 
 from blf.errors import AnalysisError, InputError
-from blf.segments import runs
-from blf.validate import as_1d_finite, below_nyquist, count, positive_scalar, readonly, same_shape, scalar
+from blf.maint_regions import binned_curve, contact_extremes, locate_regions, noise_std
+from blf.validate import (
+    as_1d_finite,
+    below_nyquist,
+    count,
+    instance_of,
+    positive_scalar,
+    readonly,
+    same_shape,
+    scalar,
+)
 
 __all__ = [
     "BinnedCurve",
@@ -33,8 +45,7 @@ __all__ = [
 ]
 
 MIN_SAMPLES = 200  #: fewest force-fight samples BLFmaint accepts
-_MAX_BINS = 100_000
-_FLAT_TO_STEEP_MAX = 0.25  # flat (backlash) slope level must be < 25 % of the contact level
+_FLAT_TO_STEEP_MAX = 0.25  # the backlash line must be flatter than 25 % of the softer contact (beyond 3 sigma)
 
 
 @dataclass(frozen=True)
@@ -84,18 +95,22 @@ class ContactLine:
 
 @dataclass(frozen=True)
 class CentreLine:
-    """Regression line of the backlash (centre) region, F regressed on D.
+    """Line of the backlash (centre) region, F on D.
 
-    Model ``F = f_at_zero_d_N + slope_N_per_mm * D`` (original sign of F).
+    Model ``F = f_at_zero_d_N + slope_N_per_mm * D`` (original sign of F). By
+    default the free play is fitted as a level (``slope_N_per_mm = 0``, F is
+    the mean force in the backlash); with ``blf_maint(..., centre_slope=True)``
+    it is the paper's regression line.
 
     Attributes
     ----------
     f_at_zero_d_N : float
         F of the line at D = 0, N.
     slope_N_per_mm : float
-        dF/dD of the line in the backlash, N/mm (ideally ~0).
+        dF/dD of the line in the backlash, N/mm (0 for a level).
     cov : ndarray, shape (2, 2)
-        Covariance of ``(f_at_zero_d_N, slope_N_per_mm)`` (Newey-West).
+        Covariance of ``(f_at_zero_d_N, slope_N_per_mm)`` (Newey-West; only
+        the first entry is non-zero for a level).
     n : int
         Samples used.
     d_min_mm, d_max_mm : float
@@ -159,10 +174,12 @@ class BinnedCurve:
     count : ndarray of int, shape (m,)
         Samples per bin.
     bin_width_mm : float
-        Bin width, mm.
+        Bin width used, mm: the requested one, narrowed to 1/40 of the D
+        range when that is smaller.
     threshold_N_per_mm : float
-        Slope threshold separating contact (steeper) from backlash, N/mm,
-        original sign.
+        Slope level drawn between contact and backlash in the figure: half
+        the softer fitted contact stiffness, N/mm, original sign. (The
+        regions are found from the force, not from this level.)
     """
 
     d_mm: np.ndarray
@@ -192,11 +209,12 @@ class BlfMaintResult:
     slope_sign : int
         Global sign of dF/dD: -1 (F decreases with D) or +1.
     d_lc_mm, d_rc_mm : float
-        Left and right corners (ends of the flat backlash range of the binned
-        slope), mm.
+        Left and right corners: D of the left and right contact line at the
+        force level of the backlash, mm (the ends of the backlash region).
     dfdd_median : float
         Median of the binned slope dF/dD over the populated bins, N/mm,
-        original sign (the paper's reference level, reported for Figure 4).
+        original sign (the paper's reference level, reported for Figure 4;
+        not used to find the regions).
     lines : FdLines
         The three regression lines and their intersections.
     curve : BinnedCurve
@@ -241,6 +259,7 @@ def blf_maint(
     hac_lag_s: float = 0.05,
     min_contact_points: int = 50,
     min_centre_points: int = 10,
+    centre_slope: bool = False,
 ) -> BlfMaintResult:
     """Measure backlash and contact stiffness from a force-fight F-D record.
 
@@ -266,18 +285,22 @@ def blf_maint(
     min_bin_count : int, optional
         Bins with fewer samples are dropped from the binned curve (default 3).
     contact_margin_frac : float, optional
-        Fraction of the force span between a corner and the force extreme
-        that is excluded next to the corner from the contact regressions
-        (default 0.2; removes the visco-elastic rounding of the transition).
+        Fraction of the force span between the edge of the backlash's force
+        band and the force extreme that is excluded next to the corner from
+        the contact regressions (default 0.2; removes the visco-elastic
+        rounding of the transition).
     centre_margin_frac : float, optional
         Fraction of ``d_rc - d_lc`` excluded at each end of the backlash
-        region from the centre regression (default 0.15).
+        region from the centre fit (default 0.15).
     hac_lag_s : float, optional
         Maximum lag of the Newey-West (Bartlett) covariance of the regression
         coefficients, s (default 0.05 s = 25 samples at 500 Hz).
     min_contact_points, min_centre_points : int, optional
         Minimum samples in each contact region (default 50) and in the centre
         region (default 10); fewer raise :class:`~blf.errors.AnalysisError`.
+    centre_slope : bool, optional
+        False (default): the backlash is fitted as a level of F (free play,
+        dF/dD = 0). True: the paper's regression line F on D.
 
     Returns
     -------
@@ -291,8 +314,13 @@ def blf_maint(
         Bad shapes (not 1-D, unequal), NaN/inf, fewer than 200 samples, or
         bad options.
     blf.errors.AnalysisError
-        No F-D relation, no distinct backlash region, backlash not traversed
-        (contact reached on one side only), or a region with too few samples.
+        No F-D relation; backlash not traversed (the force fight never
+        reached contact on a side: the message names the side, the end of
+        the D range and the force reached); no distinct backlash region (the
+        two contact lines meet the gap force closer than the resolution of
+        the low-passed D, or F still rises with D between them); a region
+        with too few samples. Each message says what is missing in the
+        record, in mm and N.
 
     Notes
     -----
@@ -303,44 +331,57 @@ def blf_maint(
     .. math::
 
         D = -\\frac{B}{2} + \\frac{G}{c_{left}} \\; (G < 0), \\qquad
-        G \\approx 0 \\; (|D| < B/2), \\qquad
+        G \\approx G_0 \\; (|D| < B/2), \\qquad
         D = \\frac{B}{2} + \\frac{G}{c_{right}} \\; (G > 0)
 
-    (plus an arbitrary offset of D). The algorithm follows the paper with
-    these choices:
+    (plus an arbitrary offset of D; :math:`G_0` the small force in the
+    backlash: friction, load-cell offset). The algorithm follows the paper
+    (three parts, three straight lines, B = distance of the intersections)
+    with these choices:
 
     1. D and F are low-passed identically, zero phase (``sosfiltfilt``,
-       2nd-order Butterworth at ``lowpass_rad_s``). The filtered signals are
-       used **only** for the segmentation (steps 2-3 and the region masks).
-    2. Instead of differentiating the time series (dF/dt / dD/dt is
-       dominated by noise where D barely moves), the filtered (D, G) cloud is
-       binned along D (``bin_width_mm``), the median G of each bin taken and
-       the slope :math:`dG/dD` of this binned curve computed by a local
-       linear fit, then a 3-point running median. The bin medians are
-       insensitive to how long the record dwells at a given D.
-    3. The slope level separating contact from backlash is found by a
-       two-cluster (iterated mid-point of the two cluster medians) split of
-       the binned slopes. The plain median of the slopes used in the paper is
-       reported as ``dfdd_median`` but not used: over D-uniform bins it lands
-       inside the contact cluster when the contact span exceeds the backlash
-       (internal: 2 x 0.075 mm vs 0.1 mm) and inside the flat cluster
-       otherwise, so it would not separate them. Working on :math:`G`, "larger
-       in magnitude" is simply "larger". The backlash range is the widest run
-       of consecutive bins below the level; its ends, interpolated, are
-       ``d_lc_mm``, ``d_rc_mm``. A run touching either end of the recorded
-       D range means the backlash was not traversed.
-    4. Three ordinary least-squares fits on the **unfiltered** samples
-       (independent noise, no filter-induced bias at the corners):
-       contact regions regress D on F, because F is nearly noise-free
-       (10 N ~ 0.1 um at 80 kN/mm) while D carries the LVDT noise
-       (~4 um); regressing F on D would attenuate the stiffness by the
-       errors-in-variables factor :math:`var(D_{true}) /
-       (var(D_{true}) + \\sigma_D^2)`, 4-6 % at 80 kN/mm and +-6 kN.
-       Contact samples are selected on the filtered force only (a selection
-       on the regressor does not bias OLS, one on D would): beyond the corner
-       force plus ``contact_margin_frac`` of the span to the force extreme.
-       The centre region regresses F on D over ``[d_lc + m, d_rc - m]``,
-       :math:`m` = ``centre_margin_frac`` x ``(d_rc - d_lc)``.
+       2nd-order Butterworth at ``lowpass_rad_s``). The low-passed signals
+       select the regions and are the regressor of the contact lines; the
+       responses (D in contact, F in the backlash) stay unfiltered.
+    2. The parts are found from the force (:func:`blf.maint_regions.
+       locate_regions`), not from the slope dF/dD: the paper's rule (the
+       widest D range where dF/dD is flatter than its median) needs that
+       range to stand out against the flat runs the noise of dF/dD makes in
+       the contact branches, and a two-cluster split of the binned slope
+       finds no flat cluster when the backlash is a few percent of the D
+       range (external backlash 0.02-0.07 mm in +-0.8 mm). Both sides must have
+       been loaded: each side's force extreme (0.5/99.5 % quantile of G)
+       reaches 10 % of the other's and 10 x the load-cell noise. Contact
+       samples: G beyond the edge of the backlash's force band by
+       ``contact_margin_frac`` of the span to the extreme (first pass: 50 %
+       of the extreme). The contact lines' D at the gap level :math:`G_0`
+       are the corners :math:`d_{lc}, d_{rc}`; the band (5-95 % quantiles)
+       and :math:`G_0` (its midpoint: gap friction is +-, by direction) come
+       from the samples in the middle half between the corners (iterated). The backlash is distinct when
+       :math:`d_{rc} - d_{lc}` exceeds 3 robust spreads of the low-passed D
+       about the contact lines; its samples are those with the low-passed D
+       in :math:`[d_{lc} + m, d_{rc} - m]`, :math:`m` =
+       ``centre_margin_frac`` x :math:`(d_{rc} - d_{lc})`. The binned curve
+       (F and dF/dD binned along D, paper Figure 4) is kept for the report.
+    3. Contact lines regress D on F, :math:`D = a + bG`: F is nearly
+       noise-free against D (10 N ~ 0.1 um at 80 kN/mm, LVDT ~4 um), and
+       regressing F on D would attenuate the stiffness by the
+       errors-in-variables factor :math:`var(D_{true}) / (var(D_{true}) +
+       \\sigma_D^2)`, 4-6 % at 80 kN/mm and +-6 kN. The regressor is the
+       low-passed F: with a small force amplitude and a noisy load cell
+       (580 N, 42 N std) even F's own noise attenuates b by ~13 % (the
+       low-pass cuts it ~6 x; zero phase, so no lag). Samples are selected
+       on the low-passed force only (selection on the regressor does not
+       bias OLS; one on D would).
+    4. The backlash is fitted as a level :math:`G = c_0` (mean of the
+       unfiltered G over its samples): in free play dF/dD = 0 and gap
+       friction is a level (+-, by direction). The paper's sloped line
+       (``centre_slope=True``) adds the noise of its slope :math:`c_1`,
+       which enters B multiplied by the compliance b, so it costs accuracy
+       with soft contacts and wide D ranges (envelope benchmark: worst error
+       3.4 x the target max(5 um, 5 % of B) with the line, 0.67 x with the
+       level); a true slope :math:`c_1` in the backlash would shift B by
+       only about :math:`(c_1/c) B`.
     5. Intersections: with contact line :math:`D = a + bG` and centre line
        :math:`G = c_0 + c_1 D`, :math:`D^* = (a + b c_0) / (1 - b c_1)`;
        :math:`B = D^*_{right} - D^*_{left}`, :math:`c = 1/b`.
@@ -349,13 +390,15 @@ def blf_maint(
     Newey-West (Bartlett kernel, lags up to ``hac_lag_s``) sandwich estimate,
     with lag products taken only between samples that are adjacent in time,
     so it stays valid if the D noise is coloured; the three fits use disjoint
-    samples and are treated as independent. ``backlash_sigma_mm`` follows by
+    samples and are treated as independent (the level's variance is the
+    Newey-West variance of a mean). ``backlash_sigma_mm`` follows by
     first-order propagation through :math:`D^*`; the stiffness sigma is
     :math:`\\sigma_b / b^2`. On measurement noise these sigmas match the
     seed-to-seed spread (tests: ratio 0.8-1.2, white and AR(1)-coloured D
-    noise). Residual structure that is slow but repeats (friction hysteresis in the gap, visco-elastic loops)
-    enters through the HAC lags and makes them conservative (e.g. +-100 N gap
-    friction: sigma of B 1.0 um vs a seed spread of 0.23 um); a systematic
+    noise; +-100 N of gap friction: sigma of B 0.25 um vs a seed spread of
+    0.23 um, the level is not disturbed by the friction's two signs).
+    Residual structure that is slow but repeats (visco-elastic loops) enters
+    through the HAC lags and makes them conservative; a systematic
     model error that does not show in the residuals (e.g. a contact law that
     is curved beyond the margin) is not included.
 
@@ -363,7 +406,7 @@ def blf_maint(
     (Maxwell) stiffening whose time constant is not small against the force
     ramp shows as a higher, rate-dependent stiffness and a shifted backlash
     (simulated rig, 2 kN/s ramps, arm 40 kN/mm in parallel with 80 kN/mm:
-    tau 0.1 s gives +0.7 % and +0.2 um, tau 0.5 s gives +15 % and +9 um).
+    tau 0.1 s gives +0.7 % and +0.4 um, tau 0.5 s gives +15 % and +9 um).
     """
     d = as_1d_finite(d_mm, "d_mm", "mm")
     f = as_1d_finite(f_N, "f_N", "N")
@@ -384,9 +427,10 @@ def blf_maint(
     m_margin = scalar(centre_margin_frac, "centre_margin_frac", "(fraction, dimensionless)", lo=0.0, hi=0.5,
                       hi_open=True)
     max_lag = int(round(scalar(hac_lag_s, "hac_lag_s", "s", lo=0.0) * fs))
+    instance_of(centre_slope, bool, "centre_slope", "a bool (no unit)")
     n_total = d.size
 
-    # 1. identical zero-phase low-pass of D and F (segmentation only)
+    # 1. identical zero-phase low-pass of D and F (the selections, and the contact lines' regressor)
     sos = signal.butter(2, wc / (2.0 * np.pi), btype="low", fs=fs, output="sos")
     d_f = signal.sosfiltfilt(sos, d)
     f_f = signal.sosfiltfilt(sos, f)
@@ -401,88 +445,42 @@ def blf_maint(
     corr = float(np.corrcoef(d_f, f_f)[0, 1])
     if not abs(corr) >= 0.3:
         raise AnalysisError(
-            f"no F-D relation: correlation of low-passed D and F is {corr:.3f} (|r| < 0.3)"
+            "no F-D relation: D and F do not move together, as they do in a force fight (correlation of the "
+            f"low-passed D and F {corr:.3f}, |r| < 0.3)"
         )
     sign = 1 if corr > 0 else -1
     g = sign * f
     g_f = sign * f_f
 
-    # 2. binned curve along D and its slope
-    d_lo, d_hi = float(d_f.min()), float(d_f.max())
-    n_bins = int(np.ceil((d_hi - d_lo) / bw)) + 1
-    if n_bins > _MAX_BINS:
-        raise InputError(
-            f"bin_width_mm = {bw:g} mm is too small for the D range {d_hi - d_lo:.4g} mm "
-            f"({n_bins} bins > {_MAX_BINS}); check the units of d_mm (shape {d.shape})"
-        )
-    labels = np.floor((d_f - d_lo) / bw).astype(np.int64)
-    counts_all = np.bincount(labels, minlength=n_bins)
-    populated = np.flatnonzero(counts_all >= min_count)
-    if populated.size < 2 * half_win + 5:
-        raise AnalysisError(
-            f"D range {d_hi - d_lo:.4g} mm gives only {populated.size} populated bins of "
-            f"{bw:g} mm; need at least {2 * half_win + 5} to separate contact and backlash "
-            "(check the units of d_mm)"
-        )
-    cd = np.asarray(ndimage.median(d_f, labels=labels, index=populated), dtype=float)
-    cg = np.asarray(ndimage.median(g_f, labels=labels, index=populated), dtype=float)
-    counts = counts_all[populated]
-    raw_slope = _local_slope(cd, cg, half_win)
-    slope = _running_median3(raw_slope)
+    # 2. binned curve along D and its slope (paper Figure 4; refuses D not in mm)
+    cd, cg, counts, slope, bw_used = binned_curve(d_f, g_f, bw, half_win, min_count)
 
-    # 3. contact / backlash level and corners
-    level, flat_med, steep_med = _two_cluster_level(slope)
-    if not (steep_med > 0.0 and flat_med < _FLAT_TO_STEEP_MAX * steep_med):
-        raise AnalysisError(
-            "no distinct backlash region: the binned slope |dF/dD| has no flat part "
-            f"(flat cluster {flat_med:.4g} N/mm vs contact cluster {steep_med:.4g} N/mm)"
-        )
-    below = slope < level
-    start, stop = _widest_run(below, cd)
-    if start == 0 or stop == below.size - 1:
-        side = "lower" if start == 0 else "upper"
-        raise AnalysisError(
-            "backlash not traversed: the flat (backlash) part of the F-D relation reaches the "
-            f"{side} end of the recorded D range [{d_lo:.4f}, {d_hi:.4f}] mm, so contact is "
-            "reached on one side only"
-        )
-    d_lc = _crossing(cd[start - 1], cd[start], slope[start - 1], slope[start], level)
-    d_rc = _crossing(cd[stop], cd[stop + 1], slope[stop], slope[stop + 1], level)
-    g_lc = float(np.interp(d_lc, cd, cg))
-    g_rc = float(np.interp(d_rc, cd, cg))
-    g_min, g_max = float(cg.min()), float(cg.max())
-
-    # region masks (selection on filtered signals)
-    # contact: on the filtered force only (the regressor), never on D (the response)
-    mask_left = g_f <= g_lc - c_margin * (g_lc - g_min)
-    mask_right = g_f >= g_rc + c_margin * (g_max - g_rc)
-    width = d_rc - d_lc
-    mask_centre = (d_f >= d_lc + m_margin * width) & (d_f <= d_rc - m_margin * width)
+    # 3. regions from the force: both sides loaded, contact lines, corners, backlash samples
+    g_lo, g_hi = contact_extremes(g_f, noise_std(f, f_f), sign, (float(d_f.min()), float(d_f.max())))
+    reg = locate_regions(d, d_f, g_f, g_lo, g_hi, sign, contact_margin_frac=c_margin,
+                         centre_margin_frac=m_margin, min_contact=min_contact, min_centre=min_centre)
+    d_lc, d_rc = reg.d_lc_mm, reg.d_rc_mm
+    mask_left, mask_centre, mask_right = reg.mask_left, reg.mask_centre, reg.mask_right
     n_left, n_right, n_centre = (int(np.count_nonzero(m)) for m in (mask_left, mask_right, mask_centre))
-    for name, cnt, need in (
-        ("left contact", n_left, min_contact),
-        ("right contact", n_right, min_contact),
-        ("centre (backlash)", n_centre, min_centre),
-    ):
-        if cnt < need:
-            raise AnalysisError(
-                f"{name} region has too few samples: {cnt} < {need} "
-                f"(corners d_lc = {d_lc:.4f} mm, d_rc = {d_rc:.4f} mm)"
-            )
 
-    # 4. regressions on unfiltered samples
+    # 4. regressions: raw D on the low-passed F in contact, the raw F's level (or line on raw D) in the backlash
     idx_l = np.flatnonzero(mask_left)
     idx_r = np.flatnonzero(mask_right)
     idx_c = np.flatnonzero(mask_centre)
-    a_l, b_l, cov_l, rms_l = _ols_hac(g[idx_l], d[idx_l], idx_l, n_total, max_lag, "left contact")
-    a_r, b_r, cov_r, rms_r = _ols_hac(g[idx_r], d[idx_r], idx_r, n_total, max_lag, "right contact")
+    a_l, b_l, cov_l, rms_l = _ols_hac(g_f[idx_l], d[idx_l], idx_l, n_total, max_lag, "left contact")
+    a_r, b_r, cov_r, rms_r = _ols_hac(g_f[idx_r], d[idx_r], idx_r, n_total, max_lag, "right contact")
     c0, c1, cov_c, rms_c = _ols_hac(d[idx_c], g[idx_c], idx_c, n_total, max_lag, "centre")
-    for name, b in (("left", b_l), ("right", b_r)):
-        if not b > 0.0:
-            raise AnalysisError(
-                f"{name} contact region has no elastic slope of the global sign "
-                f"(dD/dF = {sign * b:.4g} mm/N)"
-            )
+    slope_c, slope_c_sigma = c1, float(np.sqrt(cov_c[1, 1]))  # the backlash line's slope, for the flatness check
+    if not centre_slope:
+        c0, c1, cov_c, rms_c = _level_hac(g[idx_c], idx_c, n_total, max_lag)
+    # (b_l, b_r > 0: locate_regions fitted the same lines and refused others)
+    k_soft = min(1.0 / b_l, 1.0 / b_r)
+    if abs(slope_c) - 3.0 * slope_c_sigma > _FLAT_TO_STEEP_MAX * k_soft:
+        raise AnalysisError(
+            "no distinct backlash region: between the contact lines F still changes with D at "
+            f"{abs(slope_c):.4g} N/mm, {100 * abs(slope_c) / k_soft:.0f} % of the softer contact stiffness "
+            f"{k_soft:.4g} N/mm (a soft spring, not free play)"
+        )
 
     # 5. intersections, backlash, stiffness and uncertainties
     dl, jl = _intersection(a_l, b_l, c0, c1)
@@ -534,8 +532,8 @@ def blf_maint(
         f_N=readonly(sign * cg),
         dfdd_N_per_mm=readonly(sign * slope),
         count=readonly(counts),
-        bin_width_mm=bw,
-        threshold_N_per_mm=float(sign * level),
+        bin_width_mm=bw_used,
+        threshold_N_per_mm=float(sign * 0.5 * k_soft),
     )
     return BlfMaintResult(
         backlash_mm=float(backlash),
@@ -562,61 +560,6 @@ def blf_maint(
 # --------------------------------------------------------------------------
 # private helpers
 # --------------------------------------------------------------------------
-
-
-def _local_slope(x: np.ndarray, y: np.ndarray, half_win: int) -> np.ndarray:
-    """Slope of a local least-squares line over +-half_win neighbouring points."""
-    m = x.size
-    out = np.empty(m)
-    for i in range(m):
-        lo, hi = max(0, i - half_win), min(m, i + half_win + 1)
-        xs, ys = x[lo:hi], y[lo:hi]
-        xc = xs - xs.mean()
-        sxx = float(xc @ xc)
-        out[i] = float(xc @ (ys - ys.mean())) / sxx if sxx > 0.0 else 0.0
-    return out
-
-
-def _running_median3(v: np.ndarray) -> np.ndarray:
-    """3-point running median with edge replication."""
-    padded = np.concatenate(([v[0]], v, [v[-1]]))
-    stack = np.stack((padded[:-2], padded[1:-1], padded[2:]))
-    return np.median(stack, axis=0)
-
-
-def _two_cluster_level(v: np.ndarray) -> tuple[float, float, float]:
-    """Split values into a low and a high cluster (iterated mid-point of medians)."""
-    lo_q, hi_q = np.quantile(v, [0.05, 0.95])
-    level = 0.5 * (lo_q + hi_q)
-    flat_med = steep_med = float("nan")
-    for _ in range(100):
-        low, high = v[v < level], v[v >= level]
-        if low.size == 0 or high.size == 0:
-            break
-        flat_med, steep_med = float(np.median(low)), float(np.median(high))
-        new = 0.5 * (flat_med + steep_med)
-        if new == level:
-            break
-        level = new
-    return float(level), flat_med, steep_med
-
-
-def _widest_run(mask: np.ndarray, x: np.ndarray) -> tuple[int, int]:
-    """First and last index of the run of True with the largest extent in x."""
-    stretches = runs(mask)
-    if not stretches:
-        raise AnalysisError("no flat (backlash) part found in the binned F-D slope")
-    k = int(np.argmax([x[b - 1] - x[a] for a, b in stretches]))
-    a, b = stretches[k]
-    return int(a), int(b - 1)
-
-
-def _crossing(x0: float, x1: float, y0: float, y1: float, level: float) -> float:
-    """x where the segment (x0, y0)-(x1, y1) crosses level (clamped to the segment)."""
-    if y1 == y0:
-        return 0.5 * (x0 + x1)
-    t = min(max((level - y0) / (y1 - y0), 0.0), 1.0)
-    return float(x0 + t * (x1 - x0))
 
 
 def _ols_hac(x: np.ndarray, y: np.ndarray, idx: np.ndarray, n_total: int, max_lag: int, name: str):
@@ -649,6 +592,25 @@ def _ols_hac(x: np.ndarray, y: np.ndarray, idx: np.ndarray, n_total: int, max_la
     cov = jac @ cov_c @ jac.T
     a = ym - b * xm
     return a, b, cov, float(np.sqrt(np.mean(u * u)))
+
+
+def _level_hac(y: np.ndarray, idx: np.ndarray, n_total: int, max_lag: int):
+    """Mean level of y as the line y = c0 + 0 x, with the Newey-West variance of the mean.
+
+    Returns c0, cov (2x2, only the c0 entry non-zero), rms residual; lag
+    products as in :func:`_ols_hac`.
+    """
+    n = y.size
+    c0 = float(y.mean())
+    u = y - c0
+    full = np.zeros(n_total)
+    full[idx] = u
+    s = float(full @ full)
+    for k in range(1, min(max_lag, n_total - 1) + 1):
+        s += 2.0 * (1.0 - k / (max_lag + 1.0)) * float(full[k:] @ full[:-k])
+    cov = np.zeros((2, 2))
+    cov[0, 0] = max(s, 0.0) / n**2 * (n / max(n - 1, 1))
+    return c0, 0.0, cov, float(np.sqrt(np.mean(u * u)))
 
 
 def _intersection(a: float, b: float, c0: float, c1: float) -> tuple[float, np.ndarray]:

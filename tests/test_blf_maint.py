@@ -1,91 +1,34 @@
 """Tests of blf.maint.blf_maint (BLFmaint, paper 2.1) on synthetic force-fight data.
 
-The generator below builds the F-D relation of a quasi-static force fight
-with known backlash and stiffness; the analysis must recover them to the
-product's acceptance figures (backlash within 0.005 mm, stiffness within 3 %,
-seed-to-seed std of the backlash < 0.003 mm).
+The generator (tests/support/blfmaint_data.py) builds the F-D relation of a
+quasi-static force fight with known backlash and stiffness; the analysis must
+recover them to the product's acceptance figures (backlash within 0.005 mm,
+stiffness within 3 %, seed-to-seed std of the backlash < 0.003 mm), at the
+corners of the envelope to max(5 um, 5 % of B) (tests/bench/bench_envelope.py
+covers the whole envelope), and on the simulated rig with a small external
+backlash (slow). A channel that cannot be measured raises an error that says
+what is missing in the record.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
+from conftest import simulate_run
 
 from blf import BlfMaintResult, blf_maint
 from blf.errors import AnalysisError, InputError
+from support.blfmaint_data import FS_HZ, make_force_fight
+from support.profiles import write_profile_variant
 
-FS_HZ = 500.0
 SIGMA_D_MM = 0.0042  # LVDT noise (0.025 mm pp)
 SIGMA_F_N = 10.0
 
-
-def make_force_fight(
-    rng: np.random.Generator,
-    *,
-    stiffness_left_N_per_mm: float = 80_000.0,
-    stiffness_right_N_per_mm: float = 80_000.0,
-    backlash_mm: float = 0.10,
-    slope_sign: int = -1,
-    f_max_N: float = 6_000.0,
-    n_cycles: int = 3,
-    ramp_s: float = 1.9,
-    gap_speed_mm_per_s: float = 0.25,
-    rounding_mm: float = 0.0,
-    rounding_force_N: float = 400.0,
-    gap_friction_N: float = 0.0,
-    d_offset_mm: float = 0.0,
-    sigma_d_mm: float = SIGMA_D_MM,
-    sigma_f_N: float = SIGMA_F_N,
-    d_noise_ar1: float = 0.0,
-):
-    """Quasi-static force fight through +-f_max_N, sampled at 500 Hz.
-
-    Works in the sign-normalised force G (increasing with D); F = slope_sign*G.
-    Per cycle (4*ramp_s + 2*gap time, ~8.4 s): traverse the gap to the right
-    at gap_speed (G = +friction), right contact G: 0 -> f_max -> 0, traverse
-    the gap to the left (G = -friction), left contact G: 0 -> -f_max -> 0.
-
-    Contact law (truth = asymptotes, B is the distance between them at G = 0)::
-
-        right:  D =  B/2 + G/k_right - r * exp(-|G|/G_r)
-        left:   D = -B/2 + G/k_left  + r * exp(-|G|/G_r)
-
-    r = rounding_mm softens the first ~r of each contact (visco-elastic-like
-    rounding; the initial slope is k / (1 + k r / G_r)). For slope_sign = -1
-    (internal) this is D = -(F/k_c + B/2) for F > 0 and D = -(F/k_t - B/2)
-    for F < 0 with k_c = k_left, k_t = k_right.
-
-    D noise is Gaussian with std sigma_d_mm, white or, with d_noise_ar1 = a,
-    AR(1) coloured (e[k] = a e[k-1] + w[k], same stationary std).
-
-    Returns (d_mm, f_N) with noise, and the noise-free (d_true, f_true).
-    """
-    n_ramp = int(round(ramp_s * FS_HZ))
-    up = np.arange(n_ramp) / n_ramp
-    tri = np.concatenate((up, 1.0 - up)) * f_max_N
-    edge = backlash_mm / 2.0 - rounding_mm
-    n_gap = max(1, int(round(2.0 * edge / gap_speed_mm_per_s * FS_HZ)))
-    gap = np.linspace(-edge, edge, n_gap, endpoint=False)
-
-    def right(gv):
-        soft = rounding_mm * np.exp(-np.abs(gv) / rounding_force_N)
-        return backlash_mm / 2 + gv / stiffness_right_N_per_mm - soft
-
-    def left(gv):
-        soft = rounding_mm * np.exp(-np.abs(gv) / rounding_force_N)
-        return -backlash_mm / 2 + gv / stiffness_left_N_per_mm + soft
-
-    ds, gs = [], []
-    for _ in range(n_cycles):
-        ds += [gap, right(tri), -gap, left(-tri)]
-        gs += [np.full(n_gap, gap_friction_N), tri, np.full(n_gap, -gap_friction_N), -tri]
-    d_true = np.concatenate(ds) + d_offset_mm
-    f_true = slope_sign * np.concatenate(gs)
-    w = rng.normal(0.0, sigma_d_mm * np.sqrt(1.0 - d_noise_ar1**2), d_true.size)
-    d = d_true + lfilter([1.0], [1.0, -d_noise_ar1], w)
-    f = f_true + rng.normal(0.0, sigma_f_N, f_true.size)
-    return d, f, d_true, f_true
+# make_force_fight (tests/support/blfmaint_data.py) builds the F-D relation of a quasi-static
+# force fight: per cycle the gap traversed to the right at gap_speed (G = +friction), the right
+# contact loaded G: 0 -> f_max -> 0, the gap traversed to the left, the left contact loaded;
+# contact law D = +-B/2 + G/k -+ r exp(-|G|/G_r) (r = rounding_mm), F = slope_sign * G; Gaussian
+# D noise (white or AR(1)) and F noise. Returns (d_mm, f_N, d_true, f_true).
 
 
 CASES = {
@@ -319,3 +262,195 @@ def test_too_few_points_in_a_region():
     with pytest.raises(AnalysisError, match="centre .* too few samples"):
         blf_maint(d, f, FS_HZ, min_centre_points=100_000)
     assert issubclass(AnalysisError, ValueError)
+
+
+# ------------------------------------------------------------ envelope corners
+
+SQ2 = np.sqrt(2.0)  # external pair D_ext = s2 - s1 with F2 - F1: two LVDTs, two load cells
+
+CORNERS = {
+    # name: (generator kwargs, stiffness checked to 3 %?) -- truth B and k are in the kwargs
+    # small backlash in a wide D range: B/D range = 0.01 (D +-1 mm at 5 kN/mm)
+    "B0.02_Drange2mm_soft5k": (dict(backlash_mm=0.02, stiffness_left_N_per_mm=5e3, stiffness_right_N_per_mm=5e3,
+                                    f_max_N=5000.0), True),
+    # the external channel that failed: 0.02 mm at 18 kN/mm through F2 - F1 = +-12 kN (D +-0.66 mm)
+    "ext_B0.02_18k_12kN": (dict(backlash_mm=0.02, stiffness_left_N_per_mm=18.2e3, stiffness_right_N_per_mm=18.2e3,
+                                slope_sign=+1, f_max_N=12_000.0, sigma_d_mm=SIGMA_D_MM * SQ2,
+                                sigma_f_N=SIGMA_F_N * SQ2), True),
+    "ext_B0.03_18k_12kN_offset": (dict(backlash_mm=0.03, stiffness_left_N_per_mm=18.2e3,
+                                       stiffness_right_N_per_mm=18.2e3, slope_sign=+1, f_max_N=12_000.0,
+                                       d_offset_mm=0.01, sigma_d_mm=SIGMA_D_MM * SQ2, sigma_f_N=SIGMA_F_N * SQ2),
+                                  True),
+    "B0.02_stiff200k": (dict(backlash_mm=0.02, stiffness_left_N_per_mm=200e3, stiffness_right_N_per_mm=200e3), True),
+    "B0.5_soft5k_asym": (dict(backlash_mm=0.5, stiffness_left_N_per_mm=4e3, stiffness_right_N_per_mm=6e3,
+                              f_max_N=5000.0, gap_speed_mm_per_s=0.5), True),
+    "B0.5_stiff200k": (dict(backlash_mm=0.5, stiffness_left_N_per_mm=200e3, stiffness_right_N_per_mm=200e3,
+                            gap_speed_mm_per_s=0.5), True),
+    "B0.02_noise3x": (dict(backlash_mm=0.02, stiffness_left_N_per_mm=80e3, stiffness_right_N_per_mm=80e3,
+                           sigma_d_mm=3 * SIGMA_D_MM, sigma_f_N=3 * SIGMA_F_N), True),
+    # small force amplitude, noisy load cells, friction in the gap at 17 % of the amplitude: F's own
+    # noise would attenuate a D-on-raw-F slope by ~13 %, and 100 N of friction is no contact
+    "ext_B0.1_soft5k_580N_noise3x_friction": (dict(backlash_mm=0.1, stiffness_left_N_per_mm=4.4e3,
+                                                   stiffness_right_N_per_mm=5.6e3, slope_sign=+1, f_max_N=580.0,
+                                                   gap_friction_N=100.0, sigma_d_mm=3 * SIGMA_D_MM * SQ2,
+                                                   sigma_f_N=3 * SIGMA_F_N * SQ2), False),
+    # backlash 90 % of the D range: contact deflection 12.5 um per side
+    "B0.2_ratio0.9_stiff200k_5kN": (dict(backlash_mm=0.2, stiffness_left_N_per_mm=200e3,
+                                         stiffness_right_N_per_mm=200e3, f_max_N=2500.0), False),
+}
+
+
+@pytest.mark.parametrize("name", list(CORNERS))
+def test_envelope_corners_known_answer(name):
+    """Within max(5 um, 5 % of B) at the corners of the envelope, every seed; stiffness within 3 %."""
+    kw, check_k = CORNERS[name]
+    b_true = kw["backlash_mm"]
+    tol = max(0.005, 0.05 * b_true)
+    for seed in range(5):
+        r = blf_maint(*make_force_fight(np.random.default_rng(2000 + seed), **kw)[:2], FS_HZ)
+        assert abs(r.backlash_mm - b_true) <= tol, (seed, r.backlash_mm - b_true)
+        # the error is within the reported uncertainty (4 sigma + 0.5 um)
+        assert abs(r.backlash_mm - b_true) < 4 * r.backlash_sigma_mm + 0.0005, (seed, r.backlash_sigma_mm)
+        if check_k:
+            assert abs(r.stiffness_left_N_per_mm / kw["stiffness_left_N_per_mm"] - 1) < 0.03
+            assert abs(r.stiffness_right_N_per_mm / kw["stiffness_right_N_per_mm"] - 1) < 0.03
+        # corners at +-B/2 (plus offset) within 2 um + 10 % of B
+        off = kw.get("d_offset_mm", 0.0)
+        assert r.d_lc_mm == pytest.approx(off - b_true / 2, abs=0.002 + 0.1 * b_true)
+        assert r.d_rc_mm == pytest.approx(off + b_true / 2, abs=0.002 + 0.1 * b_true)
+
+
+def test_small_backlash_is_a_few_percent_of_the_bins():
+    """The case that failed (no flat cluster): the backlash is ~2 % of the D range; the regions come from F."""
+    kw, _ = CORNERS["ext_B0.02_18k_12kN"]
+    d, f, _, f_true = make_force_fight(np.random.default_rng(1), **kw)
+    r = blf_maint(d, f, FS_HZ)
+    assert 0.01 < 0.02 / (d.max() - d.min()) < 0.02
+    assert abs(r.backlash_mm - 0.02) < 0.002
+    # backlash samples are those of the gap traversals (F = 0), contact samples are loaded
+    assert np.all(f_true[r.mask_centre] == 0.0)
+    assert np.all(np.abs(f_true[r.mask_left | r.mask_right]) > 0.15 * 12_000.0)
+
+
+def test_centre_is_a_level_unless_the_paper_line_is_asked_for():
+    """Default: the backlash is a level (dF/dD = 0); centre_slope=True fits the paper's line, also within acceptance."""
+    d, f, _, _ = make_force_fight(np.random.default_rng(8))
+    level = blf_maint(d, f, FS_HZ)
+    line = blf_maint(d, f, FS_HZ, centre_slope=True)
+    assert level.lines.centre.slope_N_per_mm == 0.0
+    assert level.lines.centre.cov[1, 1] == 0.0 and level.lines.centre.cov[0, 0] > 0.0
+    assert line.lines.centre.slope_N_per_mm != 0.0
+    for r in (level, line):
+        assert abs(r.backlash_mm - 0.10) < 0.0015
+        assert abs(r.stiffness_left_N_per_mm / 80e3 - 1) < 0.01
+    assert abs(level.backlash_mm - line.backlash_mm) < 0.001
+
+
+# -------------------------------------------- unmeasurable channels, in words
+
+_INTERNALS = ("cluster", "quantile", "MAD", "G_", "g_hi", "binned slope")
+
+
+def _no_internals(msg: str) -> None:
+    for word in _INTERNALS:
+        assert word not in msg, f"message quotes an internal step ({word!r}): {msg}"
+
+
+def test_error_names_the_side_never_loaded():
+    """Internal relation without tension: the message names the side, the D end and the force reached."""
+    d, f, _, f_true = _good()
+    keep = f_true >= 0.0
+    with pytest.raises(AnalysisError) as exc:
+        blf_maint(d[keep], f[keep], FS_HZ)
+    msg = str(exc.value)
+    assert "backlash not traversed: the force fight never reached contact on the tension side (F < 0)" in msg
+    assert "upper end of the recorded D range" in msg
+    assert "F stayed above" in msg and "load-cell noise" in msg
+    _no_internals(msg)
+
+
+def test_error_names_the_side_barely_loaded():
+    """Tension only to 300 N against 6 kN in compression: the shares are quoted."""
+    rng = np.random.default_rng(5)
+    _, _, d_true, f_true = make_force_fight(rng)
+    f2 = np.where(f_true < 0.0, f_true * 300.0 / 6000.0, f_true)
+    d2 = np.where(f_true < 0.0, 0.05 - f2 / 80e3, d_true) + rng.normal(0, SIGMA_D_MM, d_true.size)
+    with pytest.raises(AnalysisError) as exc:
+        blf_maint(d2, f2 + rng.normal(0, SIGMA_F_N, f2.size), FS_HZ)
+    msg = str(exc.value)
+    assert "never reached contact on the tension side (F < 0)" in msg
+    assert "5 % of the" in msg and "reached on the compression side (F > 0)" in msg
+    _no_internals(msg)
+
+
+def test_error_external_side_named_by_sign():
+    """External relation (slope +1) without the F2 - F1 > 0 side."""
+    d, f, _, f_true = make_force_fight(np.random.default_rng(6), slope_sign=+1, stiffness_left_N_per_mm=18e3,
+                                       stiffness_right_N_per_mm=18e3)
+    keep = f_true <= 0.0
+    with pytest.raises(AnalysisError, match=r"never reached contact on the F > 0 side, at the upper end") as exc:
+        blf_maint(d[keep], f[keep], FS_HZ)
+    _no_internals(str(exc.value))
+
+
+def test_error_no_backlash_says_d_does_not_move_freely():
+    d, f, _, _ = make_force_fight(np.random.default_rng(2), backlash_mm=0.0)
+    with pytest.raises(AnalysisError) as exc:
+        blf_maint(d, f, FS_HZ)
+    msg = str(exc.value)
+    assert msg.startswith("no distinct backlash region: D does not move freely at the gap force; the two contact "
+                          "lines reach F = ")
+    assert "with no gap between them: any backlash is below the resolution, 3 x the" in msg
+    assert "um spread of the low-passed D" in msg
+    # a gap narrower than the resolution: its width is quoted
+    d, f, _, _ = make_force_fight(np.random.default_rng(2), backlash_mm=0.0015)
+    with pytest.raises(AnalysisError, match=r"only 1\.\d um apart .* any backlash is below that resolution"):
+        blf_maint(d, f, FS_HZ)
+    _no_internals(msg)
+
+
+def test_error_contact_deflection_lost_in_noise():
+    """200 kN/mm loaded to 300 N: 1.5 um of deflection under 12 um of D noise, with the slope's sign lost."""
+    for seed in range(40):
+        d, f, _, _ = make_force_fight(np.random.default_rng(seed), backlash_mm=0.1, stiffness_left_N_per_mm=200e3,
+                                      stiffness_right_N_per_mm=200e3, f_max_N=300.0, sigma_d_mm=3 * SIGMA_D_MM)
+        try:
+            blf_maint(d, f, FS_HZ)
+        except AnalysisError as exc:
+            msg = str(exc)
+            assert "contact region has no elastic slope" in msg
+            assert "the contact deflection is lost in the noise" in msg and "um std" in msg
+            _no_internals(msg)
+            return
+    pytest.fail("no seed gave a contact slope of the wrong sign")
+
+
+# ------------------------------------------------ the simulated rig, small ext
+
+#: a shorter check than the shipped one: two force-fight cycles, a +-10 mm calibration sweep
+SHORT_CHECK = {"force_fight": {"cycles": 2}, "calibration": {"sweep_amplitude_mm": 10.0}}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("bearing_mm", [0.01, 0.015])
+def test_small_external_backlash_on_the_simulated_rig(tmp_path, actuation, bearing_mm):
+    """bearing_backlash_mm 0.01 / 0.015 at both EMAs (ext 0.02 / 0.03 mm in a +-0.66 mm D range): pass, ext
+    within 5 um (it said FAIL: no flat part of the binned slope)."""
+    from hil.analysis.maint import analyze_signals, result_dict
+    from hil.profiles import load_check, load_simrig
+    from hil.runfolder import read_signals
+
+    chk = load_check(write_profile_variant("check.toml", tmp_path / "check.toml", SHORT_CHECK), actuation)
+    sim = load_simrig(write_profile_variant("simrig.toml", tmp_path / "simrig.toml", {
+        "ema1": {"bearing_backlash_mm": bearing_mm}, "ema2": {"bearing_backlash_mm": bearing_mm}}))
+    outcome, truth = simulate_run(tmp_path / "run", actuation, chk, sim, 7)
+    assert outcome.status == "done", outcome.reason
+    res = result_dict(analyze_signals(read_signals(tmp_path / "run" / "signals.csv"), actuation), actuation, truth)
+    assert truth["backlash_mm"]["ext"] == pytest.approx(2 * bearing_mm)
+    assert res["status"] == "pass", res["notes"]
+    for ch in ("int1", "int2", "ext"):
+        assert res["backlash_mm"][ch] is not None, res["blf_maint"][ch]
+        assert abs(res["backlash_mm"][ch] - truth["backlash_mm"][ch]) < 0.005, ch
+        for side in ("left", "right"):
+            c, tc = res["stiffness_N_per_mm"][ch][side], truth["stiffness_N_per_mm"][ch][side]
+            assert abs(c / tc - 1) < 0.03, (ch, side)
