@@ -58,10 +58,27 @@ class Canopen:
     product_code: int = field(metadata=_rng(0, 0xFFFF_FFFF))  #: expected identity 0x1018:02
     revision_min: int = field(metadata=_rng(0, 0xFFFF_FFFF))  #: lowest accepted 0x1018:03
     eds: str  #: the drives' EDS: a path relative to the profile, or the name of a shipped one
+    #: the master's own node id: its heartbeat is 0x700 + this id, the drives consume it (0x1016)
+    master_node_id: int = field(default=127, metadata=_rng(1, 127))
+    #: the master's heartbeat producer time [s], sent from the master's own loop (proves it is alive)
+    master_heartbeat_period_s: float = field(default=0.05, metadata=_rng(0.005, 10.0))
+    #: the drives' consumer heartbeat time 0x1016 on the master = factor * master_heartbeat_period_s
+    master_heartbeat_consumer_factor: float = field(default=2.5, metadata=_rng(1.5, 10.0))
+    #: the rig's other protection against the master's death, stated in words (e.g. "an external
+    #: watchdog relay on the master's heartbeat drops STO of both drives within 100 ms"); empty (the
+    #: default): the drives' own reaction (consumer heartbeat 0x1016 + abort connection option 0x6007)
+    #: is required, and a drive that lacks or refuses it stops the preflight
+    external_watchdog: str = ""
 
     @property
     def node_ids(self) -> tuple[int, int]:
         return (self.node_id_ema1, self.node_id_ema2)
+
+    @property
+    def master_consumer_time_s(self) -> float:
+        """The drives' consumer heartbeat time on the master's heartbeat [s], whole milliseconds
+        as written to 0x1016 (factor times the master's period, rounded to the ms)."""
+        return round(self.master_heartbeat_consumer_factor * self.master_heartbeat_period_s * 1000.0) / 1000.0
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,14 @@ simulated or real; the transports of :mod:`hil.transport` move the frames.
 It feeds every frame to the sans-IO :class:`hil.master.MasterCore`, logs it,
 runs the SYNC cycle, watches sensor freshness and the master's lag, and
 brings the drives to the safe state on close.
+
+The master's heartbeat (what the drives' consumers watch to stop by
+themselves if the master dies) is whatever :meth:`MasterCore.poll
+<hil.master.MasterCore.poll>` returns: this loop polls after every frame it
+takes, in the preflight, the cycles and the safe-state cycles of
+:meth:`CanopenLink.close`, and its NMT pre-operational ends it. SYNC is
+kernel-timed where the transport can (it would outlive a hung loop); the
+heartbeat never is.
 """
 
 from __future__ import annotations

@@ -13,17 +13,23 @@ Life cycle::
                resolution 0x608F against the profile, rated/max torque,
                heartbeat producer 0x1017, interpolation period 0x60C2,
                software position limits 0x607D (the stroke limits), quick stop
-               option 0x605A, PDO mapping of :data:`hil.canopen.pdo.DEFAULT_LAYOUT`
+               option 0x605A, PDO mapping of :data:`hil.canopen.pdo.DEFAULT_LAYOUT`,
+               the reaction to the master's death (read back: consumer heartbeat
+               0x1016:01, abort connection option 0x6007 = 3, 0x605A, 0x1006)
                -> NMT start.
     CYCLIC     SYNC -> TPDO1/TPDO2 of both drives -> one :class:`~hil.canopen.process.Sample`;
                setpoints -> RPDO2 (mode, only on change) and RPDO1 (controlword,
                targets) before the next SYNC. Heartbeat consumer with a timeout
                per drive, EMCY consumer.
 
+Heartbeat producer: :meth:`MasterCore.poll` returns the master's heartbeat when due, from
+:meth:`~MasterCore.start` to the NMT pre-operational at the end: from the master's own loop
+(never a kernel-timed task), so that a dead or hung master stops it.
+
 Errors are typed and name the drive: :class:`PreflightError` (identity,
-device type, ...), :class:`~hil.canopen.sdo.SdoAbortError` (code and meaning),
-:class:`~hil.canopen.sdo.SdoTimeout`, :class:`DriveFault` (EMCY, fault state),
-:class:`HeartbeatLost`.
+device type, ...), :class:`MasterLossReactionError`, :class:`~hil.canopen.sdo.SdoAbortError`
+(code and meaning), :class:`~hil.canopen.sdo.SdoTimeout`, :class:`DriveFault` (EMCY, fault
+state), :class:`HeartbeatLost`.
 """
 
 from __future__ import annotations
@@ -46,7 +52,8 @@ from hil.canopen.frame import (
     Frame,
     split_cob_id,
 )
-from hil.canopen.nmt import NmtCommand, NmtState, nmt_frame
+from hil.canopen.nmt import NmtCommand, NmtState, heartbeat_frame, nmt_frame
+from hil.canopen.od import QUICK_STOP_OPTION, AbortConnectionOption, master_loss_steps
 from hil.canopen.pdo import (
     DEFAULT_LAYOUT,
     RPDO1,
@@ -62,7 +69,7 @@ from hil.canopen.pdo import (
     encode_rpdo2,
 )
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.canopen.sdo import SdoClient, SdoEvent, expedited_download_frame
+from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent, describe, expedited_download_frame
 from hil.canopen.units import force_dN_to_newton, force_to_permille, increments_to_rad, lvdt_um_to_mm, rad_to_increments
 from hil.config import Actuation
 from hil.errors import EmacheckError
@@ -82,6 +89,10 @@ class DriveFault(EmacheckError, RuntimeError):
 
 class HeartbeatLost(EmacheckError, RuntimeError):
     """A drive's heartbeat did not arrive within its timeout."""
+
+
+class MasterLossReactionError(PreflightError):
+    """A drive lacks or refuses its reaction to the master's death (0x1016, 0x6007) and no other is stated."""
 
 
 class EventKind(Enum):
@@ -128,6 +139,7 @@ class _SdoRead:
     index: int
     sub: int
     what: str
+    soft: bool = False  #: an abort comes back to the preflight as the result (not raised)
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +149,7 @@ class _SdoWrite:
     sub: int
     data: bytes
     what: str
+    soft: bool = False
 
 
 class Phase(Enum):
@@ -165,6 +178,8 @@ class DriveView:
     identity: dict = field(default_factory=dict)
     last_tpdo_s: float | None = None  #: time of the last TPDO1 (statusword) seen in the cyclic phase
     lost: bool = False  #: heartbeat lost (the consumer fired for this node)
+    #: how this drive is protected against the master's death (set by the preflight)
+    master_loss: dict = field(default_factory=dict)
 
 
 def _u(data: bytes) -> int:
@@ -188,6 +203,11 @@ class MasterCore:
         self.i_total = actuation.mechanics.i_total_rad_per_mm
         self.counts = actuation.sensors.resolver_counts_per_rev
         self.hb_timeout_s = c.heartbeat_period_s * c.heartbeat_timeout_factor
+        self.node_id = c.master_node_id  #: the master's own node id (its heartbeat)
+        self.hb_period_s = c.master_heartbeat_period_s  #: the master's heartbeat producer time [s]
+        self.consumer_ms = round(c.master_consumer_time_s * 1000)  #: the drives' 0x1016 time [ms]
+        self._hb_frame = heartbeat_frame(self.node_id, NmtState.OPERATIONAL)
+        self._hb_next: float | None = None  #: when the next heartbeat is due; None: not producing
         self.drives = {n: DriveView(n) for n in c.node_ids}
         self.order = c.node_ids  # EMA 1, EMA 2
         self.phase = Phase.IDLE
@@ -224,6 +244,7 @@ class MasterCore:
         if self.phase is not Phase.IDLE:
             raise PreflightError(f"master already started (phase {self.phase.value})")
         self.phase = Phase.PREFLIGHT
+        self._hb_next = t  # the heartbeat starts with the first frame: the first poll sends it
         self._gen = self._preflight()
         return self._advance(None, t, first=True)
 
@@ -280,13 +301,38 @@ class MasterCore:
             lim = rad_to_increments(a.mechanics.stroke_limit_mm * self.i_total, self.counts)
             yield _SdoWrite(n, 0x607D, 1, struct.pack("<i", -lim), "software position limit min")
             yield _SdoWrite(n, 0x607D, 2, struct.pack("<i", lim), "software position limit max")
-            yield _SdoWrite(n, 0x605A, 0, struct.pack("<h", 2), "quick stop option code")
+            yield _SdoWrite(n, 0x605A, 0, struct.pack("<h", QUICK_STOP_OPTION), "quick stop option code")
             yield _SdoWrite(n, 0x1006, 0, struct.pack("<I", period_us), "communication cycle period")
             for w in DEFAULT_LAYOUT.configuration_writes(n):
                 yield _SdoWrite(n, w.index, w.subindex, w.data, w.what)
+            yield from self._master_loss_reaction(n, ema, period_us)
             self._event(0.0, EventKind.PREFLIGHT, n, f"configured: identity {d.identity}, rated torque "
                                              f"{d.rated_torque_Nm} Nm, heartbeat {hb_ms} ms")
         yield _Nmt(NmtCommand.START)
+
+    def _master_loss_reaction(self, n: int, ema: int, period_us: int) -> Generator:
+        """Configure and read back the drive's own reaction to the master's death
+        (:func:`~hil.canopen.od.master_loss_steps`); a missing, refused or not kept object stops the
+        preflight naming it, unless the profile states another protection (then it is noted)."""
+        problems = []
+        for st in master_loss_steps(self.node_id, self.consumer_ms, period_us):
+            r = (yield _SdoWrite(n, st.index, st.subindex, st.data, st.what, soft=True)) if st.write else None
+            if not isinstance(r, SdoAbortError):
+                r = yield _SdoRead(n, st.index, st.subindex, st.what, soft=True)
+            name = f"0x{st.index:04X}:{st.subindex:02X} ({st.what})"
+            if isinstance(r, SdoAbortError):
+                problems.append(f"{name}: SDO abort 0x{int(r.code):08X} ({describe(r.code)})")
+            elif bytes(r[:len(st.data)]).ljust(len(st.data), b"\0") != st.data:
+                problems.append(f"{name} reads back 0x{_u(r):X}, not 0x{_u(st.data):X}")
+        watchdog = self.act.canopen.external_watchdog
+        self.drives[n].master_loss = {"consumer_heartbeat_ms": self.consumer_ms, "master_node_id": self.node_id,
+                                      "abort_connection_option": int(AbortConnectionOption.QUICK_STOP),
+                                      "verified": not problems, "problems": problems, "external_watchdog": watchdog}
+        if problems and not watchdog:
+            raise MasterLossReactionError(
+                f"node {n} (EMA {ema}): its reaction to the master's death is not in place: " + "; ".join(problems)
+                + " (it would keep its last command if the master died; canopen.external_watchdog states another"
+                " protection of the rig)")
 
     def _advance(self, result: object, t: float, first: bool = False) -> list[Frame]:
         """Run the preflight generator until it waits for something."""
@@ -388,7 +434,7 @@ class MasterCore:
                 if base in _OWN_TRAFFIC:
                     return []  # our own RPDOs / SDO requests seen on the bus
             if cid == NMT_COB_ID:
-                return []  # NMT (ours)
+                return []  # NMT (ours; one on our heartbeat's COB-ID is another node's or an echo: counted)
             self.unknown_frames += 1
             return []
         except PdoError as exc:
@@ -399,7 +445,12 @@ class MasterCore:
     def _on_sdo(self, node: int, frame: Frame, t: float) -> list[Frame]:
         if self.phase is not Phase.PREFLIGHT:
             return []
-        res = self._sdo[node].on_frame(frame, t)  # raises SdoAbortError with code and meaning
+        try:
+            res = self._sdo[node].on_frame(frame, t)  # raises SdoAbortError with code and meaning
+        except SdoAbortError as exc:  # a soft request gets the abort as its result
+            if exc.abort_frame is not None or not getattr(self._pending, "soft", False):
+                raise
+            return self._advance(exc, t)
         if isinstance(res, Frame):
             return [res]
         if isinstance(res, SdoEvent):
@@ -440,14 +491,21 @@ class MasterCore:
     # ------------------------------------------------------------------ timing
 
     def poll(self, t: float) -> list[Frame]:
-        """Check timeouts at time ``t`` (boot-up, SDO, heartbeat); latches like :meth:`on_frame`."""
+        """Check timeouts at time ``t`` (boot-up, SDO, heartbeat); latches like :meth:`on_frame`.
+        Returns the master's own heartbeat when one is due (see the module docstring)."""
         try:
-            return self._poll(t)
+            self._poll(t)
         except BaseException as exc:
             self.latch(exc)
             raise
+        nxt = self._hb_next
+        if nxt is None or t < nxt - 1e-9:
+            return []
+        nxt += self.hb_period_s  # on its own schedule; restarted from t if it fell a period behind
+        self._hb_next = nxt if nxt > t else t + self.hb_period_s
+        return [self._hb_frame]
 
-    def _poll(self, t: float) -> list[Frame]:
+    def _poll(self, t: float) -> None:
         if self.phase is Phase.PREFLIGHT:
             if isinstance(self._pending, _WaitBoot) and t > self._boot_deadline:
                 missing = [n for n, d in self.drives.items() if not d.booted]
@@ -467,7 +525,6 @@ class MasterCore:
                     self._fail(HeartbeatLost(f"node {n} (EMA {self.order.index(n) + 1}): heartbeat lost "
                                              f"(none for {t - d.last_heartbeat_s:.3f} s, "
                                              f"timeout {self.hb_timeout_s:.3f} s)"), t, n)
-        return []
 
     # ------------------------------------------------------------------ cyclic
 
@@ -549,7 +606,7 @@ class MasterCore:
                 else:
                     # orderly: disable operation (drive stops under control), shutdown, disable voltage;
                     # not the shortest path (disable voltage cuts the power stage at once)
-                    cmd = _ORDERLY_DOWN.get(d.state) or _hold(d.state)
+                    cmd = _ORDERLY_DOWN.get(d.state) or _HOLD.get(d.state)
                 mode = d.mode_sent if d.mode_sent is not None else int(OperationMode.CSP)
             else:
                 mode = int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST)
@@ -560,7 +617,7 @@ class MasterCore:
                 target = State.OPERATION_ENABLED
                 cmd = next_command(d.state, target) if d.state is not State.FAULT else Command.FAULT_RESET
                 if cmd is None:
-                    cmd = _hold(d.state)
+                    cmd = _HOLD.get(d.state)
             if mode != d.mode_sent:
                 out.append(encode_rpdo2(n, Rpdo2(mode)))
                 d.mode_sent = mode
@@ -569,6 +626,10 @@ class MasterCore:
         return out
 
     def nmt_frames(self, command: NmtCommand) -> list[Frame]:
+        """The NMT frame of ``command`` to all nodes; any command but START also ends the master's
+        heartbeat (the check's last frame is NMT pre-operational)."""
+        if command != NmtCommand.START:
+            self._hb_next = None
         return [nmt_frame(command)]
 
     def fallback_stop_frames(self, t: float) -> list[Frame]:
@@ -608,16 +669,14 @@ class MasterCore:
             d = self.drives[n]
             ok = self._confirmed(d, t)
             out[f"ema{k}"] = {"node": n, "state": d.state.name, "reachable": not d.lost, "confirmed": ok,
-                              "safe": ok and d.state in SAFE_STATES}
+                              "safe": ok and d.state in SAFE_STATES, "master_loss": d.master_loss}
         return out
 
     def all_in(self, state: State) -> bool:
         return all(d.state is state for d in self.drives.values())
 
     def modes_confirmed(self, sp1: Setpoint, sp2: Setpoint) -> bool:
-        want = []
-        for sp in (sp1, sp2):
-            want.append(int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST))
+        want = [int(OperationMode.CSP if sp.mode is DriveMode.POSITION else OperationMode.CST) for sp in (sp1, sp2)]
         return all(self.drives[n].mode_display == w for n, w in zip(self.order, want))
 
 
@@ -631,13 +690,11 @@ _ORDERLY_DOWN = {
     State.FAULT: Command.FAULT_RESET,
 }
 
-
-def _hold(state: State) -> Command | None:
-    """The controlword that keeps a drive where it is."""
-    return {
-        State.SWITCH_ON_DISABLED: Command.DISABLE_VOLTAGE,
-        State.READY_TO_SWITCH_ON: Command.SHUTDOWN,
-        State.SWITCHED_ON: Command.SWITCH_ON,
-        State.OPERATION_ENABLED: Command.ENABLE_OPERATION,
-        State.QUICK_STOP_ACTIVE: Command.QUICK_STOP,
-    }.get(state)
+#: The command that keeps a drive where it is.
+_HOLD = {
+    State.SWITCH_ON_DISABLED: Command.DISABLE_VOLTAGE,
+    State.READY_TO_SWITCH_ON: Command.SHUTDOWN,
+    State.SWITCHED_ON: Command.SWITCH_ON,
+    State.OPERATION_ENABLED: Command.ENABLE_OPERATION,
+    State.QUICK_STOP_ACTIVE: Command.QUICK_STOP,
+}

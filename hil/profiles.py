@@ -144,6 +144,19 @@ def load_actuation(path: str | Path | None = None) -> Actuation:
     if act.canopen.node_id_ema1 == act.canopen.node_id_ema2:
         raise ProfileError(f"{path.name}: fields 'canopen.node_id_ema1' and 'canopen.node_id_ema2' "
                            f"are both {act.canopen.node_id_ema1}; the drives need distinct node ids")
+    c = act.canopen
+    for name in ("node_id_ema1", "node_id_ema2"):
+        if getattr(c, name) == c.master_node_id:
+            raise ProfileError(f"{path.name}: fields 'canopen.master_node_id' and 'canopen.{name}' are both "
+                               f"{c.master_node_id}; the master's heartbeat needs a node id of its own")
+    consumer_ms = c.master_consumer_time_s * 1000.0
+    if not 1.0 <= consumer_ms <= 0xFFFF:
+        raise ProfileError(f"{path.name}: fields 'canopen.master_heartbeat_consumer_factor' * "
+                           f"'canopen.master_heartbeat_period_s' give a consumer heartbeat time of "
+                           f"{consumer_ms:g} ms; 0x1016 holds 1..65535 ms")
+    if c.external_watchdog != c.external_watchdog.strip() or "\n" in c.external_watchdog:
+        raise ProfileError(f"{path.name}: field 'canopen.external_watchdog' must be one line without "
+                           f"leading or trailing blanks (it is quoted in the run folder)")
     return act
 
 

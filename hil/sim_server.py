@@ -82,15 +82,16 @@ class _PythonCanIO:
         self.bus = bus
         self.ignored = 0
 
-    def recv(self, timeout: float) -> Frame | None:
-        """One classic data frame, or None after ``timeout`` [s] (or for an ignored message)."""
+    def recv(self, timeout: float) -> tuple[Frame | None, float | None]:
+        """One classic data frame (None after ``timeout`` [s] or for an ignored message) and its
+        receive stamp (None: python-can's stamps are not comparable across interfaces)."""
         msg = self.bus.recv(timeout)
         if msg is None:
-            return None
+            return None, None
         if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.dlc > 8:
             self.ignored += 1
-            return None
-        return Frame.trusted(msg.arbitration_id, bytes(msg.data))
+            return None, None
+        return Frame.trusted(msg.arbitration_id, bytes(msg.data)), None
 
     def send(self, f: Frame) -> bool:
         try:
@@ -111,8 +112,10 @@ class _RawIO:
     def ignored(self) -> int:
         return self.raw.ignored
 
-    def recv(self, timeout: float) -> Frame | None:
-        return self.raw.recv_stamped(timeout)[1]
+    def recv(self, timeout: float) -> tuple[Frame | None, float | None]:
+        """A frame and the kernel's receive stamp (CLOCK_REALTIME [s], SO_TIMESTAMPNS) or None."""
+        _, f, stamp = self.raw.recv_stamped(timeout)
+        return f, stamp
 
     def send(self, f: Frame) -> bool:
         try:
@@ -162,10 +165,16 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
     and its replies are sent at once; ``pair.tick(t)`` runs when
     :data:`TICK_PERIOD_S` has passed since the last tick, so heartbeats
     leave within :data:`TICK_PERIOD_S` plus one receive of their due time.
+    On SocketCAN (with the default clock) :math:`t` is the kernel's receive
+    stamp of the frame (event time): after a stall of this process, the
+    master's heartbeats still queued in the socket carry the time they came,
+    so the drives' heartbeat consumer does not judge a live master lost.
     """
     stop = stop if stop is not None else threading.Event()
     io = _io_for(bus)
     t0 = clock()
+    # CLOCK_REALTIME minus this clock: turns kernel receive stamps into the pair's time (default clock only)
+    rt_minus_clock = time.time() - clock() if clock is time.monotonic else None
     rx = tx = send_errors = 0
 
     def send(frames: list[Frame]) -> None:
@@ -190,8 +199,10 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
         next_tick = t + TICK_PERIOD_S
         next_stats = t + STATS_PERIOD_S
         while not stop.is_set():
-            f = io.recv(RECV_SLICE_S)
+            f, stamp = io.recv(RECV_SLICE_S)
             t = clock() - t0
+            if stamp is not None and rt_minus_clock is not None:
+                t = min(t, stamp - rt_minus_clock - t0)  # event time (never later than now)
             if f is not None:
                 rx += 1
                 out = pair.on_frame(f, t)

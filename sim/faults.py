@@ -35,11 +35,19 @@ Kinds (``value`` is kind-specific; ``ema`` is 1 or 2):
                         obeys: quick stop and disable work)
 ``bus_errors``          every frame to and from the drives is lost with
                         probability ``value`` (error frames, CRC errors)
+``master_silent``       the master dies: from ``start_s`` every frame it sends
+                        (SYNC, RPDOs, SDO, NMT, its heartbeat) is dropped
+                        before the drives (``ema`` ignored); the drives go on
+                        on their own clock (free-running cycle, heartbeat
+                        consumer, abort connection option 0x6007)
 ======================  =====================================================
 
-The injector also records the plant's truth after every SYNC
-(:attr:`FaultInjector.truth`): true forces and strokes (no sensor errors) and
-both drives' CiA 402 states, for tests and benchmarks.
+The injector also records the plant's truth after every SYNC and every step
+of the drives' own cycle (:attr:`FaultInjector.truth`): true forces and
+strokes (no sensor errors) and both drives' CiA 402 states, for tests and
+benchmarks; and the bus time of the last frame that reached the drives
+(:attr:`FaultInjector.last_inbound_t`, the master's last frame under
+``master_silent``).
 """
 
 from __future__ import annotations
@@ -79,6 +87,7 @@ class FaultKind(Enum):
     RESOLVER_WRAP = "resolver_wrap"
     RUNAWAY = "runaway"
     BUS_ERRORS = "bus_errors"
+    MASTER_SILENT = "master_silent"
 
 
 #: Default ``value`` per kind (None: the kind takes no value).
@@ -192,6 +201,11 @@ class FaultInjector:
         self.onset_s: dict[str, float] = {}  #: kind -> check time of the onset
         self.dropped = 0
         self._nodes = {k + 1: n for k, n in enumerate(pair.nodes)}
+        #: bus time [s] of the last frame that reached the drives (None before the first)
+        self.last_inbound_t: float | None = None
+        self.t0_bus: float | None = None  #: bus time of SYNC 0 (the first SYNC's time less T) [s]
+        if record_truth:
+            pair.on_free_step = self._free_step
 
     # ------------------------------------------------------------ delegation
 
@@ -244,6 +258,8 @@ class FaultInjector:
         cid = frame.arbitration_id
         node = cid & 0x7F
         base = cid & 0x780
+        if self._active(FaultKind.MASTER_SILENT):
+            return True  # the master is dead: nothing it would send reaches the drives
         if cid != 0x080 and self._active(FaultKind.BUS_ERRORS) and self._lose():
             return True  # (SYNC exempt: the simulated physics advances on it)
         if base in (0x200, 0x300, 0x400, 0x500, 0x600):
@@ -332,6 +348,8 @@ class FaultInjector:
         is_sync = frame.arbitration_id == 0x080 and len(frame.data) <= 1
         if is_sync:
             self.syncs += 1
+            if self.t0_bus is None:
+                self.t0_bus = t - self.T
         if not self.faults and not self.record_truth:
             return self.pair.on_frame(frame, t)  # nothing scheduled: the pair as it is
         pre = self._onsets() if is_sync else []
@@ -340,6 +358,7 @@ class FaultInjector:
             return [abort]
         if self._inbound_dropped(frame):
             return self._outbound(pre, at_sync=False) if pre else []
+        self.last_inbound_t = t
         out = self.pair.on_frame(frame, t)
         if is_sync and self.record_truth:
             st = self.pair.plant.state()
@@ -351,6 +370,14 @@ class FaultInjector:
         if not self.faults:
             return self.pair.tick(t)
         return self._outbound(self.pair.tick(t), at_sync=False)
+
+    def _free_step(self, t: float) -> None:
+        """Truth after a step of the drives' own cycle at bus time ``t`` (SYNC missing)."""
+        if self.t0_bus is None:
+            return
+        st = self.pair.plant.state()
+        self._truth.append((t - self.t0_bus + self.T, st.F_N, st.s_mm,
+                            tuple(n.state_machine.state.name for n in self.pair.nodes)))
 
     # ------------------------------------------------------------ results
 

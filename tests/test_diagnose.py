@@ -10,16 +10,15 @@ synthetic residuals stay in the fast loop.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from test_verdict import validate
 
 from blf.diagnose import diagnose
 from blf.errors import InputError
 from hil.cli import main
-from test_verdict import validate
 from sim.replay import ChainParams, DualEmaReplay, replay_chains
 from support import diagnose_cases as dc
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import shutil
 import struct
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -10,13 +12,17 @@ from canopen.objectdictionary import ODRecord
 
 from hil.canopen.errors import EdsError
 from hil.canopen.od import (
+    MASTER_LOSS_OBJECTS,
     REQUIRED_OBJECTS,
+    AbortConnectionOption,
     check_drive_od,
     decode_value,
     default_eds_path,
     encode_value,
     load_drive_od,
+    master_loss_steps,
     od_variable,
+    required_objects,
 )
 from hil.canopen.pdo import DEFAULT_LAYOUT
 
@@ -113,6 +119,9 @@ def _broken(tmp_path: Path, section: str, key: str | None = None, value: str = "
     ("6040", "AccessType", "ro", r"0x6040:00 \(controlword\) is not writable \(access ro\)"),
     ("2100", "PDOMapping", "0", r"0x2100:00 \(lvdt_um\) is not PDO-mappable"),
     ("1018sub1", None, "", r"0x1018:01 \(vendor-ID\) is missing"),
+    ("6007", None, "", r"0x6007:00 \(abort connection option code\) is missing"),
+    ("1016sub1", None, "", r"0x1016:01 \(consumer heartbeat time 1\) is missing"),
+    ("1016sub1", "AccessType", "ro", r"0x1016:01 \(consumer heartbeat time 1\) is not writable \(access ro\)"),
 ])
 def test_broken_eds_refused_with_object_named(tmp_path, section, key, value, message):
     path = _broken(tmp_path, section, key, value)
@@ -136,3 +145,39 @@ def test_missing_or_garbage_eds(tmp_path):
     bad.write_text("[DeviceInfo]\nVendorName=x\n\n[6041]\nObjectType=0x7\n")  # no ParameterName
     with pytest.raises(EdsError, match="bad.eds: not a valid EDS"):
         load_drive_od(bad)
+
+
+def test_master_loss_objects_in_the_shipped_eds(od):
+    """The drive's own reaction to the master's death: consumer heartbeat 0x1016 (four entries,
+    all unused by default) and the CiA 402 abort connection option 0x6007 (default 1, fault)."""
+    assert default(od, 0x1016, 0) == 4
+    for k in range(1, 5):
+        var = od_variable(od, 0x1016, k)
+        assert (var.data_type, var.default, var.writable, var.readable) == (0x0007, 0, True, True), k
+    var = od_variable(od, 0x6007, 0)
+    assert (var.data_type, var.default, var.writable) == (0x0003, 1, True)
+    assert [int(o) for o in AbortConnectionOption] == [0, 1, 2, 3]
+    need = {(r.index, r.subindex) for r in REQUIRED_OBJECTS}
+    assert {(r.index, r.subindex) for r in MASTER_LOSS_OBJECTS} == {(0x1016, 1), (0x6007, 0)} <= need
+    assert not {(0x1016, 1), (0x6007, 0)} & {(r.index, r.subindex) for r in required_objects(master_loss=False)}
+    steps = master_loss_steps(127, 125, 2000)
+    assert [(st.index, st.subindex, st.data.hex(), st.write) for st in steps] == [
+        (0x1016, 1, "7d007f00", True), (0x6007, 0, "0300", True), (0x605A, 0, "0200", False),
+        (0x1006, 0, "d0070000", False)]
+    for st in steps:  # each value as the EDS types it
+        assert encode_value(od, st.index, st.subindex, decode_value(od, st.index, st.subindex, st.data)) == st.data
+
+
+def test_eds_without_the_reaction_passes_only_where_the_rig_states_another(tmp_path):
+    od = load_drive_od(_broken(tmp_path, "6007"), node_id=1)
+    with pytest.raises(EdsError, match=r"0x6007:00 \(abort connection option code\) is missing"):
+        check_drive_od(od)
+    check_drive_od(od, master_loss=False)  # (canopen.external_watchdog states the other protection)
+
+
+@pytest.mark.skipif(shutil.which("eds-validate") is None, reason="eds-utils' eds-validate not installed "
+                    "(pip install eds-utils): the shipped EDS is checked by canopen's parser only")
+def test_shipped_eds_passes_eds_utils_validation():
+    r = subprocess.run(["eds-validate", str(default_eds_path())], capture_output=True, text=True, timeout=60,
+                       check=False)
+    assert r.returncode == 0, r.stdout + r.stderr

@@ -255,5 +255,7 @@ def test_faults_from_the_simrig_profile(tmp_path):
 
 
 def test_every_fault_kind_is_covered():
-    covered = {c[0].kind for c in CASES} | {"node_silent", "sdo_abort"}
+    # master_silent: the master's own death, which the drives handle (consumer heartbeat, 0x6007),
+    # not the master: tests/test_master_loss.py asserts their reaction, the truth and the run folder
+    covered = {c[0].kind for c in CASES} | {"node_silent", "sdo_abort", "master_silent"}
     assert covered == {k.value for k in FaultKind}

@@ -14,11 +14,13 @@ import pytest
 
 from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame, sync_frame
+from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import load_drive_od
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortError
-from hil.master import DriveFault, HeartbeatLost, MasterCore, PreflightError
+from hil.master import DriveFault, HeartbeatLost, MasterCore, MasterLossReactionError, PreflightError
 from sim.drives import SimDrivePair
+from sim.faults import Fault, FaultInjector
 from sim.plant import RigPlant
 
 
@@ -99,7 +101,10 @@ def test_preflight_against_simulated_drives_golden_sequence(actuation, pair):
     # quick stop option, cycle period, then the PDO mapping procedure of CiA 301
     assert writes[:7] == [(0x1017, 0), (0x60C2, 1), (0x60C2, 2), (0x607D, 1), (0x607D, 2), (0x605A, 0), (0x1006, 0)]
     assert writes[7:10] == [(0x1400, 1), (0x1600, 0), (0x1600, 1)]
-    assert len(writes) == 7 + 29
+    # then, after the 29 writes of the PDO mapping, the drive's own reaction to the master's
+    # death: consumer heartbeat on the master, abort connection option (each read back)
+    assert writes[36:] == [(0x1016, 1), (0x6007, 0)]
+    assert len(writes) == 7 + 29 + 2
     assert p.traffic[-1] == ("M", Frame(0x000, bytes([0x01, 0x00])))  # NMT start all
     # the drives now carry the configuration
     n1 = pair.nodes[0]
@@ -237,3 +242,87 @@ def test_errors_latch_and_force_quick_stop(actuation, pair):
     off = Setpoint(DriveMode.DISABLED, 0.0)
     rpdo1 = [f for f in m.setpoint_frames(off, off, smp) if f.arbitration_id == 0x201]
     assert rpdo1[0].data[:2] == bytes([0x02, 0x00])  # quick stop
+
+
+# ------------------------------------------------------------------ the master's heartbeat, the drives' reaction
+
+
+HB = Frame(0x77F, b"\x05")  # the master's heartbeat: node 127, operational
+
+
+def test_master_heartbeat_from_the_first_frame_until_nmt_pre_operational(actuation):
+    m = MasterCore(actuation)
+    assert m.poll(0.0) == []  # not started: no heartbeat
+    assert m.start(0.0) == [Frame(0x000, bytes([0x81, 0x00]))]
+    assert m.poll(0.0) == [HB]  # due with the first frame: the first poll sends it
+    assert m.poll(0.049) == []
+    assert m.poll(0.050) == [HB] and m.poll(0.051) == []
+    assert m.poll(0.130) == [HB]  # late (the loop was held): sent now, the schedule kept ...
+    assert m.poll(0.150) == [HB]
+    assert m.poll(0.420) == [HB] and m.poll(0.450) == []  # ... unless a period behind: from now
+    assert m.poll(0.470) == [HB]
+    # a frame on its heartbeat's COB-ID that it hears (another node with its id, or an echo of a
+    # loop-back interface: SocketCAN never returns its own frames) is counted, never fatal
+    assert m.on_frame(HB, 0.48) == [] and m.unknown_frames == 1
+    assert m.nmt_frames(NmtCommand.PRE_OPERATIONAL) == [Frame(0x000, bytes([0x80, 0x00]))]
+    assert m.poll(0.6) == [] and m.poll(1.5) == []  # the check's last frame was NMT pre-operational
+
+
+def test_preflight_configures_and_reads_back_the_drives_reaction_to_the_masters_death(actuation, pair):
+    m, p = _preflight(actuation, pair)
+    reads = [(f.data[2] << 8 | f.data[1], f.data[3]) for who, f in p.traffic
+             if who == "M" and f.arbitration_id == 0x602 and f.data[0] == 0x40]
+    assert reads[-4:] == [(0x1016, 1), (0x6007, 0), (0x605A, 0), (0x1006, 0)]  # after the writes
+    for node in pair.nodes:
+        assert node.read(0x1016, 1) == 127 << 16 | 125  # consumer on node 127, 2.5 * 50 ms
+        assert node.read(0x6007) == 3 and node.read(0x605A) == 2 and node.read(0x1006) == 2000
+        assert node._hb_consumers == {127: [0.125, None, False]}  # armed by the next heartbeat
+    assert m.drives[2].master_loss == {"consumer_heartbeat_ms": 125, "master_node_id": 127,
+                                       "abort_connection_option": 3, "verified": True, "problems": [],
+                                       "external_watchdog": ""}
+
+
+def _without_6007(node_id=None):
+    od = load_drive_od(None, node_id=node_id)
+    if node_id == 2:
+        del od[0x6007]  # EMA 2's drive has no abort connection option
+    return od
+
+
+def test_drive_without_abort_connection_option_stops_the_preflight_naming_it(actuation, simrig):
+    pair = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(4)), _without_6007)
+    with pytest.raises(MasterLossReactionError, match=r"node 2 \(EMA 2\): its reaction to the master's death is "
+                       r"not in place: 0x6007:00 \(abort connection option code\): SDO abort 0x06020000 \(object "
+                       r"does not exist in the object dictionary\).*canopen.external_watchdog") as exc:
+        _preflight(actuation, pair)
+    assert isinstance(exc.value, PreflightError) and isinstance(exc.value, RuntimeError)
+    assert pair.nodes[0].read(0x6007) == 3  # EMA 1 was configured; nothing was enabled
+    assert pair.stats.syncs == 0 and {n.state_machine.state for n in pair.nodes} == {State.SWITCH_ON_DISABLED}
+
+
+def test_external_watchdog_stated_in_the_profile_lets_such_a_drive_run_and_says_so(actuation, simrig):
+    watchdog = "STO of both drives dropped by the rig's watchdog relay 100 ms after the master's last heartbeat"
+    act = dataclasses.replace(actuation, canopen=dataclasses.replace(actuation.canopen, external_watchdog=watchdog))
+    pair = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(4)), _without_6007)
+    m, p = _preflight(act, pair)
+    assert m.preflight_done
+    ml = m.safe_state_report(p.t)["ema2"]["master_loss"]
+    assert ml["verified"] is False and ml["external_watchdog"] == watchdog
+    assert ml["problems"] == [("0x6007:00 (abort connection option code): SDO abort 0x06020000 "
+                               "(object does not exist in the object dictionary)")]
+    assert m.drives[1].master_loss["verified"] is True
+
+
+def test_refused_or_not_kept_reaction_objects_stop_the_preflight(actuation, simrig):
+    plant = RigPlant(simrig.params, np.random.default_rng(5))
+    refusing = FaultInjector(SimDrivePair(plant, lambda node_id=None: load_drive_od(None, node_id=node_id)),
+                             [Fault("sdo_abort", 1, value=float(0x1016))], record_truth=False)
+    with pytest.raises(MasterLossReactionError, match=r"node 1 \(EMA 1\): .*0x1016:01 \(consumer heartbeat time 1\): "
+                       r"SDO abort 0x08000020"):
+        _preflight(actuation, refusing)
+    forgetting = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(6)),
+                              lambda node_id=None: load_drive_od(None, node_id=node_id))
+    forgetting.nodes[1].store.live[(0x6007, 0)] = lambda: 1  # EMA 2 answers 1 whatever was written
+    with pytest.raises(MasterLossReactionError, match=r"node 2 \(EMA 2\): .*0x6007:00 \(abort connection option "
+                       r"code\) reads back 0x1, not 0x3"):
+        _preflight(actuation, forgetting)

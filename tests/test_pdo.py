@@ -260,6 +260,30 @@ def test_bus_load_two_drives_1mbit_2ms():
     assert (load.bits_per_cycle_worst + load.event_bits_worst) / 2000 == pytest.approx(0.48945)
 
 
+def test_bus_load_with_the_masters_own_heartbeat_period(actuation):
+    """The shipped profile: drives' heartbeats every 100 ms, the master's every 50 ms (its own
+    period, item "master heartbeat"); still inside the 50 % budget in the worst cycle."""
+    c = actuation.canopen
+    load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, actuation.timing.sync_period_s, c.heartbeat_period_s,
+                    master_heartbeat_period_s=c.master_heartbeat_period_s)
+    per_cycle = {i.name: i.frames_per_cycle for i in load.items}
+    assert per_cycle["heartbeat"] == pytest.approx(2 * 0.002 / 0.1)  # the two drives only
+    assert per_cycle["master heartbeat"] == pytest.approx(0.002 / 0.05)
+    # nominal: 700.3 - 55 * 0.02 (the master at 100 ms) + 55 * 0.04 (at 50 ms) = 701.4 bits of 2000
+    assert load.bits_per_cycle_nominal == pytest.approx(701.4)
+    assert load.load_nominal == pytest.approx(0.3507)
+    # worst case: 848.9 - 65 * 0.02 + 65 * 0.04 = 850.2 bits -> 42.5 %; with both mode changes 49.0 %
+    assert load.bits_per_cycle_worst == pytest.approx(850.2)
+    assert load.load_worst == pytest.approx(0.4251) and load.load_worst < 0.5
+    mode_change = (load.bits_per_cycle_worst + load.event_bits_worst) / 2000
+    assert mode_change == pytest.approx(0.4901) and mode_change < 0.5
+    # the same master period as the drives': the former count of n + 1 producers at one period
+    same = bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.002, 0.1, master_heartbeat_period_s=0.1)
+    assert same.bits_per_cycle_worst == pytest.approx(bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.002, 0.1).bits_per_cycle_worst)
+    with pytest.raises(InputError, match="master_heartbeat_period_s"):
+        bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.002, 0.1, master_heartbeat_period_s=0.0)
+
+
 def test_bus_load_inputs():
     assert bus_load(DEFAULT_LAYOUT, 2, 500_000, 0.002, 0.0).load_worst == pytest.approx(845 / 1000)
     with pytest.raises(InputError, match="sync_period_s"):

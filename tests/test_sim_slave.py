@@ -739,3 +739,131 @@ def test_tpdo_with_a_stored_object_and_an_event_rpdo_with_two_side_effects(rig):
     assert rig.read(1, 0x6061, 0, "b") == 8 and rig.read(1, 0x6041, 0, "H") == SW_READY
     assert rig.sync_by_id()[0x281].data == bytes.fromhex("F401 3102 00000000")
     assert rig.pair.stats.rpdos_applied == 1
+
+
+# ------------------------------------------------------------------ the master's death: consumer, 0x6007
+
+
+MASTER = 0x7F  # the master's node id: its heartbeat is 0x77F
+HB_EMCY = Frame(0x081, bytes.fromhex("3081 11 0000000000"))  # 0x8130 heartbeat error, register 0x11
+
+
+def _watch_master(rig: Rig, node: int, consumer_ms: int, option: int) -> None:
+    """Node ``node`` consumes the master's heartbeat (0x1016:01) and reacts with ``option`` (0x6007)."""
+    rig.write(node, 0x1016, 1, "I", MASTER << 16 | consumer_ms)
+    rig.write(node, 0x6007, 0, "h", option)
+    assert rig.read(node, 0x1016, 1, "I") == 0x007F0000 | consumer_ms
+    assert rig.read(node, 0x6007, 0, "h") == option
+
+
+def test_heartbeat_consumer_and_abort_connection_entries_are_validated(rig):
+    assert rig.read(1, 0x1016, 0, "B") == 4  # four consumer entries
+    assert rig.read(1, 0x6007, 0, "h") == 1  # CiA 402 default: fault signal
+    for bad in (0x01_7F_0064, 0x00_80_0064):  # reserved bits 24..31, node id 128
+        with pytest.raises(SdoAbortError) as exc:
+            rig.write(1, 0x1016, 1, "I", bad)
+        assert exc.value.code is SdoAbortCode.VALUE_RANGE_EXCEEDED
+    rig.write(1, 0x1016, 1, "I", 0x7F_0064)
+    with pytest.raises(SdoAbortError) as exc:  # one entry per producer
+        rig.write(1, 0x1016, 2, "I", 0x7F_00C8)
+    assert exc.value.code is SdoAbortCode.PARAMETER_INCOMPATIBILITY
+    rig.write(1, 0x1016, 2, "I", 0x7F_0000)  # time 0: unused, allowed
+    rig.write(1, 0x1016, 3, "I", 0x05_0064)
+    assert rig.pair.nodes[0]._hb_consumers == {0x7F: [0.1, None, False], 5: [0.1, None, False]}
+    with pytest.raises(SdoAbortError) as exc:
+        rig.write(1, 0x1016, 0, "B", 2)
+    assert exc.value.code is SdoAbortCode.WRITE_OF_READ_ONLY
+    for bad in (4, -1):
+        with pytest.raises(SdoAbortError) as exc:
+            rig.write(1, 0x6007, 0, "h", bad)
+        assert exc.value.code is SdoAbortCode.VALUE_RANGE_EXCEEDED
+    rig.nmt(0x81, 1)  # reset node: the consumer is off again (EDS default 0)
+    assert rig.read(1, 0x1016, 1, "I") == 0 and rig.pair.nodes[0]._hb_consumers == {}
+
+
+def test_hung_master_heartbeat_event_quick_stop_then_switch_on_disabled(rig):
+    """SYNC goes on (a kernel-timed SYNC outlives a hung master), the master's heartbeat stops:
+    EMCY 0x8130 at the first tick past the consumer time, quick stop (0x6007 = 3), the hold,
+    then switch on disabled; the other drive (no consumer) is untouched."""
+    _watch_master(rig, 1, 100, 3)
+    rig.enable()
+    pair, node = rig.pair, rig.pair.nodes[0]
+    t_hb = rig.t
+    assert rig.send(Frame(0x77F, b"\x05")) == []  # the master's last heartbeat: monitoring starts
+    words, event_t = [], None
+    for _ in range(100):
+        out = pair.tick(rig.t + T_S)
+        if HB_EMCY in out:
+            event_t = rig.t + T_S
+        words.append(status(rig.sync_by_id(), 1))
+    assert event_t == pytest.approx(t_hb + 0.1 + T_S)  # first tick with more than 100 ms since it
+    assert node.heartbeat_events == [(pytest.approx(event_t), MASTER)]
+    k = round((event_t - t_hb) / T_S) - 1  # the SYNC at the event's tick shows the quick stop
+    hold = round(QUICK_STOP_HOLD_S / T_S)  # drive cycles of the hold: SYNCs k .. k + hold - 1
+    assert words[:k] == [SW_OE_CSP_REACHED] * k
+    # (QSA shows from SYNC k, before that SYNC's drive cycle, to SYNC k + hold, before the
+    # cycle that ends the hold: switch on disabled 50 ms after the event)
+    assert words[k:k + hold + 1] == [SW_QSA] * (hold + 1)
+    assert set(words[k + hold + 1:]) == {SW_SOD}
+    assert rig.read(1, 0x1001, 0, "B") == 0x11 and rig.read(1, 0x1003, 1, "I") == 0x8130
+    assert rig.pair.nodes[1].statusword == SW_OE_CSP_REACHED
+    # the master comes back: the event ends (EMCY 0x0000), the drive stays switch on disabled
+    assert rig.send(Frame(0x77F, b"\x05")) == [Frame(0x081, bytes(8))]
+    assert rig.read(1, 0x1001, 0, "B") == 0 and node.statusword == SW_SOD
+
+
+@pytest.mark.parametrize("option,first,final", [
+    (0, State.OPERATION_ENABLED, State.OPERATION_ENABLED),
+    (1, State.FAULT, State.FAULT),  # (the fault reaction ends at the drive cycle of the event's step)
+    (2, State.SWITCH_ON_DISABLED, State.SWITCH_ON_DISABLED),
+    (3, State.QUICK_STOP_ACTIVE, State.SWITCH_ON_DISABLED),
+])
+def test_dead_master_abort_connection_options_on_the_drives_own_clock(rig, option, first, final):
+    """The master dies: no SYNC, no RPDO, no heartbeat. The drives' cycle runs on their own clock
+    (from FREE_RUN_AFTER_CYCLES SYNC periods after the last SYNC, caught up from it), the
+    consumer fires after its time and 0x6007 acts through the CiA 402 table."""
+    for n in (1, 2):
+        _watch_master(rig, n, 50, option)
+    rig.enable()
+    pair = rig.pair
+    rig.send(Frame(0x77F, b"\x05"))
+    t_last, steps0 = rig.t, pair.stats.plant_steps
+    seen: list[float] = []
+    pair.on_free_step = seen.append
+    states, emcys = [], []
+    for k in range(1, 60):
+        t = t_last + k * T_S
+        emcys += [(t, f) for f in pair.tick(t) if f.arbitration_id in (0x81, 0x82)]
+        states.append(pair.nodes[0].state_machine.state)
+    # own clock: nothing before 5 silent SYNC periods, then one step per period from the last SYNC
+    assert seen[0] == pytest.approx(t_last + T_S) and np.allclose(np.diff(seen), T_S)
+    assert pair.stats.plant_steps == steps0 and pair.stats.syncs == 3  # no SYNC-driven step
+    t_event = t_last + 0.05 + T_S
+    assert [round(t, 6) for t, _ in emcys] == [round(t_event, 6)] * 2
+    assert {f.data[:2] for _, f in emcys} == {bytes.fromhex("3081")}
+    assert states[round(0.05 / T_S)] is first  # at the event's tick
+    assert states[-1] is final and pair.nodes[1].state_machine.state is final
+    if final is State.OPERATION_ENABLED:
+        assert len(seen) == 59  # option 0: the drives hold their command, the rig keeps moving
+    else:  # every power stage off: the rig rests on its brakes, no more steps
+        t_off = seen[-1]
+        assert t_off <= t_event + QUICK_STOP_HOLD_S + 2 * T_S + 1e-9
+        pair.tick(t_last + 0.2)
+        assert seen[-1] == t_off
+    if option == 1:
+        assert rig.read(1, 0x603F, 0, "H") == 0x8130
+
+
+def test_drive_cycle_on_its_own_clock_stops_at_the_next_sync(rig):
+    rig.enable()
+    pair = rig.pair
+    t_last = rig.t
+    assert pair.tick(t_last + 5 * T_S) == [] and pair.stats.free_steps == 0  # SYNC only late
+    pair.tick(t_last + 6 * T_S + 1e-4)  # lost: caught up from the last SYNC
+    assert pair.stats.free_steps == 6
+    assert pair.plant.t_s == pytest.approx((pair.stats.plant_steps + 6) * T_S)
+    rig.t = t_last + 6.5 * T_S
+    frames = rig.sync_by_id()  # SYNC back: TPDOs and one step as usual, no more own steps
+    assert decode_state(status(frames, 1)) is State.OPERATION_ENABLED
+    pair.tick(rig.t + 4 * T_S)
+    assert pair.stats.free_steps == 6

@@ -86,6 +86,7 @@ def bus_load(
     heartbeat_period_s: float,
     *,
     heartbeat_producers: int | None = None,
+    master_heartbeat_period_s: float | None = None,
 ) -> BusLoad:
     """Bits per SYNC cycle and bus load of the cyclic CANopen traffic.
 
@@ -102,8 +103,14 @@ def bus_load(
     heartbeat_period_s : float
         Heartbeat producer time [s], > 0, or 0 for no heartbeats.
     heartbeat_producers : int, optional
-        Number of heartbeat producers; default ``n_drives + 1`` (every drive
-        and the master, whose heartbeat the drives consume via 0x1016).
+        Number of heartbeat producers at ``heartbeat_period_s``; default
+        ``n_drives + 1`` (every drive and the master, whose heartbeat the
+        drives consume via 0x1016), or ``n_drives`` when the master's own
+        period is given.
+    master_heartbeat_period_s : float, optional
+        The master's heartbeat producer time [s], > 0: one more producer at
+        its own period (item ``"master heartbeat"``). None: the master is
+        counted among ``heartbeat_producers`` at ``heartbeat_period_s``.
 
     Returns
     -------
@@ -112,8 +119,9 @@ def bus_load(
     Notes
     -----
     Per cycle: one SYNC (0 bytes), for every drive one frame of every
-    synchronous PDO with transmission type ``k`` every ``k`` SYNCs, and
-    ``producers * T_sync / T_hb`` heartbeats (1 byte). Event-driven PDOs
+    synchronous PDO with transmission type ``k`` every ``k`` SYNCs,
+    ``producers * T_sync / T_hb`` heartbeats (1 byte) and, with the master's
+    own period :math:`T_m`, ``T_sync / T_m`` master heartbeats. Event-driven PDOs
     (type >= 241) are listed with 0 frames per cycle. Frame lengths as in
     :func:`frame_bits`:
 
@@ -132,7 +140,11 @@ def bus_load(
     t_hb = finite("heartbeat_period_s", heartbeat_period_s, "s")
     if t_hb < 0.0:
         raise InputError(f"heartbeat_period_s = {t_hb} [s] must be >= 0 (0 = no heartbeat)")
-    producers = nd + 1 if heartbeat_producers is None else operator.index(heartbeat_producers)
+    t_master = None
+    if master_heartbeat_period_s is not None:
+        t_master = positive("master_heartbeat_period_s", master_heartbeat_period_s, "s")
+    default_producers = nd + 1 if t_master is None else nd
+    producers = default_producers if heartbeat_producers is None else operator.index(heartbeat_producers)
     if producers < 0:
         raise InputError(f"heartbeat_producers = {producers} must be >= 0")
 
@@ -151,6 +163,8 @@ def bus_load(
             event_bits += nd * it.bits_per_frame_worst
     hb_per_cycle = producers * t_sync / t_hb if t_hb > 0.0 else 0.0
     items.append(item("heartbeat", 1, hb_per_cycle))
+    if t_master is not None:
+        items.append(item("master heartbeat", 1, t_sync / t_master))
 
     nominal = sum(i.frames_per_cycle * i.bits_per_frame_nominal for i in items)
     worst = sum(i.frames_per_cycle * i.bits_per_frame_worst for i in items)

@@ -3,14 +3,18 @@
 The shipped CiA 306 EDS (``profiles/ema_drive.eds``) describes the drive; the
 simulated drives (:mod:`sim.drives`) serve it, and the master refuses a
 drive EDS that lacks an object the PDO layout maps or the check reads or
-writes (:func:`check_drive_od`). Parsing and data-type encoding are canopen's
+writes (:func:`check_drive_od`), including the drive's own reaction to the
+master's death (:data:`MASTER_LOSS_OBJECTS`, configured as
+:func:`master_loss_steps` says). Parsing and data-type encoding are canopen's
 (``canopen.objectdictionary``); nothing here talks to a bus.
 """
 
 from __future__ import annotations
 
 import configparser
+import struct
 from dataclasses import dataclass
+from enum import IntEnum
 from importlib import resources
 from pathlib import Path
 
@@ -79,7 +83,57 @@ class RequiredObject:
     pdo_mappable: bool = False
 
 
-def required_objects(layout: PdoLayout = DEFAULT_LAYOUT) -> tuple[RequiredObject, ...]:
+class AbortConnectionOption(IntEnum):
+    """CiA 402 abort connection option code 0x6007: what a drive does on a connection loss
+    (here: a heartbeat event of its consumer 0x1016)."""
+
+    NO_ACTION = 0
+    FAULT = 1  #: fault signal: transition 13, FAULT_REACTION_ACTIVE then FAULT
+    DISABLE_VOLTAGE = 2  #: disable voltage command: power stage off at once
+    QUICK_STOP = 3  #: quick stop command: then as 0x605A says (2: switch on disabled)
+
+
+#: 0x605A quick stop option code of the emacheck drives: 2 = slow down, then switch on disabled.
+QUICK_STOP_OPTION = 2
+
+
+@dataclass(frozen=True, slots=True)
+class ConfigStep:
+    """One object of the preflight: written (``write``) and/or read back, expecting ``data``."""
+
+    index: int
+    subindex: int
+    data: bytes
+    what: str
+    write: bool
+
+
+def master_loss_steps(master_node_id: int, consumer_ms: int, sync_period_us: int) -> tuple[ConfigStep, ...]:
+    """The preflight's configuration of a drive's own reaction to the master's death, in order.
+
+    0x1016:01 = ``master_node_id << 16 | consumer_ms`` (consumer heartbeat on
+    the master), 0x6007 = 3 (quick stop on the loss), both written and read
+    back; 0x605A (= 2: then switch on disabled) and 0x1006 (the SYNC period,
+    the drive's communication cycle) read back, written before.
+    """
+    return (ConfigStep(0x1016, 1, struct.pack("<I", master_node_id << 16 | consumer_ms),
+                       "consumer heartbeat time 1", True),
+            ConfigStep(0x6007, 0, struct.pack("<h", AbortConnectionOption.QUICK_STOP),
+                       "abort connection option code", True),
+            ConfigStep(0x605A, 0, struct.pack("<h", QUICK_STOP_OPTION), "quick stop option code", False),
+            ConfigStep(0x1006, 0, struct.pack("<I", sync_period_us), "communication cycle period", False))
+
+
+#: The objects of a drive's own reaction to the master's death (the preflight writes and reads
+#: them back): consumer heartbeat time 1 (the master's node id and the time) and the CiA 402
+#: abort connection option code (3: quick stop, then switch on disabled through 0x605A = 2).
+MASTER_LOSS_OBJECTS: tuple[RequiredObject, ...] = (
+    RequiredObject(0x1016, 1, "consumer heartbeat time 1", dt.UNSIGNED32, "rw"),
+    RequiredObject(0x6007, 0, "abort connection option code", dt.INTEGER16, "rw"),
+)
+
+
+def required_objects(layout: PdoLayout = DEFAULT_LAYOUT, *, master_loss: bool = True) -> tuple[RequiredObject, ...]:
     """The objects a drive must have for ``layout`` and the check.
 
     The mapped objects (RPDO ones writable, TPDO ones readable, both
@@ -88,7 +142,10 @@ def required_objects(layout: PdoLayout = DEFAULT_LAYOUT) -> tuple[RequiredObject
     writable), and the objects the master reads or sets up: device type,
     identity, producer heartbeat, error code, quick stop option code,
     software position limits, rated torque, encoder resolution, supported
-    drive modes and the gear ratio 0x2102.
+    drive modes and the gear ratio 0x2102; with ``master_loss`` (the
+    default) also :data:`MASTER_LOSS_OBJECTS`, the drive's own reaction to
+    the master's death. Only a rig whose profile states another protection
+    (``canopen.external_watchdog``) may do without them.
     """
     req: list[RequiredObject] = []
     for p in layout.pdos:
@@ -117,6 +174,8 @@ def required_objects(layout: PdoLayout = DEFAULT_LAYOUT) -> tuple[RequiredObject
         RequiredObject(0x6502, 0, "supported drive modes", dt.UNSIGNED32, "r"),
         RequiredObject(0x2102, 0, "gear ratio i_total", dt.REAL32, "r"),
     ]
+    if master_loss:
+        req += MASTER_LOSS_OBJECTS
     return tuple(req)
 
 
@@ -180,7 +239,7 @@ def decode_value(od: cod.ObjectDictionary, index: int, subindex: int, data: byte
 
 
 def check_drive_od(od: cod.ObjectDictionary, *, layout: PdoLayout = DEFAULT_LAYOUT,
-                   source: str = "drive EDS") -> None:
+                   source: str = "drive EDS", master_loss: bool = True) -> None:
     """Refuse an object dictionary that lacks what the master needs.
 
     Every :func:`required_objects` entry must exist (a real sub-index, not
@@ -195,6 +254,10 @@ def check_drive_od(od: cod.ObjectDictionary, *, layout: PdoLayout = DEFAULT_LAYO
         The PDO layout the master will configure.
     source : str
         Name used in the message (e.g. the EDS path).
+    master_loss : bool
+        Require :data:`MASTER_LOSS_OBJECTS` (default; fail closed). False only
+        for a rig whose actuation profile states another protection against
+        the master's death (``canopen.external_watchdog``).
 
     Raises
     ------
@@ -203,7 +266,7 @@ def check_drive_od(od: cod.ObjectDictionary, *, layout: PdoLayout = DEFAULT_LAYO
         ``drive EDS: 0x6041:00 (statusword) is missing``.
     """
     problems: list[str] = []
-    for r in required_objects(layout):
+    for r in required_objects(layout, master_loss=master_loss):
         where = f"0x{r.index:04X}:{r.subindex:02X} ({r.name})"
         var = lookup(od, r.index, r.subindex)
         if var is None:

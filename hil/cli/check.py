@@ -128,6 +128,9 @@ def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> di
         "files_sha256": meta.get("files_sha256") or {},
         "recording": str(sig_path),
         "mode": meta.get("mode"),
+        # each drive's configured reaction to losing the master (or the external watchdog stated instead)
+        "master_loss": {k: v.get("master_loss") for k, v in (meta.get("drives_final") or {}).items()
+                        if v.get("master_loss")},
     }
 
 
@@ -184,10 +187,13 @@ def master_setup(act, profile_path, out: Path):
 
     eds = resolve_eds(act, profile_path)
     od = load_drive_od(eds)
-    check_drive_od(od, source=str(eds))
     c = act.canopen
+    # the drives' own reaction to losing the master (0x1016, 0x6007) is required unless the profile
+    # states another protection (an external watchdog)
+    check_drive_od(od, source=str(eds), master_loss=not c.external_watchdog)
     check_eds_identity(od, c, eds)
-    load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, act.timing.sync_period_s, c.heartbeat_period_s)
+    load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, act.timing.sync_period_s, c.heartbeat_period_s,
+                    master_heartbeat_period_s=c.master_heartbeat_period_s)
     if load.load_worst >= 0.5:
         from hil.errors import ProfileError
         raise ProfileError(f"bus load of the PDO layout at canopen.bitrate_bps = {c.bitrate_bps} is "

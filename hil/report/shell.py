@@ -101,6 +101,15 @@ def trace_lines(trace: dict | None) -> str:
             rows.append([f"{k} identity (0x1018)",
                          f"vendor 0x{ident.get('vendor_id', 0):08X}, product 0x{ident.get('product_code', 0):08X}, "
                          f"revision 0x{ident.get('revision', 0):08X}, serial {ident.get('serial', '—')}"])
+    for k, ml in (trace.get("master_loss") or {}).items():
+        if ml.get("verified"):
+            how = (f"consumer heartbeat {ml.get('consumer_heartbeat_ms')} ms on node {ml.get('master_node_id')}, "
+                   f"abort connection option {ml.get('abort_connection_option', 3)}: verified by SDO read-back")
+        else:
+            how = "NOT verified: " + "; ".join(ml.get("problems") or ["—"])
+        if ml.get("external_watchdog"):
+            how += f"; external watchdog stated: {ml['external_watchdog']}"
+        rows.append([f"{k} reaction to losing the master", how])
     for k, h in (trace.get("files_sha256") or {}).items():
         rows.append([f"{k} (sha256)", h[:16] + "…" if h else "—"])
     return "<h2>Traceability</h2>" + table(["item", "value"], rows)

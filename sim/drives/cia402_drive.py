@@ -19,7 +19,15 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   in SYNC cycles of the plant's sample period; 0x6085 is not used), then
   takes transition 12 to SWITCH_ON_DISABLED (brake).
 * Fault reaction: FAULT_REACTION_ACTIVE lasts until the next SYNC, then FAULT;
-  both command DISABLED. A fault reset (rising edge of controlword bit 7)
+  both command DISABLED.
+* Abort connection option 0x6007 (0..3; manufacturer-specific negative
+  values are refused, 0x06090030): on a heartbeat event of the consumer
+  0x1016 the drive applies 1 fault signal (transition 13, error code 0x8130),
+  2 disable voltage or 3 quick stop, as commands through
+  :data:`hil.canopen.cia402.TRANSITIONS` (3 in OPERATION_ENABLED: quick stop,
+  the hold below, then SWITCH_ON_DISABLED; where the table has no such
+  transition, as in FAULT, the state is kept). Bus-off, NMT stopped and
+  reset communication do not trigger it here. A fault reset (rising edge of controlword bit 7)
   sends EMCY 0x0000.
 * Illegal controlwords leave the state unchanged and are counted
   (``stats.illegal_commands``), no EMCY. A repeated controlword is a no-op.
@@ -39,6 +47,7 @@ import struct
 from collections.abc import Callable
 
 from hil.canopen.cia402 import (
+    Command,
     DriveStateMachine,
     IllegalTransition,
     OperationMode,
@@ -47,6 +56,7 @@ from hil.canopen.cia402 import (
     state_word,
 )
 from hil.canopen.errors import InputError
+from hil.canopen.od import AbortConnectionOption
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortCode
 from hil.canopen.units import (
@@ -63,7 +73,7 @@ from hil.canopen.units import (
     rad_to_increments,
     um_from_mm,
 )
-from sim.drives.nmt_slave import EMCY_NO_ERROR
+from sim.drives.nmt_slave import EMCY_HEARTBEAT, EMCY_NO_ERROR
 from sim.drives.store import abort
 
 __all__ = ["QUICK_STOP_HOLD_S", "SUPPORTED_MODES", "TARGET_WINDOW_INC", "Cia402Drive"]
@@ -74,6 +84,10 @@ QUICK_STOP_HOLD_S = 0.05
 TARGET_WINDOW_INC = 20
 #: Modes of operation (0x6060) the drive supports: CSP and CST.
 SUPPORTED_MODES = frozenset((int(OperationMode.CSP), int(OperationMode.CST)))
+#: Abort connection option codes (0x6007) the drive supports, and the commands of 2 and 3.
+_ABORT_OPTIONS = frozenset(int(o) for o in AbortConnectionOption)
+_ABORT_COMMAND = {int(AbortConnectionOption.DISABLE_VOLTAGE): Command.DISABLE_VOLTAGE,
+                  int(AbortConnectionOption.QUICK_STOP): Command.QUICK_STOP}
 
 # Hot-path constants (plain ints and identities instead of enum arithmetic and hashing).
 _CSP = int(OperationMode.CSP)
@@ -229,6 +243,9 @@ class Cia402Drive:
         elif index in (0x6076, 0x608F):
             if value is not None and value <= 0:
                 raise abort(SdoAbortCode.VALUE_TOO_LOW)
+        elif index == 0x6007:
+            if value not in _ABORT_OPTIONS:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
 
     def _mode_written(self) -> None:
         """0x6060 written: a supported mode shows in 0x6061 (another one is ignored)."""
@@ -408,11 +425,30 @@ class Cia402Drive:
         new = sm.state
         if repeated and new is old and (sm.last_transition, sm.error_code) == before:
             self._cw_noop[cw] = self._cw_noop.get(cw, ()) + (old,)
+        self._entered(old, new)
+        if old is State.FAULT and new is State.SWITCH_ON_DISABLED:
+            self._emcy(EMCY_NO_ERROR)
+
+    def _entered(self, old: State, new: State) -> None:
+        """A transition ``old`` -> ``new`` was taken: a quick stop starts holding the angle measured now."""
         if new is State.QUICK_STOP_ACTIVE and old is not State.QUICK_STOP_ACTIVE:
             self._qs_phi_rad = self._phi_rad
             self._qs_left = self._qs_cycles
-        if old is State.FAULT and new is State.SWITCH_ON_DISABLED:
-            self._emcy(EMCY_NO_ERROR)
+
+    def _connection_lost(self) -> None:
+        """The abort connection option 0x6007 on a connection loss (a heartbeat event), through
+        the CiA 402 transition table: 1 fault, 2 disable voltage, 3 quick stop (0 nothing)."""
+        sm = self.state_machine
+        old = sm.state
+        option = self._int(0x6007) if self.store.var(0x6007, 0) is not None else 0
+        try:
+            if option == AbortConnectionOption.FAULT:
+                sm.fault(EMCY_HEARTBEAT)
+            elif option in _ABORT_COMMAND:
+                sm.apply(_ABORT_COMMAND[option])
+        except IllegalTransition:
+            return  # no such transition in this state (FAULT, NOT_READY_TO_SWITCH_ON): kept
+        self._entered(old, sm.state)
 
     def _cycle(self) -> tuple[int, float]:
         """The drive's control cycle at a SYNC: internal transitions and the plant command.

@@ -191,7 +191,7 @@ class SimDrive(PdoEngine, NmtSlave, Cia402Drive):
         pdo = self._pdo_by_index(index)
         if pdo is not None:
             self._check_pdo_write(pdo, index, subindex, value)
-        elif index in (0x1005, 0x1014, 0x1003):
+        elif index in (0x1005, 0x1014, 0x1003, 0x1016):
             self._check_comm_object_write(index, subindex, value)
         else:
             self._check_drive_write(index, subindex, value)

@@ -19,8 +19,20 @@ Choices (CiA 301 leaves them open or this drive restricts them)
 * Heartbeat: sent at the first tick at or after each multiple of the
   producer time 0x1017 since boot-up (or since 0x1017 was written); if ticks
   are farther apart than the period, one heartbeat is sent and the schedule
-  restarts from that tick. The consumer heartbeat 0x1016 is stored but not
-  monitored.
+  restarts from that tick.
+* Heartbeat consumer (0x1016, up to its sub-index 0 entries): entry = node id
+  (bits 16..23) and consumer time [ms] (bits 0..15); 0 in either is unused,
+  bits 24..31 must be 0 and a node may be monitored by one entry only
+  (0x06040043). Monitoring of an entry starts with the first heartbeat (or
+  boot-up) of its producer after the entry was written; a heartbeat event is
+  the first :meth:`~sim.drives.SimDrivePair.tick` (or free-running drive
+  cycle) at which more than the consumer time passed since that producer's
+  last heartbeat. The event sends EMCY 0x8130 (error register bits 0 and 4
+  while it stands), is recorded in ``heartbeat_events`` and triggers the
+  CiA 402 abort connection option 0x6007 (:class:`~sim.drives.cia402_drive.Cia402Drive`).
+  The NMT state is kept (no 0x1029 error behaviour). A heartbeat of that
+  producer ends the event (EMCY 0x0000 when no other error stands) and
+  re-arms the entry; the drive state is not restored.
 * EMCY: COB-ID from 0x1014 (bit 31 = not sent), sent in PRE-OPERATIONAL and
   OPERATIONAL only; data = error code u16, error register 0x1001 u8, five
   zero manufacturer bytes. Error codes other than 0 are pushed into the
@@ -30,7 +42,8 @@ Choices (CiA 301 leaves them open or this drive restricts them)
   (:func:`hil.canopen.emcy.error_register_bits`) plus bits 0 and 4 while an
   RPDO length error stands.
 * SYNC consumer (0x1005): the node is no SYNC producer (bit 30 refused),
-  11-bit COB-IDs only. EMCY COB-ID (0x1014): the CAN-ID cannot change while
+  11-bit COB-IDs only. 0x1006 is stored; SYNC is not supervised (see the
+  free-running drive cycle of :mod:`sim.drives.pair`). EMCY COB-ID (0x1014): the CAN-ID cannot change while
   the EMCY is valid.
 """
 
@@ -47,6 +60,7 @@ from hil.canopen.sdo import SdoAbortCode
 from sim.drives.store import abort
 
 __all__ = [
+    "EMCY_HEARTBEAT",
     "EMCY_NO_ERROR",
     "EMCY_PDO_LENGTH_ERROR",
     "EMCY_PDO_LENGTH_EXCEEDED",
@@ -61,6 +75,8 @@ EMCY_NO_ERROR = int(EmcyCode.NO_ERROR)
 EMCY_PDO_LENGTH_ERROR = int(EmcyCode.PDO_LENGTH)
 #: EMCY error code "PDO length exceeded".
 EMCY_PDO_LENGTH_EXCEEDED = int(EmcyCode.PDO_LENGTH_EXCEEDED)
+#: EMCY error code "life guard error or heartbeat error" (a heartbeat consumer event).
+EMCY_HEARTBEAT = int(EmcyCode.LIFE_GUARD_OR_HEARTBEAT)
 #: Entries of the pre-defined error field 0x1003.
 ERROR_HISTORY_LEN = 4
 #: Tolerance of the time comparisons (heartbeat, inhibit and event timers) [s].
@@ -76,8 +92,8 @@ class NmtSlave:
     The attributes below are the ones this part owns (set in
     :meth:`_init_nmt`). It uses ``node_id``, ``_now``, ``_out``,
     ``_counters``, ``store``, ``sdo``, ``_icache``, ``_int`` and ``_store``
-    of the drive, ``state_machine`` and the reset hooks (``_cpr_changed``,
-    ``_apply_own_data``, ``_reset_drive``) of
+    of the drive, ``state_machine``, the reset hooks (``_cpr_changed``,
+    ``_apply_own_data``, ``_reset_drive``) and ``_connection_lost`` of
     :class:`~sim.drives.cia402_drive.Cia402Drive`, and ``_comm_error``,
     the PDO lists, ``_refresh_pdos``, ``_restart_pdos``, ``_drop_latched``
     and ``_timed_tpdos`` of :class:`~sim.drives.pdo_engine.PdoEngine`.
@@ -97,6 +113,13 @@ class NmtSlave:
         COB-ID of the SYNC this node consumes (0x1005).
     _emcy_cob_id : int or None
         COB-ID of its EMCY (0x1014), None when invalid.
+    _hb_consumers : dict
+        Heartbeat consumer (0x1016): producer node id -> ``[time_s, last_s, in_error]``
+        (``last_s`` None until its first heartbeat).
+    _hb_error : bool
+        A heartbeat event stands (error register bits 0 and 4).
+    heartbeat_events : list of (float, int)
+        Time [s] and producer node id of every heartbeat event.
     """
 
     def _init_nmt(self) -> None:
@@ -107,6 +130,9 @@ class NmtSlave:
         self._hb_next: float | None = None
         self._sync_cob_id = SYNC_COB_ID
         self._emcy_cob_id: int | None = EMCY_COB_ID_BASE + self.node_id
+        self._hb_consumers: dict[int, list] = {}
+        self._hb_error = False
+        self.heartbeat_events: list[tuple[float, int]] = []
 
     # ------------------------------------------------------------------ boot and NMT commands
 
@@ -119,6 +145,8 @@ class NmtSlave:
             self._apply_own_data()
             self._reset_drive()
         self._comm_error = False
+        self._hb_error = False
+        self._hb_consumers = {}
         self.sdo.reset()
         self.nmt_state = NmtState.INITIALISING
         self._out.append(heartbeat_frame(self.node_id, NmtState.BOOT_UP))
@@ -152,10 +180,27 @@ class NmtSlave:
             period_ms = self._int(0x1017)
             self._hb_period_s = period_ms / 1000.0
             self._hb_next = self._now + self._hb_period_s if period_ms > 0 else None
+        self._refresh_consumers()
         self._refresh_pdos()
 
+    def _refresh_consumers(self) -> None:
+        """Re-read the heartbeat consumer entries 0x1016; an unchanged entry keeps its monitoring,
+        a changed one waits for its producer's first heartbeat again."""
+        store = self.store
+        new: dict[int, list] = {}
+        if store.var(0x1016, 0) is not None:
+            for k in range(1, self._int(0x1016, 0) + 1):
+                if store.var(0x1016, k) is None:
+                    continue
+                v = self._int(0x1016, k)
+                node, time_s = v >> 16 & 0xFF, (v & 0xFFFF) / 1000.0
+                if node and time_s:
+                    old = self._hb_consumers.get(node)
+                    new[node] = old if old is not None and old[0] == time_s else [time_s, None, False]
+        self._hb_consumers = new
+
     def _check_comm_object_write(self, index: int, subindex: int, value: int) -> None:
-        """Validate an SDO write of 0x1005, 0x1014 or 0x1003 (raise SdoAbortedError to refuse)."""
+        """Validate an SDO write of 0x1005, 0x1014, 0x1003 or 0x1016 (raise SdoAbortedError to refuse)."""
         if index == 0x1005:
             if value & ((1 << 30) | (1 << 29)) or value & 0x1FFFF800:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)  # this node is no SYNC producer; 11 bit
@@ -168,12 +213,24 @@ class NmtSlave:
         elif index == 0x1003 and subindex == 0:
             if value != 0:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif index == 0x1016:
+            node = value >> 16 & 0xFF
+            if value >> 24 or node > 127:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+            for k in range(1, self._int(0x1016, 0) + 1):
+                if k == subindex or self.store.var(0x1016, k) is None:
+                    continue
+                other = self._int(0x1016, k)
+                if node and value & 0xFFFF and other >> 16 & 0xFF == node and other & 0xFFFF:
+                    raise abort(SdoAbortCode.PARAMETER_INCOMPATIBILITY)  # one entry per producer
 
     # ------------------------------------------------------------------ heartbeat
 
     def _tick(self, t: float) -> None:
-        """Time passes to ``t``: the heartbeat if due, then the timed event TPDOs."""
+        """Time passes to ``t``: the heartbeat consumer, the heartbeat if due, the timed event TPDOs."""
         self._now = t
+        if self._hb_consumers:
+            self._supervise(t)
         if self._hb_next is not None and t >= self._hb_next - TIME_EPS_S:
             if self.heartbeat_enabled:
                 self._out.append(heartbeat_frame(self.node_id, self.nmt_state))
@@ -184,6 +241,33 @@ class NmtSlave:
         if self._event_tpdos_list:  # (_timed_tpdos only acts on valid event-driven TPDOs)
             self._timed_tpdos(t)
 
+    # ------------------------------------------------------------------ heartbeat consumer
+
+    def _on_heartbeat(self, producer: int, t: float) -> bool:
+        """A heartbeat (or boot-up) of node ``producer`` at ``t``; False if this node does not consume it."""
+        c = self._hb_consumers.get(producer)
+        if c is None:
+            return False
+        c[1] = t
+        if c[2]:  # the event ends; the drive state is not restored
+            c[2] = False
+            if not any(e[2] for e in self._hb_consumers.values()):
+                self._hb_error = False
+                if not self.error_register:
+                    self._emcy(EMCY_NO_ERROR)
+        return True
+
+    def _supervise(self, t: float) -> None:
+        """Heartbeat events at time ``t``: more than the consumer time since the producer's last heartbeat."""
+        for node, c in self._hb_consumers.items():
+            last = c[1]
+            if last is not None and not c[2] and t - last > c[0] + TIME_EPS_S:
+                c[2] = True
+                self._hb_error = True
+                self.heartbeat_events.append((t, node))
+                self._emcy(EMCY_HEARTBEAT)
+                self._connection_lost()
+
     # ------------------------------------------------------------------ EMCY and error history
 
     @property
@@ -193,7 +277,7 @@ class NmtSlave:
         sm = self.state_machine
         if sm.state in _FAULTY and sm.error_code:
             reg |= error_register_bits(sm.error_code)
-        if self._comm_error:
+        if self._comm_error or self._hb_error:
             reg |= 0x11
         return reg
 

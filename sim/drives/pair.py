@@ -35,6 +35,18 @@ A statusword change commanded by a synchronous RPDO therefore shows in the
 TPDO of the SYNC after the one that applied it (one cycle of latency, as on
 the real bus).
 
+The drives' own cycle when SYNC stops: a real drive's control loop does not
+stop with the master (it holds the last target or torque until a reaction
+such as 0x6007 takes over), and the rig does not stop either. Once SYNCs
+were seen and none came for :data:`FREE_RUN_AFTER_CYCLES` SYNC periods,
+:meth:`SimDrivePair.tick` runs the drive cycle itself every plant sample
+period, catching up from the last step (heartbeat consumers checked at each
+step's time, no TPDOs, latched RPDOs wait for a SYNC): steps 2 and 3 above
+on the drives' clock. It does so while a drive's power stage is on
+(OPERATION_ENABLED, QUICK_STOP_ACTIVE, FAULT_REACTION_ACTIVE); with every
+drive disabled (holding brakes) the rig is at rest and is not stepped. These
+steps are counted in ``stats.free_steps``, not in ``stats.plant_steps``.
+
 Choices
 -------
 * Power-on: both nodes boot (see :mod:`sim.drives.nmt_slave`). At the first
@@ -43,6 +55,9 @@ Choices
   ``stats.plant_steps`` (``plant_steps == syncs + 1``).
 * Time passed to :meth:`SimDrivePair.on_frame` and :meth:`SimDrivePair.tick`
   never runs backwards: a smaller ``t`` than the last one is taken as the last.
+* Heartbeats (0x700 + n) go to the heartbeat consumers (0x1016) of the
+  nodes that monitor node n; a node's consumer reacts with EMCY 0x8130 and
+  its abort connection option 0x6007 (see :mod:`sim.drives.nmt_slave`).
 * Frames no node consumes (another node's traffic, unknown COB-IDs, NMT for
   other nodes) and malformed ones (NMT not 2 bytes, SYNC over 1 byte, SDO
   request not 8 bytes, unknown NMT command) are counted and ignored.
@@ -57,6 +72,7 @@ from dataclasses import dataclass
 
 import canopen.objectdictionary as cod
 
+from hil.canopen.cia402 import State
 from hil.canopen.errors import EdsError, InputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtCommand
@@ -64,10 +80,16 @@ from hil.canopen.od import check_drive_od, load_drive_od, lookup
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.validate import error_code, integer, node_id, time_s
 from sim.drives.drive import SimDrive
+from sim.drives.nmt_slave import TIME_EPS_S
 from sim.drives.pdo_engine import Pdo
 from sim.plant import RigPlant
 
-__all__ = ["SimDrivePair", "SimPairStats"]
+__all__ = ["FREE_RUN_AFTER_CYCLES", "SimDrivePair", "SimPairStats"]
+
+#: SYNC periods without a SYNC after which the drives run their cycle on their own clock.
+FREE_RUN_AFTER_CYCLES = 5
+#: CiA 402 states with the power stage on: the drives' own cycle steps the rig while one is in them.
+_POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 
 _MODE_DISABLED = int(DriveMode.DISABLED)
 #: Objects this simulation needs besides what hil.canopen.od.check_drive_od demands.
@@ -89,7 +111,9 @@ class SimPairStats:
     syncs : int
         SYNC frames processed.
     plant_steps : int
-        Calls of ``plant.step`` (one per SYNC plus one at the first power-on).
+        Calls of ``plant.step`` on a SYNC (one per SYNC plus one at the first power-on).
+    free_steps : int
+        Calls of ``plant.step`` by the drives' own cycle while SYNC is missing.
     tpdos_sent : int
         TPDO frames transmitted.
     rpdos_applied : int
@@ -115,6 +139,7 @@ class SimPairStats:
 
     syncs: int = 0
     plant_steps: int = 0
+    free_steps: int = 0
     tpdos_sent: int = 0
     rpdos_applied: int = 0
     rpdos_late: int = 0
@@ -170,6 +195,9 @@ class SimDrivePair:
         The two drives, in ``node_ids`` order.
     plant : RigPlant
         The simulated rig.
+    on_free_step : callable or None
+        Called as ``on_free_step(t)`` after each step of the drives' own
+        cycle (``t`` [s]: the time of that step), e.g. to record the truth.
 
     Raises
     ------
@@ -231,6 +259,10 @@ class SimDrivePair:
         self._powered = False
         self._now = -math.inf
         self._raw_sample: tuple | None = None  # plant.step_raw output; :attr:`sample` builds the Sample
+        self._T = float(plant.params.sample_period_s)  # the drives' cycle when SYNC is missing [s]
+        self._last_sync_t: float | None = None  # time of the last SYNC (None: none yet)
+        self._last_step_t = 0.0  # time of the last drive cycle (SYNC or own clock)
+        self.on_free_step: Callable[[float], None] | None = None
         self._sample: Sample | None = None
         params = plant.params
         nodes = []
@@ -240,7 +272,9 @@ class SimDrivePair:
                 raise InputError(f"od_factory(node_id={n}) must return a canopen ObjectDictionary, "
                                  f"got {type(od).__name__}")
             try:
-                check_drive_od(od, source=f"node {n} object dictionary")
+                # (a drive without its own reaction to the master's death may be simulated: the
+                # master's preflight, not the drive, refuses it)
+                check_drive_od(od, source=f"node {n} object dictionary", master_loss=False)
             except EdsError as exc:
                 raise InputError(str(exc)) from None
             missing = [f"0x{i:04X}:{s:02X}" for i, s in _SIM_REQUIRED if lookup(od, i, s) is None]
@@ -309,7 +343,6 @@ class SimDrivePair:
             raise
         self._raw_sample = raw
         self._sample = None
-        self._counters.plant_steps += 1
         n0, n1 = self.nodes
         n0._measure(raw)
         n1._measure(raw)
@@ -352,6 +385,7 @@ class SimDrivePair:
         now = self._clock(t)
         if self._raw_sample is None:
             self._step(_MODE_DISABLED, 0.0, _MODE_DISABLED, 0.0)
+            self._counters.plant_steps += 1
         self._powered = True
         for node in self.nodes:
             node._boot(now, communication_only=False)
@@ -399,6 +433,13 @@ class SimDrivePair:
                     consumed = True
             if not consumed:
                 self._counters.bad_frames_ignored += 1
+        elif 0x700 < cob <= 0x77F:  # a heartbeat: the nodes' consumers (0x1016)
+            used = False
+            if len(frame.data) == 1:
+                used = n0._on_heartbeat(cob - 0x700, now)
+                used = n1._on_heartbeat(cob - 0x700, now) or used
+            if not used:
+                self._counters.bad_frames_ignored += 1
         else:
             # RPDOs (or nothing): the nodes' RPDOs of this COB-ID, looked up once per
             # configuration (a node's RPDO only changes that node's configuration)
@@ -441,6 +482,7 @@ class SimDrivePair:
             self._counters.bad_frames_ignored += 1
             return
         self._counters.syncs += 1
+        self._last_sync_t = self._last_step_t = t
         cob = frame.arbitration_id
         n0, n1 = self.nodes
         c0 = n0._sync_cob_id == cob
@@ -462,9 +504,11 @@ class SimDrivePair:
         if n1.command_override is not None:
             mode2, value2 = n1.command_override(n1, t, mode2, value2)
         self._step(mode1, value1, mode2, value2)
+        self._counters.plant_steps += 1
 
     def tick(self, t: float) -> list[Frame]:
-        """Let time pass to ``t`` [s]: heartbeats (0x1017) and timed event TPDOs that are due.
+        """Let time pass to ``t`` [s]: the drives' own cycle while SYNC is missing (module
+        docstring), heartbeat consumers, heartbeats (0x1017) and timed event TPDOs that are due.
 
         A heartbeat is sent at the first tick at or after each multiple of the
         producer time since boot-up (or since 0x1017 was written); if ticks are
@@ -484,9 +528,38 @@ class SimDrivePair:
         else:
             now = self._clock(t)
         if self._powered:
+            last = self._last_sync_t
+            if last is not None and now - last > FREE_RUN_AFTER_CYCLES * self._T:
+                self._free_run(now)
             for node in self.nodes:
                 node._tick(now)
         return self._drain()
+
+    def _free_run(self, now: float) -> None:
+        """The drives' own cycle up to ``now`` while SYNC is missing: every sample period from the
+        last step, heartbeat consumers at the step's time, then the drive cycle and one plant step."""
+        n0, n1 = self.nodes
+        T = self._T
+        while self._last_step_t + T <= now + TIME_EPS_S:
+            if n0.state_machine.state not in _POWERED and n1.state_machine.state not in _POWERED:
+                self._last_step_t = now  # every power stage off: the rig rests on its brakes
+                return
+            tau = self._last_step_t + T
+            for node in self.nodes:
+                node._now = tau
+                if node._hb_consumers:
+                    node._supervise(tau)
+            mode1, value1 = n0._cycle()
+            mode2, value2 = n1._cycle()
+            if n0.command_override is not None:
+                mode1, value1 = n0.command_override(n0, tau, mode1, value1)
+            if n1.command_override is not None:
+                mode2, value2 = n1.command_override(n1, tau, mode2, value2)
+            self._step(mode1, value1, mode2, value2)
+            self._counters.free_steps += 1
+            self._last_step_t = tau
+            if self.on_free_step is not None:
+                self.on_free_step(tau)
 
     # ------------------------------------------------------------------ fault hooks
 

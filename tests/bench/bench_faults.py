@@ -9,6 +9,12 @@ sample beyond the limit), when the quick stop / disable reached the drives,
 the peak true force and stroke after the onset (plant truth, no sensor
 errors), the drives' final states and the data kept in the run folder
 (signals rows, the last sample time, CAN frames logged).
+
+``master_silent`` (the master's death, at the force fight's 6 kN) is detected
+by the drives, not the master: its reaction is from the master's last frame to
+the later of the two drives' heartbeat events (EMCY 0x8130, quick stop), its
+stop from there to both out of Operation enabled in the plant truth, and the
+row adds when both were in Switch on disabled (``sod_ms``, from the last frame).
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (conftest, support)
 
 from test_faults import CASES, T, _t_detect, _t_safe_command  # noqa: E402
+from test_master_loss import silent_figures  # noqa: E402
 
 from hil.cli.dry_run import dry_run  # noqa: E402
 from hil.profiles import load_actuation, load_check, load_simrig  # noqa: E402
@@ -59,6 +66,7 @@ def main() -> int:
             (Fault("sdo_abort", 2, value=float(0x1017)), chk, "sdo_abort"),
             (Fault("runaway", 1, 0.6, value=5.0), f_chk, "runaway -> force limit"),
             (Fault("runaway", 1, 2.7, value=5.0), s_chk, "runaway -> stroke limit"),
+            (Fault("master_silent", 1, 78.0), chk, "master_silent"),
         ]
         for k, (fault, check, name) in enumerate(cases):
             r = dry_run(act, check, sim, tmp / f"run{k}", faults=[fault])
@@ -67,7 +75,15 @@ def main() -> int:
             row = {"fault": name, "ema": fault.ema, "status": meta["status"],
                    "detected_by": meta.get("safety", {}).get("limit") or meta["reason"].split(":")[1].strip(),
                    "frames_logged": meta["can"]["frames_logged"]}
-            if r.injector.syncs == 0:
+            if fault.kind == "master_silent":
+                fig = silent_figures(r, act)
+                det = max(fig["event_s"].values())
+                sig = read_signals(r.out / "signals.csv")
+                row.update(detected_by="drives' consumer (EMCY 0x8130)", reaction_ms=round(det * 1e3, 1),
+                           stop_ms=round((fig["out_of_oe_s"] - det) * 1e3, 1), sod_ms=round(fig["sod_s"] * 1e3, 1),
+                           peak_F_N=round(fig["peak_F_N"], 0), peak_s_mm=round(fig["peak_s_mm"], 3), rows=int(sig.n),
+                           last_t_s=float(sig.t[-1]), t_detect_s=round(fig["t_last_s"] + det, 4))
+            elif r.injector.syncs == 0:
                 row.update(reaction_ms=None, stop_ms=None, peak_F_N=0.0, peak_s_mm=float("nan"), rows=0)
             else:
                 onset = r.injector.onset_s.get(fault.kind, fault.start_s)

@@ -8,6 +8,12 @@ inside user-mode-linux (see ``vcan_stage.py``), as::
 
 It needs a ``vcan0`` that is up and can-utils' ``candump``.
 
+Scenarios: the whole check; SIGKILL of ``sim-serve`` mid-check (the master
+stops within 1.5 heartbeat periods); SIGKILL of ``run`` mid force fight (the
+drives stop by themselves: their consumer heartbeat on the master and the
+abort connection option 0x6007, checked from the capture and by SDO from a
+separate client).
+
 Profiles (all in tests/vcan/, their headers say why): ``check.toml`` (6 mm
 sweep, two force-fight cycles, 3 mm/s approach: 55.5 s instead of 115.5 s),
 ``actuation.toml`` (SYNC at 100 Hz instead of 500 Hz, heartbeat 0.5 s instead
@@ -36,8 +42,12 @@ import pytest
 
 from blf.signals import CHANNELS
 from hil.canlog import decode_can_log
+from hil.canopen.cia402 import State, decode_state
+from hil.canopen.frame import Frame
+from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent
 from hil.profiles import load_actuation, load_simrig
 from hil.runfolder import read_signals
+from sim.drives import QUICK_STOP_HOLD_S
 from sim.truth import rig_truth
 
 HERE = Path(__file__).resolve().parent
@@ -59,6 +69,11 @@ RUN_TIMEOUT_S = 240.0
 READY_TIMEOUT_S = 60.0
 #: sim-serve is killed once the master logged this much of the check [s]
 KILL_AFTER_S = 8.0
+#: run is killed mid force fight, once its signals.csv shows this force-fight level |F1 - F2| / 2 [N]
+#: (the fight of tests/vcan/check.toml peaks at 6 kN about 34 s into the check)
+KILL_RUN_FIGHT_N = 5000.0
+#: statusword poll period of the separate SDO client after the kill [s]
+POLL_S = 0.01
 
 pytestmark = pytest.mark.vcan
 
@@ -191,6 +206,103 @@ def _scenario(base: Path, kill_after_s: float | None) -> dict:
     return res
 
 
+def _last_csv_row(path: Path) -> list[str] | None:
+    try:
+        text = path.read_text()
+    except OSError:
+        return None
+    lines = text.rstrip("\n").split("\n")
+    return lines[-1].split(",") if len(lines) > 1 and text.endswith("\n") else None
+
+
+def _read_statusword(bus, node: int, timeout_s: float = 0.2) -> tuple[float, int] | None:
+    """One SDO upload of 0x6041 from ``node`` over ``bus``: (receive stamp of the answer, statusword)."""
+    import can
+
+    client = SdoClient(node, timeout_s=timeout_s)
+    req = client.start_upload(0x6041, 0, time.monotonic())
+    bus.send(can.Message(arbitration_id=req.arbitration_id, data=req.data, is_extended_id=False))
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        msg = bus.recv(max(0.0, deadline - time.monotonic()))
+        if msg is None:
+            break
+        try:
+            res = client.on_frame(Frame(msg.arbitration_id, bytes(msg.data)), time.monotonic())
+        except SdoAbortError:
+            return None
+        if isinstance(res, SdoEvent):
+            return msg.timestamp, int.from_bytes(res.data[:2], "little")
+    return None
+
+
+def _master_kill_scenario(base: Path) -> dict:
+    """candump, sim-serve, run; SIGKILL run mid force fight, then read both statuswords by SDO."""
+    import can
+
+    if shutil.which("candump") is None:
+        pytest.fail("candump (can-utils) not installed")
+    act = load_actuation(ACT)
+    c, T = act.canopen, act.timing.sync_period_s
+    base.mkdir(parents=True, exist_ok=True)
+    out = base / "run"
+    capture = base / "candump.log"
+    procs = Procs()
+    res: dict = {"out": out, "capture": capture, "polls": []}
+    try:
+        with open(capture, "w") as cap_f:
+            dump = procs.start(["candump", "-L", "-r", str(8 << 20), CHANNEL], cap_f)
+        serve = procs.start(_cli("sim-serve", "--interface", "socketcan", "--channel", CHANNEL,
+                                 "--rt-priority", RT_PRIORITY, *_profile_args(sim=True)),
+                            subprocess.PIPE, text=True, bufsize=1)
+        serve_lines = Lines(serve.stdout)
+        serve_lines.wait_for("ready", READY_TIMEOUT_S, serve)
+        _wait_for_file_text(capture, ("701#00", "702#00"), 10.0)
+        with open(base / "run.out", "w") as run_log:  # (the child has its own copy of the fd)
+            run = procs.start(_cli("run", "--interface", "socketcan", "--channel", CHANNEL, "--arm", "--quiet",
+                                   "--rt-priority", MASTER_RT_PRIORITY, "--check", str(CHECK), "--out", str(out),
+                                   *_profile_args(sim=False)), run_log)
+        deadline = time.monotonic() + RUN_TIMEOUT_S
+        row = None
+        while time.monotonic() < deadline and run.poll() is None:
+            row = _last_csv_row(out / "signals.csv")
+            if row and row[-1] == "force_fight" and abs(float(row[5]) - float(row[6])) / 2 >= KILL_RUN_FIGHT_N:
+                break
+            time.sleep(0.02)
+        assert run.poll() is None, f"run ended before the force fight reached {KILL_RUN_FIGHT_N} N: {row}"
+        res["t_kill"] = time.time()
+        run.send_signal(signal.SIGKILL)
+        run.wait(timeout=10)
+        res["kill_row"] = row
+        # a separate SDO client (not the master's code path): both statuswords until switch on disabled
+        bus = can.Bus(interface="socketcan", channel=CHANNEL)
+        try:
+            stop_at = res["t_kill"] + c.master_consumer_time_s + QUICK_STOP_HOLD_S + 2 * T + 3.0
+            done: set[int] = set()
+            while time.time() < stop_at and len(done) < 2:
+                for n in c.node_ids:
+                    got = _read_statusword(bus, n)
+                    if got is not None:
+                        res["polls"].append((got[0], n, got[1]))
+                        if decode_state(got[1]) is State.SWITCH_ON_DISABLED:
+                            done.add(n)
+                time.sleep(POLL_S)
+            time.sleep(0.2)
+            res["final"] = {n: _read_statusword(bus, n) for n in c.node_ids}
+        finally:
+            bus.shutdown()
+        serve.send_signal(signal.SIGTERM)
+        res["serve_rc"] = serve.wait(timeout=20)
+        res["serve_out"] = serve_lines.join()
+        time.sleep(0.2)
+        dump.send_signal(signal.SIGINT)
+        dump.wait(timeout=10)
+    finally:
+        procs.close()
+    res["run_out"] = (base / "run.out").read_text(errors="replace")
+    return res
+
+
 @pytest.fixture(scope="module")
 def actuation():
     return load_actuation(ACT)
@@ -204,6 +316,11 @@ def full_check(tmp_path_factory):
 @pytest.fixture(scope="module")
 def killed_check(tmp_path_factory, full_check):
     return _scenario(tmp_path_factory.mktemp("vcan-kill"), KILL_AFTER_S)
+
+
+@pytest.fixture(scope="module")
+def killed_master(tmp_path_factory, killed_check):
+    return _master_kill_scenario(tmp_path_factory.mktemp("vcan-kill-run"))
 
 
 def _capture_frames(path: Path) -> list[tuple[float, int, bytes]]:
@@ -342,3 +459,63 @@ def test_run_folder_keeps_the_data_up_to_the_loss(killed_check, actuation):
     k = _match_by_time(dec, csv)
     _assert_same_signals(dec, csv, k)
     assert k[-1] == dec.n - 1
+
+
+# ----------------------------------------------------------------------------- the master's death
+
+
+def test_sigkill_of_run_mid_force_fight_drives_stop_by_themselves(killed_master, actuation):
+    """`run` SIGKILLed at the force fight's 5-6 kN: its SYNC (the Broadcast Manager's task goes with
+    its socket), its heartbeat and everything else stop. Each drive's consumer fires within the
+    consumer time + 2 SYNC periods of the master's last frame (EMCY 0x8130: quick stop, out of
+    Operation enabled), and a separate SDO client reads Switch on disabled after the quick stop hold."""
+    res = killed_master
+    c, T = actuation.canopen, actuation.timing.sync_period_s
+    C = c.master_consumer_time_s
+    nodes = c.node_ids
+    frames = _capture_frames(res["capture"])
+    master = {0x000, 0x080, 0x700 + c.master_node_id} | {b + n for b in (0x200, 0x300) for n in nodes}
+    t_kill = res["t_kill"]
+    t_last = max(t for t, cid, _ in frames if cid in master and t <= t_kill + 0.005)
+    last_hb = max(t for t, cid, _ in frames if cid == 0x700 + c.master_node_id and t <= t_kill + 0.005)
+    assert not [cid for t, cid, _ in frames if cid in master and t > t_kill + 0.005]  # the master is gone
+    # the force fight stood at 5-6 kN when the master died (the capture's last complete sample)
+    dec = decode_can_log(res["capture"], actuation).signals
+    fight = abs(dec.F1[-1] - dec.F2[-1]) / 2
+    assert fight >= 0.8 * KILL_RUN_FIGHT_N, (fight, res["kill_row"])
+    emcy = {n: min((t for t, cid, d in frames if cid == 0x80 + n and t > t_last and d[:2] == b"\x30\x81"),
+                   default=None) for n in nodes}
+    sod = {n: min((t for t, m, sw in res["polls"] if m == n and decode_state(sw) is State.SWITCH_ON_DISABLED),
+                  default=None) for n in nodes}
+    out_oe = {n: None if v is None else v - t_last for n, v in emcy.items()}
+    sod_s = {n: None if v is None else v - t_last for n, v in sod.items()}
+    print(f"\nrun killed at a force fight of {fight:.0f} N: master's last heartbeat {(t_last - last_hb) * 1e3:.0f} ms "
+          f"before its last frame; out of Operation enabled (EMCY 0x8130) {out_oe} s and switch on disabled "
+          f"(SDO) {sod_s} s after its last frame; consumer {C} s, SYNC {T} s, hold {QUICK_STOP_HOLD_S} s")
+    for n in nodes:
+        assert out_oe[n] is not None, f"no EMCY 0x8130 from node {n}"
+        assert emcy[n] - last_hb >= C - T and out_oe[n] <= C + 2 * T, (n, out_oe, t_last - last_hb)
+        # switch on disabled, read by SDO: the quick stop hold after the event, plus one poll
+        assert sod_s[n] is not None and sod_s[n] <= C + QUICK_STOP_HOLD_S + 2 * T + POLL_S + T, (n, sod_s)
+        final = res["final"][n]
+        assert final is not None and decode_state(final[1]) is State.SWITCH_ON_DISABLED, (n, final)
+    # the same answers are in the capture (the client's SDO traffic is on the bus like any other)
+    answers = [t for t, cid, d in frames if cid in (0x580 + n for n in nodes) and d[:4] == b"\x4b\x41\x60\x00"]
+    assert len(answers) >= len(res["polls"]) > 0
+    # the drives' TPDOs stopped with the SYNC
+    assert not [t for t, cid, _ in frames if cid in (0x180 + n for n in nodes) and t > t_last + T]
+
+
+def test_killed_master_run_folder_keeps_the_data_up_to_the_loss(killed_master, actuation):
+    out = killed_master["out"]
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["status"] == "running"  # killed: nobody closed it
+    csv = read_signals(out / "signals.csv")
+    own = decode_can_log(out / "can.log", actuation).signals
+    cap = decode_can_log(killed_master["capture"], actuation).signals
+    # signals.csv and can.log are flushed every 0.5 s of check time: each ends within that (and a
+    # cycle) of the last sample on the bus, and what they hold is what the bus carried
+    T = actuation.timing.sync_period_s
+    assert csv.t[-1] >= cap.t[-1] - 0.5 - 2 * T and own.t[-1] >= cap.t[-1] - 0.5 - 2 * T
+    k = _match_by_time(cap, csv)
+    _assert_same_signals(cap, csv, k)
