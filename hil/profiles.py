@@ -16,7 +16,7 @@ import difflib
 import math
 import tomllib
 import typing
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -266,6 +266,16 @@ class SimRigProfile:
     params: RigParams
     seed: int
     faults: tuple = ()  #: sim.faults.Fault schedule of ``[[faults]]`` (none by default)
+    #: the simulated drives' serial numbers (0x1018:04) from ``[identity]``; None: the EDS's default
+    serials: tuple[int, int] | None = None
+
+
+@dataclass(frozen=True)
+class SimIdentity:
+    """``[identity]`` of a simulated-rig profile: what the simulated drives report as their serial numbers."""
+
+    serial_ema1: int = field(metadata={"lo": 0, "hi": 0xFFFF_FFFF})
+    serial_ema2: int = field(metadata={"lo": 0, "hi": 0xFFFF_FFFF})
 
 
 def load_simrig(path: str | Path | None = None) -> SimRigProfile:
@@ -273,9 +283,9 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     path = Path(path) if path is not None else default_profile_path("simrig.toml")
     fname = path.name
     data = _read_toml(path)
-    known = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2", "effects", "faults"]
+    known = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2", "effects", "faults", "identity"]
     _check_keys(data, known, "", fname)
-    for key in known[:-2]:
+    for key in known[:-3]:
         if key not in data:
             raise ProfileError(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
     seed = data["seed"]
@@ -305,7 +315,11 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     params = RigParams(i_total_rad_per_mm=i_total, stroke_limit_mm=stroke, sample_period_s=period,
                        substeps=substeps, effects=effects, **parts)
     faults = _load_faults(data.get("faults", []), fname)
-    return SimRigProfile(params=params, seed=seed, faults=faults)
+    serials = None
+    if "identity" in data:
+        ident = build_dataclass(SimIdentity, data["identity"], fname, "identity.")
+        serials = (ident.serial_ema1, ident.serial_ema2)
+    return SimRigProfile(params=params, seed=seed, faults=faults, serials=serials)
 
 
 def _load_faults(tables: Any, fname: str) -> tuple:

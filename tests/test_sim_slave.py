@@ -867,3 +867,14 @@ def test_drive_cycle_on_its_own_clock_stops_at_the_next_sync(rig):
     assert decode_state(status(frames, 1)) is State.OPERATION_ENABLED
     pair.tick(rig.t + 4 * T_S)
     assert pair.stats.free_steps == 6
+
+
+def test_serial_numbers_are_the_drives_own_data():
+    """``serials`` are what 0x1018:04 reports, restored at power-on and after reset node."""
+    pair = SimDrivePair(RigPlant(make_params(), np.random.default_rng(0)), serials=(0x5E000101, 0x5E000102))
+    pair.power_on(0.0)
+    assert [n.read(0x1018, 4) for n in pair.nodes] == [0x5E000101, 0x5E000102]
+    pair.on_frame(Frame(0x000, bytes([0x81, 0])), 0.01)  # NMT reset node, all nodes
+    assert [n.read(0x1018, 4) for n in pair.nodes] == [0x5E000101, 0x5E000102]
+    with pytest.raises(InputError, match="serials"):
+        SimDrivePair(RigPlant(make_params(), np.random.default_rng(0)), serials=(1,))

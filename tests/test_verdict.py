@@ -199,6 +199,10 @@ def test_ctrl_c_writes_an_aborted_result_and_names_each_drives_final_state(tmp_p
     assert r["status"] == "aborted" and r["reason"].startswith("interrupted by the operator")
     meta = json.loads((out / "meta.json").read_text())
     assert meta["status"] == "aborted" and all(d["safe"] for d in meta["drives_final"].values())
+    # the drives' identity as read by SDO in the preflight: the simulated rig's serial numbers
+    ident = r["trace"]["identity"]
+    assert (ident["ema1"]["serial"], ident["ema2"]["serial"]) == (0x5E000101, 0x5E000102)
+    assert ident["ema1"]["node"] == 1 and ident["ema1"]["vendor_id"] == 0x00000E3A
     assert "EMA 1 (node 1): SWITCH_ON_DISABLED, safe" in console and "EMA 2 (node 2): SWITCH_ON_DISABLED, safe" in console
 
 

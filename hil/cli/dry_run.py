@@ -58,7 +58,8 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     plant = RigPlant(simrig.params, rng)
-    pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id), node_ids=act.canopen.node_ids)
+    pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id), node_ids=act.canopen.node_ids,
+                        serials=simrig.serials)
     injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=bool(faults))
     truth = truth_dict(rig_truth(simrig.params))
     meta = start_meta(act, check, {"mode": "dry-run", "seed": seed, "realtime": bool(realtime),

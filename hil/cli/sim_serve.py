@@ -28,7 +28,7 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     seed = simrig.seed if args.seed is None else args.seed
     plant = RigPlant(simrig.params, np.random.default_rng(seed))
     pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id),
-                        node_ids=act.canopen.node_ids)
+                        node_ids=act.canopen.node_ids, serials=simrig.serials)
     bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps)
 
     stop = threading.Event()

@@ -171,10 +171,12 @@ class Cia402Drive:
         SYNC cycles of the hold left.
     """
 
-    def _init_drive(self, gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float) -> None:
+    def _init_drive(self, gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
+                    serial: int | None = None) -> None:
         """Initial state: drive in SWITCH_ON_DISABLED, no sample yet (see :class:`~sim.drives.drive.SimDrive`)."""
         self._i_total = float(gear_ratio_rad_per_mm)
         self._cpr_override = counts_per_rev
+        self._serial = serial
         self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9))
         self.state_machine = DriveStateMachine(remote=True)
         self.command_override: Callable[[Cia402Drive, float, int, float], tuple[int, float]] | None = None
@@ -226,6 +228,10 @@ class Cia402Drive:
         self._set_setpoint(_MODE_DISABLED, 0.0)
 
     def _apply_own_data(self) -> None:
+        """The drive's own data, restored at power-on and reset node: its serial number (0x1018:04)
+        and, where given, its encoder resolution (0x608F)."""
+        if self._serial is not None:
+            self._store(0x1018, 4, struct.pack("<I", self._serial))
         if self._cpr_override is not None:
             self._store(0x608F, 1, struct.pack("<I", self._cpr_override))
             self._store(0x608F, 2, struct.pack("<I", 1))

@@ -107,7 +107,7 @@ class SimDrive(PdoEngine, NmtSlave, Cia402Drive):
 
     def __init__(self, node_id: int, ema_index: int, od: cod.ObjectDictionary, *,
                  gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
-                 counters: _Counters, outbox: list[Frame]) -> None:
+                 counters: _Counters, outbox: list[Frame], serial: int | None = None) -> None:
         self.node_id = node_id
         self.ema_index = ema_index
         self._counters = counters
@@ -123,7 +123,7 @@ class SimDrive(PdoEngine, NmtSlave, Cia402Drive):
         self.sdo_request_cob_id = self.sdo.request_cob_id  #: requests to this node
         self.sdo_response_cob_id = self.sdo.response_cob_id  #: its responses
 
-        self._init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s)
+        self._init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s, serial)
         self._init_nmt()
         self._init_pdos()
         problems = self._default_mapping_problems()

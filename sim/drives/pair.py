@@ -184,6 +184,9 @@ class SimDrivePair:
         serves (0x1001, 0x1005, 0x1014, 0x6072, 0x6077, ...).
     node_ids : tuple of two int, optional
         Distinct node ids 1..127, default (1, 2).
+    serials : tuple of two int, optional
+        The drives' serial numbers (identity 0x1018:04, the drive's own data like
+        ``counts_per_rev``); default the EDS's.
     counts_per_rev : int, optional
         Encoder increments per motor revolution. None: the EDS's 0x608F
         (4096 / 1). Given: written to 0x608F:01 (and 1 to 0x608F:02) as the
@@ -237,7 +240,8 @@ class SimDrivePair:
     """
 
     def __init__(self, plant: RigPlant, od_factory: Callable[..., cod.ObjectDictionary] = load_drive_od,
-                 node_ids: tuple[int, int] = (1, 2), *, counts_per_rev: int | None = None) -> None:
+                 node_ids: tuple[int, int] = (1, 2), *, counts_per_rev: int | None = None,
+                 serials: tuple[int, int] | None = None) -> None:
         if not isinstance(plant, RigPlant):
             raise InputError(f"plant must be a sim.plant.RigPlant, got {type(plant).__name__}")
         if not callable(od_factory):
@@ -253,6 +257,14 @@ class SimDrivePair:
             raise InputError(f"node_ids must be two distinct ints in 1..127 (shape (2,)), got {node_ids!r}")
         if counts_per_rev is not None:
             counts_per_rev = integer("counts_per_rev", counts_per_rev, 1, 2**32 - 1)  # [increments/rev]
+        if serials is not None:
+            try:
+                serials = tuple(serials)
+            except TypeError:
+                serials = ()
+            if len(serials) != 2:
+                raise InputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
+            serials = tuple(integer(f"serials[{k}]", v, 0, 2**32 - 1) for k, v in enumerate(serials))
         self.plant = plant
         self._counters = _Counters()
         self._out: list[Frame] = []
@@ -283,7 +295,8 @@ class SimDrivePair:
                                  + ", ".join(missing))
             nodes.append(SimDrive(n, k, od, gear_ratio_rad_per_mm=params.i_total_rad_per_mm,
                                   counts_per_rev=counts_per_rev, sample_period_s=params.sample_period_s,
-                                  counters=self._counters, outbox=self._out))
+                                  counters=self._counters, outbox=self._out,
+                                  serial=None if serials is None else serials[k]))
         self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
         for node in self.nodes:
             node._torque_fetch = self._fetch_torque
