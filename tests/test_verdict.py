@@ -216,3 +216,17 @@ def test_the_eds_device_info_must_agree_with_its_identity_object(tmp_path, capsy
     rc = main(["dry-run", "--quiet", "--profile", str(act), "--out", str(tmp_path / "run")])
     err = capsys.readouterr().err
     assert rc == ExitCode.INPUT and "[DeviceInfo] ProductNumber = 0x00000403" in err and "0x1018:02" in err
+
+
+def test_recordings_that_cannot_be_analysed_name_the_file_and_exit_3(tmp_path, capsys):
+    short = tmp_path / "short.csv"
+    rows = ["t,phi1,phi2,s1,s2,F1,F2,step"] + [f"{0.002 * (k + 1):.4f},0,0,0,0,0,0,approach" for k in range(1200)]
+    short.write_text("\n".join(rows) + "\n")
+    assert main(["analyze", str(short)]) == ExitCode.INPUT
+    err = capsys.readouterr().err
+    assert str(short) in err and "force_fight" in err and err.count("\n") == 1
+    mat = tmp_path / "DATA.mat"
+    mat.write_bytes(b"MATLAB 5.0 MAT-file\x00\x01\x02\xff\xfe" * 10)
+    assert main(["analyze", str(mat)]) == ExitCode.INPUT
+    err = capsys.readouterr().err
+    assert "a MATLAB file" in err and "--model single-axis" in err
