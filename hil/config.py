@@ -82,6 +82,20 @@ class Canopen:
 
 
 @dataclass(frozen=True)
+class HistorySettings:
+    """``[history]`` of an actuation profile (optional): where the checks are recorded and what
+    the record says about the installation, unless ``--history``, ``--aircraft``, ``--position``
+    and ``--rig`` say otherwise (docs/history.md)."""
+
+    #: the station's history database (``sqlite:///PATH`` or ``postgresql://USER@HOST/DB``);
+    #: "" (the default): an SQLite file in the user's data directory
+    url: str = ""
+    aircraft: str = ""  #: the aircraft's registration, e.g. "D-AXYZ"
+    position: str = ""  #: where the actuation sits on it, e.g. "left aileron"
+    rig: str = ""  #: the test rig or station that runs the check
+
+
+@dataclass(frozen=True)
 class Actuation:
     """The actuation as the master and the analysis see it (profiles/actuation.toml)."""
 
@@ -90,6 +104,7 @@ class Actuation:
     sensors: Sensors
     timing: Timing
     canopen: Canopen
+    history: HistorySettings = field(default_factory=HistorySettings)
 
     @property
     def sample_rate_Hz(self) -> float:

@@ -31,7 +31,7 @@ from hil.config import (
 )
 from hil.errors import ProfileError
 from sim import effects as sim_effects
-from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams
+from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams, WearParams
 
 
 def default_profile_path(name: str) -> Path:
@@ -154,6 +154,14 @@ def load_actuation(path: str | Path | None = None) -> Actuation:
         raise ProfileError(f"{path.name}: fields 'canopen.master_heartbeat_consumer_factor' * "
                            f"'canopen.master_heartbeat_period_s' give a consumer heartbeat time of "
                            f"{consumer_ms:g} ms; 0x1016 holds 1..65535 ms")
+    if act.history.url:
+        from hil.history.errors import HistoryInputError
+        from hil.history.url import check_url
+
+        try:
+            check_url(act.history.url)
+        except HistoryInputError as exc:
+            raise ProfileError(f"{path.name}: field 'history.url': {exc}") from None
     if c.external_watchdog != c.external_watchdog.strip() or "\n" in c.external_watchdog:
         raise ProfileError(f"{path.name}: field 'canopen.external_watchdog' must be one line without "
                            f"leading or trailing blanks (it is quoted in the run folder)")
@@ -256,6 +264,11 @@ _SIM_RANGES: dict[str, tuple] = {
     "SensorParams.loadcell_gain": (0.5, 2.0),
     "SensorParams.loadcell_noise_std_N": (0.0, 1e4),
     "SensorParams.resolver_bits": (4, 24),
+    "WearParams.backlash_int1_mm_per_1000_fh": (-1.0, 1.0),
+    "WearParams.backlash_int2_mm_per_1000_fh": (-1.0, 1.0),
+    "WearParams.backlash_ext_mm_per_1000_fh": (-1.0, 1.0),
+    "WearParams.scatter_mm": (0.0, 0.5),
+    "WearParams.reference_flight_hours": (0.0, 1e6),
 }
 
 
@@ -268,6 +281,8 @@ class SimRigProfile:
     faults: tuple = ()  #: sim.faults.Fault schedule of ``[[faults]]`` (none by default)
     #: the simulated drives' serial numbers (0x1018:04) from ``[identity]``; None: the EDS's default
     serials: tuple[int, int] | None = None
+    #: backlash growth with flight hours from ``[wear]`` (applied by ``--flight-hours``); None: no wear
+    wear: WearParams | None = None
 
 
 @dataclass(frozen=True)
@@ -283,9 +298,10 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     path = Path(path) if path is not None else default_profile_path("simrig.toml")
     fname = path.name
     data = _read_toml(path)
-    known = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2", "effects", "faults", "identity"]
+    required = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2"]
+    known = required + ["effects", "faults", "identity", "wear"]
     _check_keys(data, known, "", fname)
-    for key in known[:-3]:
+    for key in required:
         if key not in data:
             raise ProfileError(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
     seed = data["seed"]
@@ -319,7 +335,8 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     if "identity" in data:
         ident = build_dataclass(SimIdentity, data["identity"], fname, "identity.")
         serials = (ident.serial_ema1, ident.serial_ema2)
-    return SimRigProfile(params=params, seed=seed, faults=faults, serials=serials)
+    wear = build_dataclass(WearParams, data["wear"], fname, "wear.", _SIM_RANGES) if "wear" in data else None
+    return SimRigProfile(params=params, seed=seed, faults=faults, serials=serials, wear=wear)
 
 
 def _load_faults(tables: Any, fname: str) -> tuple:

@@ -83,3 +83,26 @@ class RigParams:
     sensors1: SensorParams
     sensors2: SensorParams
     effects: tuple = field(default_factory=tuple)
+
+
+@dataclass(frozen=True)
+class WearParams:
+    """Wear of the simulated rig with flight hours (simulated-rig profile ``[wear]``, optional).
+
+    The backlash values of ``[ema1]``/``[ema2]`` hold at ``reference_flight_hours``; a check
+    simulated at flight hours H has each backlash grown by its rate times
+    ``(H - reference_flight_hours) / 1000`` plus a scatter of standard deviation
+    ``scatter_mm`` drawn per check (:func:`sim.truth.apply_wear`). The external rate is
+    shared equally by the two ram-end bearings.
+    """
+
+    backlash_int1_mm_per_1000_fh: float  #: growth of EMA 1's internal backlash
+    backlash_int2_mm_per_1000_fh: float  #: growth of EMA 2's internal backlash
+    backlash_ext_mm_per_1000_fh: float  #: growth of the external backlash (both bearings together)
+    scatter_mm: float = 0.0  #: standard deviation of each check's true backlash about the wear line
+    reference_flight_hours: float = 0.0  #: flight hours at which the profile's backlash values hold
+
+    def rate_mm_per_1000_fh(self, channel: str) -> float:
+        """The stated growth rate of ``channel`` ("int1", "int2" or "ext") [mm per 1000 FH]."""
+        return {"int1": self.backlash_int1_mm_per_1000_fh, "int2": self.backlash_int2_mm_per_1000_fh,
+                "ext": self.backlash_ext_mm_per_1000_fh}[channel]

@@ -27,7 +27,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from blf.errors import InputError
 from blf.validate import count, generator, instance_of, scalar
@@ -177,6 +176,8 @@ def _smooth_noise(rng: np.random.Generator, n: int, std: float, bandwidth_rad_s:
     e = rng.standard_normal(n + nw)
     b1 = np.array([1.0 - a])
     a1 = np.array([1.0, -a])
+    from scipy import signal  # here, not at import: `emacheck --help` lists the scenarios without scipy
+
     x = signal.lfilter(b1, a1, signal.lfilter(b1, a1, e))
     # noise gain of the cascade (1 - a)^2 / (1 - a z^-1)^2: sum h_k^2 = (1-a)^4 (1 + a^2) / (1 - a^2)^3
     gain = (1.0 - a) ** 2 * math.sqrt((1.0 + a * a) / (1.0 - a * a) ** 3)

@@ -5,12 +5,16 @@ Pure: parameters in, a frozen dataclass out.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
-from blf.validate import instance_of, scalar
-from sim.params import EmaMechanics, RigParams
+import numpy as np
 
-__all__ = ["RigTruth", "rig_truth"]
+from blf.errors import InputError
+from blf.validate import generator, instance_of, scalar
+from sim.params import EmaMechanics, RigParams, WearParams
+
+__all__ = ["RigTruth", "rig_truth", "wear_line_mm", "apply_wear"]
 
 
 @dataclass(frozen=True)
@@ -159,3 +163,76 @@ def force_fight_play_mm(params: RigParams) -> float:
     p = instance_of(params, RigParams, "params", "a sim.params.RigParams")
     return 0.5 * (p.ema1.backlash_int_mm + p.ema1.bearing_backlash_mm
                   + p.ema2.backlash_int_mm + p.ema2.bearing_backlash_mm)
+
+
+def wear_line_mm(params: RigParams, wear: WearParams, flight_hours: float) -> dict[str, float]:
+    """The backlash of each channel on the stated wear line at ``flight_hours`` (no scatter).
+
+    Parameters
+    ----------
+    params : RigParams
+        The rig at ``wear.reference_flight_hours``.
+    wear : WearParams
+    flight_hours : float
+        Flight hours of the check (>= 0).
+
+    Returns
+    -------
+    dict
+        ``{"int1": mm, "int2": mm, "ext": mm}``: :func:`rig_truth`'s backlash plus
+        rate times ``(flight_hours - reference) / 1000``.
+    """
+    instance_of(wear, WearParams, "wear", "a sim.params.WearParams")
+    fh = scalar(flight_hours, "flight_hours", "FH", lo=0.0)
+    base = rig_truth(params).backlash_mm
+    dk = (fh - wear.reference_flight_hours) / 1000.0
+    return {ch: base[ch] + wear.rate_mm_per_1000_fh(ch) * dk for ch in ("int1", "int2", "ext")}
+
+
+def apply_wear(params: RigParams, wear: WearParams, flight_hours: float, rng: np.random.Generator) -> RigParams:
+    """The rig worn to ``flight_hours``: each backlash on its wear line plus one draw of the scatter.
+
+    Parameters
+    ----------
+    params : RigParams
+        The rig at ``wear.reference_flight_hours``.
+    wear : WearParams
+    flight_hours : float
+        Flight hours of the simulated check (>= 0).
+    rng : numpy.random.Generator
+        Draws the scatter (three normal numbers, int1, int2, ext, in that order).
+
+    Returns
+    -------
+    RigParams
+        ``params`` with ``ema1.backlash_int_mm``, ``ema2.backlash_int_mm`` and the two
+        ``bearing_backlash_mm`` (sharing the external growth and scatter equally) replaced;
+        :func:`rig_truth` of it is the check's truth.
+
+    Raises
+    ------
+    blf.errors.InputError
+        A backlash that would drop below zero (a negative rate run backwards too far).
+
+    Notes
+    -----
+    The scatter stands for what makes one check's true backlash differ from the
+    wear line (lubrication, temperature, the load history before the check); it
+    is drawn per check, independent between checks and channels.
+    """
+    instance_of(params, RigParams, "params", "a sim.params.RigParams")
+    line = wear_line_mm(params, wear, flight_hours)
+    rng = generator(rng)
+    scatter = rng.normal(0.0, 1.0, 3) * scalar(wear.scatter_mm, "wear.scatter_mm", "mm", lo=0.0)
+    new = {ch: line[ch] + d for ch, d in zip(("int1", "int2", "ext"), scatter)}
+    for ch, v in new.items():
+        if v < 0.0:
+            raise InputError(f"wear at flight_hours = {flight_hours} gives a negative {ch} backlash ({v:.4f} mm)")
+    half_ext = 0.5 * (new["ext"] - (params.ema1.bearing_backlash_mm + params.ema2.bearing_backlash_mm))
+    ema1 = dataclasses.replace(params.ema1, backlash_int_mm=new["int1"],
+                               bearing_backlash_mm=params.ema1.bearing_backlash_mm + half_ext)
+    ema2 = dataclasses.replace(params.ema2, backlash_int_mm=new["int2"],
+                               bearing_backlash_mm=params.ema2.bearing_backlash_mm + half_ext)
+    if min(ema1.bearing_backlash_mm, ema2.bearing_backlash_mm) < 0.0:
+        raise InputError(f"wear at flight_hours = {flight_hours} gives a negative bearing backlash")
+    return dataclasses.replace(params, ema1=ema1, ema2=ema2)

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +14,12 @@ import pytest
 from hil.profiles import load_actuation, load_check, load_simrig
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
+
+# `run`, `analyze` and `serv` record every real result in the wear history, by default an SQLite
+# file in the user's data directory (platformdirs: $XDG_DATA_HOME, else ~/.local/share). The tests
+# and every command they start (subprocesses inherit it) write to a temporary one instead.
+os.environ["XDG_DATA_HOME"] = tempfile.mkdtemp(prefix="emacheck-test-data-")
+atexit.register(shutil.rmtree, os.environ["XDG_DATA_HOME"], ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

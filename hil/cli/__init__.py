@@ -1,7 +1,7 @@
 """The command line of emacheck: one module per command, dispatched by argparse's ``set_defaults``.
 
 Each command module (``dry_run``, ``run``, ``simulate``, ``analyze``,
-``serv``, ``diagnose``, ``sim_serve``) registers its sub-parser with a
+``serv``, ``diagnose``, ``history``, ``sim_serve``) registers its sub-parser with a
 ``register(sub)`` function and keeps its heavy imports (analysis, plotting,
 python-control, numba) inside the command, so ``emacheck run`` loads no more
 than its cyclic loop needs before the first SYNC. Shared pieces are in
@@ -9,8 +9,9 @@ than its cyclic loop needs before the first SYNC. Shared pieces are in
 :mod:`hil.cli.check` (running a check and turning it into a result).
 
 Exit status (:class:`hil.cli.common.ExitCode`): 0 pass, 1 fail (backlash
-above B_spec), 2 aborted, 3 bad input (profile, recording, EDS, arguments),
-4 internal error. Any error, expected or not, is one line on the console;
+above B_spec), 2 aborted, 3 bad input (profile, recording, EDS, arguments,
+a history database URL, file or login that cannot be used), 4 internal error,
+5 inconclusive. Any error, expected or not, is one line on the console;
 an unexpected one leaves its traceback in a file whose path that line names.
 """
 
@@ -21,11 +22,11 @@ import sys
 from typing import NoReturn
 
 from hil import __version__
-from hil.cli import analyze, diagnose, dry_run, run, serv, sim_serve, simulate
+from hil.cli import analyze, diagnose, dry_run, history, run, serv, sim_serve, simulate
 from hil.cli.common import EPILOG, ExitCode
 
 #: The commands in the order ``--help`` lists them.
-COMMANDS = (dry_run, run, simulate, analyze, serv, diagnose, sim_serve)
+COMMANDS = (dry_run, run, simulate, analyze, serv, diagnose, history, sim_serve)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -87,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
         return ExitCode.INPUT
     except (EmacheckError, CanopenError, BlfError) as exc:
         print(f"emacheck: error: {exc}", file=sys.stderr)
-        return ExitCode.ABORTED
+        # an error may say it is about bad input (the wear history's URL, file or login: exit 3)
+        return ExitCode.INPUT if getattr(exc, "bad_input", False) else ExitCode.ABORTED
     except KeyboardInterrupt:
         print("emacheck: interrupted", file=sys.stderr)
         return ExitCode.ABORTED

@@ -10,12 +10,15 @@ from hil.cli.check import INCOMPLETE_REASON, analyze_and_report, exit_for, print
 from hil.cli.common import (
     ExitCode,
     actuation_for,
+    add_history_args,
     add_parser,
     add_recording_args,
     add_trace_args,
+    installation,
     make_console,
     outputs_for,
     read_meta,
+    record_history,
 )
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import resolve_recording, write_json_atomic
@@ -37,7 +40,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     out = outputs.folder
     truth = meta.get("truth") if meta else None
     incomplete = meta is not None and meta.get("status") == "running"
-    extra = {"operator": args.operator, "work_order": args.work_order}
+    extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta)}
     try:
         result = analyze_and_report(sig_path, act, outputs, truth, meta, console, trace_extra=extra)
     except (IncompleteRecordingError, AnalysisError) as exc:
@@ -56,10 +59,12 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
         write_json_atomic(outputs.path("result.json"), result)
         console.print(f"[yellow]{result['status']}:[/yellow] {result['reason']}; no analysis: {exc}")
+        record_history(console, args, act, outputs.path("result.json"), run_folder=run_dir, recording=sig_path)
         return ExitCode.ABORTED
     if incomplete:
         console.print(f"[yellow]incomplete:[/yellow] {INCOMPLETE_REASON}")
     print_summary(console, result, out)
+    record_history(console, args, act, outputs.path("result.json"), run_folder=run_dir, recording=sig_path)
     return exit_for(result)
 
 
@@ -71,3 +76,4 @@ def register(sub) -> None:
                                "segments are found automatically.")
     add_recording_args(p, "result.json and report.html")
     add_trace_args(p)
+    add_history_args(p, simulated=False)

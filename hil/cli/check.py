@@ -16,7 +16,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from blf.signals import CHANNELS
-from hil.cli.common import ExitCode, Outputs, load_recording, utc_iso
+from hil.cli.common import INSTALLATION_KEYS, ExitCode, Outputs, load_recording, utc_iso
 from hil.config import Actuation
 from hil.errors import KNOWN_ERRORS
 from hil.runfolder import write_json_atomic
@@ -115,6 +115,7 @@ def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> di
     from hil import __version__
 
     meta = meta or {}
+    place = {k: (extra or {}).get(k) if (extra or {}).get(k) is not None else meta.get(k) for k in INSTALLATION_KEYS}
     extra = {k: v for k, v in (extra or {}).items() if v}
     return {
         "run_id": meta.get("run_id"),
@@ -131,6 +132,9 @@ def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> di
         # each drive's configured reaction to losing the master (or the external watchdog stated instead)
         "master_loss": {k: v.get("master_loss") for k, v in (meta.get("drives_final") or {}).items()
                         if v.get("master_loss")},
+        # where and when in the aircraft's life (the wear history's keys): aircraft, position, rig,
+        # flight hours and cycles
+        **place,
     }
 
 
@@ -169,6 +173,35 @@ def exit_for(result: dict) -> int:
     """The exit status of a result: pass 0, fail 1, inconclusive 5, aborted or incomplete 2."""
     return {"pass": ExitCode.PASS, "fail": ExitCode.FAIL,
             "inconclusive": ExitCode.INCONCLUSIVE}.get(result["status"], ExitCode.ABORTED)
+
+
+def worn_simrig(simrig, flight_hours: float | None, seed: int):
+    """The simulated rig worn to ``flight_hours`` by its ``[wear]`` table (sim.truth.apply_wear, the scatter
+    drawn from ``seed``), and what to record of it in meta.json; unchanged (and None) without both."""
+    if simrig.wear is None or flight_hours is None:
+        return simrig, None
+    import dataclasses
+
+    import numpy as np
+
+    from hil.profiles import snapshot
+    from sim.truth import apply_wear, wear_line_mm
+
+    params = apply_wear(simrig.params, simrig.wear, flight_hours, np.random.default_rng([seed, 0x16]))
+    info = {"flight_hours": flight_hours, "params": snapshot(simrig.wear),
+            "line_mm": wear_line_mm(simrig.params, simrig.wear, flight_hours)}
+    return dataclasses.replace(simrig, params=params), info
+
+
+def simulated_identity(act, simrig) -> dict | None:
+    """The identity (0x1018) the simulated drives report, for a check without them (``simulate``):
+    vendor and product the profile expects, its lowest revision, the simulated rig's serial numbers."""
+    if simrig.serials is None:
+        return None
+    c = act.canopen
+    return {f"ema{k}": {"node": n, "vendor_id": c.vendor_id, "product_code": c.product_code,
+                        "revision": c.revision_min, "serial": s}
+            for k, (n, s) in enumerate(zip(c.node_ids, simrig.serials), start=1)}
 
 
 def truth_dict(truth) -> dict:

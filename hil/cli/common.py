@@ -35,7 +35,9 @@ exit status: 0 pass (diagnose, sim-serve: done), 1 fail (a backlash proven above
 2 check aborted or run incomplete (result.json says why), 3 bad input (profile,
 recording, EDS, CAN interface, arguments: the message names the file, field or line),
 4 internal error, 5 inconclusive (a reading whose uncertainty straddles B_spec, or a
-channel not measured). Profiles default to the shipped ones (profiles/*.toml)."""
+channel not measured). history: 2 its database is down or locked, 3 its URL, file or
+login cannot be used; a check's recording in the history never changes its exit status.
+Profiles default to the shipped ones (profiles/*.toml)."""
 
 
 def add_parser(sub, name: str, *, help: str, description: str, handler) -> argparse.ArgumentParser:
@@ -189,6 +191,117 @@ def add_trace_args(p: argparse.ArgumentParser) -> None:
     """``--operator`` and ``--work-order``: who ran the check, for which work order (into result.json)."""
     p.add_argument("--operator", metavar="NAME", help="who runs the check (recorded in meta.json and result.json)")
     p.add_argument("--work-order", metavar="ID", help="the work order it is run for (recorded likewise)")
+
+
+def _history_url(text: str) -> str:
+    """argparse type of ``--history``: a database URL (only its form is checked here; no database
+    library is imported before a check)."""
+    from hil.history.errors import HistoryInputError
+    from hil.history.url import check_url
+
+    try:
+        return check_url(text)
+    except HistoryInputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _flight_hours(text: str) -> float:
+    import math
+
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of flight hours: {text!r}") from None
+    if not math.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text} flight hours: must be a finite number >= 0")
+    return v
+
+
+def _flight_cycles(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number of flight cycles: {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{v} flight cycles: must be >= 0")
+    return v
+
+
+#: what the history records about where and when a check was made (flags, else meta.json, else the
+#: actuation profile's [history] table)
+INSTALLATION_KEYS = ("aircraft", "position", "rig", "flight_hours", "flight_cycles")
+
+
+def add_history_args(p: argparse.ArgumentParser, *, simulated: bool) -> None:
+    """The wear history's flags (docs/history.md): where the result is recorded and what the record
+    says about the installation. A real check is recorded unless ``--no-history``; a simulated one
+    (``simulated``) only with ``--history``."""
+    g = p.add_argument_group("wear history (docs/history.md)")
+    if simulated:
+        g.add_argument("--history", nargs="?", const=True, metavar="URL", type=_history_url,
+                       help="record this simulated check in the wear history, marked simulated (never in a real "
+                            "actuator's trend): into URL, else the actuation profile's history.url, else the "
+                            "user's SQLite file")
+    else:
+        g.add_argument("--history", metavar="URL", type=_history_url,
+                       help="record the result into this database (sqlite:///PATH or postgresql://USER@HOST/DB) "
+                            "instead of the actuation profile's history.url or the user's SQLite file")
+        g.add_argument("--no-history", action="store_true", help="do not record this result in the wear history")
+    g.add_argument("--aircraft", metavar="REG", help="aircraft registration (default: the profile's history.aircraft)")
+    g.add_argument("--position", metavar="TEXT", help="where the actuation sits, e.g. 'left aileron' "
+                                                      "(default: the profile's history.position)")
+    g.add_argument("--rig", metavar="NAME", help="the rig or station (default: the profile's history.rig)")
+    g.add_argument("--flight-hours", type=_flight_hours, metavar="FH",
+                   help="the aircraft's flight hours at the check (the wear trend's axis)"
+                        + ("; with a simulated-rig [wear] table the backlash is worn to them" if simulated else ""))
+    g.add_argument("--flight-cycles", type=_flight_cycles, metavar="N", help="the aircraft's flight cycles")
+
+
+def installation(args: argparse.Namespace, act: Actuation, meta: dict | None = None) -> dict:
+    """Aircraft, position, rig, flight hours and cycles of a check: the flags, else the run's
+    meta.json, else the actuation profile's ``[history]`` (None where nobody said)."""
+    meta = meta or {}
+    out = {}
+    for k in INSTALLATION_KEYS:
+        v = getattr(args, k, None)
+        if v is None:
+            v = meta.get(k)
+        if v is None and k in ("aircraft", "position", "rig"):
+            v = getattr(act.history, k) or None
+        out[k] = v
+    return out
+
+
+def record_history(console, args: argparse.Namespace, act: Actuation, result_path: Path, *,
+                   run_folder: Path | None, recording: Path | None = None) -> None:
+    """After a command wrote its result: record it in the wear history, one line on the console
+    either way; never raises and never changes the command's exit status (docs/history.md).
+
+    A real result is recorded unless ``--no-history``; a simulated one only with ``--history``."""
+    explicit = getattr(args, "history", None)
+    if getattr(args, "no_history", False) or not Path(result_path).is_file():
+        return
+    from rich.markup import escape
+
+    from hil.history.record import is_simulated, load_result, record_after_check
+
+    try:
+        simulated = is_simulated(load_result(result_path))
+    except Exception as exc:  # noqa: BLE001 - reported; the command's outcome stands
+        console.print(escape(f"NOT recorded in the history: {exc}"), soft_wrap=True)
+        return
+    if simulated and explicit is None:
+        return
+    if isinstance(explicit, str):  # --history URL (True: --history alone)
+        url = explicit
+    elif act.history.url:
+        url = act.history.url
+    else:
+        from hil.history.url import default_url
+
+        url = default_url()
+    record_after_check(url, Path(result_path), run_folder=run_folder, recording=recording,
+                       say=lambda m: console.print(escape(m), soft_wrap=True))
 
 
 def make_console(**kwargs):

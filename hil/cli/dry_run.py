@@ -8,8 +8,18 @@ from pathlib import Path
 
 from rich.console import Console
 
-from hil.cli.check import canopen_check, master_setup, record_can_stats, result_after, truth_dict
-from hil.cli.common import add_parser, add_profile_args, add_trace_args, file_hashes, make_console, out_dir
+from hil.cli.check import canopen_check, master_setup, record_can_stats, result_after, truth_dict, worn_simrig
+from hil.cli.common import (
+    add_history_args,
+    add_parser,
+    add_profile_args,
+    add_trace_args,
+    file_hashes,
+    installation,
+    make_console,
+    out_dir,
+    record_history,
+)
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
 from hil.runfolder import write_json_atomic
 
@@ -98,10 +108,15 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
     out = out_dir(args, "dry-run")
-    trace = {"operator": args.operator, "work_order": args.work_order,
+    simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
+    trace = {"operator": args.operator, "work_order": args.work_order, **installation(args, act),
              "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim)}
-    return dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
-                   console=console, profile_path=args.profile, trace=trace).exit_code
+    if wear is not None:
+        trace["wear"] = wear
+    rc = dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
+                 console=console, profile_path=args.profile, trace=trace).exit_code
+    record_history(console, args, act, out / "result.json", run_folder=out)
+    return rc
 
 
 def register(sub) -> None:
@@ -113,5 +128,6 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-dry-run)")
     add_profile_args(p, sim=True)
     add_trace_args(p)
+    add_history_args(p, simulated=True)
     p.add_argument("--realtime", action="store_true", help="pace SYNC at the SYNC period (default: as fast as possible)")
     p.add_argument("--quiet", action="store_true", help="no progress display")

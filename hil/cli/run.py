@@ -9,13 +9,16 @@ from hil.cli.check import canopen_check, master_setup, page_faults, record_can_s
 from hil.cli.common import (
     ExitCode,
     add_bus_args,
+    add_history_args,
     add_parser,
     add_profile_args,
     add_trace_args,
     file_hashes,
+    installation,
     make_console,
     open_bus,
     out_dir,
+    record_history,
 )
 from hil.profiles import load_actuation, load_check
 
@@ -52,6 +55,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    "bitrate_bps": bitrate,
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
                                    "eds": str(eds), "operator": args.operator, "work_order": args.work_order,
+                                   **installation(args, act),
                                    "files_sha256": file_hashes(actuation=args.profile, check=args.check, eds=eds)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
@@ -66,7 +70,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     record_can_stats(out, meta, wall, log, master, transport, page_faults() - faults0)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
                   f"{log.frames} CAN frames logged")
-    return result_after(out, act, None, meta, outcome, console)
+    rc = result_after(out, act, None, meta, outcome, console)
+    # the wear history is imported and written only now, after the cyclic loop and the result
+    record_history(console, args, act, out / "result.json", run_folder=out)
+    return rc
 
 
 def register(sub) -> None:
@@ -78,6 +85,7 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-run)")
     add_profile_args(p)
     add_trace_args(p)
+    add_history_args(p, simulated=False)
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "

@@ -15,13 +15,16 @@ from hil.cli.check import exit_for, trace_of
 from hil.cli.common import (
     Outputs,
     actuation_for,
+    add_history_args,
     add_parser,
     add_recording_args,
     add_trace_args,
+    installation,
     load_recording,
     make_console,
     outputs_for,
     read_meta,
+    record_history,
 )
 from hil.errors import RecordingError
 from hil.runfolder import resolve_recording, write_json_atomic
@@ -88,13 +91,15 @@ def cmd_serv(args: argparse.Namespace) -> int:
     outputs = outputs_for(args.out, sig_path, run_dir, "serv")
     outputs.folder.mkdir(parents=True, exist_ok=True)
     data = serv_dict(an, truth, str(sig_path))
-    data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order})
+    data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order,
+                                              **installation(args, act, meta)})
     data["analysis_s"] = round(time.perf_counter() - t0, 3)
     write_json_atomic(outputs.path("serv.json"), data)
     report = not getattr(args, "no_report", False)
     if report:
         write_serv_report(outputs.path("serv_report.html"), an, data, act, json_name=outputs.path("serv.json").name)
     print_summary(console, data, outputs, report)
+    record_history(console, args, act, outputs.path("serv.json"), run_folder=run_dir, recording=sig_path)
     return exit_for(data)
 
 
@@ -106,6 +111,7 @@ def register(sub) -> None:
                                "serv.json and serv_report.html (paper Fig. 8, error budget of paper 2.3).")
     add_recording_args(p, "serv.json and serv_report.html")
     add_trace_args(p)
+    add_history_args(p, simulated=False)
     p.add_argument("--calibration", metavar="RESULT.json", type=Path,
                    help="LVDT pitch and offset from a maintenance check's result.json")
     p.add_argument("--method", choices=("improved", "paper"), default="improved",

@@ -6,8 +6,18 @@ import argparse
 import time
 from pathlib import Path
 
-from hil.cli.check import LiveProgress, result_after, truth_dict
-from hil.cli.common import add_parser, add_profile_args, add_trace_args, file_hashes, make_console, out_dir
+from hil.cli.check import LiveProgress, result_after, simulated_identity, truth_dict, worn_simrig
+from hil.cli.common import (
+    add_history_args,
+    add_parser,
+    add_profile_args,
+    add_trace_args,
+    file_hashes,
+    installation,
+    make_console,
+    out_dir,
+    record_history,
+)
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
 
 
@@ -28,14 +38,21 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     simrig = load_simrig(args.sim)
     seed = simrig.seed if args.seed is None else args.seed
     out = out_dir(args, "simulate")
+    simrig, wear = worn_simrig(simrig, args.flight_hours, seed)
     rng = np.random.default_rng(seed)
     plant = RigPlant(simrig.params, rng)
     truth = truth_dict(rig_truth(simrig.params))
     meta = start_meta(act, check, {"mode": "simulate", "seed": seed,
                                    "simrig": snapshot(simrig.params), "truth": truth,
                                    "operator": args.operator, "work_order": args.work_order,
+                                   **installation(args, act),
                                    "files_sha256": file_hashes(actuation=args.profile, check=args.check,
                                                                simrig=args.sim)})
+    ident = simulated_identity(act, simrig)
+    if ident is not None:  # as the simulated drives would report it (there are none without CAN)
+        meta["identity"] = ident
+    if wear is not None:
+        meta["wear"] = wear
     console.print(f"emacheck simulate: seed {seed}, run folder {out}")
     t0 = time.perf_counter()
     with LiveProgress(console, 0.0, not args.quiet) as live:
@@ -43,7 +60,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated "
                   f"({outcome.samples} samples) in {wall:.2f} s wall")
-    return result_after(out, act, truth, meta, outcome, console)
+    rc = result_after(out, act, truth, meta, outcome, console)
+    record_history(console, args, act, out / "result.json", run_folder=out)
+    return rc
 
 
 def simulate_scenario(args: argparse.Namespace) -> int:
@@ -89,6 +108,9 @@ def simulate_scenario(args: argparse.Namespace) -> int:
                                    "operator": args.operator, "work_order": args.work_order,
                                    "files_sha256": file_hashes(actuation=args.profile, check=args.check,
                                                                simrig=args.sim)})
+    ident = simulated_identity(act, simrig)
+    if ident is not None:  # as the simulated drives would report it: `serv` of this recording traces it
+        meta["identity"] = ident
     write_json_atomic(out / "meta.json", meta)
     crossed = ", ".join(k for k, v in rec.traversed.items() if v) or "none"
     console.print(f"{steps.size} samples ({steps.size * T:.1f} s: two calibration sweeps, then the scenario); "
@@ -105,6 +127,7 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-simulate)")
     add_profile_args(p, sim=True)
     add_trace_args(p)
+    add_history_args(p, simulated=True)
     p.add_argument("--quiet", action="store_true", help="no progress display")
     from sim.scenarios import SCENARIOS
 

@@ -1,0 +1,260 @@
+"""From a result file to a history record; recording after a check; ``emacheck history sync``.
+
+A record is what :meth:`hil.history.store.HistoryStore.add` writes: the
+check's columns (when, where, who, flight hours, status, calibration, files),
+the actuators at EMA 1 and EMA 2 (0x1018 vendor, product, serial) and one
+reading per channel. Everything comes from the result itself (result.json or
+serv.json, whose ``trace`` carries identity, aircraft, position, rig, flight
+hours and cycles), so a result that could not be recorded when it was made is
+recorded later from its run folder exactly as it would have been.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+#: modes of simulated checks (meta.json ``mode``): never mixed into a real actuator's trend
+SIMULATED_MODES = ("dry-run", "simulate", "simulate-scenario")
+CHANNELS = ("int1", "int2", "ext")
+
+
+@dataclass(frozen=True)
+class CheckRecord:
+    """One result as the history stores it (see :mod:`hil.history.schema`)."""
+
+    check: dict  #: column -> value of ``emacheck_checks`` (without the actuator ids)
+    identity: dict  #: ``{"ema1": (vendor_id, product_code, serial) | None, "ema2": ...}``
+    readings: list = field(default_factory=list)  #: column -> value of ``emacheck_readings`` per channel
+
+
+def result_sha256(result: dict) -> str:
+    """SHA-256 of a result's canonical JSON (sorted keys, no blanks): the same result, the same key."""
+    from hil.runfolder import json_default
+
+    text = json.dumps(result, sort_keys=True, separators=(",", ":"), default=json_default, allow_nan=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def file_sha256(path: Path) -> str | None:
+    """SHA-256 of a file's bytes, None if it cannot be read."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def parse_utc(text: Any) -> _dt.datetime | None:
+    """An ISO 8601 time as a naive UTC datetime (None if absent or unreadable)."""
+    if not text or not isinstance(text, str):
+        return None
+    try:
+        t = _dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    if t.tzinfo is not None:
+        t = t.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+    return t
+
+
+def kind_of(result: dict) -> str:
+    """``"serv"`` for a serv.json, ``"maint"`` for a maintenance check's result.json."""
+    return "serv" if ("traversals" in result or "jumps" in result) and "stiffness_N_per_mm" not in result else "maint"
+
+
+def is_simulated(result: dict) -> bool:
+    """True for a result of simulated data (a simulated mode, or the simulator's truth beside it)."""
+    trace = result.get("trace") or {}
+    return trace.get("mode") in SIMULATED_MODES or isinstance(result.get("truth"), dict)
+
+
+def _num(x: Any) -> float | None:
+    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else None
+
+
+def _int(x: Any) -> int | None:
+    return int(x) if isinstance(x, int) and not isinstance(x, bool) else None
+
+
+def _text(x: Any, n: int) -> str | None:
+    return None if x is None else str(x)[:n]
+
+
+def record_from_result(result: dict, *, result_path: Path | None = None, run_folder: Path | None = None,
+                       recording_sha256: str | None = None) -> CheckRecord:
+    """The history record of a result (result.json or serv.json content).
+
+    Parameters
+    ----------
+    result : dict
+        The result as written (with its ``trace``).
+    result_path, run_folder : Path, optional
+        Where the result and its run folder are (stored so the history points to the files).
+    recording_sha256 : str, optional
+        SHA-256 of the recording, for a result without a run id (a bare recording): the check's key,
+        so that analysing the same recording twice is one check in the trend.
+    """
+    trace = result.get("trace") or {}
+    kind = kind_of(result)
+    sha = result_sha256(result)
+    run_id = trace.get("run_id") or None
+    if run_id:
+        run_key = str(run_id)
+    elif recording_sha256:
+        run_key = f"recording:{recording_sha256}"
+    else:
+        rec = trace.get("recording")
+        h = file_sha256(Path(rec)) if rec else None
+        run_key = f"recording:{h}" if h else f"result:{sha}"
+    t = (parse_utc(trace.get("started_utc")) or parse_utc(trace.get("analysed_utc"))
+         or _dt.datetime.now(_dt.timezone.utc).replace(tzinfo=None, microsecond=0))
+    sw = trace.get("software") or {}
+    spec = result.get("spec") or {}
+    verdict = result.get("verdict") or {}
+    limits = {ch: _num((verdict.get(ch) or {}).get("limit_mm")) for ch in CHANNELS}
+    check: dict[str, Any] = {
+        "result_sha256": sha, "run_key": run_key[:96], "run_id": _text(run_id, 64), "kind": kind,
+        "simulated": is_simulated(result), "mode": _text(trace.get("mode"), 32), "time_utc": t,
+        "analysed_utc": parse_utc(trace.get("analysed_utc")),
+        "aircraft": str(trace.get("aircraft") or "")[:40], "position": str(trace.get("position") or "")[:80],
+        "rig": str(trace.get("rig") or "")[:80], "operator": _text(trace.get("operator"), 120),
+        "work_order": _text(trace.get("work_order"), 120), "flight_hours": _num(trace.get("flight_hours")),
+        "flight_cycles": _int(trace.get("flight_cycles")), "status": str(result.get("status") or "unknown")[:16],
+        "software_version": _text(sw.get("version"), 40), "check_software_version": _text(sw.get("check_run_with"), 40),
+        "limit_int_mm": _num(spec.get("backlash_int_mm")) or limits["int1"] or limits["int2"],
+        "limit_ext_mm": _num(spec.get("backlash_ext_mm")) or limits["ext"],
+        "run_folder": None if run_folder is None else str(Path(run_folder).resolve()),
+        "result_path": None if result_path is None else str(Path(result_path).resolve()),
+        "recording": _text(trace.get("recording") or result.get("recording"), 2000),
+    }
+    identity: dict[str, tuple[int, int, int] | None] = {}
+    for k, ema in ((1, "ema1"), (2, "ema2")):
+        ident = (trace.get("identity") or {}).get(ema) or {}
+        keys = [_int(ident.get(f)) for f in ("vendor_id", "product_code", "serial")]
+        identity[ema] = None if any(v is None for v in keys) else tuple(keys)
+        check[f"ema{k}_revision"] = _int(ident.get("revision"))
+        check[f"ema{k}_node"] = _int(ident.get("node"))
+        cal = (result.get("calibration") or {}).get(ema) or {}
+        check[f"ema{k}_lvdt_pitch"] = _num(cal.get("pitch"))
+        check[f"ema{k}_lvdt_offset_mm"] = _num(cal.get("offset_mm"))
+        check[f"ema{k}_lvdt_nonlinearity_mm"] = _num(cal.get("nonlinearity_mm"))
+        check[f"ema{k}_lvdt_rmse_mm"] = _num(cal.get("rmse_mm"))
+    check["calibration_source"] = _text((result.get("calibration") or {}).get("source"), 2000)
+    readings = []
+    backlash = result.get("backlash_mm") or {}
+    sigma = result.get("backlash_sigma_mm") or {}
+    stiff = result.get("stiffness_N_per_mm") or {}
+    stiff_s = result.get("stiffness_sigma_N_per_mm") or {}
+    trav = result.get("traversals") or {}
+    for ch in CHANNELS:
+        v = verdict.get(ch) or {}
+        if ch not in backlash and not v:
+            continue
+        st, ss = stiff.get(ch) or {}, stiff_s.get(ch) or {}
+        readings.append({
+            "channel": ch, "backlash_mm": _num(backlash.get(ch, v.get("backlash_mm"))),
+            "uncertainty_mm": _num(v.get("uncertainty_mm")), "backlash_sigma_mm": _num(sigma.get(ch)),
+            "limit_mm": _num(v.get("limit_mm")), "margin_mm": _num(v.get("margin_mm")),
+            "verdict": _text(v.get("status"), 16), "reason": _text(v.get("reason"), 4000),
+            "stiffness_left_N_per_mm": _num(st.get("left")), "stiffness_right_N_per_mm": _num(st.get("right")),
+            "stiffness_left_sigma_N_per_mm": _num(ss.get("left")),
+            "stiffness_right_sigma_N_per_mm": _num(ss.get("right")), "traversals": _int(trav.get(ch)),
+        })
+    return CheckRecord(check=check, identity=identity, readings=readings)
+
+
+def load_result(path: Path) -> dict:
+    """A result.json / serv.json, or :class:`hil.errors.RecordingError` naming the file."""
+    from hil.errors import RecordingError
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
+    if not isinstance(data, dict) or "status" not in data:
+        raise RecordingError(f"{path}: not an emacheck result (no status)")
+    return data
+
+
+def record_file(store, path: Path, *, run_folder: Path | None = None, recording: Path | None = None) -> bool:
+    """Record one result file into an open store; True if new, False if already recorded."""
+    result = load_result(path)
+    rec_sha = file_sha256(recording) if recording is not None and not (result.get("trace") or {}).get("run_id") \
+        else None
+    return store.add(record_from_result(result, result_path=path, run_folder=run_folder, recording_sha256=rec_sha))
+
+
+def results_in(path: Path) -> list[tuple[Path, Path | None]]:
+    """The result files to record for a ``history sync`` argument: ``(result file, run folder)``.
+
+    A run folder gives its result.json and those of its ``analysis-*/`` and ``serv-*/`` sub-folders
+    (every result kept; the trend takes the latest analysis of each run); a folder written with
+    ``--out`` its result.json / serv.json; a file itself.
+    """
+    from hil.errors import RecordingError
+
+    path = Path(path)
+    if path.is_file():
+        return [(path, path.parent if (path.parent / "meta.json").exists() else None)]
+    if not path.is_dir():
+        raise RecordingError(f"{path}: no such run folder or result file")
+    run = path if (path / "meta.json").exists() else None
+    found = [(p, run) for p in (path / "result.json", path / "serv.json") if p.is_file()]
+    for sub in sorted(path.iterdir()):
+        if sub.is_dir() and (sub.name.startswith("analysis-") or sub.name.startswith("serv-")):
+            found += [(p, run or path) for p in (sub / "result.json", sub / "serv.json") if p.is_file()]
+    found += [(p, run) for p in sorted(path.glob("*.result.json")) + sorted(path.glob("*.serv.json"))]
+    if not found:
+        raise RecordingError(f"{path}: holds no result.json or serv.json to record")
+    return found
+
+
+def sync(store, paths: Iterable[Path], say: Callable[[str], None]) -> tuple[int, int]:
+    """``emacheck history sync``: record every result of ``paths``; returns (new, already there)."""
+    new = old = 0
+    for arg in paths:
+        for res, run in results_in(Path(arg)):
+            if record_file(store, res, run_folder=run):
+                new += 1
+                say(f"recorded: {res}")
+            else:
+                old += 1
+                say(f"already recorded: {res}")
+    return new, old
+
+
+def record_after_check(url: str, result_path: Path, *, run_folder: Path | None, recording: Path | None,
+                       say: Callable[[str], None]) -> bool:
+    """Record a result just written, after the check: one line either way, never raises.
+
+    The check's own outcome and exit status do not depend on it: a database that is down,
+    locked or refuses the login leaves the result in its folder and says how to record it later.
+    """
+    from hil.history.url import masked
+
+    later = run_folder if run_folder is not None else result_path
+    try:
+        from hil.history.store import HistoryStore
+
+        with HistoryStore.open(url) as store:
+            new = record_file(store, result_path, run_folder=run_folder, recording=recording)
+    except Exception as exc:  # noqa: BLE001 - the check is done and kept; recording must not change its outcome
+        from hil.history.errors import HistoryError
+
+        why = str(exc) if isinstance(exc, HistoryError) else f"{type(exc).__name__}: {exc}"
+        say(f"NOT recorded in the history: {why}; the result is kept in {result_path}; record it later with "
+            f"`emacheck history sync {later}`")
+        return False
+    say(f"{'recorded in' if new else 'already recorded in'} the history {masked(url)}")
+    return True
