@@ -181,3 +181,12 @@ def test_shipped_eds_passes_eds_utils_validation():
     r = subprocess.run(["eds-validate", str(default_eds_path())], capture_output=True, text=True, timeout=60,
                        check=False)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+@pytest.mark.skipif(shutil.which("eds-validate") is None, reason="eds-utils' eds-validate not installed "
+                    "(pip install eds-utils)")
+def test_eds_utils_refuses_a_broken_eds(tmp_path):
+    """The validation above can fail: an object with an invalid data type is refused."""
+    bad = _broken(tmp_path, "6007", "DataType", "0x0099")
+    r = subprocess.run(["eds-validate", str(bad)], capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode != 0 and "[6007]" in r.stdout + r.stderr
