@@ -32,12 +32,7 @@ SCHEMA = json.loads((Path(__file__).resolve().parents[1] / "hil" / "schemas" / "
 @pytest.fixture(params=["sqlite", "postgresql"])
 def url(request, tmp_path):
     """An empty history: an SQLite file, or a new database on the test PostgreSQL server."""
-    if request.param == "sqlite":
-        return f"sqlite:///{tmp_path}/history.sqlite"
-    try:
-        return postgres.server().new_database()
-    except postgres.Unavailable as exc:
-        pytest.skip(f"PostgreSQL server not available: {exc}")
+    return postgres.history_url(request.param, tmp_path)
 
 
 def write_runs(tmp_path: Path, results: list[dict], name: str = "run") -> list[Path]:

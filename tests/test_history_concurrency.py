@@ -22,12 +22,8 @@ WRITER = Path(__file__).resolve().parent / "support" / "history_writer.py"
 
 @pytest.fixture(params=["sqlite", "postgresql"])
 def url(request, tmp_path):
-    if request.param == "sqlite":
-        return f"sqlite:///{tmp_path}/history.sqlite"
-    try:
-        return postgres.server().new_database()
-    except postgres.Unavailable as exc:
-        pytest.skip(f"PostgreSQL server not available: {exc}")
+    """An empty history: an SQLite file, or a new database on the test PostgreSQL server."""
+    return postgres.history_url(request.param, tmp_path)
 
 
 def _writer(url: str, tag: str, n: int, batch: int = 1) -> subprocess.Popen:

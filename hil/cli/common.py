@@ -104,14 +104,23 @@ def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages
         ) from None
 
 
-def _seed(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{v} is negative; a seed is an integer >= 0")
-    return v
+def _count(what: str):
+    """argparse type of a whole number >= 0, named ``what`` in its error (a seed, flight cycles)."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer ({what}): {text!r}") from None
+        if v < 0:
+            raise argparse.ArgumentTypeError(f"{v} is negative; {what} is a whole number >= 0")
+        return v
+
+    parse.__name__ = what  # argparse names the type in "invalid <name> value"
+    return parse
+
+
+_seed = _count("a seed")
 
 
 def utc_stamp() -> str:
@@ -217,14 +226,7 @@ def _flight_hours(text: str) -> float:
     return v
 
 
-def _flight_cycles(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number of flight cycles: {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{v} flight cycles: must be >= 0")
-    return v
+_flight_cycles = _count("flight cycles")
 
 
 #: what the history records about where and when a check was made (flags, else meta.json, else the

@@ -143,3 +143,16 @@ def server() -> PgServer:
     if _SERVER is None:
         raise Unavailable(_FAILED)
     return _SERVER
+
+
+def history_url(kind: str, tmp_path: Path) -> str:
+    """An empty history for a test: ``kind`` "sqlite" (a file in ``tmp_path``) or "postgresql" (a new
+    database on the test server; the test is skipped with the reason where none can be started)."""
+    if kind == "sqlite":
+        return f"sqlite:///{tmp_path}/history.sqlite"
+    import pytest
+
+    try:
+        return server().new_database()
+    except Unavailable as exc:
+        pytest.skip(f"PostgreSQL server not available: {exc}")
