@@ -243,6 +243,40 @@ def place_of(channel: str) -> str:
     return "external"
 
 
+def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, margin: float, refit, chi_fit: float,
+                        chi_val: float, say) -> list:
+    """Among forms of one physics at one place (same ``where`` and non-empty ``variant``, e.g. the
+    friction laws of a drive) with as many parameters, whose refitted BIC lies within ``margin`` of
+    the best, the one listed first in the model's library goes first: the recording cannot tell them
+    apart (at a constant sweep speed Coulomb and viscous friction have the same signature except at
+    the few reversals), and the library lists the simpler law first. A form with more parameters
+    (Stribeck, direction-dependent) earns them by BIC alone. The earlier forms not yet refitted are
+    refitted here."""
+    if not refits or not refits[0][2].variant:
+        return refits
+    best = refits[0][2]
+    order = {c: i for i, c in enumerate(library)}
+    have = {r[2] for r in refits}
+    for c in library:
+        if order[c] >= order[best]:
+            break
+        if (c.where, c.variant) != (best.where, best.variant) or len(c.params) != len(best.params) or c in have \
+                or c not in pen \
+                or (c.name, c.where) in taken:
+            continue
+        say(f"refit {c.name} at {c.where} (same physics, simpler form)")
+        fitted = refit(c)
+        if fitted is not None:
+            x, unc, beta, chi_f, chi_v = fitted
+            refits.append(((chi_f - chi_fit) + pen[c], chi_v - chi_val, c, x, unc, beta))
+    refits.sort(key=lambda r: r[0])
+    lim = refits[0][0] + margin
+    tied = [r for r in refits if r[0] <= lim and (r[2].where, r[2].variant) == (best.where, best.variant)
+            and len(r[2].params) == len(best.params)]
+    first = min(tied, key=lambda r: order.get(r[2], len(order)))
+    return [first] + [r for r in refits if r is not first]
+
+
 def _named(params: tuple, theta: np.ndarray) -> dict:
     return {q.name: float(v) for q, v in zip(params, theta)}
 
@@ -417,7 +451,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
             pen[cand] = len(cand.params) * float(np.log(max(n_eff, 2)))
             scores.append((red - pen[cand], red, cand))
         scores.sort(key=lambda s: -s[0])
-        screening_log.append([{"name": c.name, "where": c.where, "delta_chi2_linear": round(r, 1),
+        screening_log.append([{"name": c.name, "where": c.where, "variant": c.variant, "delta_chi2_linear": round(r, 1),
                                "delta_bic_linear": round(-s, 1)} for s, r, c in scores])
         refits = []
         for s, red, cand in scores[: cfg.refit_top]:
@@ -429,6 +463,8 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
                 x, unc, beta, chi_f, chi_v = fitted
                 refits.append(((chi_f - chi_fit_cur) + pen[cand], chi_v - chi_val_cur, cand, x, unc, beta))
         refits.sort(key=lambda r: r[0])
+        refits = _prefer_simpler_law(refits, model.candidates, pen, taken, cfg.bic_margin,
+                                     lambda c: fit_candidate(p, proj, theta, active, c), chi_fit_cur, chi_val_cur, say)
         chosen = None
         scale = np.array([q.scale for q in model.nominal])
         for lin_bic, lin_val, cand, x, unc, beta in refits[:2]:
