@@ -12,6 +12,8 @@ master does, and the RPDOs for the setpoint columns.
 
 from __future__ import annotations
 
+import gzip
+
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -104,8 +106,8 @@ def _check_lines(path: Path) -> bool:
     returns True when there is one (the reader drops it as a bad line).
     """
     try:
-        data = path.read_bytes()
-    except OSError as exc:
+        data = gzip.decompress(path.read_bytes()) if path.name.lower().endswith(".gz") else path.read_bytes()
+    except (OSError, EOFError) as exc:
         raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
     lines = data.split(b"\n")
     cut_short = bool(lines) and lines[-1] != b""
@@ -166,7 +168,8 @@ def decode_can_log(path: str | Path, act: Actuation, rated_torque_Nm: float = 1.
         formed = False
 
     try:
-        reader = can.io.CanutilsLogReader(str(path))
+        # a gzip'd log (can.log.gz) is read as it is
+        reader = can.io.CanutilsLogReader(gzip.open(path, "rt") if path.name.lower().endswith(".gz") else str(path))
         it = iter(reader)
         while True:
             try:

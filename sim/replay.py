@@ -6,19 +6,20 @@ The measured motor angles drive the motor side of both load paths
 (:math:`x_{m,i} = \\varphi_i / i_{total}`), so the drives' controllers and
 their differences from the simulator's do not count as mismatch. The surface
 is quasi-static (its 50 Hz mode is far above the check's motions): at each
-sample it sits where the two chain forces and the load spring balance,
+sample it sits where the two chain forces, the load spring and the hinge
+friction balance,
 
-.. math:: F_1(x_{m,1} - y) + F_2(x_{m,2} - y) = k_{load}\\,y,
+.. math:: F_1(x_{m,1} - y) + F_2(x_{m,2} - y) = k_{load}\\,y + c_h\\dot y
+          + F_{c,h}\\,\\mathrm{sign}(\\dot y),
 
-and where both chains are slack (the force passes zero) it stays where it was
-(the nearest point of the zero-force interval). The chains are the closed-form
-dead-zone springs of :func:`sim.plant_kernel.chain` (internal play, tension and
-compression stiffness, Maxwell arm of :class:`sim.effects.Viscoelastic`,
-bearing play and stiffness, housing spring). The sensors are applied after:
-:func:`lvdt_model` and the load-cell gain.
-
-An EMA in FORCE mode gives one more channel: the force the drive delivers,
-from the momentum balance of its motor over short blocks (:func:`block_means`).
+with the Coulomb hinge friction set-valued (the surface sticks while the net
+chain force stays within :math:`\\pm F_{c,h}`); where both chains are slack
+the surface stays where it was. Each chain is a closed-form dead-zone spring
+(internal play, tension and compression stiffness, progressive stiffening,
+the Maxwell arm of :class:`sim.effects.Viscoelastic`, bearing play, series
+bearing-plus-housing compliance). The sensors are applied after:
+:func:`lvdt_model` and the load-cell gain. :mod:`sim.replay_model` builds the
+diagnosis model on it (:class:`sim.replay_model.DualEmaReplay`).
 """
 
 from __future__ import annotations
@@ -30,16 +31,17 @@ import numpy as np
 from numba import njit
 
 from blf.validate import as_1d_finite, instance_of, positive_scalar, same_shape, scalar
-from sim.plant_kernel import chain
 
-__all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "block_means"]
+__all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "block_means",
+           "DualEmaReplay", "dual_ema_candidates"]
 
 
 @dataclass(frozen=True)
 class ChainParams:
-    """Load path of one EMA for the replay (mm, N/mm, s).
+    """Load path of one EMA for the replay (mm, N/mm, s, 1/mm).
 
-    ``ve_stiffness_N_per_mm`` = 0 switches the Maxwell arm off.
+    ``ve_stiffness_N_per_mm`` = 0 switches the Maxwell arm off;
+    ``progressive_per_mm`` = 0 keeps the contact springs linear.
     """
 
     backlash_int_mm: float
@@ -49,6 +51,7 @@ class ChainParams:
     series_compliance_mm_per_N: float  #: bearing plus housing compliance 1/k_b + 1/k_h
     ve_stiffness_N_per_mm: float = 0.0
     ve_time_constant_s: float = 1.0
+    progressive_per_mm: float = 0.0  #: contact spring F = k d (1 + p |d|), d its deflection
 
 
 @dataclass(frozen=True)
@@ -65,79 +68,150 @@ class ReplayTrace:
 
 
 @njit(cache=True)
-def _g(xm, y, r, zc, zt, P, e, kload, mq, cq, c0):
-    """Sum of chain forces minus load spring and inertia at surface position y (non-increasing in y)."""
-    tot = c0 - (kload + mq + cq) * y
-    for j in range(2):
-        q = e[j]
-        f, _, _, _, _ = chain(xm[j], y, r[j], zc[j], zt[j], P[q, 0], P[q, 1], P[q, 2], P[q, 3],
-                              P[q, 4], P[q, 5], P[q, 6])
-        tot += f
-    return tot
+def _flank(w, k, cs, p):
+    """Force of a contact flank (spring k, progressive p) in series with compliance cs at overlap w >= 0."""
+    if p == 0.0:
+        return w / (1.0 / k + cs)
+    # d + cs k d (1 + p d) = w  ->  cs k p d^2 + (1 + cs k) d - w = 0
+    a = cs * k * p
+    b = 1.0 + cs * k
+    disc = max(b * b + 4.0 * a * w, 0.25 * b * b)
+    d = 2.0 * w / (b + math.sqrt(disc))
+    return k * d * max(1.0 + p * d, 0.0)
 
 
 @njit(cache=True)
-def _replay(xm1, xm2, P, kload, mass, damping, period):
+def _chain(xm, y, r_prev, zc, zt, bi, bb, kc, kt, cs, kv, p, ff):
+    """Closed-form load path of one EMA (SI). Returns F, r, s (= r - h), dmc, dmt.
+
+    In contact the ram sits at r = y + F cs/2 + sign(F) bb/2 (the series
+    compliance split evenly between bearing and housing, as in the plant) and
+    the stroke is s = r + F cs/2; slack, the ram follows the play operator
+    between the nut flanks and the bearing and s = r. A friction force ff
+    between ram and housing (opposing the ram's motion, > 0 extending) is
+    carried by the nut flank besides F: it shifts the flank by ff/k."""
+    u = xm - y
+    kcv = kc + kv
+    ktv = kt + kv
+    dc0 = kv * zc / kcv  # free material deflection of the compression flank (>= 0)
+    dt0 = kv * zt / ktv  # ... of the tension flank (<= 0)
+    half = 0.5 * (bi + bb)
+    ac = half + dc0 + ff / kcv
+    at = -half + dt0 + ff / ktv
+    if u > ac:
+        f = _flank(u - ac, kcv, cs, p)
+        r = y + 0.5 * (f * cs + bb)
+        return f, r, r + 0.5 * f * cs, (f + ff + kv * zc) / kcv, dt0
+    if u < at:
+        f = -_flank(at - u, ktv, cs, p)
+        r = y + 0.5 * (f * cs - bb)
+        return f, r, r + 0.5 * f * cs, dc0, (f + ff + kv * zt) / ktv
+    lo = max(xm - 0.5 * bi - dc0, y - 0.5 * bb)
+    hi = min(xm + 0.5 * bi - dt0, y + 0.5 * bb)
+    r = min(max(r_prev, lo), hi)
+    return 0.0, r, r, dc0, dt0
+
+
+@njit(cache=True)
+def _force(u, ac, at, kcv, ktv, cs, p):
+    """Chain force at elongation u and its derivative dF/du, given the contact thresholds (SI)."""
+    if u > ac:
+        f = _flank(u - ac, kcv, cs, p)
+        d = 1e-10
+        return f, ((_flank(u - ac + d, kcv, cs, p) - f) / d if p != 0.0 else 1.0 / (1.0 / kcv + cs))
+    if u < at:
+        f = -_flank(at - u, ktv, cs, p)
+        d = 1e-10
+        return f, ((f + _flank(at - u - d, ktv, cs, p)) / d if p != 0.0 else 1.0 / (1.0 / ktv + cs))
+    return 0.0, 0.0
+
+
+@njit(cache=True)
+def _solve(x1, x2, y, A, klin, c0):
+    """Surface position with g(y) = c0 - klin y + F1(x1 - y) + F2(x2 - y) = 0 (g non-increasing):
+    Newton with the exact slope, safeguarded by bisection, to 1e-13 m. A: per chain ac, at, kcv, ktv, cs, p."""
+    lo = -1e300
+    hi = 1e300
+    for _ in range(80):
+        f1, d1 = _force(x1 - y, A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4], A[0, 5])
+        f2, d2 = _force(x2 - y, A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4], A[1, 5])
+        g = c0 - klin * y + f1 + f2
+        if g == 0.0:
+            return y
+        if g > 0.0:
+            lo = y
+        else:
+            hi = y
+        slope = -klin - d1 - d2
+        yn = y - g / slope if slope < 0.0 else y
+        if not (lo < yn < hi):
+            if lo > -1e300 and hi < 1e300:
+                yn = 0.5 * (lo + hi)
+            else:
+                yn = y + (1e-4 if g > 0.0 else -1e-4)
+        if abs(yn - y) < 1e-13:
+            return yn
+        y = yn
+    return y
+
+
+@njit(cache=True)
+def _replay(xm1, xm2, P, kload, mass, damping, fc_hinge, period, ff1, ff2):
     n = xm1.shape[0]
     s = np.empty((n, 2))
     F = np.empty((n, 2))
     Y = np.empty(n)
-    xm = np.empty(2)
     r = np.zeros(2)
     zc = np.zeros(2)
     zt = np.zeros(2)
-    e = np.array([0, 1])
-    alpha = np.empty(2)
+    A = np.empty((2, 6))
+    alpha = np.zeros(2)
     for j in range(2):
-        tau = P[j, 7]
-        alpha[j] = -math.expm1(-period / tau) if P[j, 6] > 0.0 else 0.0
-    xm[0] = xm1[0]
-    xm[1] = xm2[0]
-    y = 0.5 * (xm[0] + xm[1])
-    r[0] = xm[0]
-    r[1] = xm[1]
+        if P[j, 5] > 0.0:
+            alpha[j] = -math.expm1(-period / P[j, 6])
+    y = 0.5 * (xm1[0] + xm2[0])
+    r[0] = xm1[0]
+    r[1] = xm2[0]
     y1 = y
     y2 = y
     mq = mass / (period * period)
     cq = damping / period
+    klin = kload + mq + cq
     for k in range(n):
-        xm[0] = xm1[k]
-        xm[1] = xm2[k]
+        # contact thresholds of each chain at this sample (Maxwell states and ram friction held over it)
+        for j in range(2):
+            kv = P[j, 5]
+            kcv = P[j, 2] + kv
+            ktv = P[j, 3] + kv
+            half = 0.5 * (P[j, 0] + P[j, 1])
+            ffj = ff1[k] if j == 0 else ff2[k]
+            A[j, 0] = half + kv * zc[j] / kcv + ffj / kcv
+            A[j, 1] = -half + kv * zt[j] / ktv + ffj / ktv
+            A[j, 2] = kcv
+            A[j, 3] = ktv
+            A[j, 4] = P[j, 4]
+            A[j, 5] = P[j, 7]
         # backward differences: m (y - 2 y1 + y2)/T^2 + c (y - y1)/T
         c0 = mq * (2.0 * y1 - y2) + cq * y1
-        g0 = _g(xm, y, r, zc, zt, P, e, kload, mq, cq, c0)
-        # safeguarded Newton on the non-increasing, piecewise-linear g
-        lo = -1e300
-        hi = 1e300
-        g = g0
-        for _ in range(60):
-            if g == 0.0:
-                break
-            if g > 0.0:
-                lo = y
+        if fc_hinge > 0.0:
+            f1, _ = _force(xm1[k] - y1, A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4], A[0, 5])
+            f2, _ = _force(xm2[k] - y1, A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4], A[1, 5])
+            g1 = c0 - klin * y1 + f1 + f2
+            if abs(g1) <= fc_hinge:
+                y = y1  # the hinge sticks
             else:
-                hi = y
-            d = 1e-9
-            slope = (_g(xm, y + d, r, zc, zt, P, e, kload, mq, cq, c0) - g) / d
-            yn = y - g / slope if slope < 0.0 else y
-            if not (lo < yn < hi):
-                if lo > -1e300 and hi < 1e300:
-                    yn = 0.5 * (lo + hi)
-                else:
-                    yn = y + (1e-4 if g > 0.0 else -1e-4)
-            if abs(yn - y) < 1e-13:
-                y = yn
-                break
-            y = yn
-            g = _g(xm, y, r, zc, zt, P, e, kload, mq, cq, c0)
+                y = _solve(xm1[k], xm2[k], y1, A, klin, c0 - (fc_hinge if g1 > 0.0 else -fc_hinge))
+        else:
+            y = _solve(xm1[k], xm2[k], y, A, klin, c0)
         Y[k] = y
         y2 = y1
         y1 = y
         for j in range(2):
-            f, rr, hh, dmc, dmt = chain(xm[j], y, r[j], zc[j], zt[j], P[j, 0], P[j, 1], P[j, 2],
-                                        P[j, 3], P[j, 4], P[j, 5], P[j, 6])
+            xm = xm1[k] if j == 0 else xm2[k]
+            f, rr, sj, dmc, dmt = _chain(xm, y, r[j], zc[j], zt[j], P[j, 0], P[j, 1], P[j, 2], P[j, 3],
+                                         P[j, 4], P[j, 5], P[j, 7], ff1[k] if j == 0 else ff2[k])
             r[j] = rr
-            s[k, j] = rr - hh
+            s[k, j] = sj
             F[k, j] = f
             if alpha[j] > 0.0:
                 zc[j] += (dmc - zc[j]) * alpha[j]
@@ -158,16 +232,17 @@ def _chain_row(c: ChainParams, name: str) -> list[float]:
     instance_of(c, ChainParams, name)
     for field, unit, positive in _CHAIN_FIELDS:
         scalar(getattr(c, field), f"{name}.{field}", unit, lo=0.0, lo_open=positive)
-    # SI row: bi, bb, kc, kt, kb, kh, kv, tau (kb, kh split evenly: only their series counts)
-    ks = 1e3 / c.series_compliance_mm_per_N  # N/m
-    return [c.backlash_int_mm * 1e-3, c.bearing_backlash_mm * 1e-3,
-            c.stiffness_compression_N_per_mm * 1e3, c.stiffness_tension_N_per_mm * 1e3,
-            2.0 * ks, 2.0 * ks, c.ve_stiffness_N_per_mm * 1e3, c.ve_time_constant_s]
+    scalar(c.progressive_per_mm, f"{name}.progressive_per_mm", "1/mm")
+    # SI row: bi, bb, kc, kt, cs, kv, tau, p
+    return [c.backlash_int_mm * 1e-3, c.bearing_backlash_mm * 1e-3, c.stiffness_compression_N_per_mm * 1e3,
+            c.stiffness_tension_N_per_mm * 1e3, c.series_compliance_mm_per_N * 1e-3, c.ve_stiffness_N_per_mm * 1e3,
+            c.ve_time_constant_s, c.progressive_per_mm * 1e3]
 
 
 def replay_chains(xm1_mm: np.ndarray, xm2_mm: np.ndarray, ema1: ChainParams, ema2: ChainParams,
                   sample_period_s: float, load_stiffness_N_per_mm: float = 0.0,
-                  surface_mass_kg: float = 0.0, surface_damping_N_s_per_mm: float = 0.0) -> ReplayTrace:
+                  surface_mass_kg: float = 0.0, surface_damping_N_s_per_mm: float = 0.0,
+                  hinge_coulomb_N: float = 0.0, friction1_N=None, friction2_N=None) -> ReplayTrace:
     """Replay the load paths driven by the motor-side positions.
 
     Parameters
@@ -180,7 +255,12 @@ def replay_chains(xm1_mm: np.ndarray, xm2_mm: np.ndarray, ema1: ChainParams, ema
     load_stiffness_N_per_mm : float
         Restoring load spring on the surface, N/mm (>= 0).
     surface_mass_kg, surface_damping_N_s_per_mm : float
-        Surface inertia (kg) and damping (N s/mm), >= 0; 0 = quasi-static.
+        Surface inertia (kg) and viscous hinge damping (N s/mm), >= 0; 0 = quasi-static.
+    hinge_coulomb_N : float
+        Coulomb friction of the surface hinge, N (>= 0).
+    friction1_N, friction2_N : ndarray, shape (n,), optional
+        Friction between ram and housing of each EMA per sample, N (opposing
+        the ram's motion: > 0 while it extends); None: none.
 
     Returns
     -------
@@ -188,11 +268,19 @@ def replay_chains(xm1_mm: np.ndarray, xm2_mm: np.ndarray, ema1: ChainParams, ema
 
     Notes
     -----
-    Surface :math:`F_1 + F_2 = k_{load} y + m\\,\\ddot y + c\\,\\dot y` with
-    backward differences (implicit, so the 50 Hz surface mode is damped
-    numerically rather than resolved), solved by safeguarded Newton
-    (bisection fallback) to 1e-13 m each sample (the residual function is non-increasing in y); chain per :func:`sim.plant_kernel.chain`; Maxwell states updated once per
-    sample, :math:`z \\leftarrow z + (\\delta - z)(1 - e^{-T_s/\\tau})`.
+    Surface :math:`F_1 + F_2 = k_{load} y + m\\,\\ddot y + c\\,\\dot y + F_{c,h}\\,\\mathrm{sign}(\\dot y)`
+    with backward differences (implicit, so the 50 Hz surface mode is damped
+    numerically rather than resolved). With :math:`g(y)` the left side minus
+    the smooth terms (non-increasing in y): the surface sticks,
+    :math:`y_k = y_{k-1}`, while :math:`|g(y_{k-1})| \\le F_{c,h}`; otherwise
+    :math:`g(y) = \\pm F_{c,h}` is solved by Newton with the exact slope,
+    safeguarded by bisection, to 1e-13 m. A contact flank of stiffness k carries
+    :math:`F = k\\,d\\,(1 + p|d|)` at deflection d [m], in series with the
+    compliance :math:`c_s` (closed form, a quadratic in d). Maxwell states
+    are updated once per sample, :math:`z \\leftarrow z + (\\delta - z)(1 - e^{-T_s/\\tau})`.
+    A friction :math:`F_r` between ram and housing is carried by the nut
+    flank besides the load-cell force: the flank deflects by
+    :math:`(F + F_r)/k`, so the chain's contact thresholds shift by :math:`F_r/k`.
     """
     x1 = np.ascontiguousarray(as_1d_finite(xm1_mm, "xm1_mm", "mm", min_len=2))
     x2 = np.ascontiguousarray(as_1d_finite(xm2_mm, "xm2_mm", "mm", min_len=2))
@@ -201,29 +289,39 @@ def replay_chains(xm1_mm: np.ndarray, xm2_mm: np.ndarray, ema1: ChainParams, ema
     k_load = scalar(load_stiffness_N_per_mm, "load_stiffness_N_per_mm", "N/mm", lo=0.0)
     mass = scalar(surface_mass_kg, "surface_mass_kg", "kg", lo=0.0)
     damping = scalar(surface_damping_N_s_per_mm, "surface_damping_N_s_per_mm", "N s/mm", lo=0.0)
+    fch = scalar(hinge_coulomb_N, "hinge_coulomb_N", "N", lo=0.0)
     P = np.array([_chain_row(ema1, "ema1"), _chain_row(ema2, "ema2")], dtype=np.float64)
-    s, F, y = _replay(x1 * 1e-3, x2 * 1e-3, P, k_load * 1e3, mass, damping * 1e3, T)
+    ff = []
+    for arr, name in ((friction1_N, "friction1_N"), (friction2_N, "friction2_N")):
+        if arr is None:
+            ff.append(np.zeros(x1.size))
+        else:
+            a = np.ascontiguousarray(as_1d_finite(arr, name, "N"))
+            same_shape((x1, "xm1_mm", "mm"), (a, name, "N"))
+            ff.append(a)
+    s, F, y = _replay(x1 * 1e-3, x2 * 1e-3, P, k_load * 1e3, mass, damping * 1e3, fch, T, ff[0], ff[1])
     return ReplayTrace(s_mm=s * 1e3, F_N=F, y_mm=y * 1e3)
 
 
 def lvdt_model(s_mm: np.ndarray, t_s: np.ndarray, *, gain: float = 1.0, offset_mm: float = 0.0,
                nonlinearity_mm: float = 0.0, full_scale_mm: float = 20.0, drift_per_s: float = 0.0,
-               delay_s: float = 0.0) -> np.ndarray:
-    """LVDT reading of a true stroke (the sensor law of :mod:`sim.plant`).
+               delay_s: float = 0.0, quadratic_mm: float = 0.0) -> np.ndarray:
+    """LVDT reading of a true stroke (the sensor law of :mod:`sim.plant`, plus a quadratic bow).
 
     Parameters
     ----------
     s_mm, t_s : ndarray, shape (n,)
         True stroke (mm) and sample times (s).
-    gain, offset_mm, nonlinearity_mm, full_scale_mm, drift_per_s, delay_s : float
+    gain, offset_mm, nonlinearity_mm, full_scale_mm, drift_per_s, delay_s, quadratic_mm : float
         Pitch (1), offset (mm), cubic term at full scale (mm), full scale
-        (mm, > 0), relative gain drift (1/s), sampling delay (s).
+        (mm, > 0), relative gain drift (1/s), sampling delay (s, either
+        sign), quadratic term at full scale (mm).
 
     Returns
     -------
     ndarray, shape (n,)
-        :math:`o + g(1 + d\\,t)\\,\\tilde s + n_3(\\tilde s/s_{fs})^3` mm with
-        :math:`\\tilde s = s - \\Delta\\,\\dot s` (first order in the delay).
+        :math:`o + g(1 + d\\,t)\\,\\tilde s + n_2(\\tilde s/s_{fs})^2 + n_3(\\tilde s/s_{fs})^3`
+        mm with :math:`\\tilde s = s - \\Delta\\,\\dot s` (first order in the delay).
     """
     s = as_1d_finite(s_mm, "s_mm", "mm")
     t = as_1d_finite(t_s, "t_s", "s")
@@ -232,9 +330,9 @@ def lvdt_model(s_mm: np.ndarray, t_s: np.ndarray, *, gain: float = 1.0, offset_m
     if delay_s != 0.0:
         s = s - delay_s * np.gradient(s, t)
     out = gain * s if drift_per_s == 0.0 else gain * (1.0 + drift_per_s * (t - t[0])) * s
-    if nonlinearity_mm != 0.0:
+    if nonlinearity_mm != 0.0 or quadratic_mm != 0.0:
         rel = s / full_scale_mm
-        out = out + nonlinearity_mm * (rel * rel * rel)
+        out = out + (quadratic_mm + nonlinearity_mm * rel) * (rel * rel)
     return out + offset_mm if offset_mm != 0.0 else out
 
 
@@ -282,235 +380,14 @@ def block_means(x: np.ndarray, k0: np.ndarray, block: int) -> np.ndarray:
     return (cs[k0 + block] - cs[k0] + 0.5 * (x[k0 - 1] - x[k0 + block - 1])) / block
 
 
-# ====================================================================== diagnosis model
-
-_FULL_SCALE_MM = 20.0
-_TRANSIENT_S = 1.0  #: s, after a drive-mode change, where s and F are not compared
-_FD_BLOCK_S = 0.1  #: the drive-force channels are compared as means over blocks of this length
-
-
-def _cand(name, where, words, *params):
-    from blf.diagnose import Candidate, Param
-    return Candidate(name, where, words, tuple(Param(*q) for q in params))
-
-
 def dual_ema_candidates() -> tuple:
-    """The candidate library of the dual-EMA replay (machine names as in :mod:`sim.effects`)."""
-    out = []
-    for e, n in (("ema1", "1"), ("ema2", "2")):
-        out += [
-            _cand("lvdt_pitch", e, f"LVDT {n} pitch (gain) error", ("gain_error", 1e-3, 1e-3, -0.3, 0.3)),
-            _cand("lvdt_offset", e, f"LVDT {n} offset", ("offset_mm", 5e-3, 5e-3, -2.0, 2.0)),
-            _cand("lvdt_nonlinearity", e, f"LVDT {n} non-linearity (cubic over the stroke)",
-                  ("nonlinearity_mm", 5e-3, 5e-3, -1.0, 1.0)),
-            _cand("lvdt_drift", e, f"LVDT {n} gain drift over time (temperature)",
-                  ("gain_drift_per_s", 1e-5, 1e-5, -1e-2, 1e-2)),
-            _cand("time_skew", e, f"time skew between resolver {n} and LVDT {n} sampling",
-                  ("delay_s", 5e-4, 5e-4, 0.0, 0.02)),
-            _cand("loadcell_gain", e, f"load cell {n} gain error", ("gain_error", 1e-3, 1e-3, -0.3, 0.3)),
-            _cand("stiffness_asymmetry", e, f"tension and compression stiffness differ in the EMA {n} load path",
-                  ("tension_over_compression_minus_1", 0.05, 0.05, -0.9, 5.0)),
-            _cand("viscoelastic", e, f"visco-elastic creep/relaxation in the EMA {n} load path",
-                  ("stiffness_N_per_mm", 5000.0, 5000.0, 0.0, 1e6), ("time_constant_s", 0.3, 0.3, 0.01, 30.0)),
-            _cand("coulomb_friction", e, f"Coulomb friction in the EMA {n} ballscrew",
-                  ("force_N", 5.0, 5.0, 0.0, 1e4)),
-            _cand("stribeck_friction", e, f"Stribeck (static above Coulomb) friction in the EMA {n} ballscrew",
-                  ("extra_force_N", 5.0, 5.0, 0.0, 1e4), ("stribeck_velocity_mm_per_s", 0.5, 0.5, 0.01, 50.0)),
-            _cand("asymmetric_friction", e, f"friction of the EMA {n} ballscrew that differs with the direction of motion",
-                  ("force_extend_N", 5.0, 5.0, 0.0, 1e4), ("force_retract_N", 1.0, 5.0, 0.0, 1e4)),
-        ]
-    return tuple(out)
+    """The candidate library of the dual-EMA replay (see :func:`sim.replay_model.dual_ema_candidates`)."""
+    from sim.replay_model import dual_ema_candidates as library
+    return library()
 
 
-def _savgol(x: np.ndarray, period_s: float, deriv: int, window: int = 21) -> np.ndarray:
-    from scipy.signal import savgol_filter
-    return savgol_filter(x, window, 3, deriv=deriv, delta=period_s, mode="interp")
-
-
-class DualEmaReplay:
-    """The dual-EMA recording and its position-driven replay, for :func:`blf.diagnose.diagnose`.
-
-    Channels: ``s1, s2`` (LVDT, mm), ``F1, F2`` (load cells, N) from the
-    replayed load paths, and ``Fd1, Fd2`` (N): the load-cell force an EMA in
-    FORCE mode should show by the momentum balance of its motor, only where
-    the recording carries the drive modes and setpoints. ``Fd`` is compared
-    as means over blocks of 0.1 s (valid at the block centres only):
-
-    .. math:: \\bar F = \\overline{F_{target} - F_f(v) - c\\,v}
-              - M\\,\\frac{v(t_{end}) - v(t_{start})}{t_{end} - t_{start}}
-
-    so the motor acceleration is never differentiated from the quantised
-    angle (per sample that error is as large as the load-cell noise); the
-    measured side is the trapezoidal time mean of the load cell over the same
-    interval. Where modes are recorded, s and F are not compared in the 1 s
-    after a drive-mode change (the quasi-static surface does not model the
-    ringing after the impact that follows).
-
-    Nominal parameters: per EMA internal play, stiffness (equal in tension
-    and compression), bearing play, bearing-plus-housing
-    compliance; the reflected motor mass and the drive's viscous loss (so
-    motor-side viscous friction is nominal here, not a candidate: the two
-    cannot be told apart from these channels). Sensors ideal.
-
-    Parameters
-    ----------
-    t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N : ndarray, shape (n,)
-    i_total_rad_per_mm : float
-    sample_period_s : float
-    mode1, sp1, mode2, sp2 : ndarray or None
-        Drive modes (0, 8, 10) and setpoints (rad or N) per sample, when recorded.
-    """
-
-    def __init__(self, t_s, phi1_rad, phi2_rad, s1_mm, s2_mm, F1_N, F2_N, i_total_rad_per_mm: float,
-                 sample_period_s: float, mode1=None, sp1=None, mode2=None, sp2=None) -> None:
-        from blf.diagnose import Param
-        items = [(as_1d_finite(a, name, unit, min_len=200), name, unit) for a, name, unit in (
-            (t_s, "t_s", "s"), (phi1_rad, "phi1_rad", "rad"), (phi2_rad, "phi2_rad", "rad"), (s1_mm, "s1_mm", "mm"),
-            (s2_mm, "s2_mm", "mm"), (F1_N, "F1_N", "N"), (F2_N, "F2_N", "N"))]
-        same_shape(*items)
-        arrs = [a for a, _, _ in items]
-        n = arrs[0].size
-        i_total = positive_scalar(i_total_rad_per_mm, "i_total_rad_per_mm", "rad/mm")
-        self.t_s = arrs[0]
-        self.T = positive_scalar(sample_period_s, "sample_period_s", "s")
-        self.xm = (arrs[1] / i_total, arrs[2] / i_total)
-        self.channels = ("s1", "s2", "F1", "F2", "Fd1", "Fd2")
-        self.measured = {"s1": arrs[3], "s2": arrs[4], "F1": arrs[5], "F2": arrs[6]}
-        self.v = tuple(_savgol(x, self.T, 1) for x in self.xm)
-        valid = {c: np.ones(n, bool) for c in ("s1", "s2", "F1", "F2")}
-        self.target = []
-        self.blocks = []
-        blk = max(2, int(round(_FD_BLOCK_S / self.T)))
-        for e, (mode, sp) in enumerate(((mode1, sp1), (mode2, sp2))):
-            ok = np.zeros(n, bool)
-            tgt = np.zeros(n)
-            if mode is not None and sp is not None:
-                mode = np.asarray(mode, dtype=float)
-                sp = np.asarray(sp, dtype=float)
-                force = mode == 10
-                # the setpoint of sample k acts over the period ending at sample k + 1
-                ok[1:] = force[:-1]
-                tgt[1:] = sp[:-1]
-                # settle: 0.3 s after entering FORCE mode
-                start = np.where(ok & ~np.r_[False, ok[:-1]])[0]
-                for k in start:
-                    ok[k:k + int(0.3 / self.T)] = False
-            # blocks of `blk` samples inside each FORCE run (the remainder of a run is dropped)
-            k0 = []
-            edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
-            for a, b in zip(edges[::2], edges[1::2]):
-                k0.extend(range(max(a, 1), b - blk + 1, blk))
-            k0 = np.asarray(k0, dtype=np.int64)
-            centre = k0 + blk // 2
-            vmask = np.zeros(n, bool)
-            vmask[centre] = True
-            meas = np.zeros(n)
-            # time mean of the load cell over the interval of the drive's momentum balance
-            meas[centre] = block_means(arrs[5 + e], k0, blk)
-            self.measured[f"Fd{e + 1}"] = meas
-            valid[f"Fd{e + 1}"] = vmask
-            self.target.append(tgt)
-            self.blocks.append((k0, centre, blk))
-        if mode1 is not None and mode2 is not None:
-            # the quasi-static surface does not model the 50 Hz ringing after a drive enters or
-            # leaves FORCE mode (free flight across the play, impact): not compared for 1 s
-            change = np.zeros(n, bool)
-            change[1:] = (np.diff(np.asarray(mode1, dtype=float)) != 0) | (np.diff(np.asarray(mode2, dtype=float)) != 0)
-            k = int(round(_TRANSIENT_S / self.T))
-            transient = np.convolve(change, np.ones(k), mode="full")[:n] > 0
-            for c in ("s1", "s2", "F1", "F2"):
-                valid[c] &= ~transient
-        self.valid = valid
-        self.derived_valid = {"Dint1": valid["s1"], "Dint2": valid["s2"], "Dext": valid["s1"] & valid["s2"]}
-        self.nominal = (
-            Param("backlash_int1_mm", 0.1, 0.01, 0.0, 2.0), Param("stiffness_int1_N_per_mm", 8e4, 1e4, 1e3, 1e7),
-            Param("backlash_bearing1_mm", 0.05, 0.01, 0.0, 2.0),
-            Param("compliance_ext1_mm_per_N", 5.5e-5, 5e-6, 1e-7, 1e-2),
-            Param("backlash_int2_mm", 0.1, 0.01, 0.0, 2.0), Param("stiffness_int2_N_per_mm", 8e4, 1e4, 1e3, 1e7),
-            Param("backlash_bearing2_mm", 0.05, 0.01, 0.0, 2.0),
-            Param("compliance_ext2_mm_per_N", 5.5e-5, 5e-6, 1e-7, 1e-2),
-            Param("reflected_mass_kg", 2500.0, 500.0, 0.0, 1e6),
-            Param("drive_viscous_N_s_per_mm", 10.0, 10.0, 0.0, 1e4),
-        )
-        if not (valid["Fd1"].any() or valid["Fd2"].any()):
-            self.nominal = self.nominal[:-2]
-        self.candidates = dual_ema_candidates()
-        self.regimes = {
-            "position along the stroke": 0.5 * (self.xm[0] + self.xm[1]) - np.median(0.5 * (self.xm[0] + self.xm[1])),
-            "velocity": 0.5 * (self.v[0] + self.v[1]),
-            "force F1": arrs[5],
-            "force rate": _savgol(arrs[5], self.T, 1),
-            "time since start": self.t_s - 0.5 * (self.t_s[0] + self.t_s[-1]),
-        }
-        self._cache: dict = {}
-
-    def derived(self, ch: dict) -> dict:
-        """The paper's D signals (mm): D_int,i = s_i - phi_i / i_total, D_ext = s2 - s1."""
-        return {"Dint1": ch["s1"] - self.xm[0], "Dint2": ch["s2"] - self.xm[1], "Dext": ch["s2"] - ch["s1"]}
-
-    def _block_drive_force(self, e: int, friction_N: np.ndarray, reflected_mass_kg: float) -> np.ndarray:
-        """Load-path force the FORCE-mode drive delivers, as block means at the block centres
-        (zeros elsewhere); see :func:`block_means`."""
-        k0, centre, blk = self.blocks[e]
-        out = np.zeros(self.t_s.size)
-        if k0.size == 0:
-            return out
-        k1 = k0 + blk - 1
-        # over [t_{k0-1}, t_{k1}]: the target is held per period (tgt[k] over (t_{k-1}, t_k]),
-        # so its mean is a plain sum; friction is sampled: trapezoid
-        gt = np.r_[0.0, np.cumsum(self.target[e])]
-        fric = block_means(friction_N, k0, blk)
-        v = self.v[e]
-        # momentum over the block: M (v(t_{k1}) - v(t_{k0-1})) / (B T), M in kg, v in mm/s
-        dv = v[k1] - v[k0 - 1]
-        out[centre] = (gt[k0 + blk] - gt[k0]) / blk - fric - reflected_mass_kg * 1e-3 * dv / (blk * self.T)
-        return out
-
-    def predict(self, theta: np.ndarray, active: list) -> dict:
-        """Predicted channels for nominal ``theta`` and the active effects [(Candidate, params)]."""
-        th = list(theta) + [0.0] * (10 - len(theta))
-        fx = {(c.name, c.where): np.asarray(x, dtype=float) for c, x in active}
-        chains = []
-        for e, where in enumerate(("ema1", "ema2")):
-            bi, k, bb, cs = th[4 * e: 4 * e + 4]
-            asym = fx.get(("stiffness_asymmetry", where))
-            kt = k * (1.0 + asym[0]) if asym is not None else k
-            ve = fx.get(("viscoelastic", where))
-            kv, tau = (float(ve[0]), float(ve[1])) if ve is not None else (0.0, 1.0)
-            chains.append(ChainParams(max(bi, 0.0), k, max(kt, 1.0), max(bb, 0.0), cs, max(kv, 0.0), tau))
-        key = tuple(chains)
-        tr = self._cache.get(key)
-        if tr is None:
-            tr = replay_chains(self.xm[0], self.xm[1], chains[0], chains[1], self.T, 0.0, 300.0, 0.5)
-            if len(self._cache) > 64:
-                self._cache.clear()
-            self._cache[key] = tr
-        out = {}
-        for e, where in enumerate(("ema1", "ema2")):
-            g = lambda name: fx.get((name, where))  # noqa: E731
-            kw = {}
-            if g("lvdt_pitch") is not None:
-                kw["gain"] = 1.0 + g("lvdt_pitch")[0]
-            if g("lvdt_offset") is not None:
-                kw["offset_mm"] = g("lvdt_offset")[0]
-            if g("lvdt_nonlinearity") is not None:
-                kw["nonlinearity_mm"] = g("lvdt_nonlinearity")[0]
-            if g("lvdt_drift") is not None:
-                kw["drift_per_s"] = g("lvdt_drift")[0]
-            if g("time_skew") is not None:
-                kw["delay_s"] = g("time_skew")[0]
-            out[f"s{e + 1}"] = lvdt_model(tr.s_mm[:, e], self.t_s, full_scale_mm=_FULL_SCALE_MM, **kw)
-            lg = 1.0 + (g("loadcell_gain")[0] if g("loadcell_gain") is not None else 0.0)
-            out[f"F{e + 1}"] = lg * tr.F_N[:, e]
-            fk = {}
-            if g("coulomb_friction") is not None:
-                fk["coulomb_N"] = g("coulomb_friction")[0]
-            if g("stribeck_friction") is not None:
-                fk["stribeck_N"], fk["stribeck_velocity_mm_s"] = g("stribeck_friction")
-            if g("asymmetric_friction") is not None:
-                fp, fm = g("asymmetric_friction")
-                fk["coulomb_N"] = fk.get("coulomb_N", 0.0) + 0.5 * (fp + fm)
-                fk["asym_N"] = 0.5 * (fp - fm)
-            ff = friction_force(self.v[e], viscous_N_s_per_mm=th[9], **fk)
-            out[f"Fd{e + 1}"] = lg * self._block_drive_force(e, ff, th[8])
-        return out
+def __getattr__(name: str):
+    if name == "DualEmaReplay":  # the diagnosis model lives in sim.replay_model (size limit)
+        from sim.replay_model import DualEmaReplay
+        return DualEmaReplay
+    raise AttributeError(f"module 'sim.replay' has no attribute {name!r}")

@@ -67,7 +67,7 @@ def test_replay_refuses_bad_input():
 def test_null_is_no_mismatch(tmp_path, short):
     sig, _, _ = _case([], 31002, tmp_path, short)
     d = _diag(sig)
-    assert d.verdict == "no_mismatch", (d.excess_before, [e.name for e in d.partial_effects])
+    assert d.verdict == "no_mismatch", (d.excess_before, [e.name for e in d.effects])
     assert d.effects == ()
 
 
@@ -93,7 +93,8 @@ def test_concealed_coulomb_friction_found(tmp_path):
 @pytest.mark.slow
 def test_out_of_library_is_unexplained(tmp_path, short):
     """A screw lead error (periodic along the stroke: no effect of the library has that shape) is
-    found, called unexplained with its locations, and no library effect is named for it.
+    found, called unexplained with its locations at EMA 1, and no library effect is named for it there
+    (``effects`` lists whatever the fit accepted, whatever the verdict: an effect elsewhere may be).
 
     At its largest concealed size the short recording carries it only at the detection threshold
     (window excess 3.5 against 3.0 at this seed; 1 of 4 seeds tried gave no_mismatch): it is
@@ -103,7 +104,8 @@ def test_out_of_library_is_unexplained(tmp_path, short):
     assert 1.0 < max(s.values()) < 2.5, s  # above the noise per sample, but not by much
     d = _diag(sig)
     assert d.verdict == "unexplained", (d.verdict, d.excess_before, [e.name for e in d.effects])
-    assert d.effects == ()
+    assert not [e for e in d.effects if e.where == "ema1"], d.effects
+    assert d.where and d.where[0] == "ema1", d.where
     assert d.locations, (d.excess_before, d.regime_before)
 
 
@@ -115,16 +117,22 @@ def test_emps_cli(tmp_path):
     data = validate(tmp_path / "diagnosis.json", "diagnosis")
     assert set(data) >= {"verdict", "effects", "locations", "residual_rms_before", "residual_rms_after",
                          "ic_before", "ic_after"}
-    named = data["effects"] + data["partial_effects"]
+    named = data["effects"]
     assert named, data["verdict"]
     assert all(e["delta_chi2_holdout"] < -10 for e in named)
     # the dominant missing physics: viscous friction that differs with the direction of motion
     assert (named[0]["name"], named[0]["where"]) == ("asymmetric_friction", "axis")
     asym = named[0]["parameters"]["viscous_asymmetry_N_s_per_m"]
     assert abs(asym) > 10 * named[0]["uncertainty"]["viscous_asymmetry_N_s_per_m"]
-    # and the fit improves by >= 10 % on the half it was never fitted on
+    # compared in the band the rigid-body model claims (IDIM-LS's 20 Hz), and the fit improves there by
+    # >= 15 % on the half it was never fitted on (issue 13's figure); the raw band beside it improves too
+    assert data["band"]["cutoff_hz"] == 20.0
     hb, ha = data["residual_rms_holdout_before"]["force"], data["residual_rms_holdout_after"]["force"]
-    assert ha < 0.9 * hb, (hb, ha)
+    assert ha < 0.85 * hb, (hb, ha)
+    rb, ra = data["residual_rms_raw_holdout_before"]["force"], data["residual_rms_raw_holdout_after"]["force"]
+    assert ra < rb and hb < rb, (rb, ra, hb)
+    # what is left in the band is far above its noise floor: not explained, and said where
+    assert data["verdict"] == "unexplained" and data["where"] == ["axis"], (data["verdict"], data["where"])
     assert data["ic_after"] < data["ic_before"]
     assert data["residual_rms_after"]["force"] < data["residual_rms_before"]["force"]
     assert data["locations"]
@@ -169,7 +177,9 @@ def test_drive_force_blocks_balance_momentum():
     mode[:10] = 8.0
     m = DualEmaReplay(t, x * i_tot, x * i_tot, x, x, F_chain, F_chain, i_tot, T, mode, tgt_mid, mode, tgt_mid)
     th = np.array([q.x0 for q in m.nominal])
-    th[8], th[9] = M, c
+    names = [q.name for q in m.nominal]
+    th[names.index("reflected_mass_kg")], th[names.index("drive_viscous_N_s_per_mm")] = M, c
+    th[names.index("drive_coulomb_N")] = 0.0
     pred = m.predict(th, [])
     ok = m.valid["Fd1"]
     assert ok.sum() > 300

@@ -1,9 +1,12 @@
-"""Simulation versus recording: a recording as a replay model, and diagnosis.json (for ``emacheck diagnose``).
+"""From a recording to a diagnosis: load it, build the replay model, and the JSON of the result.
 
-A run folder, a signals CSV or a CAN log becomes the dual-EMA replay
-(:class:`sim.replay.DualEmaReplay`); a ``.mat`` or ``t,q,q_ref,force`` CSV of
-one positioning axis becomes :class:`sim.single_axis.SingleAxisReplay`. The
-diagnosis itself is :func:`blf.diagnose.diagnose` (pure).
+The dual-EMA model (:class:`sim.replay_model.DualEmaReplay`) gets the phases
+from the recorded drive modes when the recording has them, otherwise from
+the same segmentation the maintenance analysis uses
+(:func:`hil.analysis.maint.find_segments`); the held force target from the
+check profile (the run folder's snapshot, else the shipped one); and, when
+the run folder records the simulated rig it was made with (meta.json
+``simrig``), that rig as the nominal. The core is :func:`blf.diagnose.diagnose` (pure).
 """
 
 from __future__ import annotations
@@ -15,20 +18,51 @@ import numpy as np
 from hil.errors import RecordingError
 
 
-def _load_dual(path: Path, profile: Path | None):
-    from hil.cli.common import actuation_for, load_recording, read_meta
-    from sim.replay import DualEmaReplay
+def _is_can_log(path: Path) -> bool:
+    name = path.name.lower()
+    return name.endswith(".log") or name.endswith(".log.gz")
 
-    run_dir = path if path.is_dir() else None
-    sig_path = path / "signals.csv" if run_dir else path
-    if run_dir and not sig_path.exists() and (path / "can.log").exists():
-        sig_path = path / "can.log"
+
+def _check_for(meta: dict | None, act):
+    from hil.config import Check
+    from hil.profiles import build_dataclass, load_check
+    snap = ((meta or {}).get("profiles") or {}).get("check")
+    if snap is not None:
+        try:
+            return build_dataclass(Check, snap, "meta.json (check snapshot)")
+        except Exception:  # noqa: BLE001 - an old or foreign snapshot: the shipped check then
+            pass
+    return load_check(None, act)
+
+
+def load_dual(path: Path, profile: Path | None):
+    """The dual-EMA replay model of a run folder, signals CSV (``.csv``, ``.csv.gz``) or CAN log
+    (``.log``, ``.log.gz``), and its sample period (s)."""
+    from blf.errors import AnalysisError
+    from hil.analysis.maint import check_units, find_segments
+    from hil.canlog import decode_can_log
+    from hil.cli.common import actuation_for, read_meta
+    from hil.runfolder import read_signals, resolve_recording
+    from sim.replay_model import DualEmaReplay
+
+    sig_path, run_dir = resolve_recording(path)
     meta = read_meta(run_dir)
     act = actuation_for(profile, meta)
-    sig = load_recording(sig_path, act, meta)
-    period = float(np.median(np.diff(sig.t)))
+    sig = decode_can_log(sig_path, act).signals if _is_can_log(sig_path) else read_signals(sig_path)
+    if sig.n < 1000:
+        raise RecordingError(f"{sig_path}: recording too short to diagnose: {sig.n} samples (need >= 1000)")
+    check_units(sig, act)
+    check = _check_for(meta, act)
+    try:
+        seg = find_segments(sig, act)
+    except AnalysisError:
+        seg = None  # no check phases (e.g. normal operation): nothing held, only slack paths skipped
+    period = sig.sample_period_s
     model = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2,
-                          act.mechanics.i_total_rad_per_mm, period, sig.mode1, sig.sp1, sig.mode2, sig.sp2)
+                          act.mechanics.i_total_rad_per_mm, period, sig.mode1, sig.sp1, sig.mode2, sig.sp2,
+                          segments=seg, opposing_force_N=check.calibration.opposing_force_N,
+                          force_ramp_s=check.calibration.force_ramp_s,
+                          nominal_rig=(meta or {}).get("simrig"))
     return model, period
 
 
@@ -47,53 +81,71 @@ def _load_single(path: Path):
         force = float(np.ravel(d["gtau"])[0]) * d["vir"].ravel()
         q, qref = d["qm"].ravel(), d["qg"].ravel()
     else:
+        import io
+
+        from hil.runfolder import read_text
+        text = read_text(path, "a text CSV file (columns t,q,q_ref,force)")
         try:
-            arr = np.genfromtxt(path, delimiter=",", names=True)
-        except (OSError, ValueError) as exc:
+            arr = np.genfromtxt(io.StringIO(text), delimiter=",", names=True)
+        except ValueError as exc:
             raise RecordingError(f"{path}: not a readable CSV ({exc})") from None
         need = ("t", "q", "q_ref", "force")
         if arr.dtype.names is None or any(c not in arr.dtype.names for c in need):
             raise RecordingError(f"{path}: line 1: need columns t,q,q_ref,force (s, m, m, N)")
-        t, q, qref, force = (arr[c] for c in need)
+        t, q, qref, force = (np.asarray(arr[c], dtype=float) for c in need)
+        if not all(np.all(np.isfinite(x)) for x in (t, q, qref, force)) or np.any(np.diff(t) <= 0):
+            raise RecordingError(f"{path}: NaN, empty cells or non-increasing time in t,q,q_ref,force")
     period = float(np.median(np.diff(t)))
     return SingleAxisReplay(t, q, qref, force, period), period
 
 
 def load_model(path: Path, model: str, profile: Path | None):
-    """Replay model and sample period of a recording (run folder, CSV, .mat)."""
-    if not path.exists():
+    """Replay model and sample period of a recording (run folder, CSV, CAN log, .mat)."""
+    if not Path(path).exists():
         raise RecordingError(f"{path}: no such file or folder")
-    return _load_single(path) if model == "single-axis" else _load_dual(path, profile)
+    return _load_single(Path(path)) if model == "single-axis" else load_dual(Path(path), profile)
 
 
 def _r(x, nd=6):
     return None if x is None else float(f"{x:.{nd}g}")
 
 
+def _rd(d: dict) -> dict:
+    return {k: _r(v) for k, v in d.items()}
+
+
 def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
-    """JSON shape of issue 6."""
-    eff = lambda e: {"name": e.name, "where": e.where, "words": e.words,  # noqa: E731
-                     "parameters": {k: _r(v) for k, v in e.parameters.items()},
-                     "uncertainty": {k: _r(v) for k, v in e.uncertainty.items()},
+    """JSON shape of diagnosis.json (hil/schemas/diagnosis.schema.json): ``effects`` lists every
+    effect accepted whatever the verdict; RMS figures in the compared band, ``raw`` ones beside."""
+    eff = lambda e: {"name": e.name, "where": e.where, "words": e.words, "source": e.source,  # noqa: E731
+                     "parameters": _rd(e.parameters), "uncertainty": _rd(e.uncertainty),
                      "delta_bic": _r(e.delta_bic), "delta_chi2_holdout": _r(e.delta_chi2_holdout),
                      "evidence": e.evidence}
+    b = d.band
     return {
         "verdict": d.verdict, "model": model_name,
         "effects": [eff(e) for e in d.effects],
-        "partial_effects": [eff(e) for e in d.partial_effects],
-        "locations": [{"channel": l.channel, "t_start_s": _r(l.t_start_s), "t_end_s": _r(l.t_end_s),
-                       "regime": l.regime, "score": _r(l.score), "test": l.test} for l in d.locations],
-        "residual_rms_before": {k: _r(v) for k, v in d.residual_rms_before.items()},
-        "residual_rms_after": {k: _r(v) for k, v in d.residual_rms_after.items()},
-        "residual_rms_holdout_before": {k: _r(v) for k, v in d.residual_rms_holdout_before.items()},
-        "residual_rms_holdout_after": {k: _r(v) for k, v in d.residual_rms_holdout_after.items()},
-        "noise_floor": {k: _r(v) for k, v in d.noise_floor.items()},
-        "excess_before": {k: _r(v) for k, v in d.excess_before.items()},
-        "excess_after": {k: _r(v) for k, v in d.excess_after.items()},
-        "regime_score_before": {k: _r(v) for k, v in d.regime_before.items()},
-        "regime_score_after": {k: _r(v) for k, v in d.regime_after.items()},
+        "where": list(d.where),
+        "band": {"cutoff_hz": _r(b.cutoff_hz), "step": int(b.step), "words": b.words},
+        "locations": [{"channel": l.channel, "where": l.where, "t_start_s": _r(l.t_start_s),
+                       "t_end_s": _r(l.t_end_s), "regime": l.regime, "score": _r(l.score), "test": l.test}
+                      for l in d.locations],
+        "residual_rms_before": _rd(d.residual_rms_before),
+        "residual_rms_after": _rd(d.residual_rms_after),
+        "residual_rms_holdout_before": _rd(d.residual_rms_holdout_before),
+        "residual_rms_holdout_after": _rd(d.residual_rms_holdout_after),
+        "residual_rms_raw_before": _rd(d.residual_rms_raw_before),
+        "residual_rms_raw_after": _rd(d.residual_rms_raw_after),
+        "residual_rms_raw_holdout_before": _rd(d.residual_rms_raw_holdout_before),
+        "residual_rms_raw_holdout_after": _rd(d.residual_rms_raw_holdout_after),
+        "noise_floor": _rd(d.noise_floor),
+        "noise_floor_raw": _rd(d.noise_floor_raw),
+        "excess_before": _rd(d.excess_before),
+        "excess_after": _rd(d.excess_after),
+        "regime_score_before": _rd(d.regime_before),
+        "regime_score_after": _rd(d.regime_after),
         "ic": "BIC", "ic_before": _r(d.ic_before, 9), "ic_after": _r(d.ic_after, 9),
-        "nominal": {k: _r(v) for k, v in d.nominal.items()},
+        "nominal": _rd(d.nominal),
         "screening": list(d.screening),
         "diagnosis_s": round(seconds, 2),
     }

@@ -33,17 +33,22 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     words = {"no_mismatch": "no significant mismatch between simulation and recording",
              "explained": "mismatch explained", "unexplained": "mismatch NOT explained by the candidate library"}
     console.print(f"[bold]{words[d.verdict]}[/bold] ({secs:.1f} s)")
-    for e in data["effects"] + data["partial_effects"]:
-        tag = "" if d.verdict == "explained" else " (partial)"
-        console.print(f"  {e['words']}{tag}: " + ", ".join(
+    for e in data["effects"]:
+        console.print(f"  {e['words']} ({e['name']} at {e['where']}): " + ", ".join(
             f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
+    if data["where"]:
+        console.print("  the rest lies at: " + ", ".join(data["where"]))
     for l in data["locations"][:6]:
         console.print(f"  where: {l['channel']} {l['t_start_s']}-{l['t_end_s']} s ({l['test']} test), {l['regime']}")
-    console.print("  residual RMS before -> after: " + ", ".join(
+    console.print(f"  compared in the band: {d.band.words}")
+    console.print("  residual RMS before -> after (band): " + ", ".join(
         f"{c} {data['residual_rms_before'][c]} -> {data['residual_rms_after'][c]}"
         for c in d.measured if d.valid[c].any()))
     console.print("  on the held-out half (never fitted): " + ", ".join(
         f"{c} {data['residual_rms_holdout_before'][c]} -> {data['residual_rms_holdout_after'][c]}"
+        for c in d.measured if d.valid[c].any()))
+    console.print("  held-out, raw band: " + ", ".join(
+        f"{c} {data['residual_rms_raw_holdout_before'][c]} -> {data['residual_rms_raw_holdout_after'][c]}"
         for c in d.measured if d.valid[c].any()))
     console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {outputs.path('diagnosis.json')}")
     return 0

@@ -14,8 +14,8 @@ def _unit(channel: str) -> str:
 
 
 def figure_overlay(model, d, channel: str):
-    """One channel: recording, nominal model and model with the fitted effects; residuals (0.5 s means)
-    before and after, the flagged windows red, the held-out blocks grey."""
+    """One channel: recording, nominal model and model with the fitted effects; residuals in the compared
+    band before and after, the flagged windows red, the held-out blocks grey."""
     from scipy.ndimage import uniform_filter1d
 
     t = model.t_s
@@ -29,11 +29,16 @@ def figure_overlay(model, d, channel: str):
     ax[0].legend(fontsize=7)
     unit = _unit(channel)
     ax[0].set_ylabel(f"{channel} [{unit}]")
-    w = max(1, int(0.5 / np.median(np.diff(t))))
+    kept = np.asarray(d.kept)
+    kv = d.kept_valid.get(channel) if d.kept_valid else None
     for pred, lab in ((d.predicted_before, "residual before"), (d.predicted_after, "residual after")):
-        r = np.where(ok, m - pred[channel], np.nan)
-        rs = uniform_filter1d(np.nan_to_num(r), w)
-        ax[1].plot(t[ok][sl], rs[ok][sl], lw=0.8, label=lab + " (0.5 s mean)")
+        r = np.where(ok, m - pred[channel], 0.0)
+        if kept.size and kv is not None:  # in the compared band, at its kept samples
+            rb = d.band.reduce(r)
+            ax[1].plot(t[kept][kv], rb[kv], lw=0.8, label=lab + " (in the band)")
+        else:
+            rs = uniform_filter1d(r, max(1, int(0.5 / np.median(np.diff(t)))))
+            ax[1].plot(t[ok][sl], rs[ok][sl], lw=0.8, label=lab + " (0.5 s mean)")
     ax[1].set_ylabel(f"residual [{unit}]")
     for loc in d.locations:
         if loc.channel == channel and loc.test == "window":  # a regime cell spans many visits
@@ -79,35 +84,61 @@ def figure_regime(d, channel: str):
     return fig
 
 
+def _g(x, nd: int = 4) -> str:
+    """A number to ``nd`` significant digits, "—" for None."""
+    return "—" if x is None else f"{x:.{nd}g}"
+
+
+def _param_unit(name: str) -> str:
+    """The unit a parameter's name ends with (``force_N`` -> N, ``delay_s`` -> s); "1" if none."""
+    for suffix, unit in (("_N_s_per_mm", "N s/mm"), ("_N_s_per_m", "N s/m"), ("_N_per_mm", "N/mm"),
+                         ("_N_per_m2", "N/m²"), ("_N_per_m", "N/m"), ("_mm_per_s", "mm/s"), ("_m_per_s", "m/s"),
+                         ("_per_mm", "1/mm"), ("_per_s", "1/s"), ("_mm", "mm"), ("_N", "N"), ("_s", "s")):
+        if name.endswith(suffix):
+            return unit
+    return "1"
+
+
 def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosis.json") -> None:
-    """Self-contained HTML report: verdict, effects, where, residual table before/after, overlays, regime cells."""
+    """Self-contained HTML report in the shell of the maintenance report: verdict, the band compared,
+    effects with units, where the rest lies, residual table (band and raw, whole and held-out),
+    overlays and regime cells."""
     from blf.diagnose import DiagnoseConfig
 
     channels = [c for c in d.measured if d.valid[c].any()]
-    cols = [column("channel"), column("RMS before"), column("RMS after"), column("held-out RMS before"),
-            column("held-out RMS after"), column("noise floor"), column("excess before"), column("excess after"),
-            column("regime score before"), column("regime score after")]
-    rows = [[f"{c} [{_unit(c)}]", data["residual_rms_before"][c], data["residual_rms_after"][c],
-             data["residual_rms_holdout_before"][c], data["residual_rms_holdout_after"][c], data["noise_floor"][c],
-             data["excess_before"][c], data["excess_after"][c], data["regime_score_before"][c],
-             data["regime_score_after"][c]] for c in channels]
-    effs = "".join(
-        f"<li><b>{esc(e['words'])}</b> (<code>{esc(e['name'])}</code> at {esc(e['where'])}): "
-        + esc(", ".join(f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
-        + f"<br><small>{esc(e['evidence'])}</small></li>"
-        for e in data["effects"] + data["partial_effects"])
-    locs = "".join(f"<li>{esc(l['channel'])}: {l['t_start_s']}–{l['t_end_s']} s ({esc(l['test'])} test), "
-                   f"{esc(l['regime'])}</li>" for l in data["locations"][:12])
-    parts = [f"<h1>Simulation versus recording: {esc(data['verdict'])}</h1>",
-             f"<p>Model {esc(data['model'])}; BIC before {data['ic_before']}, after {data['ic_after']}; "
-             f"{data['diagnosis_s']} s.</p>",
-             f"<h2>Effects</h2><ul>{effs or '<li>none</li>'}</ul>",
+    cols = [column("channel"), column("unit"), column("RMS before"), column("RMS after"),
+            column("held-out RMS before"), column("held-out RMS after"), column("noise floor"),
+            column("held-out raw RMS before"), column("held-out raw RMS after"), column("raw noise floor"),
+            column("excess before", "1"), column("excess after", "1"), column("regime score before", "1"),
+            column("regime score after", "1")]
+    rows = [[c, _unit(c), *(_g(data[k].get(c)) for k in (
+        "residual_rms_before", "residual_rms_after", "residual_rms_holdout_before", "residual_rms_holdout_after",
+        "noise_floor", "residual_rms_raw_holdout_before", "residual_rms_raw_holdout_after", "noise_floor_raw",
+        "excess_before", "excess_after", "regime_score_before", "regime_score_after"))] for c in channels]
+    erows = [[f"<b>{esc(e['name'])}</b>", esc(e["where"]), esc(e["words"]),
+              "<br>".join(f"{esc(k)} = {_g(v)} ± {_g(e['uncertainty'].get(k), 2)} {esc(_param_unit(k))}"
+                          for k, v in e["parameters"].items()),
+              f"{_g(e.get('delta_bic'))}", f"{_g(e.get('delta_chi2_holdout'))}",
+              f"<small>{esc(e['evidence'])}</small>"] for e in data["effects"]]
+    effs = (table([column("effect"), column("where"), column("what"), column("parameters"), column("ΔBIC", "1"),
+                   column("Δχ² held out", "1"), column("evidence")], erows, raw=True)
+            if erows else "<p>none</p>")
+    locs = "".join(f"<li>{esc(l['channel'])} ({esc(l.get('where', ''))}): {_g(l['t_start_s'])}–{_g(l['t_end_s'])} s "
+                   f"({esc(l['test'])} test), {esc(l['regime'])}</li>" for l in data["locations"][:12])
+    css = {"no_mismatch": "pass", "explained": "pass", "unexplained": "fail"}[data["verdict"]]
+    where = (f"<p>The rest of the mismatch lies at: <b>{esc(', '.join(data['where']))}</b> (strongest first).</p>"
+             if data.get("where") else "")
+    parts = [f"<h1>Simulation versus recording: <span class='{css}'>{esc(data['verdict'])}</span></h1>",
+             f"<p>Model {esc(data['model'])}; compared in the band: {esc(data['band']['words'])}; "
+             f"BIC before {_g(data['ic_before'], 7)}, after {_g(data['ic_after'], 7)} (dimensionless); "
+             f"diagnosis {_g(data['diagnosis_s'], 3)} s.</p>",
+             "<h2>Effects the fit accepted</h2>" + effs, where,
              f"<h2>Where</h2><ul>{locs or '<li>nowhere</li>'}</ul>",
-             "<h2>Residual RMS</h2><p>Residual RMS in the channel's unit; excess and regime score are "
-             "dimensionless (noise alone: excess about 1, regime score about standard normal).</p>"
-             + table(cols, rows),
+             "<h2>Residual RMS</h2><p>RMS in the channel's unit, in the compared band unless marked raw; "
+             "held-out: on the half never fitted. Excess and regime score are dimensionless (noise alone: "
+             "excess about 1, regime score about standard normal).</p>" + table(cols, rows),
              "<h2>Overlay and residuals</h2>",
-             *(f"<h3>{esc(c)}</h3>{img(figure_overlay(model, d, c))}" for c in channels)]
+             *(f"<h3>{esc(c)} [{_unit(c)}]</h3>{img(figure_overlay(model, d, c))}" for c in channels)]
     thr = DiagnoseConfig().regime_threshold
     flagged = [c for c in model.channels if max(d.regime_before.get(c, 0.0), d.regime_after.get(c, 0.0)) > thr]
     if flagged and d.regime_labels:

@@ -1,0 +1,28 @@
+"""Issue 13's development acceptance: ``emacheck diagnose`` on the 19 independent-rig recordings.
+
+Recordings of a rig model written independently of sim/ (../shared/data/independent-rig,
+7-column gzip'd CSVs, no mode column), judged by issue 13's rules
+(:func:`support.independent_rig.judge`): at least 90 % right, no crash, and < 30 s CPU per
+recording. Skipped with the reason where ../shared is absent. The benchmark that prints the
+per-file table is tests/bench/bench_diagnose_dev.py.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from support.independent_rig import DATA, KEYS, diagnose_file, judge
+
+pytestmark = [pytest.mark.slow,
+              pytest.mark.skipif(not KEYS, reason=f"independent-rig recordings not present at {DATA} (../shared/data)")]
+
+
+def test_dev_set_at_least_90_percent_right():
+    rows = []
+    for name, key in KEYS.items():
+        d, secs = diagnose_file(DATA / f"{name}.csv.gz")  # a crash fails the test
+        ok, why = judge(key["expect"], d.verdict, [(e.name, e.where) for e in d.effects], list(d.where))
+        rows.append((name, ok, why, secs))
+        assert secs < 30.0, (name, secs)
+    right = sum(r[1] for r in rows)
+    assert right >= 0.9 * len(rows), [r for r in rows if not r[1]]

@@ -1,0 +1,105 @@
+"""Issue 13: ``emacheck diagnose`` holds on what the tool itself writes and on minimal recordings.
+
+* a default ``dry-run`` folder (shipped profiles: the simulated rig's 7.5 % LVDT pitch error on) and
+  a default ``simulate`` folder: diagnose says ``no_mismatch`` or names only the LVDT pitch/offset
+  it calibrated (their physics is our nominal), and never crashes;
+* the same recording reduced to the 7 documented columns ``t,phi1,phi2,s1,s2,F1,F2`` (no mode,
+  setpoint or step column), as ``.csv`` and as ``.csv.gz``: the phases come from the data, and the
+  verdict is the same kind.
+
+Slow (a whole check each); they are part of the default run.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from hil.cli import main
+from hil.runfolder import read_signals
+from test_verdict import validate
+
+CALIBRATED = {"lvdt_pitch", "lvdt_offset"}
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.slow
+
+
+def _diag(src, out) -> dict:
+    rc = main(["diagnose", str(src), "--out", str(out), "--quiet"])
+    assert rc == 0, rc
+    return validate(out / "diagnosis.json", "diagnosis")
+
+
+def _nominal_ok(data: dict) -> None:
+    named = {(e["name"], e["where"]) for e in data["effects"]}
+    assert data["verdict"] in ("no_mismatch", "explained"), (data["verdict"], named, data["where"])
+    assert all(n in CALIBRATED for n, _ in named), named
+
+
+@pytest.fixture(scope="module")
+def dry(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dry") / "run"
+    assert main(["dry-run", "--out", str(out), "--quiet"]) in (0, 1)
+    return out
+
+
+def test_dry_run_then_diagnose_is_no_mismatch(dry, tmp_path):
+    data = _diag(dry, tmp_path / "diag")
+    _nominal_ok(data)
+    # the run folder records the simulated rig (meta.json simrig, its LVDT 1 reading 7.5 % short): that is
+    # the nominal, so nothing differs from it
+    assert data["verdict"] == "no_mismatch", data["effects"]
+
+
+def test_minimal_csv_and_gz(dry, tmp_path):
+    """Only t,phi1,phi2,s1,s2,F1,F2: the phases are found from the data; .csv and .csv.gz alike."""
+    sig = read_signals(dry / "signals.csv")
+    lines = ["t,phi1,phi2,s1,s2,F1,F2"] + [
+        ",".join(f"{v:.9g}" for v in row)
+        for row in zip(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2)]
+    text = "\n".join(lines) + "\n"
+    (tmp_path / "min.csv").write_text(text)
+    with gzip.open(tmp_path / "min.csv.gz", "wt") as fh:
+        fh.write(text)
+    a = _diag(tmp_path / "min.csv", tmp_path / "a")
+    b = _diag(tmp_path / "min.csv.gz", tmp_path / "b")
+    assert a["verdict"] == b["verdict"] and a["effects"] == b["effects"]
+    # without meta.json the nominal has ideal LVDTs: what the shipped rig's LVDTs add is named, nothing else
+    assert a["verdict"] == "explained", (a["verdict"], a["where"], [e["name"] for e in a["effects"]])
+    sens = tomllib.loads((ROOT / "profiles" / "simrig.toml").read_text())
+    for e in a["effects"]:
+        assert e["name"] in CALIBRATED | {"lvdt_nonlinearity"}, e
+        n = e["where"][-1]
+        if e["name"] == "lvdt_pitch":
+            assert e["parameters"]["gain_error"] == pytest.approx(sens[f"sensors{n}"]["lvdt_gain"] - 1.0, abs=2e-3)
+        if e["name"] == "lvdt_offset":
+            assert e["parameters"]["offset_mm"] == pytest.approx(sens[f"sensors{n}"]["lvdt_offset_mm"], abs=0.01)
+
+
+def test_simulate_then_diagnose(tmp_path):
+    run = tmp_path / "sim"
+    assert main(["simulate", "--out", str(run), "--quiet"]) in (0, 1)
+    data = _diag(run, tmp_path / "diag")
+    _nominal_ok(data)
+    assert json.loads((tmp_path / "diag" / "diagnosis.json").read_text())["band"]["cutoff_hz"] > 0
+
+
+def test_gzipped_can_log(dry, tmp_path):
+    """The raw CAN traffic alone, gzip'd (can.log.gz), is read directly: it decodes into the same signals
+    as can.log, and diagnose runs on it (no meta.json: what it names is the shipped rig's LVDT errors).
+
+    The verdict is not asserted: on this recording the decoded log leaves a regime score of 5.5 on F1
+    (threshold 5) that the CSV does not (see docs/diagnose.md)."""
+    from hil.canlog import decode_can_log
+    from hil.profiles import load_actuation
+    gz = tmp_path / "can.log.gz"
+    with open(dry / "can.log", "rb") as src, gzip.open(gz, "wb") as dst:
+        dst.write(src.read())
+    a, b = decode_can_log(gz, load_actuation()).signals, decode_can_log(dry / "can.log", load_actuation()).signals
+    assert a.n == b.n and (a.s1 == b.s1).all() and (a.F2 == b.F2).all()
+    data = _diag(gz, tmp_path / "diag")
+    assert all(e["name"] in CALIBRATED | {"lvdt_nonlinearity"} for e in data["effects"]), data["effects"]
