@@ -52,6 +52,17 @@ def simulate_run(out: Path, act, check, simrig_profile, seed: int):
 
 
 @pytest.fixture(scope="session")
+def dry_run(tmp_path_factory):
+    """``emacheck dry-run`` with the shipped profiles and seed (over the in-process CANopen bus):
+    its run folder and exit status. Users are marked ``slow``; none may change the folder's files."""
+    from hil.cli import main
+
+    out = tmp_path_factory.mktemp("dry") / "run"
+    rc = main(["dry-run", "--out", str(out), "--quiet"])
+    return out, rc
+
+
+@pytest.fixture(scope="session")
 def default_run(tmp_path_factory, actuation, check_profile, simrig):
     """Run folder of one simulated check with the shipped profiles and seed.
 

@@ -26,13 +26,6 @@ from hil.runfolder import read_signals
 from support.profiles import write_profile_variant
 
 
-@pytest.fixture(scope="session")
-def dry_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("dry") / "run"
-    rc = main(["dry-run", "--out", str(out), "--quiet"])
-    return out, rc
-
-
 @pytest.mark.slow
 def test_dry_run_recovers_truth_through_canopen(dry_run):
     out, rc = dry_run
