@@ -229,6 +229,13 @@ def _data_rows_absent(path: Path) -> bool:
     return head.count(b"\n") < 2
 
 
+def is_can_log(path: Path) -> bool:
+    """A raw CAN log by its name: ``*.log`` (candump -L) or ``*.log.gz``; anything else is a signals file."""
+    name = Path(path).name.lower()
+    return name.endswith(".log") or name.endswith(".log.gz")
+
+
+
 def resolve_recording(arg: str | Path) -> tuple[Path, Path | None]:
     """Map a RUN_FOLDER or SIGNALS.csv argument to (signals path, run folder or None)."""
     p = Path(arg)

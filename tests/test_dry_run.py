@@ -103,6 +103,23 @@ def test_analyze_from_can_log_alone(dry_run, tmp_path):
     assert any("decoded from CAN log" in n for n in res["notes"])
 
 
+def test_analyze_reads_a_gzipped_can_log_directly(dry_run, tmp_path):
+    """A bare can.log.gz (no run folder, no meta.json): decoded as it is, the segments found from the
+    data, the same backlash as the check's own result."""
+    import gzip
+
+    out, _ = dry_run
+    gz = tmp_path / "can.log.gz"
+    with open(out / "can.log", "rb") as src, gzip.open(gz, "wb") as dst:
+        dst.write(src.read())
+    assert main(["analyze", str(gz), "--out", str(tmp_path / "a"), "--no-history"]) == 0
+    res = json.loads((tmp_path / "a" / "result.json").read_text())
+    ref = json.loads((out / "result.json").read_text())
+    for ch in CHANNELS:
+        assert res["backlash_mm"][ch] == pytest.approx(ref["backlash_mm"][ch], abs=2e-4), ch
+    assert any("decoded from CAN log" in n for n in res["notes"])
+
+
 def test_nothing_sent_before_profiles_validate_and_run_needs_arm(tmp_path, capsys):
     listener = can.Bus(interface="virtual", channel="emacheck-test-arm")
     try:

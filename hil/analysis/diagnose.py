@@ -18,11 +18,6 @@ import numpy as np
 from hil.errors import RecordingError
 
 
-def _is_can_log(path: Path) -> bool:
-    name = path.name.lower()
-    return name.endswith(".log") or name.endswith(".log.gz")
-
-
 def _check_for(meta: dict | None, act):
     from hil.config import Check
     from hil.profiles import build_dataclass, load_check
@@ -42,13 +37,13 @@ def load_dual(path: Path, profile: Path | None):
     from hil.analysis.maint import check_units, find_segments
     from hil.canlog import decode_can_log
     from hil.cli.common import actuation_for, read_meta
-    from hil.runfolder import read_signals, resolve_recording
+    from hil.runfolder import is_can_log, read_signals, resolve_recording
     from sim.replay_model import DualEmaReplay
 
     sig_path, run_dir = resolve_recording(path)
     meta = read_meta(run_dir)
     act = actuation_for(profile, meta)
-    sig = decode_can_log(sig_path, act).signals if _is_can_log(sig_path) else read_signals(sig_path)
+    sig = decode_can_log(sig_path, act).signals if is_can_log(sig_path) else read_signals(sig_path)
     if sig.n < 1000:
         raise RecordingError(f"{sig_path}: recording too short to diagnose: {sig.n} samples (need >= 1000)")
     check_units(sig, act)

@@ -16,7 +16,7 @@ from pathlib import Path
 from hil.config import Actuation
 from hil.errors import RecordingError
 from hil.profiles import build_dataclass, load_actuation
-from hil.runfolder import read_signals
+from hil.runfolder import is_can_log, read_signals
 
 
 class ExitCode(IntEnum):
@@ -274,6 +274,18 @@ def installation(args: argparse.Namespace, act: Actuation, meta: dict | None = N
     return out
 
 
+def history_url(url: str | None, act: Actuation) -> str:
+    """The wear history's database: ``url`` (``--history``), else the actuation profile's
+    ``history.url``, else the user's SQLite file."""
+    if url:
+        return url
+    if act.history.url:
+        return act.history.url
+    from hil.history.url import default_url
+
+    return default_url()
+
+
 def record_history(console, args: argparse.Namespace, act: Actuation, result_path: Path, *,
                    run_folder: Path | None, recording: Path | None = None) -> None:
     """After a command wrote its result: record it in the wear history, one line on the console
@@ -294,14 +306,8 @@ def record_history(console, args: argparse.Namespace, act: Actuation, result_pat
         return
     if simulated and explicit is None:
         return
-    if isinstance(explicit, str):  # --history URL (True: --history alone)
-        url = explicit
-    elif act.history.url:
-        url = act.history.url
-    else:
-        from hil.history.url import default_url
-
-        url = default_url()
+    # --history URL (True: --history alone, the profile's or the user's database)
+    url = history_url(explicit if isinstance(explicit, str) else None, act)
     record_after_check(url, Path(result_path), run_folder=run_folder, recording=recording,
                        say=lambda m: console.print(escape(m), soft_wrap=True))
 
@@ -332,8 +338,9 @@ def out_dir(args: argparse.Namespace, kind: str) -> Path:
 
 
 def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
-    """Signals from a CSV, or decoded from a raw CAN log (``*.log``), step labels from meta.json."""
-    if sig_path.suffix != ".log":
+    """Signals from a CSV, or decoded from a raw CAN log (``*.log``, ``*.log.gz``), step labels from
+    meta.json."""
+    if not is_can_log(sig_path):
         return read_signals(sig_path)
     import dataclasses
 

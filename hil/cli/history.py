@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from hil.cli.common import EPILOG, ExitCode, _history_url, add_parser, make_console
+from hil.cli.common import EPILOG, ExitCode, _history_url, add_parser, history_url, make_console
 
 
 def _serial(text: str) -> int:
@@ -24,15 +24,10 @@ def _serial(text: str) -> int:
 def history_url_for(url: str | None, profile: Path | None) -> str:
     """``--history``, else the actuation profile's ``history.url``, else the user's SQLite file."""
     if url:
-        return url
+        return url  # no profile to read
     from hil.profiles import load_actuation
 
-    act = load_actuation(profile)
-    if act.history.url:
-        return act.history.url
-    from hil.history.url import default_url
-
-    return default_url()
+    return history_url(None, load_actuation(profile))
 
 
 def cmd_history(args: argparse.Namespace) -> int:
