@@ -32,8 +32,7 @@ from numba import njit
 
 from blf.validate import as_1d_finite, instance_of, positive_scalar, same_shape, scalar
 
-__all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "block_means",
-           "DualEmaReplay", "dual_ema_candidates"]
+__all__ = ["ChainParams", "ReplayTrace", "replay_chains", "lvdt_model", "friction_force", "block_means"]
 
 
 @dataclass(frozen=True)
@@ -378,16 +377,3 @@ def block_means(x: np.ndarray, k0: np.ndarray, block: int) -> np.ndarray:
     """
     cs = np.r_[0.0, np.cumsum(x)]
     return (cs[k0 + block] - cs[k0] + 0.5 * (x[k0 - 1] - x[k0 + block - 1])) / block
-
-
-def dual_ema_candidates() -> tuple:
-    """The candidate library of the dual-EMA replay (see :func:`sim.replay_model.dual_ema_candidates`)."""
-    from sim.replay_model import dual_ema_candidates as library
-    return library()
-
-
-def __getattr__(name: str):
-    if name == "DualEmaReplay":  # the diagnosis model lives in sim.replay_model (size limit)
-        from sim.replay_model import DualEmaReplay
-        return DualEmaReplay
-    raise AttributeError(f"module 'sim.replay' has no attribute {name!r}")

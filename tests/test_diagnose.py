@@ -19,7 +19,8 @@ from test_verdict import validate
 from blf.diagnose import diagnose
 from blf.errors import InputError
 from hil.cli import main
-from sim.replay import ChainParams, DualEmaReplay, replay_chains
+from sim.replay import ChainParams, replay_chains
+from sim.replay_model import DualEmaReplay
 from support import diagnose_cases as dc
 
 EMPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"

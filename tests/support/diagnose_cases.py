@@ -226,7 +226,7 @@ def orthogonal_chi2(with_effect: dict, without: dict, sig, mask: np.ndarray) -> 
     """The part of :func:`aggregate_chi2` that no re-fit of the replay's nominal parameters can
     absorb: the weighted signature in s and F with its projection on the nominal Jacobian (at the
     base rig, by finite differences of the replay of ``sig``'s motor angles) removed."""
-    from sim.replay import DualEmaReplay
+    from sim.replay_model import DualEmaReplay
     base = base_params()
     m = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2, I_TOTAL, 0.002,
                       sig.mode1, sig.sp1, sig.mode2, sig.sp2)
@@ -350,7 +350,7 @@ def generate(case: dict, work: Path, check=None, size: float = 1.0):
 
 def diagnose_signals(sig):
     from blf.diagnose import diagnose
-    from sim.replay import DualEmaReplay
+    from sim.replay_model import DualEmaReplay
     m = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2, I_TOTAL, 0.002,
                       sig.mode1, sig.sp1, sig.mode2, sig.sp2)
     return diagnose(m, 0.002)
