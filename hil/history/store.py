@@ -22,7 +22,7 @@ import contextlib
 import datetime as _dt
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import sqlalchemy as sa
 from sqlalchemy import exc as sa_exc
@@ -31,6 +31,9 @@ from hil import __version__
 from hil.history import schema as S
 from hil.history.errors import HistoryError, HistoryInputError, HistoryUnavailableError
 from hil.history.url import check_url, dialect, masked, sqlite_path
+
+if TYPE_CHECKING:  # (record imports no store)
+    from hil.history.record import CheckRecord
 
 #: how long a write waits for another writer's lock (SQLite busy timeout) or a server to answer [s]
 DEFAULT_TIMEOUT_S = 10.0
@@ -200,7 +203,7 @@ class HistoryStore:
 
     # ------------------------------------------------------------------ writing
 
-    def add(self, record: "CheckRecordLike") -> bool:
+    def add(self, record: "CheckRecord") -> bool:
         """Record one result with its readings in one transaction.
 
         Parameters
@@ -218,7 +221,7 @@ class HistoryStore:
         with self._tx(write=True) as conn:
             return self._add(conn, record)
 
-    def add_many(self, records: Sequence["CheckRecordLike"]) -> int:
+    def add_many(self, records: Sequence["CheckRecord"]) -> int:
         """Record several results in one transaction; returns how many were new."""
         with self._tx(write=True) as conn:
             return sum(self._add(conn, r) for r in records)
@@ -314,15 +317,6 @@ class HistoryStore:
                     rd = dict(rd)
                     by_id[rd.pop("check_id")]["readings"][rd["channel"]] = rd
         return rows
-
-
-class CheckRecordLike:  # pragma: no cover - documentation of what add() reads
-    """What :meth:`HistoryStore.add` reads: ``check``, ``identity``, ``readings``
-    (:class:`hil.history.record.CheckRecord`)."""
-
-    check: dict
-    identity: dict
-    readings: list
 
 
 def _version(conn: sa.Connection) -> int:
