@@ -114,9 +114,9 @@ def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> di
     preflight), who and for which work order, which files (SHA-256), which run and recording."""
     from hil import __version__
 
-    meta = meta or {}
-    place = {k: (extra or {}).get(k) if (extra or {}).get(k) is not None else meta.get(k) for k in INSTALLATION_KEYS}
-    extra = {k: v for k, v in (extra or {}).items() if v}
+    meta, extra = meta or {}, extra or {}
+    place = {k: extra[k] if extra.get(k) is not None else meta.get(k) for k in INSTALLATION_KEYS}
+    extra = {k: v for k, v in extra.items() if v}
     return {
         "run_id": meta.get("run_id"),
         "started_utc": meta.get("started_utc"),
