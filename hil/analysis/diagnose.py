@@ -19,13 +19,14 @@ from hil.errors import RecordingError
 
 
 def _check_for(meta: dict | None, act):
+    """The check profile a recording was made with (meta.json's snapshot), else the shipped one."""
     from hil.config import Check
     from hil.profiles import build_dataclass, load_check
     snap = ((meta or {}).get("profiles") or {}).get("check")
     if snap is not None:
         try:
             return build_dataclass(Check, snap, "meta.json (check snapshot)")
-        except Exception:  # noqa: BLE001 - an old or foreign snapshot: the shipped check then
+        except ValueError:  # ProfileError: an old or foreign snapshot; the shipped check then
             pass
     return load_check(None, act)
 
