@@ -52,7 +52,12 @@ Method
 7. **Verdict.** ``unexplained`` if a channel still differs (by either test)
    after the accepted effects, or a flagged channel lost less than
    ``min_explained_fraction`` of its excess; then the places where the rest
-   lies are ranked (:attr:`Diagnosis.where`). Otherwise ``explained`` if any
+   lies are ranked (:attr:`Diagnosis.where`) by the evidence of each place's
+   channels in noise sigmas, those below the thresholds included: per
+   channel the larger of the regime score and the window excess as
+   :math:`(E - 1)\sqrt{n_b/2}`, the load cells at half weight (both see the
+   surface's force fight alike; an EMA's own LVDT and drive force tell which
+   EMA it is). Otherwise ``explained`` if any
    effect was named, else ``no_mismatch``. ``effects`` lists every effect
    accepted, whatever the verdict.
 """
@@ -154,7 +159,7 @@ class DiagnoseConfig:
     bic_margin: float = 10.0
     holdout_margin: float = 10.0
     max_effects: int = 3
-    refit_top: int = 3
+    refit_top: int = 5
     min_explained_fraction: float = 0.5  #: of each flagged channel's excess above 1, for "explained"
     regime_bins: int = 10  #: position bins of the regime test (x 2 velocity signs x 2 force signs)
     regime_threshold: float = 5.0  #: regime score S above which a channel differs (S ~ N(0, 1) under noise)
@@ -467,7 +472,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
                                      lambda c: fit_candidate(p, proj, theta, active, c), chi_fit_cur, chi_val_cur, say)
         chosen = None
         scale = np.array([q.scale for q in model.nominal])
-        for lin_bic, lin_val, cand, x, unc, beta in refits[:2]:
+        for lin_bic, lin_val, cand, x, unc, beta in refits:
             if not (lin_bic < -cfg.bic_margin and lin_val < -cfg.holdout_margin):
                 continue
             # exact acceptance: the re-adjustment only ranks. First the linearised step itself; if the
@@ -494,6 +499,22 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
             say(f"candidate {cand.name} at {cand.where} not accepted (dBIC {dbic:.1f}, held-out {dval:.1f})")
         if chosen is None:
             break
+        twin = next((r for r in refits if r[2] is not chosen[2] and r[2].name == chosen[2].name
+                     and r[2].variant == chosen[2].variant and r[2].where != chosen[2].where
+                     and r[0] < -cfg.bic_margin and r[1] < -cfg.holdout_margin), None)
+        if twin is not None:
+            # the same physics passes at the other place too: the linearised re-adjustment of the nominal
+            # ranks places poorly when the term moves the nominal far (a stiffening first read as a stiffer
+            # spring), so the place is decided by the joint nonlinear fit of the nominal and each of the two
+            say(f"{chosen[2].name} at {chosen[2].where} or {twin[2].where}: both refitted with the nominal")
+            for c, x0 in ((chosen[2], chosen[4]), (twin[2], twin[3])):
+                joint = fit_joint(p, theta, active, c, x0)
+                if joint is None:
+                    continue
+                th_j, x_j, unc_j, chi_f, chi_v = joint
+                dbic, dval = (chi_f - chi_fit_cur) + pen[c], chi_v - chi_val_cur
+                if dbic < min(chosen[0], -cfg.bic_margin) and dval < -cfg.holdout_margin:
+                    chosen = (dbic, dval, c, th_j, x_j, unc_j, chi_f)
         dbic, dval, cand, theta, x, unc, chi_f = chosen
         others = [s for s in scores if s[2] is not cand]
         active.append((cand, x))
@@ -549,11 +570,16 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         verdict = "no_mismatch"
     if verdict == "unexplained":
         locations = locate(cur_all, w_cur, rs_cur)
+        # every fitted channel's evidence in noise sigmas, the ones below the thresholds too (a fault in
+        # one EMA's load path shows in both load cells alike; its own LVDT and drive force tell which)
         score: dict = {}
-        for c in still or flagged0 + flag_r0:
-            s = max(excess_cur[c] / cfg.excess_threshold, regime_cur[c] / cfg.regime_threshold, 0.0)
+        for c in fitted_ch:
+            z = window_scores(w_cur[c], p.valid[c], nwin)[0]
+            z_excess = (excess_cur[c] - 1.0) * np.sqrt(np.isfinite(z).sum() / 2.0)
+            s = max(z_excess, regime_cur[c], 0.0)
             w = 0.5 if c.startswith("F") and not c.startswith("Fd") else 1.0  # F1 and F2 share the surface
-            score[place(c)] = score.get(place(c), 0.0) + w * s
+            if s > 0.0:
+                score[place(c)] = score.get(place(c), 0.0) + w * s
         where = tuple(k for k, _ in sorted(score.items(), key=lambda kv: -kv[1]))
     else:
         locations, where = [], ()

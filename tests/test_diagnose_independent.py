@@ -29,9 +29,23 @@ def _one(name: str) -> tuple[str, bool, str, float]:
 def test_dev_set_at_least_90_percent_right():
     # one recording per core (the diagnosis is single-threaded); each one's CPU time is its own
     with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
-        rows = list(pool.map(_one, KEYS))
+        rows = list(pool.map(_one, KEYS, chunksize=1))
     assert len(rows) == len(KEYS) == 19
     for name, _, _, secs in rows:
         assert secs < 30.0, (name, secs)
     right = sum(r[1] for r in rows)
     assert right >= 0.9 * len(rows), [r for r in rows if not r[1]]
+
+
+def test_the_rig_profile_is_the_shipped_one_with_the_readme_ratio():
+    # the README states the rig's motor-to-ram ratio; the diagnoses above use it and nothing else new
+    import dataclasses
+
+    from hil.profiles import load_actuation
+    from support.independent_rig import SHIPPED_ACTUATION, rig_i_total, rig_profile
+
+    shipped, rig = load_actuation(SHIPPED_ACTUATION), load_actuation(rig_profile())
+    assert rig_i_total() == rig.mechanics.i_total_rad_per_mm
+    assert abs(rig.mechanics.i_total_rad_per_mm / shipped.mechanics.i_total_rad_per_mm - 1.0) < 1e-4
+    same_ratio = dataclasses.replace(rig.mechanics, i_total_rad_per_mm=shipped.mechanics.i_total_rad_per_mm)
+    assert dataclasses.replace(rig, mechanics=same_ratio) == shipped

@@ -80,9 +80,12 @@ from support.diagnose_cases import (  # noqa: E402
 #: viscous friction a candidate): 80001.. was run once on that method (84 %: Coulomb friction at EMA 1
 #: named viscous twice), the tie rule between forms of one physics was then added; on 90001.. it took
 #: Coulomb for a direction-dependent friction (run stopped after 24 cases), so it was restricted to
-#: forms with as many parameters. 80001.. and 90001.. count as development seeds; 100001.. had never
-#: been run.
-FIRST_SEED = 100001
+#: forms with as many parameters. 80001.. and 90001.. count as development seeds. 100001.. was run
+#: once (21/25 = 84 % strict, 23/25 by issue 13's rules; out of library 4/4 unexplained but 2/4
+#: located first at the wrong EMA); the places were then ranked by every channel's evidence, the
+#: place of a physics passing at both EMAs decided by the joint fit, and the independent rig's
+#: ratio stated: 100001.. counts as development seeds; 110001.. had never been run.
+FIRST_SEED = 110001
 FIRST_DEV_SEED = 20001
 
 

@@ -2,10 +2,13 @@
 
 Not collected by pytest. Usage::
 
-    python tests/bench/bench_diagnose_dev.py [out.json] [--only NAME,...]
+    python tests/bench/bench_diagnose_dev.py [out.json] [--only NAME,...] [--shipped-profile]
 
 One line per recording (verdict, effects, where, judgement, CPU seconds), then
-the score by issue 13's rules (:func:`support.independent_rig.judge`). Needs
+the score by issue 13's rules (:func:`support.independent_rig.judge`). The
+actuation profile is the shipped one with the rig's ratio from its README
+(:func:`support.independent_rig.rig_profile`); ``--shipped-profile`` uses the
+shipped ratio instead (9.6 ppm more than the rig's). Needs
 ../shared/data/independent-rig. One process, one core.
 """
 
@@ -18,7 +21,7 @@ from pathlib import Path
 TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]
 
-from support.independent_rig import DATA, KEYS, diagnose_file, judge  # noqa: E402
+from support.independent_rig import DATA, KEYS, SHIPPED_ACTUATION, diagnose_file, judge  # noqa: E402
 
 
 def main(argv: list[str]) -> int:
@@ -26,6 +29,7 @@ def main(argv: list[str]) -> int:
     only = None
     if "--only" in argv:
         only = set(argv[argv.index("--only") + 1].split(","))
+    profile = SHIPPED_ACTUATION if "--shipped-profile" in argv else None
     if not KEYS:
         print(f"independent-rig recordings not present at {DATA}")
         return 2
@@ -34,7 +38,7 @@ def main(argv: list[str]) -> int:
         if only and name not in only:
             continue
         try:
-            d, secs = diagnose_file(DATA / f"{name}.csv.gz")
+            d, secs = diagnose_file(DATA / f"{name}.csv.gz", profile)
             effects = [(e.name, e.where) for e in d.effects]
             where = list(getattr(d, "where", ()) or ())
             if not hasattr(d, "where") and d.locations:  # an older Diagnosis: the strongest location's EMA
