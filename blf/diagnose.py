@@ -42,7 +42,12 @@ Method
    variable projection); one is accepted only if its BIC improves by more
    than ``bic_margin`` on the fit half *and* its chi-square improves by more
    than ``holdout_margin`` on the held-out half. Forward selection, up to
-   ``max_effects``, while a candidate passes both tests.
+   ``max_effects``, while a candidate passes both tests. The best
+   ``refit_top`` are refitted and every refit that passes on the
+   linearisation is tried, best first; when the same physics passes at the
+   other EMA too, the place is decided by the joint nonlinear fit of the
+   nominal parameters with each of the two (the linearised re-adjustment
+   ranks places poorly when a term moves the nominal far).
 6. **Nominal parameters with a reference.** A nominal parameter the model
    compares with a reference value (an LVDT pitch calibrated on the
    recording against the simulator's, the hinge friction against the
@@ -55,7 +60,7 @@ Method
    lies are ranked (:attr:`Diagnosis.where`) by the evidence of each place's
    channels in noise sigmas, those below the thresholds included: per
    channel the larger of the regime score and the window excess as
-   :math:`(E - 1)\sqrt{n_b/2}`, the load cells at half weight (both see the
+   :math:`(E - 1)\\sqrt{n_b/2}`, the load cells at half weight (both see the
    surface's force fight alike; an EMA's own LVDT and drive force tell which
    EMA it is). Otherwise ``explained`` if any
    effect was named, else ``no_mismatch``. ``effects`` lists every effect
