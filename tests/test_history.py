@@ -285,3 +285,44 @@ def test_profile_history_fields_are_validated(tmp_path):
         load_actuation(p)
     p = write_profile_variant("actuation.toml", tmp_path / "b.toml", {"history": {"aircraft": "D-AXYZ"}})
     assert load_actuation(p).history.aircraft == "D-AXYZ"
+
+
+def test_a_lock_the_busy_timeout_does_not_cover_is_retried_within_it(tmp_path):
+    # switching a new file to WAL, or WAL recovery after another process closed the last connection,
+    # can answer "database is locked" at once; the store retries such a start within the busy timeout
+    import sqlalchemy as sa
+
+    path = tmp_path / "h.sqlite"
+    store = HistoryStore.open(f"sqlite:///{path}")
+    refusals = {"left": 3, "seen": 0}
+
+    @sa.event.listens_for(store._engine, "connect")
+    def _refuse(dbapi_conn, _record):
+        if refusals["left"] > 0:
+            refusals["left"] -= 1
+            refusals["seen"] += 1
+            raise sqlite3.OperationalError("database is locked")
+
+    try:
+        assert store.schema_version() >= 1
+        assert refusals == {"left": 0, "seen": 3}
+    finally:
+        store.close()
+    # always refused: given up after the URL's own busy timeout, as one HistoryUnavailableError
+    from hil.history.errors import HistoryUnavailableError
+    store = HistoryStore.open(f"sqlite:///{path}?timeout=0.3")
+    assert store.timeout_s == 0.3
+    sa.event.listen(store._engine, "connect",
+                    lambda *_: (_ for _ in ()).throw(sqlite3.OperationalError("database is locked")))
+    try:
+        with pytest.raises(HistoryUnavailableError, match="waited 0.3 s"):
+            store.schema_version()
+    finally:
+        store.close()
+
+
+def test_a_timeout_in_the_url_that_is_not_seconds_is_exit_3(tmp_path, capsys):
+    HistoryStore.open(f"sqlite:///{tmp_path / 'h.sqlite'}").close()
+    assert main(["history", "--history", f"sqlite:///{tmp_path / 'h.sqlite'}?timeout=soon"]) == 3
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "timeout='soon'" in err

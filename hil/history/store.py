@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -103,7 +104,17 @@ class HistoryStore:
         u = sa.engine.make_url(self.url)
         if self.dialect == "sqlite":
             u = u.set(drivername="sqlite+pysqlite")
-            args = {} if "timeout" in u.query else {"timeout": self.timeout_s}
+            if "timeout" in u.query:  # the URL's own busy timeout
+                raw = u.query["timeout"]
+                try:
+                    t = float(raw if isinstance(raw, str) else raw[-1])
+                except (TypeError, ValueError, IndexError):
+                    t = float("nan")
+                if not (0.0 <= t < float("inf")):
+                    raise HistoryInputError(f"history {self.shown}: timeout={raw!r} in the URL is not a number of "
+                                            f"seconds >= 0")
+                self.timeout_s = t
+            args = {"timeout": self.timeout_s}
             engine = sa.create_engine(u, connect_args=args, poolclass=NullPool)
             _sqlite_events(engine)
             return engine
@@ -130,10 +141,33 @@ class HistoryStore:
     def _tx(self, write: bool) -> Iterator[sa.Connection]:
         """One transaction (a write one takes SQLite's write lock at once); errors translated."""
         with self.translated():
-            with self._engine.connect() as conn:
-                conn = conn.execution_options(emacheck_write=write)
-                with conn.begin():
-                    yield conn
+            conn, tx = self._begin(write)
+            with conn, tx:
+                yield conn
+
+    def _begin(self, write: bool) -> tuple[sa.Connection, sa.RootTransaction]:
+        """A connection and its begun transaction, before any statement of the transaction's body.
+
+        SQLite's busy timeout does not cover every lock a new connection meets: switching the file to
+        WAL, or the WAL recovery after another process closed the last connection, can answer "database
+        is locked" at once. Those are retried here, backing off, for up to the busy timeout; nothing of
+        the body has run yet, so a retry repeats nothing. Other errors, and PostgreSQL's, go through."""
+        deadline = time.monotonic() + self.timeout_s
+        delay_s = 0.005
+        while True:
+            conn = None
+            try:
+                conn = self._engine.connect().execution_options(emacheck_write=write)
+                return conn, conn.begin()
+            except sa_exc.OperationalError as exc:
+                if conn is not None:
+                    conn.close()
+                text = str(getattr(exc, "orig", exc)).lower()
+                if self.dialect != "sqlite" or not ("locked" in text or "busy" in text) \
+                        or time.monotonic() + delay_s > deadline:
+                    raise
+            time.sleep(delay_s)
+            delay_s = min(2.0 * delay_s, 0.1)
 
     @contextlib.contextmanager
     def translated(self) -> Iterator[None]:
