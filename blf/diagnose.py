@@ -131,6 +131,10 @@ class Reference:
     words: str
     param: str
     offset: float = 0.0
+    #: references with the same ``common`` = (name, where, words, param) that are all named and agree,
+    #: relative to their reference values, within 3 combined standard uncertainties are one physics
+    #: shared by their places (e.g. both LVDT pitches: the motor-to-ram ratio), named once
+    common: tuple = ()
 
 
 class ReplayModel(Protocol):
@@ -285,6 +289,46 @@ def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, mar
             and len(r[2].params) == len(best.params)]
     first = min(tied, key=lambda r: order.get(r[2], len(order)))
     return [first] + [r for r in refits if r is not first]
+
+
+def _reference_effects(named: list, refs: tuple, nominal: tuple, lnN: float) -> list:
+    """The effects of the named nominal parameters (:class:`Reference`), ``named`` as
+    (reference, value, standard uncertainty, chi-square cost on the fit half, on the held-out half).
+
+    References sharing a ``common`` key that are all named and whose relative deviations
+    :math:`d_i = v_i / r_i - 1` agree within 3 combined standard uncertainties are named once, as
+    the ``common`` physics with their weighted mean deviation: the recording cannot tell one shared
+    cause from the same error at every place (both LVDTs reading alike against the motor angles is
+    the motor-to-ram ratio differing from the profile's)."""
+    out, done = [], set()
+    for ref, v, sd, dfit, dval in named:
+        if ref in done:
+            continue
+        if ref.common:
+            group = [r for r in refs if r.common == ref.common]
+            rows = [n for n in named if n[0] in group]
+            if len(rows) == len(group) > 1 and all(n[0].value != 0.0 for n in rows):
+                d = np.array([n[1] / n[0].value - 1.0 for n in rows])
+                u = np.array([n[2] / abs(n[0].value) for n in rows])
+                if np.ptp(d) <= 3.0 * float(np.sqrt(np.sum(u ** 2))):
+                    w = 1.0 / np.maximum(u, 1e-300) ** 2
+                    name, where, words, param = ref.common
+                    mean, sd_mean = float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
+                    done.update(group)
+                    out.append(FittedEffect(
+                        name, where, words, {param: mean}, {param: sd_mean},
+                        float(-sum(n[3] - lnN for n in rows)), float(-sum(n[4] for n in rows)),
+                        "nominal parameters " + ", ".join(f"{nominal[n[0].index].name} = {n[1]:.6g}" for n in rows)
+                        + " against " + ", ".join(f"{n[0].value:.6g}" for n in rows)
+                        + f": the same relative deviation, {mean:+.3g} ± {sd_mean:.2g}", "nominal"))
+                    continue
+        out.append(FittedEffect(
+            ref.name, ref.where, ref.words, {ref.param: v - ref.offset}, {ref.param: sd},
+            float(-(dfit - lnN)), float(-dval),
+            f"nominal parameter {nominal[ref.index].name} = {v:.6g} against the simulator's "
+            f"{ref.value:.6g}: holding it there costs {dfit:.0f} in chi-square on the fit half and "
+            f"{dval:.0f} on the held-out half", "nominal"))
+    return out
 
 
 def _named(params: tuple, theta: np.ndarray) -> dict:
@@ -542,19 +586,15 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         Jn = nominal_jacobian(p, theta, active, wc)
         _, rf_c, rv_c = Projector(p, Jn).solve(wc)
         cf, cv = float(rf_c @ rf_c), float(rv_c @ rv_c)
+        named = []
         for ref in refs:
             res = reference_test(p, theta, active, Jn, ref.index, ref.value, cf, cv)
             if res is None:
                 continue
             dfit, dval, sd = res
             if dfit > lnN + cfg.bic_margin and dval > cfg.holdout_margin:
-                v = float(theta[ref.index])
-                accepted.append(FittedEffect(
-                    ref.name, ref.where, ref.words, {ref.param: v - ref.offset}, {ref.param: sd},
-                    float(-(dfit - lnN)), float(-dval),
-                    f"nominal parameter {model.nominal[ref.index].name} = {v:.6g} against the simulator's "
-                    f"{ref.value:.6g}: holding it there costs {dfit:.0f} in chi-square on the fit half and "
-                    f"{dval:.0f} on the held-out half", "nominal"))
+                named.append((ref, float(theta[ref.index]), sd, dfit, dval))
+        accepted += _reference_effects(named, refs, model.nominal, lnN)
     cur_all = full(pred_cur)
     w_cur = wall(cur_all)
     excess_cur = excess_all(w_cur)

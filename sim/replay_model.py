@@ -52,6 +52,12 @@ BAND_HZ = 10.0  #: the band the quasi-static replay claims (Hz)
 _FULL_SCALE_MM = 20.0
 _SIM_SURFACE_DAMPING = 0.5  #: N s/mm, the simulator's surface (profiles/simrig.toml)
 _SURFACE_MASS = 300.0  #: kg
+#: both LVDT pitches off their references by the same relative amount: one physics shared by the two
+#: EMAs (blf.diagnose.Reference.common), named once at "external" (neither EMA on its own)
+RATIO = ("transmission_ratio", "external",
+         "both LVDTs read alike against the motor angles: the motor-to-ram ratio differs from the profile's "
+         "i_total (the rig's is i_total / (1 + gain_error)), or both LVDTs share that pitch error; state the "
+         "rig's ratio in the actuation profile", "gain_error")
 
 
 def _cand(name, where, words, *params, variant=""):
@@ -196,7 +202,7 @@ class DualEmaReplay:
             n_ = e + 1
             refs += [Reference(11 + 2 * e, ref_gain[e], "lvdt_pitch", f"ema{n_}",
                                f"LVDT {n_} pitch (gain) differs from nominal: calibrated on the recording",
-                               "gain_error", 1.0),
+                               "gain_error", 1.0, RATIO),
                      Reference(12 + 2 * e, ref_off[e], "lvdt_offset", f"ema{n_}",
                                f"LVDT {n_} offset: calibrated on the recording", "offset_mm", 0.0)]
         refs += [Reference(8, damping, "viscous_friction", "external",

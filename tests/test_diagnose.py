@@ -326,3 +326,27 @@ def test_regime_test_localises_a_mismatch_the_window_test_misses():
     d0 = diagnose(_BandModel(0.0), 0.002)
     assert d0.verdict == "no_mismatch", (d0.excess_before, d0.regime_before)
     assert abs(d0.regime_before["F"]) < 4.0
+
+
+def test_both_lvdt_pitches_alike_are_one_ratio_named_once():
+    # two references of one common physics: folded when both are named and agree (relative to their
+    # references) within 3 combined standard uncertainties, else named each at its place
+    from blf.diagnose import Param, Reference, _reference_effects
+    from sim.replay_model import RATIO
+
+    nominal = tuple(Param(f"gain{k}", 1.0, 1.0, 0.5, 1.5) for k in range(2))
+    r1 = Reference(0, 1.075, "lvdt_pitch", "ema1", "LVDT 1 pitch", "gain_error", 1.0, RATIO)
+    r2 = Reference(1, 0.98, "lvdt_pitch", "ema2", "LVDT 2 pitch", "gain_error", 1.0, RATIO)
+    u = 3e-6
+    alike = [(r1, 1.075 * (1 + 12e-6), 1.075 * u, 40.0, 30.0), (r2, 0.98 * (1 + 16e-6), 0.98 * u, 50.0, 35.0)]
+    (e,) = _reference_effects(alike, (r1, r2), nominal, 10.0)
+    assert (e.name, e.where, e.source) == ("transmission_ratio", "external", "nominal")
+    assert e.parameters["gain_error"] == pytest.approx(14e-6, abs=1e-9)  # equal weights: the mean
+    assert e.uncertainty["gain_error"] == pytest.approx(u / np.sqrt(2), rel=1e-9)
+    assert e.delta_bic == pytest.approx(-(30.0 + 40.0)) and e.delta_chi2_holdout == pytest.approx(-65.0)
+    apart = [alike[0], (r2, 0.98 * (1 + 40e-6), 0.98 * u, 50.0, 35.0)]  # 28e-6 apart > 3 x 4.2e-6
+    assert [(x.name, x.where) for x in _reference_effects(apart, (r1, r2), nominal, 10.0)] == [
+        ("lvdt_pitch", "ema1"), ("lvdt_pitch", "ema2")]
+    (one,) = _reference_effects(alike[:1], (r1, r2), nominal, 10.0)  # the other not named: no fold
+    assert (one.name, one.where) == ("lvdt_pitch", "ema1")
+    assert one.parameters["gain_error"] == pytest.approx(1.075 * (1 + 12e-6) - 1.0)
