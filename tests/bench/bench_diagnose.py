@@ -84,8 +84,10 @@ from support.diagnose_cases import (  # noqa: E402
 #: once (21/25 = 84 % strict, 23/25 by issue 13's rules; out of library 4/4 unexplained but 2/4
 #: located first at the wrong EMA); the places were then ranked by every channel's evidence, the
 #: place of a physics passing at both EMAs decided by the joint fit, and the independent rig's
-#: ratio stated: 100001.. counts as development seeds; 110001.. had never been run.
-FIRST_SEED = 110001
+#: ratio stated: 100001.. counts as development seeds. 110001.. was run once (effect cases 22/25 by
+#: issue 13's rules, 19/25 strict, all cases 30/33); then both LVDT pitches alike were named once
+#: (transmission_ratio), so 110001.. counts as development seeds too; 120001.. had never been run.
+FIRST_SEED = 120001
 FIRST_DEV_SEED = 20001
 
 
