@@ -525,9 +525,12 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
             if not (lin_bic < -cfg.bic_margin and lin_val < -cfg.holdout_margin):
                 continue
             # exact acceptance: the re-adjustment only ranks. First the linearised step itself; if the
-            # replay disagrees with it, nominal and candidate refitted together
-            th_new = clip_nominal(model, theta + beta * scale)
-            pr = safe_predict(model, th_new, active + [(cand, x)])
+            # replay disagrees with it or a bound cuts it (then it is not the bounded optimum: a shared
+            # nominal term held at its bound leaves the rest of its channel unfitted), nominal and
+            # candidate refitted together
+            th_lin = theta + beta * scale
+            th_new = clip_nominal(model, th_lin)
+            pr = safe_predict(model, th_new, active + [(cand, x)]) if np.array_equal(th_new, th_lin) else None
             exact = None
             if pr is not None:
                 wn = p.weighted(pr)

@@ -126,14 +126,30 @@ def _force(u, ac, at, kcv, ktv, cs, p):
 
 
 @njit(cache=True)
-def _solve(x1, x2, y, A, klin, c0):
+def _branch(u, ac, at):
+    """Contact branch of a chain at elongation u: 1 compression flank, -1 tension flank, 0 slack."""
+    if u > ac:
+        return 1
+    if u < at:
+        return -1
+    return 0
+
+
+@njit(cache=True)
+def _solve(x1, x2, y, A, klin, c0, f1, d1, f2, d2):
     """Surface position with g(y) = c0 - klin y + F1(x1 - y) + F2(x2 - y) = 0 (g non-increasing):
-    Newton with the exact slope, safeguarded by bisection, to 1e-13 m. A: per chain ac, at, kcv, ktv, cs, p."""
+    Newton with the exact slope, safeguarded by bisection, to 1e-13 m. A: per chain ac, at, kcv, ktv, cs, p;
+    (f1, d1, f2, d2) the chain forces and slopes at the start value y.
+
+    With linear flanks (p = 0) g is piecewise linear: a Newton step that keeps both chains on their
+    branches lands on the root (to rounding), so it is returned without another evaluation."""
     lo = -1e300
     hi = 1e300
-    for _ in range(80):
-        f1, d1 = _force(x1 - y, A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4], A[0, 5])
-        f2, d2 = _force(x2 - y, A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4], A[1, 5])
+    linear = A[0, 5] == 0.0 and A[1, 5] == 0.0
+    for it in range(80):
+        if it > 0:
+            f1, d1 = _force(x1 - y, A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4], A[0, 5])
+            f2, d2 = _force(x2 - y, A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4], A[1, 5])
         g = c0 - klin * y + f1 + f2
         if g == 0.0:
             return y
@@ -148,6 +164,10 @@ def _solve(x1, x2, y, A, klin, c0):
                 yn = 0.5 * (lo + hi)
             else:
                 yn = y + (1e-4 if g > 0.0 else -1e-4)
+        elif linear and slope < 0.0 \
+                and _branch(x1 - yn, A[0, 0], A[0, 1]) == _branch(x1 - y, A[0, 0], A[0, 1]) \
+                and _branch(x2 - yn, A[1, 0], A[1, 1]) == _branch(x2 - y, A[1, 0], A[1, 1]):
+            return yn
         if abs(yn - y) < 1e-13:
             return yn
         y = yn
@@ -192,16 +212,16 @@ def _replay(xm1, xm2, P, kload, mass, damping, fc_hinge, period, ff1, ff2):
             A[j, 5] = P[j, 7]
         # backward differences: m (y - 2 y1 + y2)/T^2 + c (y - y1)/T
         c0 = mq * (2.0 * y1 - y2) + cq * y1
+        f1, d1 = _force(xm1[k] - y1, A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4], A[0, 5])
+        f2, d2 = _force(xm2[k] - y1, A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4], A[1, 5])
         if fc_hinge > 0.0:
-            f1, _ = _force(xm1[k] - y1, A[0, 0], A[0, 1], A[0, 2], A[0, 3], A[0, 4], A[0, 5])
-            f2, _ = _force(xm2[k] - y1, A[1, 0], A[1, 1], A[1, 2], A[1, 3], A[1, 4], A[1, 5])
             g1 = c0 - klin * y1 + f1 + f2
             if abs(g1) <= fc_hinge:
                 y = y1  # the hinge sticks
             else:
-                y = _solve(xm1[k], xm2[k], y1, A, klin, c0 - (fc_hinge if g1 > 0.0 else -fc_hinge))
+                y = _solve(xm1[k], xm2[k], y1, A, klin, c0 - (fc_hinge if g1 > 0.0 else -fc_hinge), f1, d1, f2, d2)
         else:
-            y = _solve(xm1[k], xm2[k], y, A, klin, c0)
+            y = _solve(xm1[k], xm2[k], y1, A, klin, c0, f1, d1, f2, d2)
         Y[k] = y
         y2 = y1
         y1 = y

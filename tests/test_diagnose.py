@@ -64,6 +64,37 @@ def test_replay_refuses_bad_input():
         replay_chains(np.zeros(5), np.zeros(5), ChainParams(0.1, -1.0, 8e4, 0.05, 5e-5), c, 0.002)
 
 
+
+@pytest.mark.parametrize("progressive_per_mm", [0.0, 0.4])
+@pytest.mark.parametrize("hinge_coulomb_N", [0.0, 40.0])
+def test_replay_surface_balances_its_forces_at_every_sample(progressive_per_mm, hinge_coulomb_N):
+    """Known answer of the surface equation, sample by sample: with backward differences
+    g = F1 + F2 - k y - m (y - 2y' + y'')/T^2 - c (y - y')/T is the hinge friction F_c sign(dy)
+    while the surface moves and within +-F_c while it sticks (to the solver's 1e-13 m), over
+    motor paths that cross both chains' backlash many times, force fight and slack alike."""
+    T, n = 0.002, 6000
+    t = np.arange(n) * T
+    rng = np.random.default_rng(7)
+    x1 = 0.8 * np.sin(2 * np.pi * 0.7 * t) + 0.01 * rng.standard_normal(n).cumsum() / 30
+    x2 = 0.8 * np.sin(2 * np.pi * 0.7 * t + 0.4) + 0.15 * np.sin(2 * np.pi * 3.1 * t)
+    c1 = ChainParams(0.10, 8e4, 6e4, 0.05, 5e-5, 2e4, 0.3, progressive_per_mm)
+    c2 = ChainParams(0.14, 9e4, 9e4, 0.03, 6e-5)
+    k_load, mass, damping = 300.0, 25.0, 0.5  # N/mm, kg, N s/mm
+    tr = replay_chains(x1, x2, c1, c2, T, k_load, mass, damping, hinge_coulomb_N)
+    y = tr.y_mm * 1e-3
+    g = (tr.F_N[:, 0] + tr.F_N[:, 1] - k_load * 1e3 * y)[2:] \
+        - mass * (y[2:] - 2 * y[1:-1] + y[:-2]) / T ** 2 - damping * 1e3 * (y[2:] - y[1:-1]) / T
+    moving = y[2:] != y[1:-1]
+    # 1e-13 m of the stiffest flank pair plus the surface terms, in N
+    tol = 1e-13 * (2 * 9e4 * 1e3 + mass / T ** 2 + damping * 1e3 / T + k_load * 1e3) + 1e-9 * np.abs(tr.F_N).max()
+    fric = hinge_coulomb_N * np.sign(y[2:] - y[1:-1])
+    assert moving.sum() > n // 2
+    assert np.max(np.abs(g - fric)[moving]) < tol
+    if hinge_coulomb_N > 0.0:
+        assert (~moving).sum() > 10
+        assert np.max(np.abs(g[~moving])) <= hinge_coulomb_N + tol
+    assert np.ptp(tr.F_N[:, 0]) > 1e3 and np.any(tr.F_N[:, 0] == 0.0)  # contact and slack both visited
+
 @pytest.mark.slow
 def test_null_is_no_mismatch(tmp_path, short):
     sig, _, _ = _case([], 31002, tmp_path, short)
@@ -350,3 +381,43 @@ def test_both_lvdt_pitches_alike_are_one_ratio_named_once():
     (one,) = _reference_effects(alike[:1], (r1, r2), nominal, 10.0)  # the other not named: no fold
     assert (one.name, one.where) == ("lvdt_pitch", "ema1")
     assert one.parameters["gain_error"] == pytest.approx(1.075 * (1 + 12e-6) - 1.0)
+
+
+class _SharedFrictionModel:
+    """Two force channels sharing a nominal friction c >= 0 (a bound), EMA 1 with a candidate
+    extra friction x: F1 = ref1 + (c + x) sign(v1), F2 = ref2 + c sign(v2), noise sigma 1 N.
+    The recording has 20 N in F1 and -10 N in F2: the unbounded optimum (c = -10, x = 30) lies
+    beyond c's bound, the bounded one is c = 0, x = 20 with F2's 10 N left unexplained."""
+
+    def __init__(self, seed: int = 5):
+        from blf.diagnose import Candidate, Param
+        n = 60000
+        self.t_s = np.arange(n) * 0.002
+        self.sg = (np.sign(np.sin(2 * np.pi * self.t_s / 7.0)), np.sign(np.sin(2 * np.pi * self.t_s / 5.0 + 1.0)))
+        self.ref = (300.0 * np.sin(2 * np.pi * self.t_s / 11.0), 250.0 * np.sin(2 * np.pi * self.t_s / 13.0))
+        rng = np.random.default_rng(seed)
+        self.channels = ("F1", "F2")
+        self.measured = {"F1": self.ref[0] + 20.0 * self.sg[0] + rng.normal(size=n),
+                         "F2": self.ref[1] - 10.0 * self.sg[1] + rng.normal(size=n)}
+        self.valid = {c: np.ones(n, bool) for c in self.channels}
+        self.nominal = (Param("coulomb_N", 5.0, 5.0, 0.0, 100.0),)
+        self.candidates = (Candidate("coulomb_friction", "ema1", "extra friction of EMA 1",
+                                     (Param("force_N", 5.0, 5.0, 0.0, 100.0),), "drive"),)
+        self.regimes = {"velocity 1": self.sg[0], "velocity 2": self.sg[1]}
+
+    def predict(self, theta, active):
+        x = sum(float(p[0]) for _, p in active)
+        return {"F1": self.ref[0] + (theta[0] + x) * self.sg[0], "F2": self.ref[1] + theta[0] * self.sg[1]}
+
+
+def test_an_effect_is_fitted_to_the_bounded_optimum_when_a_bound_cuts_the_linear_step():
+    """The linearised re-adjustment wants the shared nominal friction at -10 N; cut at its bound 0,
+    that step would leave 10 N in F1 with x = 30 N. The accepted effect is the bounded optimum
+    (nominal and candidate refitted together): x = 20 N, c = 0, the rest (F2) unexplained at EMA 2."""
+    d = diagnose(_SharedFrictionModel(), 0.002)
+    (e,) = [e for e in d.effects if e.source == "library"]
+    assert (e.name, e.where) == ("coulomb_friction", "ema1")
+    assert e.parameters["force_N"] == pytest.approx(20.0, abs=0.2), e.parameters
+    assert d.nominal["coulomb_N"] == pytest.approx(0.0, abs=0.1)
+    assert d.residual_rms_after["F1"] < 0.5 * d.residual_rms_before["F1"]
+    assert d.verdict == "unexplained" and d.where[0] == "ema2"
