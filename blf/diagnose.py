@@ -41,7 +41,10 @@ Method
    parameters nonlinear, nominal parameters re-adjusted linearly, i.e.
    variable projection); one is accepted only if its BIC improves by more
    than ``bic_margin`` on the fit half *and* its chi-square improves by more
-   than ``holdout_margin`` on the held-out half. Forward selection, up to
+   than ``holdout_margin`` on the held-out half, judged by a replay at the
+   linearised step, or, where that disagrees or a parameter bound cuts the
+   step (then it is not the bounded optimum), after the nominal and the
+   candidate are refitted together. Forward selection, up to
    ``max_effects``, while a candidate passes both tests. The best
    ``refit_top`` are refitted and every refit that passes on the
    linearisation is tried, best first; when the same physics passes at the
@@ -172,6 +175,10 @@ class DiagnoseConfig:
     min_explained_fraction: float = 0.5  #: of each flagged channel's excess above 1, for "explained"
     regime_bins: int = 10  #: position bins of the regime test (x 2 velocity signs x 2 force signs)
     regime_threshold: float = 5.0  #: regime score S above which a channel differs (S ~ N(0, 1) under noise)
+    #: forms of one physics at one place whose BIC lies within this of the best are indistinguishable
+    #: (Kass and Raftery 1995: a BIC difference below 2 is "not worth more than a bare mention"):
+    #: the one with the fewest parameters, then the first in the library, is named
+    form_margin: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -260,12 +267,13 @@ def place_of(channel: str) -> str:
 def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, margin: float, refit, chi_fit: float,
                         chi_val: float, say) -> list:
     """Among forms of one physics at one place (same ``where`` and non-empty ``variant``, e.g. the
-    friction laws of a drive) with as many parameters, whose refitted BIC lies within ``margin`` of
-    the best, the one listed first in the model's library goes first: the recording cannot tell them
-    apart (at a constant sweep speed Coulomb and viscous friction have the same signature except at
-    the few reversals), and the library lists the simpler law first. A form with more parameters
-    (Stribeck, direction-dependent) earns them by BIC alone. The earlier forms not yet refitted are
-    refitted here."""
+    friction laws of a drive) whose refitted BIC lies within ``margin`` of the best, the one with
+    the fewest parameters goes first, then the one listed first in the model's library (which lists
+    the simpler law first): the recording cannot tell them apart (at the check's two sweep speeds,
+    1-3 mm/s, Coulomb, viscous and Stribeck friction differ only at the few reversals, and a
+    direction-dependent friction at its size looks like a Coulomb one), and the simpler law claims
+    less. Beyond ``margin`` the better BIC decides, so a form with more parameters earns them by
+    evidence. The simpler forms not yet refitted are refitted here."""
     if not refits or not refits[0][2].variant:
         return refits
     best = refits[0][2]
@@ -274,7 +282,7 @@ def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, mar
     for c in library:
         if order[c] >= order[best]:
             break
-        if (c.where, c.variant) != (best.where, best.variant) or len(c.params) != len(best.params) or c in have \
+        if (c.where, c.variant) != (best.where, best.variant) or len(c.params) > len(best.params) or c in have \
                 or c not in pen \
                 or (c.name, c.where) in taken:
             continue
@@ -285,9 +293,8 @@ def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, mar
             refits.append(((chi_f - chi_fit) + pen[c], chi_v - chi_val, c, x, unc, beta))
     refits.sort(key=lambda r: r[0])
     lim = refits[0][0] + margin
-    tied = [r for r in refits if r[0] <= lim and (r[2].where, r[2].variant) == (best.where, best.variant)
-            and len(r[2].params) == len(best.params)]
-    first = min(tied, key=lambda r: order.get(r[2], len(order)))
+    tied = [r for r in refits if r[0] <= lim and (r[2].where, r[2].variant) == (best.where, best.variant)]
+    first = min(tied, key=lambda r: (len(r[2].params), order.get(r[2], len(order))))
     return [first] + [r for r in refits if r is not first]
 
 
@@ -517,7 +524,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
                 x, unc, beta, chi_f, chi_v = fitted
                 refits.append(((chi_f - chi_fit_cur) + pen[cand], chi_v - chi_val_cur, cand, x, unc, beta))
         refits.sort(key=lambda r: r[0])
-        refits = _prefer_simpler_law(refits, model.candidates, pen, taken, cfg.bic_margin,
+        refits = _prefer_simpler_law(refits, model.candidates, pen, taken, cfg.form_margin,
                                      lambda c: fit_candidate(p, proj, theta, active, c), chi_fit_cur, chi_val_cur, say)
         chosen = None
         scale = np.array([q.scale for q in model.nominal])

@@ -421,3 +421,44 @@ def test_an_effect_is_fitted_to_the_bounded_optimum_when_a_bound_cuts_the_linear
     assert d.nominal["coulomb_N"] == pytest.approx(0.0, abs=0.1)
     assert d.residual_rms_after["F1"] < 0.5 * d.residual_rms_before["F1"]
     assert d.verdict == "unexplained" and d.where[0] == "ema2"
+
+
+def test_forms_of_one_physics_within_two_bic_units_name_the_simpler():
+    """Parsimony among the friction laws of one drive: within form_margin (2) of the best BIC the
+    form with the fewest parameters is named, then the library's first; beyond it the better BIC
+    decides. A simpler form not yet refitted is refitted for the comparison; another place or
+    variant never takes part."""
+    from blf.diagnose import Candidate, DiagnoseConfig, Param, _prefer_simpler_law
+
+    def cand(name, n, where="ema1", variant="drive"):
+        return Candidate(name, where, name, tuple(Param(f"p{k}", 1.0, 1.0) for k in range(n)), variant)
+
+    cou, vis, stri, asym = cand("coulomb_friction", 1), cand("viscous_friction", 1), \
+        cand("stribeck_friction", 2), cand("asymmetric_friction", 2)
+    other = cand("coulomb_friction", 1, where="ema2")
+    lib = (cou, vis, stri, asym, other)
+    pen = {c: 8.0 * len(c.params) for c in lib}
+    margin = DiagnoseConfig().form_margin
+    assert margin == 2.0
+
+    def row(bic, c):
+        return (bic, -20.0, c, np.ones(len(c.params)), np.ones(len(c.params)), np.zeros(3))
+
+    def first(refits, refit=lambda c: None):
+        return _prefer_simpler_law(list(refits), lib, pen, set(), margin, refit, 100.0, 100.0, lambda s: None)[0][2]
+
+    # a direction-dependent fit 1.3 better than Coulomb: indistinguishable, Coulomb named
+    assert first([row(-45.4, asym), row(-44.1, cou), row(-40.0, stri)]) is cou
+    # 3.5 better: evidence, the direction-dependent law named (not Stribeck by library order)
+    assert first([row(-27.4, asym), row(-23.9, vis), row(-17.8, stri)]) is asym
+    assert first([row(-27.4, asym), row(-26.0, stri)]) is stri  # same count, within 2: the library's first
+    assert first([row(-30.0, asym), row(-29.5, other)]) is asym  # another place is another question
+    # the simpler forms not among the refits are refitted here (Coulomb: chi2 on the fit half
+    # 46 - 100 + pen 8 = -46, within 1 of the best)
+    calls = []
+
+    def refit(c):
+        calls.append(c.name)
+        return (np.ones(1), np.ones(1), np.zeros(3), 46.0, 80.0) if c is cou else None
+    assert first([row(-47.0, asym)], refit) is cou
+    assert calls == ["coulomb_friction", "viscous_friction", "stribeck_friction"]
