@@ -583,6 +583,14 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
               f"held-out half by {-dval:.0f}; "
               + (f"next best candidate {others[0][2].name} at {others[0][2].where} explains {others[0][1]:.0f} "
                  f"(linearised)" if others else "no other candidate"))
+        # the forms of this physics the recording could not tell from it (step 5): said, not hidden
+        forms = [r for r in refits if cand.variant and (r[2].where, r[2].variant) == (cand.where, cand.variant)]
+        if forms:
+            low = min(r[0] for r in forms)
+            alike = [r for r in forms if r[2] is not cand and r[0] <= low + cfg.form_margin]
+            if alike:
+                ev += (f"; as good within {cfg.form_margin:g} BIC units, so the form with the fewest parameters is "
+                       "named: " + ", ".join(f"{r[2].name} (BIC {r[0]:+.1f}, linearised)" for r in alike))
         accepted.append(FittedEffect(cand.name, cand.where, cand.words,
                                      {q.name: float(v) for q, v in zip(cand.params, x)},
                                      {q.name: float(u) for q, u in zip(cand.params, unc)},

@@ -462,3 +462,36 @@ def test_forms_of_one_physics_within_two_bic_units_name_the_simpler():
         return (np.ones(1), np.ones(1), np.zeros(3), 46.0, 80.0) if c is cou else None
     assert first([row(-47.0, asym)], refit) is cou
     assert calls == ["coulomb_friction", "viscous_friction", "stribeck_friction"]
+
+
+class _TwoLawsModel:
+    """One force channel with a friction of 20 N at a constant speed of 1 mm/s: Coulomb (force_N)
+    and viscous (N s/mm) friction have the same signature there; the nominal is the gain."""
+
+    def __init__(self, seed: int = 9):
+        from blf.diagnose import Candidate, Param
+        n = 40000
+        self.t_s = np.arange(n) * 0.002
+        self.v = np.sign(np.sin(2 * np.pi * self.t_s / 6.0))  # mm/s
+        self.ref = 200.0 * np.sin(2 * np.pi * self.t_s / 9.0)
+        self.channels = ("F1",)
+        self.measured = {"F1": 1.01 * self.ref + 20.0 * self.v + np.random.default_rng(seed).normal(size=n)}
+        self.valid = {"F1": np.ones(n, bool)}
+        self.nominal = (Param("gain", 1.0, 0.1, 0.5, 2.0),)
+        self.candidates = tuple(Candidate(name, "ema1", name, (Param(pn, 5.0, 5.0, 0.0, 100.0),), "drive")
+                                for name, pn in (("coulomb_friction", "force_N"),
+                                                 ("viscous_friction", "coeff_N_s_per_mm")))
+        self.regimes = {"velocity": self.v}
+
+    def predict(self, theta, active):
+        return {"F1": theta[0] * self.ref + sum(float(p[0]) for _, p in active) * self.v}
+
+
+def test_a_form_the_recording_cannot_tell_apart_is_named_beside_the_one_taken():
+    """At one speed Coulomb and viscous friction fit alike: Coulomb (the library's first) is named,
+    20 N, and its evidence says viscous friction fitted as well, with its BIC."""
+    d = diagnose(_TwoLawsModel(), 0.002)
+    (e,) = d.effects
+    assert (e.name, e.where) == ("coulomb_friction", "ema1") and d.verdict == "explained"
+    assert e.parameters["force_N"] == pytest.approx(20.0, abs=0.1)
+    assert "as good within 2 BIC units" in e.evidence and "viscous_friction (BIC -" in e.evidence, e.evidence
