@@ -264,6 +264,16 @@ def place_of(channel: str) -> str:
     return "external"
 
 
+def _forms_alike(refits: list, where: str, variant: str, margin: float) -> list:
+    """The refits of the forms of one physics at ``where`` (``variant``) whose BIC lies within
+    ``margin`` of the best of them: the forms the recording cannot tell apart (step 5)."""
+    forms = [r for r in refits if variant and (r[2].where, r[2].variant) == (where, variant)]
+    if not forms:
+        return []
+    lim = min(r[0] for r in forms) + margin
+    return [r for r in forms if r[0] <= lim]
+
+
 def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, margin: float, refit, chi_fit: float,
                         chi_val: float, say) -> list:
     """Among forms of one physics at one place (same ``where`` and non-empty ``variant``, e.g. the
@@ -292,8 +302,7 @@ def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, mar
             x, unc, beta, chi_f, chi_v = fitted
             refits.append(((chi_f - chi_fit) + pen[c], chi_v - chi_val, c, x, unc, beta))
     refits.sort(key=lambda r: r[0])
-    lim = refits[0][0] + margin
-    tied = [r for r in refits if r[0] <= lim and (r[2].where, r[2].variant) == (best.where, best.variant)]
+    tied = _forms_alike(refits, best.where, best.variant, margin)
     first = min(tied, key=lambda r: (len(r[2].params), order.get(r[2], len(order))))
     return [first] + [r for r in refits if r is not first]
 
@@ -584,13 +593,10 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
               + (f"next best candidate {others[0][2].name} at {others[0][2].where} explains {others[0][1]:.0f} "
                  f"(linearised)" if others else "no other candidate"))
         # the forms of this physics the recording could not tell from it (step 5): said, not hidden
-        forms = [r for r in refits if cand.variant and (r[2].where, r[2].variant) == (cand.where, cand.variant)]
-        if forms:
-            low = min(r[0] for r in forms)
-            alike = [r for r in forms if r[2] is not cand and r[0] <= low + cfg.form_margin]
-            if alike:
-                ev += (f"; as good within {cfg.form_margin:g} BIC units, so the form with the fewest parameters is "
-                       "named: " + ", ".join(f"{r[2].name} (BIC {r[0]:+.1f}, linearised)" for r in alike))
+        alike = [r for r in _forms_alike(refits, cand.where, cand.variant, cfg.form_margin) if r[2] is not cand]
+        if alike:
+            ev += (f"; as good within {cfg.form_margin:g} BIC units, so the form with the fewest parameters is "
+                   "named: " + ", ".join(f"{r[2].name} (BIC {r[0]:+.1f}, linearised)" for r in alike))
         accepted.append(FittedEffect(cand.name, cand.where, cand.words,
                                      {q.name: float(v) for q, v in zip(cand.params, x)},
                                      {q.name: float(u) for q, u in zip(cand.params, unc)},
