@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from hil.canopen.signalmap import SignalMap
+
 
 def _rng(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
          hard_max: float | None = None, doc: str = "") -> dict:
@@ -31,7 +33,6 @@ class Mechanics:
 
 @dataclass(frozen=True)
 class Sensors:
-    resolver_counts_per_rev: int = field(metadata=_rng(16, 1 << 24))
     lvdt_full_scale_mm: float = field(metadata=_rng(0.0, 500.0, lo_open=True))
     lvdt_noise_pp_mm: float = field(metadata=_rng(0.0, 1.0, lo_open=True))
     loadcell_noise_std_N: float = field(metadata=_rng(0.0, 1e4, lo_open=True))
@@ -69,6 +70,22 @@ class Canopen:
     #: default): the drives' own reaction (consumer heartbeat 0x1016 + abort connection option 0x6007)
     #: is required, and a drive that lacks or refuses it stops the preflight
     external_watchdog: str = ""
+    #: how the EMAs hold a force: "auto" (CST where the drive offers it, else "csp"), "cst" (the drive's
+    #: cyclic synchronous torque mode, 0x6071), "csp" (the master's own force loop in CSP)
+    force_control: str = "auto"
+    #: an object of the drives that reports the gear ratio i_total [rad/mm] (REAL32), compared in the
+    #: preflight with mechanics.i_total_rad_per_mm; "" (the default): the drives report none
+    gear_ratio_object: str = ""
+    #: a mode change (0x6060) must show in the modes display 0x6061 within this [s]
+    mode_change_timeout_s: float = field(default=0.1, metadata=_rng(0.004, 10.0))
+    #: fault resets tried on a drive found in FAULT at power-up before the check is refused
+    fault_reset_attempts: int = field(default=3, metadata=_rng(1, 10))
+    #: from QUICK STOP ACTIVE the master commands disable voltage once the drive stands still, or at
+    #: the latest after this [s]
+    quick_stop_timeout_s: float = field(default=1.0, metadata=_rng(0.01, 10.0))
+    #: the master's-death drill (docs/drives.md) runs before every check; a sentence here saying why
+    #: skips it (quoted in the run folder and the report); "" (the default) runs it
+    skip_master_loss_drill: str = ""
 
     @property
     def node_ids(self) -> tuple[int, int]:
@@ -105,6 +122,9 @@ class Actuation:
     timing: Timing
     canopen: Canopen
     history: HistorySettings = field(default_factory=HistorySettings)
+    #: where each signal of the check lives (``[signals.ema1]``, ``[signals.ema2]``, ``[nodes.NAME]``);
+    #: set by :func:`hil.profiles.load_actuation`
+    signals: SignalMap | None = None
 
     @property
     def sample_rate_Hz(self) -> float:

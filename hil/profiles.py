@@ -14,12 +14,16 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
 import tomllib
 import typing
 from dataclasses import dataclass, field
+from enum import Enum
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from canopen.objectdictionary import datatypes
 
 from hil.config import (
     HARD_FORCE_FIGHT_FRACTION,
@@ -28,6 +32,23 @@ from hil.config import (
     HARD_MAX_FORCE_IMBALANCE_FRACTION,
     Actuation,
     Check,
+)
+from hil.canopen.errors import InputError
+from hil.canopen.signalmap import (
+    DEFAULT_OBJECTS,
+    DRIVE_ROLE,
+    DeviceProfile,
+    ForceControl,
+    NodeRole,
+    NodeSpec,
+    Scale,
+    ScaleSource,
+    Signal,
+    SignalEntry,
+    SignalMap,
+    angle_scale_counts,
+    parse_object,
+    torque_scale,
 )
 from hil.errors import ProfileError
 from sim import effects as sim_effects
@@ -138,20 +159,27 @@ def build_dataclass(cls: type, table: Any, fname: str, where: str = "",
 
 
 def load_actuation(path: str | Path | None = None) -> Actuation:
-    """Load and validate an actuation profile (default: the shipped one)."""
+    """Load and validate an actuation profile (default: the shipped one), its signal map included."""
     path = Path(path) if path is not None else default_profile_path("actuation.toml")
-    act = build_dataclass(Actuation, _read_toml(path), path.name)
-    if act.canopen.node_id_ema1 == act.canopen.node_id_ema2:
-        raise ProfileError(f"{path.name}: fields 'canopen.node_id_ema1' and 'canopen.node_id_ema2' "
-                           f"are both {act.canopen.node_id_ema1}; the drives need distinct node ids")
+    fname = path.name
+    data = _read_toml(path)
+    _refuse_moved(data, fname)
+    signals = data.pop("signals", None)
+    nodes = data.pop("nodes", {})
+    co = data.get("canopen")
+    cob_ids = co.pop("cob_ids", {}) if isinstance(co, dict) else {}
+    act = build_dataclass(Actuation, data, fname)
     c = act.canopen
+    if c.node_id_ema1 == c.node_id_ema2:
+        raise ProfileError(f"{fname}: fields 'canopen.node_id_ema1' and 'canopen.node_id_ema2' "
+                           f"are both {c.node_id_ema1}; the drives need distinct node ids")
     for name in ("node_id_ema1", "node_id_ema2"):
         if getattr(c, name) == c.master_node_id:
-            raise ProfileError(f"{path.name}: fields 'canopen.master_node_id' and 'canopen.{name}' are both "
+            raise ProfileError(f"{fname}: fields 'canopen.master_node_id' and 'canopen.{name}' are both "
                                f"{c.master_node_id}; the master's heartbeat needs a node id of its own")
     consumer_ms = c.master_consumer_time_s * 1000.0
     if not 1.0 <= consumer_ms <= 0xFFFF:
-        raise ProfileError(f"{path.name}: fields 'canopen.master_heartbeat_consumer_factor' * "
+        raise ProfileError(f"{fname}: fields 'canopen.master_heartbeat_consumer_factor' * "
                            f"'canopen.master_heartbeat_period_s' give a consumer heartbeat time of "
                            f"{consumer_ms:g} ms; 0x1016 holds 1..65535 ms")
     if act.history.url:
@@ -161,28 +189,242 @@ def load_actuation(path: str | Path | None = None) -> Actuation:
         try:
             check_url(act.history.url)
         except HistoryInputError as exc:
-            raise ProfileError(f"{path.name}: field 'history.url': {exc}") from None
-    if c.external_watchdog != c.external_watchdog.strip() or "\n" in c.external_watchdog:
-        raise ProfileError(f"{path.name}: field 'canopen.external_watchdog' must be one line without "
-                           f"leading or trailing blanks (it is quoted in the run folder)")
-    return act
+            raise ProfileError(f"{fname}: field 'history.url': {exc}") from None
+    for name in ("external_watchdog", "skip_master_loss_drill"):
+        text = getattr(c, name)
+        if text != text.strip() or "\n" in text:
+            raise ProfileError(f"{fname}: field 'canopen.{name}' must be one line without "
+                               f"leading or trailing blanks (it is quoted in the run folder)")
+    return dataclasses.replace(act, signals=load_signal_map(signals, nodes, cob_ids, act, fname))
 
 
-def resolve_eds(act: Actuation, profile_path: str | Path | None) -> Path:
-    """Path of the EDS an actuation profile names (relative to the profile, else shipped)."""
-    name = act.canopen.eds
+#: Keys of earlier actuation profiles and where they went.
+_MOVED = {("sensors", "resolver_counts_per_rev"): "signals.ema1.motor_angle.counts_per_rev (and ema2)"}
+
+
+def _refuse_moved(data: dict, fname: str) -> None:
+    for (table, key), where in _MOVED.items():
+        if isinstance(data.get(table), dict) and key in data[table]:
+            raise ProfileError(f"{fname}: field '{table}.{key}' has moved to '{where}' (docs/drives.md)")
+
+
+def resolve_eds(name: str, profile_path: str | Path | None, key: str = "canopen.eds",
+                override: str | Path | None = None) -> Path:
+    """Path of an EDS a profile names: ``override`` (``--eds``) if given, else relative to the
+    profile, else an absolute path, else a shipped one; ProfileError naming ``key`` if none exists."""
+    if override is not None:
+        p = Path(override)
+        if not p.is_file():
+            raise ProfileError(f"--eds {override}: no such file")
+        return p
     if profile_path is not None:
         p = Path(profile_path).parent / name
-        if p.exists():
+        if p.is_file():
             return p
     p = Path(name)
-    if p.is_absolute() and p.exists():
+    if p.is_absolute() and p.is_file():
         return p
     shipped = default_profile_path(name)
-    if shipped.exists():
+    if shipped.is_file():
         return shipped
-    raise ProfileError(f"actuation profile: field 'canopen.eds' = {name!r}: no such EDS "
-                       f"(looked next to the profile and among the shipped profiles)")
+    raise ProfileError(f"actuation profile: field '{key}' = {name!r}: no such EDS (looked next to the profile "
+                       f"and among the shipped profiles; give its path with --eds PATH)")
+
+
+# ----------------------------------------------------------------- the signal map
+
+#: Keys of a signal's table besides ``object``, ``node`` and ``type``, per signal.
+_SCALE_KEYS = {
+    Signal.MOTOR_ANGLE: ("counts_per_rev", "rad_per_unit", "units"),
+    Signal.LVDT: ("mm_per_unit", "offset_mm"),
+    Signal.FORCE: ("N_per_unit", "offset_N"),
+    Signal.TARGET_TORQUE: ("rated_torque_Nm",),
+}
+#: The signals a profile must place (the others default to the drive's CiA 402 objects).
+_REQUIRED_SIGNALS = (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE)
+_TYPES = {k: v for k, v in vars(datatypes).items() if k.isupper() and isinstance(v, int) and k != "SIGNED_TYPES"}
+_ANGLE_UNITS = {"0x608F": ScaleSource.ENCODER, "0x6091/0x6092": ScaleSource.FACTOR_GROUP}
+_NODE_NAME = re.compile(r"^[a-z][a-z0-9_]{0,31}$")
+
+
+def _table(value: Any, where: str, fname: str) -> dict:
+    if not isinstance(value, dict):
+        raise ProfileError(f"{fname}: '{where}' must be a table")
+    return value
+
+
+def _number(tbl: dict, key: str, where: str, fname: str, *, nonzero: bool = False, positive: bool = False,
+            default: float | None = None) -> float | None:
+    if key not in tbl:
+        return default
+    v = _convert_scalar(tbl[key], float, f"{where}.{key}", fname)
+    if (nonzero or positive) and v == 0.0:
+        raise ProfileError(f"{fname}: field '{where}.{key}' = {v:g}: a scaling of zero maps every raw value "
+                           f"to the same reading")
+    if positive and v < 0.0:
+        raise ProfileError(f"{fname}: field '{where}.{key}' = {v:g} must be > 0")
+    return v
+
+
+def _signal_entry(sig: Signal, ema: int, tbl: Any, act: Actuation, fname: str) -> SignalEntry:
+    where = f"signals.ema{ema}.{sig.value}"
+    tbl = _table(tbl, where, fname)
+    _check_keys(tbl, ["object", "node", "type", *_SCALE_KEYS.get(sig, ())], where + ".", fname)
+    default = DEFAULT_OBJECTS.get(sig)
+    if "object" not in tbl and default is None:
+        raise ProfileError(f"{fname}: missing field '{where}.object' (e.g. \"0x6401:01\")")
+    try:
+        index, sub = parse_object(tbl["object"], f"{where}.object") if "object" in tbl else default
+    except InputError as exc:
+        raise ProfileError(f"{fname}: field {exc}") from None
+    node = tbl.get("node", f"ema{ema}")
+    if not isinstance(node, str):
+        raise ProfileError(f"{fname}: field '{where}.node' must be a node name, got {node!r}")
+    data_type = None
+    if "type" in tbl:
+        t = tbl["type"]
+        if t not in _TYPES:
+            close = difflib.get_close_matches(str(t), list(_TYPES), n=1, cutoff=0.5)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ProfileError(f"{fname}: field '{where}.type' = {t!r} is not a CiA 301 data type{hint}")
+        data_type = _TYPES[t]
+    scale, source = None, ScaleSource.PROFILE
+    if sig is Signal.MOTOR_ANGLE:
+        given = [k for k in _SCALE_KEYS[sig] if k in tbl]
+        if len(given) != 1:
+            raise ProfileError(f"{fname}: '{where}' needs exactly one of counts_per_rev (increments per motor "
+                               f"revolution), rad_per_unit, units = \"0x608F\" or \"0x6091/0x6092\" "
+                               f"(as read from the drive); got {given or 'none'}")
+        if "counts_per_rev" in tbl:
+            counts = _convert_scalar(tbl["counts_per_rev"], int, f"{where}.counts_per_rev", fname)
+            _check_range(counts, {"lo": 1, "hi": 2**32 - 1}, f"{where}.counts_per_rev", fname)
+            scale = angle_scale_counts(counts)
+        elif "rad_per_unit" in tbl:
+            scale = Scale.per_unit(_number(tbl, "rad_per_unit", where, fname, nonzero=True))
+        else:
+            units = tbl["units"]
+            if units not in _ANGLE_UNITS:
+                raise ProfileError(f"{fname}: field '{where}.units' = {units!r}: \"0x608F\" (increments per "
+                                   f"revolution as read) or \"0x6091/0x6092\" (user units as read)")
+            source = _ANGLE_UNITS[units]
+    elif sig is Signal.LVDT:
+        if "mm_per_unit" not in tbl:
+            raise ProfileError(f"{fname}: missing field '{where}.mm_per_unit' (mm of stroke per raw unit)")
+        scale = Scale.per_unit(_number(tbl, "mm_per_unit", where, fname, nonzero=True),
+                               _number(tbl, "offset_mm", where, fname, default=0.0))
+    elif sig is Signal.FORCE:
+        if "N_per_unit" not in tbl:
+            raise ProfileError(f"{fname}: missing field '{where}.N_per_unit' (N of force per raw unit)")
+        scale = Scale.per_unit(_number(tbl, "N_per_unit", where, fname, nonzero=True),
+                               _number(tbl, "offset_N", where, fname, default=0.0))
+    elif sig is Signal.TARGET_TORQUE:
+        rated = _number(tbl, "rated_torque_Nm", where, fname, positive=True)
+        if rated is None:
+            source = ScaleSource.RATED_TORQUE
+        else:
+            scale = torque_scale(rated, act.mechanics.i_total_rad_per_mm)
+    return SignalEntry(sig, ema, node, index, sub, data_type, scale, source, where)
+
+
+def _node_spec(name: str, tbl: Any, act: Actuation, fname: str) -> NodeSpec:
+    where = f"nodes.{name}"
+    if not _NODE_NAME.match(name) or name in DRIVE_ROLE:
+        raise ProfileError(f"{fname}: table '{where}': a node name is lower-case letters, digits and _ "
+                           f"(ema1 and ema2 are the drives)")
+    tbl = _table(tbl, where, fname)
+    known = ["node_id", "eds", "vendor_id", "product_code", "revision_min", "device_profile", "heartbeat_period_s"]
+    _check_keys(tbl, known, where + ".", fname)
+    for k in known[:-1]:
+        if k not in tbl and k != "device_profile":
+            raise ProfileError(f"{fname}: missing field '{where}.{k}'")
+    nid = _convert_scalar(tbl["node_id"], int, f"{where}.node_id", fname)
+    _check_range(nid, {"lo": 1, "hi": 127}, f"{where}.node_id", fname)
+    eds = _convert_scalar(tbl["eds"], str, f"{where}.eds", fname)
+    ident = []
+    for k in ("vendor_id", "product_code", "revision_min"):
+        v = _convert_scalar(tbl[k], int, f"{where}.{k}", fname)
+        _check_range(v, {"lo": 0, "hi": 0xFFFF_FFFF}, f"{where}.{k}", fname)
+        ident.append(v)
+    profile = _convert_scalar(tbl.get("device_profile", 401), int, f"{where}.device_profile", fname)
+    if profile not in (DeviceProfile.IO, DeviceProfile.MEASURING):
+        raise ProfileError(f"{fname}: field '{where}.device_profile' = {profile}: a sensor node is a CiA 401 "
+                           f"I/O module (401) or a CiA 404 measuring device (404)")
+    hb = act.canopen.heartbeat_period_s
+    if "heartbeat_period_s" in tbl:
+        hb = _convert_scalar(tbl["heartbeat_period_s"], float, f"{where}.heartbeat_period_s", fname)
+        _check_range(hb, {"lo": 0.01, "hi": 10.0}, f"{where}.heartbeat_period_s", fname)
+    return NodeSpec(name, NodeRole.SENSORS, nid, eds, *ident, profile, hb, where)
+
+
+def load_signal_map(signals: Any, nodes: Any, cob_ids: Any, act: Actuation, fname: str) -> SignalMap:
+    """``[signals.ema1]``, ``[signals.ema2]``, ``[nodes.NAME]`` and ``canopen.cob_ids`` -> :class:`SignalMap`.
+
+    Every error names the profile field (docs/drives.md describes the tables)."""
+    if signals is None:
+        raise ProfileError(f"{fname}: missing tables '[signals.ema1]' and '[signals.ema2]': where each signal "
+                           f"of the check lives (docs/drives.md)")
+    signals = _table(signals, "signals", fname)
+    _check_keys(signals, ["ema1", "ema2"], "signals.", fname)
+    c = act.canopen
+    drives = tuple(NodeSpec(f"ema{k}", NodeRole.DRIVE, nid, c.eds, c.vendor_id, c.product_code, c.revision_min,
+                            DeviceProfile.DRIVE, c.heartbeat_period_s, "canopen")
+                   for k, nid in ((1, c.node_id_ema1), (2, c.node_id_ema2)))
+    extra = tuple(_node_spec(str(n), t, act, fname) for n, t in _table(nodes, "nodes", fname).items())
+    seen = {c.master_node_id: "canopen.master_node_id", c.node_id_ema1: "canopen.node_id_ema1",
+            c.node_id_ema2: "canopen.node_id_ema2"}
+    for n in extra:
+        if n.node_id in seen:
+            raise ProfileError(f"{fname}: fields '{n.key}.node_id' and '{seen[n.node_id]}' are both {n.node_id}; "
+                               f"every node needs a node id of its own")
+        seen[n.node_id] = f"{n.key}.node_id"
+    names = {n.name for n in drives + extra}
+    entries = []
+    for ema in (1, 2):
+        key = f"ema{ema}"
+        if key not in signals:
+            raise ProfileError(f"{fname}: missing table '[signals.{key}]'")
+        tbl = _table(signals[key], f"signals.{key}", fname)
+        _check_keys(tbl, [x.value for x in Signal], f"signals.{key}.", fname)
+        for sig in _REQUIRED_SIGNALS:
+            if sig.value not in tbl:
+                raise ProfileError(f"{fname}: missing field 'signals.{key}.{sig.value}' (where the check reads "
+                                   f"EMA {ema}'s {sig.value.replace('_', ' ')}; docs/drives.md)")
+        for sig in Signal:
+            e = _signal_entry(sig, ema, tbl.get(sig.value, {}), act, fname)
+            if e.node not in names:
+                raise ProfileError(f"{fname}: field '{e.key}.node' = {e.node!r} is not a node of the rig "
+                                   f"(ema1, ema2{''.join(', ' + n.name for n in extra)})")
+            entries.append(e)
+        # the target position is in the units of the drive's position actual value: the motor angle's scaling
+        angle = next(e for e in entries if e.ema == ema and e.signal is Signal.MOTOR_ANGLE)
+        k = next(i for i, e in enumerate(entries) if e.ema == ema and e.signal is Signal.TARGET_POSITION)
+        entries[k] = dataclasses.replace(entries[k], scale=angle.scale, source=angle.source)
+    try:
+        fc = ForceControl(c.force_control)
+    except ValueError:
+        raise ProfileError(f"{fname}: field 'canopen.force_control' = {c.force_control!r}: \"auto\", \"cst\" "
+                           f"or \"csp\"") from None
+    if c.gear_ratio_object:
+        try:
+            parse_object(c.gear_ratio_object, "canopen.gear_ratio_object")
+        except InputError as exc:
+            raise ProfileError(f"{fname}: field {exc}") from None
+    cobs = []
+    for k, v in _table(cob_ids, "canopen.cob_ids", fname).items():
+        m = re.fullmatch(r"([a-z][a-z0-9_]*)\.([TR]PDO)([1-9]\d{0,2})", str(k))
+        if m is None or m.group(1) not in names:
+            raise ProfileError(f"{fname}: field 'canopen.cob_ids.{k}': a key is NODE.TPDOn or NODE.RPDOn with "
+                               f"NODE one of {', '.join(sorted(names))}")
+        cob = _convert_scalar(v, int, f"canopen.cob_ids.{k}", fname)
+        _check_range(cob, {"lo": 1, "hi": 0x7FF}, f"canopen.cob_ids.{k}", fname)
+        cobs.append((m.group(1), m.group(2) + m.group(3), cob))
+    return SignalMap(drives + extra, tuple(entries), fc, tuple(cobs))
+
+
+def gear_ratio_object(act: Actuation) -> tuple[int, int] | None:
+    """The drives' gear-ratio object of ``canopen.gear_ratio_object``, None when the profile names none."""
+    g = act.canopen.gear_ratio_object
+    return parse_object(g, "canopen.gear_ratio_object") if g else None
 
 
 def load_check(path: str | Path | None = None, actuation: Actuation | None = None) -> Check:
@@ -409,6 +651,8 @@ def snapshot(obj: Any) -> Any:
         if hasattr(obj, "name") and isinstance(getattr(type(obj), "NAME", None), str):
             out["name"] = type(obj).NAME
         return out
+    if isinstance(obj, Enum):
+        return obj.value
     if isinstance(obj, (tuple, list)):
         return [snapshot(x) for x in obj]
     if isinstance(obj, dict):

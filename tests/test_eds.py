@@ -19,7 +19,7 @@ from hil.canopen.od import (
     decode_value,
     default_eds_path,
     encode_value,
-    load_drive_od,
+    load_eds,
     master_loss_steps,
     od_variable,
     required_objects,
@@ -29,7 +29,7 @@ from hil.canopen.pdo import DEFAULT_LAYOUT
 
 @pytest.fixture(scope="module")
 def od():
-    return load_drive_od(node_id=2)
+    return load_eds(node_id=2)
 
 
 def default(od, index, sub=0):
@@ -38,7 +38,7 @@ def default(od, index, sub=0):
 
 def test_shipped_eds_loads_and_passes_the_check(od):
     check_drive_od(od)
-    check_drive_od(load_drive_od())  # without node id ($NODEID defaults unresolved) too
+    check_drive_od(load_eds())  # without node id ($NODEID defaults unresolved) too
     info = od.device_information
     assert (info.vendor_name, info.product_name) == ("emacheck", "EMA drive (simulated)")
     assert (info.vendor_number, info.product_number, info.revision_number) == (0x0E3A, 0x0402, 0x00010000)
@@ -69,7 +69,7 @@ def test_pdo_defaults_equal_the_layout(od):
         assert default(od, p.mapping_index, 0) == len(p.entries), p.name
         got = [default(od, p.mapping_index, k) for k in range(1, 9)]
         assert got == [e.mapping_entry for e in p.entries] + [0] * (8 - len(p.entries)), p.name
-    assert od_variable(load_drive_od(), 0x1800, 1).default_raw == "$NODEID+0x180"
+    assert od_variable(load_eds(), 0x1800, 1).default_raw == "$NODEID+0x180"
 
 
 def test_required_objects_cover_the_layout():
@@ -125,7 +125,7 @@ def _broken(tmp_path: Path, section: str, key: str | None = None, value: str = "
 ])
 def test_broken_eds_refused_with_object_named(tmp_path, section, key, value, message):
     path = _broken(tmp_path, section, key, value)
-    od = load_drive_od(path, node_id=1)
+    od = load_eds(path, node_id=1)
     with pytest.raises(EdsError, match=message) as exc:
         check_drive_od(od, source=str(path))
     assert str(exc.value).startswith(f"{path}: ")
@@ -135,16 +135,16 @@ def test_broken_eds_refused_with_object_named(tmp_path, section, key, value, mes
 def test_unchanged_copy_passes(tmp_path):
     text = default_eds_path().read_text()
     assert "\n\n".join("\n".join(b) for b in _sections(text)) + "\n" == text
-    check_drive_od(load_drive_od(_broken(tmp_path, "6041", "DefaultValue", "0x0000")))
+    check_drive_od(load_eds(_broken(tmp_path, "6041", "DefaultValue", "0x0000")))
 
 
 def test_missing_or_garbage_eds(tmp_path):
     with pytest.raises(EdsError, match="EDS not found"):
-        load_drive_od(tmp_path / "nope.eds")
+        load_eds(tmp_path / "nope.eds")
     bad = tmp_path / "bad.eds"
     bad.write_text("[DeviceInfo]\nVendorName=x\n\n[6041]\nObjectType=0x7\n")  # no ParameterName
     with pytest.raises(EdsError, match="bad.eds: not a valid EDS"):
-        load_drive_od(bad)
+        load_eds(bad)
 
 
 def test_master_loss_objects_in_the_shipped_eds(od):
@@ -169,7 +169,7 @@ def test_master_loss_objects_in_the_shipped_eds(od):
 
 
 def test_eds_without_the_reaction_passes_only_where_the_rig_states_another(tmp_path):
-    od = load_drive_od(_broken(tmp_path, "6007"), node_id=1)
+    od = load_eds(_broken(tmp_path, "6007"), node_id=1)
     with pytest.raises(EdsError, match=r"0x6007:00 \(abort connection option code\) is missing"):
         check_drive_od(od)
     check_drive_od(od, master_loss=False)  # (canopen.external_watchdog states the other protection)

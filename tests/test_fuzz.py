@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from hil.canopen.frame import Frame
-from hil.canopen.od import load_drive_od
+from hil.canopen.od import load_eds
 from hil.canopen.process import DriveMode, Setpoint
 from hil.errors import KNOWN_ERRORS, ProfileError
 from hil.link import CanopenLink
@@ -45,7 +45,7 @@ def cyclic():
     """A link in the cyclic phase on its own virtual channel (python-can virtual channels are
     process-global by name: a shared name would let other tests' traffic in)."""
     pair = SimDrivePair(RigPlant(SIM.params, np.random.default_rng(1)),
-                        lambda node_id=None: load_drive_od(None, node_id=node_id))
+                        lambda node_id=None: load_eds(None, node_id=node_id))
     tr = InProcessTransport(pair, ACT.timing.sync_period_s, channel="emacheck-fuzz-test")
     link = CanopenLink(MasterCore(ACT), tr)
     state = {"link": link, "smp": link.first_sample()}

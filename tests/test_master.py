@@ -15,7 +15,7 @@ import pytest
 from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
-from hil.canopen.od import load_drive_od
+from hil.canopen.od import load_eds
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortError
 from hil.master import DriveFault, HeartbeatLost, MasterCore, MasterLossReactionError, PreflightError
@@ -67,7 +67,7 @@ class Pump:
 @pytest.fixture()
 def pair(simrig):
     plant = RigPlant(simrig.params, np.random.default_rng(1))
-    return SimDrivePair(plant, lambda node_id=None: load_drive_od(None, node_id=node_id))
+    return SimDrivePair(plant, lambda node_id=None: load_eds(None, node_id=node_id))
 
 
 def _preflight(actuation, pair):
@@ -188,7 +188,7 @@ def test_orderly_shutdown_and_quick_stop(actuation, pair):
     assert dedup == [0x07, 0x06, 0x00]  # disable operation, shutdown, disable voltage
     # quick stop on abort
     m2, p2 = _preflight(actuation, SimDrivePair(RigPlant(pair.plant.params, np.random.default_rng(2)),
-                                                 lambda node_id=None: load_drive_od(None, node_id=node_id)))
+                                                 lambda node_id=None: load_eds(None, node_id=node_id)))
     smp = p2.sync()
     for _ in range(12):
         hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
@@ -213,7 +213,7 @@ def test_heartbeat_timeout_and_emcy_raise(actuation, pair):
     with pytest.raises(HeartbeatLost, match=r"node \d \(EMA \d\): heartbeat lost .*timeout 0.150 s"):
         m.poll(t_hb + 0.150)  # fires on the grid poll at the timeout (within T/2 of it)
     m2, p2 = _preflight(actuation, SimDrivePair(RigPlant(pair.plant.params, np.random.default_rng(3)),
-                                                 lambda node_id=None: load_drive_od(None, node_id=node_id)))
+                                                 lambda node_id=None: load_eds(None, node_id=node_id)))
     p2.sync()
     with pytest.raises(DriveFault, match=r"node 2: EMCY 0x4310 \(drive over temperature\)"):
         m2.on_frame(Frame(0x082, struct.pack("<HB5x", 0x4310, 0x09)), p2.t)
@@ -283,7 +283,7 @@ def test_preflight_configures_and_reads_back_the_drives_reaction_to_the_masters_
 
 
 def _without_6007(node_id=None):
-    od = load_drive_od(None, node_id=node_id)
+    od = load_eds(None, node_id=node_id)
     if node_id == 2:
         del od[0x6007]  # EMA 2's drive has no abort connection option
     return od
@@ -315,13 +315,13 @@ def test_external_watchdog_stated_in_the_profile_lets_such_a_drive_run_and_says_
 
 def test_refused_or_not_kept_reaction_objects_stop_the_preflight(actuation, simrig):
     plant = RigPlant(simrig.params, np.random.default_rng(5))
-    refusing = FaultInjector(SimDrivePair(plant, lambda node_id=None: load_drive_od(None, node_id=node_id)),
+    refusing = FaultInjector(SimDrivePair(plant, lambda node_id=None: load_eds(None, node_id=node_id)),
                              [Fault("sdo_abort", 1, value=float(0x1016))], record_truth=False)
     with pytest.raises(MasterLossReactionError, match=r"node 1 \(EMA 1\): .*0x1016:01 \(consumer heartbeat time 1\): "
                        r"SDO abort 0x08000020"):
         _preflight(actuation, refusing)
     forgetting = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(6)),
-                              lambda node_id=None: load_drive_od(None, node_id=node_id))
+                              lambda node_id=None: load_eds(None, node_id=node_id))
     forgetting.nodes[1].store.live[(0x6007, 0)] = lambda: 1  # EMA 2 answers 1 whatever was written
     with pytest.raises(MasterLossReactionError, match=r"node 2 \(EMA 2\): .*0x6007:00 \(abort connection option "
                        r"code\) reads back 0x1, not 0x3"):

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from hil.canopen.busload import bus_load, frame_bits
 from hil.canopen.errors import CanopenError, InputError
 from hil.canopen.frame import Frame, FrameError, sync_frame
-from hil.canopen.od import load_drive_od
+from hil.canopen.od import load_eds
 from hil.canopen.pdo import (
     DEFAULT_LAYOUT,
     Direction,
@@ -188,7 +188,7 @@ def test_configuration_writes_accepted_by_the_eds_drive():
     """Every write goes through canopen's SdoServer on the shipped EDS (access, lengths)."""
     bus = CollectingBus()
     network = canopen.Network(bus)
-    drive = canopen.LocalNode(1, load_drive_od(node_id=1))
+    drive = canopen.LocalNode(1, load_eds(node_id=1))
     network.add_node(drive)
     client = SdoClient(1)
     for w in DEFAULT_LAYOUT.configuration_writes(1):

@@ -10,7 +10,7 @@ from canopen.sdo.exceptions import SdoAbortedError
 
 from hil.canopen.errors import CanopenError
 from hil.canopen.frame import Frame
-from hil.canopen.od import load_drive_od
+from hil.canopen.od import load_eds
 from hil.canopen.sdo import (
     SdoAbortCode,
     SdoAbortError,
@@ -210,7 +210,7 @@ class CollectingBus:
 
 @pytest.fixture(scope="module")
 def od():
-    return load_drive_od(node_id=2)
+    return load_eds(node_id=2)
 
 
 @pytest.fixture()

@@ -6,7 +6,7 @@ The master refuses a profile whose worst-case load reaches 50 %
 
 from __future__ import annotations
 
-import operator
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from hil.canopen.errors import InputError
@@ -56,20 +56,22 @@ class BusLoad:
     Attributes
     ----------
     items : tuple of BusLoadItem
-        SYNC, every PDO of the layout (all drives together) and the heartbeats.
+        SYNC, every PDO of every node and the heartbeats.
     bits_per_cycle_nominal, bits_per_cycle_worst : float
         Sum of ``frames_per_cycle * bits_per_frame`` without / with worst-case stuffing.
     load_nominal, load_worst : float
         Fraction of the bit rate: bits per cycle / (bit rate * SYNC period).
     event_bits_worst : float
-        Worst-case bits of sending every event-driven PDO once to every drive
-        (the cycle in which the master changes the mode of both drives); not
-        included in ``bits_per_cycle_*``.
+        Worst-case bits of sending every event-driven PDO once (the cycle in
+        which the master changes the mode of both drives); not included in
+        ``bits_per_cycle_*``.
+    n_nodes : int
+        Nodes with a PDO layout.
     """
 
     bitrate_bps: float
     sync_period_s: float
-    n_drives: int
+    n_nodes: int
     items: tuple[BusLoadItem, ...]
     bits_per_cycle_nominal: float
     bits_per_cycle_worst: float
@@ -79,38 +81,28 @@ class BusLoad:
 
 
 def bus_load(
-    layout: PdoLayout,
-    n_drives: int,
+    layouts: Sequence[PdoLayout],
     bitrate_bps: float,
     sync_period_s: float,
-    heartbeat_period_s: float,
+    heartbeat_periods_s: Sequence[float],
     *,
-    heartbeat_producers: int | None = None,
     master_heartbeat_period_s: float | None = None,
 ) -> BusLoad:
     """Bits per SYNC cycle and bus load of the cyclic CANopen traffic.
 
     Parameters
     ----------
-    layout : PdoLayout
-        PDO layout of every drive.
-    n_drives : int
-        Number of drives, >= 1.
+    layouts : sequence of PdoLayout
+        The PDO layout of every node (the drives and the sensor nodes).
     bitrate_bps : float
         CAN bit rate [bit/s], > 0.
     sync_period_s : float
         SYNC (communication cycle) period [s], > 0.
-    heartbeat_period_s : float
-        Heartbeat producer time [s], > 0, or 0 for no heartbeats.
-    heartbeat_producers : int, optional
-        Number of heartbeat producers at ``heartbeat_period_s``; default
-        ``n_drives + 1`` (every drive and the master, whose heartbeat the
-        drives consume via 0x1016), or ``n_drives`` when the master's own
-        period is given.
+    heartbeat_periods_s : sequence of float
+        Heartbeat producer time of every node [s], each > 0 or 0 for none.
     master_heartbeat_period_s : float, optional
-        The master's heartbeat producer time [s], > 0: one more producer at
-        its own period (item ``"master heartbeat"``). None: the master is
-        counted among ``heartbeat_producers`` at ``heartbeat_period_s``.
+        The master's heartbeat producer time [s], > 0 (item ``"master heartbeat"``); None: no
+        master heartbeat.
 
     Returns
     -------
@@ -118,35 +110,31 @@ def bus_load(
 
     Notes
     -----
-    Per cycle: one SYNC (0 bytes), for every drive one frame of every
-    synchronous PDO with transmission type ``k`` every ``k`` SYNCs,
-    ``producers * T_sync / T_hb`` heartbeats (1 byte) and, with the master's
-    own period :math:`T_m`, ``T_sync / T_m`` master heartbeats. Event-driven PDOs
-    (type >= 241) are listed with 0 frames per cycle. Frame lengths as in
-    :func:`frame_bits`:
+    Per cycle: one SYNC (0 bytes), one frame of every synchronous PDO with
+    transmission type ``k`` every ``k`` SYNCs, :math:`T_{sync}/T_{hb}`
+    heartbeats (1 byte) per node and :math:`T_{sync}/T_m` master heartbeats.
+    Event-driven PDOs (type >= 241) are listed with 0 frames per cycle. Frame
+    lengths as in :func:`frame_bits`:
 
     .. math:: b = 47 + 8n \\;(+\\lfloor (34 + 8n - 1)/4 \\rfloor \\text{ worst case}),
               \\qquad U = \\frac{\\sum_i f_i \\, b_i}{R \\, T_{sync}}
 
     SDO traffic (configuration before the cyclic phase) is not included.
     """
-    if not isinstance(layout, PdoLayout):
-        raise InputError(f"layout must be a PdoLayout, got {type(layout).__name__}")
-    nd = operator.index(n_drives)
-    if nd < 1:
-        raise InputError(f"n_drives = {nd} must be >= 1")
+    layouts = tuple(layouts)
+    if not layouts or not all(isinstance(x, PdoLayout) for x in layouts):
+        raise InputError(f"layouts must be a non-empty sequence of PdoLayout, got {layouts!r}")
     rate = positive("bitrate_bps", bitrate_bps, "bit/s")
     t_sync = positive("sync_period_s", sync_period_s, "s")
-    t_hb = finite("heartbeat_period_s", heartbeat_period_s, "s")
-    if t_hb < 0.0:
-        raise InputError(f"heartbeat_period_s = {t_hb} [s] must be >= 0 (0 = no heartbeat)")
+    periods = []
+    for k, p in enumerate(heartbeat_periods_s):
+        t_hb = finite(f"heartbeat_periods_s[{k}]", p, "s")
+        if t_hb < 0.0:
+            raise InputError(f"heartbeat_periods_s[{k}] = {t_hb} [s] must be >= 0 (0 = no heartbeat)")
+        periods.append(t_hb)
     t_master = None
     if master_heartbeat_period_s is not None:
         t_master = positive("master_heartbeat_period_s", master_heartbeat_period_s, "s")
-    default_producers = nd + 1 if t_master is None else nd
-    producers = default_producers if heartbeat_producers is None else operator.index(heartbeat_producers)
-    if producers < 0:
-        raise InputError(f"heartbeat_producers = {producers} must be >= 0")
 
     def item(name: str, n_bytes: int, per_cycle: float) -> BusLoadItem:
         return BusLoadItem(name, n_bytes, per_cycle,
@@ -154,14 +142,16 @@ def bus_load(
 
     items = [item("SYNC", 0, 1.0)]
     event_bits = 0.0
-    for p in layout.pdos:
-        if p.is_synchronous:
-            items.append(item(p.name, p.length_bytes, nd / p.transmission_type))
-        else:
-            it = item(p.name, p.length_bytes, 0.0)
-            items.append(it)
-            event_bits += nd * it.bits_per_frame_worst
-    hb_per_cycle = producers * t_sync / t_hb if t_hb > 0.0 else 0.0
+    for layout in layouts:
+        for p in layout.pdos:
+            name = f"{p.name} node {layout.node_id}"
+            if p.is_synchronous:
+                items.append(item(name, p.length_bytes, 1.0 / p.transmission_type))
+            else:
+                it = item(name, p.length_bytes, 0.0)
+                items.append(it)
+                event_bits += it.bits_per_frame_worst
+    hb_per_cycle = sum(t_sync / t for t in periods if t > 0.0)
     items.append(item("heartbeat", 1, hb_per_cycle))
     if t_master is not None:
         items.append(item("master heartbeat", 1, t_sync / t_master))
@@ -169,5 +159,5 @@ def bus_load(
     nominal = sum(i.frames_per_cycle * i.bits_per_frame_nominal for i in items)
     worst = sum(i.frames_per_cycle * i.bits_per_frame_worst for i in items)
     capacity = rate * t_sync
-    return BusLoad(rate, t_sync, nd, tuple(items), nominal, worst, nominal / capacity, worst / capacity,
-                   event_bits)
+    return BusLoad(rate, t_sync, len(layouts), tuple(items), nominal, worst, nominal / capacity,
+                   worst / capacity, event_bits)

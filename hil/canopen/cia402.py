@@ -475,3 +475,76 @@ def next_command(current: State, target: State) -> Command | None:
     if cur is tgt or cur in _WAIT_STATES:
         return None
     return path(cur, tgt)[0]
+
+
+# --------------------------------------------------------------------------- the master's side
+
+
+class Goal(Enum):
+    """Where the master is taking a drive."""
+
+    ENABLED = "enabled"  #: power up to OPERATION_ENABLED and hold it there
+    ORDERLY_DOWN = "orderly down"  #: disable operation, shutdown, disable voltage (a finished check)
+    QUICK_STOP = "quick stop"  #: quick stop, then disable voltage (an abort)
+
+
+#: The state a drive is confirmed safe in: the power stage off and no command to move accepted
+#: until the master walks it up again. Whatever its quick stop option code 0x605A says, the master
+#: takes every drive there at the end of a check (from QUICK_STOP_ACTIVE once it stands still, from
+#: FAULT by fault reset).
+SAFE_STATES = frozenset((State.SWITCH_ON_DISABLED,))
+
+_QSA = State.QUICK_STOP_ACTIVE
+
+#: THE master's table: (goal, state) -> the command to send in that state (None: send nothing new,
+#: wait for the drive's own transition). QUICK_STOP_ACTIVE is resolved by :func:`master_command`
+#: (quick stop until the drive stands still, then disable voltage, transition 12); FAULT is a fault
+#: reset (transition 15), which the master repeats a bounded number of times.
+MASTER_COMMANDS: dict[tuple[Goal, State], Command | None] = {
+    **{(Goal.ENABLED, s): c for s, c in (
+        (State.NOT_READY_TO_SWITCH_ON, None), (State.SWITCH_ON_DISABLED, Command.SHUTDOWN),
+        (State.READY_TO_SWITCH_ON, Command.SWITCH_ON), (State.SWITCHED_ON, Command.ENABLE_OPERATION),
+        (State.OPERATION_ENABLED, Command.ENABLE_OPERATION), (State.FAULT_REACTION_ACTIVE, None),
+        (State.FAULT, Command.FAULT_RESET))},
+    **{(Goal.ORDERLY_DOWN, s): c for s, c in (
+        (State.NOT_READY_TO_SWITCH_ON, None), (State.SWITCH_ON_DISABLED, Command.DISABLE_VOLTAGE),
+        (State.READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCHED_ON, Command.SHUTDOWN),
+        (State.OPERATION_ENABLED, Command.DISABLE_OPERATION), (State.FAULT_REACTION_ACTIVE, None),
+        (State.FAULT, Command.FAULT_RESET))},
+    **{(Goal.QUICK_STOP, s): c for s, c in (
+        (State.NOT_READY_TO_SWITCH_ON, None), (State.SWITCH_ON_DISABLED, Command.DISABLE_VOLTAGE),
+        (State.READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCHED_ON, Command.DISABLE_VOLTAGE),
+        (State.OPERATION_ENABLED, Command.QUICK_STOP), (State.FAULT_REACTION_ACTIVE, None),
+        (State.FAULT, Command.FAULT_RESET))},
+}
+
+
+def master_command(goal: Goal, state: State, *, stopped: bool = False) -> Command | None:
+    """The command the master sends a drive in ``state`` on its way to ``goal``.
+
+    Parameters
+    ----------
+    goal : Goal
+    state : State
+        The drive's state as its statusword reports it.
+    stopped : bool
+        The drive stands still (only read in QUICK_STOP_ACTIVE).
+
+    Returns
+    -------
+    Command or None
+        From :data:`MASTER_COMMANDS`; in QUICK_STOP_ACTIVE quick stop while the drive
+        still moves and disable voltage (transition 12) once it stands still, for every goal:
+        a drive whose quick stop option code keeps it there (0x605A = 5..8) is still taken to
+        SWITCH_ON_DISABLED. Every command returned is a transition of :data:`TRANSITIONS` or
+        holds the state (a test checks the table against it).
+    """
+    if state is _QSA:
+        return Command.DISABLE_VOLTAGE if stopped else Command.QUICK_STOP
+    return MASTER_COMMANDS[(Goal(goal), State(state))]
+
+
+def enables_operation(cw: int) -> bool:
+    """True when a controlword carries enable operation (bits 0..3 set, bit 7 clear): the drive
+    follows its targets (the CAN-log reader's mode columns)."""
+    return decode_command(cw) is Command.ENABLE_OPERATION

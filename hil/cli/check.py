@@ -211,54 +211,12 @@ def truth_dict(truth) -> dict:
             "calibration": {k: dict(v) for k, v in truth.calibration.items()}}
 
 
-def master_setup(act, profile_path, out: Path):
-    """Checks before anything touches a bus: EDS against the layout, bus load."""
-    from hil.canopen.busload import bus_load
-    from hil.canopen.od import check_drive_od, load_drive_od
-    from hil.canopen.pdo import DEFAULT_LAYOUT
-    from hil.profiles import resolve_eds
+def master_setup(act, profile_path, eds=None):
+    """Checks before anything touches a bus: every node's EDS against the signal map, the PDO layout,
+    the bus load (:func:`hil.rig.plan_for`); returns the planned :class:`hil.rig.Rig`."""
+    from hil.rig import plan_for
 
-    eds = resolve_eds(act, profile_path)
-    od = load_drive_od(eds)
-    c = act.canopen
-    # the drives' own reaction to losing the master (0x1016, 0x6007) is required unless the profile
-    # states another protection (an external watchdog)
-    check_drive_od(od, source=str(eds), master_loss=not c.external_watchdog)
-    check_eds_identity(od, c, eds)
-    load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, act.timing.sync_period_s, c.heartbeat_period_s,
-                    master_heartbeat_period_s=c.master_heartbeat_period_s)
-    if load.load_worst >= 0.5:
-        from hil.errors import ProfileError
-        raise ProfileError(f"bus load of the PDO layout at canopen.bitrate_bps = {c.bitrate_bps} is "
-                           f"{load.load_worst:.1%} (worst case), not below 50 %")
-    return eds, load
-
-
-def check_eds_identity(od, c, eds) -> None:
-    """The EDS must describe the drive the profile expects: its ``[DeviceInfo]`` vendor, product and
-    revision numbers and the 0x1018:01/02/03 defaults must agree with each other and with the profile's
-    ``canopen.vendor_id``, ``product_code`` and ``revision_min``."""
-    from hil.errors import ProfileError
-
-    ident = od[0x1018] if 0x1018 in od else None
-    info = getattr(od, "device_information", None)
-    for sub, field_name, info_name, info_key, want, cmp in (
-            (1, "vendor_id", "VendorNumber", "vendor_number", c.vendor_id, "=="),
-            (2, "product_code", "ProductNumber", "product_number", c.product_code, "=="),
-            (3, "revision_min", "RevisionNumber", "revision_number", c.revision_min, ">=")):
-        var = ident.subindices.get(sub) if ident is not None else None
-        have = getattr(var, "default", None)
-        if have is None:
-            raise ProfileError(f"EDS {eds}: identity 0x1018:{sub:02X} has no default value; cannot check it "
-                               f"against the profile's canopen.{field_name}")
-        ok = have == want if cmp == "==" else have >= want
-        if not ok:
-            raise ProfileError(f"EDS {eds}: identity 0x1018:{sub:02X} = 0x{have:08X} does not match the profile's "
-                               f"canopen.{field_name} = 0x{want:08X}: the EDS describes another drive")
-        declared = getattr(info, info_key, None)
-        if declared is not None and declared != have:
-            raise ProfileError(f"EDS {eds}: [DeviceInfo] {info_name} = 0x{declared:08X} but the identity object "
-                               f"0x1018:{sub:02X} defaults to 0x{have:08X}: the file contradicts itself")
+    return plan_for(act, profile_path, eds)
 
 
 def canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):

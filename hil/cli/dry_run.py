@@ -51,7 +51,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     import numpy as np
 
     from hil.canlog import CanLogWriter
-    from hil.canopen.od import load_drive_od
+    from hil.canopen.od import load_eds
     from hil.link import CanopenLink
     from hil.master import MasterCore
     from hil.runner import start_meta
@@ -68,7 +68,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     plant = RigPlant(simrig.params, rng)
-    pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id), node_ids=act.canopen.node_ids,
+    pair = SimDrivePair(plant, lambda node_id=None: load_eds(eds, node_id=node_id), node_ids=act.canopen.node_ids,
                         serials=simrig.serials)
     injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=bool(faults))
     truth = truth_dict(rig_truth(simrig.params))

@@ -15,7 +15,7 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     """``emacheck sim-serve``: the two simulated drives on a CAN bus until SIGINT/SIGTERM."""
     import numpy as np
 
-    from hil.canopen.od import check_drive_od, load_drive_od
+    from hil.canopen.od import check_drive_od, load_eds
     from hil.profiles import load_actuation, load_simrig, resolve_eds
     from hil.sim_server import serve
     from sim.drives import SimDrivePair
@@ -24,10 +24,10 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     act = load_actuation(args.profile)
     simrig = load_simrig(args.sim)
     eds = resolve_eds(act, args.profile)
-    check_drive_od(load_drive_od(eds), source=str(eds))
+    check_drive_od(load_eds(eds), source=str(eds))
     seed = simrig.seed if args.seed is None else args.seed
     plant = RigPlant(simrig.params, np.random.default_rng(seed))
-    pair = SimDrivePair(plant, lambda node_id=None: load_drive_od(eds, node_id=node_id),
+    pair = SimDrivePair(plant, lambda node_id=None: load_eds(eds, node_id=node_id),
                         node_ids=act.canopen.node_ids, serials=simrig.serials)
     bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps)
 

@@ -3,7 +3,7 @@
 :class:`SimDrivePair` replaces the two EMA drives of the rig in dry-runs and
 tests. Each node (:class:`sim.drives.drive.SimDrive`) is built from the same
 EDS the master reads (``profiles/ema_drive.eds`` through
-:func:`hil.canopen.od.load_drive_od`) and serves it with canopen's SDO
+:func:`hil.canopen.od.load_eds`) and serves it with canopen's SDO
 server. The pair consumes every frame seen on the bus and returns the frames
 it transmits; time is passed in. No threads, no clocks, no bus objects: the
 caller (an IO shell on a python-can bus, or a test) moves the frames.
@@ -76,7 +76,7 @@ from hil.canopen.cia402 import State
 from hil.canopen.errors import EdsError, InputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtCommand
-from hil.canopen.od import check_drive_od, load_drive_od, lookup
+from hil.canopen.od import check_drive_od, load_eds, lookup
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.validate import error_code, integer, node_id, time_s
 from sim.drives.drive import SimDrive
@@ -178,7 +178,7 @@ class SimDrivePair:
         steps it once per SYNC (and once at the first power-on).
     od_factory : callable, optional
         ``od_factory(node_id=n)`` returns a fresh ``canopen.ObjectDictionary``
-        for node ``n`` (default :func:`hil.canopen.od.load_drive_od`, the shipped
+        for node ``n`` (default :func:`hil.canopen.od.load_eds`, the shipped
         EDS with ``$NODEID`` resolved). It must pass
         :func:`hil.canopen.od.check_drive_od` and hold the objects the drive
         serves (0x1001, 0x1005, 0x1014, 0x6072, 0x6077, ...).
@@ -239,7 +239,7 @@ class SimDrivePair:
     protocol choices.
     """
 
-    def __init__(self, plant: RigPlant, od_factory: Callable[..., cod.ObjectDictionary] = load_drive_od,
+    def __init__(self, plant: RigPlant, od_factory: Callable[..., cod.ObjectDictionary] = load_eds,
                  node_ids: tuple[int, int] = (1, 2), *, counts_per_rev: int | None = None,
                  serials: tuple[int, int] | None = None) -> None:
         if not isinstance(plant, RigPlant):

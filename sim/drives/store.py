@@ -1,7 +1,7 @@
 """The object store of a simulated drive: object dictionary, data store, SDO server.
 
 Each simulated node is built from the same EDS the master reads
-(``profiles/ema_drive.eds`` through :func:`hil.canopen.od.load_drive_od`).
+(``profiles/ema_drive.eds`` through :func:`hil.canopen.od.load_eds`).
 :class:`ObjectStore` holds it together with the values written since the
 last reset and serves both to canopen's ``canopen.sdo.SdoServer``
 (expedited and segmented transfers), through the three things the server

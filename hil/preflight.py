@@ -1,0 +1,562 @@
+"""The master's preflight as a sans-IO generator: boot, identify, configure, the master's-death drill.
+
+:class:`Preflight` is driven by :class:`hil.master.MasterCore`: it yields
+requests (an NMT command, wait for boot-up, an SDO read or write, let time
+pass, the master's own heartbeat off or on) and receives their results; it
+never touches a bus or a clock. What it learns goes into the master's views
+of the nodes and into :attr:`Preflight.scales` (the scalings read from the
+drives) and the typed :class:`MasterLossRecord` of each drive.
+
+Sequence (CiA 302-style, per node as the rig's :class:`~hil.canopen.plan.RigPlan` says):
+
+1. NMT reset node (all), boot-up of every node of the rig.
+2. Every node: identity 0x1018 and device type 0x1000 against the profile,
+   producer heartbeat 0x1017, its PDOs (the unused ones disabled).
+3. Each drive: supported modes 0x6502 (CSP; CST where it holds forces in
+   CST), the gear ratio object and 0x608F against the profile where they
+   exist, the scalings it reports (0x608F, 0x6091/0x6092, rated torque
+   0x6076), interpolation period 0x60C2, software position limits 0x607D,
+   quick stop option 0x605A = 2 and 0x1006 where writable, the modes of
+   operation (CSP, set once by SDO for a drive without CST), the reaction to
+   the master's death (0x1016:01, 0x6007 = 3, written and read back).
+4. The drill (unless ``canopen.skip_master_loss_drill`` says why not): every
+   drive whose reaction is configured is powered up by SDO at standstill,
+   holding its position; the master stops its heartbeat (and sends nothing
+   else) for longer than the consumer time while it keeps listening, polls
+   each statusword by SDO every SYNC period and notes EMCYs; a drive that
+   leaves OPERATION_ENABLED has reacted (the time since the master's last
+   heartbeat is its reaction time). Then the heartbeat resumes, NMT
+   pre-operational restores SDO on a drive whose error behaviour stopped it,
+   and each drive is brought to SWITCH_ON_DISABLED. A drive that did not
+   react stops the preflight (:class:`~hil.master.MasterLossReactionError`)
+   unless ``canopen.external_watchdog`` states the rig's protection.
+5. NMT start (all).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Generator
+from dataclasses import dataclass, field
+from enum import Enum
+
+from canopen.objectdictionary import datatypes as dt
+
+from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
+from hil.canopen.nmt import NmtCommand
+from hil.canopen.od import AbortConnectionOption, QUICK_STOP_OPTION, master_loss_steps
+from hil.canopen.pdo import TYPE_BITS
+from hil.canopen.plan import CSP_BIT, CST_BIT, DrivePlan, NodePlan, RigPlan
+from hil.canopen.sdo import SdoAbortError, describe
+from hil.canopen.signalmap import (
+    ForceControl,
+    Scale,
+    ScaleSource,
+    Signal,
+    angle_scale_counts,
+    angle_scale_factor_group,
+    object_name,
+    torque_scale,
+)
+from hil.config import Actuation
+from hil.errors import EmacheckError
+
+__all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
+           "MasterLossReactionError", "ReactionConfig"]
+
+
+class PreflightError(EmacheckError, RuntimeError):
+    """A node does not match the profile or did not come up."""
+
+
+class MasterLossReactionError(PreflightError):
+    """A drive lacks, refuses or does not perform its reaction to the master's death, and no other
+    protection is stated."""
+
+
+# ------------------------------------------------------------------ requests the generator yields
+
+
+@dataclass(frozen=True, slots=True)
+class Nmt:
+    command: NmtCommand
+    node: int = 0  #: 0: all nodes
+
+
+@dataclass(frozen=True, slots=True)
+class WaitBoot:
+    pass
+
+
+@dataclass(frozen=True, slots=True)
+class SdoRead:
+    node: int
+    index: int
+    sub: int
+    what: str
+    soft: bool = False  #: an abort comes back as the result (not raised)
+
+
+@dataclass(frozen=True, slots=True)
+class SdoWrite:
+    node: int
+    index: int
+    sub: int
+    data: bytes
+    what: str
+    soft: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Wait:
+    """Let time pass until ``until_s``; the result is the time then."""
+
+    until_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class Now:
+    """The result is the time now."""
+
+
+@dataclass(frozen=True, slots=True)
+class Heartbeat:
+    """The master's own heartbeat off (``on`` False; result: the time of its last heartbeat) or on."""
+
+    on: bool
+
+
+# ------------------------------------------------------------------ the master-loss record
+
+
+class DrillOutcome(Enum):
+    REACTED = "reacted"  #: the drive left OPERATION_ENABLED after the master fell silent
+    NO_REACTION = "no reaction"  #: still OPERATION_ENABLED at the drill's deadline
+    SKIPPED = "skipped"  #: the profile says why (canopen.skip_master_loss_drill)
+    NOT_CONFIGURED = "not configured"  #: the drive has no reaction to drill (external watchdog stated)
+
+
+@dataclass(frozen=True, slots=True)
+class DrillResult:
+    """What the drill observed of one drive.
+
+    Attributes
+    ----------
+    outcome : DrillOutcome
+    reaction_ms : float or None
+        From the master's last heartbeat to the first statusword outside OPERATION_ENABLED [ms].
+    waited_ms : float or None
+        How long the master stayed silent [ms].
+    state_after : str or None
+        The state the drive reacted into (e.g. ``QUICK_STOP_ACTIVE``).
+    emcy : tuple of int
+        EMCY error codes the drive sent while the master was silent.
+    note : str
+        Why it was skipped, or what else the engineer should know.
+    """
+
+    outcome: DrillOutcome
+    reaction_ms: float | None = None
+    waited_ms: float | None = None
+    state_after: str | None = None
+    emcy: tuple[int, ...] = ()
+    note: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ReactionConfig:
+    """The reaction to the master's death as written and read back (what the drive was told)."""
+
+    consumer_heartbeat_ms: int
+    master_node_id: int
+    abort_connection_option: int
+    configured: bool  #: every object written and read back as intended
+    problems: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class MasterLossRecord:
+    """How one drive is protected against the master's death: configured, and observed by the drill."""
+
+    reaction: ReactionConfig
+    drill: DrillResult
+    external_watchdog: str = ""
+
+    @property
+    def armed(self) -> bool:
+        """The drive may be enabled for the check: it reacted in the drill, the drill was skipped with a
+        reason, or the rig states another protection."""
+        return bool(self.external_watchdog) or self.drill.outcome in (DrillOutcome.REACTED, DrillOutcome.SKIPPED)
+
+    def as_json(self) -> dict:
+        d = self.drill
+        return {"consumer_heartbeat_ms": self.reaction.consumer_heartbeat_ms,
+                "master_node_id": self.reaction.master_node_id,
+                "abort_connection_option": self.reaction.abort_connection_option,
+                "configured": self.reaction.configured, "problems": list(self.reaction.problems),
+                "drill": {"outcome": d.outcome.value, "reaction_ms": d.reaction_ms, "waited_ms": d.waited_ms,
+                          "state_after": d.state_after, "emcy": [f"0x{c:04X}" for c in d.emcy], "note": d.note},
+                "external_watchdog": self.external_watchdog}
+
+
+# ------------------------------------------------------------------ value codec
+
+
+_STD_TYPES = {(0x1006, 0): dt.UNSIGNED32, (0x1016, 1): dt.UNSIGNED32, (0x1017, 0): dt.UNSIGNED16,
+              (0x6007, 0): dt.INTEGER16, (0x6040, 0): dt.UNSIGNED16, (0x605A, 0): dt.INTEGER16,
+              (0x6060, 0): dt.INTEGER8, (0x607A, 0): dt.INTEGER32, (0x607D, 1): dt.INTEGER32,
+              (0x607D, 2): dt.INTEGER32, (0x60C2, 1): dt.UNSIGNED8, (0x60C2, 2): dt.INTEGER8}
+
+
+def _code(node: NodePlan, index: int, sub: int) -> str:
+    t = node.types.get((index, sub), _STD_TYPES.get((index, sub), dt.UNSIGNED32))
+    if t in (dt.REAL64,):
+        return "d"
+    return TYPE_BITS.get(t, (32, "I"))[1]
+
+
+def encode(node: NodePlan, index: int, sub: int, value: int | float) -> bytes:
+    """``value`` in the object's data type as the node's EDS gives it (little endian)."""
+    code = _code(node, index, sub)
+    if code not in "fd":
+        bits = struct.calcsize(code) * 8
+        lo, hi = (-(1 << bits - 1), (1 << bits - 1) - 1) if code.islower() else (0, (1 << bits) - 1)
+        value = max(lo, min(hi, int(value)))
+    return struct.pack("<" + code, value)
+
+
+def decode(node: NodePlan, index: int, sub: int, data: bytes) -> int | float:
+    """Bytes read from an object, decoded with its data type (shorter data is zero-extended)."""
+    code = _code(node, index, sub)
+    size = struct.calcsize(code)
+    raw = bytes(data[:size]).ljust(size, b"\0")
+    return struct.unpack("<" + code, raw)[0]
+
+
+# ------------------------------------------------------------------ the preflight
+
+
+@dataclass
+class DriveSetup:
+    """What the preflight learned of one drive (filled as it goes)."""
+
+    ema: int
+    plan: DrivePlan
+    identity: dict = field(default_factory=dict)
+    rated_torque_Nm: float | None = None
+    scales: dict = field(default_factory=dict)  #: Signal -> Scale read from the drive
+    master_loss: MasterLossRecord | None = None
+    modes: int | None = None  #: 0x6502 as read
+
+
+class Preflight:
+    """The preflight of one check (see the module docstring); :meth:`run` is the generator.
+
+    Parameters
+    ----------
+    actuation : Actuation
+    plan : RigPlan
+    emcy_since : callable
+        ``emcy_since(node, t) -> tuple of int``: EMCY codes the node sent since ``t`` (the master
+        core keeps them).
+    """
+
+    def __init__(self, actuation: Actuation, plan: RigPlan, emcy_since) -> None:
+        self.act = actuation
+        self.plan = plan
+        self.c = actuation.canopen
+        self.T = actuation.timing.sync_period_s
+        self.consumer_ms = round(self.c.master_consumer_time_s * 1000)
+        self.drives = [DriveSetup(d.ema, d) for d in plan.drives]
+        self.identities: dict[int, dict] = {}
+        self._emcy_since = emcy_since
+        self.events: list[tuple[int, str]] = []  #: (node, what) for the master's event log
+
+    # ------------------------------------------------------------ helpers
+
+    def _read(self, node: NodePlan, index: int, sub: int, what: str, soft: bool = False):
+        r = yield SdoRead(node.spec.node_id, index, sub, what, soft)
+        if isinstance(r, SdoAbortError):
+            return r
+        return decode(node, index, sub, r)
+
+    def _write(self, node: NodePlan, index: int, sub: int, value, what: str, soft: bool = False):
+        return (yield SdoWrite(node.spec.node_id, index, sub, encode(node, index, sub, value), what, soft))
+
+    # ------------------------------------------------------------ the sequence
+
+    def run(self) -> Generator:
+        yield Nmt(NmtCommand.RESET_NODE)
+        yield WaitBoot()
+        for node in self.plan.nodes:
+            yield from self._identify(node)
+            yield from self._common(node)
+        for d in self.drives:
+            yield from self._drive(d)
+        yield from self._drill()
+        yield Nmt(NmtCommand.START)
+
+    def _identify(self, node: NodePlan) -> Generator:
+        spec = node.spec
+        ident = {}
+        for sub, key in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial")):
+            if sub == 4 and not node.can_read(0x1018, 4):
+                continue
+            v = yield from self._read(node, 0x1018, sub, key.replace("_", " "), soft=sub == 4)
+            ident[key] = None if isinstance(v, SdoAbortError) else int(v)
+        self.identities[spec.node_id] = ident
+        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] != spec.product_code:
+            raise PreflightError(
+                f"{spec.label}: identity 0x1018 vendor 0x{ident['vendor_id']:08X} product "
+                f"0x{ident['product_code']:08X} does not match the profile ({spec.key}.vendor_id "
+                f"0x{spec.vendor_id:08X}, {spec.key}.product_code 0x{spec.product_code:08X})")
+        if ident["revision"] < spec.revision_min:
+            raise PreflightError(f"{spec.label}: revision 0x{ident['revision']:08X} below "
+                                 f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
+        devtype = int((yield from self._read(node, 0x1000, 0, "device type")))
+        if devtype & 0xFFFF != spec.device_profile:
+            raise PreflightError(f"{spec.label}: device type 0x{devtype:08X} is not a CiA {spec.device_profile} "
+                                 f"device (0x1000 bits 0..15 = {devtype & 0xFFFF})")
+
+    def _common(self, node: NodePlan) -> Generator:
+        hb_ms = int(round(node.spec.heartbeat_period_s * 1000))
+        yield from self._write(node, 0x1017, 0, hb_ms, "producer heartbeat time")
+        for w in node.layout.configuration_writes():
+            yield SdoWrite(node.spec.node_id, w.index, w.subindex, w.data, w.what)
+
+    def _drive(self, d: DriveSetup) -> Generator:
+        node, spec, plan = d.plan.node, d.plan.node.spec, d.plan
+        c = self.c
+        modes = int((yield from self._read(node, 0x6502, 0, "supported drive modes")))
+        d.modes = modes
+        if not modes >> CSP_BIT & 1:
+            raise PreflightError(f"{spec.label}: does not support CSP (0x6502 = 0x{modes:08X}); the check "
+                                 f"commands positions in cyclic synchronous position mode")
+        if plan.force_control is ForceControl.CST and not modes >> CST_BIT & 1:
+            raise PreflightError(f"{spec.label}: does not support CST (0x6502 = 0x{modes:08X}); set "
+                                 f"canopen.force_control = \"csp\" (the master's force loop) or check the drive")
+        if self.plan.gear_ratio_object is not None:
+            gi, gs = self.plan.gear_ratio_object
+            ratio = float((yield from self._read(node, gi, gs, "gear ratio")))
+            want = self.act.mechanics.i_total_rad_per_mm
+            if not math.isclose(ratio, want, rel_tol=1e-5):
+                raise PreflightError(f"{spec.label}: gear ratio {object_name(gi, gs)} = {ratio:.6f} rad/mm, profile "
+                                     f"mechanics.i_total_rad_per_mm = {want:.6f}")
+        yield from self._scales(d)
+        if node.can_read(0x6072, 0):
+            v = yield from self._read(node, 0x6072, 0, "max torque", soft=True)
+            d.identity["max_torque_permille"] = None if isinstance(v, SdoAbortError) else int(v)
+        if node.can_write(0x60C2, 1) and node.can_write(0x60C2, 2):
+            yield from self._write(node, 0x60C2, 1, int(round(self.T * 1000)), "interpolation period value")
+            yield from self._write(node, 0x60C2, 2, -3, "interpolation period index")
+        angle = d.scales.get(Signal.MOTOR_ANGLE) or self.plan.channel(d.ema, Signal.MOTOR_ANGLE).scale
+        if node.can_write(0x607D, 1) and node.can_write(0x607D, 2) and angle is not None:
+            lim = round(self.act.mechanics.stroke_limit_mm * self.act.mechanics.i_total_rad_per_mm
+                        * abs(angle.units_per_si))
+            yield from self._write(node, 0x607D, 1, -lim, "software position limit min")
+            yield from self._write(node, 0x607D, 2, lim, "software position limit max")
+        if node.can_write(0x605A, 0):
+            r = yield from self._write(node, 0x605A, 0, QUICK_STOP_OPTION, "quick stop option code", soft=True)
+            if isinstance(r, SdoAbortError):
+                self.events.append((spec.node_id, f"0x605A = {QUICK_STOP_OPTION} refused ({describe(r.code)}); "
+                                                  f"the master takes the drive out of QUICK STOP ACTIVE itself"))
+        if node.can_write(0x1006, 0):
+            yield from self._write(node, 0x1006, 0, int(round(self.T * 1e6)), "communication cycle period")
+        if not plan.mode_by_pdo:
+            yield from self._set_mode_by_sdo(d, OperationMode.CSP)
+        d.master_loss = yield from self._reaction(d)
+        self.events.append((spec.node_id, f"configured: identity {self.identities[spec.node_id]}, "
+                                          f"force control {plan.force_control.value}"))
+
+    def _scales(self, d: DriveSetup) -> Generator:
+        """The scalings the drive reports, and the profile's counts per revolution checked against 0x608F."""
+        node, spec = d.plan.node, d.plan.node.spec
+        angle = self.plan.channel(d.ema, Signal.MOTOR_ANGLE)
+        counts = None
+        if angle.source is ScaleSource.ENCODER or (angle.source is ScaleSource.PROFILE and node.can_read(0x608F, 1)
+                                                   and node.can_read(0x608F, 2)):
+            inc = yield from self._read(node, 0x608F, 1, "encoder increments")
+            revs = yield from self._read(node, 0x608F, 2, "motor revolutions")
+            if revs <= 0 or inc <= 0:
+                raise PreflightError(f"{spec.label}: encoder resolution 0x608F = {inc}/{revs} is not a resolution")
+            counts = inc / revs
+        if angle.source is ScaleSource.ENCODER:
+            d.scales[Signal.MOTOR_ANGLE] = angle_scale_counts(counts)
+        elif angle.source is ScaleSource.FACTOR_GROUP:
+            vals = []
+            for i, s, what in ((0x6091, 1, "gear ratio motor revolutions"), (0x6091, 2, "gear ratio shaft revolutions"),
+                               (0x6092, 1, "feed"), (0x6092, 2, "feed shaft revolutions")):
+                vals.append(int((yield from self._read(node, i, s, what))))
+            if min(vals) <= 0:
+                raise PreflightError(f"{spec.label}: position factor 0x6091 = {vals[0]}/{vals[1]}, 0x6092 = "
+                                     f"{vals[2]}/{vals[3]} is not a scaling")
+            d.scales[Signal.MOTOR_ANGLE] = angle_scale_factor_group(*vals)
+        elif counts is not None and angle.node_id == spec.node_id and \
+                not math.isclose(angle.scale.units_per_si, angle_scale_counts(counts).units_per_si, rel_tol=1e-9):
+            want = angle.scale.units_per_si * 2 * math.pi
+            raise PreflightError(f"{spec.label}: encoder resolution 0x608F = {counts:g} increments per revolution, "
+                                 f"profile signals.ema{d.ema}.motor_angle.counts_per_rev = {want:.6g}")
+        if Signal.MOTOR_ANGLE in d.scales:
+            d.scales[Signal.TARGET_POSITION] = d.scales[Signal.MOTOR_ANGLE]
+        torque = self.plan.channel(d.ema, Signal.TARGET_TORQUE)
+        if torque is not None and torque.source is ScaleSource.RATED_TORQUE:
+            rated_mNm = int((yield from self._read(node, 0x6076, 0, "rated torque")))
+            if rated_mNm <= 0:
+                raise PreflightError(f"{spec.label}: rated torque 0x6076 is {rated_mNm} mN m; give "
+                                     f"signals.ema{d.ema}.target_torque.rated_torque_Nm")
+            d.rated_torque_Nm = rated_mNm / 1000.0
+            d.scales[Signal.TARGET_TORQUE] = torque_scale(d.rated_torque_Nm, self.act.mechanics.i_total_rad_per_mm)
+        elif torque is not None:
+            d.rated_torque_Nm = 1.0 / (torque.scale.units_per_si * self.act.mechanics.i_total_rad_per_mm)
+
+    def _set_mode_by_sdo(self, d: DriveSetup, mode: OperationMode) -> Generator:
+        """0x6060 = ``mode`` by SDO, confirmed by 0x6061 within ``canopen.mode_change_timeout_s``."""
+        node, spec = d.plan.node, d.plan.node.spec
+        mode_e = self.plan.map.entry(d.ema, Signal.MODE)
+        disp_e = self.plan.map.entry(d.ema, Signal.MODE_DISPLAY)
+        yield from self._write(node, mode_e.index, mode_e.subindex, int(mode), "modes of operation")
+        deadline = (yield Now()) + self.c.mode_change_timeout_s
+        while True:
+            shown = int((yield from self._read(node, disp_e.index, disp_e.subindex, "modes of operation display")))
+            if shown == int(mode):
+                return
+            t = yield Now()
+            if t > deadline:
+                raise PreflightError(f"{spec.label}: modes of operation {int(mode)} ({mode.name}) not confirmed by "
+                                     f"0x6061 within canopen.mode_change_timeout_s = {self.c.mode_change_timeout_s} s "
+                                     f"(0x6061 = {shown})")
+            yield Wait(t + self.T)
+
+    def _reaction(self, d: DriveSetup) -> Generator:
+        """Configure and read back the drive's own reaction to the master's death."""
+        node, spec = d.plan.node, d.plan.node.spec
+        watchdog = self.c.external_watchdog
+        if not d.plan.reaction:
+            cfg = ReactionConfig(self.consumer_ms, self.c.master_node_id, int(AbortConnectionOption.QUICK_STOP),
+                                 False, ("the drive has no 0x1016:01 / 0x6007 (its EDS)",))
+            return MasterLossRecord(cfg, DrillResult(DrillOutcome.NOT_CONFIGURED, note="external watchdog stated"),
+                                    watchdog)
+        problems = []
+        for st in master_loss_steps(self.c.master_node_id, self.consumer_ms):
+            r = yield SdoWrite(spec.node_id, st.index, st.subindex, st.data, st.what, soft=True)
+            if not isinstance(r, SdoAbortError):
+                r = yield SdoRead(spec.node_id, st.index, st.subindex, st.what, soft=True)
+            name = f"{object_name(st.index, st.subindex)} ({st.what})"
+            if isinstance(r, SdoAbortError):
+                problems.append(f"{name}: SDO abort 0x{int(r.code):08X} ({describe(r.code)})")
+            elif bytes(r[:len(st.data)]).ljust(len(st.data), b"\0") != st.data:
+                problems.append(f"{name} reads back 0x{int.from_bytes(bytes(r), 'little'):X}, "
+                                f"not 0x{int.from_bytes(st.data, 'little'):X}")
+        cfg = ReactionConfig(self.consumer_ms, self.c.master_node_id, int(AbortConnectionOption.QUICK_STOP),
+                             not problems, tuple(problems))
+        if problems and not watchdog:
+            raise MasterLossReactionError(
+                f"{spec.label}: its reaction to the master's death is not in place: " + "; ".join(problems)
+                + " (it would keep its last command if the master died; canopen.external_watchdog states another"
+                " protection of the rig)")
+        drill = DrillResult(DrillOutcome.SKIPPED, note=self.c.skip_master_loss_drill) \
+            if self.c.skip_master_loss_drill else DrillResult(DrillOutcome.NOT_CONFIGURED)
+        return MasterLossRecord(cfg, drill, watchdog)
+
+    # ------------------------------------------------------------ the drill
+
+    def _drill(self) -> Generator:
+        if self.c.skip_master_loss_drill:
+            return
+        drives = [d for d in self.drives if d.master_loss.reaction.configured]
+        if not drives:
+            return
+        for d in drives:
+            yield from self._power_up_by_sdo(d)
+        t_last = yield Heartbeat(False)
+        deadline = t_last + 2.0 * self.consumer_ms / 1000.0 + 0.1
+        reacted: dict[int, tuple[float, State]] = {}
+        t = yield Now()
+        while len(reacted) < len(drives) and t <= deadline:
+            for d in drives:
+                if d.ema in reacted:
+                    continue
+                sw = int((yield from self._read(d.plan.node, 0x6041, 0, "statusword")))
+                state = decode_state(sw)
+                if state is not State.OPERATION_ENABLED:
+                    reacted[d.ema] = ((yield Now()), state)
+            t = yield Wait(t + self.T)
+        t_end = yield Now()
+        yield Heartbeat(True)
+        for d in drives:
+            emcy = tuple(self._emcy_since(d.plan.node.spec.node_id, t_last))
+            waited = round((t_end - t_last) * 1e3, 1)
+            if d.ema in reacted:
+                tr, state = reacted[d.ema]
+                res = DrillResult(DrillOutcome.REACTED, round((tr - t_last) * 1e3, 1), waited, state.name, emcy)
+            else:
+                res = DrillResult(DrillOutcome.NO_REACTION, None, waited, State.OPERATION_ENABLED.name, emcy,
+                                  "still OPERATION ENABLED when the drill ended")
+            d.master_loss = MasterLossRecord(d.master_loss.reaction, res, d.master_loss.external_watchdog)
+        for d in drives:  # SDO again on a drive whose error behaviour (0x1029) stopped it
+            yield Nmt(NmtCommand.ENTER_PRE_OPERATIONAL, d.plan.node.spec.node_id)
+        for d in drives:
+            yield from self._power_down_by_sdo(d)
+        bad = [d for d in drives if d.master_loss.drill.outcome is DrillOutcome.NO_REACTION]
+        if bad and not self.c.external_watchdog:
+            d = bad[0]
+            res = d.master_loss.drill
+            seen = ", ".join(f"0x{c:04X}" for c in res.emcy) or "none"
+            raise MasterLossReactionError(
+                f"{d.plan.node.spec.label}: did not react to the master's death: the master was silent "
+                f"{res.waited_ms:.0f} ms (its consumer time 0x1016:01 is {self.consumer_ms} ms) and the drive stayed "
+                f"OPERATION ENABLED (EMCY seen: {seen}); the check is not started. State the rig's other protection "
+                f"in canopen.external_watchdog, or repair the drive's reaction (0x6007, 0x1029)")
+
+    def _power_up_by_sdo(self, d: DriveSetup) -> Generator:
+        """CSP, target = actual position, then shutdown, switch on, enable operation by SDO (pre-operational)."""
+        node = d.plan.node
+        pos = yield from self._read(node, 0x6064, 0, "position actual value")
+        yield from self._write(node, 0x607A, 0, int(pos), "target position (hold)")
+        if d.plan.mode_by_pdo:
+            yield from self._set_mode_by_sdo(d, OperationMode.CSP)
+        yield from self._walk(d, State.OPERATION_ENABLED)
+
+    def _power_down_by_sdo(self, d: DriveSetup) -> Generator:
+        yield from self._walk(d, State.SWITCH_ON_DISABLED)
+
+    def _walk(self, d: DriveSetup, target: State) -> Generator:
+        """Controlwords by SDO until the statusword shows ``target`` (bounded fault resets, the enable timeout)."""
+        node, spec = d.plan.node, d.plan.node.spec
+        deadline = (yield Now()) + self.c.enable_timeout_s
+        resets = 0
+        previous_cw = None
+        while True:
+            sw = int((yield from self._read(node, 0x6041, 0, "statusword")))
+            state = decode_state(sw)
+            if state is target:
+                return
+            t = yield Now()
+            if t > deadline:
+                raise PreflightError(f"{spec.label}: not in {target.name} within canopen.enable_timeout_s = "
+                                     f"{self.c.enable_timeout_s} s (statusword 0x{sw:04X}, {state.name})")
+            if state is State.FAULT:
+                if resets >= self.c.fault_reset_attempts:
+                    err = ""
+                    if node.can_read(0x603F, 0):
+                        code = yield from self._read(node, 0x603F, 0, "error code", soft=True)
+                        if not isinstance(code, SdoAbortError):
+                            err = f", error code 0x603F = 0x{int(code):04X}"
+                    raise PreflightError(f"{spec.label}: still in FAULT after {resets} fault resets"
+                                         f" (canopen.fault_reset_attempts){err}")
+                if previous_cw is not None and previous_cw & 0x80:
+                    yield from self._write(node, 0x6040, 0, 0, "controlword (fault reset edge)")
+                yield from self._write(node, 0x6040, 0, controlword(Command.FAULT_RESET), "controlword fault reset")
+                previous_cw = controlword(Command.FAULT_RESET)
+                resets += 1
+            elif state not in (State.NOT_READY_TO_SWITCH_ON, State.FAULT_REACTION_ACTIVE):  # (those: wait)
+                if target is State.SWITCH_ON_DISABLED:
+                    cmd = Command.DISABLE_VOLTAGE  # from any state: transitions 7, 9, 10, 12
+                else:
+                    cmd = next_command(state, target)
+                if cmd is not None:
+                    cw = controlword(cmd)
+                    yield from self._write(node, 0x6040, 0, cw, f"controlword ({cmd.value})")
+                    previous_cw = cw
+            yield Wait((yield Now()) + self.T)
