@@ -6,14 +6,14 @@ python-can's :class:`can.io.CanutilsLogWriter` (one line per frame,
 ``can.LogReader`` replay it, and a crash loses at most the unflushed lines).
 
 :func:`decode_can_log` turns such a log back into the signals of the run
-folder: it follows the SYNC frames and the drives' TPDOs exactly as the
-master does, and the RPDOs for the setpoint columns.
+folder with the one codec of a SYNC cycle the master uses
+(:mod:`hil.canopen.cycle`), and the RPDOs for the setpoint columns.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
-
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,20 +21,12 @@ from pathlib import Path
 import can
 import numpy as np
 
-from hil.canopen.cia402 import OperationMode
-from hil.canopen.frame import SYNC_COB_ID, Frame, split_cob_id
-from hil.canopen.pdo import (
-    RPDO1,
-    RPDO2,
-    TPDO1,
-    TPDO2,
-    PdoError,
-    decode_rpdo1,
-    decode_rpdo2,
-    decode_tpdo1,
-    decode_tpdo2,
-)
-from hil.canopen.units import force_dN_to_newton, increments_to_rad, lvdt_um_to_mm, permille_to_force_N
+from hil.canopen.cia402 import OperationMode, enables_operation
+from hil.canopen.cycle import CycleDecoder, SetpointEncoder, from_image
+from hil.canopen.errors import InputError
+from hil.canopen.frame import SYNC_COB_ID, Frame
+from hil.canopen.pdo import Direction, PdoError
+from hil.canopen.signalmap import Signal, torque_scale
 from hil.config import Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import Signals
@@ -120,106 +112,125 @@ def _check_lines(path: Path) -> bool:
     return cut_short
 
 
-def decode_can_log(path: str | Path, act: Actuation, rated_torque_Nm: float = 1.0) -> DecodedLog:
-    """Decode a candump log of a check into run-folder signals.
+def _codec(act: Actuation, meta: dict | None, rig=None):
+    """The cycle codec of a recorded check: meta.json's process image where the run folder has one,
+    else the profile's plan (scalings the drives report are then not known: the rated torque is taken
+    as 1 N m for the setpoint columns, a motor angle scaled by the drive refuses the log)."""
+    image = (meta or {}).get("process_image")
+    notes = []
+    if image:
+        try:
+            pdos, chans = from_image(image)
+        except InputError as exc:
+            raise RecordingError(f"meta.json: {exc}") from None
+    else:
+        if rig is None:
+            from hil.rig import plan_for
 
-    A sample is formed for every SYNC cycle in which both drives' TPDO1 and
-    TPDO2 arrived; its time is the cycle number times the SYNC period, as the
-    master logs it. Setpoint columns come from the RPDOs sent after that
-    sample (mode from RPDO2, target from RPDO1). Lines that are not frames are
-    counted and skipped.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise RecordingError(f"{path}: no such CAN log")
-    cut_short = _check_lines(path)
-    n1, n2 = act.canopen.node_ids
-    counts = act.sensors.resolver_counts_per_rev
-    i_total = act.mechanics.i_total_rad_per_mm
-    T = act.timing.sync_period_s
-    rows: list[list[float]] = []
-    setp: list[list[float]] = []
-    tp1: dict[int, object] = {}
-    tp2: dict[int, object] = {}
-    mode = {n1: 0, n2: 0}
-    cycle = 0
-    syncs = frames = incomplete = bad = 0
-    pending: int | None = None  # index of the last row waiting for its setpoints
-
-    formed = False  # the current cycle's sample exists (all four TPDOs arrived)
-
-    def form_row() -> None:
-        nonlocal pending, formed
-        if formed or cycle == 0 or not all(n in tp1 and n in tp2 for n in (n1, n2)):
-            return
-        rows.append([cycle * T,
-                     increments_to_rad(tp1[n1].position_inc, counts), increments_to_rad(tp1[n2].position_inc, counts),
-                     lvdt_um_to_mm(tp2[n1].lvdt_um), lvdt_um_to_mm(tp2[n2].lvdt_um),
-                     force_dN_to_newton(tp2[n1].force_dN), force_dN_to_newton(tp2[n2].force_dN)])
-        setp.append([0.0, 0.0, 0.0, 0.0])
-        pending = len(rows) - 1  # the RPDOs until the next SYNC carry this sample's setpoints
-        formed = True
-
-    def end_cycle() -> None:
-        nonlocal pending, incomplete, formed
-        if cycle > 0 and not formed:
-            incomplete += 1
-        pending = None
-        formed = False
-
+            rig = plan_for(act)
+        plan = rig.plan
+        pdos = plan.tx_pdos + plan.rx_pdos
+        chans = []
+        for ch in plan.channels:
+            if ch.scale is None and ch.signal in (Signal.MOTOR_ANGLE, Signal.TARGET_POSITION):
+                raise RecordingError(f"{ch.key}: the motor angle's scaling is read from the drive "
+                                     f"({ch.source.value}); decode the CAN log with its run folder's meta.json")
+            if ch.scale is None and ch.signal is Signal.TARGET_TORQUE:
+                ch = dataclasses.replace(ch, scale=torque_scale(1.0, act.mechanics.i_total_rad_per_mm))
+                if not notes:
+                    notes.append("no meta.json: force setpoints taken at a rated torque of 1 N m")
+            chans.append(ch)
+    tx = [p for p in pdos if p.direction is Direction.TX]
+    rx = [p for p in pdos if p.direction is Direction.RX]
     try:
-        # a gzip'd log (can.log.gz) is read as it is
+        return (CycleDecoder(tx, [c for c in chans if c.signal.direction is Direction.TX]),
+                SetpointEncoder(rx, [c for c in chans if c.signal.direction is Direction.RX]), tuple(notes))
+    except InputError as exc:
+        raise RecordingError(f"process image: {exc}") from None
+
+
+def _frames(path: Path, counts: dict):
+    """The frames of a candump log (``.gz`` too), skipping lines python-can cannot parse (counted)."""
+    try:
         reader = can.io.CanutilsLogReader(gzip.open(path, "rt") if path.name.lower().endswith(".gz") else str(path))
         it = iter(reader)
         while True:
             try:
                 msg = next(it)
             except StopIteration:
-                break
+                return
             except (ValueError, IndexError):
-                bad += 1
+                counts["bad"] += 1
                 continue
-            frames += 1
-            cid = msg.arbitration_id
-            try:
-                f = Frame(cid, bytes(msg.data))
-                if cid == SYNC_COB_ID:
-                    syncs += 1
-                    end_cycle()
-                    cycle += 1
-                    tp1.clear()
-                    tp2.clear()
-                    continue
-                base, node = split_cob_id(cid)
-                if node not in (n1, n2):
-                    continue
-                if base == TPDO1.cob_id_base:
-                    tp1[node] = decode_tpdo1(f)
-                    form_row()
-                elif base == TPDO2.cob_id_base:
-                    tp2[node] = decode_tpdo2(f)
-                    form_row()
-                elif base == RPDO2.cob_id_base:
-                    mode[node] = decode_rpdo2(f).mode
-                elif base == RPDO1.cob_id_base and pending is not None:
-                    r = decode_rpdo1(f)
-                    k = 0 if node == n1 else 2
-                    m = mode[node]
-                    cw_enabled = (r.controlword & 0x0F) == 0x0F
-                    mm = m if cw_enabled else 0
-                    setp[pending][k] = mm
-                    setp[pending][k + 1] = (permille_to_force_N(r.target_torque_permille, i_total, rated_torque_Nm)
-                                            if m == OperationMode.CST else increments_to_rad(r.target_position_inc, counts))
-            except PdoError:
-                bad += 1
+            counts["frames"] += 1
+            yield Frame(msg.arbitration_id, bytes(msg.data))
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
+
+
+def decode_can_log(path: str | Path, act: Actuation, meta: dict | None = None, *, rig=None) -> DecodedLog:
+    """Decode a candump log of a check into run-folder signals.
+
+    A sample is formed for every SYNC cycle in which every TPDO with an input
+    arrived (:class:`hil.canopen.cycle.CycleDecoder`, as the master forms it);
+    its time is the cycle number times the SYNC period, as the master logs it.
+    Setpoint columns come from the RPDOs sent after that sample (mode from the
+    modes-of-operation RPDO, targets from the synchronous RPDOs, the mode column
+    0 while the controlword does not enable operation). The layout and scalings
+    are meta.json's ``process_image`` when given, else the profile's plan.
+    Lines that are not frames are counted and skipped.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise RecordingError(f"{path}: no such CAN log")
+    cut_short = _check_lines(path)
+    dec, enc, notes = _codec(act, meta, rig)
+    T = act.timing.sync_period_s
+    rows: list[list[float]] = []
+    setp: list[list[float]] = []
+    mode = {1: 0, 2: 0}
+    counts = {"frames": 0, "bad": 0}
+    cycle = syncs = incomplete = bad = 0
+    pending: int | None = None  # index of the last row waiting for its setpoints
+    for f in _frames(path, counts):
+        cid = f.arbitration_id
+        try:
+            if cid == SYNC_COB_ID:
+                syncs += 1
+                if cycle > 0 and pending is None:
+                    incomplete += 1
+                cycle += 1
+                pending = None
+                dec.reset()
+                continue
+            if dec.feed(f) is not None:
+                if pending is None and cycle > 0 and dec.complete:
+                    rows.append([cycle * T, *dec.values])
+                    setp.append([0.0, 0.0, 0.0, 0.0])
+                    pending = len(rows) - 1  # the RPDOs until the next SYNC carry this sample's setpoints
+                continue
+            rx = enc.decode(f)
+            if rx is None:
+                continue
+            if rx.mode is not None:
+                mode[rx.ema] = rx.mode
+            if pending is not None and rx.controlword is not None:
+                k = 0 if rx.ema == 1 else 2
+                m = mode[rx.ema]
+                setp[pending][k] = m if enables_operation(rx.controlword) else 0
+                value = rx.target_torque_N if m == OperationMode.CST else rx.target_position_rad
+                setp[pending][k + 1] = 0.0 if value is None else value
+        except PdoError:
+            bad += 1
+    if cycle > 0 and pending is None:
+        incomplete += 1
+    bad += counts["bad"]
     if not rows:
-        raise IncompleteRecordingError(f"{path}: no complete SYNC cycle with TPDOs of nodes {n1} and {n2}")
+        raise IncompleteRecordingError(f"{path}: no complete SYNC cycle with the TPDOs of the rig's nodes")
     a = np.asarray(rows)
     s = np.asarray(setp)
     sig = Signals(t=a[:, 0], phi1=a[:, 1], phi2=a[:, 2], s1=a[:, 3], s2=a[:, 4], F1=a[:, 5], F2=a[:, 6],
                   mode1=s[:, 0], sp1=s[:, 1], mode2=s[:, 2], sp2=s[:, 3],
                   notes=(f"decoded from CAN log {path.name}: {incomplete} incomplete cycle(s), {bad} bad line(s)",)
-                  + (("last line incomplete (recording cut short), dropped",) if cut_short else ()))
-    return DecodedLog(sig, frames, syncs, incomplete, bad)
+                  + notes + (("last line incomplete (recording cut short), dropped",) if cut_short else ()))
+    return DecodedLog(sig, counts["frames"], syncs, incomplete, bad)

@@ -156,8 +156,7 @@ class CanopenLink:
             if missing > self.max_missing:
                 err = StaleData(f"sensor data stale: no complete sample for {missing} SYNC cycles "
                                 f"(safety.max_stale_cycles = {self.max_missing}); missing: "
-                                + ", ".join(f"node {n} TPDO{k}" for n, d in self.m.drives.items()
-                                            for k, tp in ((1, d.tpdo1), (2, d.tpdo2)) if tp is None)
+                                + ", ".join(f"COB-ID 0x{c:03X}" for c in self.m.decoder.missing())
                                 + f"; drive states {[d.state.name for d in self.m.drives.values()]}")
                 self.m.latch(err)
                 raise err
@@ -177,6 +176,16 @@ class CanopenLink:
             self._send(self.m.setpoint_frames(*hold, smp))
             smp = self._next_sample()
         return smp
+
+    def preflight_record(self) -> dict:
+        """What meta.json records once the drives are up: the process image (PDOs, scalings as the drives
+        reported them) and how each drive is protected against the master's death (configured, drilled)."""
+        m = self.m
+        return {"process_image": m.process_image(),
+                "master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in m.drives.values()
+                                if d.master_loss is not None},
+                "identity": {f"ema{d.ema}": ({"node": d.node_id, **d.identity} if d.identity else None)
+                             for d in m.drives.values()}}
 
     def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
         if self.m.fault is not None and sp1.mode is DriveMode.DISABLED and sp2.mode is DriveMode.DISABLED:

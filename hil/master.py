@@ -50,7 +50,7 @@ from hil.canopen.cia402 import (
     decode_state,
     master_command,
 )
-from hil.canopen.cycle import CycleDecoder, SetpointEncoder
+from hil.canopen.cycle import CycleDecoder, SetpointEncoder, image_of
 from hil.canopen.emcy import Emcy, EmcyCode, decode_emcy
 from hil.canopen.frame import (
     EMCY_COB_ID_BASE,
@@ -72,6 +72,7 @@ from hil.config import Actuation
 from hil.errors import EmacheckError
 from hil.preflight import (
     Heartbeat,
+    LastHeartbeat,
     MasterLossReactionError,
     MasterLossRecord,
     Nmt,
@@ -220,7 +221,7 @@ class MasterCore:
         self.fault_cycle: int | None = None  #: the cyclic-phase SYNC count when the fault latched
         self.later_faults: list[str] = []  #: errors after the first one (recorded, not raised again)
         self._sdo = {n: SdoClient(n, timeout_s=c.sdo_timeout_s) for n in self.nodes}
-        self.preflight = Preflight(actuation, plan, self.emcy_codes_since)
+        self.preflight = Preflight(actuation, plan, self.emcy_codes_since, self._sdo_status)
         self._gen: Generator | None = None
         self._pending: object | None = None
         self._boot_deadline = 0.0
@@ -327,6 +328,8 @@ class MasterCore:
                 result = t
             elif isinstance(req, Now):
                 result = t
+            elif isinstance(req, LastHeartbeat):
+                result = self._hb_last
             elif isinstance(req, Heartbeat):
                 if req.on:
                     self._hb_next = t
@@ -337,6 +340,18 @@ class MasterCore:
                     self._event(t, EventKind.DRILL, 0, f"the master falls silent (last heartbeat at {result:.3f} s)")
             else:  # pragma: no cover
                 raise PreflightError(f"internal: unknown preflight request {req!r}")
+
+    def _sdo_status(self, node: int, sw: int, t: float) -> None:
+        """A statusword the preflight read by SDO: the drive's state as the master knows it."""
+        d = self.drives.get(node)
+        if d is None:
+            return
+        d.statusword = sw
+        d.last_tpdo_s = t
+        new = decode_state(sw)
+        if new is not d.state:
+            self._event(t, EventKind.STATE, node, f"{d.state.name} -> {new.name} (SDO)")
+            d.state = new
 
     # -------------------------------------------------------------- frames in
 
@@ -676,9 +691,7 @@ class MasterCore:
     def all_in(self, state: State) -> bool:
         return all(d.state is state for d in self.drives.values())
 
-    def process_image(self) -> list[dict]:
-        """Where each signal was in the PDOs and how it was scaled (meta.json, for the CAN-log reader)."""
-        return [{"signal": ch.signal.value, "ema": ch.ema, "node": ch.node_id, "cob_id": ch.cob_id,
-                 "position": ch.position, "data_type": ch.data_type,
-                 "units_per_si": None if ch.scale is None else ch.scale.units_per_si,
-                 "offset": None if ch.scale is None else ch.scale.offset} for ch in self.channels]
+    def process_image(self) -> dict:
+        """The PDOs and where each signal was in them, scaled as the drives said (meta.json, for the
+        CAN-log reader: :func:`hil.canopen.cycle.image_of`)."""
+        return image_of(self.plan.tx_pdos + self.plan.rx_pdos, self.channels)

@@ -121,6 +121,11 @@ class Now:
 
 
 @dataclass(frozen=True, slots=True)
+class LastHeartbeat:
+    """The result is the time the master's last heartbeat went out (None: none yet)."""
+
+
+@dataclass(frozen=True, slots=True)
 class Heartbeat:
     """The master's own heartbeat off (``on`` False; result: the time of its last heartbeat) or on."""
 
@@ -260,9 +265,12 @@ class Preflight:
     emcy_since : callable
         ``emcy_since(node, t) -> tuple of int``: EMCY codes the node sent since ``t`` (the master
         core keeps them).
+    on_status : callable, optional
+        ``on_status(node, statusword, t)``: every statusword the preflight reads by SDO (the master's
+        view of the drive's state before the cyclic phase).
     """
 
-    def __init__(self, actuation: Actuation, plan: RigPlan, emcy_since) -> None:
+    def __init__(self, actuation: Actuation, plan: RigPlan, emcy_since, on_status=None) -> None:
         self.act = actuation
         self.plan = plan
         self.c = actuation.canopen
@@ -271,6 +279,7 @@ class Preflight:
         self.drives = [DriveSetup(d.ema, d) for d in plan.drives]
         self.identities: dict[int, dict] = {}
         self._emcy_since = emcy_since
+        self._on_status = on_status  #: ``on_status(node, statusword, t)``: a statusword read by SDO
         self.events: list[tuple[int, str]] = []  #: (node, what) for the master's event log
 
     # ------------------------------------------------------------ helpers
@@ -469,6 +478,13 @@ class Preflight:
             return
         for d in drives:
             yield from self._power_up_by_sdo(d)
+        # a consumer watches from the first heartbeat after its configuration (CiA 301): one goes out first
+        t_cfg = yield Now()
+        while True:
+            last = yield LastHeartbeat()
+            if last is not None and last > t_cfg:
+                break
+            yield Wait((yield Now()) + self.T)
         t_last = yield Heartbeat(False)
         deadline = t_last + 2.0 * self.consumer_ms / 1000.0 + 0.1
         reacted: dict[int, tuple[float, State]] = {}
@@ -477,7 +493,7 @@ class Preflight:
             for d in drives:
                 if d.ema in reacted:
                     continue
-                sw = int((yield from self._read(d.plan.node, 0x6041, 0, "statusword")))
+                sw = yield from self._statusword(d)
                 state = decode_state(sw)
                 if state is not State.OPERATION_ENABLED:
                     reacted[d.ema] = ((yield Now()), state)
@@ -509,6 +525,14 @@ class Preflight:
                 f"OPERATION ENABLED (EMCY seen: {seen}); the check is not started. State the rig's other protection "
                 f"in canopen.external_watchdog, or repair the drive's reaction (0x6007, 0x1029)")
 
+    def _statusword(self, d: DriveSetup) -> Generator:
+        """The drive's statusword by SDO (told to the master's view of it)."""
+        node = d.plan.node
+        sw = int((yield from self._read(node, 0x6041, 0, "statusword")))
+        if self._on_status is not None:
+            self._on_status(node.spec.node_id, sw, (yield Now()))
+        return sw
+
     def _power_up_by_sdo(self, d: DriveSetup) -> Generator:
         """CSP, target = actual position, then shutdown, switch on, enable operation by SDO (pre-operational)."""
         node = d.plan.node
@@ -528,7 +552,7 @@ class Preflight:
         resets = 0
         previous_cw = None
         while True:
-            sw = int((yield from self._read(node, 0x6041, 0, "statusword")))
+            sw = yield from self._statusword(d)
             state = decode_state(sw)
             if state is target:
                 return

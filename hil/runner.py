@@ -108,6 +108,10 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
     try:
         smp = link.first_sample()
         t_start = smp.t_s
+        record = getattr(link, "preflight_record", None)
+        if record is not None:  # the layout, the scalings the drives reported, the drill: on disk now
+            meta.update(record())
+            write_json_atomic(meta_path, meta)
         while True:
             viol = sup.check(smp, sp1, sp2)
             if viol is not None:

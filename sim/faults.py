@@ -55,6 +55,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass, field
+from dataclasses import replace as _replace
 from enum import Enum
 
 import numpy as np
@@ -62,8 +63,10 @@ import numpy as np
 from blf.errors import InputError
 from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame
-from hil.canopen.pdo import Tpdo1, Tpdo2, decode_tpdo1, decode_tpdo2, encode_tpdo1, encode_tpdo2
+from hil.canopen.cycle import CycleDecoder
+from hil.canopen.pdo import Direction
 from hil.canopen.process import DriveMode
+from hil.canopen.signalmap import Scale, Signal
 
 __all__ = ["FaultKind", "Fault", "FaultInjector", "TruthTrace", "SDO_ABORT_CODE"]
 
@@ -196,11 +199,26 @@ class FaultInjector:
         self.record_truth = record_truth
         self._truth: list[tuple] = []
         self._held: list[tuple[int, Frame]] = []  # (due SYNC count, frame) of late TPDOs
-        self._stuck: dict[int, int] = {}  # node -> frozen LVDT value [um]
+        self._stuck: dict[int, float] = {}  # EMA -> frozen LVDT value [mm]
         self._started: set[int] = set()  # indices of faults whose onset happened
         self.onset_s: dict[str, float] = {}  #: kind -> check time of the onset
         self.dropped = 0
         self._nodes = {k + 1: n for k, n in enumerate(pair.nodes)}
+        plan = pair.plan
+        self._tpdos = {n.spec.node_id: frozenset(p.cob_id for p in n.layout.pdos if p.direction is Direction.TX)
+                       for n in plan.nodes}
+        self._rpdos = {n.spec.node_id: frozenset(p.cob_id for p in n.layout.pdos if p.direction is Direction.RX)
+                       for n in plan.nodes}
+        self._tpdo_owner = {c: n for n, cobs in self._tpdos.items() for c in cobs}  # COB-ID -> node id
+        self._rpdo_owner = {c: n for n, cobs in self._rpdos.items() for c in cobs}
+        self._drive_ids = frozenset(n.node_id for n in pair.nodes)
+        # the measured inputs of every TPDO, as the simulated nodes scale them
+        chans = []
+        for ch in plan.channels:
+            if ch.scale is None and ch.signal is Signal.MOTOR_ANGLE:
+                ch = _replace(ch, scale=Scale(self._nodes[ch.ema]._k_inc()))
+            chans.append(ch)
+        self._codec = CycleDecoder(plan.tx_pdos, [c for c in chans if c.signal.direction is Direction.TX])
         #: bus time [s] of the last frame that reached the drives (None before the first)
         self.last_inbound_t: float | None = None
         self.t0_bus: float | None = None  #: bus time of SYNC 0 (the first SYNC's time less T) [s]
@@ -262,10 +280,11 @@ class FaultInjector:
             return True  # the master is dead: nothing it would send reaches the drives
         if cid != 0x080 and self._active(FaultKind.BUS_ERRORS) and self._lose():
             return True  # (SYNC exempt: the simulated physics advances on it)
-        if base in (0x200, 0x300, 0x400, 0x500, 0x600):
-            if self._active(FaultKind.NODE_SILENT, node):
+        target = node if base == 0x600 else self._rpdo_owner.get(cid)
+        if target is not None:
+            if self._active(FaultKind.NODE_SILENT, target):
                 return True
-            if base in (0x200, 0x300) and self._active(FaultKind.RPDO_LOST, node):
+            if base != 0x600 and self._active(FaultKind.RPDO_LOST, target):
                 return True
         return False
 
@@ -290,50 +309,58 @@ class FaultInjector:
     def _outbound(self, frames: list[Frame], at_sync: bool) -> list[Frame]:
         out: list[Frame] = []
         if at_sync and self._held:  # late TPDOs due now, ahead of this SYNC's frames
-            out += [self._sensor_faults(f, f.arbitration_id & 0x7F) for k, f in self._held if k <= self.syncs]
+            out += [self._sensor_faults(f) for k, f in self._held if k <= self.syncs]
             self._held = [(k, f) for k, f in self._held if k > self.syncs]
+        drive_ids = self._drive_ids
         for fr in frames:
             cid = fr.arbitration_id
             node, base = cid & 0x7F, cid & 0x780
             if self._active(FaultKind.BUS_ERRORS) and self._lose():
                 continue
-            if node not in (n.node_id for n in self.pair.nodes):
+            owner = self._tpdo_owner.get(cid)
+            if owner is not None:
+                if owner in drive_ids:
+                    if self._active(FaultKind.NODE_SILENT, owner) or self._active(FaultKind.TPDO_MISSING, owner):
+                        continue
+                    late = self._active(FaultKind.TPDO_LATE, owner)
+                    if late and at_sync:
+                        self._held.append((self.syncs + int(late[0].param), fr))
+                        continue
+                out.append(self._sensor_faults(fr))
+                continue
+            if node not in drive_ids:
                 out.append(fr)
                 continue
             if self._active(FaultKind.NODE_SILENT, node):
                 continue
             if base == 0x700 and self._active(FaultKind.HEARTBEAT_STOP, node):
                 continue
-            if base in (0x180, 0x280):
-                if self._active(FaultKind.TPDO_MISSING, node):
-                    continue
-                late = self._active(FaultKind.TPDO_LATE, node)
-                if late and at_sync:
-                    self._held.append((self.syncs + int(late[0].param), fr))
-                    continue
-                fr = self._sensor_faults(fr, node)
             out.append(fr)
         return out
 
-    def _sensor_faults(self, fr: Frame, node: int) -> Frame:
-        if fr.arbitration_id & 0x780 == 0x280:
-            tp = decode_tpdo2(fr)
-            lvdt, force = tp.lvdt_um, tp.force_dN
-            if self._active(FaultKind.LVDT_STUCK, node):
-                lvdt = self._stuck.setdefault(node, lvdt)
-            for f in self._active(FaultKind.LVDT_SPIKE, node):
-                lvdt += int(round(f.param * 1000))
-            for f in self._active(FaultKind.LOADCELL_SATURATION, node):
-                lim = int(round(f.param * 10))
-                force = max(-lim, min(lim, force))
-            if (lvdt, force) != (tp.lvdt_um, tp.force_dN):
-                return encode_tpdo2(node, Tpdo2(lvdt, force))
+    def _sensor_faults(self, fr: Frame) -> Frame:
+        """The sensor faults of the EMAs whose measured values ``fr`` carries, applied to those values."""
+        values = self._codec.scaled(fr)
+        if not values:
             return fr
-        if self._active(FaultKind.RESOLVER_WRAP, node):
-            tp = decode_tpdo1(fr)
-            counts = int(round(self._node(node).counts_per_rev))
-            return encode_tpdo1(node, Tpdo1(tp.statusword, tp.position_inc + counts, tp.mode_display))
-        return fr
+        changes = {}
+        for (ema, sig), v in values.items():
+            node = self._nodes[ema].node_id
+            if sig is Signal.LVDT:
+                x = v
+                if self._active(FaultKind.LVDT_STUCK, node):
+                    x = self._stuck.setdefault(ema, v)
+                for f in self._active(FaultKind.LVDT_SPIKE, node):
+                    x += f.param
+                if x != v:
+                    changes[(ema, sig)] = x
+            elif sig is Signal.FORCE:
+                for f in self._active(FaultKind.LOADCELL_SATURATION, node):
+                    if abs(v) > f.param:
+                        changes[(ema, sig)] = math.copysign(f.param, v)
+            elif sig is Signal.MOTOR_ANGLE and self._active(FaultKind.RESOLVER_WRAP, node):
+                changes[(ema, sig)] = v + 2.0 * math.pi
+        return self._codec.rescaled(fr, changes) if changes else fr
 
     def _node(self, node_id: int):
         return next(n for n in self.pair.nodes if n.node_id == node_id)

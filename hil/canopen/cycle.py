@@ -30,7 +30,7 @@ from hil.canopen.plan import Channel
 from hil.canopen.process import Sample
 from hil.canopen.signalmap import Scale, Signal
 
-__all__ = ["CycleDecoder", "SetpointEncoder", "SAMPLE_SLOTS", "RxValues"]
+__all__ = ["CycleDecoder", "RxValues", "SAMPLE_SLOTS", "SetpointEncoder", "encode_raw"]
 
 #: Slot of each physical input in :attr:`CycleDecoder.values` (the order of :class:`Sample` after ``t_s``).
 SAMPLE_SLOTS: dict[tuple[int, Signal], int] = {
@@ -174,11 +174,11 @@ class CycleDecoder:
         for slot, pos, k, off in rows:
             key = next((key for key, s in SAMPLE_SLOTS.items() if s == slot), None)
             if key in changes and k is not None:
-                vals[pos] = _encode(spec.entries[pos].data_type, (changes[key] - off) * k)
+                vals[pos] = encode_raw(spec.entries[pos].data_type, (changes[key] - off) * k)
         return spec.pack(vals)
 
 
-def _encode(data_type: int, x: float) -> int | float:
+def encode_raw(data_type: int, x: float) -> int | float:
     """``x`` rounded (ties to even) and clipped to the data type's range; REAL32 as it is."""
     rng = TYPE_RANGE.get(data_type)
     if rng is None:
@@ -262,9 +262,9 @@ class SetpointEncoder:
                 if sig is Signal.CONTROLWORD:
                     vals.append(controlword)
                 elif sig is Signal.TARGET_POSITION:
-                    vals.append(_encode(t, target_position_rad * k))
+                    vals.append(encode_raw(t, target_position_rad * k))
                 else:
-                    vals.append(_encode(t, target_torque_N * k))
+                    vals.append(encode_raw(t, target_torque_N * k))
             out.append(spec.pack(vals))
         return out
 
@@ -292,3 +292,39 @@ class SetpointEncoder:
             else:
                 kw["target_torque_N"] = sc.to_si(v)
         return RxValues(ema, **kw)
+
+
+# --------------------------------------------------------------------------- the process image as data
+
+
+def image_of(pdos: Sequence[PdoSpec], channels: Sequence[Channel]) -> dict:
+    """The layout and the scaled channels as plain data (meta.json's ``process_image``): enough to decode a
+    CAN log of the run without the profile, the EDS files or the drives (:func:`from_image`)."""
+    return {
+        "pdos": [{"name": p.name, "direction": p.direction.value, "cob_id": p.cob_id,
+                  "transmission_type": p.transmission_type,
+                  "entries": [[e.name, e.index, e.subindex, e.data_type] for e in p.entries]} for p in pdos],
+        "channels": [{"signal": c.signal.value, "ema": c.ema, "node": c.node_id, "cob_id": c.cob_id,
+                      "position": c.position, "data_type": c.data_type, "source": c.source.value, "key": c.key,
+                      "units_per_si": None if c.scale is None else c.scale.units_per_si,
+                      "offset": None if c.scale is None else c.scale.offset} for c in channels],
+    }
+
+
+def from_image(image: dict) -> tuple[tuple[PdoSpec, ...], tuple[Channel, ...]]:
+    """The inverse of :func:`image_of`; InputError naming what is malformed."""
+    from hil.canopen.pdo import MappedObject
+    from hil.canopen.signalmap import ScaleSource
+
+    try:
+        pdos = tuple(PdoSpec(p["name"], Direction(p["direction"]), int(p["name"][4:]), int(p["cob_id"]),
+                             int(p["transmission_type"]),
+                             tuple(MappedObject(str(n), int(i), int(s), int(t)) for n, i, s, t in p["entries"]))
+                     for p in image["pdos"])
+        chans = tuple(Channel(Signal(c["signal"]), int(c["ema"]), int(c["node"]), int(c["cob_id"]),
+                              int(c["position"]), int(c["data_type"]),
+                              None if c["units_per_si"] is None else Scale(c["units_per_si"], c["offset"]),
+                              ScaleSource(c["source"]), str(c["key"])) for c in image["channels"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"process image: malformed ({type(exc).__name__}: {exc})") from None
+    return pdos, chans

@@ -219,6 +219,21 @@ def master_setup(act, profile_path, eds=None):
     return plan_for(act, profile_path, eds)
 
 
+def rig_meta(rig) -> dict:
+    """What meta.json records of the planned rig: the drives' EDS, every node's EDS, the notes of the plan."""
+    return {"eds": str(rig.eds_paths["ema1"]), "eds_nodes": {k: str(v) for k, v in rig.eds_paths.items()},
+            "plan_notes": list(rig.plan.notes),
+            "force_control": {f"ema{d.ema}": d.force_control.value for d in rig.plan.drives}}
+
+
+def rig_hashes(rig) -> dict:
+    """SHA-256 of the drives' EDS (``eds``) and of each sensor node's (``eds_NAME``)."""
+    from hil.cli.common import file_hashes
+
+    return file_hashes(eds=rig.eds_paths["ema1"],
+                       **{f"eds_{k}": v for k, v in rig.eds_paths.items() if k not in ("ema1", "ema2")})
+
+
 def canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):
     """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
     ...) or Ctrl-C has already stopped the drives and closed the log when it arrives here: it

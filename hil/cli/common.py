@@ -48,10 +48,12 @@ def add_parser(sub, name: str, *, help: str, description: str, handler) -> argpa
     return p
 
 
-def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: bool = False) -> None:
-    """``--profile`` (and ``--check``, ``--sim``, ``--seed``): the profiles a command reads."""
+def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: bool = False, eds: bool = True) -> None:
+    """``--profile``, ``--eds`` (and ``--check``, ``--sim``, ``--seed``): the profiles a command reads."""
     p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
-                   help="actuation profile (gear ratio, stroke, F_limit, B_spec, SYNC period, node ids, EDS)")
+                   help="actuation profile (mechanics, SYNC period, the drives and sensor nodes, the signal map)")
+    if eds:
+        add_eds_arg(p)
     if check:
         p.add_argument("--check", metavar="CHECK.toml", type=Path,
                        help="check profile (sweep, opposing force, force fight, safety limits)")
@@ -60,6 +62,12 @@ def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: boo
                        help="simulated-rig profile (physical parameters, sensor errors, seed)")
         p.add_argument("--seed", type=_seed, help="noise seed, an integer >= 0 (default: the simulated-rig "
                                                   "profile's); recorded in meta.json")
+
+
+def add_eds_arg(p: argparse.ArgumentParser) -> None:
+    """``--eds PATH``: the drives' EDS where the user keeps it (overrides the profile's canopen.eds)."""
+    p.add_argument("--eds", metavar="PATH", type=Path,
+                   help="the drives' EDS file as its vendor ships it (overrides canopen.eds of the profile)")
 
 
 def add_recording_args(p: argparse.ArgumentParser, writes: str, *,
@@ -348,7 +356,7 @@ def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
 
     from hil.canlog import decode_can_log
 
-    dec = decode_can_log(sig_path, act)
+    dec = decode_can_log(sig_path, act, meta)
     sig = dec.signals
     steps = (meta or {}).get("steps") or {}
     if steps:

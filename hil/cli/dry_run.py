@@ -8,7 +8,16 @@ from pathlib import Path
 
 from rich.console import Console
 
-from hil.cli.check import canopen_check, master_setup, record_can_stats, result_after, truth_dict, worn_simrig
+from hil.cli.check import (
+    canopen_check,
+    master_setup,
+    record_can_stats,
+    result_after,
+    rig_hashes,
+    rig_meta,
+    truth_dict,
+    worn_simrig,
+)
 from hil.cli.common import (
     add_history_args,
     add_parser,
@@ -40,7 +49,7 @@ class DryRun:
 
 def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=None, realtime: bool = False,
             quiet: bool = True, console: Console | None = None, profile_path=None,
-            trace: dict | None = None) -> DryRun:
+            trace: dict | None = None, eds=None) -> DryRun:
     """The check over CANopen against two simulated drives on an in-process virtual bus.
 
     ``faults`` (a :class:`sim.faults.Fault` sequence) replaces the simulated-rig profile's
@@ -62,13 +71,14 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     from sim.truth import rig_truth
 
     console = console or make_console(quiet=quiet)
-    eds, load = master_setup(act, profile_path, None)
+    rig = master_setup(act, profile_path, eds)
+    load = rig.plan.load
     seed = simrig.seed if seed is None else seed
     faults = tuple(simrig.faults if faults is None else faults)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     plant = RigPlant(simrig.params, rng)
-    pair = SimDrivePair(plant, lambda node_id=None: load_eds(eds, node_id=node_id), node_ids=act.canopen.node_ids,
+    pair = SimDrivePair(plant, rig.plan, lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id),
                         serials=simrig.serials)
     injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=bool(faults))
     truth = truth_dict(rig_truth(simrig.params))
@@ -76,13 +86,13 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                                    "simrig": snapshot(simrig.params), "truth": truth,
                                    "faults": [snapshot(f) for f in faults],
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
-                                   "eds": str(eds), **(trace or {})})
-    meta.setdefault("files_sha256", {}).update(file_hashes(eds=eds))
+                                   **rig_meta(rig), **(trace or {})})
+    meta.setdefault("files_sha256", {}).update(rig_hashes(rig))
     write_json_atomic(out / "meta.json", meta)  # the run folder says "running" from the start
     # a channel of its own: python-can's virtual channels are process-global by name
     transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
                                    realtime=realtime)
-    master = MasterCore(act)
+    master = MasterCore(act, rig.plan)
     log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
@@ -114,7 +124,7 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     if wear is not None:
         trace["wear"] = wear
     rc = dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
-                 console=console, profile_path=args.profile, trace=trace).exit_code
+                 console=console, profile_path=args.profile, trace=trace, eds=args.eds).exit_code
     record_history(console, args, act, out / "result.json", run_folder=out)
     return rc
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hil.cli.check import canopen_check, master_setup, page_faults, record_can_stats, result_after
+from hil.cli.check import canopen_check, master_setup, page_faults, record_can_stats, result_after, rig_hashes, rig_meta
 from hil.cli.common import (
     ExitCode,
     add_bus_args,
@@ -34,7 +34,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     console = make_console()
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
-    eds, load = master_setup(act, args.profile, None)
+    rig = master_setup(act, args.profile, args.eds)
+    load = rig.plan.load
     if not args.arm:
         console.print("[red]refusing to move anything:[/red] `emacheck run` drives real actuators; "
                       "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
@@ -46,7 +47,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = out_dir(args, "run")
     out.mkdir(parents=True, exist_ok=True)
     transport = BusTransport(bus, act.timing.sync_period_s)
-    master = MasterCore(act)
+    master = MasterCore(act, rig.plan)
     # wall-clock stamps in the CAN log, as candump writes them
     log = CanLogWriter(out / "can.log", channel=args.channel, time_offset_s=transport.wall_clock_offset_s)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
@@ -54,9 +55,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     meta = start_meta(act, check, {"mode": "run", "interface": args.interface, "channel": args.channel,
                                    "bitrate_bps": bitrate,
                                    "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
-                                   "eds": str(eds), "operator": args.operator, "work_order": args.work_order,
+                                   **rig_meta(rig), "operator": args.operator, "work_order": args.work_order,
                                    **installation(args, act),
-                                   "files_sha256": file_hashes(actuation=args.profile, check=args.check, eds=eds)})
+                                   "files_sha256": {**file_hashes(actuation=args.profile, check=args.check),
+                                                    **rig_hashes(rig)}})
     console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
     console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")

@@ -125,7 +125,7 @@ def register(sub) -> None:
                    description="Run the whole check against the simulated plant directly "
                                "(no CANopen), then analyse it and write the run folder and report.")
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-simulate)")
-    add_profile_args(p, sim=True)
+    add_profile_args(p, sim=True, eds=False)
     add_trace_args(p)
     add_history_args(p, simulated=True)
     p.add_argument("--quiet", action="store_true", help="no progress display")

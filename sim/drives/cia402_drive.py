@@ -59,19 +59,17 @@ from hil.canopen.errors import InputError
 from hil.canopen.od import AbortConnectionOption
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortCode
+from hil.canopen.cycle import encode_raw
+from hil.canopen.signalmap import Signal, angle_scale_factor_group
 from hil.canopen.units import (
     N_from_permille,
-    dN_from_N,
     inc_from_rad,
     increments_per_rad,
     increments_to_rad,
-    mm_to_lvdt_um,
-    newton_to_force_dN,
     permille_from_torque,
     permille_to_force_N,
     rad_from_inc,
     rad_to_increments,
-    um_from_mm,
 )
 from sim.drives.nmt_slave import EMCY_HEARTBEAT, EMCY_NO_ERROR
 from sim.drives.store import abort
@@ -82,8 +80,9 @@ __all__ = ["QUICK_STOP_HOLD_S", "SUPPORTED_MODES", "TARGET_WINDOW_INC", "Cia402D
 QUICK_STOP_HOLD_S = 0.05
 #: CSP target reached (statusword bit 10) when |target - actual| <= this [increments].
 TARGET_WINDOW_INC = 20
-#: Modes of operation (0x6060) the drive supports: CSP and CST.
+#: Modes of operation (0x6060) the drive can simulate: CSP and CST (each drive offers those its 0x6502 says).
 SUPPORTED_MODES = frozenset((int(OperationMode.CSP), int(OperationMode.CST)))
+_CSP_CST_BITS = 1 << 7 | 1 << 9
 #: Abort connection option codes (0x6007) the drive supports, and the commands of 2 and 3.
 _ABORT_OPTIONS = frozenset(int(o) for o in AbortConnectionOption)
 _ABORT_COMMAND = {int(AbortConnectionOption.DISABLE_VOLTAGE): Command.DISABLE_VOLTAGE,
@@ -109,7 +108,6 @@ _K_POS_MIN = (0x607D, 1)
 _K_POS_MAX = (0x607D, 2)
 _K_TARGET_TORQUE = (0x6071, 0)
 _K_MAX_TORQUE = (0x6072, 0)
-_K_RATED_TORQUE = (0x6076, 0)
 
 
 class Cia402Drive:
@@ -148,8 +146,10 @@ class Cia402Drive:
         Fetches it (:meth:`sim.drives.SimDrivePair._fetch_torque`).
     _inc_per_rad : float or None
         Increments per rad, None until needed after a change of 0x608F.
-    _pos_memo, _um_memo, _dN_memo : int or None
-        0x6064, 0x2100 and 0x2101 of the current sample, None until needed.
+    _pos_memo : int or None
+        Position actual value of the current sample (computed once).
+    _memo : list
+        The measured inputs' raw values of the current sample (computed once each).
     _sw_state : State or None
         The state whose statusword bits ``_sw_base`` holds.
     _sw_base : int
@@ -172,11 +172,14 @@ class Cia402Drive:
     """
 
     def _init_drive(self, gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
-                    serial: int | None = None) -> None:
+                    serial: int | None = None, *, angle_units_per_rad: float | None = None,
+                    rated_torque_Nm: float | None = None) -> None:
         """Initial state: drive in SWITCH_ON_DISABLED, no sample yet (see :class:`~sim.drives.drive.SimDrive`)."""
         self._i_total = float(gear_ratio_rad_per_mm)
         self._cpr_override = counts_per_rev
         self._serial = serial
+        self._angle_k = angle_units_per_rad  # position units per rad the profile states (None: the drive's own)
+        self._rated_override = rated_torque_Nm
         self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9))
         self.state_machine = DriveStateMachine(remote=True)
         self.command_override: Callable[[Cia402Drive, float, int, float], tuple[int, float]] | None = None
@@ -188,8 +191,6 @@ class Cia402Drive:
         self._torque_fetch: Callable[[], None] = self._no_torque_source  # set by SimDrivePair
         self._inc_per_rad: float | None = None
         self._pos_memo: int | None = None
-        self._um_memo: int | None = None
-        self._dN_memo: int | None = None
         self._sw_state: State | None = None  # statusword bits of this state: _sw_base
         self._sw_base = 0
         # controlword -> states in which receiving it again (same word as the previous one)
@@ -201,26 +202,56 @@ class Cia402Drive:
         self._reset_drive()
 
     def _live_objects(self) -> dict[tuple[int, int], Callable[[], int | float]]:
-        """The objects whose value the drive computes when read, with their getters."""
-        return {
+        """The objects whose value the drive computes when read, with their getters: its CiA 402
+        objects, the gear-ratio object and every measured input the rig's map puts on this drive."""
+        od = self.store_od
+        live = {
             (0x6041, 0): self._statusword_now,
             (0x6061, 0): lambda: self._mode_display,
             (0x6064, 0): self._position_now,
-            (0x6077, 0): lambda: self.torque_actual_permille,
-            (0x2100, 0): self._lvdt_um_now,
-            (0x2101, 0): self._force_dN_now,
-            (0x2102, 0): lambda: self._i_total,
             (0x603F, 0): lambda: self.state_machine.error_code,
             (0x1001, 0): lambda: self.error_register,
         }
+        if 0x6077 in od:
+            live[(0x6077, 0)] = lambda: self.torque_actual_permille
+        if self._gear_object is not None:
+            live[self._gear_object] = lambda: self._i_total
+        for k, inp in enumerate(self._inputs):
+            if inp.key == (0x6064, 0) and inp.signal is Signal.MOTOR_ANGLE:
+                continue  # the drive's own position actual value
+            live[inp.key] = self._input_getter(k, inp)
+        return live
+
+    def _input_getter(self, k: int, inp) -> Callable[[], int | float]:
+        """Getter of a measured input: the plant's value of this EMA, scaled and rounded into its data type."""
+        if inp.signal is Signal.MOTOR_ANGLE:
+            return self._position_now if inp.scale is None else self._scaled(k, inp, "_phi_rad")
+        return self._scaled(k, inp, "_s_mm" if inp.signal is Signal.LVDT else "_F_N")
+
+    def _scaled(self, k: int, inp, attr: str) -> Callable[[], int | float]:
+        units, off, dtype = inp.scale.units_per_si, inp.scale.offset, inp.data_type
+        memo = self._memo
+
+        def get() -> int | float:
+            v = memo[k]
+            if v is None:
+                x = getattr(self, attr)
+                v = memo[k] = encode_raw(dtype, (x - off) * units if off else x * units)
+            return v
+
+        return get
 
     # ------------------------------------------------------------------ reset and own data
 
     def _reset_drive(self) -> None:
-        """Power-on / reset node: SWITCH_ON_DISABLED, 0x6061 from the EDS, plant command DISABLED."""
+        """Power-on / reset node: SWITCH_ON_DISABLED, 0x6061 from the EDS, plant command DISABLED, the
+        modes it supports from its 0x6502 (CSP bit 7, CST bit 9)."""
+        modes = self.store.int_or(0x6502, 0, _CSP_CST_BITS)
+        self._modes = frozenset(m for m, bit in ((_CSP, 7), (_CST, 9)) if modes >> bit & 1)
         self.state_machine = DriveStateMachine(remote=True)
         self.state_machine.boot_done()
-        self._mode_display = int(self.store.object_dictionary[0x6061].default or 0)
+        d = self.store.var(0x6061, 0)
+        self._mode_display = int(d.default or 0) if d is not None else 0
         self._limit_active = False
         self._target_eff_inc: int | None = None
         self._qs_phi_rad = 0.0
@@ -228,8 +259,11 @@ class Cia402Drive:
         self._set_setpoint(_MODE_DISABLED, 0.0)
 
     def _apply_own_data(self) -> None:
-        """The drive's own data, restored at power-on and reset node: its serial number (0x1018:04)
-        and, where given, its encoder resolution (0x608F)."""
+        """The drive's own data, restored at power-on and reset node: what its EDS leaves open
+        (identity, device type, supported modes, rated torque, ... :attr:`own_data`), its serial
+        number (0x1018:04) and, where given, its encoder resolution (0x608F)."""
+        for (index, sub), data in self.own_data.items():
+            self._store(index, sub, data)
         if self._serial is not None:
             self._store(0x1018, 4, struct.pack("<I", self._serial))
         if self._cpr_override is not None:
@@ -239,7 +273,7 @@ class Cia402Drive:
     def _check_drive_write(self, index: int, subindex: int, value: float | None) -> None:
         """Validate an SDO write of a drive object (raise SdoAbortedError to refuse)."""
         if index == 0x6060:
-            if value not in SUPPORTED_MODES:
+            if value not in self._modes:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
         elif index == 0x607D and subindex in (1, 2):
             lo = value if subindex == 1 else self._int(0x607D, 1)
@@ -256,7 +290,7 @@ class Cia402Drive:
     def _mode_written(self) -> None:
         """0x6060 written: a supported mode shows in 0x6061 (another one is ignored)."""
         mode = self._int(0x6060)
-        if mode in SUPPORTED_MODES:
+        if mode in self._modes:
             self._mode_display = mode
 
     # ------------------------------------------------------------------ live values
@@ -271,7 +305,10 @@ class Cia402Drive:
         self._phi_rad = raw[1 + k]
         self._s_mm = raw[3 + k]
         self._F_N = raw[5 + k]
-        self._pos_memo = self._um_memo = self._dN_memo = None
+        self._pos_memo = None
+        memo = self._memo
+        for j in range(len(memo)):
+            memo[j] = None
         self._torque_stale = True
 
     def _no_torque_source(self) -> None:
@@ -298,13 +335,21 @@ class Cia402Drive:
         """Increments per rad, :func:`hil.canopen.units.increments_per_rad` of :attr:`counts_per_rev` (cached)."""
         k = self._inc_per_rad
         if k is None:
-            k = self._inc_per_rad = increments_per_rad(self.counts_per_rev)
+            if self._angle_k is not None:
+                k = self._angle_k
+            elif self._factor_group:
+                so = self.store.int_or
+                k = angle_scale_factor_group(so(0x6091, 1, 1), so(0x6091, 2, 1), so(0x6092, 1, 1),
+                                             so(0x6092, 2, 1)).units_per_si
+            else:
+                k = increments_per_rad(self.counts_per_rev)
+            self._inc_per_rad = k
         return k
 
     @property
     def counts_per_rev(self) -> float:
         """Position increments per motor revolution, 0x608F:01 / 0x608F:02."""
-        return self._int(0x608F, 1) / self._int(0x608F, 2)
+        return self.store.int_or(0x608F, 1, 4096) / self.store.int_or(0x608F, 2, 1)
 
     @property
     def position_inc(self) -> int:
@@ -325,32 +370,16 @@ class Cia402Drive:
             self._pos_memo = v
         return v
 
-    def _lvdt_um_now(self) -> int:
-        v = self._um_memo
-        if v is None:
-            s_mm = self._s_mm
-            try:
-                v = um_from_mm(s_mm)
-            except (ValueError, OverflowError):
-                return mm_to_lvdt_um(s_mm)  # raises its own error
-            self._um_memo = v
-        return v
-
-    def _force_dN_now(self) -> int:
-        v = self._dN_memo
-        if v is None:
-            F_N = self._F_N
-            try:
-                v = dN_from_N(F_N)
-            except (ValueError, OverflowError):
-                return newton_to_force_dN(F_N)  # raises its own error
-            self._dN_memo = v
-        return v
-
     @property
     def torque_actual_permille(self) -> int:
         """Torque actual value 0x6077 [per mille of the rated torque 0x6076]."""
-        return permille_from_torque(self._torque_Nm, self._int(0x6076) / 1000.0)
+        return permille_from_torque(self._torque_Nm, self._rated_Nm())
+
+    def _rated_Nm(self) -> float:
+        """The motor's rated torque [N m]: the profile's where it states it, else 0x6076 [mN m]."""
+        if self._rated_override is not None:
+            return self._rated_override
+        return self.store.int_or(0x6076, 0, 1000) / 1000.0
 
     @property
     def statusword(self) -> int:
@@ -373,7 +402,7 @@ class Cia402Drive:
             mode = self._icache.get(_K_MODE)
             if mode is None:
                 mode = self._int(0x6060)
-            if mode in SUPPORTED_MODES:
+            if mode in self._modes:
                 extra = _SW_FOLLOWS
                 if self._limit_active:
                     extra |= _SW_LIMIT
@@ -482,16 +511,16 @@ class Cia402Drive:
             mode = ic.get(_K_MODE)
             if mode is None:
                 mode = self._int(0x6060)
-            if mode == _CSP:  # (a supported mode, so the effective one)
+            if mode == _CSP and _CSP in self._modes:  # (a supported mode, so the effective one)
                 target = ic.get(_K_TARGET_POS)
                 if target is None:
                     target = self._int(0x607A)
                 lo = ic.get(_K_POS_MIN)
                 if lo is None:
-                    lo = self._int(0x607D, 1)
+                    lo = self.store.int_or(0x607D, 1, -(2**31))
                 hi = ic.get(_K_POS_MAX)
                 if hi is None:
-                    hi = self._int(0x607D, 2)
+                    hi = self.store.int_or(0x607D, 2, 2**31 - 1)
                 eff = min(max(target, lo), hi)
                 self._limit_active = eff != target
                 self._target_eff_inc = eff
@@ -503,19 +532,16 @@ class Cia402Drive:
                 except (ArithmeticError, InputError):
                     value = increments_to_rad(eff, self.counts_per_rev)  # raises its own error
                 mode_out = _MODE_POSITION
-            elif mode == _CST:
+            elif mode == _CST and _CST in self._modes:
                 tau = ic.get(_K_TARGET_TORQUE)
                 if tau is None:
                     tau = self._int(0x6071)
                 tmax = ic.get(_K_MAX_TORQUE)
                 if tmax is None:
-                    tmax = self._int(0x6072)
+                    tmax = self.store.int_or(0x6072, 0, 32767)
                 eff = min(max(tau, -tmax), tmax)
                 self._limit_active = eff != tau
-                rated = ic.get(_K_RATED_TORQUE)
-                if rated is None:
-                    rated = self._int(0x6076)
-                rated_Nm = rated / 1000.0
+                rated_Nm = self._rated_Nm()
                 i_total = self._i_total
                 if 0.0 < rated_Nm < math.inf and 0.0 < i_total < math.inf:
                     value = N_from_permille(eff, i_total, rated_Nm)

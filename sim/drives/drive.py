@@ -29,6 +29,7 @@ written objects (:meth:`SimDrive._after_write`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import canopen.objectdictionary as cod
@@ -36,6 +37,7 @@ import canopen.objectdictionary as cod
 from hil.canopen.errors import InputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtState
+from hil.canopen.signalmap import Scale, Signal
 from sim.drives.cia402_drive import Cia402Drive
 from sim.drives.nmt_slave import NmtSlave
 from sim.drives.pdo_engine import PdoEngine
@@ -44,7 +46,33 @@ from sim.drives.store import ObjectStore, SdoEndpoint
 if TYPE_CHECKING:
     from sim.drives.pair import _Counters
 
-__all__ = ["SimDrive"]
+__all__ = ["LiveInput", "SimDrive"]
+
+
+@dataclass(frozen=True, slots=True)
+class LiveInput:
+    """A measured value a simulated node serves at one of its objects (from the rig's plan).
+
+    Attributes
+    ----------
+    signal : Signal
+        MOTOR_ANGLE, LVDT or FORCE.
+    ema : int
+        Whose value of the plant's sample (1 or 2).
+    key : (int, int)
+        The object (index, sub-index).
+    data_type : int
+        Its CiA 301 data type: the value is rounded and clipped into it.
+    scale : Scale or None
+        SI -> raw as the profile states it; None: the drive's own position units (0x608F,
+        0x6091/0x6092), motor angle only.
+    """
+
+    signal: Signal
+    ema: int
+    key: tuple[int, int]
+    data_type: int
+    scale: Scale | None
 
 _TALKING = (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL)
 
@@ -107,12 +135,24 @@ class SimDrive(PdoEngine, NmtSlave, Cia402Drive):
 
     def __init__(self, node_id: int, ema_index: int, od: cod.ObjectDictionary, *,
                  gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
-                 counters: _Counters, outbox: list[Frame], serial: int | None = None) -> None:
+                 counters: _Counters, outbox: list[Frame], serial: int | None = None,
+                 inputs: tuple[LiveInput, ...] = (), own_data: dict | None = None,
+                 gear_object: tuple[int, int] | None = None, factor_group: bool = False,
+                 rated_torque_Nm: float | None = None) -> None:
         self.node_id = node_id
         self.ema_index = ema_index
         self._counters = counters
         self._out = outbox
         self._now = 0.0
+        self.store_od = od
+        self._inputs = tuple(inputs)
+        self._gear_object = gear_object
+        self._factor_group = factor_group
+        #: the drive's own data where its EDS gives no default, (index, sub) -> bytes (restored at reset)
+        self.own_data = dict(own_data or {})
+        self._memo: list = [None] * len(self._inputs)  # (the input getters share this list, never rebound)
+        angle = next((i for i in self._inputs if i.signal is Signal.MOTOR_ANGLE and i.key == (0x6064, 0)), None)
+        angle_k = angle.scale.units_per_si if angle is not None and angle.scale is not None else None
 
         self._live = self._live_objects()
         self.store = ObjectStore(od, self._live, self._on_write)
@@ -123,7 +163,8 @@ class SimDrive(PdoEngine, NmtSlave, Cia402Drive):
         self.sdo_request_cob_id = self.sdo.request_cob_id  #: requests to this node
         self.sdo_response_cob_id = self.sdo.response_cob_id  #: its responses
 
-        self._init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s, serial)
+        self._init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s, serial,
+                         angle_units_per_rad=angle_k, rated_torque_Nm=rated_torque_Nm)
         self._init_nmt()
         self._init_pdos()
         problems = self._default_mapping_problems()

@@ -173,11 +173,11 @@ class NmtSlave:
 
     def _refresh_comm(self, *, restart_heartbeat: bool) -> None:
         """Re-read the communication objects (SYNC, EMCY, heartbeat if asked, PDOs)."""
-        self._sync_cob_id = self._int(0x1005) & 0x7FF
-        emcy = self._int(0x1014)
+        self._sync_cob_id = self.store.int_or(0x1005, 0, SYNC_COB_ID) & 0x7FF
+        emcy = self.store.int_or(0x1014, 0, EMCY_COB_ID_BASE + self.node_id)
         self._emcy_cob_id = None if emcy & COB_ID_INVALID else emcy & 0x7FF
         if restart_heartbeat:
-            period_ms = self._int(0x1017)
+            period_ms = self.store.int_or(0x1017, 0, 0)
             self._hb_period_s = period_ms / 1000.0
             self._hb_next = self._now + self._hb_period_s if period_ms > 0 else None
         self._refresh_consumers()

@@ -67,19 +67,22 @@ from __future__ import annotations
 
 import math
 import operator
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import canopen.objectdictionary as cod
 
 from hil.canopen.cia402 import State
-from hil.canopen.errors import EdsError, InputError
+from hil.canopen.errors import InputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtCommand
-from hil.canopen.od import check_drive_od, load_eds, lookup
+from hil.canopen.od import lookup
+from hil.canopen.plan import CSP_BIT, CST_BIT, RigPlan
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.canopen.validate import error_code, integer, node_id, time_s
-from sim.drives.drive import SimDrive
+from hil.canopen.signalmap import ForceControl, NodeRole, NodeSpec, ScaleSource, Signal
+from hil.canopen.validate import error_code, integer, time_s
+from sim.drives.drive import LiveInput, SimDrive
 from sim.drives.nmt_slave import TIME_EPS_S
 from sim.drives.pdo_engine import Pdo
 from sim.plant import RigPlant
@@ -92,11 +95,11 @@ FREE_RUN_AFTER_CYCLES = 5
 _POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 
 _MODE_DISABLED = int(DriveMode.DISABLED)
-#: Objects this simulation needs besides what hil.canopen.od.check_drive_od demands.
-_SIM_REQUIRED = ((0x1001, 0), (0x1005, 0), (0x1014, 0), (0x1017, 0), (0x6040, 0), (0x6041, 0),
-                 (0x6060, 0), (0x6061, 0), (0x6064, 0), (0x6071, 0), (0x6072, 0), (0x6076, 0),
-                 (0x6077, 0), (0x607A, 0), (0x607D, 1), (0x607D, 2), (0x608F, 1), (0x608F, 2),
-                 (0x2100, 0), (0x2101, 0), (0x2102, 0))
+#: Objects a simulated drive needs in its EDS (the CiA 402 objects it acts on).
+_SIM_REQUIRED = ((0x6040, 0), (0x6041, 0), (0x6060, 0), (0x6061, 0), (0x6064, 0), (0x607A, 0))
+#: Device type 0x1000 of a simulated node whose EDS gives none: CiA 402 servo drive, CiA 401 analog
+#: input module, CiA 404 measuring device.
+_DEVICE_TYPE = {402: 0x00020192, 401: 0x00040191, 404: 0x00000194}
 
 
 # --------------------------------------------------------------------------- stats
@@ -163,6 +166,52 @@ class _Counters:
 
     def snapshot(self) -> SimPairStats:
         return SimPairStats(**{name: getattr(self, name) for name in self.__slots__})
+
+
+# --------------------------------------------------------------------------- what each node serves
+
+
+def _inputs(plan: RigPlan, spec: NodeSpec) -> tuple[LiveInput, ...]:
+    """The measured inputs the rig's map puts on node ``spec``, with the scaling the profile states."""
+    out = []
+    for e in plan.map.entries:
+        if e.node != spec.name or e.signal not in (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE):
+            continue
+        scale = e.scale if e.source is ScaleSource.PROFILE else None
+        out.append(LiveInput(e.signal, e.ema, e.object, e.data_type, scale))
+    return tuple(out)
+
+
+def _own_data(od: cod.ObjectDictionary, spec: NodeSpec, force_control: ForceControl | None) -> dict:
+    """A simulated node's own data where its EDS gives no default: the identity the profile expects
+    (revision: the lowest it accepts), the device type of its profile, the drive modes (CSP, and CST
+    where the rig uses it), a rated torque of 1 N m, 4096 increments per revolution, unit factors."""
+    own: dict[tuple[int, int], bytes] = {}
+
+    def put(index: int, sub: int, value: int, fmt: str, *, zero_too: bool = False) -> None:
+        var = lookup(od, index, sub)
+        if var is not None and (var.default is None or (zero_too and var.default == 0)):
+            own[(index, sub)] = struct.pack("<" + fmt, value)
+
+    put(0x1000, 0, _DEVICE_TYPE.get(spec.device_profile, spec.device_profile), "I")
+    put(0x1018, 1, spec.vendor_id, "I", zero_too=True)
+    put(0x1018, 2, spec.product_code, "I", zero_too=True)
+    put(0x1018, 3, spec.revision_min, "I", zero_too=True)
+    if spec.role is NodeRole.DRIVE:
+        modes = 1 << CSP_BIT | (1 << CST_BIT if force_control is ForceControl.CST else 0)
+        put(0x6502, 0, modes, "I")
+        put(0x6076, 0, 1000, "I", zero_too=True)
+        put(0x608F, 1, 4096, "I" if _unsigned(od, 0x608F, 1) else "i")
+        put(0x608F, 2, 1, "I" if _unsigned(od, 0x608F, 2) else "i")
+        for index in (0x6091, 0x6092):
+            for sub in (1, 2):
+                put(index, sub, 1, "I", zero_too=True)
+    return own
+
+
+def _unsigned(od: cod.ObjectDictionary, index: int, sub: int) -> bool:
+    var = lookup(od, index, sub)
+    return var is None or var.data_type in (cod.UNSIGNED32, cod.UNSIGNED16, cod.UNSIGNED8)
 
 
 # --------------------------------------------------------------------------- the pair
@@ -239,22 +288,14 @@ class SimDrivePair:
     protocol choices.
     """
 
-    def __init__(self, plant: RigPlant, od_factory: Callable[..., cod.ObjectDictionary] = load_eds,
-                 node_ids: tuple[int, int] = (1, 2), *, counts_per_rev: int | None = None,
-                 serials: tuple[int, int] | None = None) -> None:
+    def __init__(self, plant: RigPlant, plan: RigPlan, od_factory: Callable[[str, int], cod.ObjectDictionary], *,
+                 counts_per_rev: int | None = None, serials: tuple[int, int] | None = None) -> None:
         if not isinstance(plant, RigPlant):
             raise InputError(f"plant must be a sim.plant.RigPlant, got {type(plant).__name__}")
+        if not isinstance(plan, RigPlan):
+            raise InputError(f"plan must be a hil.canopen.plan.RigPlan, got {type(plan).__name__}")
         if not callable(od_factory):
-            raise InputError(f"od_factory must be callable as od_factory(node_id=n), got {od_factory!r}")
-        try:
-            given = tuple(node_ids)
-        except TypeError:
-            given = ()
-        if len(given) != 2:
-            raise InputError(f"node_ids must be two distinct ints in 1..127 (shape (2,)), got {node_ids!r}")
-        ids = (node_id(given[0], "node_ids[0]"), node_id(given[1], "node_ids[1]"))
-        if ids[0] == ids[1]:
-            raise InputError(f"node_ids must be two distinct ints in 1..127 (shape (2,)), got {node_ids!r}")
+            raise InputError(f"od_factory must be callable as od_factory(node name, node id), got {od_factory!r}")
         if counts_per_rev is not None:
             counts_per_rev = integer("counts_per_rev", counts_per_rev, 1, 2**32 - 1)  # [increments/rev]
         if serials is not None:
@@ -265,7 +306,11 @@ class SimDrivePair:
             if len(serials) != 2:
                 raise InputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
             serials = tuple(integer(f"serials[{k}]", v, 0, 2**32 - 1) for k, v in enumerate(serials))
+        sensors = [n.spec.name for n in plan.nodes if n.spec.role is NodeRole.SENSORS]
+        if sensors:
+            raise InputError(f"simulated sensor nodes ({', '.join(sensors)}) are not simulated yet")
         self.plant = plant
+        self.plan = plan
         self._counters = _Counters()
         self._out: list[Frame] = []
         self._powered = False
@@ -278,25 +323,30 @@ class SimDrivePair:
         self._sample: Sample | None = None
         params = plant.params
         nodes = []
-        for k, n in enumerate(ids):
-            od = od_factory(node_id=n)
+        for k, dp in enumerate(plan.drives):
+            spec = dp.node.spec
+            n = spec.node_id
+            od = od_factory(spec.name, n)
             if not isinstance(od, cod.ObjectDictionary):
-                raise InputError(f"od_factory(node_id={n}) must return a canopen ObjectDictionary, "
+                raise InputError(f"od_factory({spec.name!r}, {n}) must return a canopen ObjectDictionary, "
                                  f"got {type(od).__name__}")
-            try:
-                # (a drive without its own reaction to the master's death may be simulated: the
-                # master's preflight, not the drive, refuses it)
-                check_drive_od(od, source=f"node {n} object dictionary", master_loss=False)
-            except EdsError as exc:
-                raise InputError(str(exc)) from None
             missing = [f"0x{i:04X}:{s:02X}" for i, s in _SIM_REQUIRED if lookup(od, i, s) is None]
             if missing:
                 raise InputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
                                  + ", ".join(missing))
+            torque = plan.map.entry(dp.ema, Signal.TARGET_TORQUE)
+            rated = None
+            if torque is not None and torque.source is ScaleSource.PROFILE and torque.scale is not None:
+                rated = 1.0 / (torque.scale.units_per_si * params.i_total_rad_per_mm)
+            angle = plan.map.entry(dp.ema, Signal.MOTOR_ANGLE)
             nodes.append(SimDrive(n, k, od, gear_ratio_rad_per_mm=params.i_total_rad_per_mm,
                                   counts_per_rev=counts_per_rev, sample_period_s=params.sample_period_s,
                                   counters=self._counters, outbox=self._out,
-                                  serial=None if serials is None else serials[k]))
+                                  serial=None if serials is None else serials[k],
+                                  inputs=_inputs(plan, spec), own_data=_own_data(od, spec, dp.force_control),
+                                  gear_object=plan.gear_ratio_object,
+                                  factor_group=angle is not None and angle.source is ScaleSource.FACTOR_GROUP,
+                                  rated_torque_Nm=rated))
         self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
         for node in self.nodes:
             node._torque_fetch = self._fetch_torque

@@ -204,6 +204,15 @@ class ObjectStore:
                 self.icache[key] = v  # invalidated by every store of this object
         return v
 
+    def int_or(self, index: int, subindex: int, default: int) -> int:
+        """:meth:`int_value` of an object the EDS may lack; ``default`` when it has no such object."""
+        v = self.icache.get((index, subindex))
+        if v is not None:
+            return v
+        if lookup(self.object_dictionary, index, subindex) is None:
+            return default
+        return self.int_value(index, subindex)
+
     def put(self, index: int, subindex: int, data: bytes) -> None:
         """Store ``data`` without validation (the drive's own writes)."""
         self.data.setdefault(index, {})[subindex] = bytes(data)
