@@ -7,7 +7,7 @@ import signal
 import threading
 from pathlib import Path
 
-from hil.cli.common import add_bus_args, add_parser, open_bus
+from hil.cli.common import add_bus_args, add_eds_arg, add_parser, open_bus
 from hil.cli.realtime import prepare_realtime
 
 
@@ -15,20 +15,20 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     """``emacheck sim-serve``: the two simulated drives on a CAN bus until SIGINT/SIGTERM."""
     import numpy as np
 
-    from hil.canopen.od import check_drive_od, load_eds
-    from hil.profiles import load_actuation, load_simrig, resolve_eds
+    from hil.canopen.od import load_eds
+    from hil.profiles import load_actuation, load_simrig
+    from hil.rig import plan_for
     from hil.sim_server import serve
     from sim.drives import SimDrivePair
     from sim.plant import RigPlant
 
     act = load_actuation(args.profile)
     simrig = load_simrig(args.sim)
-    eds = resolve_eds(act, args.profile)
-    check_drive_od(load_eds(eds), source=str(eds))
+    rig = plan_for(act, args.profile, args.eds)  # the same profile, map and EDS files as the master's
     seed = simrig.seed if args.seed is None else args.seed
     plant = RigPlant(simrig.params, np.random.default_rng(seed))
-    pair = SimDrivePair(plant, lambda node_id=None: load_eds(eds, node_id=node_id),
-                        node_ids=act.canopen.node_ids, serials=simrig.serials)
+    pair = SimDrivePair(plant, rig.plan, lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id),
+                        serials=simrig.serials)
     bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps)
 
     stop = threading.Event()
@@ -60,7 +60,9 @@ def register(sub) -> None:
                                "vcan0) for `emacheck run` in another process; the plant steps on each "
                                "SYNC received. SIGINT/SIGTERM end it cleanly.")
     add_bus_args(p, "socketcan, virtual")
-    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path, help="actuation profile (node ids, EDS)")
+    p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
+                   help="actuation profile (the drives, sensor nodes and signal map the master uses)")
+    add_eds_arg(p)
     p.add_argument("--sim", metavar="SIMRIG.toml", type=Path, help="simulated-rig profile")
     p.add_argument("--seed", type=int, help="noise seed (default: the simulated-rig profile's)")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",

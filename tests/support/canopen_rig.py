@@ -1,0 +1,41 @@
+"""The CANopen rig of the protocol tests: the shipped actuation profile planned, a master and a simulated
+drive pair built from it (as ``emacheck dry-run`` builds them), without the command layer."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+from hil.canopen.od import load_eds
+from hil.master import MasterCore
+from hil.profiles import load_actuation
+from hil.rig import Rig, plan_for
+from sim.drives import SimDrivePair
+
+__all__ = ["make_master", "make_pair", "od_factory", "shipped_rig"]
+
+
+@lru_cache(maxsize=None)
+def shipped_rig() -> Rig:
+    """The shipped actuation profile and EDS, planned (cached: the plan is immutable)."""
+    return plan_for(load_actuation())
+
+
+def od_factory(rig: Rig):
+    """``od_factory(name, node_id)`` of :class:`sim.drives.SimDrivePair`: a fresh OD from the rig's EDS."""
+    return lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id)
+
+
+def make_pair(plant, rig: Rig | None = None, **kw) -> SimDrivePair:
+    """A simulated drive pair for ``rig`` (default the shipped one) around ``plant``."""
+    rig = rig or shipped_rig()
+    return SimDrivePair(plant, rig.plan, od_factory(rig), **kw)
+
+
+def make_master(act=None, *, profile_path: str | Path | None = None, eds=None) -> MasterCore:
+    """A master core for ``act`` (default the shipped profile), planned against its EDS."""
+    if act is None and profile_path is None:
+        return MasterCore(load_actuation(), shipped_rig().plan)
+    if act is None:
+        act = load_actuation(profile_path)
+    return MasterCore(act, plan_for(act, profile_path, eds).plan)
