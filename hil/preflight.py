@@ -51,7 +51,6 @@ from hil.canopen.plan import CSP_BIT, CST_BIT, DrivePlan, NodePlan, RigPlan
 from hil.canopen.sdo import SdoAbortError, describe
 from hil.canopen.signalmap import (
     ForceControl,
-    Scale,
     ScaleSource,
     Signal,
     angle_scale_counts,
@@ -336,7 +335,6 @@ class Preflight:
 
     def _drive(self, d: DriveSetup) -> Generator:
         node, spec, plan = d.plan.node, d.plan.node.spec, d.plan
-        c = self.c
         modes = int((yield from self._read(node, 0x6502, 0, "supported drive modes")))
         d.modes = modes
         if not modes >> CSP_BIT & 1:
@@ -439,7 +437,7 @@ class Preflight:
 
     def _reaction(self, d: DriveSetup) -> Generator:
         """Configure and read back the drive's own reaction to the master's death."""
-        node, spec = d.plan.node, d.plan.node.spec
+        spec = d.plan.node.spec
         watchdog = self.c.external_watchdog
         if not d.plan.reaction:
             cfg = ReactionConfig(self.consumer_ms, self.c.master_node_id, int(AbortConnectionOption.QUICK_STOP),

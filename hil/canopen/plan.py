@@ -46,25 +46,9 @@ from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.busload import BusLoad, bus_load
 from hil.canopen.errors import CanopenError
-from hil.canopen.frame import (
-    EMCY_COB_ID_BASE,
-    HEARTBEAT_COB_ID_BASE,
-    NMT_COB_ID,
-    SDO_RX_COB_ID_BASE,
-    SDO_TX_COB_ID_BASE,
-    SYNC_COB_ID,
-)
-from hil.canopen.od import lookup, type_name
-from hil.canopen.pdo import (
-    COB_ID_INVALID,
-    COB_ID_NO_RTR,
-    TYPE_BITS,
-    Direction,
-    MappedObject,
-    PdoLayout,
-    PdoSpec,
-    predefined_cob_id,
-)
+from hil.canopen.od import type_name
+from hil.canopen.pdo import TYPE_BITS, Direction, MappedObject, PdoLayout, PdoSpec
+from hil.canopen.pdoplan import RESTRICTED_CAN_IDS, EdsView, Need, PdoPacker
 from hil.canopen.signalmap import (
     DeviceProfile,
     ForceControl,
@@ -81,16 +65,12 @@ from hil.canopen.signalmap import (
 __all__ = ["Channel", "DrivePlan", "NodePlan", "PlanError", "Problem", "RigPlan", "plan_rig",
            "RESTRICTED_CAN_IDS", "CSP_BIT", "CST_BIT"]
 
-#: CiA 301 restricted CAN-IDs (may not be used by a PDO), inclusive ranges.
-RESTRICTED_CAN_IDS = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x5FF),
-                      (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x77F), (0x780, 0x7FF))
 CSP_BIT = 7  #: 0x6502 bit of cyclic synchronous position
 CST_BIT = 9  #: 0x6502 bit of cyclic synchronous torque
 
 #: Signals in the order they are packed into PDOs.
 _TX_ORDER = (Signal.STATUSWORD, Signal.MOTOR_ANGLE, Signal.MODE_DISPLAY, Signal.LVDT, Signal.FORCE)
 _RX_ORDER = (Signal.CONTROLWORD, Signal.TARGET_POSITION, Signal.TARGET_TORQUE)
-_PREFIX = {Direction.RX: "R", Direction.TX: "T"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -260,82 +240,6 @@ class RigPlan:
 # --------------------------------------------------------------------------- EDS views
 
 
-class _Eds:
-    """What the planner asks of one node's object dictionary."""
-
-    def __init__(self, od: cod.ObjectDictionary, name: str) -> None:
-        self.od = od
-        self.name = name
-
-    def var(self, index: int, subindex: int) -> cod.ODVariable | None:
-        return lookup(self.od, index, subindex)
-
-    def readable(self, index: int, subindex: int = 0) -> bool:
-        v = self.var(index, subindex)
-        return v is not None and v.readable
-
-    def writable(self, index: int, subindex: int = 0) -> bool:
-        v = self.var(index, subindex)
-        return v is not None and v.writable
-
-    def default(self, index: int, subindex: int = 0) -> int | float | None:
-        v = self.var(index, subindex)
-        return None if v is None else v.default
-
-
-@dataclass
-class _Record:
-    """One PDO record (communication + mapping) of a node's EDS."""
-
-    direction: Direction
-    number: int
-    n_entries: int
-    mapping_writable: bool
-    cob_writable: bool
-    type_writable: bool
-    default_cob: int | None
-    default_type: int | None
-    default_entries: tuple[tuple[int, int, int], ...]  # (index, subindex, bits)
-    used: bool = False
-
-
-def _records(eds: _Eds, direction: Direction) -> list[_Record]:
-    base = 0x1400 if direction is Direction.RX else 0x1800
-    out = []
-    for k in range(512):
-        comm, mapping = base + k, base + 0x200 + k
-        if comm not in eds.od or mapping not in eds.od or isinstance(eds.od[mapping], cod.ODVariable):
-            continue
-        subs = [s for s in eds.od[mapping].subindices if s > 0]
-        n_max = max(subs, default=0)
-        sub0 = eds.var(mapping, 0)
-        fixed = sub0 is None or not sub0.writable or any(not eds.writable(mapping, s) for s in subs)
-        entries = []
-        count = eds.default(mapping, 0) or 0
-        for s in range(1, int(count) + 1):
-            word = eds.default(mapping, s)
-            if isinstance(word, int) and word:
-                entries.append((word >> 16, (word >> 8) & 0xFF, word & 0xFF))
-        cob = eds.default(comm, 1)
-        tt = eds.default(comm, 2)
-        out.append(_Record(direction, k + 1, n_max, not fixed, eds.writable(comm, 1), eds.writable(comm, 2),
-                           int(cob) if isinstance(cob, int) else None, int(tt) if isinstance(tt, int) else None,
-                           tuple(entries)))
-    return out
-
-
-# --------------------------------------------------------------------------- planning
-
-
-@dataclass
-class _Need:
-    """An object a node must carry in a PDO."""
-
-    entry: SignalEntry
-    obj: MappedObject
-    group: str  # "tx", "rx", "rx_event"
-
-
 class _Planner:
     def __init__(self, smap: SignalMap, ods: Mapping[str, cod.ObjectDictionary], eds_names: Mapping[str, str],
                  *, bitrate_bps: int, sync_period_s: float, master_node_id: int,
@@ -343,7 +247,7 @@ class _Planner:
                  gear_ratio_object: tuple[int, int] | None, i_total_rad_per_mm: float,
                  max_bus_load: float) -> None:
         self.smap = smap
-        self.eds = {n.name: _Eds(ods[n.name], eds_names.get(n.name, n.eds)) for n in smap.nodes}
+        self.eds = {n.name: EdsView(ods[n.name], eds_names.get(n.name, n.eds)) for n in smap.nodes}
         self.bitrate = bitrate_bps
         self.T = sync_period_s
         self.master_node_id = master_node_id
@@ -461,7 +365,7 @@ class _Planner:
                          f"the profile expects {node.device_profile}")
         self._check_identity(node, eds)
 
-    def _check_identity(self, node: NodeSpec, eds: _Eds) -> None:
+    def _check_identity(self, node: NodeSpec, eds: EdsView) -> None:
         """The EDS must describe the node the profile expects: 0x1018 defaults (else [DeviceInfo])."""
         info = getattr(eds.od, "device_information", None)
         for sub, field_name, info_key, want, exact in (
@@ -496,7 +400,6 @@ class _Planner:
 
         self._require(node, 0x6502, 0, "supported drive modes", key)
         modes = eds.default(0x6502, 0)
-        csp_ok = not isinstance(modes, int) or bool(modes >> CSP_BIT & 1)
         cst_eds = not isinstance(modes, int) or bool(modes >> CST_BIT & 1)
         if isinstance(modes, int) and not (modes >> CSP_BIT & 1):
             what = "neither CSP nor CST" if not modes >> CST_BIT & 1 else "no CSP"
@@ -594,8 +497,8 @@ class _Planner:
 
     # ------------------------------------------------------------ PDOs
 
-    def _needs(self, entries: list[SignalEntry], drive_info) -> dict[str, list[_Need]]:
-        needs: dict[str, list[_Need]] = {n.name: [] for n in self.smap.nodes}
+    def _needs(self, entries: list[SignalEntry], drive_info) -> dict[str, list[Need]]:
+        needs: dict[str, list[Need]] = {n.name: [] for n in self.smap.nodes}
         order = {s: k for k, s in enumerate(_TX_ORDER + _RX_ORDER + (Signal.MODE,))}
         for ema in (1, 2):
             fc = drive_info[ema - 1][0]
@@ -605,162 +508,22 @@ class _Planner:
                 group = ("rx_event" if e.signal is Signal.MODE else
                          "rx" if e.signal.direction is Direction.RX else "tx")
                 obj = MappedObject(e.signal.value, e.index, e.subindex, e.data_type)
-                needs[e.node].append(_Need(e, obj, group))
+                needs[e.node].append(Need(e, obj, group))
         return needs
 
     def _layouts(self, entries: list[SignalEntry], drive_info):
         needs = self._needs(entries, drive_info)
+        packer = PdoPacker(self.smap, self.eds, self.problem, self.notes, self.master_node_id)
         layouts: dict[str, PdoLayout] = {}
         channels: list[Channel] = []
         for node in self.smap.nodes:
-            pdos, chans = self._node_pdos(node, needs[node.name])
-            layouts[node.name] = pdos
-            channels += chans
-        self._check_cob_ids(layouts)
+            layout, placed = packer.node_layout(node, needs[node.name])
+            layouts[node.name] = layout
+            for need, cob, pos in placed:
+                e = need.entry
+                channels.append(Channel(e.signal, e.ema, node.node_id, cob, pos, e.data_type, e.scale, e.source, e.key))
+        packer.check_cob_ids(layouts)
         return layouts, channels
-
-    def _node_pdos(self, node: NodeSpec, needs: list[_Need]) -> tuple[PdoLayout, list[Channel]]:
-        eds = self.eds[node.name]
-        records = {Direction.TX: _records(eds, Direction.TX), Direction.RX: _records(eds, Direction.RX)}
-        pdos: list[tuple[_Record, list[_Need], list[MappedObject], int]] = []  # record, needs, entries, type
-        for group, direction, ttype in (("tx", Direction.TX, 1), ("rx", Direction.RX, 1),
-                                        ("rx_event", Direction.RX, 255)):
-            todo = [n for n in needs if n.group == group]
-            if not todo:
-                continue
-            # a PDO the EDS fixes serves the needed objects it carries
-            for rec in records[direction]:
-                if rec.mapping_writable or rec.used or not rec.default_entries:
-                    continue
-                carried = [(i, s) for i, s, _ in rec.default_entries]
-                mine = [n for n in todo if (n.obj.index, n.obj.subindex) in carried]
-                if not mine:
-                    continue
-                objs = []
-                for i, s, bits in rec.default_entries:
-                    hit = next((n for n in mine if (n.obj.index, n.obj.subindex) == (i, s)), None)
-                    var = eds.var(i, s)
-                    if hit is not None:
-                        objs.append(hit.obj)
-                    elif var is not None and var.data_type in TYPE_BITS and TYPE_BITS[var.data_type][0] == bits:
-                        objs.append(MappedObject(f"(0x{i:04X}:{s:02X})", i, s, var.data_type))
-                    else:
-                        objs = None
-                        break
-                if objs is None:
-                    continue
-                rec.used = True
-                todo = [n for n in todo if n not in mine]
-                pdos.append((rec, mine, objs, ttype))
-                self.notes.append(f"{node.name}: {_PREFIX[direction]}PDO{rec.number} is fixed by {eds.name}; "
-                                  f"used as it is")
-            # the rest first-fit into records the master may map
-            current: tuple[_Record, list[_Need], list[MappedObject], int] | None = None
-            for n in todo:
-                bits = n.obj.bit_length
-                if current is not None:
-                    rec, mine, objs, _ = current
-                    if sum(o.bit_length for o in objs) + bits <= 64 and len(objs) < rec.n_entries:
-                        mine.append(n)
-                        objs.append(n.obj)
-                        continue
-                rec = next((r for r in records[direction] if r.mapping_writable and not r.used and r.n_entries), None)
-                if rec is None:
-                    have = sum(1 for r in records[direction] if r.mapping_writable)
-                    self.problem(n.entry.key, n.entry.where,
-                                 f"no {_PREFIX[direction]}PDO left to carry it: {eds.name} has {have} "
-                                 f"{_PREFIX[direction]}PDO(s) the master may map and the map needs more")
-                    current = None
-                    continue
-                rec.used = True
-                current = (rec, [n], [n.obj], ttype)
-                pdos.append(current)
-        specs, channels = [], []
-        for rec, mine, objs, ttype in pdos:
-            spec = self._spec(node, eds, rec, objs, ttype)
-            if spec is None:
-                continue
-            specs.append(spec)
-            for n in mine:
-                pos = next(k for k, o in enumerate(objs) if o is n.obj)
-                e = n.entry
-                channels.append(Channel(e.signal, e.ema, node.node_id, spec.cob_id, pos, e.data_type, e.scale,
-                                        e.source, e.key))
-        disable = []
-        for direction in (Direction.TX, Direction.RX):
-            for rec in records[direction]:
-                if rec.used or rec.default_cob is None or rec.default_cob & COB_ID_INVALID:
-                    continue
-                if rec.cob_writable:
-                    base = 0x1800 if direction is Direction.TX else 0x1400
-                    disable.append((base + rec.number - 1, rec.default_cob | COB_ID_INVALID))
-                else:
-                    self.notes.append(f"{node.name}: {_PREFIX[direction]}PDO{rec.number} stays enabled (its COB-ID "
-                                      f"is fixed by {eds.name}); its frames are ignored")
-        return PdoLayout(node.node_id, tuple(sorted(specs, key=lambda p: (p.direction.value, p.number))),
-                         tuple(disable)), channels
-
-    def _spec(self, node: NodeSpec, eds: _Eds, rec: _Record, objs: list[MappedObject], ttype: int) -> PdoSpec | None:
-        name = f"{_PREFIX[rec.direction]}PDO{rec.number}"
-        given = {(n, p): c for n, p, c in self.smap.cob_ids}
-        key = "canopen.cob_ids"
-        cob = given.get((node.name, name))
-        if cob is not None and not rec.cob_writable and rec.default_cob is not None \
-                and cob != rec.default_cob & 0x7FF:
-            self.problem(key, f"{node.name}.{name}", f"0x{cob:03X} given, but {eds.name} fixes its COB-ID at "
-                                                     f"0x{rec.default_cob & 0x7FF:03X}")
-            return None
-        if cob is None:
-            if not rec.cob_writable:
-                if rec.default_cob is None or rec.default_cob & COB_ID_INVALID:
-                    self.problem(key, f"{node.name}.{name}", f"{eds.name} fixes this PDO's COB-ID and does not "
-                                                             f"enable it")
-                    return None
-                cob = rec.default_cob & 0x7FF
-            else:
-                cob = predefined_cob_id(rec.direction, rec.number, node.node_id)
-                if cob is None:
-                    d = rec.default_cob
-                    if d is None or d & COB_ID_INVALID or not d & 0x7FF:
-                        self.problem(key, f"{node.name}.{name}",
-                                     f"PDO {rec.number} has no predefined COB-ID and {eds.name} gives none: "
-                                     f"give one, e.g. canopen.cob_ids = {{ \"{node.name}.{name}\" = 0x... }}")
-                        return None
-                    cob = d & 0x7FF
-        if not rec.type_writable and rec.default_type != ttype:
-            ok = ttype == 1 and rec.default_type is not None and rec.default_type == 1
-            if not ok:
-                self.problem(f"{node.key}.eds", f"0x{(0x1400 if rec.direction is Direction.RX else 0x1800) + rec.number - 1:04X}:02 at {node.name}",
-                             f"{name}'s transmission type is fixed at {rec.default_type} by {eds.name}; "
-                             f"the check needs {ttype} ({'every SYNC' if ttype == 1 else 'event driven'})")
-                return None
-        rtr = COB_ID_NO_RTR if (rec.default_cob or 0) & COB_ID_NO_RTR and rec.direction is Direction.TX else 0
-        return PdoSpec(name, rec.direction, rec.number, cob, ttype, tuple(objs),
-                       write_mapping=rec.mapping_writable, write_cob_id=rec.cob_writable,
-                       write_transmission=rec.type_writable, rtr_bit=rtr)
-
-    def _check_cob_ids(self, layouts: dict[str, PdoLayout]) -> None:
-        reserved: dict[int, str] = {NMT_COB_ID: "NMT", SYNC_COB_ID: "SYNC",
-                                    HEARTBEAT_COB_ID_BASE + self.master_node_id: "the master's heartbeat"}
-        for n in self.smap.nodes:
-            i = n.node_id
-            for base, what in ((EMCY_COB_ID_BASE, "EMCY"), (SDO_RX_COB_ID_BASE, "SDO response"),
-                               (SDO_TX_COB_ID_BASE, "SDO request"), (HEARTBEAT_COB_ID_BASE, "heartbeat")):
-                reserved[base + i] = f"{what} of {n.label}"
-        seen: dict[int, str] = {}
-        for name, layout in layouts.items():
-            for p in layout.pdos:
-                who = f"{name}.{p.name}"
-                cob = p.cob_id
-                if cob in reserved:
-                    self.problem("canopen.cob_ids", who, f"COB-ID 0x{cob:03X} is the {reserved[cob]}")
-                elif any(lo <= cob <= hi for lo, hi in RESTRICTED_CAN_IDS):
-                    self.problem("canopen.cob_ids", who, f"COB-ID 0x{cob:03X} is restricted by CiA 301 "
-                                                         f"(no PDO may use it)")
-                if cob in seen:
-                    self.problem("canopen.cob_ids", who, f"COB-ID 0x{cob:03X} is also {seen[cob]}'s: "
-                                                         f"two PDOs overlap")
-                seen.setdefault(cob, who)
 
     def _node_plan(self, node: NodeSpec, layout: PdoLayout) -> NodePlan:
         od = self.eds[node.name].od
