@@ -1,7 +1,7 @@
 """The command line of emacheck: one module per command, dispatched by argparse's ``set_defaults``.
 
-Each command module (``dry_run``, ``run``, ``simulate``, ``analyze``,
-``serv``, ``diagnose``, ``history``, ``sim_serve``) registers its sub-parser with a
+Each command module (``dry_run``, ``run``, ``profile``, ``simulate``,
+``analyze``, ``serv``, ``diagnose``, ``history``, ``sim_serve``) registers its sub-parser with a
 ``register(sub)`` function and keeps its heavy imports (analysis, plotting,
 python-control, numba) inside the command, so ``emacheck run`` loads no more
 than its cyclic loop needs before the first SYNC. Shared pieces are in
@@ -22,11 +22,11 @@ import sys
 from typing import NoReturn
 
 from hil import __version__
-from hil.cli import analyze, diagnose, dry_run, history, run, serv, sim_serve, simulate
+from hil.cli import analyze, diagnose, dry_run, history, profile, run, serv, sim_serve, simulate
 from hil.cli.common import EPILOG, ExitCode
 
 #: The commands in the order ``--help`` lists them.
-COMMANDS = (dry_run, run, simulate, analyze, serv, diagnose, history, sim_serve)
+COMMANDS = (dry_run, run, profile, simulate, analyze, serv, diagnose, history, sim_serve)
 
 
 class _Parser(argparse.ArgumentParser):
