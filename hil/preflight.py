@@ -10,27 +10,27 @@ drives) and the typed :class:`MasterLossRecord` of each drive.
 Sequence (CiA 302-style, per node as the rig's :class:`~hil.canopen.plan.RigPlan` says):
 
 1. NMT reset node (all), boot-up of every node of the rig.
-2. Every node: identity 0x1018 and device type 0x1000 against the profile,
-   producer heartbeat 0x1017, its PDOs (the unused ones disabled).
-3. Each drive: supported modes 0x6502 (CSP; CST where it holds forces in
+2. Every node, one after the other: identity 0x1018 and device type 0x1000
+   against the profile, producer heartbeat 0x1017, its PDOs (the unused ones
+   disabled); and for a drive: supported modes 0x6502 (CSP; CST where it holds forces in
    CST), the gear ratio object and 0x608F against the profile where they
    exist, the scalings it reports (0x608F, 0x6091/0x6092, rated torque
    0x6076), interpolation period 0x60C2, software position limits 0x607D,
    quick stop option 0x605A = 2 and 0x1006 where writable, the modes of
    operation (CSP, set once by SDO for a drive without CST), the reaction to
    the master's death (0x1016:01, 0x6007 = 3, written and read back).
-4. The drill (unless ``canopen.skip_master_loss_drill`` says why not): every
+3. The drill (unless ``canopen.skip_master_loss_drill`` says why not): every
    drive whose reaction is configured is powered up by SDO at standstill,
-   holding its position; the master stops its heartbeat (and sends nothing
-   else) for longer than the consumer time while it keeps listening, polls
-   each statusword by SDO every SYNC period and notes EMCYs; a drive that
+   holding its position; the master stops its heartbeat (no SYNC, no PDO
+   runs yet) for longer than the consumer time while it keeps listening,
+   reads each statusword by SDO every SYNC period and notes EMCYs; a drive that
    leaves OPERATION_ENABLED has reacted (the time since the master's last
    heartbeat is its reaction time). Then the heartbeat resumes, NMT
    pre-operational restores SDO on a drive whose error behaviour stopped it,
    and each drive is brought to SWITCH_ON_DISABLED. A drive that did not
    react stops the preflight (:class:`~hil.master.MasterLossReactionError`)
    unless ``canopen.external_watchdog`` states the rig's protection.
-5. NMT start (all).
+4. NMT start (all).
 """
 
 from __future__ import annotations
@@ -297,11 +297,12 @@ class Preflight:
     def run(self) -> Generator:
         yield Nmt(NmtCommand.RESET_NODE)
         yield WaitBoot()
+        drives = {d.plan.node.spec.node_id: d for d in self.drives}
         for node in self.plan.nodes:
             yield from self._identify(node)
             yield from self._common(node)
-        for d in self.drives:
-            yield from self._drive(d)
+            if node.spec.node_id in drives:
+                yield from self._drive(drives[node.spec.node_id])
         yield from self._drill()
         yield Nmt(NmtCommand.START)
 
