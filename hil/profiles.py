@@ -3,7 +3,9 @@
 Three profiles describe a check: the actuation (:class:`hil.config.Actuation`),
 the check itself (:class:`hil.config.Check`) and, for dry-runs, the simulated
 rig (:class:`sim.params.RigParams`). The defaults ship in the ``profiles``
-package. Every error names the file and the dotted field, e.g.
+package. The field checks are :mod:`hil.profile_tables`, the actuation's
+signal map :mod:`hil.profile_signals`. Every error names the file and the
+dotted field, e.g.
 ``check.toml: force_fight.amplitude_fraction_of_limit = 0.2 is above the hard
 cap 0.15``; unknown keys are refused with the closest known name, which catches
 wrong units (``sweep_speed_mm_per_min`` is not ``sweep_speed_mm_per_s``).
@@ -11,19 +13,13 @@ wrong units (``sweep_speed_mm_per_min`` is not ``sweep_speed_mm_per_s``).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import difflib
-import math
-import re
-import tomllib
-import typing
 from dataclasses import dataclass, field
-from enum import Enum
 from importlib import resources
 from pathlib import Path
 from typing import Any
-
-from canopen.objectdictionary import datatypes
 
 from hil.config import (
     HARD_FORCE_FIGHT_FRACTION,
@@ -33,126 +29,20 @@ from hil.config import (
     Actuation,
     Check,
 )
-from hil.canopen.errors import InputError
-from hil.canopen.signalmap import (
-    DEFAULT_OBJECTS,
-    DRIVE_ROLE,
-    DeviceProfile,
-    ForceControl,
-    NodeRole,
-    NodeSpec,
-    Scale,
-    ScaleSource,
-    Signal,
-    SignalEntry,
-    SignalMap,
-    angle_scale_counts,
-    parse_object,
-    torque_scale,
-)
 from hil.errors import ProfileError
+from hil.profile_signals import LEGACY_SIGNALS, gear_ratio_object, load_signal_map, signal_tables
+from hil.profile_tables import build_dataclass, check_keys, check_range, convert_scalar, read_toml, snapshot
 from sim import effects as sim_effects
 from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams, WearParams
+
+__all__ = ["SimRigProfile", "actuation_from_snapshot", "actuation_from_tables", "actuation_tables",
+           "build_dataclass", "default_profile_path", "gear_ratio_object", "load_actuation", "load_check",
+           "load_simrig", "resolve_eds", "snapshot", "validate_check"]
 
 
 def default_profile_path(name: str) -> Path:
     """Path of a profile shipped in the ``profiles`` package (e.g. ``"check.toml"``)."""
     return Path(str(resources.files("profiles").joinpath(name)))
-
-
-def _read_toml(path: Path) -> dict:
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise ProfileError(f"{path}: profile not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ProfileError(f"{path}: not valid TOML: {exc}") from None
-
-
-def _check_keys(table: dict, known: list[str], where: str, fname: str) -> None:
-    for key in table:
-        if key not in known:
-            close = difflib.get_close_matches(key, known, n=1, cutoff=0.5)
-            hint = f" (did you mean '{close[0]}'? units are part of the name)" if close else ""
-            raise ProfileError(f"{fname}: unknown field '{where}{key}'{hint}")
-
-
-def _convert_scalar(value: Any, typ: Any, name: str, fname: str) -> Any:
-    if typ is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ProfileError(f"{fname}: field '{name}' must be a number, got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise ProfileError(f"{fname}: field '{name}' must be finite, got {value!r}")
-        return value
-    if typ is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ProfileError(f"{fname}: field '{name}' must be an integer, got {value!r}")
-        return value
-    if typ is str:
-        if not isinstance(value, str):
-            raise ProfileError(f"{fname}: field '{name}' must be a string, got {value!r}")
-        return value
-    raise ProfileError(f"{fname}: field '{name}' has an unsupported type {typ!r}")  # pragma: no cover
-
-
-def _check_range(value: Any, meta: typing.Mapping, name: str, fname: str) -> None:
-    lo, hi, hard = meta.get("lo"), meta.get("hi"), meta.get("hard_max")
-    if hard is not None and value > hard:
-        raise ProfileError(f"{fname}: field '{name}' = {value} is above the hard cap {hard}")
-    if lo is not None:
-        if meta.get("lo_open") and not value > lo:
-            raise ProfileError(f"{fname}: field '{name}' = {value} must be > {lo}")
-        if not meta.get("lo_open") and not value >= lo:
-            raise ProfileError(f"{fname}: field '{name}' = {value} must be >= {lo}")
-    if hi is not None and value > hi:
-        raise ProfileError(f"{fname}: field '{name}' = {value} must be <= {hi}")
-
-
-def build_dataclass(cls: type, table: Any, fname: str, where: str = "",
-                    ranges: typing.Mapping[str, tuple] | None = None) -> Any:
-    """Build a (nested) frozen dataclass from a TOML table, validating everything.
-
-    Parameters
-    ----------
-    cls : dataclass type
-    table : dict
-        The TOML table.
-    fname : str
-        File name quoted in errors.
-    where : str
-        Dotted prefix of this table quoted in errors.
-    ranges : mapping, optional
-        ``{"Class.field": (lo, hi)}`` for classes without range metadata.
-    """
-    if not isinstance(table, dict):
-        raise ProfileError(f"{fname}: '{where.rstrip('.') or 'profile'}' must be a table")
-    hints = typing.get_type_hints(cls)
-    fields = [f for f in dataclasses.fields(cls) if f.init]
-    names = [f.name for f in fields]
-    _check_keys(table, names, where, fname)
-    kwargs = {}
-    for f in fields:
-        name = f"{where}{f.name}"
-        if f.name not in table:
-            if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING:
-                continue
-            raise ProfileError(f"{fname}: missing field '{name}'")
-        typ = hints[f.name]
-        value = table[f.name]
-        if dataclasses.is_dataclass(typ):
-            kwargs[f.name] = build_dataclass(typ, value, fname, name + ".", ranges)
-            continue
-        value = _convert_scalar(value, typ, name, fname)
-        meta = dict(f.metadata)
-        if ranges and f"{cls.__name__}.{f.name}" in ranges:
-            lo, hi = ranges[f"{cls.__name__}.{f.name}"]
-            meta.update(lo=lo, hi=hi, lo_open=False)
-        if meta:
-            _check_range(value, meta, name, fname)
-        kwargs[f.name] = value
-    return cls(**kwargs)
 
 
 # ----------------------------------------------------------------- loaders
@@ -161,9 +51,14 @@ def build_dataclass(cls: type, table: Any, fname: str, where: str = "",
 def load_actuation(path: str | Path | None = None) -> Actuation:
     """Load and validate an actuation profile (default: the shipped one), its signal map included."""
     path = Path(path) if path is not None else default_profile_path("actuation.toml")
-    fname = path.name
-    data = _read_toml(path)
-    _refuse_moved(data, fname)
+    data = read_toml(path)
+    _refuse_moved(data, path.name)
+    return actuation_from_tables(data, path.name)
+
+
+def actuation_from_tables(data: dict, fname: str) -> Actuation:
+    """An actuation profile from its parsed tables (a TOML file, or meta.json's snapshot of one)."""
+    data = copy.deepcopy(data)
     signals = data.pop("signals", None)
     nodes = data.pop("nodes", {})
     co = data.get("canopen")
@@ -231,206 +126,34 @@ def resolve_eds(name: str, profile_path: str | Path | None, key: str = "canopen.
                        f"and among the shipped profiles; give its path with --eds PATH)")
 
 
-# ----------------------------------------------------------------- the signal map
-
-#: Keys of a signal's table besides ``object``, ``node`` and ``type``, per signal.
-_SCALE_KEYS = {
-    Signal.MOTOR_ANGLE: ("counts_per_rev", "rad_per_unit", "units"),
-    Signal.LVDT: ("mm_per_unit", "offset_mm"),
-    Signal.FORCE: ("N_per_unit", "offset_N"),
-    Signal.TARGET_TORQUE: ("rated_torque_Nm",),
-}
-#: The signals a profile must place (the others default to the drive's CiA 402 objects).
-_REQUIRED_SIGNALS = (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE)
-_TYPES = {k: v for k, v in vars(datatypes).items() if k.isupper() and isinstance(v, int) and k != "SIGNED_TYPES"}
-_ANGLE_UNITS = {"0x608F": ScaleSource.ENCODER, "0x6091/0x6092": ScaleSource.FACTOR_GROUP}
-_NODE_NAME = re.compile(r"^[a-z][a-z0-9_]{0,31}$")
+def actuation_tables(act: Actuation) -> dict:
+    """The profile tables of ``act`` (what :func:`actuation_from_tables` reads back): meta.json's snapshot."""
+    data = snapshot(dataclasses.replace(act, signals=None))
+    del data["signals"]
+    if act.signals is not None:
+        t = signal_tables(act)
+        data["signals"], data["nodes"] = t["signals"], t["nodes"]
+        if t["cob_ids"]:
+            data["canopen"]["cob_ids"] = t["cob_ids"]
+    return data
 
 
-def _table(value: Any, where: str, fname: str) -> dict:
-    if not isinstance(value, dict):
-        raise ProfileError(f"{fname}: '{where}' must be a table")
-    return value
-
-
-def _number(tbl: dict, key: str, where: str, fname: str, *, nonzero: bool = False, positive: bool = False,
-            default: float | None = None) -> float | None:
-    if key not in tbl:
-        return default
-    v = _convert_scalar(tbl[key], float, f"{where}.{key}", fname)
-    if (nonzero or positive) and v == 0.0:
-        raise ProfileError(f"{fname}: field '{where}.{key}' = {v:g}: a scaling of zero maps every raw value "
-                           f"to the same reading")
-    if positive and v < 0.0:
-        raise ProfileError(f"{fname}: field '{where}.{key}' = {v:g} must be > 0")
-    return v
-
-
-def _signal_entry(sig: Signal, ema: int, tbl: Any, act: Actuation, fname: str) -> SignalEntry:
-    where = f"signals.ema{ema}.{sig.value}"
-    tbl = _table(tbl, where, fname)
-    _check_keys(tbl, ["object", "node", "type", *_SCALE_KEYS.get(sig, ())], where + ".", fname)
-    default = DEFAULT_OBJECTS.get(sig)
-    if "object" not in tbl and default is None:
-        raise ProfileError(f"{fname}: missing field '{where}.object' (e.g. \"0x6401:01\")")
-    try:
-        index, sub = parse_object(tbl["object"], f"{where}.object") if "object" in tbl else default
-    except InputError as exc:
-        raise ProfileError(f"{fname}: field {exc}") from None
-    node = tbl.get("node", f"ema{ema}")
-    if not isinstance(node, str):
-        raise ProfileError(f"{fname}: field '{where}.node' must be a node name, got {node!r}")
-    data_type = None
-    if "type" in tbl:
-        t = tbl["type"]
-        if t not in _TYPES:
-            close = difflib.get_close_matches(str(t), list(_TYPES), n=1, cutoff=0.5)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ProfileError(f"{fname}: field '{where}.type' = {t!r} is not a CiA 301 data type{hint}")
-        data_type = _TYPES[t]
-    scale, source = None, ScaleSource.PROFILE
-    if sig is Signal.MOTOR_ANGLE:
-        given = [k for k in _SCALE_KEYS[sig] if k in tbl]
-        if len(given) != 1:
-            raise ProfileError(f"{fname}: '{where}' needs exactly one of counts_per_rev (increments per motor "
-                               f"revolution), rad_per_unit, units = \"0x608F\" or \"0x6091/0x6092\" "
-                               f"(as read from the drive); got {given or 'none'}")
-        if "counts_per_rev" in tbl:
-            counts = _convert_scalar(tbl["counts_per_rev"], int, f"{where}.counts_per_rev", fname)
-            _check_range(counts, {"lo": 1, "hi": 2**32 - 1}, f"{where}.counts_per_rev", fname)
-            scale = angle_scale_counts(counts)
-        elif "rad_per_unit" in tbl:
-            scale = Scale.per_unit(_number(tbl, "rad_per_unit", where, fname, nonzero=True))
-        else:
-            units = tbl["units"]
-            if units not in _ANGLE_UNITS:
-                raise ProfileError(f"{fname}: field '{where}.units' = {units!r}: \"0x608F\" (increments per "
-                                   f"revolution as read) or \"0x6091/0x6092\" (user units as read)")
-            source = _ANGLE_UNITS[units]
-    elif sig is Signal.LVDT:
-        if "mm_per_unit" not in tbl:
-            raise ProfileError(f"{fname}: missing field '{where}.mm_per_unit' (mm of stroke per raw unit)")
-        scale = Scale.per_unit(_number(tbl, "mm_per_unit", where, fname, nonzero=True),
-                               _number(tbl, "offset_mm", where, fname, default=0.0))
-    elif sig is Signal.FORCE:
-        if "N_per_unit" not in tbl:
-            raise ProfileError(f"{fname}: missing field '{where}.N_per_unit' (N of force per raw unit)")
-        scale = Scale.per_unit(_number(tbl, "N_per_unit", where, fname, nonzero=True),
-                               _number(tbl, "offset_N", where, fname, default=0.0))
-    elif sig is Signal.TARGET_TORQUE:
-        rated = _number(tbl, "rated_torque_Nm", where, fname, positive=True)
-        if rated is None:
-            source = ScaleSource.RATED_TORQUE
-        else:
-            scale = torque_scale(rated, act.mechanics.i_total_rad_per_mm)
-    return SignalEntry(sig, ema, node, index, sub, data_type, scale, source, where)
-
-
-def _node_spec(name: str, tbl: Any, act: Actuation, fname: str) -> NodeSpec:
-    where = f"nodes.{name}"
-    if not _NODE_NAME.match(name) or name in DRIVE_ROLE:
-        raise ProfileError(f"{fname}: table '{where}': a node name is lower-case letters, digits and _ "
-                           f"(ema1 and ema2 are the drives)")
-    tbl = _table(tbl, where, fname)
-    known = ["node_id", "eds", "vendor_id", "product_code", "revision_min", "device_profile", "heartbeat_period_s"]
-    _check_keys(tbl, known, where + ".", fname)
-    for k in known[:-1]:
-        if k not in tbl and k != "device_profile":
-            raise ProfileError(f"{fname}: missing field '{where}.{k}'")
-    nid = _convert_scalar(tbl["node_id"], int, f"{where}.node_id", fname)
-    _check_range(nid, {"lo": 1, "hi": 127}, f"{where}.node_id", fname)
-    eds = _convert_scalar(tbl["eds"], str, f"{where}.eds", fname)
-    ident = []
-    for k in ("vendor_id", "product_code", "revision_min"):
-        v = _convert_scalar(tbl[k], int, f"{where}.{k}", fname)
-        _check_range(v, {"lo": 0, "hi": 0xFFFF_FFFF}, f"{where}.{k}", fname)
-        ident.append(v)
-    profile = _convert_scalar(tbl.get("device_profile", 401), int, f"{where}.device_profile", fname)
-    if profile not in (DeviceProfile.IO, DeviceProfile.MEASURING):
-        raise ProfileError(f"{fname}: field '{where}.device_profile' = {profile}: a sensor node is a CiA 401 "
-                           f"I/O module (401) or a CiA 404 measuring device (404)")
-    hb = act.canopen.heartbeat_period_s
-    if "heartbeat_period_s" in tbl:
-        hb = _convert_scalar(tbl["heartbeat_period_s"], float, f"{where}.heartbeat_period_s", fname)
-        _check_range(hb, {"lo": 0.01, "hi": 10.0}, f"{where}.heartbeat_period_s", fname)
-    return NodeSpec(name, NodeRole.SENSORS, nid, eds, *ident, profile, hb, where)
-
-
-def load_signal_map(signals: Any, nodes: Any, cob_ids: Any, act: Actuation, fname: str) -> SignalMap:
-    """``[signals.ema1]``, ``[signals.ema2]``, ``[nodes.NAME]`` and ``canopen.cob_ids`` -> :class:`SignalMap`.
-
-    Every error names the profile field (docs/drives.md describes the tables)."""
-    if signals is None:
-        raise ProfileError(f"{fname}: missing tables '[signals.ema1]' and '[signals.ema2]': where each signal "
-                           f"of the check lives (docs/drives.md)")
-    signals = _table(signals, "signals", fname)
-    _check_keys(signals, ["ema1", "ema2"], "signals.", fname)
-    c = act.canopen
-    drives = tuple(NodeSpec(f"ema{k}", NodeRole.DRIVE, nid, c.eds, c.vendor_id, c.product_code, c.revision_min,
-                            DeviceProfile.DRIVE, c.heartbeat_period_s, "canopen")
-                   for k, nid in ((1, c.node_id_ema1), (2, c.node_id_ema2)))
-    extra = tuple(_node_spec(str(n), t, act, fname) for n, t in _table(nodes, "nodes", fname).items())
-    seen = {c.master_node_id: "canopen.master_node_id", c.node_id_ema1: "canopen.node_id_ema1",
-            c.node_id_ema2: "canopen.node_id_ema2"}
-    for n in extra:
-        if n.node_id in seen:
-            raise ProfileError(f"{fname}: fields '{n.key}.node_id' and '{seen[n.node_id]}' are both {n.node_id}; "
-                               f"every node needs a node id of its own")
-        seen[n.node_id] = f"{n.key}.node_id"
-    names = {n.name for n in drives + extra}
-    entries = []
-    for ema in (1, 2):
-        key = f"ema{ema}"
-        if key not in signals:
-            raise ProfileError(f"{fname}: missing table '[signals.{key}]'")
-        tbl = _table(signals[key], f"signals.{key}", fname)
-        _check_keys(tbl, [x.value for x in Signal], f"signals.{key}.", fname)
-        for sig in _REQUIRED_SIGNALS:
-            if sig.value not in tbl:
-                raise ProfileError(f"{fname}: missing field 'signals.{key}.{sig.value}' (where the check reads "
-                                   f"EMA {ema}'s {sig.value.replace('_', ' ')}; docs/drives.md)")
-        for sig in Signal:
-            e = _signal_entry(sig, ema, tbl.get(sig.value, {}), act, fname)
-            if e.node not in names:
-                raise ProfileError(f"{fname}: field '{e.key}.node' = {e.node!r} is not a node of the rig "
-                                   f"(ema1, ema2{''.join(', ' + n.name for n in extra)})")
-            entries.append(e)
-        # the target position is in the units of the drive's position actual value: the motor angle's scaling
-        angle = next(e for e in entries if e.ema == ema and e.signal is Signal.MOTOR_ANGLE)
-        k = next(i for i, e in enumerate(entries) if e.ema == ema and e.signal is Signal.TARGET_POSITION)
-        entries[k] = dataclasses.replace(entries[k], scale=angle.scale, source=angle.source)
-    try:
-        fc = ForceControl(c.force_control)
-    except ValueError:
-        raise ProfileError(f"{fname}: field 'canopen.force_control' = {c.force_control!r}: \"auto\", \"cst\" "
-                           f"or \"csp\"") from None
-    if c.gear_ratio_object:
-        try:
-            parse_object(c.gear_ratio_object, "canopen.gear_ratio_object")
-        except InputError as exc:
-            raise ProfileError(f"{fname}: field {exc}") from None
-    cobs = []
-    for k, v in _table(cob_ids, "canopen.cob_ids", fname).items():
-        m = re.fullmatch(r"([a-z][a-z0-9_]*)\.([TR]PDO)([1-9]\d{0,2})", str(k))
-        if m is None or m.group(1) not in names:
-            raise ProfileError(f"{fname}: field 'canopen.cob_ids.{k}': a key is NODE.TPDOn or NODE.RPDOn with "
-                               f"NODE one of {', '.join(sorted(names))}")
-        cob = _convert_scalar(v, int, f"canopen.cob_ids.{k}", fname)
-        _check_range(cob, {"lo": 1, "hi": 0x7FF}, f"canopen.cob_ids.{k}", fname)
-        cobs.append((m.group(1), m.group(2) + m.group(3), cob))
-    return SignalMap(drives + extra, tuple(entries), fc, tuple(cobs))
-
-
-def gear_ratio_object(act: Actuation) -> tuple[int, int] | None:
-    """The drives' gear-ratio object of ``canopen.gear_ratio_object``, None when the profile names none."""
-    g = act.canopen.gear_ratio_object
-    return parse_object(g, "canopen.gear_ratio_object") if g else None
+def actuation_from_snapshot(snap: dict, fname: str = "meta.json (actuation snapshot)") -> Actuation:
+    """The actuation a run used, from meta.json's snapshot (also one written before the signal map:
+    its drive's fixed objects are taken)."""
+    snap = copy.deepcopy(snap)
+    if "signals" not in snap:
+        counts = (snap.get("sensors") or {}).pop("resolver_counts_per_rev", 4096)
+        snap["signals"] = copy.deepcopy(LEGACY_SIGNALS)
+        for k in ("ema1", "ema2"):
+            snap["signals"][k]["motor_angle"]["counts_per_rev"] = counts
+    return actuation_from_tables(snap, fname)
 
 
 def load_check(path: str | Path | None = None, actuation: Actuation | None = None) -> Check:
     """Load and validate a check profile; with ``actuation``, also cross-check limits."""
     path = Path(path) if path is not None else default_profile_path("check.toml")
-    check = build_dataclass(Check, _read_toml(path), path.name)
+    check = build_dataclass(Check, read_toml(path), path.name)
     if actuation is not None:
         validate_check(check, actuation, path.name)
     return check
@@ -539,10 +262,10 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     """Load and validate a simulated-rig profile (default: the shipped one)."""
     path = Path(path) if path is not None else default_profile_path("simrig.toml")
     fname = path.name
-    data = _read_toml(path)
+    data = read_toml(path)
     required = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2"]
     known = required + ["effects", "faults", "identity", "wear"]
-    _check_keys(data, known, "", fname)
+    check_keys(data, known, "", fname)
     for key in required:
         if key not in data:
             raise ProfileError(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
@@ -553,18 +276,18 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     if not isinstance(rig, dict):
         raise ProfileError(f"{fname}: 'rig' must be a table")
     rig_known = ["i_total_rad_per_mm", "stroke_limit_mm", "sample_period_s", "substeps"]
-    _check_keys(rig, rig_known, "rig.", fname)
+    check_keys(rig, rig_known, "rig.", fname)
     for k in rig_known:
         if k not in rig:
             raise ProfileError(f"{fname}: missing field 'rig.{k}'")
-    i_total = _convert_scalar(rig["i_total_rad_per_mm"], float, "rig.i_total_rad_per_mm", fname)
-    stroke = _convert_scalar(rig["stroke_limit_mm"], float, "rig.stroke_limit_mm", fname)
-    period = _convert_scalar(rig["sample_period_s"], float, "rig.sample_period_s", fname)
-    substeps = _convert_scalar(rig["substeps"], int, "rig.substeps", fname)
-    _check_range(i_total, {"lo": 0.0, "lo_open": True, "hi": 1e4}, "rig.i_total_rad_per_mm", fname)
-    _check_range(stroke, {"lo": 0.0, "lo_open": True, "hi": 500.0}, "rig.stroke_limit_mm", fname)
-    _check_range(period, {"lo": 1e-4, "hi": 0.1}, "rig.sample_period_s", fname)
-    _check_range(substeps, {"lo": 1, "hi": 1000}, "rig.substeps", fname)
+    i_total = convert_scalar(rig["i_total_rad_per_mm"], float, "rig.i_total_rad_per_mm", fname)
+    stroke = convert_scalar(rig["stroke_limit_mm"], float, "rig.stroke_limit_mm", fname)
+    period = convert_scalar(rig["sample_period_s"], float, "rig.sample_period_s", fname)
+    substeps = convert_scalar(rig["substeps"], int, "rig.substeps", fname)
+    check_range(i_total, {"lo": 0.0, "lo_open": True, "hi": 1e4}, "rig.i_total_rad_per_mm", fname)
+    check_range(stroke, {"lo": 0.0, "lo_open": True, "hi": 500.0}, "rig.stroke_limit_mm", fname)
+    check_range(period, {"lo": 1e-4, "hi": 0.1}, "rig.sample_period_s", fname)
+    check_range(substeps, {"lo": 1, "hi": 1000}, "rig.substeps", fname)
     parts = {}
     for key, cls in (("ema1", EmaMechanics), ("ema2", EmaMechanics), ("drive", DriveParams),
                      ("surface", SurfaceParams), ("sensors1", SensorParams), ("sensors2", SensorParams)):
@@ -592,7 +315,7 @@ def _load_faults(tables: Any, fname: str) -> tuple:
         where = f"faults[{k}]"
         if not isinstance(tbl, dict):
             raise ProfileError(f"{fname}: '{where}' must be a table")
-        _check_keys(tbl, ["kind", "ema", "start_s", "duration_s", "value"], where + ".", fname)
+        check_keys(tbl, ["kind", "ema", "start_s", "duration_s", "value"], where + ".", fname)
         kind = tbl.get("kind")
         kinds = [x.value for x in FaultKind]
         if kind not in kinds:
@@ -602,11 +325,11 @@ def _load_faults(tables: Any, fname: str) -> tuple:
                                f"known: {', '.join(kinds)}")
         kw: dict[str, Any] = {"kind": kind}
         if "ema" in tbl:
-            kw["ema"] = _convert_scalar(tbl["ema"], int, where + ".ema", fname)
-            _check_range(kw["ema"], {"lo": 1, "hi": 2}, where + ".ema", fname)
+            kw["ema"] = convert_scalar(tbl["ema"], int, where + ".ema", fname)
+            check_range(kw["ema"], {"lo": 1, "hi": 2}, where + ".ema", fname)
         for name in ("start_s", "duration_s", "value"):
             if name in tbl:
-                kw[name] = _convert_scalar(tbl[name], float, f"{where}.{name}", fname)
+                kw[name] = convert_scalar(tbl[name], float, f"{where}.{name}", fname)
         if kw.get("start_s", 0.0) < 0:
             raise ProfileError(f"{fname}: field '{where}.start_s' = {kw['start_s']} must be >= 0")
         if "duration_s" in kw and not kw["duration_s"] > 0:
@@ -642,19 +365,3 @@ def _load_effect(tbl: Any, index: int, fname: str) -> Any:
         if isinstance(exc, ProfileError):
             raise
         raise ProfileError(f"{fname}: '{where}': {exc}") from None
-
-
-def snapshot(obj: Any) -> Any:
-    """A JSON-serialisable snapshot of a profile dataclass (for meta.json)."""
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        out = {f.name: snapshot(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-        if hasattr(obj, "name") and isinstance(getattr(type(obj), "NAME", None), str):
-            out["name"] = type(obj).NAME
-        return out
-    if isinstance(obj, Enum):
-        return obj.value
-    if isinstance(obj, (tuple, list)):
-        return [snapshot(x) for x in obj]
-    if isinstance(obj, dict):
-        return {str(k): snapshot(v) for k, v in obj.items()}
-    return obj

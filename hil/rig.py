@@ -18,7 +18,8 @@ from hil.canopen.od import load_eds
 from hil.canopen.plan import PlanError, Problem, RigPlan, plan_rig
 from hil.canopen.signalmap import NodeRole
 from hil.config import Actuation
-from hil.profiles import gear_ratio_object, resolve_eds
+from hil.profile_signals import gear_ratio_object
+from hil.profiles import resolve_eds
 
 __all__ = ["Rig", "plan_for"]
 

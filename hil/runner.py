@@ -17,7 +17,7 @@ from typing import Callable, Protocol
 from hil import __version__
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import Actuation, Check
-from hil.profiles import snapshot
+from hil.profiles import actuation_tables, snapshot
 from hil.runfolder import SignalsWriter, write_json_atomic
 from hil.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.supervisor import Supervisor
@@ -79,7 +79,7 @@ def start_meta(act: Actuation, check: Check, extra: dict) -> dict:
         "software": {"name": "emacheck", "version": __version__},
         "started_utc": _now_iso(),
         "status": "running",
-        "profiles": {"actuation": snapshot(act), "check": snapshot(check)},
+        "profiles": {"actuation": actuation_tables(act), "check": snapshot(check)},
         "steps": {},
         **extra,
     }

@@ -16,7 +16,7 @@ import pytest
 
 from hil.canopen.frame import Frame
 from hil.link import CanopenLink, StaleData
-from hil.master import MasterCore
+from support.canopen_rig import make_master
 from hil.transport import BusTransport
 
 
@@ -77,7 +77,7 @@ def test_backlog_frames_carry_their_arrival_time(transport):
 def test_heartbeat_in_the_backlog_is_not_judged_lost(transport, actuation):
     """The consumer fires only if no heartbeat *arrived* within the timeout (1.5 periods)."""
     tr = transport
-    m = MasterCore(actuation)
+    m = make_master(actuation)
     hb = actuation.canopen.heartbeat_period_s
     from hil.master import Phase
     m.phase = Phase.CYCLIC
@@ -99,12 +99,12 @@ def test_heartbeat_in_the_backlog_is_not_judged_lost(transport, actuation):
     assert m.fault is None
     # judged at read time instead (what the master did before), the first heartbeat alone would
     # have been 3 periods old when read: the consumer would have fired
-    assert (now - (start + hb)) > m.hb_timeout_s
+    assert (now - (start + hb)) > m.nodes[1].hb_timeout_s
 
 
 def test_master_behind_the_bus_stops_with_stale_data(transport, actuation):
     tr = transport
-    m = MasterCore(actuation)
+    m = make_master(actuation)
     link = CanopenLink(m, tr, max_missing_cycles=5)
     assert link.max_lag_s == pytest.approx(5 * 0.002)
     now = time.monotonic() - tr._t0

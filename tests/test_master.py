@@ -469,7 +469,7 @@ def test_skipping_the_drill_takes_a_reason_and_the_record_says_it(actuation, pai
 
 def test_drive_without_abort_connection_option_is_refused_by_the_plan_naming_it(tmp_path):
     with pytest.raises(PlanError, match=r"canopen.external_watchdog: 0x6007:00 \(abort connection option code\) at "
-                                        r"ema1: not in drive.eds"):
+                                        r"ema1, ema2: not in drive.eds"):
         _variant(tmp_path, eds_remove=[0x6007])
 
 
@@ -517,6 +517,6 @@ def test_a_drive_without_cst_gets_csp_once_by_sdo_and_no_mode_pdo(tmp_path, simr
 
 
 def test_a_drive_whose_eds_announces_no_csp_is_refused_naming_0x6502(tmp_path):
-    with pytest.raises(PlanError, match=r"canopen.eds: 0x6502:00 \(supported drive modes\) at ema1: drive.eds "
+    with pytest.raises(PlanError, match=r"canopen.eds: 0x6502:00 \(supported drive modes\) at ema1, ema2: drive.eds "
                                         r"announces neither CSP nor CST \(0x6502 = 0x00000060\)"):
         _variant(tmp_path, eds_defaults={(0x6502, 0): "0x00000060"})

@@ -21,7 +21,8 @@ from hil.errors import RecordingError
 def _check_for(meta: dict | None, act):
     """The check profile a recording was made with (meta.json's snapshot), else the shipped one."""
     from hil.config import Check
-    from hil.profiles import build_dataclass, load_check
+    from hil.profile_tables import build_dataclass
+    from hil.profiles import load_check
     snap = ((meta or {}).get("profiles") or {}).get("check")
     if snap is not None:
         try:

@@ -345,7 +345,7 @@ class _Planner:
                        for ema, (fc, angle_src, torque_src, reaction) in zip((1, 2), drive_info))
         load = self._load(layouts)
         if self.problems:
-            raise PlanError(self.problems)
+            raise PlanError(_merged(self.problems))
         smap = replace(self.smap, entries=tuple(entries))
         return RigPlan(smap, nodes, drives, tuple(channels), load, tuple(self.notes), self.gear_ratio_object)
 
@@ -366,27 +366,29 @@ class _Planner:
         self._check_identity(node, eds)
 
     def _check_identity(self, node: NodeSpec, eds: EdsView) -> None:
-        """The EDS must describe the node the profile expects: 0x1018 defaults (else [DeviceInfo])."""
+        """The EDS must describe the node the profile expects: its 0x1018 defaults and its ``[DeviceInfo]``
+        numbers agree with each other and with the profile (0 or absent: the EDS does not say)."""
         info = getattr(eds.od, "device_information", None)
-        for sub, field_name, info_key, want, exact in (
-                (1, "vendor_id", "vendor_number", node.vendor_id, True),
-                (2, "product_code", "product_number", node.product_code, True),
-                (3, "revision_min", "revision_number", node.revision_min, False)):
+        for sub, field_name, info_name, info_key, want, exact in (
+                (1, "vendor_id", "VendorNumber", "vendor_number", node.vendor_id, True),
+                (2, "product_code", "ProductNumber", "product_number", node.product_code, True),
+                (3, "revision_min", "RevisionNumber", "revision_number", node.revision_min, False)):
             have = eds.default(0x1018, sub)
+            have = have if isinstance(have, int) and have else None
             declared = getattr(info, info_key, None)
-            if isinstance(have, int) and isinstance(declared, int) and declared and declared != have:
-                self.problem(f"{node.key}.eds", f"0x1018:{sub:02X} at {node.name}",
-                             f"{eds.name} contradicts itself: [DeviceInfo] says 0x{declared:08X}, the identity "
-                             f"object defaults to 0x{have:08X}")
-                continue
-            value = have if isinstance(have, int) else declared if isinstance(declared, int) else None
-            if value is None or (value == 0 and not isinstance(have, int)):
+            declared = declared if isinstance(declared, int) and declared else None
+            obj = f"0x1018:{sub:02X} at {node.name}"
+            if have is not None and declared is not None and declared != have:
+                self.problem(f"{node.key}.eds", obj, f"{eds.name}: [DeviceInfo] {info_name} = 0x{declared:08X} but the "
+                                                     f"identity object defaults to 0x{have:08X}: the file contradicts "
+                                                     f"itself")
+            value, what = (have, f"identity 0x1018:{sub:02X}") if have is not None else (declared, info_name)
+            if value is None:
                 continue  # the EDS does not say: the preflight reads it from the node
-            ok = value == want if exact else value >= want
-            if not ok:
-                self.problem(f"{node.key}.{field_name}", f"0x1018:{sub:02X} at {node.name}",
-                             f"{eds.name} describes 0x{value:08X}, the profile expects "
-                             f"{'' if exact else 'at least '}0x{want:08X}: the EDS describes another device")
+            if not (value == want if exact else value >= want):
+                self.problem(f"{node.key}.{field_name}", obj,
+                             f"{eds.name}: {what} = 0x{value:08X} does not match the profile's {node.key}.{field_name} "
+                             f"= 0x{want:08X}: the EDS describes another device")
 
     def _plan_drive(self, ema: int, node: NodeSpec):
         """Check one EMA's drive; returns ((force control, angle source, torque source, reaction), entries)."""
@@ -552,6 +554,25 @@ class _Planner:
 
 
 _PHYSICAL = (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE, Signal.TARGET_POSITION, Signal.TARGET_TORQUE)
+
+
+def _merged(problems: list[Problem]) -> list[Problem]:
+    """Problems that differ only in the drive they were found at (``at ema1``, ``at ema2``: both drives
+    share the EDS) said once, ``at ema1, ema2``."""
+    out: list[Problem] = []
+    seen: dict[tuple, int] = {}
+    for p in problems:
+        obj = p.obj or ""
+        base = obj.rsplit(" at ", 1)[0] if obj.endswith((" at ema1", " at ema2")) else None
+        key = (p.key, base, p.message)
+        if base is not None and key in seen:
+            k = seen[key]
+            out[k] = Problem(p.key, f"{out[k].obj}, {obj.rsplit(' at ', 1)[1]}", p.message)
+            continue
+        if base is not None:
+            seen[key] = len(out)
+        out.append(p)
+    return out
 
 
 def plan_rig(smap: SignalMap, ods: Mapping[str, cod.ObjectDictionary], *, eds_names: Mapping[str, str] | None = None,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from hil.config import Actuation
 from hil.errors import RecordingError
-from hil.profiles import build_dataclass, load_actuation
+from hil.profiles import actuation_from_snapshot, load_actuation
 from hil.runfolder import is_can_log, read_signals
 
 
@@ -387,5 +387,5 @@ def actuation_for(profile: Path | None, meta: dict | None) -> Actuation:
         return load_actuation(profile)
     snap = ((meta or {}).get("profiles") or {}).get("actuation")
     if snap is not None:
-        return build_dataclass(Actuation, snap, "meta.json (actuation snapshot)")
+        return actuation_from_snapshot(snap)
     return load_actuation(None)
