@@ -1,4 +1,4 @@
-"""The shipped drive EDS: loads, passes the master's check, identity and PDO defaults; broken ones refused."""
+"""The shipped EDS files: load, pass the plan, identity and PDO defaults; broken ones refused naming key and object."""
 
 from __future__ import annotations
 
@@ -12,19 +12,19 @@ from canopen.objectdictionary import ODRecord
 
 from hil.canopen.errors import EdsError
 from hil.canopen.od import (
-    MASTER_LOSS_OBJECTS,
-    REQUIRED_OBJECTS,
     AbortConnectionOption,
-    check_drive_od,
     decode_value,
     default_eds_path,
     encode_value,
     load_eds,
     master_loss_steps,
     od_variable,
-    required_objects,
 )
-from hil.canopen.pdo import DEFAULT_LAYOUT
+from hil.canopen.plan import PlanError
+from hil.profiles import default_profile_path, load_actuation
+from hil.rig import plan_for
+from support.canopen_rig import shipped_rig
+from support.profiles import write_profile_variant
 
 
 @pytest.fixture(scope="module")
@@ -36,9 +36,9 @@ def default(od, index, sub=0):
     return od_variable(od, index, sub).default
 
 
-def test_shipped_eds_loads_and_passes_the_check(od):
-    check_drive_od(od)
-    check_drive_od(load_eds())  # without node id ($NODEID defaults unresolved) too
+def test_shipped_eds_loads_and_passes_the_plan(od):
+    assert shipped_rig().plan.nodes[0].eds == "ema_drive.eds"
+    load_eds()  # without node id ($NODEID defaults unresolved) too
     info = od.device_information
     assert (info.vendor_name, info.product_name) == ("emacheck", "EMA drive (simulated)")
     assert (info.vendor_number, info.product_number, info.revision_number) == (0x0E3A, 0x0402, 0x00010000)
@@ -63,20 +63,13 @@ def test_identity_and_device_defaults(od):
 
 
 def test_pdo_defaults_equal_the_layout(od):
-    for p in DEFAULT_LAYOUT.pdos:
-        assert default(od, p.comm_index, 1) == p.cob_id(2), p.name
+    for p in shipped_rig().plan.node("ema2").layout.pdos:
+        assert default(od, p.comm_index, 1) == p.cob_id, p.name
         assert default(od, p.comm_index, 2) == p.transmission_type, p.name
         assert default(od, p.mapping_index, 0) == len(p.entries), p.name
         got = [default(od, p.mapping_index, k) for k in range(1, 9)]
         assert got == [e.mapping_entry for e in p.entries] + [0] * (8 - len(p.entries)), p.name
     assert od_variable(load_eds(), 0x1800, 1).default_raw == "$NODEID+0x180"
-
-
-def test_required_objects_cover_the_layout():
-    need = {(r.index, r.subindex) for r in REQUIRED_OBJECTS}
-    for p in DEFAULT_LAYOUT.pdos:
-        assert {(e.index, e.subindex) for e in p.entries} <= need
-        assert {(p.comm_index, 1), (p.comm_index, 2), (p.mapping_index, 0)} <= need
 
 
 def test_value_codec(od):
@@ -111,31 +104,41 @@ def _broken(tmp_path: Path, section: str, key: str | None = None, value: str = "
     return p
 
 
+def _plan(tmp_path, eds: Path):
+    prof = write_profile_variant("actuation.toml", tmp_path / "actuation.toml", {"canopen": {"eds": str(eds)}})
+    return plan_for(load_actuation(prof), prof)
+
+
 @pytest.mark.parametrize("section,key,value,message", [
-    ("6041", None, "", r"0x6041:00 \(statusword\) is missing"),
-    ("1A01sub2", None, "", r"0x1A01:02 \(TPDO2 mapping entry 2\) is missing"),
-    ("6064", "DataType", "0x0007",
-     r"0x6064:00 \(position_inc\) has data type 0x0007 \(UNSIGNED32\), expected 0x0004 \(INTEGER32\)"),
-    ("6040", "AccessType", "ro", r"0x6040:00 \(controlword\) is not writable \(access ro\)"),
-    ("2100", "PDOMapping", "0", r"0x2100:00 \(lvdt_um\) is not PDO-mappable"),
-    ("1018sub1", None, "", r"0x1018:01 \(vendor-ID\) is missing"),
-    ("6007", None, "", r"0x6007:00 \(abort connection option code\) is missing"),
-    ("1016sub1", None, "", r"0x1016:01 \(consumer heartbeat time 1\) is missing"),
-    ("1016sub1", "AccessType", "ro", r"0x1016:01 \(consumer heartbeat time 1\) is not writable \(access ro\)"),
+    ("6041", None, "", r"signals.ema1.statusword: 0x6041:00 at ema1: no such object in broken.eds"),
+    ("1A01sub2", None, "", r"signals.ema1.force: 0x2101:00 at ema1: no TPDO left to carry it: broken.eds has 2 "
+                           r"TPDO\(s\) the master may map and the map needs more"),
+    ("6064", "DataType", "0x0003",
+     r"signals.ema1.motor_angle: 0x6064:00 at ema1: data type 0x0003 \(INTEGER16\) .*CiA 402 says 0x0004 \(INTEGER32\)"),
+    ("6040", "AccessType", "ro", r"signals.ema1.controlword: 0x6040:00 at ema1: is not writable in broken.eds "
+                                 r"\(access ro\)"),
+    ("2100", "PDOMapping", "0", r"signals.ema1.lvdt: 0x2100:00 at ema1: is not PDO-mappable in broken.eds"),
+    ("1018sub1", None, "", r"canopen.eds: 0x1018:01 \(vendor-ID\) at ema1, ema2: not in broken.eds"),
+    ("6007", None, "", r"canopen.external_watchdog: 0x6007:00 \(abort connection option code\) at ema1, ema2: not "
+                       r"in broken.eds"),
+    ("1016sub1", None, "", r"canopen.external_watchdog: 0x1016:01 \(consumer heartbeat time\) at ema1, ema2: not "
+                           r"in broken.eds"),
+    ("1016sub1", "AccessType", "ro", r"canopen.external_watchdog: 0x1016:01 \(consumer heartbeat time\) at ema1, "
+                                     r"ema2: not writable in broken.eds \(access ro\)"),
+    ("1017", "AccessType", "ro", r"canopen.eds: 0x1017:00 \(producer heartbeat time\) at ema1, ema2: not writable"),
 ])
-def test_broken_eds_refused_with_object_named(tmp_path, section, key, value, message):
+def test_broken_eds_refused_with_key_and_object_named(tmp_path, section, key, value, message):
     path = _broken(tmp_path, section, key, value)
-    od = load_eds(path, node_id=1)
-    with pytest.raises(EdsError, match=message) as exc:
-        check_drive_od(od, source=str(path))
-    assert str(exc.value).startswith(f"{path}: ")
-    assert str(exc.value).count("; ") == 0  # exactly one problem reported
+    with pytest.raises(PlanError, match=message) as exc:
+        _plan(tmp_path, path)
+    problems = [str(p) for p in exc.value.problems]
+    assert all(p.startswith(("signals.", "canopen.")) for p in problems), problems
 
 
 def test_unchanged_copy_passes(tmp_path):
     text = default_eds_path().read_text()
     assert "\n\n".join("\n".join(b) for b in _sections(text)) + "\n" == text
-    check_drive_od(load_eds(_broken(tmp_path, "6041", "DefaultValue", "0x0000")))
+    _plan(tmp_path, _broken(tmp_path, "6041", "DefaultValue", "0x0000"))
 
 
 def test_missing_or_garbage_eds(tmp_path):
@@ -157,30 +160,31 @@ def test_master_loss_objects_in_the_shipped_eds(od):
     var = od_variable(od, 0x6007, 0)
     assert (var.data_type, var.default, var.writable) == (0x0003, 1, True)
     assert [int(o) for o in AbortConnectionOption] == [0, 1, 2, 3]
-    need = {(r.index, r.subindex) for r in REQUIRED_OBJECTS}
-    assert {(r.index, r.subindex) for r in MASTER_LOSS_OBJECTS} == {(0x1016, 1), (0x6007, 0)} <= need
-    assert not {(0x1016, 1), (0x6007, 0)} & {(r.index, r.subindex) for r in required_objects(master_loss=False)}
-    steps = master_loss_steps(127, 125, 2000)
+    assert all(d.reaction for d in shipped_rig().plan.drives)
+    steps = master_loss_steps(127, 125)
     assert [(st.index, st.subindex, st.data.hex(), st.write) for st in steps] == [
-        (0x1016, 1, "7d007f00", True), (0x6007, 0, "0300", True), (0x605A, 0, "0200", False),
-        (0x1006, 0, "d0070000", False)]
+        (0x1016, 1, "7d007f00", True), (0x6007, 0, "0300", True)]
     for st in steps:  # each value as the EDS types it
         assert encode_value(od, st.index, st.subindex, decode_value(od, st.index, st.subindex, st.data)) == st.data
 
 
 def test_eds_without_the_reaction_passes_only_where_the_rig_states_another(tmp_path):
-    od = load_eds(_broken(tmp_path, "6007"), node_id=1)
-    with pytest.raises(EdsError, match=r"0x6007:00 \(abort connection option code\) is missing"):
-        check_drive_od(od)
-    check_drive_od(od, master_loss=False)  # (canopen.external_watchdog states the other protection)
+    eds = _broken(tmp_path, "6007")
+    with pytest.raises(PlanError, match=r"0x6007:00 \(abort connection option code\) at ema1, ema2: not in broken.eds"):
+        _plan(tmp_path, eds)
+    prof = write_profile_variant("actuation.toml", tmp_path / "wd.toml", {"canopen": {
+        "eds": str(eds), "external_watchdog": "the rig's relay drops STO 100 ms after the master's last heartbeat"}})
+    plan = plan_for(load_actuation(prof), prof).plan
+    assert [d.reaction for d in plan.drives] == [False, False]
 
 
 @pytest.mark.skipif(shutil.which("eds-validate") is None, reason="eds-utils' eds-validate not installed "
                     "(pip install eds-utils): the shipped EDS is checked by canopen's parser only")
-def test_shipped_eds_passes_eds_utils_validation():
-    r = subprocess.run(["eds-validate", str(default_eds_path())], capture_output=True, text=True, timeout=60,
+@pytest.mark.parametrize("name", ["ema_drive.eds", "cia401_io.eds"])
+def test_shipped_eds_passes_eds_utils_validation(name):
+    r = subprocess.run(["eds-validate", str(default_profile_path(name))], capture_output=True, text=True, timeout=60,
                        check=False)
-    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.returncode == 0 and not r.stdout.strip(), r.stdout + r.stderr
 
 
 @pytest.mark.skipif(shutil.which("eds-validate") is None, reason="eds-utils' eds-validate not installed "

@@ -23,7 +23,6 @@ from hil.master import DriveFault, HeartbeatLost, MasterCore, MasterLossReaction
 from hil.preflight import DrillOutcome
 from hil.profiles import load_actuation
 from hil.rig import plan_for
-from sim.drives import SimDrivePair
 from sim.faults import Fault, FaultInjector
 from sim.plant import RigPlant
 from support.canopen_rig import make_pair, shipped_rig
@@ -351,7 +350,7 @@ def test_a_mode_change_not_confirmed_by_0x6061_in_time_is_a_fault(actuation, sim
 
 def test_a_mode_change_confirmed_within_the_timeout_is_not(actuation, pair):
     m, p = _preflight(actuation, pair)
-    smp = p.enable(p.sync(), cycles=60)
+    p.enable(p.sync(), cycles=60)
     assert m.fault is None and all(d.mode_pending is None and d.mode_display == 8 for d in m.drives.values())
 
 

@@ -1,4 +1,8 @@
-"""PDO layout and codec: golden bytes, round trips, length errors, configuration SDO writes, bus load."""
+"""PDO layout and codec: golden bytes, round trips, length errors, configuration SDO writes, bus load.
+
+The layout under test is the shipped profile's, planned against the shipped EDS (what the master
+configures and the simulated drives serve): the same four PDOs per drive the fixed layout had.
+"""
 
 from __future__ import annotations
 
@@ -14,24 +18,7 @@ from hil.canopen.busload import bus_load, frame_bits
 from hil.canopen.errors import CanopenError, InputError
 from hil.canopen.frame import Frame, FrameError, sync_frame
 from hil.canopen.od import load_eds
-from hil.canopen.pdo import (
-    DEFAULT_LAYOUT,
-    Direction,
-    PdoError,
-    PdoLengthError,
-    Rpdo1,
-    Rpdo2,
-    Tpdo1,
-    Tpdo2,
-    decode_rpdo1,
-    decode_rpdo2,
-    decode_tpdo1,
-    decode_tpdo2,
-    encode_rpdo1,
-    encode_rpdo2,
-    encode_tpdo1,
-    encode_tpdo2,
-)
+from hil.canopen.pdo import Direction, MappedObject, PdoError, PdoLayout, PdoLengthError, PdoSpec, predefined_cob_id
 from hil.canopen.sdo import SdoClient, SdoEvent
 from hil.canopen.units import (
     force_dN_to_newton,
@@ -44,6 +31,7 @@ from hil.canopen.units import (
     permille_to_force_N,
     rad_to_increments,
 )
+from support.canopen_rig import shipped_rig
 
 I_TOTAL = 2 * math.pi * 4 / 5  # rad/mm, the default actuation (gearbox 4:1, lead 5 mm)
 
@@ -51,111 +39,116 @@ i8 = st.integers(-128, 127)
 u16 = st.integers(0, 0xFFFF)
 i16 = st.integers(-(2**15), 2**15 - 1)
 i32 = st.integers(-(2**31), 2**31 - 1)
-node = st.integers(1, 127)
+
+
+def layout(node: int = 1) -> PdoLayout:
+    """The shipped layout of drive ``node`` (1 or 2)."""
+    return shipped_rig().plan.node(f"ema{node}").layout
+
+
+def test_the_shipped_layout_is_the_four_pdos_of_each_drive():
+    for n in (1, 2):
+        lay = layout(n)
+        got = [(p.name, p.direction, p.cob_id, p.comm_index, p.mapping_index, p.transmission_type, p.length_bytes,
+                struct.calcsize(p.struct_format)) for p in lay.pdos]
+        assert got == [
+            ("RPDO1", Direction.RX, 0x200 + n, 0x1400, 0x1600, 1, 8, 8),
+            ("RPDO2", Direction.RX, 0x300 + n, 0x1401, 0x1601, 255, 1, 1),
+            ("TPDO1", Direction.TX, 0x180 + n, 0x1800, 0x1A00, 1, 7, 7),
+            ("TPDO2", Direction.TX, 0x280 + n, 0x1801, 0x1A01, 1, 8, 8),
+        ]
+        assert [(e.index, e.subindex, e.bit_length) for e in lay["TPDO1"].entries] == [
+            (0x6041, 0, 16), (0x6064, 0, 32), (0x6061, 0, 8)]
+        assert [(e.index, e.subindex, e.bit_length) for e in lay["RPDO1"].entries] == [
+            (0x6040, 0, 16), (0x607A, 0, 32), (0x6071, 0, 16)]
+        assert [(e.index, e.subindex, e.bit_length) for e in lay["TPDO2"].entries] == [(0x2100, 0, 32), (0x2101, 0, 32)]
+        assert lay.disable == ()
+
+
+def test_predefined_connection_set():
+    assert [predefined_cob_id(Direction.TX, k, 5) for k in (1, 2, 3, 4, 5)] == [0x185, 0x285, 0x385, 0x485, None]
+    assert [predefined_cob_id(Direction.RX, k, 127) for k in (1, 4)] == [0x27F, 0x57F]
 
 
 # ---------------------------------------------------------------------------- golden bytes
 
 
 def test_rpdo1_golden():
-    f = encode_rpdo1(1, Rpdo1(controlword=0x000F, target_position_inc=0x00012345, target_torque_permille=-2))
+    f = layout(1)["RPDO1"].pack((0x000F, 0x00012345, -2))
     assert f == Frame(0x201, bytes.fromhex("0F 00 45 23 01 00 FE FF"))
-    assert decode_rpdo1(f) == Rpdo1(0x000F, 74565, -2)
+    assert layout(1)["RPDO1"].unpack(f) == (0x000F, 74565, -2)
 
 
 def test_tpdo2_golden():
-    f = encode_tpdo2(2, Tpdo2(lvdt_um=-12345, force_dN=60000))
+    f = layout(2)["TPDO2"].pack((-12345, 60000))
     assert f == Frame(0x282, bytes.fromhex("C7 CF FF FF 60 EA 00 00"))
-    assert decode_tpdo2(f) == Tpdo2(-12345, 60000)
+    assert layout(2)["TPDO2"].unpack(f) == (-12345, 60000)
 
 
 def test_tpdo1_and_rpdo2_golden():
-    assert encode_tpdo1(2, Tpdo1(0x0237, -65536, 10)).data == bytes.fromhex("37 02 00 00 FF FF 0A")
-    assert encode_rpdo2(1, Rpdo2(8)) == Frame(0x301, b"\x08")
+    assert layout(2)["TPDO1"].pack((0x0237, -65536, 10)).data == bytes.fromhex("37 02 00 00 FF FF 0A")
+    assert layout(1)["RPDO2"].pack((8,)) == Frame(0x301, b"\x08")
     assert sync_frame() == Frame(0x080, b"")
 
 
 # ---------------------------------------------------------------------------- round trips
 
 
-@given(node, u16, i32, i16)
-def test_rpdo1_round_trip(n, cw, pos, tq):
-    f = encode_rpdo1(n, Rpdo1(cw, pos, tq))
-    assert f.arbitration_id == 0x200 + n and len(f.data) == 8
-    assert decode_rpdo1(f) == Rpdo1(cw, pos, tq)
+@given(u16, i32, i16)
+def test_rpdo1_round_trip(cw, pos, tq):
+    p = layout(1)["RPDO1"]
+    f = p.pack((cw, pos, tq))
+    assert f.arbitration_id == 0x201 and len(f.data) == 8 and p.unpack(f) == (cw, pos, tq)
 
 
-@given(node, i8)
-def test_rpdo2_round_trip(n, mode):
-    f = encode_rpdo2(n, Rpdo2(mode))
-    assert f.arbitration_id == 0x300 + n and decode_rpdo2(f) == Rpdo2(mode)
+@given(u16, i32, i8)
+def test_tpdo1_round_trip(sw, pos, mode):
+    p = layout(2)["TPDO1"]
+    f = p.pack((sw, pos, mode))
+    assert f.arbitration_id == 0x182 and len(f.data) == 7 and p.unpack(f) == (sw, pos, mode)
 
 
-@given(node, u16, i32, i8)
-def test_tpdo1_round_trip(n, sw, pos, mode):
-    f = encode_tpdo1(n, Tpdo1(sw, pos, mode))
-    assert f.arbitration_id == 0x180 + n and len(f.data) == 7
-    assert decode_tpdo1(f) == Tpdo1(sw, pos, mode)
-
-
-@given(node, i32, i32)
-def test_tpdo2_round_trip(n, lvdt, force):
-    f = encode_tpdo2(n, Tpdo2(lvdt, force))
-    assert f.arbitration_id == 0x280 + n and decode_tpdo2(f) == Tpdo2(lvdt, force)
+@given(st.floats(-1e6, 1e6, allow_nan=False), i16)
+def test_real32_and_integer_entries_pack_together(x, y):
+    p = PdoSpec("TPDO3", Direction.TX, 3, 0x383, 1, (MappedObject("a", 0x9130, 1, 0x0008),
+                                                        MappedObject("b", 0x6401, 1, 0x0003)))
+    a, b = p.unpack(p.pack((x, y)))
+    assert b == y and a == pytest.approx(x, rel=1e-7, abs=1e-30)
 
 
 # ---------------------------------------------------------------------------- errors
 
 
-@pytest.mark.parametrize("decode,frame,expected,got", [
-    (decode_rpdo1, Frame(0x201, bytes(7)), 8, 7),
-    (decode_rpdo1, Frame(0x27F, b""), 8, 0),
-    (decode_rpdo2, Frame(0x302, b"\x08\x00"), 1, 2),
-    (decode_tpdo1, Frame(0x182, bytes(8)), 7, 8),
-    (decode_tpdo2, Frame(0x281, bytes(4)), 8, 4),
-])
-def test_length_errors_name_cob_id(decode, frame, expected, got):
-    with pytest.raises(PdoLengthError,
-                       match=f"COB-ID 0x{frame.arbitration_id:03X}: expected {expected} data bytes, got {got}"):
-        decode(frame)
+@pytest.mark.parametrize("name,n,expected", [("RPDO1", 7, 8), ("RPDO1", 0, 8), ("RPDO2", 2, 1), ("TPDO1", 8, 7),
+                                             ("TPDO2", 4, 8)])
+def test_length_errors_name_cob_id(name, n, expected):
+    p = layout(2)[name]
+    with pytest.raises(PdoLengthError, match=f"{name} COB-ID 0x{p.cob_id:03X}: expected {expected} data bytes, "
+                                             f"got {n}"):
+        p.unpack(Frame(p.cob_id, bytes(n)))
 
 
 def test_error_types():
     assert issubclass(PdoLengthError, CanopenError) and issubclass(PdoLengthError, ValueError)
-    with pytest.raises(PdoError, match="not a TPDO1 COB-ID"):
-        decode_tpdo1(Frame(0x282, bytes(7)))
-    with pytest.raises(PdoError, match=r"Rpdo1.controlword = 65536 is outside 0..65535"):
-        Rpdo1(0x10000, 0, 0)
-    with pytest.raises(PdoError, match=r"Rpdo1.target_torque_permille = 32768"):
-        Rpdo1(0, 0, 32768)
-    with pytest.raises(PdoError, match="must be an int"):
-        Tpdo2(1.5, 0)
+    with pytest.raises(PdoError, match=r"RPDO1 COB-ID 0x201: cannot encode \(65536, 0, 0\)"):
+        layout(1)["RPDO1"].pack((0x10000, 0, 0))
+    with pytest.raises(PdoError, match=r"cannot encode \(0, 0, 32768\)"):
+        layout(1)["RPDO1"].pack((0, 0, 32768))
+    with pytest.raises(InputError, match="72 mapped bits exceed the 64 of a CAN frame"):
+        PdoSpec("TPDO1", Direction.TX, 1, 0x181, 1, tuple(MappedObject(f"x{k}", 0x6401, k, 0x0003) for k in range(1, 5))
+                + (MappedObject("y", 0x6000, 1, 0x0005),))
+    with pytest.raises(InputError, match="data type 0x0009 cannot be mapped"):
+        MappedObject("name", 0x1008, 0, 0x0009)
+    with pytest.raises(InputError, match="COB-ID 0x800 is not an 11-bit identifier"):
+        PdoSpec("TPDO1", Direction.TX, 1, 0x800, 1, ())
     with pytest.raises(FrameError):
         Frame(0x800, b"")
     with pytest.raises(FrameError, match="9 data bytes"):
         Frame(0x201, bytes(9))
-    with pytest.raises(InputError, match="node_id = 128"):
-        encode_rpdo2(128, Rpdo2(8))
     assert Frame(0x201, bytearray(b"\x01")).data == b"\x01"
 
 
-# ---------------------------------------------------------------------------- layout
-
-
-def test_layout_lengths_and_indices():
-    got = [(p.name, p.direction, p.comm_index, p.mapping_index, p.transmission_type, p.length_bytes,
-            struct.calcsize(p.struct_format)) for p in DEFAULT_LAYOUT.pdos]
-    assert got == [
-        ("RPDO1", Direction.RX, 0x1400, 0x1600, 1, 8, 8),
-        ("RPDO2", Direction.RX, 0x1401, 0x1601, 255, 1, 1),
-        ("TPDO1", Direction.TX, 0x1800, 0x1A00, 1, 7, 7),
-        ("TPDO2", Direction.TX, 0x1801, 0x1A01, 1, 8, 8),
-    ]
-    assert [(e.index, e.subindex, e.bit_length) for e in DEFAULT_LAYOUT["TPDO1"].entries] == [
-        (0x6041, 0, 16), (0x6064, 0, 32), (0x6061, 0, 8)]
-    assert DEFAULT_LAYOUT.find(0x182) == (DEFAULT_LAYOUT["TPDO1"], 2)
-    assert DEFAULT_LAYOUT.find(0x27F) == (DEFAULT_LAYOUT["RPDO1"], 127)
-    assert DEFAULT_LAYOUT.find(0x080) is None and DEFAULT_LAYOUT.find(0x602) is None
+# ---------------------------------------------------------------------------- configuration writes
 
 
 CONFIG_NODE2 = [  # (index, subindex, data) for node 2, the CiA 301 mapping procedure per PDO
@@ -171,9 +164,20 @@ CONFIG_NODE2 = [  # (index, subindex, data) for node 2, the CiA 301 mapping proc
 
 
 def test_configuration_writes_golden():
-    writes = DEFAULT_LAYOUT.configuration_writes(2)
+    writes = layout(2).configuration_writes()
     assert [(w.index, w.subindex, w.data.hex(" ").upper()) for w in writes] == CONFIG_NODE2
     assert writes[0].what == "RPDO1 disable" and writes[-1].what == "TPDO2 enable"
+
+
+def test_a_pdo_the_eds_fixes_is_not_written_and_unused_ones_are_disabled():
+    fixed = PdoSpec("TPDO2", Direction.TX, 2, 0x283, 1, (MappedObject("lvdt", 0x6401, 1, 0x0003),),
+                    write_mapping=False, write_cob_id=False, write_transmission=True)
+    lay = PdoLayout(3, (fixed,), disable=((0x1800, 0x8000_0183),))
+    w = [(x.index, x.subindex, x.data.hex()) for x in lay.configuration_writes()]
+    assert w == [(0x1800, 1, "83010080"), (0x1801, 2, "01")]
+    no_rtr = PdoSpec("TPDO1", Direction.TX, 1, 0x181, 1, (MappedObject("sw", 0x6041, 0, 0x0006),), rtr_bit=0x4000_0000)
+    assert [x.data.hex() for x in no_rtr.configuration_writes() if x.index == 0x1800 and x.subindex == 1] == [
+        "810100c0", "81010040"]
 
 
 class CollectingBus:
@@ -191,7 +195,7 @@ def test_configuration_writes_accepted_by_the_eds_drive():
     drive = canopen.LocalNode(1, load_eds(node_id=1))
     network.add_node(drive)
     client = SdoClient(1)
-    for w in DEFAULT_LAYOUT.configuration_writes(1):
+    for w in layout(1).configuration_writes():
         frame = client.start_download(w.index, w.subindex, w.data, 0.0)
         network.notify(frame.arbitration_id, bytearray(frame.data), 0.0)
         (reply,), bus.sent = bus.sent, []
@@ -238,14 +242,21 @@ def test_sensor_scaling():
 # ---------------------------------------------------------------------------- bus load
 
 
+def _layouts():
+    return (layout(1), layout(2))
+
+
 def test_frame_bits():
     assert [frame_bits(n, worst_case=False) for n in (0, 1, 7, 8)] == [47, 55, 103, 111]
     assert [frame_bits(n, worst_case=True) for n in (0, 1, 7, 8)] == [55, 65, 125, 135]
 
 
 def test_bus_load_two_drives_1mbit_2ms():
-    load = bus_load(DEFAULT_LAYOUT, 2, 1_000_000, 0.002, 0.1)
-    per_cycle = {i.name: i.frames_per_cycle for i in load.items}
+    load = bus_load(_layouts(), 1_000_000, 0.002, [0.1, 0.1, 0.1])  # the master counted at 100 ms too
+    per_cycle = {}
+    for i in load.items:
+        name = i.name.split(" node")[0]
+        per_cycle[name] = per_cycle.get(name, 0) + i.frames_per_cycle
     assert per_cycle == {"SYNC": 1, "RPDO1": 2, "RPDO2": 0, "TPDO1": 2, "TPDO2": 2,
                          "heartbeat": pytest.approx(0.06)}
     # nominal: 47 + 2*111 + 2*103 + 2*111 + 3 * 55 * 0.02 = 700.3 bits of 2000
@@ -262,9 +273,10 @@ def test_bus_load_two_drives_1mbit_2ms():
 
 def test_bus_load_with_the_masters_own_heartbeat_period(actuation):
     """The shipped profile: drives' heartbeats every 100 ms, the master's every 50 ms (its own
-    period, item "master heartbeat"); still inside the 50 % budget in the worst cycle."""
+    period, item "master heartbeat"); still inside the 50 % budget in the worst cycle; the plan
+    computes the same."""
     c = actuation.canopen
-    load = bus_load(DEFAULT_LAYOUT, 2, c.bitrate_bps, actuation.timing.sync_period_s, c.heartbeat_period_s,
+    load = bus_load(_layouts(), c.bitrate_bps, actuation.timing.sync_period_s, [c.heartbeat_period_s] * 2,
                     master_heartbeat_period_s=c.master_heartbeat_period_s)
     per_cycle = {i.name: i.frames_per_cycle for i in load.items}
     assert per_cycle["heartbeat"] == pytest.approx(2 * 0.002 / 0.1)  # the two drives only
@@ -277,16 +289,16 @@ def test_bus_load_with_the_masters_own_heartbeat_period(actuation):
     assert load.load_worst == pytest.approx(0.4251) and load.load_worst < 0.5
     mode_change = (load.bits_per_cycle_worst + load.event_bits_worst) / 2000
     assert mode_change == pytest.approx(0.4901) and mode_change < 0.5
-    # the same master period as the drives': the former count of n + 1 producers at one period
-    same = bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.002, 0.1, master_heartbeat_period_s=0.1)
-    assert same.bits_per_cycle_worst == pytest.approx(bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.002, 0.1).bits_per_cycle_worst)
+    assert shipped_rig().plan.load == load
     with pytest.raises(InputError, match="master_heartbeat_period_s"):
-        bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.002, 0.1, master_heartbeat_period_s=0.0)
+        bus_load(_layouts(), 1e6, 0.002, [0.1, 0.1], master_heartbeat_period_s=0.0)
 
 
 def test_bus_load_inputs():
-    assert bus_load(DEFAULT_LAYOUT, 2, 500_000, 0.002, 0.0).load_worst == pytest.approx(845 / 1000)
+    assert bus_load(_layouts(), 500_000, 0.002, [0.0, 0.0]).load_worst == pytest.approx(845 / 1000)
     with pytest.raises(InputError, match="sync_period_s"):
-        bus_load(DEFAULT_LAYOUT, 2, 1e6, 0.0, 0.1)
-    with pytest.raises(InputError, match="n_drives"):
-        bus_load(DEFAULT_LAYOUT, 0, 1e6, 0.002, 0.1)
+        bus_load(_layouts(), 1e6, 0.0, [0.1])
+    with pytest.raises(InputError, match="layouts must be a non-empty sequence of PdoLayout"):
+        bus_load((), 1e6, 0.002, [0.1])
+    with pytest.raises(InputError, match=r"heartbeat_periods_s\[1\] = -0.1"):
+        bus_load(_layouts(), 1e6, 0.002, [0.1, -0.1])

@@ -11,7 +11,7 @@ import pytest
 from blf.calibration import fit_lvdt_calibration
 from hil.canlog import CanLogWriter
 from hil.canopen.frame import sync_frame
-from hil.canopen.pdo import Tpdo1, Tpdo2, encode_tpdo1, encode_tpdo2
+from support.canopen_rig import shipped_rig
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main
 from hil.cli.common import ExitCode
@@ -136,15 +136,16 @@ def test_raw_can_log(sim_data, run_folder, tmp_path, actuation):
     rec = sim_data["rec"]
     log = tmp_path / "flight.log"
     w = CanLogWriter(log)
-    n1, n2 = actuation.canopen.node_ids
-    counts = actuation.sensors.resolver_counts_per_rev
+    plan = shipped_rig().plan  # the shipped drives' TPDOs, as a CAN log of them would carry them
+    counts = 4096
     for k in range(rec.t_s.size):
         t = float(rec.t_s[k])
         w.write(sync_frame(), t, rx=False)
-        for node, phi, s, f in ((n1, rec.phi1_rad[k], rec.s1_mm[k], rec.F1_N[k]),
-                                (n2, rec.phi2_rad[k], rec.s2_mm[k], rec.F2_N[k])):
-            w.write(encode_tpdo1(node, Tpdo1(0x0237, rad_to_increments(float(phi), counts), 8)), t, rx=True)
-            w.write(encode_tpdo2(node, Tpdo2(mm_to_lvdt_um(float(s)), newton_to_force_dN(float(f)))), t, rx=True)
+        for ema, phi, s, f in ((1, rec.phi1_rad[k], rec.s1_mm[k], rec.F1_N[k]),
+                               (2, rec.phi2_rad[k], rec.s2_mm[k], rec.F2_N[k])):
+            lay = plan.node(f"ema{ema}").layout
+            w.write(lay["TPDO1"].pack((0x0237, rad_to_increments(float(phi), counts), 8)), t, rx=True)
+            w.write(lay["TPDO2"].pack((mm_to_lvdt_um(float(s)), newton_to_force_dN(float(f)))), t, rx=True)
     w.close()
     rc, data, _ = _serv(tmp_path, log, "--calibration", run_folder / "result.json")
     assert rc == 0

@@ -90,7 +90,9 @@ def records(eds: EdsView, direction: Direction) -> list[_Record]:
         if comm not in eds.od or mapping not in eds.od or isinstance(eds.od[mapping], cod.ODVariable):
             continue
         subs = [s for s in eds.od[mapping].subindices if s > 0]
-        n_max = max(subs, default=0)
+        n_max = 0  # the entries 1, 2, ... the record has without a gap (a missing one cannot be written)
+        while n_max + 1 in subs:
+            n_max += 1
         sub0 = eds.var(mapping, 0)
         fixed = sub0 is None or not sub0.writable or any(not eds.writable(mapping, s) for s in subs)
         entries = []

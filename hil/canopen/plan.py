@@ -65,6 +65,10 @@ from hil.canopen.signalmap import (
 __all__ = ["Channel", "DrivePlan", "NodePlan", "PlanError", "Problem", "RigPlan", "plan_rig",
            "RESTRICTED_CAN_IDS", "CSP_BIT", "CST_BIT"]
 
+#: The data types CiA 402 gives the drive objects the check exchanges every cycle.
+CIA402_TYPES = {(0x6040, 0): dt.UNSIGNED16, (0x6041, 0): dt.UNSIGNED16, (0x6060, 0): dt.INTEGER8,
+                (0x6061, 0): dt.INTEGER8, (0x6064, 0): dt.INTEGER32, (0x6071, 0): dt.INTEGER16,
+                (0x607A, 0): dt.INTEGER32}
 CSP_BIT = 7  #: 0x6502 bit of cyclic synchronous position
 CST_BIT = 9  #: 0x6502 bit of cyclic synchronous torque
 
@@ -283,6 +287,12 @@ class _Planner:
         if e.data_type is not None and e.data_type != var.data_type:
             self.problem(e.key, where, f"the profile says type {type_name(e.data_type)}, {eds.name} says "
                                        f"{type_name(var.data_type)}")
+            ok = False
+        std = CIA402_TYPES.get(e.object)
+        if e.data_type is None and std is not None and var.data_type != std and e.node.startswith("ema"):
+            self.problem(e.key, where, f"data type {type_name(var.data_type)} in {eds.name}, CiA 402 says "
+                                       f"{type_name(std)}: state the type the drive sends ({e.key}.type) if the "
+                                       f"EDS is right")
             ok = False
         if pdo and var.data_type not in TYPE_BITS:
             self.problem(e.key, where, f"data type {type_name(var.data_type)} cannot be carried in a PDO "
