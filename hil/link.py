@@ -28,6 +28,7 @@ from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.sdo import SdoAbortError, SdoTimeout
+from hil.canopen.signalmap import ForceControl
 from hil.config import HARD_MAX_LAG_S
 from hil.errors import KNOWN_ERRORS, EmacheckError
 from hil.master import MasterCore, PreflightError
@@ -176,6 +177,11 @@ class CanopenLink:
             self._send(self.m.setpoint_frames(*hold, smp))
             smp = self._next_sample()
         return smp
+
+    @property
+    def force_by_position(self) -> tuple[bool, bool]:
+        """Per EMA: its drive holds forces by the master's loop in CSP (no CST in the plan)."""
+        return tuple(d.force_control is ForceControl.CSP for d in self.m.plan.drives)
 
     def preflight_record(self) -> dict:
         """What meta.json records once the drives are up: the process image (PDOs, scalings as the drives

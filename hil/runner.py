@@ -95,7 +95,8 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
     drives (DISABLED), closes the log and is re-raised.
     """
     run_dir.mkdir(parents=True, exist_ok=True)
-    seq = CheckSequence(act, check)
+    # a drive without CST holds the calibration's opposing force by the sequence's position-mode loop
+    seq = CheckSequence(act, check, force_by_position=getattr(link, "force_by_position", (False, False)))
     sup = Supervisor(act, check)
     writer = SignalsWriter(run_dir / "signals.csv")
     meta_path = run_dir / "meta.json"

@@ -24,6 +24,17 @@ opposite excursions ``+delta`` (EMA 1) and ``-delta`` (EMA 2) and integrates
 
 with ``F_dem`` a triangle through ``+-amplitude_fraction_of_limit * F_limit``.
 The rate limit makes the backlash be traversed quasi-statically.
+
+Opposing force of the calibration: the opposing EMA ``j`` holds ``F_opp`` in
+FORCE mode (the drive's CST). A drive without CST (``force_by_position``)
+holds it by the same kind of loop in position mode: it follows the sweeping
+EMA's commanded motion and adds an excursion integrated on its own force
+error,
+
+.. math:: \varphi_j = \varphi_{j,0} + (\varphi^*_k - \varphi^*_{k,0}) + i\,\delta_j, \qquad
+          \dot\delta_j = \mathrm{clip}(K (F_{opp}(t) - F_j),\ \pm v_{max}),
+
+with the force-fight loop's gain ``K`` and rate limit ``v_max``.
 """
 
 from __future__ import annotations
@@ -95,6 +106,12 @@ class Progress:
 
 _HOLD_DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
 
+#: The position-mode force loop (a drive without CST): the sweep starts once the opposing force is within
+#: this fraction of its target ...
+OPPOSING_FORCE_TOLERANCE = 0.1
+#: ... and the check aborts when it is not after this long beyond the ramp and the settling [s].
+OPPOSING_FORCE_TIMEOUT_S = 10.0
+
 
 def _triangle(t: float, amplitude: float, period: float) -> float:
     """Triangle 0 -> +A -> -A -> 0 over one period, repeated."""
@@ -124,6 +141,9 @@ class CheckSequence:
         Gear ratio, limit load, sample period.
     check : Check
         The check profile (validated against ``actuation``).
+    force_by_position : (bool, bool)
+        Per EMA: its drive has no CST, it holds the calibration's opposing force by the
+        position-mode loop of the module docstring.
 
     Notes
     -----
@@ -133,8 +153,12 @@ class CheckSequence:
     (``phi_c = phi - s * i_total``); the calibration needs no better.
     """
 
-    def __init__(self, actuation: Actuation, check: Check) -> None:
+    def __init__(self, actuation: Actuation, check: Check, force_by_position: tuple[bool, bool] = (False, False)) -> None:
         self.act = actuation
+        #: per EMA: it holds a force by the master's loop in position mode (its drive has no CST)
+        self.force_by_position = (bool(force_by_position[0]), bool(force_by_position[1]))
+        self._opp_delta = 0.0  # the opposing EMA's excursion of the position-mode force loop [mm]
+        self._opp_base = (0.0, 0.0)  # its angle and the sweeping EMA's when the loop took over [rad]
         self.check = check
         self.i = actuation.mechanics.i_total_rad_per_mm
         self.T = actuation.timing.sync_period_s
@@ -298,9 +322,11 @@ class CheckSequence:
             if self._opposer_in_force:  # first cycle: ramp from the force the opposer carries now
                 self._force_start = (smp.F1_N, smp.F2_N)[j]
                 self._opposer_in_force = False
+                self._opp_delta = 0.0
+                self._opp_base = (self._phi_hold[j], self._phi_hold[k])
             a = min(1.0, dt / c.force_ramp_s)
             self._force = (1.0 - a) * self._force_start + a * f_opp
-            if dt >= c.force_ramp_s + settle:
+            if dt >= c.force_ramp_s + settle and self._opposing_force_held(smp, j, f_opp, dt):
                 self._phi_start = list(self._phi_hold)
                 self._goto(Step.CAL1_SWEEP if k == 0 else Step.CAL2_SWEEP, t)
         elif st in (Step.CAL1_SWEEP, Step.CAL2_SWEEP):
@@ -324,8 +350,36 @@ class CheckSequence:
                     self._opposer_in_position = False
                 return self._emit(self._pos(0), self._pos(1))
         sps = [self._pos(0), self._pos(1)]
-        sps[j] = Setpoint(DriveMode.FORCE, self._force)
+        if self.force_by_position[j]:
+            sps[j] = Setpoint(DriveMode.POSITION, self._force_by_position(smp, j, k))
+        else:
+            sps[j] = Setpoint(DriveMode.FORCE, self._force)
         return self._emit(sps[0], sps[1])
+
+    def _opposing_force_held(self, smp: Sample, j: int, f_opp: float, dt: float) -> bool:
+        """The sweep may start: the drive holds the opposing force itself (CST), or the position-mode loop
+        has brought EMA ``j``'s force within :data:`OPPOSING_FORCE_TOLERANCE` of it (it first traverses the
+        chain's play). Raises SequenceError when that takes longer than :data:`OPPOSING_FORCE_TIMEOUT_S`."""
+        if not self.force_by_position[j]:
+            return True
+        if abs((smp.F1_N, smp.F2_N)[j] - f_opp) <= OPPOSING_FORCE_TOLERANCE * abs(f_opp):
+            return True
+        c = self.check.calibration
+        if dt > c.force_ramp_s + self.check.approach.settle_s + OPPOSING_FORCE_TIMEOUT_S:
+            raise SequenceError(f"EMA {j + 1} did not reach the opposing force {f_opp:g} N within "
+                                f"{OPPOSING_FORCE_TIMEOUT_S:g} s of its ramp (force {(smp.F1_N, smp.F2_N)[j]:.0f} N; "
+                                f"it holds forces by the position-mode loop, its drive has no CST)")
+        return False
+
+    def _force_by_position(self, smp: Sample, j: int, k: int) -> float:
+        """The opposing EMA ``j``'s angle target: it follows EMA ``k``'s commanded motion plus an
+        excursion integrated on its force error (module docstring) [rad]."""
+        ff = self.check.force_fight
+        err = self._force - (smp.F1_N, smp.F2_N)[j]
+        rate = max(-ff.max_excursion_rate_mm_per_s, min(ff.max_excursion_rate_mm_per_s, ff.loop_gain_mm_per_N_s * err))
+        self._opp_delta += rate * self.T
+        base_j, base_k = self._opp_base
+        return base_j + (self._phi_hold[k] - base_k) + self._opp_delta * self.i
 
     def _set_excursion(self) -> None:
         self._phi_hold[0] = self._phi_start[0] + self._delta * self.i

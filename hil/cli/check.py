@@ -129,9 +129,12 @@ def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> di
         "files_sha256": meta.get("files_sha256") or {},
         "recording": str(sig_path),
         "mode": meta.get("mode"),
-        # each drive's configured reaction to losing the master (or the external watchdog stated instead)
-        "master_loss": {k: v.get("master_loss") for k, v in (meta.get("drives_final") or {}).items()
-                        if v.get("master_loss")},
+        # each drive's reaction to losing the master: configured, and what the drill observed (or the
+        # external watchdog stated instead)
+        "master_loss": meta.get("master_loss") or {k: v.get("master_loss") for k, v in
+                                                   (meta.get("drives_final") or {}).items() if v.get("master_loss")},
+        # how each EMA held a force: its drive's CST, or the master's force loop in CSP
+        "force_control": meta.get("force_control") or {},
         # where and when in the aircraft's life (the wear history's keys): aircraft, position, rig,
         # flight hours and cycles
         **place,

@@ -102,17 +102,40 @@ def trace_lines(trace: dict | None) -> str:
                          f"vendor 0x{ident.get('vendor_id', 0):08X}, product 0x{ident.get('product_code', 0):08X}, "
                          f"revision 0x{ident.get('revision', 0):08X}, serial {ident.get('serial', '—')}"])
     for k, ml in (trace.get("master_loss") or {}).items():
-        if ml.get("verified"):
-            how = (f"consumer heartbeat {ml.get('consumer_heartbeat_ms')} ms on node {ml.get('master_node_id')}, "
-                   f"abort connection option {ml.get('abort_connection_option', 3)}: verified by SDO read-back")
-        else:
-            how = "NOT verified: " + "; ".join(ml.get("problems") or ["—"])
-        if ml.get("external_watchdog"):
-            how += f"; external watchdog stated: {ml['external_watchdog']}"
-        rows.append([f"{k} reaction to losing the master", how])
+        rows.append([f"{k} reaction to losing the master", master_loss_text(ml)])
+    for k, fc in (trace.get("force_control") or {}).items():
+        rows.append([f"{k} holds forces by", "its CST mode (target torque)" if fc == "cst" else
+                     "the master's force loop on the measured force in CSP (its drive has no CST)"])
     for k, h in (trace.get("files_sha256") or {}).items():
         rows.append([f"{k} (sha256)", h[:16] + "…" if h else "—"])
     return "<h2>Traceability</h2>" + table(["item", "value"], rows)
+
+
+def master_loss_text(ml: dict) -> str:
+    """What the record says of a drive's reaction to the master's death: configured (written and read back)
+    and what the drill observed, each said for what it is."""
+    if ml.get("configured"):
+        text = (f"configured: consumer heartbeat {ml.get('consumer_heartbeat_ms')} ms on node "
+                f"{ml.get('master_node_id')}, abort connection option {ml.get('abort_connection_option', 3)} "
+                f"(written and read back by SDO)")
+    else:
+        text = "NOT configured: " + ("; ".join(ml.get("problems") or []) or "the drive has none")
+    drill = ml.get("drill") or {}
+    outcome = drill.get("outcome")
+    if outcome == "reacted":
+        emcy = ", ".join(drill.get("emcy") or []) or "none"
+        text += (f"; drill: reacted {drill.get('reaction_ms')} ms after the master's last heartbeat "
+                 f"(to {drill.get('state_after')}, EMCY {emcy})")
+    elif outcome == "no reaction":
+        text += (f"; drill: NO REACTION: still OPERATION ENABLED after {drill.get('waited_ms')} ms of the master's "
+                 f"silence")
+    elif outcome == "skipped":
+        text += f"; drill skipped: {drill.get('note')}"
+    else:
+        text += "; not drilled"
+    if ml.get("external_watchdog"):
+        text += f"; external watchdog stated: {ml['external_watchdog']}"
+    return text
 
 
 def write_page(path: Path, title: str, parts: Iterable[str]) -> None:
