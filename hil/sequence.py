@@ -31,8 +31,8 @@ holds it by the same kind of loop in position mode: it follows the sweeping
 EMA's commanded motion and adds an excursion integrated on its own force
 error,
 
-.. math:: \varphi_j = \varphi_{j,0} + (\varphi^*_k - \varphi^*_{k,0}) + i\,\delta_j, \qquad
-          \dot\delta_j = \mathrm{clip}(K (F_{opp}(t) - F_j),\ \pm v_{max}),
+.. math:: \\varphi_j = \\varphi_{j,0} + (\\varphi^*_k - \\varphi^*_{k,0}) + i\\,\\delta_j, \\qquad
+          \\dot\\delta_j = \\mathrm{clip}(K (F_{opp}(t) - F_j),\\ \\pm v_{max}),
 
 with the force-fight loop's gain ``K`` and rate limit ``v_max``.
 """

@@ -91,3 +91,82 @@ def test_run_goes_through_all_steps_in_order(default_run):
     assert names == ["enable", "approach", "cal1_load", "cal1_sweep", "cal1_unload", "cal2_load",
                      "cal2_sweep", "cal2_unload", "force_fight", "unload", "done"]
     assert meta["status"] == "done"
+
+
+# ------------------------------------------------------------------ a drive without CST: the position-mode force loop
+
+
+def _to_cal1_load(seq, F2=0.0):
+    t = 0.0
+    while seq.step_now != Step.CAL1_LOAD:
+        t += 0.002
+        seq.step(_smp(t, F2=F2))
+    return t
+
+
+def test_a_drive_without_cst_opposes_in_position_mode_integrating_its_force_error(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile, force_by_position=(False, True))
+    ff = check_profile.force_fight
+    i = actuation.mechanics.i_total_rad_per_mm
+    t = _to_cal1_load(seq)
+    phi_hold2 = seq._phi_hold[1]
+    t += 0.002
+    out = seq.step(_smp(t))
+    assert out.sp2.mode == DriveMode.POSITION and out.sp1.mode == DriveMode.POSITION
+    # the force error grows with the ramp (0 -> -2000 N in 1 s); past 0.25 / 0.0007 = 357 N of error the
+    # excursion runs at the rate limit, 0.25 mm/s, retracting (more tension)
+    for _ in range(250):
+        t += 0.002
+        out = seq.step(_smp(t))
+    before = out.sp2.value
+    for _ in range(400):
+        t += 0.002
+        out = seq.step(_smp(t))
+    assert (out.sp2.value - before) / i == pytest.approx(-ff.max_excursion_rate_mm_per_s * 400 * 0.002, rel=1e-9)
+    # below the limit the rate is the loop gain times the error: at the target force the excursion stands
+    for _ in range(10):
+        t += 0.002
+        out = seq.step(_smp(t, F2=-check_profile.calibration.opposing_force_N))
+    held = out.sp2.value
+    t += 0.002
+    out = seq.step(_smp(t, F2=-check_profile.calibration.opposing_force_N + 100.0))  # 100 N short
+    assert (out.sp2.value - held) / i == pytest.approx(-ff.loop_gain_mm_per_N_s * 100.0 * 0.002, rel=1e-9)
+    assert out.sp2.value < phi_hold2
+
+
+def test_the_sweep_starts_once_the_opposing_force_is_within_ten_percent(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile, force_by_position=(False, True))
+    t = _to_cal1_load(seq)
+    f = check_profile.calibration.opposing_force_N
+    ramp = check_profile.calibration.force_ramp_s + check_profile.approach.settle_s
+    t0 = t
+    while t - t0 < ramp + 0.1:  # past the ramp and the settling, the force 10.5 % short: no sweep
+        t += 0.002
+        seq.step(_smp(t, F2=-0.895 * f))
+    assert seq.step_now == Step.CAL1_LOAD
+    t += 0.002
+    seq.step(_smp(t, F2=-0.9 * f))  # at the tolerance: the sweep starts
+    assert seq.step_now == Step.CAL1_SWEEP
+
+
+def test_an_opposing_force_never_reached_aborts_the_check_naming_the_ema(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile, force_by_position=(False, True))
+    t = _to_cal1_load(seq)
+    t0 = t
+    ramp = check_profile.calibration.force_ramp_s + check_profile.approach.settle_s
+    with pytest.raises(SequenceError, match=r"EMA 2 did not reach the opposing force -2000 N within 10 s of its ramp"):
+        while True:
+            t += 0.002
+            seq.step(_smp(t, F2=-100.0))
+    assert t - t0 == pytest.approx(ramp + 10.0, abs=0.005) and seq.step_now == Step.ABORTED
+
+
+def test_a_drive_with_cst_is_not_waited_for(actuation, check_profile):
+    seq = CheckSequence(actuation, check_profile)
+    t = _to_cal1_load(seq)
+    t0 = t
+    while seq.step_now == Step.CAL1_LOAD:
+        t += 0.002
+        seq.step(_smp(t, F2=0.0))
+    ramp = check_profile.calibration.force_ramp_s + check_profile.approach.settle_s
+    assert t - t0 == pytest.approx(ramp + 0.002, abs=0.003)
