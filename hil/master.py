@@ -66,7 +66,7 @@ from hil.canopen.nmt import NmtCommand, NmtState, heartbeat_frame, nmt_frame
 from hil.canopen.pdo import PdoError
 from hil.canopen.plan import Channel, RigPlan
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent, expedited_download_frame
+from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent, SdoTimeout, expedited_download_frame
 from hil.canopen.signalmap import ForceControl, NodeRole, ScaleSource, Signal
 from hil.config import Actuation
 from hil.errors import EmacheckError
@@ -495,8 +495,14 @@ class MasterCore:
                 missing = [v.label for v in self.nodes.values() if not v.booted]
                 raise PreflightError(f"{', '.join(missing)}: no boot-up within "
                                      f"canopen.boot_timeout_s = {self.act.canopen.boot_timeout_s} s of NMT reset")
-            for c in self._sdo.values():
-                c.poll(t)  # raises SdoTimeout (its abort frame is in the exception)
+            for n, c in self._sdo.items():
+                try:
+                    c.poll(t)  # raises SdoTimeout (its abort frame is in the exception)
+                except SdoTimeout as exc:
+                    pending = self._pending
+                    if getattr(pending, "soft", False) and getattr(pending, "node", None) == n:
+                        return [exc.abort_frame, *self._advance(exc, t)]  # a soft request gets it as its result
+                    raise
             if isinstance(self._pending, Wait) and t >= self._pending.until_s - 1e-12:
                 return self._advance(t, t)
         elif self.phase is Phase.CYCLIC:

@@ -48,7 +48,7 @@ from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import AbortConnectionOption, QUICK_STOP_OPTION, master_loss_steps
 from hil.canopen.pdo import TYPE_BITS
 from hil.canopen.plan import CSP_BIT, CST_BIT, DrivePlan, NodePlan, RigPlan
-from hil.canopen.sdo import SdoAbortError, describe
+from hil.canopen.sdo import SdoAbortError, SdoTimeout, describe
 from hil.canopen.signalmap import (
     ForceControl,
     ScaleSource,
@@ -284,8 +284,9 @@ class Preflight:
     # ------------------------------------------------------------ helpers
 
     def _read(self, node: NodePlan, index: int, sub: int, what: str, soft: bool = False):
+        """The decoded value; with ``soft`` an abort or a timeout comes back as the result (not raised)."""
         r = yield SdoRead(node.spec.node_id, index, sub, what, soft)
-        if isinstance(r, SdoAbortError):
+        if isinstance(r, (SdoAbortError, SdoTimeout)):
             return r
         return decode(node, index, sub, r)
 
@@ -486,31 +487,45 @@ class Preflight:
             yield Wait((yield Now()) + self.T)
         t_last = yield Heartbeat(False)
         deadline = t_last + 2.0 * self.consumer_ms / 1000.0 + 0.1
-        reacted: dict[int, tuple[float, State]] = {}
+        reacted: dict[int, tuple[float | None, State]] = {}
+        mute: set[int] = set()  # drives whose SDO server fell silent (0x1029: stopped): read afterwards
         t = yield Now()
-        while len(reacted) < len(drives) and t <= deadline:
+        while len(reacted) + len(mute) < len(drives) and t <= deadline:
             for d in drives:
-                if d.ema in reacted:
+                if d.ema in reacted or d.ema in mute:
                     continue
-                sw = yield from self._statusword(d)
+                sw = yield from self._statusword(d, soft=True)
+                if isinstance(sw, SdoTimeout):
+                    mute.add(d.ema)
+                    continue
                 state = decode_state(sw)
                 if state is not State.OPERATION_ENABLED:
                     reacted[d.ema] = ((yield Now()), state)
             t = yield Wait(t + self.T)
+        if mute:
+            yield Wait(deadline)
         t_end = yield Now()
         yield Heartbeat(True)
+        for d in drives:  # SDO again on a drive whose error behaviour (0x1029) stopped it
+            yield Nmt(NmtCommand.ENTER_PRE_OPERATIONAL, d.plan.node.spec.node_id)
+        for d in drives:
+            if d.ema in mute:  # it went silent: what is its state now?
+                state = decode_state((yield from self._statusword(d)))
+                if state is not State.OPERATION_ENABLED:
+                    reacted[d.ema] = (None, state)
         for d in drives:
             emcy = tuple(self._emcy_since(d.plan.node.spec.node_id, t_last))
             waited = round((t_end - t_last) * 1e3, 1)
             if d.ema in reacted:
                 tr, state = reacted[d.ema]
-                res = DrillResult(DrillOutcome.REACTED, round((tr - t_last) * 1e3, 1), waited, state.name, emcy)
+                ms = None if tr is None else round((tr - t_last) * 1e3, 1)
+                note = "" if tr is not None else "its SDO server fell silent (NMT stopped): left OPERATION ENABLED, " \
+                                                 "seen after the drill"
+                res = DrillResult(DrillOutcome.REACTED, ms, waited, state.name, emcy, note)
             else:
                 res = DrillResult(DrillOutcome.NO_REACTION, None, waited, State.OPERATION_ENABLED.name, emcy,
                                   "still OPERATION ENABLED when the drill ended")
             d.master_loss = MasterLossRecord(d.master_loss.reaction, res, d.master_loss.external_watchdog)
-        for d in drives:  # SDO again on a drive whose error behaviour (0x1029) stopped it
-            yield Nmt(NmtCommand.ENTER_PRE_OPERATIONAL, d.plan.node.spec.node_id)
         for d in drives:
             yield from self._power_down_by_sdo(d)
         bad = [d for d in drives if d.master_loss.drill.outcome is DrillOutcome.NO_REACTION]
@@ -524,10 +539,15 @@ class Preflight:
                 f"OPERATION ENABLED (EMCY seen: {seen}); the check is not started. State the rig's other protection "
                 f"in canopen.external_watchdog, or repair the drive's reaction (0x6007, 0x1029)")
 
-    def _statusword(self, d: DriveSetup) -> Generator:
-        """The drive's statusword by SDO (told to the master's view of it)."""
+    def _statusword(self, d: DriveSetup, soft: bool = False) -> Generator:
+        """The drive's statusword by SDO (told to the master's view of it); with ``soft`` a timeout is returned."""
         node = d.plan.node
-        sw = int((yield from self._read(node, 0x6041, 0, "statusword")))
+        sw = yield from self._read(node, 0x6041, 0, "statusword", soft=soft)
+        if isinstance(sw, (SdoTimeout, SdoAbortError)):
+            if isinstance(sw, SdoAbortError):
+                raise sw
+            return sw
+        sw = int(sw)
         if self._on_status is not None:
             self._on_status(node.spec.node_id, sw, (yield Now()))
         return sw

@@ -519,3 +519,31 @@ def test_a_drive_whose_eds_announces_no_csp_is_refused_naming_0x6502(tmp_path):
     with pytest.raises(PlanError, match=r"canopen.eds: 0x6502:00 \(supported drive modes\) at ema1, ema2: drive.eds "
                                         r"announces neither CSP nor CST \(0x6502 = 0x00000060\)"):
         _variant(tmp_path, eds_defaults={(0x6502, 0): "0x00000060"})
+
+
+@pytest.mark.parametrize("reacts", [True, False])
+def test_a_drive_whose_error_behaviour_stops_it_is_read_after_the_drill(actuation, simrig, reacts):
+    """0x1029 = stopped: at the heartbeat event the drive stops answering SDO; the master notes it, waits out
+    the drill, restores SDO by NMT pre-operational and reads the state the drive is in then."""
+    from hil.canopen.nmt import NmtState
+
+    pair = make_pair(_plant(simrig, 8))
+    node = pair.nodes[1]
+    react = node._connection_lost
+
+    def stopped():
+        if reacts:
+            react()
+        node.nmt_state = NmtState.STOPPED
+
+    node._connection_lost = stopped
+    if reacts:
+        m, p = _preflight(actuation, pair)
+        drill = m.drives[2].master_loss.drill
+        assert drill.outcome is DrillOutcome.REACTED and drill.reaction_ms is None
+        assert drill.state_after == "QUICK_STOP_ACTIVE" and "NMT stopped" in drill.note
+        assert m.drives[1].master_loss.drill.reaction_ms is not None
+    else:
+        with pytest.raises(MasterLossReactionError, match=r"node 2 \(EMA 2\): did not react"):
+            _preflight(actuation, pair)
+    assert node.state_machine.state is State.SWITCH_ON_DISABLED
