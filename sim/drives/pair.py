@@ -67,7 +67,6 @@ from __future__ import annotations
 
 import math
 import operator
-import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -78,13 +77,16 @@ from hil.canopen.errors import InputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import lookup
-from hil.canopen.plan import CSP_BIT, CST_BIT, RigPlan
+from hil.canopen.plan import RigPlan
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.canopen.signalmap import ForceControl, NodeRole, NodeSpec, ScaleSource, Signal
+from hil.canopen.signalmap import NodeRole, ScaleSource, Signal
 from hil.canopen.validate import error_code, integer, time_s
-from sim.drives.drive import LiveInput, SimDrive
+from sim.drives.drive import SimDrive
+from sim.drives.node import SimNode
 from sim.drives.nmt_slave import TIME_EPS_S
 from sim.drives.pdo_engine import Pdo
+from sim.drives.sensor_node import SimSensorNode
+from sim.drives.served import live_inputs, own_data
 from sim.plant import RigPlant
 
 __all__ = ["FREE_RUN_AFTER_CYCLES", "SimDrivePair", "SimPairStats"]
@@ -97,9 +99,6 @@ _POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTI
 _MODE_DISABLED = int(DriveMode.DISABLED)
 #: Objects a simulated drive needs in its EDS (the CiA 402 objects it acts on).
 _SIM_REQUIRED = ((0x6040, 0), (0x6041, 0), (0x6060, 0), (0x6061, 0), (0x6064, 0), (0x607A, 0))
-#: Device type 0x1000 of a simulated node whose EDS gives none: CiA 402 servo drive, CiA 401 analog
-#: input module, CiA 404 measuring device.
-_DEVICE_TYPE = {402: 0x00020192, 401: 0x00040191, 404: 0x00000194}
 
 
 # --------------------------------------------------------------------------- stats
@@ -168,53 +167,15 @@ class _Counters:
         return SimPairStats(**{name: getattr(self, name) for name in self.__slots__})
 
 
-# --------------------------------------------------------------------------- what each node serves
-
-
-def _inputs(plan: RigPlan, spec: NodeSpec) -> tuple[LiveInput, ...]:
-    """The measured inputs the rig's map puts on node ``spec``, with the scaling the profile states."""
-    out = []
-    for e in plan.map.entries:
-        if e.node != spec.name or e.signal not in (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE):
-            continue
-        scale = e.scale if e.source is ScaleSource.PROFILE else None
-        out.append(LiveInput(e.signal, e.ema, e.object, e.data_type, scale))
-    return tuple(out)
-
-
-def _own_data(od: cod.ObjectDictionary, spec: NodeSpec, force_control: ForceControl | None) -> dict:
-    """A simulated node's own data where its EDS gives no default: the identity the profile expects
-    (revision: the lowest it accepts), the device type of its profile, the drive modes (CSP, and CST
-    where the rig uses it), a rated torque of 1 N m, 4096 increments per revolution, unit factors."""
-    own: dict[tuple[int, int], bytes] = {}
-
-    def put(index: int, sub: int, value: int, fmt: str, *, zero_too: bool = False) -> None:
-        var = lookup(od, index, sub)
-        if var is not None and (var.default is None or (zero_too and var.default == 0)):
-            own[(index, sub)] = struct.pack("<" + fmt, value)
-
-    put(0x1000, 0, _DEVICE_TYPE.get(spec.device_profile, spec.device_profile), "I")
-    put(0x1018, 1, spec.vendor_id, "I", zero_too=True)
-    put(0x1018, 2, spec.product_code, "I", zero_too=True)
-    put(0x1018, 3, spec.revision_min, "I", zero_too=True)
-    if spec.role is NodeRole.DRIVE:
-        modes = 1 << CSP_BIT | (1 << CST_BIT if force_control is ForceControl.CST else 0)
-        put(0x6502, 0, modes, "I")
-        put(0x6076, 0, 1000, "I", zero_too=True)
-        put(0x608F, 1, 4096, "I" if _unsigned(od, 0x608F, 1) else "i")
-        put(0x608F, 2, 1, "I" if _unsigned(od, 0x608F, 2) else "i")
-        for index in (0x6091, 0x6092):
-            for sub in (1, 2):
-                put(index, sub, 1, "I", zero_too=True)
-    return own
-
-
-def _unsigned(od: cod.ObjectDictionary, index: int, sub: int) -> bool:
-    var = lookup(od, index, sub)
-    return var is None or var.data_type in (cod.UNSIGNED32, cod.UNSIGNED16, cod.UNSIGNED8)
-
-
 # --------------------------------------------------------------------------- the pair
+
+
+def _od(od_factory: Callable[[str, int], cod.ObjectDictionary], name: str, node_id: int) -> cod.ObjectDictionary:
+    od = od_factory(name, node_id)
+    if not isinstance(od, cod.ObjectDictionary):
+        raise InputError(f"od_factory({name!r}, {node_id}) must return a canopen ObjectDictionary, "
+                         f"got {type(od).__name__}")
+    return od
 
 
 class SimDrivePair:
@@ -306,9 +267,6 @@ class SimDrivePair:
             if len(serials) != 2:
                 raise InputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
             serials = tuple(integer(f"serials[{k}]", v, 0, 2**32 - 1) for k, v in enumerate(serials))
-        sensors = [n.spec.name for n in plan.nodes if n.spec.role is NodeRole.SENSORS]
-        if sensors:
-            raise InputError(f"simulated sensor nodes ({', '.join(sensors)}) are not simulated yet")
         self.plant = plant
         self.plan = plan
         self._counters = _Counters()
@@ -326,10 +284,7 @@ class SimDrivePair:
         for k, dp in enumerate(plan.drives):
             spec = dp.node.spec
             n = spec.node_id
-            od = od_factory(spec.name, n)
-            if not isinstance(od, cod.ObjectDictionary):
-                raise InputError(f"od_factory({spec.name!r}, {n}) must return a canopen ObjectDictionary, "
-                                 f"got {type(od).__name__}")
+            od = _od(od_factory, spec.name, n)
             missing = [f"0x{i:04X}:{s:02X}" for i, s in _SIM_REQUIRED if lookup(od, i, s) is None]
             if missing:
                 raise InputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
@@ -343,13 +298,27 @@ class SimDrivePair:
                                   counts_per_rev=counts_per_rev, sample_period_s=params.sample_period_s,
                                   counters=self._counters, outbox=self._out,
                                   serial=None if serials is None else serials[k],
-                                  inputs=_inputs(plan, spec), own_data=_own_data(od, spec, dp.force_control),
+                                  inputs=live_inputs(plan, spec), own_data=own_data(od, spec, dp.force_control),
                                   gear_object=plan.gear_ratio_object,
                                   factor_group=angle is not None and angle.source is ScaleSource.FACTOR_GROUP,
                                   rated_torque_Nm=rated))
         self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
         for node in self.nodes:
             node._torque_fetch = self._fetch_torque
+        sensors = []
+        for np_ in plan.nodes:
+            spec = np_.spec
+            if spec.role is not NodeRole.SENSORS:
+                continue
+            od = _od(od_factory, spec.name, spec.node_id)
+            sensors.append(SimSensorNode(spec.name, spec.node_id, od, counters=self._counters, outbox=self._out,
+                                         inputs=live_inputs(plan, spec), own_data=own_data(od, spec)))
+        #: the sensor nodes of the plan (CiA 401 / 404), in the plan's order
+        self.sensors: tuple[SimSensorNode, ...] = tuple(sensors)
+        #: every node: the two drives, then the sensor nodes
+        self.all_nodes: tuple[SimNode, ...] = self.nodes + self.sensors
+        # sensor nodes: SDO request COB-ID -> node (their frames take the rare paths of on_frame)
+        self._sensor_sdo = {s.sdo_request_cob_id: s for s in self.sensors}
         # COB-ID -> ((node, its RPDOs of that COB-ID), ...), valid for the nodes' _rx_by_cob dicts
         self._routes: dict[int, tuple[tuple[SimDrive, list[Pdo]], ...]] = {}
         self._routes_rx: tuple[dict, dict] = (nodes[0]._rx_by_cob, nodes[1]._rx_by_cob)
@@ -409,6 +378,9 @@ class SimDrivePair:
         n0, n1 = self.nodes
         n0._measure(raw)
         n1._measure(raw)
+        if self.sensors:
+            for s in self.sensors:
+                s._measure(raw)
 
     def _fetch_torque(self) -> None:
         """Read both drive torques [N m] of the last plant step into the nodes."""
@@ -450,7 +422,7 @@ class SimDrivePair:
             self._step(_MODE_DISABLED, 0.0, _MODE_DISABLED, 0.0)
             self._counters.plant_steps += 1
         self._powered = True
-        for node in self.nodes:
+        for node in self.all_nodes:
             node._boot(now, communication_only=False)
         return self._drain()
 
@@ -501,6 +473,8 @@ class SimDrivePair:
             if len(frame.data) == 1:
                 used = n0._on_heartbeat(cob - 0x700, now)
                 used = n1._on_heartbeat(cob - 0x700, now) or used
+                for s in self.sensors:
+                    used = s._on_heartbeat(cob - 0x700, now) or used
             if not used:
                 self._counters.bad_frames_ignored += 1
         else:
@@ -516,13 +490,37 @@ class SimDrivePair:
             if route:
                 for node, rx in route:
                     node._on_rpdo(rx, frame, now)
-            else:
+            elif not self.sensors or not self._sensor_frame(frame, now):
                 self._counters.bad_frames_ignored += 1
         if n0._event_tpdos_list:
             n0._event_tpdos(now)
         if n1._event_tpdos_list:
             n1._event_tpdos(now)
+        if self.sensors:
+            for s in self.sensors:
+                if s._event_tpdos_list:
+                    s._event_tpdos(now)
         return self._drain()
+
+    def _sensor_frame(self, frame: Frame, now: float) -> bool:
+        """A frame no drive consumes, for the sensor nodes: an SDO request, a SYNC of a sensor node's
+        own COB-ID (its TPDOs only), an RPDO. False if none consumes it."""
+        cob = frame.arbitration_id
+        node = self._sensor_sdo.get(cob)
+        if node is not None:
+            node._on_sdo(frame, now)
+            return True
+        used = False
+        for s in self.sensors:
+            if cob == s._sync_cob_id and len(frame.data) <= 1:
+                s._now = now
+                s._sync_tpdos(now)
+                used = True
+            rx = s._rx_by_cob.get(cob)
+            if rx:
+                s._on_rpdo(rx, frame, now)
+                used = True
+        return used
 
     def _on_nmt(self, frame: Frame, t: float) -> None:
         if len(frame.data) != 2:
@@ -534,7 +532,7 @@ class SimDrivePair:
         except ValueError:
             self._counters.bad_frames_ignored += 1
             return
-        targets = [n for n in self.nodes if target in (0, n.node_id)]
+        targets = [n for n in self.all_nodes if target in (0, n.node_id)]
         if not targets:
             self._counters.bad_frames_ignored += 1
         for node in targets:
@@ -556,6 +554,12 @@ class SimDrivePair:
         if c1:
             n1._now = t
             n1._sync_tpdos(t)
+        if self.sensors:
+            for s in self.sensors:
+                if s._sync_cob_id == cob:
+                    s._now = t
+                    s._sync_tpdos(t)
+                    s._apply_latched()
         if c0:
             n0._apply_latched()
         if c1:
@@ -594,7 +598,7 @@ class SimDrivePair:
             last = self._last_sync_t
             if last is not None and now - last > FREE_RUN_AFTER_CYCLES * self._T:
                 self._free_run(now)
-            for node in self.nodes:
+            for node in self.all_nodes:
                 node._tick(now)
         return self._drain()
 
