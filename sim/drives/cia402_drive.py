@@ -219,7 +219,7 @@ class Cia402Drive:
         self.mode_frozen = False
         self._resets_seen = 0
         self._qs_stay = False
-        self._angle_k = angle_units_per_rad  # position units per rad the profile states (None: the drive's own)
+        self._angle_k = angle_units_per_rad  # position units per rad the profile states (a drive without 0x608F)
         self._rated_override = rated_torque_Nm
         self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9))
         self.state_machine = DriveStateMachine(remote=True)
@@ -372,15 +372,17 @@ class Cia402Drive:
         self._pos_memo = None
 
     def _k_inc(self) -> float:
-        """Increments per rad, :func:`hil.canopen.units.increments_per_rad` of :attr:`counts_per_rev` (cached)."""
+        """Increments (position units) per rad, cached: the drive's own units, in this order the
+        position factor group 0x6091/0x6092 (where the map reads the angle in user units), the encoder
+        resolution 0x608F where the drive has one, the scaling the profile states, 4096 per revolution."""
         k = self._inc_per_rad
         if k is None:
-            if self._angle_k is not None:
-                k = self._angle_k
-            elif self._factor_group:
+            if self._factor_group:
                 so = self.store.int_or
                 k = angle_scale_factor_group(so(0x6091, 1, 1), so(0x6091, 2, 1), so(0x6092, 1, 1),
                                              so(0x6092, 2, 1)).units_per_si
+            elif self._angle_k is not None and self.store.var(0x608F, 1) is None:
+                k = self._angle_k
             else:
                 k = increments_per_rad(self.counts_per_rev)
             self._inc_per_rad = k
@@ -388,8 +390,12 @@ class Cia402Drive:
 
     @property
     def counts_per_rev(self) -> float:
-        """Position increments per motor revolution, 0x608F:01 / 0x608F:02."""
-        return self.store.int_or(0x608F, 1, 4096) / self.store.int_or(0x608F, 2, 1)
+        """Position increments per motor revolution: 0x608F:01 / 0x608F:02 (a drive without 0x608F:
+        the profile's, else 4096)."""
+        so = self.store.int_or
+        if self._angle_k is not None and self.store.var(0x608F, 1) is None:
+            return self._angle_k * 2.0 * math.pi
+        return so(0x608F, 1, 4096) / so(0x608F, 2, 1)
 
     @property
     def position_inc(self) -> int:

@@ -1,32 +1,42 @@
-"""Two simulated CiA 402 EMA drives as real CANopen slaves around one rig plant (sans-IO).
+"""The rig's simulated CANopen nodes around one rig plant: two CiA 402 EMA drives and the sensor nodes (sans-IO).
 
-:class:`SimDrivePair` replaces the two EMA drives of the rig in dry-runs and
-tests. Each node (:class:`sim.drives.drive.SimDrive`) is built from the same
-EDS the master reads (``profiles/ema_drive.eds`` through
-:func:`hil.canopen.od.load_eds`) and serves it with canopen's SDO
-server. The pair consumes every frame seen on the bus and returns the frames
-it transmits; time is passed in. No threads, no clocks, no bus objects: the
-caller (an IO shell on a python-can bus, or a test) moves the frames.
+:class:`SimDrivePair` replaces the rig's nodes in dry-runs and tests: the
+two EMA drives (:class:`sim.drives.drive.SimDrive`) and every sensor node of
+the rig's plan, a CiA 401 I/O module or CiA 404 measuring device
+(:class:`sim.drives.sensor_node.SimSensorNode`). Each node is built from the
+EDS the master reads (the shipped ``profiles/ema_drive.eds``, a vendor's
+file, ``profiles/cia401_io.eds``, through the caller's ``od_factory``) and
+the rig's :class:`~hil.canopen.plan.RigPlan`: it serves its EDS with
+canopen's SDO server and the measured inputs the signal map puts on it at
+the mapped objects, with the mapped data type and scaling
+(:mod:`sim.drives.served`). The pair consumes every frame seen on the bus
+and returns the frames its nodes transmit; time is passed in. No threads,
+no clocks, no bus objects: the caller (an IO shell on a python-can bus, or
+a test) moves the frames.
 
 The package, part by part (each module documents its protocol choices):
 
 ========================  ====================================================
 module                    what
 ========================  ====================================================
-``pair``                  this: the two nodes, frame routing, SYNC, the plant
-``drive``                 :class:`SimDrive`, assembled from the parts below;
-                          the SDO write guard
+``pair``                  this: the nodes, frame routing, SYNC, the plant
+``node``                  :class:`SimNode`, the CANopen slave assembled from
+                          the parts below; the SDO write guard
+``drive``                 :class:`SimDrive`: a node with the CiA 402 drive
+``sensor_node``           :class:`SimSensorNode`: a node with measured inputs
+``served``                what each node serves: inputs, own data
 ``store``                 object dictionary, data store, SDO server (canopen)
 ``pdo_engine``            PDO mapping and communication, TPDOs, RPDOs
 ``nmt_slave``             NMT slave, heartbeat, EMCY, error history 0x1003
 ``cia402_drive``          CiA 402 behaviour, statusword, plant command,
-                          live values (position, LVDT, force, torque)
+                          live values (position, torque)
 ========================  ====================================================
 
 Per SYNC (COB-ID of 0x1005, 0x080 by default) the pair, in this order:
 
 1. sends the due synchronous TPDOs of every OPERATIONAL node with the current
-   sample (the plant state at this SYNC);
+   sample (the plant state at this SYNC): the drives', then the sensor
+   nodes';
 2. applies the synchronous RPDOs latched since the previous SYNC;
 3. computes both drives' setpoints and steps the plant once, so that the
    current sample becomes the state at the next SYNC.
@@ -49,15 +59,20 @@ steps are counted in ``stats.free_steps``, not in ``stats.plant_steps``.
 
 Choices
 -------
-* Power-on: both nodes boot (see :mod:`sim.drives.nmt_slave`). At the first
+* Power-on: every node boots (see :mod:`sim.drives.nmt_slave`). At the first
   power-on the plant is stepped once with both drives DISABLED, so the
   current sample is the measured rig at rest; this step counts in
   ``stats.plant_steps`` (``plant_steps == syncs + 1``).
 * Time passed to :meth:`SimDrivePair.on_frame` and :meth:`SimDrivePair.tick`
   never runs backwards: a smaller ``t`` than the last one is taken as the last.
 * Heartbeats (0x700 + n) go to the heartbeat consumers (0x1016) of the
-  nodes that monitor node n; a node's consumer reacts with EMCY 0x8130 and
-  its abort connection option 0x6007 (see :mod:`sim.drives.nmt_slave`).
+  nodes that monitor node n; a drive's consumer reacts with EMCY 0x8130 and
+  its abort connection option 0x6007, a sensor node's with the EMCY only
+  (see :mod:`sim.drives.nmt_slave`).
+* The two-drive rig (no sensor node) takes the same path per frame as
+  before sensor nodes existed: a sensor node's frames are routed on the
+  paths no drive takes (SDO, SYNC of another COB-ID, RPDOs), so a rig
+  without one pays one truth test per frame.
 * Frames no node consumes (another node's traffic, unknown COB-IDs, NMT for
   other nodes) and malformed ones (NMT not 2 bytes, SYNC over 1 byte, SDO
   request not 8 bytes, unknown NMT command) are counted and ignored.
@@ -170,6 +185,13 @@ class _Counters:
 # --------------------------------------------------------------------------- the pair
 
 
+def _counts(angle) -> float | None:
+    """Increments per revolution the map states for a motor angle entry (None: read from the drive)."""
+    if angle is None or angle.source is not ScaleSource.PROFILE or angle.scale is None:
+        return None
+    return abs(angle.scale.units_per_si) * 2.0 * math.pi
+
+
 def _od(od_factory: Callable[[str, int], cod.ObjectDictionary], name: str, node_id: int) -> cod.ObjectDictionary:
     od = od_factory(name, node_id)
     if not isinstance(od, cod.ObjectDictionary):
@@ -179,35 +201,39 @@ def _od(od_factory: Callable[[str, int], cod.ObjectDictionary], name: str, node_
 
 
 class SimDrivePair:
-    """Two simulated CiA 402 EMA drives (CANopen slaves) moving one simulated rig.
+    """The rig's simulated nodes: two CiA 402 EMA drives moving one simulated rig, and its sensor nodes.
 
     Parameters
     ----------
     plant : sim.plant.RigPlant
-        The rig; ``node_ids[0]`` drives EMA 1, ``node_ids[1]`` EMA 2. The pair
-        steps it once per SYNC (and once at the first power-on).
-    od_factory : callable, optional
-        ``od_factory(node_id=n)`` returns a fresh ``canopen.ObjectDictionary``
-        for node ``n`` (default :func:`hil.canopen.od.load_eds`, the shipped
-        EDS with ``$NODEID`` resolved). It must pass
-        :func:`hil.canopen.od.check_drive_od` and hold the objects the drive
-        serves (0x1001, 0x1005, 0x1014, 0x6072, 0x6077, ...).
-    node_ids : tuple of two int, optional
-        Distinct node ids 1..127, default (1, 2).
+        The rig; the drive of EMA 1 (``plan.drives[0]``) moves its EMA 1, that of EMA 2 its EMA 2.
+        The pair steps it once per SYNC (and once at the first power-on).
+    plan : hil.canopen.plan.RigPlan
+        The rig's plan (:func:`hil.rig.plan_for`): node ids, roles, EDS files, the signal map.
+    od_factory : callable
+        ``od_factory(name, node_id)`` returns a fresh ``canopen.ObjectDictionary`` of the node
+        named ``name`` in the plan (``"ema1"``, ``"ema2"``, a sensor node's name), ``$NODEID``
+        resolved for ``node_id``; a drive's must hold the CiA 402 objects it acts on (0x6040,
+        0x6041, 0x6060, 0x6061, 0x6064, 0x607A).
     serials : tuple of two int, optional
         The drives' serial numbers (identity 0x1018:04, the drive's own data like
         ``counts_per_rev``); default the EDS's.
     counts_per_rev : int, optional
         Encoder increments per motor revolution. None: the EDS's 0x608F
-        (4096 / 1). Given: written to 0x608F:01 (and 1 to 0x608F:02) as the
+        (else 4096 / 1). Given: written to 0x608F:01 (and 1 to 0x608F:02) as the
         drive's own data at every power-on and reset node.
 
     Attributes
     ----------
     nodes : tuple of SimDrive
-        The two drives, in ``node_ids`` order.
+        The two drives, EMA 1's then EMA 2's.
+    sensors : tuple of SimSensorNode
+        The sensor nodes of the plan (none for a rig whose sensors are wired to the drives).
+    all_nodes : tuple
+        ``nodes + sensors``.
     plant : RigPlant
         The simulated rig.
+    plan : RigPlan
     on_free_step : callable or None
         Called as ``on_free_step(t)`` after each step of the drives' own
         cycle (``t`` [s]: the time of that step), e.g. to record the truth.
@@ -215,21 +241,27 @@ class SimDrivePair:
     Raises
     ------
     hil.canopen.errors.InputError
-        Wrong plant type, node ids, ``counts_per_rev``, or an object
-        dictionary that lacks what the drive needs.
+        Wrong plant or plan type, ``counts_per_rev``, ``serials``, an object
+        dictionary that lacks what a drive needs, or a measured input a node
+        cannot serve.
 
     Notes
     -----
-    Conversions between the plant (rad, mm, N) and the drive objects, per
+    Conversions between the plant (rad, mm, N) and the nodes' objects, per
     EMA with :math:`N = \\text{0x608F:01} / \\text{0x608F:02}` increments per
-    revolution, :math:`T_r = \\text{0x6076} / 1000` N m and the plant's gear
-    ratio :math:`i` [rad/mm] (also served as 0x2102, REAL32):
+    revolution (or the profile's counts per revolution, or 0x6091/0x6092),
+    :math:`T_r = \\text{0x6076} / 1000` N m (or the profile's rated torque) and
+    the plant's gear ratio :math:`i` [rad/mm] (also served at the profile's
+    ``canopen.gear_ratio_object``, REAL32); a measured input :math:`x` (LVDT
+    stroke [mm], force [N], an angle [rad]) at the object the map gives, with
+    its scaling :math:`r = k (x - x_0)` (:class:`hil.canopen.signalmap.Scale`)
+    rounded and clipped into its data type (e.g. the shipped LVDT at 0x2100 in
+    um, :math:`k = 1000`):
 
     .. math::
 
         p_{actual} = \\mathrm{round}(\\varphi N / 2\\pi)\\ \\text{[inc]},\\quad
-        \\text{0x2100} = \\mathrm{round}(1000\\, s)\\ [\\mu m],\\quad
-        \\text{0x2101} = \\mathrm{round}(10\\, F)\\ [0.1\\,N],
+        r = \\mathrm{clip}(\\mathrm{round}(k\\,(x - x_0)))\\ \\text{[raw]},
 
         \\text{0x6077} = \\mathrm{round}(1000\\, T / T_r)\\ [per mille],\\quad
         \\varphi_{target} = 2\\pi\\,\\mathrm{clip}(p_{target}, p_{min}, p_{max}) / N
@@ -238,13 +270,14 @@ class SimDrivePair:
         F_{target} = \\mathrm{clip}(\\tau, \\pm\\tau_{max}) / 1000 \\cdot T_r \\cdot 1000\\, i
         \\ \\text{[N] (CST)},
 
-    with :math:`\\varphi, s, F` the measured sample of that EMA, :math:`T`
+    with :math:`\\varphi` the measured motor angle of that EMA, :math:`T`
     the plant's drive torque [N m], :math:`p_{min}, p_{max}` = 0x607D:01/02,
     :math:`\\tau` = 0x6071 and :math:`\\tau_{max}` = 0x6072 [per mille].
     Commands to the plant per drive state: OPERATION_ENABLED + CSP ->
     POSITION, + CST -> FORCE; QUICK_STOP_ACTIVE -> POSITION at the angle
     measured when the quick stop began, for
-    :data:`~sim.drives.cia402_drive.QUICK_STOP_HOLD_S`; anything else ->
+    :data:`~sim.drives.cia402_drive.QUICK_STOP_HOLD_S` or, as 0x605A says, until
+    disable voltage; anything else ->
     DISABLED (holding brake). See the modules of :mod:`sim.drives` for the
     protocol choices.
     """
@@ -298,7 +331,8 @@ class SimDrivePair:
                                   counts_per_rev=counts_per_rev, sample_period_s=params.sample_period_s,
                                   counters=self._counters, outbox=self._out,
                                   serial=None if serials is None else serials[k],
-                                  inputs=live_inputs(plan, spec), own_data=own_data(od, spec, dp.force_control),
+                                  inputs=live_inputs(plan, spec),
+                                  own_data=own_data(od, spec, dp.force_control, _counts(angle)),
                                   gear_object=plan.gear_ratio_object,
                                   factor_group=angle is not None and angle.source is ScaleSource.FACTOR_GROUP,
                                   rated_torque_Nm=rated))
@@ -404,13 +438,13 @@ class SimDrivePair:
     # ------------------------------------------------------------------ the sans-IO interface
 
     def power_on(self, t: float) -> list[Frame]:
-        """Switch both drives on (or power-cycle them) at time ``t`` [s].
+        """Switch every node on (or power-cycle them) at time ``t`` [s].
 
         Returns
         -------
         list of Frame
-            The boot-up frames ``0x700 + n [00]`` of both nodes, in ``node_ids``
-            order; both nodes are then PRE-OPERATIONAL, drives SWITCH_ON_DISABLED.
+            The boot-up frames ``0x700 + n [00]`` of every node (the drives, then the sensor
+            nodes); they are then PRE-OPERATIONAL, drives SWITCH_ON_DISABLED.
 
         Notes
         -----

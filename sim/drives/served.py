@@ -21,8 +21,9 @@ cannot be the device's value)
 * a drive's supported modes 0x6502: CSP, and CST where the rig uses it;
   rated torque 0x6076 = 1000 mN m (also over a zero default); max torque
   0x6072 = 10000 per mille (also over a zero default); encoder resolution
-  0x608F = 4096 increments / 1 revolution in its EDS data type (UNSIGNED32,
-  or INTEGER32 as Nanotec types it); position factors 0x6091, 0x6092 = 1/1
+  0x608F = the profile's counts per revolution (else 4096) increments / 1
+  revolution in its EDS data type (UNSIGNED32, or INTEGER32 as Nanotec
+  types it); position factors 0x6091, 0x6092 = 1/1
   (also over zero defaults).
 
 Any other object without a value reads as its data type's zero
@@ -60,10 +61,11 @@ def live_inputs(plan: RigPlan, spec: NodeSpec) -> tuple[LiveInput, ...]:
     return tuple(out)
 
 
-def own_data(od: cod.ObjectDictionary, spec: NodeSpec,
-             force_control: ForceControl | None = None) -> dict[tuple[int, int], bytes]:
+def own_data(od: cod.ObjectDictionary, spec: NodeSpec, force_control: ForceControl | None = None,
+             counts_per_rev: float | None = None) -> dict[tuple[int, int], bytes]:
     """A simulated node's own data where its EDS gives no default (module docstring):
-    ``(index, sub) -> bytes`` in each object's data type."""
+    ``(index, sub) -> bytes`` in each object's data type; ``counts_per_rev`` the encoder resolution
+    the profile states for a drive (its 0x608F:01, rounded), default 4096."""
     own: dict[tuple[int, int], bytes] = {}
 
     def put(index: int, sub: int, value: int, *, zero_too: bool = False) -> None:
@@ -82,7 +84,7 @@ def own_data(od: cod.ObjectDictionary, spec: NodeSpec,
         put(0x6502, 0, 1 << CSP_BIT | (1 << CST_BIT if force_control is ForceControl.CST else 0))
         put(0x6076, 0, 1000, zero_too=True)
         put(0x6072, 0, 10000, zero_too=True)
-        put(0x608F, 1, 4096)
+        put(0x608F, 1, 4096 if counts_per_rev is None else max(1, round(counts_per_rev)))
         put(0x608F, 2, 1)
         for index in (0x6091, 0x6092):
             for sub in (1, 2):
