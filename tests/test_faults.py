@@ -114,7 +114,7 @@ CASES = [
     (Fault("heartbeat_stop", 2, 2.0), "HeartbeatLost: node 2", 1.5 * P_HB),
     (Fault("emcy_over_current", 1, 2.0), "EMCY 0x2310 (over current)", T),
     (Fault("emcy_over_temperature", 2, 2.0), "EMCY 0x4310 (drive over temperature)", T),
-    (Fault("drive_fault", 1, 2.0), "node 1: drive in FAULT", 2 * T),
+    (Fault("drive_fault", 1, 2.0), "node 1 (EMA 1): drive in FAULT", 2 * T),
     (Fault("tpdo_missing", 2, 2.0, duration_s=0.5), "StaleData", 3 * T),
     (Fault("tpdo_late", 1, 2.0), "StaleData", 3 * T),
     (Fault("rpdo_lost", 1, 3.0), "max_following_error_mm", 0.5 / 2.0 + 0.1),

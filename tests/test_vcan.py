@@ -92,15 +92,13 @@ def test_serve_answers_sync_and_stops_on_event():
     import can
     import numpy as np
 
-    from hil.canopen.od import load_eds
     from hil.profiles import load_simrig
     from hil.sim_server import serve
-    from sim.drives import SimDrivePair
     from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
 
     simrig = load_simrig()
-    pair = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(1)),
-                        lambda node_id=None: load_eds(None, node_id=node_id))
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(1)))
     channel = "emacheck-test-serve"
     master = can.Bus(interface="virtual", channel=channel)
     stop = threading.Event()
