@@ -10,18 +10,24 @@ sample (raw = round(x / per_unit), clipped to INTEGER16).
 from __future__ import annotations
 
 import struct
+import tomllib
 
 import numpy as np
 import pytest
+import tomli_w
 
-from hil.canopen.frame import Frame, sync_frame
-from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
+from hil.canopen.frame import Frame
+from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient
+from hil.profiles import load_actuation
+from hil.rig import plan_for
 from sim.drives import NmtState, SimSensorNode
 from sim.faults import Fault, FaultInjector
 from sim.plant import RigPlant
 from support.canopen_rig import make_pair
+from support.profiles import apply_overrides
 from support.rigs import T_S, brief_rig, quiet
-from support.sensor_rig import FORCE_N_PER_UNIT, IO_NODE, LVDT_MM_PER_UNIT, sensor_rig
+from support.sensor_rig import FORCE_N_PER_UNIT, IO_NODE, LVDT_MM_PER_UNIT, sensor_profile, sensor_rig
+from support.sim_bus import Bus
 
 IO = IO_NODE
 
@@ -29,40 +35,6 @@ IO = IO_NODE
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
     return sensor_rig(tmp_path_factory.mktemp("sensor-rig") / "actuation.toml")[1]
-
-
-class Bus:
-    """A minimal master: time, frames to the pair, SDO transfers, SYNC."""
-
-    def __init__(self, pair) -> None:
-        self.pair = pair
-        self.t = 0.0
-
-    def send(self, frame: Frame) -> list[Frame]:
-        return self.pair.on_frame(frame, self.t)
-
-    def sync(self) -> dict[int, Frame]:
-        self.t += T_S
-        return {f.arbitration_id: f for f in self.send(sync_frame())}
-
-    def sdo(self, node: int, index: int, sub: int, data: bytes | None = None) -> bytes:
-        client = SdoClient(node)
-        req = client.start_upload(index, sub, self.t) if data is None else \
-            client.start_download(index, sub, data, self.t)
-        for _ in range(64):
-            replies = [f for f in self.send(req) if f.arbitration_id == 0x580 + node]
-            assert len(replies) == 1
-            result = client.on_frame(replies[0], self.t)
-            if isinstance(result, SdoEvent):
-                return result.data
-            req = result
-        raise AssertionError("SDO transfer did not finish")
-
-    def read(self, node: int, index: int, sub: int, fmt: str) -> int:
-        return struct.unpack("<" + fmt, self.sdo(node, index, sub))[0]
-
-    def write(self, node: int, index: int, sub: int, fmt: str, value: int) -> None:
-        self.sdo(node, index, sub, struct.pack("<" + fmt, value))
 
 
 def _pair(rig, seed: int = 0):
@@ -175,13 +147,6 @@ def test_default_pdos_of_the_eds_before_the_master_maps_them(rig):
 
 
 def test_values_beyond_the_data_type_are_clipped(tmp_path):
-    from hil.profiles import load_actuation
-    from hil.rig import plan_for
-    from support.sensor_rig import sensor_profile
-    from support.profiles import apply_overrides
-    import tomli_w
-    import tomllib
-
     path = sensor_profile(tmp_path / "actuation.toml")
     data = tomllib.loads(path.read_text())
     apply_overrides(data, {"signals": {"ema1": {"lvdt": {"mm_per_unit": 5e-6}}}})  # 0.3 mm = 60000 units

@@ -915,3 +915,57 @@ def test_serial_numbers_are_the_drives_own_data():
     assert [n.read(0x1018, 4) for n in pair.nodes] == [0x5E000101, 0x5E000102]
     with pytest.raises(InputError, match="serials"):
         make_pair(RigPlant(make_params(), np.random.default_rng(0)), serials=(1,))
+
+
+# ------------------------------------------------------------------ quick stop option code 0x605A
+
+
+def _quick_stop_words(rig: Rig, option: int, n: int = 40) -> list[int]:
+    """Drive 1 enabled, 0x605A = ``option``, quick stop at a SYNC; its statuswords over ``n`` SYNCs."""
+    rig.write(1, 0x605A, 0, "h", option)
+    rig.enable()
+    for _ in range(5):
+        rig.cycle((0x0F, 0x0F))
+    rig.cycle((0x02, 0x0F))  # quick stop applied at this SYNC
+    return [status(rig.cycle((0x02, 0x0F)), 1) for _ in range(n)]
+
+
+@pytest.mark.parametrize("option", [1, 2, 3, 4])
+def test_quick_stop_options_1_to_4_hold_then_switch_on_disabled(rig, option):
+    hold = round(QUICK_STOP_HOLD_S / T_S)
+    assert _quick_stop_words(rig, option) == [SW_QSA] * hold + [SW_SOD] * (40 - hold)
+
+
+def test_quick_stop_option_0_disables_the_drive_at_once(rig):
+    words = _quick_stop_words(rig, 0, 5)
+    assert words == [SW_SOD] * 5  # switch on disabled in the drive cycle of the quick stop itself
+    assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED
+
+
+@pytest.mark.parametrize("option", [5, 6, 7, 8])
+def test_quick_stop_options_5_to_8_stay_until_disable_voltage(rig, option):
+    words = _quick_stop_words(rig, option, 100)  # 0.2 s, four times the hold
+    assert words == [SW_QSA] * 100
+    node = rig.pair.nodes[0]
+    held = node.setpoint
+    assert held.mode is DriveMode.POSITION  # holding the angle where the quick stop began
+    rig.cycle((0x0F, 0x0F))  # enable operation: transition 16 is not in the table, refused
+    assert node.state_machine.state is State.QUICK_STOP_ACTIVE and rig.pair.stats.illegal_commands == 1
+    rig.cycle((0x00, 0x0F))  # disable voltage: transition 12
+    assert status(rig.cycle((0x00, 0x0F)), 1) == SW_SOD
+    assert node.setpoint.mode is DriveMode.DISABLED
+
+
+def test_quick_stop_option_values_are_validated_and_a_drive_without_605a_takes_2(rig):
+    for bad in (9, -1):
+        with pytest.raises(SdoAbortError) as exc:
+            rig.write(1, 0x605A, 0, "h", bad)
+        assert exc.value.code is SdoAbortCode.VALUE_RANGE_EXCEEDED
+    assert rig.read(1, 0x605A, 0, "h") == 2  # the shipped EDS's default
+    node = rig.pair.nodes[0]
+    del node.store.object_dictionary[0x605A]  # a drive whose EDS has no 0x605A
+    hold = round(QUICK_STOP_HOLD_S / T_S)
+    rig.enable()
+    rig.cycle((0x02, 0x0F))
+    words = [status(rig.cycle((0x02, 0x0F)), 1) for _ in range(hold + 3)]
+    assert words == [SW_QSA] * hold + [SW_SOD] * 3

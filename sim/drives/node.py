@@ -59,7 +59,7 @@ from sim.drives.store import ObjectStore, SdoEndpoint
 if TYPE_CHECKING:
     from sim.drives.pair import _Counters
 
-__all__ = ["LiveInput", "SAMPLE_SLOT", "SimNode"]
+__all__ = ["SAMPLE_SLOT", "LiveInput", "SimNode"]
 
 #: Index of each measured signal of EMA 1 in a plant sample ``(t_s, phi1, phi2, s1, s2, F1, F2)``;
 #: EMA 2's is the next one.

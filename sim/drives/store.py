@@ -21,7 +21,8 @@ Read (``get_data``), in this order:
    with the object's data type;
 3. the stored value (raw bytes, as written);
 4. the EDS ParameterValue, then the EDS default;
-5. else the data type's zero (0, 0.0, an empty string or domain): a device
+5. else the data type's zero (0, 0.0, an empty string or domain, which
+   canopen's server answers with abort 0x08000024, no data available): a device
    holds a value in every object, an EDS need not give it (vendors' files
    leave identity, ratings and measured values without a default; the
    node's own data, :mod:`sim.drives.served`, fills in those that matter).

@@ -15,7 +15,7 @@ from hil.profiles import load_actuation
 from hil.rig import Rig, plan_for
 from support.profiles import write_profile_variant
 
-__all__ = ["IO_NODE", "LVDT_MM_PER_UNIT", "FORCE_N_PER_UNIT", "sensor_profile", "sensor_rig"]
+__all__ = ["FORCE_N_PER_UNIT", "IO_NODE", "LVDT_MM_PER_UNIT", "sensor_profile", "sensor_rig"]
 
 IO_NODE = 3
 LVDT_MM_PER_UNIT = 0.000625
