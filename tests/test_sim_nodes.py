@@ -266,3 +266,35 @@ def test_the_master_configures_and_reads_the_sensor_node_on_the_same_sync(tmp_pa
     assert smp.F2_N == pytest.approx(f2 * FORCE_N_PER_UNIT, rel=1e-12, abs=1e-12)
     assert abs(smp.s1_mm - 0.3) < 0.01 and abs(smp.s2_mm + 0.2) < 0.01  # the rig at rest
     assert any(f.arbitration_id == 0x703 for f in rec.sent)  # its heartbeat, which the master watches
+
+
+def test_random_frames_never_raise_and_the_rig_with_its_sensor_node_recovers(rig):
+    rnd = np.random.default_rng(11)
+    pair = _pair(rig)
+    pair.power_on(0.0)
+    bus = Bus(pair)
+    cobs = [0x000, 0x080, 0x083, 0x183, 0x203, 0x283, 0x603, 0x601, 0x703, 0x77F, 0x123]
+    bus.send(Frame(0x000, bytes([0x01, 0])))
+    for _ in range(3000):
+        bus.t += 0.001
+        cob = int(rnd.choice(cobs))
+        data = bytes(rnd.integers(0, 256, size=int(rnd.integers(0, 9)), dtype=np.uint8))
+        if cob == 0x000:
+            data = bytes([int(rnd.choice([0x01, 0x02, 0x80, 0x81, 0x82])), int(rnd.choice([0, 3]))])
+        elif cob == 0x080:
+            data = data[:int(rnd.integers(0, 2))]
+        elif cob == 0x603 and rnd.random() < 0.9:  # 8 bytes with an index of the I/O module
+            index = int(rnd.choice([0x1016, 0x1017, 0x1800, 0x1801, 0x1A00, 0x1A01, 0x2001, 0x6401, 0x6423]))
+            data = bytes([data[0] if data else 0]) + struct.pack("<HB", index, int(rnd.integers(0, 9))) + \
+                bytes(rnd.integers(0, 256, size=4, dtype=np.uint8))
+        for frame in bus.send(Frame(cob, data)) + pair.tick(bus.t):
+            assert isinstance(frame, Frame)
+    assert pair.stats.sdo_requests > 100
+    assert bus.send(Frame(0x000, bytes([0x81, 0]))) == [Frame(0x701, b"\x00"), Frame(0x702, b"\x00"),
+                                                         Frame(0x703, b"\x00")]
+    assert bus.read(IO, 0x1018, 1, "I") == 0x0E3A
+    _configure(bus, rig)
+    bus.send(Frame(0x000, bytes([0x01, 0])))
+    before = pair.sample
+    frames = bus.sync()
+    assert struct.unpack("<hhhh", frames[0x183].data) == _expected_inputs(before)
