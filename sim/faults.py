@@ -99,8 +99,8 @@ import numpy as np
 
 from blf.errors import InputError
 from hil.canopen.cia402 import State
-from hil.canopen.frame import Frame
 from hil.canopen.cycle import CycleDecoder
+from hil.canopen.frame import Frame
 from hil.canopen.pdo import Direction
 from hil.canopen.process import DriveMode
 from hil.canopen.signalmap import Scale, Signal

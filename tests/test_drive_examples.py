@@ -33,8 +33,8 @@ from hil.canopen.signalmap import DeviceProfile, ForceControl, NodeRole, NodeSpe
 from hil.profiles import default_profile_path, load_actuation, load_check, load_simrig
 from hil.rig import plan_for
 from sim.drives import SimDrive
-from sim.drives.pair import _Counters
 from sim.drives.served import own_data
+from sim.drives.stats import _Counters
 from support.sim_bus import Bus
 
 VENDOR = Path(__file__).resolve().parents[2] / "shared" / "data" / "vendor-eds"

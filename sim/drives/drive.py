@@ -19,7 +19,7 @@ from sim.drives.cia402_drive import Cia402Drive
 from sim.drives.node import LiveInput, SimNode
 
 if TYPE_CHECKING:
-    from sim.drives.pair import _Counters
+    from sim.drives.stats import _Counters
 
 __all__ = ["LiveInput", "SimDrive"]
 

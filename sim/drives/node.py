@@ -57,7 +57,7 @@ from sim.drives.pdo_engine import PdoEngine
 from sim.drives.store import ObjectStore, SdoEndpoint
 
 if TYPE_CHECKING:
-    from sim.drives.pair import _Counters
+    from sim.drives.stats import _Counters
 
 __all__ = ["SAMPLE_SLOT", "LiveInput", "SimNode"]
 

@@ -25,6 +25,7 @@ module                    what
 ``drive``                 :class:`SimDrive`: a node with the CiA 402 drive
 ``sensor_node``           :class:`SimSensorNode`: a node with measured inputs
 ``served``                what each node serves: inputs, own data
+``stats``                 the counters the nodes share
 ``store``                 object dictionary, data store, SDO server (canopen)
 ``pdo_engine``            PDO mapping and communication, TPDOs, RPDOs
 ``nmt_slave``             NMT slave, heartbeat, EMCY, error history 0x1003
@@ -83,7 +84,6 @@ from __future__ import annotations
 import math
 import operator
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import canopen.objectdictionary as cod
 
@@ -97,11 +97,12 @@ from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.signalmap import NodeRole, ScaleSource, Signal
 from hil.canopen.validate import error_code, integer, time_s
 from sim.drives.drive import SimDrive
-from sim.drives.node import SimNode
 from sim.drives.nmt_slave import TIME_EPS_S
+from sim.drives.node import SimNode
 from sim.drives.pdo_engine import Pdo
 from sim.drives.sensor_node import SimSensorNode
 from sim.drives.served import live_inputs, own_data
+from sim.drives.stats import SimPairStats, _Counters
 from sim.plant import RigPlant
 
 __all__ = ["FREE_RUN_AFTER_CYCLES", "SimDrivePair", "SimPairStats"]
@@ -114,72 +115,6 @@ _POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTI
 _MODE_DISABLED = int(DriveMode.DISABLED)
 #: Objects a simulated drive needs in its EDS (the CiA 402 objects it acts on).
 _SIM_REQUIRED = ((0x6040, 0), (0x6041, 0), (0x6060, 0), (0x6061, 0), (0x6064, 0), (0x607A, 0))
-
-
-# --------------------------------------------------------------------------- stats
-
-
-@dataclass(frozen=True, slots=True)
-class SimPairStats:
-    """Counters of a :class:`SimDrivePair` (a snapshot; both nodes together).
-
-    Attributes
-    ----------
-    syncs : int
-        SYNC frames processed.
-    plant_steps : int
-        Calls of ``plant.step`` on a SYNC (one per SYNC plus one at the first power-on).
-    free_steps : int
-        Calls of ``plant.step`` by the drives' own cycle while SYNC is missing.
-    tpdos_sent : int
-        TPDO frames transmitted.
-    rpdos_applied : int
-        RPDOs written into a data store (synchronous ones at their SYNC).
-    rpdos_late : int
-        Latched synchronous RPDOs overwritten by a newer one before their
-        SYNC (the older one missed its cycle).
-    rpdos_dropped : int
-        RPDOs not processed: node not OPERATIONAL, or wrong length.
-    bad_frames_ignored : int
-        Frames no node consumes (unknown COB-ID, another node's traffic,
-        NMT for other nodes) or that are malformed (NMT not 2 bytes, SYNC
-        over 1 byte, SDO request not 8 bytes, unknown NMT command).
-    frames_unpowered : int
-        Frames received before :meth:`SimDrivePair.power_on`.
-    sdo_requests : int
-        SDO request frames served.
-    illegal_commands : int
-        Controlwords refused by the CiA 402 state machine.
-    emcys_sent, heartbeats_sent : int
-        EMCY and heartbeat frames transmitted (boot-up frames excluded).
-    """
-
-    syncs: int = 0
-    plant_steps: int = 0
-    free_steps: int = 0
-    tpdos_sent: int = 0
-    rpdos_applied: int = 0
-    rpdos_late: int = 0
-    rpdos_dropped: int = 0
-    bad_frames_ignored: int = 0
-    frames_unpowered: int = 0
-    sdo_requests: int = 0
-    illegal_commands: int = 0
-    emcys_sent: int = 0
-    heartbeats_sent: int = 0
-
-
-class _Counters:
-    """Mutable counters shared by the pair and its nodes."""
-
-    __slots__ = SimPairStats.__slots__
-
-    def __init__(self) -> None:
-        for name in self.__slots__:
-            setattr(self, name, 0)
-
-    def snapshot(self) -> SimPairStats:
-        return SimPairStats(**{name: getattr(self, name) for name in self.__slots__})
 
 
 # --------------------------------------------------------------------------- the pair

@@ -33,7 +33,7 @@ from hil.canopen.frame import Frame
 from sim.drives.node import LiveInput, SimNode
 
 if TYPE_CHECKING:
-    from sim.drives.pair import _Counters
+    from sim.drives.stats import _Counters
 
 __all__ = ["SimSensorNode"]
 
