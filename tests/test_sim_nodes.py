@@ -18,7 +18,7 @@ import tomli_w
 
 from hil.canopen.frame import Frame
 from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient
-from hil.profiles import load_actuation
+from hil.profiles import default_profile_path, load_actuation
 from hil.rig import plan_for
 from sim.drives import NmtState, SimSensorNode
 from sim.faults import Fault, FaultInjector
@@ -298,3 +298,48 @@ def test_random_frames_never_raise_and_the_rig_with_its_sensor_node_recovers(rig
     before = pair.sample
     frames = bus.sync()
     assert struct.unpack("<hhhh", frames[0x183].data) == _expected_inputs(before)
+
+
+def _cia404_eds(dest) -> None:
+    """A CiA 404 measuring device derived from the shipped CiA 401 EDS: device type 0x00000194, the
+    eight inputs as REAL32 process values 0x9130:01..08 (in the unit the profile scales), mapped two by
+    two by default (8 bytes each)."""
+    import re
+
+    text = (default_profile_path("cia401_io.eds").read_text()
+            .replace("DefaultValue=0x00040191", "DefaultValue=0x00000194")
+            .replace("[6401", "[9130").replace("=0x6401", "=0x9130")
+            .replace("Read analog input 16-bit", "AI process value").replace("Analog input ", "AI process value "))
+    text = re.sub(r"(\[9130sub[1-8]\]\nParameterName=[^\n]*\nObjectType=0x7\nDataType=)0x0003", r"\g<1>0x0008", text)
+    text = re.sub(r"DefaultValue=0x9130(0[1-8])10", r"DefaultValue=0x9130\g<1>20", text)
+    for rec in ("1A01", "1A02"):
+        text = text.replace(f"[{rec}sub0]\nParameterName=Number of mapped objects\nObjectType=0x7\nDataType=0x0005\n"
+                            "AccessType=rw\nDefaultValue=4", f"[{rec}sub0]\nParameterName=Number of mapped objects\n"
+                            "ObjectType=0x7\nDataType=0x0005\nAccessType=rw\nDefaultValue=2")
+    assert text.count("DataType=0x0008") == 8 and "DefaultValue=0x91300120" in text
+    dest.write_text(text)
+
+
+def test_cia404_node_with_real32_inputs_over_two_tpdos(tmp_path):
+    path = sensor_profile(tmp_path / "actuation.toml", eds="meas404.eds", device_profile=404)
+    _cia404_eds(tmp_path / "meas404.eds")
+    data = tomllib.loads(path.read_text())
+    for ema, (lvdt, force) in ((1, ("0x9130:01", "0x9130:02")), (2, ("0x9130:03", "0x9130:04"))):
+        apply_overrides(data, {"signals": {f"ema{ema}": {"lvdt": {"object": lvdt, "mm_per_unit": 1.0},
+                                                         "force": {"object": force, "N_per_unit": 1000.0}}}})
+    path.write_text(tomli_w.dumps(data))  # LVDT in mm, load cell in kN, as REAL32
+    rig = plan_for(load_actuation(path), path)
+    io = rig.plan.node("io")
+    assert [(p.name, len(p.entries)) for p in io.layout.pdos] == [("TPDO1", 2), ("TPDO2", 2)]
+    pair = make_pair(RigPlant(brief_rig(), np.random.default_rng(4)), rig)
+    pair.power_on(0.0)
+    bus = Bus(pair)
+    assert bus.read(IO, 0x1000, 0, "I") == 0x00000194
+    _configure(bus, rig)
+    bus.send(Frame(0x000, bytes([0x01, 0])))
+    for _ in range(5):
+        s = pair.sample
+        frames = bus.sync()
+        got = struct.unpack("<ff", frames[0x183].data) + struct.unpack("<ff", frames[0x283].data)
+        want = (s.s1_mm, s.F1_N / 1000.0, s.s2_mm, s.F2_N / 1000.0)
+        np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-9)  # REAL32: no rounding but float32

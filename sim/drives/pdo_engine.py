@@ -37,7 +37,8 @@ Choices (CiA 301 leaves them open or this drive restricts them)
   missing ones as 0; an entry of 0 bits maps nothing; a default mapping
   (from the EDS) is taken as it is, even one an SDO write would be refused
   for: its entries of objects the node lacks (dummy entries, another
-  variant's objects) are sent as zeros, received into nothing. A PDO record
+  variant's objects) are sent as zeros, received into nothing; entries
+  beyond the 8 bytes of a CAN frame are dropped. A PDO record
   without a COB-ID (sub-index 1) is not valid; one without a transmission
   type (sub-index 2) is event driven (255).
 """
@@ -279,10 +280,13 @@ class PdoEngine:
             cob = int_or(p.comm_index, 1, COB_ID_INVALID)
             count = min(int_or(p.map_index, 0, 0), p.n_entries_max)
             entries = []
+            size = 0
             for k in range(1, count + 1):
                 e = int_or(p.map_index, k, 0)
-                if e & 0xFF:  # (an entry of 0 bits maps nothing)
-                    entries.append((e >> 16, (e >> 8) & 0xFF, (e & 0xFF) // 8))
+                n = (e & 0xFF) // 8
+                if n and size + n <= 8:  # (an entry of 0 bits maps nothing; a CAN frame holds 8 bytes)
+                    entries.append((e >> 16, (e >> 8) & 0xFF, n))
+                    size += n
             p.cob_id = cob & 0x7FF
             p.valid = not cob & COB_ID_INVALID
             p.trans_type = int_or(p.comm_index, 2, 255)
