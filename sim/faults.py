@@ -1,11 +1,14 @@
-"""Fault injection for the simulated drive pair (sans-IO, deterministic for a seed).
+"""Fault injection for the simulated nodes of the rig (sans-IO, deterministic for a seed).
 
-:class:`FaultInjector` wraps a :class:`sim.drives.SimDrivePair` with the same
-sans-IO interface (``power_on``, ``on_frame``, ``tick``) and applies a
-:class:`Fault` schedule to the frames going in and out of the drives and to
-the drives themselves, so the master sees exactly what a faulty rig would put
-on the bus. Faults come from the simulated-rig profile (``[[faults]]`` tables)
-or from tests.
+:class:`FaultInjector` wraps a :class:`sim.drives.SimDrivePair` (the two
+drives and the sensor nodes) with the same sans-IO interface (``power_on``,
+``on_frame``, ``tick``) and applies a :class:`Fault` schedule to the frames
+going in and out of the nodes and to the drives themselves, so the master
+sees exactly what a faulty rig would put on the bus. Faults come from the
+simulated-rig profile (``[[faults]]`` tables) or from tests. The sensor
+faults (``lvdt_*``, ``loadcell_saturation``, ``resolver_wrap``) change the
+EMA's reading in whichever TPDO carries it, a drive's or a sensor node's,
+through the rig's cycle codec (:class:`hil.canopen.cycle.CycleDecoder`).
 
 Time base: a fault's ``start_s`` is on the check's time axis, the SYNC count
 times the SYNC period (``t`` of signals.csv), for every kind but the drive
