@@ -1,16 +1,24 @@
-"""Fault injection for the simulated drive pair (sans-IO, deterministic for a seed).
+"""Fault injection for the simulated nodes of the rig (sans-IO, deterministic for a seed).
 
-:class:`FaultInjector` wraps a :class:`sim.drives.SimDrivePair` with the same
-sans-IO interface (``power_on``, ``on_frame``, ``tick``) and applies a
-:class:`Fault` schedule to the frames going in and out of the drives and to
-the drives themselves, so the master sees exactly what a faulty rig would put
-on the bus. Faults come from the simulated-rig profile (``[[faults]]`` tables)
-or from tests.
+:class:`FaultInjector` wraps a :class:`sim.drives.SimDrivePair` (the two
+drives and the sensor nodes) with the same sans-IO interface (``power_on``,
+``on_frame``, ``tick``) and applies a :class:`Fault` schedule to the frames
+going in and out of the nodes and to the drives themselves, so the master
+sees exactly what a faulty rig would put on the bus. Faults come from the
+simulated-rig profile (``[[faults]]`` tables) or from tests. The sensor
+faults (``lvdt_*``, ``loadcell_saturation``, ``resolver_wrap``) change the
+EMA's reading in whichever TPDO carries it, a drive's or a sensor node's,
+through the rig's cycle codec (:class:`hil.canopen.cycle.CycleDecoder`).
 
 Time base: a fault's ``start_s`` is on the check's time axis, the SYNC count
-times the SYNC period (``t`` of signals.csv), except ``sdo_abort``, which
-acts during the preflight (before any SYNC). A fault is active for
-``start_s <= t < start_s + duration_s``.
+times the SYNC period (``t`` of signals.csv), for every kind but the drive
+faults below, which act before SYNC starts (the preflight, the master's-death
+drill) as well as after: their ``start_s`` is the bus time since the drives'
+power-on (:meth:`FaultInjector.power_on`), so the default ``start_s = 0``
+means "built that way", from power-on to the end of the run. ``sdo_abort``
+acts whenever its object is accessed. A fault is active for
+``start_s <= t < start_s + duration_s``; :attr:`FaultInjector.onset_s` holds
+each onset on its own time axis.
 
 Kinds (``value`` is kind-specific; ``ema`` is 1 or 2):
 
@@ -40,7 +48,39 @@ Kinds (``value`` is kind-specific; ``ema`` is 1 or 2):
                         before the drives (``ema`` ignored); the drives go on
                         on their own clock (free-running cycle, heartbeat
                         consumer, abort connection option 0x6007)
+``sensor_node_silent``  the sensor node with node id ``value`` (default the
+                        plan's first) stops sending anything: TPDOs,
+                        heartbeat, EMCY, SDO responses (``ema`` ignored; a
+                        rig without a sensor node is refused)
 ======================  =====================================================
+
+Drive faults (time base: bus time since power-on, see above; ``ema`` is the
+drive), behaviours of drives seen in the field that the master's CiA 402
+rules must catch or handle:
+
+===========================  ================================================
+``ignore_abort_connection``  the drive accepts 0x6007 and reads it back, and
+                             its heartbeat consumer sends EMCY 0x8130 on the
+                             master's silence, but it does nothing else: it
+                             stays OPERATION_ENABLED (the master's-death
+                             drill must report no reaction)
+``quick_stop_stays``         after a quick stop the drive stays in
+                             QUICK_STOP_ACTIVE (holding its position) until
+                             disable voltage, whatever 0x605A says (like a
+                             lely-based drive seen in the field)
+``starts_in_fault``          the drive boots (power-on and every NMT reset
+                             node) into FAULT with error code ``value``
+                             (default 0x5000) and an EMCY, until one fault
+                             reset clears it
+``fault_reset_ignored``      as ``starts_in_fault`` (error code 0x5000), and
+                             every FAULT of the drive clears only at the
+                             ``value``-th fault reset (default 4: one more
+                             than the shipped canopen.fault_reset_attempts);
+                             the earlier ones are ignored
+``mode_not_confirmed``       the modes of operation display 0x6061 does not
+                             follow 0x6060 (by SDO or RPDO): the drive keeps
+                             running in the mode it shows
+===========================  ================================================
 
 The injector also records the plant's truth after every SYNC and every step
 of the drives' own cycle (:attr:`FaultInjector.truth`): true forces and
@@ -62,13 +102,14 @@ import numpy as np
 
 from blf.errors import InputError
 from hil.canopen.cia402 import State
-from hil.canopen.frame import Frame
 from hil.canopen.cycle import CycleDecoder
+from hil.canopen.frame import Frame
 from hil.canopen.pdo import Direction
 from hil.canopen.process import DriveMode
 from hil.canopen.signalmap import Scale, Signal
 
-__all__ = ["FaultKind", "Fault", "FaultInjector", "TruthTrace", "SDO_ABORT_CODE"]
+__all__ = ["BOOT_FAULT_CODE", "DRIVE_KINDS", "FaultKind", "Fault", "FaultInjector", "TruthTrace",
+           "SDO_ABORT_CODE"]
 
 #: Abort code the ``sdo_abort`` fault answers with: data cannot be transferred or stored.
 SDO_ABORT_CODE = 0x08000020
@@ -91,6 +132,21 @@ class FaultKind(Enum):
     RUNAWAY = "runaway"
     BUS_ERRORS = "bus_errors"
     MASTER_SILENT = "master_silent"
+    SENSOR_NODE_SILENT = "sensor_node_silent"
+    IGNORE_ABORT_CONNECTION = "ignore_abort_connection"
+    QUICK_STOP_STAYS = "quick_stop_stays"
+    STARTS_IN_FAULT = "starts_in_fault"
+    FAULT_RESET_IGNORED = "fault_reset_ignored"
+    MODE_NOT_CONFIRMED = "mode_not_confirmed"
+
+
+#: Drive faults: they act from the drives' power-on, before SYNC starts (``start_s`` is the bus time
+#: since power-on).
+DRIVE_KINDS = frozenset((FaultKind.IGNORE_ABORT_CONNECTION, FaultKind.QUICK_STOP_STAYS,
+                         FaultKind.STARTS_IN_FAULT, FaultKind.FAULT_RESET_IGNORED,
+                         FaultKind.MODE_NOT_CONFIRMED))
+#: Error code of a drive that boots into FAULT (``starts_in_fault``, ``fault_reset_ignored``).
+BOOT_FAULT_CODE = 0x5000
 
 
 #: Default ``value`` per kind (None: the kind takes no value).
@@ -101,6 +157,8 @@ DEFAULT_VALUE: dict[FaultKind, float | None] = {
     FaultKind.LOADCELL_SATURATION: 2500.0,  # N
     FaultKind.RUNAWAY: 5.0,  # mm/s
     FaultKind.BUS_ERRORS: 0.5,  # loss probability
+    FaultKind.STARTS_IN_FAULT: float(BOOT_FAULT_CODE),  # error code
+    FaultKind.FAULT_RESET_IGNORED: 4.0,  # fault resets a FAULT takes to clear
 }
 
 _EMCY_CODE = {FaultKind.EMCY_OVER_CURRENT: 0x2310, FaultKind.EMCY_OVER_TEMPERATURE: 0x4310,
@@ -118,7 +176,8 @@ class Fault:
     ema : int
         1 or 2 (ignored by ``bus_errors``, which hits every frame).
     start_s : float
-        Onset on the check's time axis [s] (SYNC count times the SYNC period).
+        Onset on the check's time axis [s] (SYNC count times the SYNC period); for the drive
+        faults (:data:`DRIVE_KINDS`) the bus time since the drives' power-on [s].
     duration_s : float
         How long it lasts [s] (``inf``: to the end; ``lvdt_spike`` lasts one cycle).
     value : float
@@ -145,6 +204,14 @@ class Fault:
             raise InputError(f"fault {self.kind}: duration_s = {self.duration_s!r} s must be > 0")
         if not (math.isnan(self.value) or math.isfinite(self.value)):
             raise InputError(f"fault {self.kind}: value = {self.value!r} must be finite")
+        v = self.param
+        kind = self.fault_kind
+        if kind is FaultKind.FAULT_RESET_IGNORED and not (v == int(v) and 1 <= v <= 1000):
+            raise InputError(f"fault {self.kind}: value = {v!r} must be a whole number of fault resets, 1..1000")
+        if kind is FaultKind.STARTS_IN_FAULT and not (v == int(v) and 1 <= v <= 0xFFFF):
+            raise InputError(f"fault {self.kind}: value = {v!r} must be an error code 0x0001..0xFFFF")
+        if kind is FaultKind.SENSOR_NODE_SILENT and not math.isnan(v) and not (v == int(v) and 1 <= v <= 127):
+            raise InputError(f"fault {self.kind}: value = {v!r} must be the node id of a sensor node, 1..127")
 
     @property
     def fault_kind(self) -> FaultKind:
@@ -201,7 +268,8 @@ class FaultInjector:
         self._held: list[tuple[int, Frame]] = []  # (due SYNC count, frame) of late TPDOs
         self._stuck: dict[int, float] = {}  # EMA -> frozen LVDT value [mm]
         self._started: set[int] = set()  # indices of faults whose onset happened
-        self.onset_s: dict[str, float] = {}  #: kind -> check time of the onset
+        #: kind -> time of the onset: check time, bus time since power-on for the drive faults
+        self.onset_s: dict[str, float] = {}
         self.dropped = 0
         self._nodes = {k + 1: n for k, n in enumerate(pair.nodes)}
         plan = pair.plan
@@ -212,6 +280,23 @@ class FaultInjector:
         self._tpdo_owner = {c: n for n, cobs in self._tpdos.items() for c in cobs}  # COB-ID -> node id
         self._rpdo_owner = {c: n for n, cobs in self._rpdos.items() for c in cobs}
         self._drive_ids = frozenset(n.node_id for n in pair.nodes)
+        sensors = getattr(pair, "sensors", ())
+        self._silent_sensor: dict[int, int] = {}  # fault index -> sensor node id (sensor_node_silent)
+        for k, f in enumerate(self.faults):
+            if f.fault_kind is not FaultKind.SENSOR_NODE_SILENT:
+                continue
+            if not sensors:
+                raise InputError(f"fault {f.kind}: the rig has no sensor node (its profile has no [nodes.NAME])")
+            ids = [x.node_id for x in sensors]
+            nid = ids[0] if math.isnan(f.value) else int(f.value)
+            if nid not in ids:
+                raise InputError(f"fault {f.kind}: value = {nid} is not a sensor node of the rig "
+                                 f"(node ids {', '.join(map(str, ids))})")
+            self._silent_sensor[k] = nid
+        #: drive faults (time base: bus time since power-on) by fault index, and whether each is on
+        self._drive_faults = {k: f for k, f in enumerate(self.faults) if f.fault_kind in DRIVE_KINDS}
+        self._drive_on: dict[int, bool] = {}
+        self.t_power_on: float | None = None  #: bus time of the drives' (first) power-on [s]
         # the measured inputs of every TPDO, as the simulated nodes scale them
         chans = []
         for ch in plan.channels:
@@ -255,7 +340,7 @@ class FaultInjector:
         out: list[Frame] = []
         t = self.t_check
         for k, f in enumerate(self.faults):
-            if k in self._started or self.syncs == 0 or t < f.start_s - 1e-9:
+            if k in self._started or k in self._drive_faults or self.syncs == 0 or t < f.start_s - 1e-9:
                 continue
             self._started.add(k)
             self.onset_s.setdefault(f.kind, t)
@@ -312,12 +397,15 @@ class FaultInjector:
             out += [self._sensor_faults(f) for k, f in self._held if k <= self.syncs]
             self._held = [(k, f) for k, f in self._held if k > self.syncs]
         drive_ids = self._drive_ids
+        silent = self._silent_sensors() if self._silent_sensor else ()
         for fr in frames:
             cid = fr.arbitration_id
             node, base = cid & 0x7F, cid & 0x780
             if self._active(FaultKind.BUS_ERRORS) and self._lose():
                 continue
             owner = self._tpdo_owner.get(cid)
+            if silent and (owner in silent or (owner is None and node in silent and base != 0x000)):
+                continue
             if owner is not None:
                 if owner in drive_ids:
                     if self._active(FaultKind.NODE_SILENT, owner) or self._active(FaultKind.TPDO_MISSING, owner):
@@ -337,6 +425,40 @@ class FaultInjector:
                 continue
             out.append(fr)
         return out
+
+    def _silent_sensors(self) -> frozenset[int]:
+        """Node ids of the sensor nodes silent now (``sensor_node_silent``, check time axis)."""
+        t = self.t_check
+        if self.syncs == 0:
+            return frozenset()
+        return frozenset(nid for k, nid in self._silent_sensor.items()
+                         if self.faults[k].start_s - 1e-9 <= t < self.faults[k].start_s + self.faults[k].duration_s - 1e-9)
+
+    def _drive_hooks(self, t: float) -> None:
+        """Switch the drive faults on or off at bus time ``t`` (their time base: since power-on)."""
+        if self.t_power_on is None:
+            return
+        since = t - self.t_power_on
+        for k, f in self._drive_faults.items():
+            on = f.start_s - 1e-9 <= since < f.start_s + f.duration_s - 1e-9
+            if on == self._drive_on.get(k, False):
+                continue
+            self._drive_on[k] = on
+            if on:
+                self.onset_s.setdefault(f.kind, since)
+            node = self._nodes[f.ema]
+            kind = f.fault_kind
+            if kind is FaultKind.IGNORE_ABORT_CONNECTION:
+                node.ignore_abort_connection = on
+            elif kind is FaultKind.QUICK_STOP_STAYS:
+                node.quick_stop_stays = on
+            elif kind is FaultKind.MODE_NOT_CONFIRMED:
+                node.mode_frozen = on
+            elif kind is FaultKind.STARTS_IN_FAULT:
+                node.boot_fault = int(f.param) if on else 0
+            elif kind is FaultKind.FAULT_RESET_IGNORED:
+                node.boot_fault = BOOT_FAULT_CODE if on else 0
+                node.fault_resets_needed = int(f.param) if on else 1
 
     def _sensor_faults(self, fr: Frame) -> Frame:
         """The sensor faults of the EMAs whose measured values ``fr`` carries, applied to those values."""
@@ -368,6 +490,11 @@ class FaultInjector:
     # ------------------------------------------------------------ the sans-IO interface
 
     def power_on(self, t: float) -> list[Frame]:
+        """As :meth:`sim.drives.SimDrivePair.power_on`; the drive faults' time base starts here."""
+        if self.t_power_on is None:
+            self.t_power_on = float(t)
+        if self._drive_faults:
+            self._drive_hooks(float(t))
         return self._outbound(self.pair.power_on(t), at_sync=False)
 
     def on_frame(self, frame: Frame, t: float) -> list[Frame]:
@@ -379,6 +506,8 @@ class FaultInjector:
                 self.t0_bus = t - self.T
         if not self.faults and not self.record_truth:
             return self.pair.on_frame(frame, t)  # nothing scheduled: the pair as it is
+        if self._drive_faults:
+            self._drive_hooks(t)
         pre = self._onsets() if is_sync else []
         abort = self._sdo_abort(frame)
         if abort is not None:
@@ -396,6 +525,8 @@ class FaultInjector:
     def tick(self, t: float) -> list[Frame]:
         if not self.faults:
             return self.pair.tick(t)
+        if self._drive_faults:
+            self._drive_hooks(t)
         return self._outbound(self.pair.tick(t), at_sync=False)
 
     def _free_step(self, t: float) -> None:

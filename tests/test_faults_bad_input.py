@@ -112,19 +112,23 @@ def test_profile_values_above_hard_caps_are_refused_naming_the_field(tmp_path, a
 
 _EDS_PRODUCT_CODE = ("[1018sub2]\nParameterName=Product code\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\n"
                      "DefaultValue=0x00000402")
+_EDS_PRODUCT_NUMBER = "ProductNumber=0x00000402"
 
 
 def test_eds_of_another_drive_is_refused_before_the_bus(tmp_path, capsys):
     # the EDS is not TOML: its text is edited, and the edit must have found its line
     text = default_profile_path("ema_drive.eds").read_text()
-    assert _EDS_PRODUCT_CODE in text
+    assert _EDS_PRODUCT_CODE in text and _EDS_PRODUCT_NUMBER in text
     eds = tmp_path / "other.eds"
-    eds.write_text(text.replace(_EDS_PRODUCT_CODE, _EDS_PRODUCT_CODE.replace("0x00000402", "0x00000999")))
+    eds.write_text(text.replace(_EDS_PRODUCT_CODE, _EDS_PRODUCT_CODE.replace("0x00000402", "0x00000999"))
+                   .replace(_EDS_PRODUCT_NUMBER, _EDS_PRODUCT_NUMBER.replace("0x00000402", "0x00000999")))
     act = write_profile_variant("actuation.toml", tmp_path / "actuation.toml", {"canopen": {"eds": "other.eds"}})
     rc = main(["dry-run", "--profile", str(act), "--out", str(tmp_path / "d"), "--quiet"])
     err = capsys.readouterr().err
     assert rc == 3
-    assert "identity 0x1018:02 = 0x00000999 does not match the profile's canopen.product_code = 0x00000402" in err
+    for ema in (1, 2):  # the plan names the profile key, the object and both values
+        assert (f"canopen.product_code: 0x1018:02 at ema{ema}: other.eds describes 0x00000999, the profile expects "
+                f"0x00000402: the EDS describes another device") in err
     assert not (tmp_path / "d").exists()  # nothing ran, nothing was sent
 
 

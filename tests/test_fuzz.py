@@ -21,15 +21,13 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from hil.canopen.frame import Frame
-from hil.canopen.od import load_eds
 from hil.canopen.process import DriveMode, Setpoint
 from hil.errors import KNOWN_ERRORS, ProfileError
 from hil.link import CanopenLink
-from hil.master import MasterCore
 from hil.profiles import load_actuation, load_check, load_simrig
 from hil.transport import InProcessTransport, _to_msg
-from sim.drives import SimDrivePair
 from sim.plant import RigPlant
+from support.canopen_rig import make_master, make_pair
 from support.profiles import load_profile_data, write_profile_variant
 
 ACT = load_actuation()
@@ -44,10 +42,9 @@ foreign = st.integers(0, 0x7FF).filter(lambda c: c & 0x7F not in (0, 1, 2) and c
 def cyclic():
     """A link in the cyclic phase on its own virtual channel (python-can virtual channels are
     process-global by name: a shared name would let other tests' traffic in)."""
-    pair = SimDrivePair(RigPlant(SIM.params, np.random.default_rng(1)),
-                        lambda node_id=None: load_eds(None, node_id=node_id))
+    pair = make_pair(RigPlant(SIM.params, np.random.default_rng(1)))
     tr = InProcessTransport(pair, ACT.timing.sync_period_s, channel="emacheck-fuzz-test")
-    link = CanopenLink(MasterCore(ACT), tr)
+    link = CanopenLink(make_master(), tr)
     state = {"link": link, "smp": link.first_sample()}
     yield state
     tr.close()
@@ -56,7 +53,7 @@ def cyclic():
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(frames, min_size=1, max_size=40))
 def test_random_frames_never_crash_the_master(batch):
-    m = MasterCore(ACT)
+    m = make_master()
     m.start(0.0)
     for k, f in enumerate(batch):  # during the preflight
         try:
@@ -70,7 +67,7 @@ def test_random_frames_never_crash_the_master(batch):
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(frames, min_size=1, max_size=30))
 def test_random_frames_in_the_cyclic_phase_are_refused_typed_or_ignored(batch):
-    m = MasterCore(ACT)
+    m = make_master()
     # a master that believes it is cyclic with both drives alive
     m._gen = None
     from hil.master import Phase

@@ -95,8 +95,9 @@ def silent_figures(r, act) -> dict:
     tr = inj.truth
     step_t = tr.t_s - T  # a truth entry: the state the drive cycle at step_t decided, the plant after it
     after = step_t >= t_last - 1e-9
-    events = {n.node_id: [t - inj.t0_bus for t, producer in n.heartbeat_events if producer == 127]
-              for n in inj.pair.nodes}
+    # (the heartbeat events of the master's-death drill in the preflight come before the first SYNC)
+    events = {n.node_id: [t - inj.t0_bus for t, producer in n.heartbeat_events
+                          if producer == 127 and t - inj.t0_bus > t_last] for n in inj.pair.nodes}
     sod = [t for t, st in zip(step_t[after], tr.state[after]) if all(s == "SWITCH_ON_DISABLED" for s in st)]
     oe = [t for t, st in zip(step_t[after], tr.state[after]) if all(s != "OPERATION_ENABLED" for s in st)]
     before = (tr.t_s <= t_last + 1e-9) & (tr.t_s > t_last - 1.0)

@@ -3,7 +3,13 @@
 Known answers: the EDS defaults (identity, heartbeat, PDO layout), the CiA 301
 frame formats (boot-up, heartbeat, EMCY, SDO abort), the CiA 402 statuswords
 of hil.canopen.cia402, the sensor model of sim.plant at rest (noise-free LVDT
-s_meas = offset, force 0), and the unit conversions of hil.canopen.pdo.
+s_meas = offset, force 0), and the unit conversions of the shipped signal map
+(4096 increments per revolution, LVDT 0x2100 in um, force 0x2101 in 0.1 N).
+The drives are built from the shipped profile's plan (tests/support/canopen_rig.py);
+at power-on their PDOs are the EDS defaults, which are the shipped layout:
+RPDO1 = controlword u16, target position i32, target torque i16; RPDO2 = modes of
+operation i8; TPDO1 = statusword u16, position i32, modes display i8; TPDO2 =
+LVDT i32 [um], force i32 [0.1 N].
 """
 
 from __future__ import annotations
@@ -17,13 +23,16 @@ import pytest
 from hil.canopen.cia402 import State, controlword, decode_state, next_command
 from hil.canopen.errors import InputError
 from hil.canopen.frame import Frame, sync_frame
-from hil.canopen.pdo import DEFAULT_LAYOUT, Rpdo1, Rpdo2, decode_tpdo1, decode_tpdo2, encode_rpdo1, encode_rpdo2
 from hil.canopen.process import DriveMode
 from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
 from hil.canopen.units import permille_to_force_N
+from hil.profiles import load_actuation
+from hil.rig import plan_for
 from sim.drives import QUICK_STOP_HOLD_S, TARGET_WINDOW_INC, NmtState, SimDrivePair, error_register_bits
 from sim.params import RigParams
 from sim.plant import RigPlant
+from support.canopen_rig import make_pair, od_factory, shipped_rig
+from support.profiles import write_profile_variant
 from support.rigs import I_TOTAL, T_S, brief_rig, quiet
 
 INC_PER_MM = I_TOTAL * 4096 / (2 * math.pi)  # 3276.8 increments per mm of stroke
@@ -41,6 +50,25 @@ SW_FAULT = 0x0218
 def make_params() -> RigParams:
     """The default rig of tests/test_sim_plant.py with noise-free LVDTs and load cells."""
     return quiet(brief_rig())
+
+
+# the shipped PDO layout (the EDS defaults) as a minimal master packs and reads it
+def rpdo1(node: int, cw: int, pos: int = 0, torque: int = 0) -> Frame:
+    return Frame(0x200 + node, struct.pack("<Hih", cw, pos, torque))
+
+
+def rpdo2(node: int, mode: int) -> Frame:
+    return Frame(0x300 + node, struct.pack("<b", mode))
+
+
+def tpdo1(frame: Frame) -> tuple[int, int, int]:
+    """(statusword, position actual [inc], modes display)"""
+    return struct.unpack("<Hib", frame.data)
+
+
+def tpdo2(frame: Frame) -> tuple[int, int]:
+    """(LVDT [um], force [0.1 N])"""
+    return struct.unpack("<ii", frame.data)
 
 
 class Rig:
@@ -88,30 +116,30 @@ class Rig:
               torque: tuple[int, int] = (0, 0)) -> dict[int, Frame]:
         """RPDO1 to both drives, then SYNC; returns the SYNC's output by COB-ID."""
         for k, node in enumerate((1, 2)):
-            assert self.send(encode_rpdo1(node, Rpdo1(cw[k], pos[k], torque[k]))) == []
+            assert self.send(rpdo1(node, cw[k], pos[k], torque[k])) == []
         return self.sync_by_id()
 
     def enable(self, mode1: int = 8, mode2: int = 8) -> None:
         """Start both nodes, set the modes (RPDO2) and walk both drives to OPERATION_ENABLED."""
         self.nmt(0x01)
-        self.send(encode_rpdo2(1, Rpdo2(mode1)))
-        self.send(encode_rpdo2(2, Rpdo2(mode2)))
+        self.send(rpdo2(1, mode1))
+        self.send(rpdo2(2, mode2))
         for cw in (0x06, 0x07, 0x0F):
             self.cycle((cw, cw))
         assert all(n.state_machine.state is State.OPERATION_ENABLED for n in self.pair.nodes)
 
 
 def status(frames: dict[int, Frame], node: int) -> int:
-    return decode_tpdo1(frames[0x180 + node]).statusword
+    return tpdo1(frames[0x180 + node])[0]
 
 
 def position(frames: dict[int, Frame], node: int) -> int:
-    return decode_tpdo1(frames[0x180 + node]).position_inc
+    return tpdo1(frames[0x180 + node])[1]
 
 
 @pytest.fixture
 def pair() -> SimDrivePair:
-    return SimDrivePair(RigPlant(make_params(), np.random.default_rng(0)))
+    return make_pair(RigPlant(make_params(), np.random.default_rng(0)))
 
 
 @pytest.fixture
@@ -342,7 +370,7 @@ def test_enable_path_statuswords(rig):
     assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED  # no mode of operation yet
     assert rig.pair.nodes[1].statusword == SW_SOD
     # CSP by the event RPDO2: applied on reception, visible at once by SDO
-    assert rig.send(encode_rpdo2(1, Rpdo2(8))) == []
+    assert rig.send(rpdo2(1, 8)) == []
     assert rig.read(1, 0x6061, 0, "b") == 8
     rig.cycle((0x0F, 0x00))
     assert status(rig.cycle((0x0F, 0x00)), 1) == SW_OE_CSP_REACHED
@@ -352,16 +380,16 @@ def test_enable_path_statuswords(rig):
 
 def test_synchronous_rpdo_is_latched_until_sync_and_late_ones_counted(rig):
     rig.nmt(0x01)
-    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))
+    rig.send(rpdo1(1, 0x06, 0, 0))
     assert rig.read(1, 0x6041, 0, "H") == SW_SOD  # not applied before the SYNC
-    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))  # a second one before the SYNC
+    rig.send(rpdo1(1, 0x06, 0, 0))  # a second one before the SYNC
     rig.sync()
     assert rig.read(1, 0x6041, 0, "H") == SW_READY
     assert rig.pair.stats.rpdos_late == 1 and rig.pair.stats.rpdos_applied == 1
 
 
 def test_rpdo_ignored_unless_operational(rig):
-    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))
+    rig.send(rpdo1(1, 0x06, 0, 0))
     rig.sync()
     assert rig.pair.nodes[0].statusword == SW_SOD
     assert rig.pair.stats.rpdos_dropped == 1 and rig.pair.stats.rpdos_applied == 0
@@ -376,7 +404,7 @@ def test_rpdo_with_wrong_length_sends_emcy_and_is_not_applied(rig):
     assert status(rig.sync_by_id(), 1) == SW_SOD  # not applied
     assert rig.send(Frame(0x201, b"\x06\x00")) == []  # error still active: no second EMCY
     # a correct RPDO resets the error
-    assert rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0))) == [Frame(0x081, bytes(8))]
+    assert rig.send(rpdo1(1, 0x06, 0, 0)) == [Frame(0x081, bytes(8))]
     rig.sync()
     assert rig.pair.nodes[0].statusword == SW_READY
     assert rig.read(1, 0x1003, 1, "I") == 0x8210
@@ -392,7 +420,7 @@ def test_event_driven_tpdo(rig):
     out = rig.nmt(0x01)  # sent once on entering OPERATIONAL
     assert out == [Frame(0x181, bytes.fromhex("5002 00000000 00"))]
     assert 0x181 not in rig.sync_by_id()  # nothing changed
-    rig.send(encode_rpdo1(1, Rpdo1(0x06, 0, 0)))
+    rig.send(rpdo1(1, 0x06, 0, 0))
     frames = rig.sync()
     assert Frame(0x181, bytes.fromhex("3102 00000000 00")) in frames  # statusword changed at this SYNC
     assert rig.pair.tick(0.05) == []
@@ -423,8 +451,8 @@ def test_cst_force_follows_torque_against_csp_drive(rig):
     f1, f2 = [], []
     for k in range(1000):  # torque ramp over 0.5 s to 100 per mille, hold 1.5 s
         frames = rig.cycle((0x0F, 0x0F), torque=(round(100 * min(1.0, k / 250)), 0))
-        f1.append(decode_tpdo2(frames[0x281]).force_dN / 10)
-        f2.append(decode_tpdo2(frames[0x282]).force_dN / 10)
+        f1.append(tpdo2(frames[0x281])[1] / 10)
+        f2.append(tpdo2(frames[0x282])[1] / 10)
     f_cmd = permille_to_force_N(100, I_TOTAL, 1.0)  # 502.65 N
     assert f_cmd == pytest.approx(502.6548, abs=1e-3)
     # the FORCE-mode EMA rings lightly damped (plant docs): compare the mean over 0.8 s
@@ -488,11 +516,11 @@ def test_illegal_command_leaves_state_unchanged(rig):
 
 def test_unsupported_mode_by_rpdo_disables_the_drive(rig):
     rig.enable()
-    rig.send(encode_rpdo2(1, Rpdo2(1)))  # profile position: not supported
+    rig.send(rpdo2(1, 1))  # profile position: not supported
     rig.cycle((0x0F, 0x0F))
     frames = rig.cycle((0x0F, 0x0F))
     assert status(frames, 1) == SW_OE  # bit 12 clear, display unchanged
-    assert decode_tpdo1(frames[0x181]).mode_display == 8
+    assert tpdo1(frames[0x181])[2] == 8
     assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED
 
 
@@ -509,7 +537,7 @@ def test_injected_fault_emcy_and_fault_reset(rig):
     assert rig.read(1, 0x1003, 0, "B") == 1 and rig.read(1, 0x1003, 1, "I") == 0x2310
     frames = rig.sync()  # controlword 0x0F repeated in FAULT: illegal, counted
     assert rig.pair.stats.illegal_commands >= 1
-    frames = rig.send(encode_rpdo1(1, Rpdo1(0x80, 0, 0)))
+    frames = rig.send(rpdo1(1, 0x80, 0, 0))
     frames = rig.sync()
     assert Frame(0x081, bytes(8)) in frames  # EMCY "no error" on the fault reset
     assert status(rig.sync_by_id(), 1) == SW_SOD
@@ -525,14 +553,17 @@ def test_injected_fault_emcy_and_fault_reset(rig):
 def test_round_trip_master_configures_enables_and_follows_a_csp_ramp(rig):
     pair = rig.pair
     nodes = (1, 2)
-    for n in nodes:
-        writes = DEFAULT_LAYOUT.configuration_writes(n)
-        assert len(writes) == 4 * 5 + 9  # per PDO: disable, clear, count, type, enable + entries
+    plan = shipped_rig().plan
+    for n, name in zip(nodes, ("ema1", "ema2")):
+        layout = plan.node(name).layout
+        writes = layout.configuration_writes()
+        # per PDO: disable, clear, count, type, enable + entries; plus the unused PDOs disabled
+        assert len(writes) == 4 * 5 + 9 + len(layout.disable)
         for w in writes:
             rig.sdo(n, w.index, w.subindex, w.data)
     assert rig.nmt(0x01) == []
     for n in nodes:
-        rig.send(encode_rpdo2(n, Rpdo2(8)))
+        rig.send(rpdo2(n, 8))
 
     end_inc = round(0.2 * INC_PER_MM)  # ramp 0 -> 0.2 mm (655 increments) in 1 s
     state = {n: State.SWITCH_ON_DISABLED for n in nodes}
@@ -550,13 +581,13 @@ def test_round_trip_master_configures_enables_and_follows_a_csp_ramp(rig):
                 cw[n] = controlword(cmd)
             if ramp_start is not None:
                 target[n] = round(end_inc * min(1.0, (k - ramp_start) * T_S))
-            rig.send(encode_rpdo1(n, Rpdo1(cw[n], target[n], 0)))
+            rig.send(rpdo1(n, cw[n], target[n], 0))
         frames = rig.sync_by_id()
         for n in nodes:
-            tp1 = decode_tpdo1(frames[0x180 + n])
-            state[n] = decode_state(tp1.statusword)
+            sw, pos, _ = tpdo1(frames[0x180 + n])
+            state[n] = decode_state(sw)
             if applied is not None:
-                errors[n].append(tp1.position_inc - applied[n])
+                errors[n].append(pos - applied[n])
         applied = dict(target) if ramp_start is not None else None
 
     # 3 steps x 2 SYNCs: the TPDO at SYNC k shows the state before SYNC k applied the
@@ -568,7 +599,7 @@ def test_round_trip_master_configures_enables_and_follows_a_csp_ramp(rig):
         assert position(frames, n) == pytest.approx(end_inc, abs=3)
         assert status(frames, n) == SW_OE_CSP_REACHED
     # LVDT of EMA 1 (0.3 mm + 1.075 s) follows the stroke within the backlash
-    assert decode_tpdo2(frames[0x281]).lvdt_um / 1000 == pytest.approx(0.3 + 1.075 * 0.2, abs=0.1)
+    assert tpdo2(frames[0x281])[0] / 1000 == pytest.approx(0.3 + 1.075 * 0.2, abs=0.1)
     stats = pair.stats
     assert stats.syncs == 600 and stats.plant_steps == 601
     assert stats.rpdos_late == 0 and stats.rpdos_dropped == 0 and stats.illegal_commands == 0
@@ -630,14 +661,17 @@ def test_random_frames_never_raise_and_the_pair_recovers(rig):
 
 def test_constructor_and_call_validation(pair):
     plant = pair.plant
+    rig = shipped_rig()
     with pytest.raises(InputError, match="plant"):
-        SimDrivePair("plant")
-    with pytest.raises(InputError, match="node_ids"):
-        SimDrivePair(plant, node_ids=(3, 3))
-    with pytest.raises(InputError, match="node_ids"):
-        SimDrivePair(plant, node_ids=(1, 128))
+        SimDrivePair("plant", rig.plan, od_factory(rig))
+    with pytest.raises(InputError, match="plan"):
+        SimDrivePair(plant, "plan", od_factory(rig))
+    with pytest.raises(InputError, match="od_factory"):
+        SimDrivePair(plant, rig.plan, "profiles/ema_drive.eds")
+    with pytest.raises(InputError, match=r"od_factory\('ema1', 1\) must return"):
+        SimDrivePair(plant, rig.plan, lambda name, node_id: None)
     with pytest.raises(InputError, match="counts_per_rev"):
-        SimDrivePair(plant, counts_per_rev=0)
+        make_pair(plant, counts_per_rev=0)
     with pytest.raises(InputError, match="frame"):
         pair.on_frame(b"\x01\x00", 0.0)
     with pytest.raises(InputError, match="t ="):
@@ -651,9 +685,12 @@ def test_constructor_and_call_validation(pair):
         pair.inject_fault(2, 0x2310)
 
 
-def test_node_ids_and_counts_per_rev_option():
+def test_node_ids_of_the_profile_and_counts_per_rev_option(tmp_path):
+    path = write_profile_variant("actuation.toml", tmp_path / "actuation.toml",
+                                 {"canopen": {"node_id_ema1": 5, "node_id_ema2": 9}})
+    rig5 = plan_for(load_actuation(path), path)
     plant = RigPlant(make_params(), np.random.default_rng(0))
-    pair = SimDrivePair(plant, node_ids=(5, 9), counts_per_rev=8192)
+    pair = make_pair(plant, rig5, counts_per_rev=8192)
     rig = Rig(pair)
     assert pair.power_on(0.0) == [Frame(0x705, b"\x00"), Frame(0x709, b"\x00")]
     assert rig.read(9, 0x608F, 1, "I") == 8192
@@ -871,10 +908,64 @@ def test_drive_cycle_on_its_own_clock_stops_at_the_next_sync(rig):
 
 def test_serial_numbers_are_the_drives_own_data():
     """``serials`` are what 0x1018:04 reports, restored at power-on and after reset node."""
-    pair = SimDrivePair(RigPlant(make_params(), np.random.default_rng(0)), serials=(0x5E000101, 0x5E000102))
+    pair = make_pair(RigPlant(make_params(), np.random.default_rng(0)), serials=(0x5E000101, 0x5E000102))
     pair.power_on(0.0)
     assert [n.read(0x1018, 4) for n in pair.nodes] == [0x5E000101, 0x5E000102]
     pair.on_frame(Frame(0x000, bytes([0x81, 0])), 0.01)  # NMT reset node, all nodes
     assert [n.read(0x1018, 4) for n in pair.nodes] == [0x5E000101, 0x5E000102]
     with pytest.raises(InputError, match="serials"):
-        SimDrivePair(RigPlant(make_params(), np.random.default_rng(0)), serials=(1,))
+        make_pair(RigPlant(make_params(), np.random.default_rng(0)), serials=(1,))
+
+
+# ------------------------------------------------------------------ quick stop option code 0x605A
+
+
+def _quick_stop_words(rig: Rig, option: int, n: int = 40) -> list[int]:
+    """Drive 1 enabled, 0x605A = ``option``, quick stop at a SYNC; its statuswords over ``n`` SYNCs."""
+    rig.write(1, 0x605A, 0, "h", option)
+    rig.enable()
+    for _ in range(5):
+        rig.cycle((0x0F, 0x0F))
+    rig.cycle((0x02, 0x0F))  # quick stop applied at this SYNC
+    return [status(rig.cycle((0x02, 0x0F)), 1) for _ in range(n)]
+
+
+@pytest.mark.parametrize("option", [1, 2, 3, 4])
+def test_quick_stop_options_1_to_4_hold_then_switch_on_disabled(rig, option):
+    hold = round(QUICK_STOP_HOLD_S / T_S)
+    assert _quick_stop_words(rig, option) == [SW_QSA] * hold + [SW_SOD] * (40 - hold)
+
+
+def test_quick_stop_option_0_disables_the_drive_at_once(rig):
+    words = _quick_stop_words(rig, 0, 5)
+    assert words == [SW_SOD] * 5  # switch on disabled in the drive cycle of the quick stop itself
+    assert rig.pair.nodes[0].setpoint.mode is DriveMode.DISABLED
+
+
+@pytest.mark.parametrize("option", [5, 6, 7, 8])
+def test_quick_stop_options_5_to_8_stay_until_disable_voltage(rig, option):
+    words = _quick_stop_words(rig, option, 100)  # 0.2 s, four times the hold
+    assert words == [SW_QSA] * 100
+    node = rig.pair.nodes[0]
+    held = node.setpoint
+    assert held.mode is DriveMode.POSITION  # holding the angle where the quick stop began
+    rig.cycle((0x0F, 0x0F))  # enable operation: transition 16 is not in the table, refused
+    assert node.state_machine.state is State.QUICK_STOP_ACTIVE and rig.pair.stats.illegal_commands == 1
+    rig.cycle((0x00, 0x0F))  # disable voltage: transition 12
+    assert status(rig.cycle((0x00, 0x0F)), 1) == SW_SOD
+    assert node.setpoint.mode is DriveMode.DISABLED
+
+
+def test_quick_stop_option_values_are_validated_and_a_drive_without_605a_takes_2(rig):
+    for bad in (9, -1):
+        with pytest.raises(SdoAbortError) as exc:
+            rig.write(1, 0x605A, 0, "h", bad)
+        assert exc.value.code is SdoAbortCode.VALUE_RANGE_EXCEEDED
+    assert rig.read(1, 0x605A, 0, "h") == 2  # the shipped EDS's default
+    node = rig.pair.nodes[0]
+    del node.store.object_dictionary[0x605A]  # a drive whose EDS has no 0x605A
+    hold = round(QUICK_STOP_HOLD_S / T_S)
+    rig.enable()
+    rig.cycle((0x02, 0x0F))
+    words = [status(rig.cycle((0x02, 0x0F)), 1) for _ in range(hold + 3)]
+    assert words == [SW_QSA] * hold + [SW_SOD] * 3

@@ -92,15 +92,13 @@ def test_serve_answers_sync_and_stops_on_event():
     import can
     import numpy as np
 
-    from hil.canopen.od import load_eds
     from hil.profiles import load_simrig
     from hil.sim_server import serve
-    from sim.drives import SimDrivePair
     from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
 
     simrig = load_simrig()
-    pair = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(1)),
-                        lambda node_id=None: load_eds(None, node_id=node_id))
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(1)))
     channel = "emacheck-test-serve"
     master = can.Bus(interface="virtual", channel=channel)
     stop = threading.Event()
@@ -133,3 +131,50 @@ def test_serve_answers_sync_and_stops_on_event():
     st = out["stats"]
     assert st.syncs == 3 and st.plant_steps == 4 and st.frames_rx == 4 and st.send_errors == 0
     assert st.tpdos_sent == 12 and st.frames_tx >= 2 + 12
+
+
+def test_serve_with_a_sensor_node_boots_and_answers_it(tmp_path):
+    """hil.sim_server.serve with the rig's CiA 401 node (tests/support/sensor_rig.py): its boot-up, its SDO
+    server (identity 0x1018:01) and its default event TPDO once operational, on a python-can virtual bus."""
+    import struct
+    import threading
+
+    import can
+    import numpy as np
+
+    from hil.canopen.frame import Frame
+    from hil.canopen.sdo import SdoClient, SdoEvent
+    from hil.profiles import load_simrig
+    from hil.sim_server import serve
+    from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
+    from support.sensor_rig import sensor_rig
+
+    _, rig = sensor_rig(tmp_path / "actuation.toml")
+    pair = make_pair(RigPlant(load_simrig().params, np.random.default_rng(1)), rig)
+    channel = "emacheck-test-serve-sensor"
+    master = can.Bus(interface="virtual", channel=channel)
+    stop, ready = threading.Event(), threading.Event()
+    out: dict = {}
+    th = threading.Thread(target=lambda: out.update(stats=serve(
+        can.Bus(interface="virtual", channel=channel), pair, stop=stop, on_ready=ready.set)))
+    th.start()
+    try:
+        assert ready.wait(10)
+        boot = sorted((m.arbitration_id, bytes(m.data)) for m in (master.recv(2), master.recv(2), master.recv(2)))
+        assert boot == [(0x701, b"\x00"), (0x702, b"\x00"), (0x703, b"\x00")]
+        client = SdoClient(3)
+        req = client.start_upload(0x1018, 1, 0.0)
+        master.send(can.Message(arbitration_id=req.arbitration_id, data=req.data, is_extended_id=False))
+        m = master.recv(2)
+        assert m is not None and m.arbitration_id == 0x583
+        ev = client.on_frame(Frame(m.arbitration_id, bytes(m.data)), 0.0)
+        assert isinstance(ev, SdoEvent) and struct.unpack("<I", ev.data)[0] == 0x0E3A
+        master.send(can.Message(arbitration_id=0x000, data=[0x01, 3], is_extended_id=False))  # start node 3
+        ids = sorted(m.arbitration_id for m in (master.recv(2), master.recv(2)))
+        assert ids == [0x283, 0x383]  # its EDS default: TPDO2 and TPDO3 event driven, sent on entering
+    finally:
+        stop.set()
+        th.join(10)
+        master.shutdown()
+    assert not th.is_alive() and out["stats"].send_errors == 0

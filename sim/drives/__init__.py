@@ -1,4 +1,4 @@
-"""Two simulated CiA 402 EMA drives as CANopen slaves around one rig plant (sans-IO).
+"""The rig's simulated CANopen nodes around one rig plant: two CiA 402 EMA drives and the sensor nodes (sans-IO).
 
 :class:`SimDrivePair` (:mod:`sim.drives.pair`) is the entry point; the
 modules of this package are listed in its docstring.
@@ -13,7 +13,9 @@ from sim.drives.nmt_slave import (
     EMCY_PDO_LENGTH_ERROR,
     EMCY_PDO_LENGTH_EXCEEDED,
 )
+from sim.drives.node import LiveInput, SimNode
 from sim.drives.pair import SimDrivePair, SimPairStats
+from sim.drives.sensor_node import SimSensorNode
 
 __all__ = [
     "EMCY_NO_ERROR",
@@ -23,8 +25,11 @@ __all__ = [
     "TARGET_WINDOW_INC",
     "NmtCommand",
     "NmtState",
+    "LiveInput",
     "SimDrive",
     "SimDrivePair",
+    "SimNode",
     "SimPairStats",
+    "SimSensorNode",
     "error_register_bits",
 ]

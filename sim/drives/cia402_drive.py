@@ -14,10 +14,17 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   0x6060 is aborted (0x06090030); an RPDO cannot be refused, so a drive whose
   0x6060 holds another value keeps 0x6061 unchanged, clears statusword bit 12
   and commands DISABLED (holding brake), even in OPERATION_ENABLED.
-* Quick stop (option code 2): the drive holds the motor angle measured when
-  the quick stop began for :data:`QUICK_STOP_HOLD_S` (a fixed 50 ms, counted
-  in SYNC cycles of the plant's sample period; 0x6085 is not used), then
-  takes transition 12 to SWITCH_ON_DISABLED (brake).
+* Quick stop, as the quick stop option code 0x605A says (read when the
+  quick stop begins; a drive without 0x605A takes 2): 1..4 the drive holds
+  the motor angle measured when the quick stop began for
+  :data:`QUICK_STOP_HOLD_S` (a fixed 50 ms standing for the ramp, counted in
+  SYNC cycles of the plant's sample period; 0x6085 is not used), then takes
+  transition 12 to SWITCH_ON_DISABLED (brake); 0 disables the drive function
+  at once (SWITCH_ON_DISABLED at the next drive cycle); 5..8 hold the angle
+  and stay in QUICK_STOP_ACTIVE until disable voltage (transition 12 by
+  command; transition 16 back to OPERATION_ENABLED is not in the table of
+  :mod:`hil.canopen.cia402`, so enable operation is refused there). Other
+  values of 0x605A are refused (0x06090030).
 * Fault reaction: FAULT_REACTION_ACTIVE lasts until the next SYNC, then FAULT;
   both command DISABLED.
 * Abort connection option 0x6007 (0..3; manufacturer-specific negative
@@ -34,6 +41,15 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   Bit 8 (halt) is not implemented.
 * Software position limits 0x607D: a write that makes max < min is aborted
   (0x06090036). Rated torque 0x6076 and 0x608F must be > 0 (0x06090032).
+* Fault hooks (set by :mod:`sim.faults`, off by default): ``boot_fault``
+  (an error code: the drive enters FAULT at every boot, power-on or reset
+  node, with an EMCY after its boot-up frame, until a fault reset clears
+  it), ``fault_resets_needed`` (the rising edges of bit 7 a FAULT takes to
+  clear: the earlier ones are ignored), ``ignore_abort_connection`` (a
+  heartbeat event sends its EMCY but 0x6007 is not applied),
+  ``quick_stop_stays`` (QUICK_STOP_ACTIVE is kept whatever 0x605A says) and
+  ``mode_frozen`` (0x6061 does not follow 0x6060: the drive keeps running in
+  the mode it shows).
 * Statusword: bit 12 (drive follows the command) in OPERATION_ENABLED with a
   supported mode, bit 11 when the last target was clipped (0x607D in CSP,
   0x6072 in CST), bit 10 in CSP when the effective target is within
@@ -55,11 +71,11 @@ from hil.canopen.cia402 import (
     Statusword,
     state_word,
 )
+from hil.canopen.emcy import error_register_bits
 from hil.canopen.errors import InputError
 from hil.canopen.od import AbortConnectionOption
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortCode
-from hil.canopen.cycle import encode_raw
 from hil.canopen.signalmap import Signal, angle_scale_factor_group
 from hil.canopen.units import (
     N_from_permille,
@@ -87,6 +103,12 @@ _CSP_CST_BITS = 1 << 7 | 1 << 9
 _ABORT_OPTIONS = frozenset(int(o) for o in AbortConnectionOption)
 _ABORT_COMMAND = {int(AbortConnectionOption.DISABLE_VOLTAGE): Command.DISABLE_VOLTAGE,
                   int(AbortConnectionOption.QUICK_STOP): Command.QUICK_STOP}
+#: Quick stop option codes 0x605A the drive accepts (CiA 402 0..8), those that stay in
+#: QUICK_STOP_ACTIVE, and the code of a drive without 0x605A.
+_QUICK_STOP_OPTIONS = frozenset(range(9))
+_QS_STAY = frozenset((5, 6, 7, 8))
+_QS_DEFAULT = 2
+_FAULTY = (State.FAULT_REACTION_ACTIVE, State.FAULT)
 
 # Hot-path constants (plain ints and identities instead of enum arithmetic and hashing).
 _CSP = int(OperationMode.CSP)
@@ -114,7 +136,7 @@ class Cia402Drive:
     """Mixin of :class:`sim.drives.drive.SimDrive`: the CiA 402 drive and its live values.
 
     The attributes below are the ones this part owns (set in
-    :meth:`_init_drive`, :meth:`_reset_drive` and :meth:`_measure`; the
+    :meth:`_init_drive`, :meth:`_reset_application` and :meth:`_measure`; the
     pair writes ``_torque_fetch`` once and ``_torque_val`` /
     ``_torque_stale`` when it fetches the torques). It uses ``ema_index``,
     ``store``, ``_int``, ``_icache``, ``_store`` and ``_counters`` of the
@@ -129,15 +151,25 @@ class Cia402Drive:
         Fault hook (:mod:`sim.faults`): ``f(node, t, mode, value) -> (mode, value)``
         replaces the plant command the drive computed at each SYNC (e.g. a
         runaway drive); None = no fault.
+    boot_fault : int
+        Fault hook: an error code (0: none); the drive boots into FAULT with it until a fault reset.
+    fault_resets_needed : int
+        Fault hook: fault resets (rising edges of controlword bit 7) a FAULT takes to clear (1).
+    ignore_abort_connection : bool
+        Fault hook: a heartbeat event does not apply 0x6007 (its EMCY is still sent).
+    quick_stop_stays : bool
+        Fault hook: QUICK_STOP_ACTIVE is kept until disable voltage, whatever 0x605A says.
+    mode_frozen : bool
+        Fault hook: 0x6061 does not follow 0x6060; the drive runs in the mode it shows.
     _i_total : float
         The plant's gear ratio [rad/mm] (0x2102).
     _cpr_override : int or None
         The drive's own 0x608F:01, written at power-on and reset node.
     _qs_cycles : int
         Quick-stop hold in SYNC cycles.
-    _phi_rad, _s_mm, _F_N : float
-        This EMA's motor angle [rad], LVDT stroke [mm] and load-cell force
-        [N] of the current sample (:meth:`_measure`).
+    _phi_rad : float
+        This EMA's motor angle [rad] of the current sample (:meth:`_measure`; the
+        measured inputs read the whole sample ``_raw``).
     _torque_val : float
         Drive torque [N m], valid unless ``_torque_stale``.
     _torque_stale : bool
@@ -169,23 +201,30 @@ class Cia402Drive:
         The angle a quick stop holds [rad].
     _qs_left : int
         SYNC cycles of the hold left.
+    _qs_stay : bool
+        The quick stop stays active after the hold (0x605A = 5..8, or ``quick_stop_stays``).
+    _resets_seen : int
+        Fault resets received in the current FAULT (``fault_resets_needed``).
     """
 
     def _init_drive(self, gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
-                    serial: int | None = None, *, angle_units_per_rad: float | None = None,
-                    rated_torque_Nm: float | None = None) -> None:
+                    *, angle_units_per_rad: float | None = None, rated_torque_Nm: float | None = None) -> None:
         """Initial state: drive in SWITCH_ON_DISABLED, no sample yet (see :class:`~sim.drives.drive.SimDrive`)."""
         self._i_total = float(gear_ratio_rad_per_mm)
         self._cpr_override = counts_per_rev
-        self._serial = serial
-        self._angle_k = angle_units_per_rad  # position units per rad the profile states (None: the drive's own)
+        self.boot_fault = 0
+        self.fault_resets_needed = 1
+        self.ignore_abort_connection = False
+        self.quick_stop_stays = False
+        self.mode_frozen = False
+        self._resets_seen = 0
+        self._qs_stay = False
+        self._angle_k = angle_units_per_rad  # position units per rad the profile states (a drive without 0x608F)
         self._rated_override = rated_torque_Nm
         self._qs_cycles = max(1, math.ceil(QUICK_STOP_HOLD_S / sample_period_s - 1e-9))
         self.state_machine = DriveStateMachine(remote=True)
         self.command_override: Callable[[Cia402Drive, float, int, float], tuple[int, float]] | None = None
         self._phi_rad = 0.0
-        self._s_mm = 0.0
-        self._F_N = 0.0
         self._torque_val = 0.0
         self._torque_stale = False
         self._torque_fetch: Callable[[], None] = self._no_torque_source  # set by SimDrivePair
@@ -199,53 +238,37 @@ class Cia402Drive:
         self._sp_mode = _MODE_DISABLED
         self._sp_value = 0.0
         self._sp_obj: Setpoint | None = None
-        self._reset_drive()
+        self._reset_application()
 
     def _live_objects(self) -> dict[tuple[int, int], Callable[[], int | float]]:
-        """The objects whose value the drive computes when read, with their getters: its CiA 402
-        objects, the gear-ratio object and every measured input the rig's map puts on this drive."""
-        od = self.store_od
-        live = {
+        """The objects whose value the drive computes when read: the node's (error register, the
+        measured inputs the rig's map puts on this drive), its CiA 402 objects and the gear-ratio object."""
+        live = super()._live_objects()
+        live.update({
             (0x6041, 0): self._statusword_now,
             (0x6061, 0): lambda: self._mode_display,
             (0x6064, 0): self._position_now,
             (0x603F, 0): lambda: self.state_machine.error_code,
-            (0x1001, 0): lambda: self.error_register,
-        }
-        if 0x6077 in od:
+        })
+        if 0x6077 in self.store_od:
             live[(0x6077, 0)] = lambda: self.torque_actual_permille
         if self._gear_object is not None:
             live[self._gear_object] = lambda: self._i_total
-        for k, inp in enumerate(self._inputs):
-            if inp.key == (0x6064, 0) and inp.signal is Signal.MOTOR_ANGLE:
-                continue  # the drive's own position actual value
-            live[inp.key] = self._input_getter(k, inp)
         return live
 
     def _input_getter(self, k: int, inp) -> Callable[[], int | float]:
-        """Getter of a measured input: the plant's value of this EMA, scaled and rounded into its data type."""
-        if inp.signal is Signal.MOTOR_ANGLE:
-            return self._position_now if inp.scale is None else self._scaled(k, inp, "_phi_rad")
-        return self._scaled(k, inp, "_s_mm" if inp.signal is Signal.LVDT else "_F_N")
-
-    def _scaled(self, k: int, inp, attr: str) -> Callable[[], int | float]:
-        units, off, dtype = inp.scale.units_per_si, inp.scale.offset, inp.data_type
-        memo = self._memo
-
-        def get() -> int | float:
-            v = memo[k]
-            if v is None:
-                x = getattr(self, attr)
-                v = memo[k] = encode_raw(dtype, (x - off) * units if off else x * units)
-            return v
-
-        return get
+        """Getter of a measured input; this EMA's motor angle in the drive's own position units
+        (0x6064, or the profile leaves the scaling to the drive) is its position actual value."""
+        if inp.signal is Signal.MOTOR_ANGLE and inp.ema == self.ema_index + 1 \
+                and (inp.scale is None or inp.key == (0x6064, 0)):
+            return self._position_now
+        return super()._input_getter(k, inp)
 
     # ------------------------------------------------------------------ reset and own data
 
-    def _reset_drive(self) -> None:
-        """Power-on / reset node: SWITCH_ON_DISABLED, 0x6061 from the EDS, plant command DISABLED, the
-        modes it supports from its 0x6502 (CSP bit 7, CST bit 9)."""
+    def _reset_application(self) -> None:
+        """Power-on / reset node: SWITCH_ON_DISABLED (FAULT with ``boot_fault``), 0x6061 from the EDS,
+        plant command DISABLED, the modes it supports from its 0x6502 (CSP bit 7, CST bit 9)."""
         modes = self.store.int_or(0x6502, 0, _CSP_CST_BITS)
         self._modes = frozenset(m for m, bit in ((_CSP, 7), (_CST, 9)) if modes >> bit & 1)
         self.state_machine = DriveStateMachine(remote=True)
@@ -256,21 +279,35 @@ class Cia402Drive:
         self._target_eff_inc: int | None = None
         self._qs_phi_rad = 0.0
         self._qs_left = 0
+        self._qs_stay = False
+        self._resets_seen = 0
         self._set_setpoint(_MODE_DISABLED, 0.0)
+        if self.boot_fault:
+            self.state_machine.fault(self.boot_fault)
+            self.state_machine.fault_reaction_done()
+
+    def _after_boot(self) -> None:
+        """A drive that booted into FAULT says so (EMCY with its error code)."""
+        if self.boot_fault and self.state_machine.state is State.FAULT:
+            self._emcy(self.state_machine.error_code)
+
+    def _app_error_bits(self) -> int:
+        """Error register bits of the latched fault (:func:`hil.canopen.emcy.error_register_bits`)."""
+        sm = self.state_machine
+        if sm.state in _FAULTY and sm.error_code:
+            return error_register_bits(sm.error_code)
+        return 0
 
     def _apply_own_data(self) -> None:
         """The drive's own data, restored at power-on and reset node: what its EDS leaves open
         (identity, device type, supported modes, rated torque, ... :attr:`own_data`), its serial
         number (0x1018:04) and, where given, its encoder resolution (0x608F)."""
-        for (index, sub), data in self.own_data.items():
-            self._store(index, sub, data)
-        if self._serial is not None:
-            self._store(0x1018, 4, struct.pack("<I", self._serial))
+        super()._apply_own_data()
         if self._cpr_override is not None:
             self._store(0x608F, 1, struct.pack("<I", self._cpr_override))
             self._store(0x608F, 2, struct.pack("<I", 1))
 
-    def _check_drive_write(self, index: int, subindex: int, value: float | None) -> None:
+    def _check_app_write(self, index: int, subindex: int, value: float | None) -> None:
         """Validate an SDO write of a drive object (raise SdoAbortedError to refuse)."""
         if index == 0x6060:
             if value not in self._modes:
@@ -286,11 +323,15 @@ class Cia402Drive:
         elif index == 0x6007:
             if value not in _ABORT_OPTIONS:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
+        elif index == 0x605A:
+            if value not in _QUICK_STOP_OPTIONS:
+                raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
 
     def _mode_written(self) -> None:
-        """0x6060 written: a supported mode shows in 0x6061 (another one is ignored)."""
+        """0x6060 written: a supported mode shows in 0x6061 (another one is ignored; with
+        ``mode_frozen`` every one)."""
         mode = self._int(0x6060)
-        if mode in self._modes:
+        if mode in self._modes and not self.mode_frozen:
             self._mode_display = mode
 
     # ------------------------------------------------------------------ live values
@@ -302,9 +343,8 @@ class Cia402Drive:
         (0x6077), see :meth:`sim.drives.SimDrivePair._fetch_torque`.
         """
         k = self.ema_index
+        self._raw = raw
         self._phi_rad = raw[1 + k]
-        self._s_mm = raw[3 + k]
-        self._F_N = raw[5 + k]
         self._pos_memo = None
         memo = self._memo
         for j in range(len(memo)):
@@ -332,15 +372,17 @@ class Cia402Drive:
         self._pos_memo = None
 
     def _k_inc(self) -> float:
-        """Increments per rad, :func:`hil.canopen.units.increments_per_rad` of :attr:`counts_per_rev` (cached)."""
+        """Increments (position units) per rad, cached: the drive's own units, in this order the
+        position factor group 0x6091/0x6092 (where the map reads the angle in user units), the encoder
+        resolution 0x608F where the drive has one, the scaling the profile states, 4096 per revolution."""
         k = self._inc_per_rad
         if k is None:
-            if self._angle_k is not None:
-                k = self._angle_k
-            elif self._factor_group:
+            if self._factor_group:
                 so = self.store.int_or
                 k = angle_scale_factor_group(so(0x6091, 1, 1), so(0x6091, 2, 1), so(0x6092, 1, 1),
                                              so(0x6092, 2, 1)).units_per_si
+            elif self._angle_k is not None and self.store.var(0x608F, 1) is None:
+                k = self._angle_k
             else:
                 k = increments_per_rad(self.counts_per_rev)
             self._inc_per_rad = k
@@ -348,8 +390,12 @@ class Cia402Drive:
 
     @property
     def counts_per_rev(self) -> float:
-        """Position increments per motor revolution, 0x608F:01 / 0x608F:02."""
-        return self.store.int_or(0x608F, 1, 4096) / self.store.int_or(0x608F, 2, 1)
+        """Position increments per motor revolution: 0x608F:01 / 0x608F:02 (a drive without 0x608F:
+        the profile's, else 4096)."""
+        so = self.store.int_or
+        if self._angle_k is not None and self.store.var(0x608F, 1) is None:
+            return self._angle_k * 2.0 * math.pi
+        return so(0x608F, 1, 4096) / so(0x608F, 2, 1)
 
     @property
     def position_inc(self) -> int:
@@ -402,6 +448,8 @@ class Cia402Drive:
             mode = self._icache.get(_K_MODE)
             if mode is None:
                 mode = self._int(0x6060)
+            if self.mode_frozen:
+                mode = self._mode_display
             if mode in self._modes:
                 extra = _SW_FOLLOWS
                 if self._limit_active:
@@ -447,6 +495,7 @@ class Cia402Drive:
         # one in a state where that was seen to be a no-op is a no-op again (the outcome
         # of on_controlword depends only on the state, the previous and this word).
         repeated = cw == sm.previous_controlword
+        before_code, before_transition = sm.error_code, sm.last_transition
         if repeated:
             seen = self._cw_noop.get(cw)
             if seen is not None and old in seen:
@@ -458,6 +507,13 @@ class Cia402Drive:
             self._counters.illegal_commands += 1
             return
         new = sm.state
+        if old is State.FAULT and new is not old:
+            self._resets_seen += 1
+            if self._resets_seen < self.fault_resets_needed:  # (hook) this reset is ignored
+                sm.state, sm.error_code, sm.last_transition = old, before_code, before_transition
+                return
+            self._resets_seen = 0
+            self.boot_fault = 0  # the cause of a fault found at boot is cleared
         if repeated and new is old and (sm.last_transition, sm.error_code) == before:
             self._cw_noop[cw] = self._cw_noop.get(cw, ()) + (old,)
         self._entered(old, new)
@@ -465,14 +521,19 @@ class Cia402Drive:
             self._emcy(EMCY_NO_ERROR)
 
     def _entered(self, old: State, new: State) -> None:
-        """A transition ``old`` -> ``new`` was taken: a quick stop starts holding the angle measured now."""
+        """A transition ``old`` -> ``new`` was taken: a quick stop starts as 0x605A says (holding the
+        angle measured now)."""
         if new is State.QUICK_STOP_ACTIVE and old is not State.QUICK_STOP_ACTIVE:
+            option = self.store.int_or(0x605A, 0, _QS_DEFAULT)
             self._qs_phi_rad = self._phi_rad
-            self._qs_left = self._qs_cycles
+            self._qs_left = 0 if option == 0 else self._qs_cycles
+            self._qs_stay = self.quick_stop_stays or option in _QS_STAY
 
     def _connection_lost(self) -> None:
         """The abort connection option 0x6007 on a connection loss (a heartbeat event), through
         the CiA 402 transition table: 1 fault, 2 disable voltage, 3 quick stop (0 nothing)."""
+        if self.ignore_abort_connection:
+            return  # (fault hook) the EMCY went out, the drive goes on
         sm = self.state_machine
         old = sm.state
         option = self._int(0x6007) if self.store.var(0x6007, 0) is not None else 0
@@ -495,8 +556,9 @@ class Cia402Drive:
         if sm.state is _FRA:
             sm.fault_reaction_done()
         if sm.state is _QSA:
-            if self._qs_left > 0:
-                self._qs_left -= 1
+            if self._qs_left > 0 or self._qs_stay:
+                if self._qs_left > 0:
+                    self._qs_left -= 1
                 self._limit_active = False
                 self._target_eff_inc = None
                 value = self._qs_phi_rad
@@ -511,6 +573,8 @@ class Cia402Drive:
             mode = ic.get(_K_MODE)
             if mode is None:
                 mode = self._int(0x6060)
+            if self.mode_frozen:
+                mode = self._mode_display
             if mode == _CSP and _CSP in self._modes:  # (a supported mode, so the effective one)
                 target = ic.get(_K_TARGET_POS)
                 if target is None:

@@ -1,6 +1,6 @@
-"""NMT slave, heartbeat producer, EMCY producer and error history of a simulated drive.
+"""NMT slave, heartbeat producer, EMCY producer and error history of a simulated node.
 
-The CiA 301 services of :class:`sim.drives.drive.SimDrive` besides SDO
+The CiA 301 services of :class:`sim.drives.node.SimNode` (a drive or a sensor node) besides SDO
 (:mod:`sim.drives.store`) and PDO (:mod:`sim.drives.pdo_engine`): boot-up,
 NMT commands and state, the heartbeat (0x1017), the EMCY (0x1014) and the
 pre-defined error field 0x1003. The frames are those of
@@ -8,12 +8,13 @@ pre-defined error field 0x1003. The frames are those of
 
 Choices (CiA 301 leaves them open or this drive restricts them)
 ---------------------------------------------------------------
-* Power-on: the drive's application boots instantly (CiA 402 transition 1
-  at power-on, NMT INITIALISING -> boot-up frame -> PRE-OPERATIONAL).
-* NMT reset node restores every object to its EDS default (plus the drive's
-  own data, see ``counts_per_rev``) and the drive state to
-  SWITCH_ON_DISABLED; reset communication restores 0x1000..0x1FFF and keeps
-  the drive state. Leaving OPERATIONAL does not change the drive state: the
+* Power-on: the node's application boots instantly (a drive: CiA 402
+  transition 1 at power-on, NMT INITIALISING -> boot-up frame ->
+  PRE-OPERATIONAL).
+* NMT reset node restores every object to its EDS default (plus the node's
+  own data, see :mod:`sim.drives.served`) and the application (a drive: the
+  state SWITCH_ON_DISABLED); reset communication restores 0x1000..0x1FFF and
+  keeps the application's state. Leaving OPERATIONAL does not change the drive state: the
   drive keeps following the last values received. Entering OPERATIONAL
   restarts every PDO's runtime state; leaving it drops latched RPDOs.
 * Heartbeat: sent at the first tick at or after each multiple of the
@@ -29,7 +30,8 @@ Choices (CiA 301 leaves them open or this drive restricts them)
   cycle) at which more than the consumer time passed since that producer's
   last heartbeat. The event sends EMCY 0x8130 (error register bits 0 and 4
   while it stands), is recorded in ``heartbeat_events`` and triggers the
-  CiA 402 abort connection option 0x6007 (:class:`~sim.drives.cia402_drive.Cia402Drive`).
+  application's reaction: a drive's CiA 402 abort connection option 0x6007
+  (:class:`~sim.drives.cia402_drive.Cia402Drive`); a sensor node has none.
   The NMT state is kept (no 0x1029 error behaviour). A heartbeat of that
   producer ends the event (EMCY 0x0000 when no other error stands) and
   re-arms the entry; the drive state is not restored.
@@ -51,8 +53,7 @@ from __future__ import annotations
 
 import struct
 
-from hil.canopen.cia402 import State
-from hil.canopen.emcy import EmcyCode, emcy_frame, error_register_bits
+from hil.canopen.emcy import EmcyCode, emcy_frame
 from hil.canopen.frame import EMCY_COB_ID_BASE, SYNC_COB_ID
 from hil.canopen.nmt import NmtCommand, NmtState, heartbeat_frame
 from hil.canopen.pdo import COB_ID_INVALID
@@ -82,19 +83,18 @@ ERROR_HISTORY_LEN = 4
 #: Tolerance of the time comparisons (heartbeat, inhibit and event timers) [s].
 TIME_EPS_S = 1e-9
 
-_FAULTY = (State.FAULT_REACTION_ACTIVE, State.FAULT)
 _TALKING = (NmtState.PRE_OPERATIONAL, NmtState.OPERATIONAL)
 
 
 class NmtSlave:
-    """Mixin of :class:`sim.drives.drive.SimDrive`: NMT slave, heartbeat, EMCY, error history.
+    """Mixin of :class:`sim.drives.node.SimNode`: NMT slave, heartbeat, EMCY, error history.
 
     The attributes below are the ones this part owns (set in
     :meth:`_init_nmt`). It uses ``node_id``, ``_now``, ``_out``,
     ``_counters``, ``store``, ``sdo``, ``_icache``, ``_int`` and ``_store``
-    of the drive, ``state_machine``, the reset hooks (``_cpr_changed``,
-    ``_apply_own_data``, ``_reset_drive``) and ``_connection_lost`` of
-    :class:`~sim.drives.cia402_drive.Cia402Drive`, and ``_comm_error``,
+    of the node, its application hooks (``_cpr_changed``,
+    ``_apply_own_data``, ``_reset_application``, ``_after_boot``,
+    ``_connection_lost``, ``_app_error_bits``), and ``_comm_error``,
     the PDO lists, ``_refresh_pdos``, ``_restart_pdos``, ``_drop_latched``
     and ``_timed_tpdos`` of :class:`~sim.drives.pdo_engine.PdoEngine`.
 
@@ -143,7 +143,7 @@ class NmtSlave:
         self._cpr_changed()
         if not communication_only:
             self._apply_own_data()
-            self._reset_drive()
+            self._reset_application()
         self._comm_error = False
         self._hb_error = False
         self._hb_consumers = {}
@@ -152,6 +152,8 @@ class NmtSlave:
         self._out.append(heartbeat_frame(self.node_id, NmtState.BOOT_UP))
         self.nmt_state = NmtState.PRE_OPERATIONAL
         self._refresh_comm(restart_heartbeat=True)
+        if not communication_only:
+            self._after_boot()
 
     def _nmt(self, cs: int, t: float) -> None:
         """Apply NMT command specifier ``cs`` (a valid :class:`NmtCommand` value) at time ``t``."""
@@ -272,11 +274,9 @@ class NmtSlave:
 
     @property
     def error_register(self) -> int:
-        """Error register 0x1001: bits of the latched fault plus bits 0 and 4 for a PDO length error."""
-        reg = 0
-        sm = self.state_machine
-        if sm.state in _FAULTY and sm.error_code:
-            reg |= error_register_bits(sm.error_code)
+        """Error register 0x1001: the application's bits (a drive's latched fault) plus bits 0 and 4 for
+        a PDO length error or a heartbeat event."""
+        reg = self._app_error_bits()
         if self._comm_error or self._hb_error:
             reg |= 0x11
         return reg

@@ -1,32 +1,43 @@
-"""Two simulated CiA 402 EMA drives as real CANopen slaves around one rig plant (sans-IO).
+"""The rig's simulated CANopen nodes around one rig plant: two CiA 402 EMA drives and the sensor nodes (sans-IO).
 
-:class:`SimDrivePair` replaces the two EMA drives of the rig in dry-runs and
-tests. Each node (:class:`sim.drives.drive.SimDrive`) is built from the same
-EDS the master reads (``profiles/ema_drive.eds`` through
-:func:`hil.canopen.od.load_eds`) and serves it with canopen's SDO
-server. The pair consumes every frame seen on the bus and returns the frames
-it transmits; time is passed in. No threads, no clocks, no bus objects: the
-caller (an IO shell on a python-can bus, or a test) moves the frames.
+:class:`SimDrivePair` replaces the rig's nodes in dry-runs and tests: the
+two EMA drives (:class:`sim.drives.drive.SimDrive`) and every sensor node of
+the rig's plan, a CiA 401 I/O module or CiA 404 measuring device
+(:class:`sim.drives.sensor_node.SimSensorNode`). Each node is built from the
+EDS the master reads (the shipped ``profiles/ema_drive.eds``, a vendor's
+file, ``profiles/cia401_io.eds``, through the caller's ``od_factory``) and
+the rig's :class:`~hil.canopen.plan.RigPlan`: it serves its EDS with
+canopen's SDO server and the measured inputs the signal map puts on it at
+the mapped objects, with the mapped data type and scaling
+(:mod:`sim.drives.served`). The pair consumes every frame seen on the bus
+and returns the frames its nodes transmit; time is passed in. No threads,
+no clocks, no bus objects: the caller (an IO shell on a python-can bus, or
+a test) moves the frames.
 
 The package, part by part (each module documents its protocol choices):
 
 ========================  ====================================================
 module                    what
 ========================  ====================================================
-``pair``                  this: the two nodes, frame routing, SYNC, the plant
-``drive``                 :class:`SimDrive`, assembled from the parts below;
-                          the SDO write guard
+``pair``                  this: the nodes, frame routing, SYNC, the plant
+``node``                  :class:`SimNode`, the CANopen slave assembled from
+                          the parts below; the SDO write guard
+``drive``                 :class:`SimDrive`: a node with the CiA 402 drive
+``sensor_node``           :class:`SimSensorNode`: a node with measured inputs
+``served``                what each node serves: inputs, own data
+``stats``                 the counters the nodes share
 ``store``                 object dictionary, data store, SDO server (canopen)
 ``pdo_engine``            PDO mapping and communication, TPDOs, RPDOs
 ``nmt_slave``             NMT slave, heartbeat, EMCY, error history 0x1003
 ``cia402_drive``          CiA 402 behaviour, statusword, plant command,
-                          live values (position, LVDT, force, torque)
+                          live values (position, torque)
 ========================  ====================================================
 
 Per SYNC (COB-ID of 0x1005, 0x080 by default) the pair, in this order:
 
 1. sends the due synchronous TPDOs of every OPERATIONAL node with the current
-   sample (the plant state at this SYNC);
+   sample (the plant state at this SYNC): the drives', then the sensor
+   nodes';
 2. applies the synchronous RPDOs latched since the previous SYNC;
 3. computes both drives' setpoints and steps the plant once, so that the
    current sample becomes the state at the next SYNC.
@@ -49,15 +60,20 @@ steps are counted in ``stats.free_steps``, not in ``stats.plant_steps``.
 
 Choices
 -------
-* Power-on: both nodes boot (see :mod:`sim.drives.nmt_slave`). At the first
+* Power-on: every node boots (see :mod:`sim.drives.nmt_slave`). At the first
   power-on the plant is stepped once with both drives DISABLED, so the
   current sample is the measured rig at rest; this step counts in
   ``stats.plant_steps`` (``plant_steps == syncs + 1``).
 * Time passed to :meth:`SimDrivePair.on_frame` and :meth:`SimDrivePair.tick`
   never runs backwards: a smaller ``t`` than the last one is taken as the last.
 * Heartbeats (0x700 + n) go to the heartbeat consumers (0x1016) of the
-  nodes that monitor node n; a node's consumer reacts with EMCY 0x8130 and
-  its abort connection option 0x6007 (see :mod:`sim.drives.nmt_slave`).
+  nodes that monitor node n; a drive's consumer reacts with EMCY 0x8130 and
+  its abort connection option 0x6007, a sensor node's with the EMCY only
+  (see :mod:`sim.drives.nmt_slave`).
+* The two-drive rig (no sensor node) takes the same path per frame as
+  before sensor nodes existed: a sensor node's frames are routed on the
+  paths no drive takes (SDO, SYNC of another COB-ID, RPDOs), so a rig
+  without one pays one truth test per frame.
 * Frames no node consumes (another node's traffic, unknown COB-IDs, NMT for
   other nodes) and malformed ones (NMT not 2 bytes, SYNC over 1 byte, SDO
   request not 8 bytes, unknown NMT command) are counted and ignored.
@@ -67,9 +83,7 @@ from __future__ import annotations
 
 import math
 import operator
-import struct
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import canopen.objectdictionary as cod
 
@@ -78,13 +92,17 @@ from hil.canopen.errors import InputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import lookup
-from hil.canopen.plan import CSP_BIT, CST_BIT, RigPlan
+from hil.canopen.plan import RigPlan
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.canopen.signalmap import ForceControl, NodeRole, NodeSpec, ScaleSource, Signal
+from hil.canopen.signalmap import NodeRole, ScaleSource, Signal
 from hil.canopen.validate import error_code, integer, time_s
-from sim.drives.drive import LiveInput, SimDrive
+from sim.drives.drive import SimDrive
 from sim.drives.nmt_slave import TIME_EPS_S
+from sim.drives.node import SimNode
 from sim.drives.pdo_engine import Pdo
+from sim.drives.sensor_node import SimSensorNode
+from sim.drives.served import live_inputs, own_data
+from sim.drives.stats import SimPairStats, _Counters
 from sim.plant import RigPlant
 
 __all__ = ["FREE_RUN_AFTER_CYCLES", "SimDrivePair", "SimPairStats"]
@@ -97,156 +115,60 @@ _POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTI
 _MODE_DISABLED = int(DriveMode.DISABLED)
 #: Objects a simulated drive needs in its EDS (the CiA 402 objects it acts on).
 _SIM_REQUIRED = ((0x6040, 0), (0x6041, 0), (0x6060, 0), (0x6061, 0), (0x6064, 0), (0x607A, 0))
-#: Device type 0x1000 of a simulated node whose EDS gives none: CiA 402 servo drive, CiA 401 analog
-#: input module, CiA 404 measuring device.
-_DEVICE_TYPE = {402: 0x00020192, 401: 0x00040191, 404: 0x00000194}
-
-
-# --------------------------------------------------------------------------- stats
-
-
-@dataclass(frozen=True, slots=True)
-class SimPairStats:
-    """Counters of a :class:`SimDrivePair` (a snapshot; both nodes together).
-
-    Attributes
-    ----------
-    syncs : int
-        SYNC frames processed.
-    plant_steps : int
-        Calls of ``plant.step`` on a SYNC (one per SYNC plus one at the first power-on).
-    free_steps : int
-        Calls of ``plant.step`` by the drives' own cycle while SYNC is missing.
-    tpdos_sent : int
-        TPDO frames transmitted.
-    rpdos_applied : int
-        RPDOs written into a data store (synchronous ones at their SYNC).
-    rpdos_late : int
-        Latched synchronous RPDOs overwritten by a newer one before their
-        SYNC (the older one missed its cycle).
-    rpdos_dropped : int
-        RPDOs not processed: node not OPERATIONAL, or wrong length.
-    bad_frames_ignored : int
-        Frames no node consumes (unknown COB-ID, another node's traffic,
-        NMT for other nodes) or that are malformed (NMT not 2 bytes, SYNC
-        over 1 byte, SDO request not 8 bytes, unknown NMT command).
-    frames_unpowered : int
-        Frames received before :meth:`SimDrivePair.power_on`.
-    sdo_requests : int
-        SDO request frames served.
-    illegal_commands : int
-        Controlwords refused by the CiA 402 state machine.
-    emcys_sent, heartbeats_sent : int
-        EMCY and heartbeat frames transmitted (boot-up frames excluded).
-    """
-
-    syncs: int = 0
-    plant_steps: int = 0
-    free_steps: int = 0
-    tpdos_sent: int = 0
-    rpdos_applied: int = 0
-    rpdos_late: int = 0
-    rpdos_dropped: int = 0
-    bad_frames_ignored: int = 0
-    frames_unpowered: int = 0
-    sdo_requests: int = 0
-    illegal_commands: int = 0
-    emcys_sent: int = 0
-    heartbeats_sent: int = 0
-
-
-class _Counters:
-    """Mutable counters shared by the pair and its nodes."""
-
-    __slots__ = SimPairStats.__slots__
-
-    def __init__(self) -> None:
-        for name in self.__slots__:
-            setattr(self, name, 0)
-
-    def snapshot(self) -> SimPairStats:
-        return SimPairStats(**{name: getattr(self, name) for name in self.__slots__})
-
-
-# --------------------------------------------------------------------------- what each node serves
-
-
-def _inputs(plan: RigPlan, spec: NodeSpec) -> tuple[LiveInput, ...]:
-    """The measured inputs the rig's map puts on node ``spec``, with the scaling the profile states."""
-    out = []
-    for e in plan.map.entries:
-        if e.node != spec.name or e.signal not in (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE):
-            continue
-        scale = e.scale if e.source is ScaleSource.PROFILE else None
-        out.append(LiveInput(e.signal, e.ema, e.object, e.data_type, scale))
-    return tuple(out)
-
-
-def _own_data(od: cod.ObjectDictionary, spec: NodeSpec, force_control: ForceControl | None) -> dict:
-    """A simulated node's own data where its EDS gives no default: the identity the profile expects
-    (revision: the lowest it accepts), the device type of its profile, the drive modes (CSP, and CST
-    where the rig uses it), a rated torque of 1 N m, 4096 increments per revolution, unit factors."""
-    own: dict[tuple[int, int], bytes] = {}
-
-    def put(index: int, sub: int, value: int, fmt: str, *, zero_too: bool = False) -> None:
-        var = lookup(od, index, sub)
-        if var is not None and (var.default is None or (zero_too and var.default == 0)):
-            own[(index, sub)] = struct.pack("<" + fmt, value)
-
-    put(0x1000, 0, _DEVICE_TYPE.get(spec.device_profile, spec.device_profile), "I")
-    put(0x1018, 1, spec.vendor_id, "I", zero_too=True)
-    put(0x1018, 2, spec.product_code, "I", zero_too=True)
-    put(0x1018, 3, spec.revision_min, "I", zero_too=True)
-    if spec.role is NodeRole.DRIVE:
-        modes = 1 << CSP_BIT | (1 << CST_BIT if force_control is ForceControl.CST else 0)
-        put(0x6502, 0, modes, "I")
-        put(0x6076, 0, 1000, "I", zero_too=True)
-        put(0x608F, 1, 4096, "I" if _unsigned(od, 0x608F, 1) else "i")
-        put(0x608F, 2, 1, "I" if _unsigned(od, 0x608F, 2) else "i")
-        for index in (0x6091, 0x6092):
-            for sub in (1, 2):
-                put(index, sub, 1, "I", zero_too=True)
-    return own
-
-
-def _unsigned(od: cod.ObjectDictionary, index: int, sub: int) -> bool:
-    var = lookup(od, index, sub)
-    return var is None or var.data_type in (cod.UNSIGNED32, cod.UNSIGNED16, cod.UNSIGNED8)
 
 
 # --------------------------------------------------------------------------- the pair
 
 
+def _counts(angle) -> float | None:
+    """Increments per revolution the map states for a motor angle entry (None: read from the drive)."""
+    if angle is None or angle.source is not ScaleSource.PROFILE or angle.scale is None:
+        return None
+    return abs(angle.scale.units_per_si) * 2.0 * math.pi
+
+
+def _od(od_factory: Callable[[str, int], cod.ObjectDictionary], name: str, node_id: int) -> cod.ObjectDictionary:
+    od = od_factory(name, node_id)
+    if not isinstance(od, cod.ObjectDictionary):
+        raise InputError(f"od_factory({name!r}, {node_id}) must return a canopen ObjectDictionary, "
+                         f"got {type(od).__name__}")
+    return od
+
+
 class SimDrivePair:
-    """Two simulated CiA 402 EMA drives (CANopen slaves) moving one simulated rig.
+    """The rig's simulated nodes: two CiA 402 EMA drives moving one simulated rig, and its sensor nodes.
 
     Parameters
     ----------
     plant : sim.plant.RigPlant
-        The rig; ``node_ids[0]`` drives EMA 1, ``node_ids[1]`` EMA 2. The pair
-        steps it once per SYNC (and once at the first power-on).
-    od_factory : callable, optional
-        ``od_factory(node_id=n)`` returns a fresh ``canopen.ObjectDictionary``
-        for node ``n`` (default :func:`hil.canopen.od.load_eds`, the shipped
-        EDS with ``$NODEID`` resolved). It must pass
-        :func:`hil.canopen.od.check_drive_od` and hold the objects the drive
-        serves (0x1001, 0x1005, 0x1014, 0x6072, 0x6077, ...).
-    node_ids : tuple of two int, optional
-        Distinct node ids 1..127, default (1, 2).
+        The rig; the drive of EMA 1 (``plan.drives[0]``) moves its EMA 1, that of EMA 2 its EMA 2.
+        The pair steps it once per SYNC (and once at the first power-on).
+    plan : hil.canopen.plan.RigPlan
+        The rig's plan (:func:`hil.rig.plan_for`): node ids, roles, EDS files, the signal map.
+    od_factory : callable
+        ``od_factory(name, node_id)`` returns a fresh ``canopen.ObjectDictionary`` of the node
+        named ``name`` in the plan (``"ema1"``, ``"ema2"``, a sensor node's name), ``$NODEID``
+        resolved for ``node_id``; a drive's must hold the CiA 402 objects it acts on (0x6040,
+        0x6041, 0x6060, 0x6061, 0x6064, 0x607A).
     serials : tuple of two int, optional
         The drives' serial numbers (identity 0x1018:04, the drive's own data like
         ``counts_per_rev``); default the EDS's.
     counts_per_rev : int, optional
         Encoder increments per motor revolution. None: the EDS's 0x608F
-        (4096 / 1). Given: written to 0x608F:01 (and 1 to 0x608F:02) as the
+        (else 4096 / 1). Given: written to 0x608F:01 (and 1 to 0x608F:02) as the
         drive's own data at every power-on and reset node.
 
     Attributes
     ----------
     nodes : tuple of SimDrive
-        The two drives, in ``node_ids`` order.
+        The two drives, EMA 1's then EMA 2's.
+    sensors : tuple of SimSensorNode
+        The sensor nodes of the plan (none for a rig whose sensors are wired to the drives).
+    all_nodes : tuple
+        ``nodes + sensors``.
     plant : RigPlant
         The simulated rig.
+    plan : RigPlan
     on_free_step : callable or None
         Called as ``on_free_step(t)`` after each step of the drives' own
         cycle (``t`` [s]: the time of that step), e.g. to record the truth.
@@ -254,21 +176,27 @@ class SimDrivePair:
     Raises
     ------
     hil.canopen.errors.InputError
-        Wrong plant type, node ids, ``counts_per_rev``, or an object
-        dictionary that lacks what the drive needs.
+        Wrong plant or plan type, ``counts_per_rev``, ``serials``, an object
+        dictionary that lacks what a drive needs, or a measured input a node
+        cannot serve.
 
     Notes
     -----
-    Conversions between the plant (rad, mm, N) and the drive objects, per
+    Conversions between the plant (rad, mm, N) and the nodes' objects, per
     EMA with :math:`N = \\text{0x608F:01} / \\text{0x608F:02}` increments per
-    revolution, :math:`T_r = \\text{0x6076} / 1000` N m and the plant's gear
-    ratio :math:`i` [rad/mm] (also served as 0x2102, REAL32):
+    revolution (or the profile's counts per revolution, or 0x6091/0x6092),
+    :math:`T_r = \\text{0x6076} / 1000` N m (or the profile's rated torque) and
+    the plant's gear ratio :math:`i` [rad/mm] (also served at the profile's
+    ``canopen.gear_ratio_object``, REAL32); a measured input :math:`x` (LVDT
+    stroke [mm], force [N], an angle [rad]) at the object the map gives, with
+    its scaling :math:`r = k (x - x_0)` (:class:`hil.canopen.signalmap.Scale`)
+    rounded and clipped into its data type (e.g. the shipped LVDT at 0x2100 in
+    um, :math:`k = 1000`):
 
     .. math::
 
         p_{actual} = \\mathrm{round}(\\varphi N / 2\\pi)\\ \\text{[inc]},\\quad
-        \\text{0x2100} = \\mathrm{round}(1000\\, s)\\ [\\mu m],\\quad
-        \\text{0x2101} = \\mathrm{round}(10\\, F)\\ [0.1\\,N],
+        r = \\mathrm{clip}(\\mathrm{round}(k\\,(x - x_0)))\\ \\text{[raw]},
 
         \\text{0x6077} = \\mathrm{round}(1000\\, T / T_r)\\ [per mille],\\quad
         \\varphi_{target} = 2\\pi\\,\\mathrm{clip}(p_{target}, p_{min}, p_{max}) / N
@@ -277,13 +205,14 @@ class SimDrivePair:
         F_{target} = \\mathrm{clip}(\\tau, \\pm\\tau_{max}) / 1000 \\cdot T_r \\cdot 1000\\, i
         \\ \\text{[N] (CST)},
 
-    with :math:`\\varphi, s, F` the measured sample of that EMA, :math:`T`
+    with :math:`\\varphi` the measured motor angle of that EMA, :math:`T`
     the plant's drive torque [N m], :math:`p_{min}, p_{max}` = 0x607D:01/02,
     :math:`\\tau` = 0x6071 and :math:`\\tau_{max}` = 0x6072 [per mille].
     Commands to the plant per drive state: OPERATION_ENABLED + CSP ->
     POSITION, + CST -> FORCE; QUICK_STOP_ACTIVE -> POSITION at the angle
     measured when the quick stop began, for
-    :data:`~sim.drives.cia402_drive.QUICK_STOP_HOLD_S`; anything else ->
+    :data:`~sim.drives.cia402_drive.QUICK_STOP_HOLD_S` or, as 0x605A says, until
+    disable voltage; anything else ->
     DISABLED (holding brake). See the modules of :mod:`sim.drives` for the
     protocol choices.
     """
@@ -306,9 +235,6 @@ class SimDrivePair:
             if len(serials) != 2:
                 raise InputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
             serials = tuple(integer(f"serials[{k}]", v, 0, 2**32 - 1) for k, v in enumerate(serials))
-        sensors = [n.spec.name for n in plan.nodes if n.spec.role is NodeRole.SENSORS]
-        if sensors:
-            raise InputError(f"simulated sensor nodes ({', '.join(sensors)}) are not simulated yet")
         self.plant = plant
         self.plan = plan
         self._counters = _Counters()
@@ -326,10 +252,7 @@ class SimDrivePair:
         for k, dp in enumerate(plan.drives):
             spec = dp.node.spec
             n = spec.node_id
-            od = od_factory(spec.name, n)
-            if not isinstance(od, cod.ObjectDictionary):
-                raise InputError(f"od_factory({spec.name!r}, {n}) must return a canopen ObjectDictionary, "
-                                 f"got {type(od).__name__}")
+            od = _od(od_factory, spec.name, n)
             missing = [f"0x{i:04X}:{s:02X}" for i, s in _SIM_REQUIRED if lookup(od, i, s) is None]
             if missing:
                 raise InputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
@@ -343,13 +266,28 @@ class SimDrivePair:
                                   counts_per_rev=counts_per_rev, sample_period_s=params.sample_period_s,
                                   counters=self._counters, outbox=self._out,
                                   serial=None if serials is None else serials[k],
-                                  inputs=_inputs(plan, spec), own_data=_own_data(od, spec, dp.force_control),
+                                  inputs=live_inputs(plan, spec),
+                                  own_data=own_data(od, spec, dp.force_control, _counts(angle)),
                                   gear_object=plan.gear_ratio_object,
                                   factor_group=angle is not None and angle.source is ScaleSource.FACTOR_GROUP,
                                   rated_torque_Nm=rated))
         self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
         for node in self.nodes:
             node._torque_fetch = self._fetch_torque
+        sensors = []
+        for np_ in plan.nodes:
+            spec = np_.spec
+            if spec.role is not NodeRole.SENSORS:
+                continue
+            od = _od(od_factory, spec.name, spec.node_id)
+            sensors.append(SimSensorNode(spec.name, spec.node_id, od, counters=self._counters, outbox=self._out,
+                                         inputs=live_inputs(plan, spec), own_data=own_data(od, spec)))
+        #: the sensor nodes of the plan (CiA 401 / 404), in the plan's order
+        self.sensors: tuple[SimSensorNode, ...] = tuple(sensors)
+        #: every node: the two drives, then the sensor nodes
+        self.all_nodes: tuple[SimNode, ...] = self.nodes + self.sensors
+        # sensor nodes: SDO request COB-ID -> node (their frames take the rare paths of on_frame)
+        self._sensor_sdo = {s.sdo_request_cob_id: s for s in self.sensors}
         # COB-ID -> ((node, its RPDOs of that COB-ID), ...), valid for the nodes' _rx_by_cob dicts
         self._routes: dict[int, tuple[tuple[SimDrive, list[Pdo]], ...]] = {}
         self._routes_rx: tuple[dict, dict] = (nodes[0]._rx_by_cob, nodes[1]._rx_by_cob)
@@ -409,6 +347,9 @@ class SimDrivePair:
         n0, n1 = self.nodes
         n0._measure(raw)
         n1._measure(raw)
+        if self.sensors:
+            for s in self.sensors:
+                s._measure(raw)
 
     def _fetch_torque(self) -> None:
         """Read both drive torques [N m] of the last plant step into the nodes."""
@@ -432,13 +373,13 @@ class SimDrivePair:
     # ------------------------------------------------------------------ the sans-IO interface
 
     def power_on(self, t: float) -> list[Frame]:
-        """Switch both drives on (or power-cycle them) at time ``t`` [s].
+        """Switch every node on (or power-cycle them) at time ``t`` [s].
 
         Returns
         -------
         list of Frame
-            The boot-up frames ``0x700 + n [00]`` of both nodes, in ``node_ids``
-            order; both nodes are then PRE-OPERATIONAL, drives SWITCH_ON_DISABLED.
+            The boot-up frames ``0x700 + n [00]`` of every node (the drives, then the sensor
+            nodes); they are then PRE-OPERATIONAL, drives SWITCH_ON_DISABLED.
 
         Notes
         -----
@@ -450,7 +391,7 @@ class SimDrivePair:
             self._step(_MODE_DISABLED, 0.0, _MODE_DISABLED, 0.0)
             self._counters.plant_steps += 1
         self._powered = True
-        for node in self.nodes:
+        for node in self.all_nodes:
             node._boot(now, communication_only=False)
         return self._drain()
 
@@ -501,6 +442,8 @@ class SimDrivePair:
             if len(frame.data) == 1:
                 used = n0._on_heartbeat(cob - 0x700, now)
                 used = n1._on_heartbeat(cob - 0x700, now) or used
+                for s in self.sensors:
+                    used = s._on_heartbeat(cob - 0x700, now) or used
             if not used:
                 self._counters.bad_frames_ignored += 1
         else:
@@ -516,13 +459,37 @@ class SimDrivePair:
             if route:
                 for node, rx in route:
                     node._on_rpdo(rx, frame, now)
-            else:
+            elif not self.sensors or not self._sensor_frame(frame, now):
                 self._counters.bad_frames_ignored += 1
         if n0._event_tpdos_list:
             n0._event_tpdos(now)
         if n1._event_tpdos_list:
             n1._event_tpdos(now)
+        if self.sensors:
+            for s in self.sensors:
+                if s._event_tpdos_list:
+                    s._event_tpdos(now)
         return self._drain()
+
+    def _sensor_frame(self, frame: Frame, now: float) -> bool:
+        """A frame no drive consumes, for the sensor nodes: an SDO request, a SYNC of a sensor node's
+        own COB-ID (its TPDOs only), an RPDO. False if none consumes it."""
+        cob = frame.arbitration_id
+        node = self._sensor_sdo.get(cob)
+        if node is not None:
+            node._on_sdo(frame, now)
+            return True
+        used = False
+        for s in self.sensors:
+            if cob == s._sync_cob_id and len(frame.data) <= 1:
+                s._now = now
+                s._sync_tpdos(now)
+                used = True
+            rx = s._rx_by_cob.get(cob)
+            if rx:
+                s._on_rpdo(rx, frame, now)
+                used = True
+        return used
 
     def _on_nmt(self, frame: Frame, t: float) -> None:
         if len(frame.data) != 2:
@@ -534,7 +501,7 @@ class SimDrivePair:
         except ValueError:
             self._counters.bad_frames_ignored += 1
             return
-        targets = [n for n in self.nodes if target in (0, n.node_id)]
+        targets = [n for n in self.all_nodes if target in (0, n.node_id)]
         if not targets:
             self._counters.bad_frames_ignored += 1
         for node in targets:
@@ -556,6 +523,12 @@ class SimDrivePair:
         if c1:
             n1._now = t
             n1._sync_tpdos(t)
+        if self.sensors:
+            for s in self.sensors:
+                if s._sync_cob_id == cob:
+                    s._now = t
+                    s._sync_tpdos(t)
+                    s._apply_latched()
         if c0:
             n0._apply_latched()
         if c1:
@@ -594,7 +567,7 @@ class SimDrivePair:
             last = self._last_sync_t
             if last is not None and now - last > FREE_RUN_AFTER_CYCLES * self._T:
                 self._free_run(now)
-            for node in self.nodes:
+            for node in self.all_nodes:
                 node._tick(now)
         return self._drain()
 

@@ -33,6 +33,14 @@ Choices (CiA 301 leaves them open or this drive restricts them)
   for every further bad frame); the next RPDO of correct length resets it
   with EMCY 0x0000.
 * RPDOs are processed in OPERATIONAL only (else counted as dropped).
+* Any EDS (a vendor's too): a record whose sub-indices have gaps reads the
+  missing ones as 0; an entry of 0 bits maps nothing; a default mapping
+  (from the EDS) is taken as it is, even one an SDO write would be refused
+  for: its entries of objects the node lacks (dummy entries, another
+  variant's objects) are sent as zeros, received into nothing; entries
+  beyond the 8 bytes of a CAN frame are dropped. A PDO record
+  without a COB-ID (sub-index 1) is not valid; one without a transmission
+  type (sub-index 2) is event driven (255).
 """
 
 from __future__ import annotations
@@ -171,7 +179,8 @@ class PdoEngine:
         pdos = []
         for k in range(512):
             comm, mapping = base + k, base + 0x200 + k
-            if comm not in od or mapping not in od:
+            if comm not in od or mapping not in od or isinstance(od[mapping], cod.ODVariable) \
+                    or isinstance(od[comm], cod.ODVariable):
                 continue
             n_max = max((s for s in od[mapping].subindices if s > 0), default=0)
             pdos.append(Pdo(rx=rx, number=k + 1, comm_index=comm, map_index=mapping, n_entries_max=n_max,
@@ -179,10 +188,12 @@ class PdoEngine:
         return pdos
 
     def _default_mapping_problems(self) -> list[str]:
-        """What is wrong with the stored (EDS default) mapping of every PDO, one line each."""
+        """What is wrong with the stored (EDS default) mapping of every PDO, one line each (a vendor's
+        default may map what this node cannot serve: such entries are sent as zeros, see the module
+        docstring)."""
         problems = []
         for p in self._rpdos + self._tpdos:
-            problem = self._mapping_problem(p, self._int(p.map_index, 0))
+            problem = self._mapping_problem(p, self.store.int_or(p.map_index, 0, 0))
             if problem is not None:
                 problems.append(f"0x{p.map_index:04X}: {problem[1]}")
         return problems
@@ -252,7 +263,7 @@ class PdoEngine:
             return SdoAbortCode.EXCEEDS_PDO_LENGTH, f"{count} entries exceed the {p.n_entries_max} of the record"
         total = 0
         for k in range(1, count + 1):
-            entry = self._int(p.map_index, k)
+            entry = self.store.int_or(p.map_index, k, 0)
             problem = self._entry_problem(entry, p.rx)
             if problem is not None:
                 return SdoAbortCode.CANNOT_BE_MAPPED, problem
@@ -264,16 +275,21 @@ class PdoEngine:
     def _refresh_pdos(self) -> None:
         """Re-read every PDO's configuration from the data store; keep runtime state if unchanged."""
         by_cob: dict[int, list[Pdo]] = {}
+        int_or = self.store.int_or
         for p in self._rpdos + self._tpdos:
-            cob = self._int(p.comm_index, 1)
-            count = self._int(p.map_index, 0)
+            cob = int_or(p.comm_index, 1, COB_ID_INVALID)
+            count = min(int_or(p.map_index, 0, 0), p.n_entries_max)
             entries = []
+            size = 0
             for k in range(1, count + 1):
-                e = self._int(p.map_index, k)
-                entries.append((e >> 16, (e >> 8) & 0xFF, (e & 0xFF) // 8))
+                e = int_or(p.map_index, k, 0)
+                n = (e & 0xFF) // 8
+                if n and size + n <= 8:  # (an entry of 0 bits maps nothing; a CAN frame holds 8 bytes)
+                    entries.append((e >> 16, (e >> 8) & 0xFF, n))
+                    size += n
             p.cob_id = cob & 0x7FF
             p.valid = not cob & COB_ID_INVALID
-            p.trans_type = self._int(p.comm_index, 2)
+            p.trans_type = int_or(p.comm_index, 2, 255)
             p.entries = tuple(entries)
             p.length = sum(n for _, _, n in entries)
             p.inhibit_s = self._int(p.comm_index, 3) * 1e-4 if p.has_inhibit else 0.0
@@ -345,8 +361,15 @@ class PdoEngine:
             if n == 2:
                 return pack(g[0](), g[1]())
             return pack(*[f() for f in g])
-        raw = self.store.raw
-        return b"".join(raw(i, s) for i, s, _ in p.entries)
+        return b"".join(self._entry_bytes(i, s, n) for i, s, n in p.entries)
+
+    def _entry_bytes(self, index: int, subindex: int, nbytes: int) -> bytes:
+        """One mapped entry's bytes for a TPDO: its value cut or zero-padded to the mapped length;
+        zeros for an object this node does not have (a dummy entry or a vendor's default mapping)."""
+        if self.store.var(index, subindex) is None:
+            return bytes(nbytes)
+        raw = self.store.raw(index, subindex)
+        return raw if len(raw) == nbytes else raw[:nbytes].ljust(nbytes, b"\0")
 
     def _send_tpdo(self, p: Pdo, t: float, payload: bytes | None = None) -> None:
         if payload is None:

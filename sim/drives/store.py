@@ -21,7 +21,11 @@ Read (``get_data``), in this order:
    with the object's data type;
 3. the stored value (raw bytes, as written);
 4. the EDS ParameterValue, then the EDS default;
-5. else abort 0x060A0023 (resource not available).
+5. else the data type's zero (0, 0.0, an empty string or domain, which
+   canopen's server answers with abort 0x08000024, no data available): a device
+   holds a value in every object, an EDS need not give it (vendors' files
+   leave identity, ratings and measured values without a default; the
+   node's own data, :mod:`sim.drives.served`, fills in those that matter).
 
 Write (``set_data``): the object must exist, with ``check_writable`` be
 writable (0x06010002), a number type must have its exact length
@@ -144,13 +148,13 @@ class ObjectStore:
         return obj
 
     def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
-        """Encoded value of ``index:subindex``: live, stored, EDS ParameterValue, EDS default.
+        """Encoded value of ``index:subindex``: live, stored, EDS ParameterValue, EDS default, zero.
 
         Raises
         ------
         canopen.sdo.SdoAbortedError
             See :meth:`find_object`; 0x06010001 not readable (with
-            ``check_readable``); 0x060A0023 no value available.
+            ``check_readable``).
         """
         obj = self.find_object(index, subindex)
         if check_readable and not obj.readable:
@@ -167,7 +171,7 @@ class ObjectStore:
                 return obj.encode_raw(obj.value)
             if obj.default is not None:
                 return obj.encode_raw(obj.default)
-        raise abort(SdoAbortCode.RESOURCE_NOT_AVAILABLE)
+        return obj.encode_raw(0) if obj.data_type in cod.NUMBER_TYPES else b""
 
     def set_data(self, index: int, subindex: int, data: bytes, check_writable: bool = False) -> None:
         """Validate and store ``data`` at ``index:subindex``; note it in :attr:`written`.

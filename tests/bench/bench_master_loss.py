@@ -206,7 +206,8 @@ def one_kill(k: int, delay_s: float, args, act, work: Path) -> dict:
         threading.Thread(target=serve.stdout.read, daemon=True).start()  # keep its pipe drained
         with open(work / f"run{k:02d}.out", "w") as run_log:  # (the child has its own copy of the fd)
             run = subprocess.Popen(_cli("run", "--interface", "udp_multicast", "--channel", GROUP, "--arm",
-                                        "--quiet", *prof, "--check", str(args.check), "--out", str(out)),
+                                        "--quiet", "--no-history", *prof, "--check", str(args.check),
+                                        "--out", str(out)),
                                    cwd=ROOT, stdout=run_log, stderr=subprocess.STDOUT)
         procs.append(run)
         t0 = time.monotonic()
