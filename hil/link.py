@@ -273,6 +273,12 @@ class CanopenLink:
                             break
         except BaseException as exc:
             errors.append(exc)
+        if not self.m.preflight_done:
+            try:  # the drill may have powered a drive up when the preflight failed: disable voltage by SDO
+                self._send(self.m.abort_preflight_frames(self.tr.now()))
+                self._feed(self.tr.receive(self.tr.now()))
+            except BaseException as exc:
+                errors.append(exc)
         self.final_states = self.m.safe_state_report(self.tr.now())
         self.close_errors = [f"{type(e).__name__}: {e}" for e in errors]
         for step in (self.tr.stop_sync,

@@ -149,10 +149,13 @@ class MasterCore:
     actuation : Actuation
         Bus settings, timeouts, mechanics, the signal map.
     plan : RigPlan
-        The signal map checked against every node's EDS (:func:`hil.rig.plan_rig_for`).
+        The signal map checked against every node's EDS (:func:`hil.rig.plan_for`).
+    forces : (float, float), optional
+        The check's opposing force and the supervisor's force limit [N]: a drive holding forces in CST
+        gets its max torque 0x6072 checked and set by the preflight (:class:`hil.preflight.Preflight`).
     """
 
-    def __init__(self, actuation: Actuation, plan: RigPlan) -> None:
+    def __init__(self, actuation: Actuation, plan: RigPlan, forces: tuple[float, float] | None = None) -> None:
         self.act = actuation
         self.plan = plan
         c = actuation.canopen
@@ -188,7 +191,7 @@ class MasterCore:
         self.fault_cycle: int | None = None  #: the cyclic-phase SYNC count when the fault latched
         self.later_faults: list[str] = []  #: errors after the first one (recorded, not raised again)
         self._sdo = {n: SdoClient(n, timeout_s=c.sdo_timeout_s) for n in self.nodes}
-        self.preflight = Preflight(actuation, plan, self.emcy_codes_since, self._sdo_status)
+        self.preflight = Preflight(actuation, plan, self.emcy_codes_since, self._sdo_status, forces)
         self._gen: Generator | None = None
         self._pending: object | None = None
         self._boot_deadline = 0.0
@@ -627,6 +630,19 @@ class MasterCore:
                 out.append(expedited_download_frame(n, cw.index, cw.subindex,
                                                     struct.pack("<H", controlword(Command.QUICK_STOP))))
                 self._event(t, EventKind.SDO, n, "quick stop by SDO (controlword): the drive did not follow the RPDOs")
+        return out
+
+    def abort_preflight_frames(self, t: float) -> list[Frame]:
+        """Disable voltage by SDO (controlword, expedited, not awaited) to every drive the drill may have
+        powered up, when the preflight ends in an error the drill could not handle itself (an SDO timeout):
+        fail closed before the link gives up."""
+        out = []
+        for setup in self.preflight.powered:
+            n = setup.plan.node.spec.node_id
+            cw = self.plan.map.entry(setup.ema, Signal.CONTROLWORD)
+            out.append(expedited_download_frame(n, cw.index, cw.subindex,
+                                                struct.pack("<H", controlword(Command.DISABLE_VOLTAGE))))
+            self._event(t, EventKind.SDO, n, "disable voltage by SDO: the preflight failed during the drill")
         return out
 
     def unreachable(self, t: float) -> list[int]:

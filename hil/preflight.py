@@ -267,11 +267,19 @@ class Preflight:
     on_status : callable, optional
         ``on_status(node, statusword, t)``: every statusword the preflight reads by SDO (the master's
         view of the drive's state before the cyclic phase).
+    forces : (float, float), optional
+        The check's opposing force and the supervisor's force limit [N] (``check.calibration.opposing_force_N``,
+        ``check.safety.max_force_N``): a drive holding forces in CST gets its max torque 0x6072 set to the
+        limit's torque (where writable) and must allow the opposing force.
     """
 
-    def __init__(self, actuation: Actuation, plan: RigPlan, emcy_since, on_status=None) -> None:
+    def __init__(self, actuation: Actuation, plan: RigPlan, emcy_since, on_status=None,
+                 forces: tuple[float, float] | None = None) -> None:
         self.act = actuation
         self.plan = plan
+        #: (the calibration's opposing force, the supervisor's force limit) [N]: a drive holding forces in CST
+        #: gets its max torque 0x6072 set to the limit and must allow the opposing force (None: not checked)
+        self.forces = forces
         self.c = actuation.canopen
         self.T = actuation.timing.sync_period_s
         self.consumer_ms = round(self.c.master_consumer_time_s * 1000)
@@ -279,6 +287,8 @@ class Preflight:
         self.identities: dict[int, dict] = {}
         self._emcy_since = emcy_since
         self._on_status = on_status  #: ``on_status(node, statusword, t)``: a statusword read by SDO
+        #: drives the drill is powering up or has powered up (emptied when it brought them down again)
+        self.powered: list[DriveSetup] = []
         self.events: list[tuple[int, str]] = []  #: (node, what) for the master's event log
 
     # ------------------------------------------------------------ helpers
@@ -353,9 +363,7 @@ class Preflight:
                 raise PreflightError(f"{spec.label}: gear ratio {object_name(gi, gs)} = {ratio:.6f} rad/mm, profile "
                                      f"mechanics.i_total_rad_per_mm = {want:.6f}")
         yield from self._scales(d)
-        if node.can_read(0x6072, 0):
-            v = yield from self._read(node, 0x6072, 0, "max torque", soft=True)
-            d.identity["max_torque_permille"] = None if isinstance(v, SdoAbortError) else int(v)
+        yield from self._max_torque(d)
         if node.can_write(0x60C2, 1) and node.can_write(0x60C2, 2):
             yield from self._write(node, 0x60C2, 1, int(round(self.T * 1000)), "interpolation period value")
             yield from self._write(node, 0x60C2, 2, -3, "interpolation period index")
@@ -419,6 +427,27 @@ class Preflight:
         elif torque is not None:
             d.rated_torque_Nm = 1.0 / (torque.scale.units_per_si * self.act.mechanics.i_total_rad_per_mm)
 
+    def _max_torque(self, d: DriveSetup) -> Generator:
+        """0x6072 (max torque, per mille of the rated torque) of a drive holding forces in CST: set to the
+        supervisor's force limit where writable (the drive then limits the force itself too), and never
+        below the opposing force the calibration commands."""
+        node, spec = d.plan.node, d.plan.node.spec
+        if self.forces is None or d.plan.force_control is not ForceControl.CST or not node.can_read(0x6072, 0):
+            return
+        k = (d.scales.get(Signal.TARGET_TORQUE) or self.plan.channel(d.ema, Signal.TARGET_TORQUE).scale).units_per_si
+        opposing_N, limit_N = self.forces
+        if node.can_write(0x6072, 0):
+            yield from self._write(node, 0x6072, 0, min(round(limit_N * k), 0xFFFF), "max torque")
+        value = yield from self._read(node, 0x6072, 0, "max torque", soft=True)
+        if isinstance(value, (SdoAbortError, SdoTimeout)):
+            return
+        if value < opposing_N * k:
+            raise PreflightError(
+                f"{spec.label}: max torque 0x6072 = {int(value)} per mille of the rated torque allows "
+                f"{value / k:.0f} N at the ram; the calibration's opposing force needs {opposing_N:g} N "
+                f"(check profile calibration.opposing_force_N): set 0x6072 in the drive, or hold forces in CSP "
+                f"(canopen.force_control = \"csp\")")
+
     def _set_mode_by_sdo(self, d: DriveSetup, mode: OperationMode) -> Generator:
         """0x6060 = ``mode`` by SDO, confirmed by 0x6061 within ``canopen.mode_change_timeout_s``."""
         node, spec = d.plan.node, d.plan.node.spec
@@ -476,6 +505,22 @@ class Preflight:
         drives = [d for d in self.drives if d.master_loss.reaction.configured]
         if not drives:
             return
+        self.powered = list(drives)  # what a failure must bring down (see MasterCore.abort_preflight_frames)
+        try:
+            yield from self._drill_of(drives)
+        except PreflightError:
+            # fail closed: every drive the drill may have powered up goes to switch on disabled before the
+            # error is told (a drive that does not follow is stopped by SDO when the master gives up)
+            yield Heartbeat(True)
+            for d in drives:
+                try:
+                    yield from self._power_down_by_sdo(d)
+                except PreflightError:
+                    pass
+            raise
+        self.powered = []
+
+    def _drill_of(self, drives: list[DriveSetup]) -> Generator:
         for d in drives:
             yield from self._power_up_by_sdo(d)
         # a consumer watches from the first heartbeat after its configuration (CiA 301): one goes out first

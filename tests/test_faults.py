@@ -422,9 +422,6 @@ DRIVE_CASES = [
 ]
 _REFUSED = [c for c in DRIVE_CASES if c[1] is not None]
 _HANDLED = [c[0] for c in DRIVE_CASES if c[1] is None]
-#: the master refused in its drill with the other drive already powered up by SDO, and left it so
-_LEFT_ENABLED = pytest.mark.xfail(strict=True, reason="hil/preflight.py: a preflight refused in the drill does not "
-                                                      "power down the drive it already walked up (issue 23, open)")
 
 
 @pytest.mark.parametrize("fault,words", _REFUSED, ids=[c[0].kind for c in _REFUSED])
@@ -437,8 +434,7 @@ def test_drive_fault_is_refused_before_any_sync(tmp_path, profiles, fault, words
     assert r.injector.onset_s == {fault.kind: 0.0}
 
 
-@pytest.mark.parametrize("fault", [pytest.param(c[0], marks=_LEFT_ENABLED if c[0].kind != "ignore_abort_connection"
-                                                else ()) for c in _REFUSED], ids=[c[0].kind for c in _REFUSED])
+@pytest.mark.parametrize("fault", [c[0] for c in _REFUSED], ids=[c[0].kind for c in _REFUSED])
 @pytest.mark.slow
 def test_a_refused_drive_fault_leaves_every_drive_disabled(tmp_path, profiles, fault):
     r, meta = _run(tmp_path, profiles, fault)

@@ -126,9 +126,9 @@ def test_eds_of_another_drive_is_refused_before_the_bus(tmp_path, capsys):
     rc = main(["dry-run", "--profile", str(act), "--out", str(tmp_path / "d"), "--quiet"])
     err = capsys.readouterr().err
     assert rc == 3
-    for ema in (1, 2):  # the plan names the profile key, the object and both values
-        assert (f"canopen.product_code: 0x1018:02 at ema{ema}: other.eds describes 0x00000999, the profile expects "
-                f"0x00000402: the EDS describes another device") in err
+    # the plan names the profile key, the object (both drives: one EDS) and both values
+    assert ("canopen.product_code: 0x1018:02 at ema1, ema2: other.eds: identity 0x1018:02 = 0x00000999 does not "
+            "match the profile's canopen.product_code = 0x00000402: the EDS describes another device") in err
     assert not (tmp_path / "d").exists()  # nothing ran, nothing was sent
 
 

@@ -547,3 +547,33 @@ def test_a_drive_whose_error_behaviour_stops_it_is_read_after_the_drill(actuatio
         with pytest.raises(MasterLossReactionError, match=r"node 2 \(EMA 2\): did not react"):
             _preflight(actuation, pair)
     assert node.state_machine.state is State.SWITCH_ON_DISABLED
+
+
+def test_a_drive_that_falls_silent_while_drilled_leaves_the_other_disabled(actuation, simrig):
+    """An SDO timeout in the drill (not a soft read) ends the preflight outside its generator: the link's close
+    still disables, by SDO, every drive the drill powered up."""
+    from hil.canopen.sdo import SdoTimeout
+    from hil.link import CanopenLink
+    from hil.transport import InProcessTransport
+
+    pair = make_pair(_plant(simrig, 9))
+    deaf = pair.nodes[1]
+    serve = deaf._on_sdo
+
+    def until_enabled(frame, t):  # EMA 2 stops answering SDO once it is enabled
+        if deaf.state_machine.state is State.OPERATION_ENABLED:
+            return None
+        return serve(frame, t)
+
+    deaf._on_sdo = until_enabled
+    tr = InProcessTransport(pair, T, channel="emacheck-test-deaf-drill")
+    link = CanopenLink(_master(actuation), tr)
+    try:
+        with pytest.raises(SdoTimeout, match=r"node 2: SDO timeout"):
+            link.first_sample()
+        link.close()
+    finally:
+        tr.close()
+    assert pair.nodes[0].state_machine.state is State.SWITCH_ON_DISABLED  # EMA 1: disable voltage by SDO
+    final = link.final_states
+    assert not final["ema2"]["safe"]  # EMA 2 could not be told: the record says so

@@ -47,7 +47,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = out_dir(args, "run")
     out.mkdir(parents=True, exist_ok=True)
     transport = BusTransport(bus, act.timing.sync_period_s)
-    master = MasterCore(act, rig.plan)
+    master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
     # wall-clock stamps in the CAN log, as candump writes them
     log = CanLogWriter(out / "can.log", channel=args.channel, time_offset_s=transport.wall_clock_offset_s)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
