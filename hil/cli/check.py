@@ -222,6 +222,11 @@ def master_setup(act, profile_path, eds=None):
     return plan_for(act, profile_path, eds)
 
 
+def rig_nodes_text(rig) -> str:
+    """``nodes 1 (EMA 1), 2 (EMA 2), 3 (io)``: the rig's nodes for a console line."""
+    return "nodes " + ", ".join(n.spec.label.removeprefix("node ") for n in rig.plan.nodes)
+
+
 def rig_meta(rig) -> dict:
     """What meta.json records of the planned rig: the drives' EDS, every node's EDS, the notes of the plan."""
     return {"eds": str(rig.eds_paths["ema1"]), "eds_nodes": {k: str(v) for k, v in rig.eds_paths.items()},

@@ -15,6 +15,7 @@ from hil.cli.check import (
     result_after,
     rig_hashes,
     rig_meta,
+    rig_nodes_text,
     truth_dict,
     worn_simrig,
 )
@@ -96,7 +97,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
-    console.print(f"emacheck dry-run: two simulated CiA 402 drives (nodes {act.canopen.node_ids}) on an "
+    console.print(f"emacheck dry-run: simulated {rig_nodes_text(rig)} on an "
                   f"in-process virtual CAN bus, seed {seed}, bus load {load.load_worst:.1%} worst case"
                   + (f", {len(faults)} injected fault(s)" if faults else "") + f"; run folder {out}")
     try:

@@ -5,7 +5,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hil.cli.check import canopen_check, master_setup, page_faults, record_can_stats, result_after, rig_hashes, rig_meta
+from hil.cli.check import (
+    canopen_check,
+    master_setup,
+    page_faults,
+    record_can_stats,
+    result_after,
+    rig_hashes,
+    rig_meta,
+    rig_nodes_text,
+)
 from hil.cli.common import (
     ExitCode,
     add_bus_args,
@@ -59,7 +68,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                                    **installation(args, act),
                                    "files_sha256": {**file_hashes(actuation=args.profile, check=args.check),
                                                     **rig_hashes(rig)}})
-    console.print(f"emacheck run on {args.interface}:{args.channel}, nodes {act.canopen.node_ids}; run folder {out}")
+    console.print(f"emacheck run on {args.interface}:{args.channel}, {rig_nodes_text(rig)}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
     console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")
     faults0 = page_faults()

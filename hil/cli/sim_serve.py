@@ -7,6 +7,7 @@ import signal
 import threading
 from pathlib import Path
 
+from hil.cli.check import rig_nodes_text
 from hil.cli.common import add_bus_args, add_eds_arg, add_parser, open_bus
 from hil.cli.realtime import prepare_realtime
 
@@ -38,10 +39,9 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
 
     old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
     rt = prepare_realtime(args.rt_priority)
-    n1, n2 = act.canopen.node_ids
 
     def ready() -> None:
-        print(f"sim-serve: nodes {n1}, {n2} on {args.interface}:{args.channel}, seed {seed}, {rt}; ready",
+        print(f"sim-serve: {rig_nodes_text(rig)} on {args.interface}:{args.channel}, seed {seed}, {rt}; ready",
               flush=True)
 
     try:
