@@ -192,13 +192,13 @@ def test_following_error_cap(actuation, check_profile):
 # ---------------------------------------------------------------------------- D plausibility
 
 
-def _ramp(actuation, n: int, v_mm_per_s: float, k: int = 1, t0: float = 0.0) -> list[Sample]:
+def _ramp(actuation, n: int, v_mm_per_s: float, k: int = 1, t0: float = 0.0, x0_mm: float = 0.0) -> list[Sample]:
     """EMA ``k`` moving at ``v`` with its LVDT following the motor (+-0.05 um); load cells alternating by
     0.5 N (never frozen, no fight, no imbalance); the other EMA at rest with an alternating LVDT."""
     i, T = actuation.mechanics.i_total_rad_per_mm, actuation.timing.sync_period_s
     out = []
     for j in range(n):
-        x = v_mm_per_s * j * T
+        x = x0_mm + v_mm_per_s * j * T
         w = 0.5 if j % 2 else -0.5
         out.append(_smp(t0 + j * T, **{f"phi{k}_rad": x * i, f"s{k}_mm": x + w * 1e-4, f"s{3 - k}_mm": w * 1e-3,
                                        "F1_N": w, "F2_N": w}))
@@ -206,15 +206,18 @@ def _ramp(actuation, n: int, v_mm_per_s: float, k: int = 1, t0: float = 0.0) -> 
 
 
 @pytest.mark.parametrize("k", [1, 2])
-@pytest.mark.parametrize("moved_mm, side", [(0.0, 1.0), (0.0, -1.0), (1.0, 1.0), (1.0, -1.0), (-2.0, 1.0)])
-def test_d_plausibility_limit_with_its_lvdt_gain_tolerance(actuation, check_profile, k, moved_mm, side):
+@pytest.mark.parametrize("moved_mm, side, start_mm", [(0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (1.0, 1.0, 0.0),
+                                                      (1.0, -1.0, 0.0), (-2.0, 1.0, 0.0), (1.0, 1.0, -3.0),
+                                                      (-1.0, -1.0, 2.0)])
+def test_d_plausibility_limit_with_its_lvdt_gain_tolerance(actuation, check_profile, k, moved_mm, side, start_mm):
     """|(s - s0) - (x - x0)| <= max_d_int + 0.1 |x - x0| (x = phi / i, index 0 the first sample):
-    at rest the 0.6 mm of the profile; after a move of 1 or 2 mm, 0.1 or 0.2 mm more."""
+    at rest the 0.6 mm of the profile; after a move of 1 or 2 mm, 0.1 or 0.2 mm more, wherever the
+    move started (the tolerance grows with the motion, not with the position)."""
     i, T = actuation.mechanics.i_total_rad_per_mm, actuation.timing.sync_period_s
     lim = Limits.of(actuation, check_profile).max_d_int_mm
     assert lim == 0.6 and HARD_LVDT_GAIN_TOLERANCE == 0.10
     n = 1 + round(abs(moved_mm) / (5.0 * T))
-    stream = _ramp(actuation, n, math.copysign(5.0, moved_mm), k)
+    stream = _ramp(actuation, n, math.copysign(5.0, moved_mm), k, x0_mm=start_mm)
     last = stream[-1]
     ref = stream[0]
     s0, x0 = getattr(ref, f"s{k}_mm"), getattr(ref, f"phi{k}_rad") / i
