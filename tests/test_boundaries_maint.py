@@ -272,3 +272,183 @@ def test_neither_side_loaded_names_the_force_reached():
                                             r"either side: \|F\| stayed below 90 N, less than 10 x the load-cell "
                                             r"noise \(10 N std\)$"):
         contact_extremes(_cloud(90.0, 80.0), 10.0, -1, (-0.2, 0.2))
+
+
+# ---------------------------------------------------------------------------- the fitted lines
+
+
+@pytest.mark.parametrize("sign", [-1, 1])
+def test_lines_meet_at_their_intersections_and_give_the_backlash(sign):
+    """The three lines' own methods: D on a contact line and its inverse, F on the centre line; the
+    reported intersections lie on both lines they join; B is their distance."""
+    d, f, _, _ = make_force_fight(np.random.default_rng(6), slope_sign=sign)
+    r = blf_maint(d, f, FS_HZ, centre_slope=True)
+    L = r.lines
+    for line in (L.left, L.right):
+        forces = np.array([-3000.0, 0.0, 2500.0])
+        assert np.allclose(line.d_mm(forces), line.d_at_zero_force_mm + line.compliance_mm_per_N * forces,
+                           rtol=0, atol=1e-15)
+        assert np.allclose(line.f_N(line.d_mm(forces)), forces, rtol=1e-12, atol=1e-9)
+        assert np.sign(line.compliance_mm_per_N) == sign  # D and F move together with the global sign
+    dd = np.array([-0.1, 0.0, 0.05])
+    assert np.allclose(L.centre.f_N(dd), L.centre.f_at_zero_d_N + L.centre.slope_N_per_mm * dd, rtol=0, atol=1e-9)
+    for dx, fx, contact in ((L.d_left_mm, L.f_left_N, L.left), (L.d_right_mm, L.f_right_N, L.right)):
+        assert contact.d_mm(fx) == pytest.approx(dx, abs=1e-12)
+        assert L.centre.f_N(dx) == pytest.approx(fx, abs=1e-9)
+    assert r.backlash_mm == pytest.approx(L.d_right_mm - L.d_left_mm, abs=1e-15)
+    assert r.stiffness_left_N_per_mm == pytest.approx(1.0 / abs(L.left.compliance_mm_per_N), rel=1e-12)
+    assert r.stiffness_right_N_per_mm == pytest.approx(1.0 / abs(L.right.compliance_mm_per_N), rel=1e-12)
+    assert r.slope_sign == sign and r.curve.threshold_N_per_mm * sign > 0
+
+
+# ---------------------------------------------------------------------------- the uncertainties, known answers
+
+
+def _newey_west_ols(x, y, idx, n_total, lags):
+    """Independent reference: OLS y = a + b x and the Newey-West (Bartlett) sandwich of (a, b), lag
+    products only between samples adjacent in the full record, small-sample factor n / (n - 2)."""
+    X = np.column_stack((np.ones_like(x), x))
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    u = y - X @ beta
+    H = np.zeros((n_total, 2))
+    H[idx] = X * u[:, None]
+    S = H.T @ H
+    for k in range(1, lags + 1):
+        G = H[k:].T @ H[:-k]
+        S += (1 - k / (lags + 1)) * (G + G.T)
+    Qi = np.linalg.inv(X.T @ X)
+    return beta, Qi @ S @ Qi * x.size / (x.size - 2), float(np.sqrt(np.mean(u**2)))
+
+
+def _newey_west_mean(y, idx, n_total, lags):
+    c0 = float(np.mean(y))
+    full = np.zeros(n_total)
+    full[idx] = y - c0
+    s = full @ full + sum(2 * (1 - k / (lags + 1)) * (full[k:] @ full[:-k]) for k in range(1, lags + 1))
+    return c0, s / y.size**2 * y.size / (y.size - 1), float(np.sqrt(np.mean((y - c0) ** 2)))
+
+
+def _d_star(a, b, c0, c1):
+    return (a + b * c0) / (1 - b * c1)
+
+
+@pytest.mark.parametrize("centre_slope", [False, True])
+@pytest.mark.parametrize("sign, kw", [(-1, dict(d_noise_ar1=0.6)), (1, dict(stiffness_left_N_per_mm=14e3,
+                                                                         stiffness_right_N_per_mm=20e3))])
+def test_regressions_and_sigmas_match_an_independent_newey_west(centre_slope, sign, kw):
+    """Every line, covariance, residual and the backlash sigma against a separate implementation of
+    the documented estimators (the masks and the low-pass are the result's and the docstring's):
+    D on the low-passed G in contact, G's level or line on D in the backlash, Newey-West with lags up to
+    hac_lag_s, B's sigma by first-order propagation (here with a numerical Jacobian)."""
+    d, f, _, _ = make_force_fight(np.random.default_rng(12), slope_sign=sign, **kw)
+    r = blf_maint(d, f, FS_HZ, centre_slope=centre_slope)
+    assert r.slope_sign == sign
+    lags = round(0.05 * FS_HZ)
+    g, g_f = sign * f, sign * _lowpass(f)
+    flip = np.diag([1.0, float(sign)])
+    params = {}
+    for side, line, mask in (("left", r.lines.left, r.mask_left), ("right", r.lines.right, r.mask_right)):
+        idx = np.flatnonzero(mask)
+        (a, b), cov, rms = _newey_west_ols(g_f[idx], d[idx], idx, d.size, lags)
+        assert line.d_at_zero_force_mm == pytest.approx(a, rel=1e-9, abs=1e-12)
+        assert line.compliance_mm_per_N == pytest.approx(sign * b, rel=1e-9)
+        assert np.allclose(line.cov, flip @ cov @ flip, rtol=1e-7, atol=0)
+        assert line.rmse_mm == pytest.approx(rms, rel=1e-9) and line.n == idx.size
+        assert (line.f_min_N, line.f_max_N) == (f[idx].min(), f[idx].max())
+        params[side] = (a, b, cov)
+    idx = np.flatnonzero(r.mask_centre)
+    if centre_slope:
+        (c0, c1), cov_c, rms_c = _newey_west_ols(d[idx], g[idx], idx, d.size, lags)
+    else:
+        c0, var0, rms_c = _newey_west_mean(g[idx], idx, d.size, lags)
+        c1, cov_c = 0.0, np.diag([var0, 0.0])
+    C = r.lines.centre
+    assert C.f_at_zero_d_N == pytest.approx(sign * c0, rel=1e-9) and C.slope_N_per_mm == pytest.approx(sign * c1,
+                                                                                                        rel=1e-9)
+    assert np.allclose(C.cov, cov_c, rtol=1e-7, atol=0) and C.rmse_N == pytest.approx(rms_c, rel=1e-9)
+    assert (C.n, C.d_min_mm, C.d_max_mm) == (idx.size, d[idx].min(), d[idx].max())
+    (a_l, b_l, cov_l), (a_r, b_r, cov_r) = params["left"], params["right"]
+    theta = np.array([a_l, b_l, a_r, b_r, c0, c1])
+
+    def backlash(t):
+        return _d_star(t[2], t[3], t[4], t[5]) - _d_star(t[0], t[1], t[4], t[5])
+
+    assert r.backlash_mm == pytest.approx(backlash(theta), rel=1e-9)
+    J = np.array([(backlash(theta + h) - backlash(theta - h)) / (2 * h.sum())
+                  for h in np.diag(np.maximum(np.abs(theta), 1e-3) * 1e-6)])
+    cov = np.zeros((6, 6))
+    cov[0:2, 0:2], cov[2:4, 2:4], cov[4:6, 4:6] = cov_l, cov_r, cov_c
+    assert r.backlash_sigma_mm == pytest.approx(float(np.sqrt(J @ cov @ J)), rel=1e-5)
+    assert r.stiffness_left_N_per_mm == pytest.approx(1 / b_l, rel=1e-9)
+    assert r.stiffness_left_sigma_N_per_mm == pytest.approx(np.sqrt(cov_l[1, 1]) / b_l**2, rel=1e-7)
+    assert r.stiffness_right_sigma_N_per_mm == pytest.approx(np.sqrt(cov_r[1, 1]) / b_r**2, rel=1e-7)
+    assert r.lines.d_left_mm == pytest.approx(_d_star(a_l, b_l, c0, c1), rel=1e-9)
+    assert r.lines.f_right_N == pytest.approx(sign * (c0 + c1 * _d_star(a_r, b_r, c0, c1)), rel=1e-9)
+
+
+def test_binned_curve_known_answer():
+    """The binned F-D curve (report Figure 4): bins of at least min_bin_count (3) samples, the slope a
+    local linear fit over 2 * slope_window_bins + 1 = 5 bins then a 3-point running median."""
+    d, f, d_true, _ = make_force_fight(np.random.default_rng(3), sigma_d_mm=0.0, sigma_f_N=0.0)
+    # then 60 um further into the right contact at 1 mm/s: 2.5 samples per 5 um bin, sparse bins
+    ramp = d_true.max() + np.arange(1, 31) * 1.0 / FS_HZ
+    rng = np.random.default_rng(1)
+    d = np.concatenate((d, ramp)) + rng.normal(0.0, 0.0042, d.size + ramp.size)
+    f = np.concatenate((f, -(ramp - 0.05) * 80e3)) + rng.normal(0.0, 10.0, d.size)
+    r = blf_maint(d, f, FS_HZ)
+    c = r.curve
+    assert c.count.min() == 3  # bins of fewer samples dropped, of three kept
+    assert blf_maint(d, f, FS_HZ, min_bin_count=1).curve.count.min() < 3
+    x, y = c.d_mm, c.f_N
+    raw = np.array([np.polyfit(x[max(0, k - 2):k + 3], y[max(0, k - 2):k + 3], 1)[0] for k in range(x.size)])
+    med = raw.copy()
+    med[1:-1] = np.median(np.stack((raw[:-2], raw[1:-1], raw[2:])), axis=0)
+    assert np.allclose(c.dfdd_N_per_mm, med, rtol=1e-6, atol=1e-6)
+    assert c.bin_width_mm == 0.005 and np.all(np.diff(x) > 0)
+
+
+# ---------------------------------------------------------------------------- refusals name argument and unit
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(d_mm=np.zeros((2, 300))), r"^d_mm must be a 1-D array in mm; got shape \(2, 300\)$"),
+    (dict(d_mm="D"), r"^d_mm must be a 1-D numeric array in mm; got str that cannot be converted to float"),
+    (dict(f_N=np.zeros((300, 1))), r"^f_N must be a 1-D array in N; got shape \(300, 1\)$"),
+    (dict(f_N=[None] * 300), r"^f_N must be finite \(in N\); got 300 NaN/inf value\(s\) in shape \(300,\)$"),
+    (dict(f_N=np.zeros(299)), r"^f_N \(in N\) must have the same shape as d_mm \(in mm\); got f_N shape \(299,\) and "
+                              r"d_mm shape \(300,\)$"),
+    (dict(sample_rate_Hz=0.0), r"^sample_rate_Hz must be a finite positive number in Hz; got 0.0 \(shape \(\)\)$"),
+    (dict(lowpass_rad_s=-40.0), r"^lowpass_rad_s must be a finite positive number in rad/s; got -40.0"),
+    (dict(lowpass_rad_s=1600.0), r"^lowpass_rad_s must be below the Nyquist frequency pi\*sample_rate_Hz = 1571 rad/s; "
+                                 r"got 1600 rad/s \(shape \(\)\)$"),
+    (dict(bin_width_mm=0.0), r"^bin_width_mm must be a finite positive number in mm; got 0.0 \(shape \(\)\)$"),
+    (dict(slope_window_bins=0), r"^slope_window_bins must be an int >= 1 \(count\), got 0$"),
+    (dict(min_bin_count=0), r"^min_bin_count must be an int >= 1 \(count\), got 0$"),
+    (dict(min_contact_points=2.5), r"^min_contact_points must be an int >= 3 \(count\), got 2.5$"),
+    (dict(min_centre_points=True), r"^min_centre_points must be an int >= 3 \(count\), got True$"),
+    (dict(contact_margin_frac=0.5), r"^contact_margin_frac must be a finite scalar in \[0.0, 0.5\) \(fraction, "
+                                    r"dimensionless\), got 0.5$"),
+    (dict(centre_margin_frac=-0.01), r"^centre_margin_frac must be a finite scalar in \[0.0, 0.5\) \(fraction, "
+                                     r"dimensionless\), got -0.01$"),
+    (dict(hac_lag_s=-0.05), r"^hac_lag_s must be a finite scalar >= 0.0 s, got -0.05$"),
+    (dict(centre_slope=1), r"^centre_slope must be a bool \(no unit\), got int$"),
+])
+def test_every_argument_refused_by_its_name_and_unit(change, message):
+    args = dict(d_mm=np.zeros(300), f_N=np.zeros(300), sample_rate_Hz=FS_HZ) | change
+    with pytest.raises(InputError, match=message):
+        blf_maint(**args)
+
+
+@pytest.mark.parametrize("name, default, words", [
+    ("lowpass_rad_s", 40.0, "(default 40,"), ("bin_width_mm", 0.005, "(default 0.005)"),
+    ("slope_window_bins", 2, "(default 2, i.e. 5 bins)"), ("min_bin_count", 3, "(default 3)"),
+    ("contact_margin_frac", 0.2, "(default 0.2;"), ("centre_margin_frac", 0.15, "(default 0.15)"),
+    ("hac_lag_s", 0.05, "(default 0.05 s"), ("min_contact_points", 50, "(default 50)"),
+    ("min_centre_points", 10, "(default 10)"), ("centre_slope", False, "False (default)"),
+])
+def test_defaults_are_the_documented_ones(name, default, words):
+    import inspect
+
+    assert inspect.signature(blf_maint).parameters[name].default == default
+    doc = blf_maint.__doc__
+    assert words in doc[doc.index(name):], (name, words)
