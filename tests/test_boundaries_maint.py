@@ -54,15 +54,20 @@ def spring_fight(rng: np.random.Generator, ratio: float, k: float = 80e3, backla
 
 @pytest.mark.parametrize("ratio", [0.35, 0.45])
 @pytest.mark.parametrize("sign", [-1, 1])
-def test_a_soft_spring_in_the_gap_is_refused(ratio, sign):
+def test_a_soft_spring_in_the_gap_is_refused(ratio, sign, monkeypatch):
     d, f = spring_fight(np.random.default_rng(1), ratio, sign=sign)
     with pytest.raises(AnalysisError) as exc:
         blf_maint(d, f, FS_HZ)
     msg = str(exc.value)
-    assert msg.startswith("no distinct backlash region: between the contact lines F still changes with D at ")
-    assert msg.endswith("N/mm (a soft spring, not free play)")
     pct = int(re.search(r"N/mm, (\d+) % of the softer contact stiffness", msg).group(1))
     assert 25 < pct < 50  # measured below the true ratio (the margins), above the 25 % limit
+    # the numbers of the message are the backlash line's slope and the softer contact stiffness
+    monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", 10.0)
+    r = blf_maint(d, f, FS_HZ, centre_slope=True)
+    slope, k_soft = abs(r.lines.centre.slope_N_per_mm), min(r.stiffness_left_N_per_mm, r.stiffness_right_N_per_mm)
+    assert msg == ("no distinct backlash region: between the contact lines F still changes with D at "
+                   f"{slope:.4g} N/mm, {100 * slope / k_soft:.0f} % of the softer contact stiffness {k_soft:.4g} N/mm "
+                   "(a soft spring, not free play)")
 
 
 @pytest.mark.parametrize("ratio", [0.15, 0.2])
@@ -298,7 +303,12 @@ def test_lines_meet_at_their_intersections_and_give_the_backlash(sign):
     assert r.backlash_mm == pytest.approx(L.d_right_mm - L.d_left_mm, abs=1e-15)
     assert r.stiffness_left_N_per_mm == pytest.approx(1.0 / abs(L.left.compliance_mm_per_N), rel=1e-12)
     assert r.stiffness_right_N_per_mm == pytest.approx(1.0 / abs(L.right.compliance_mm_per_N), rel=1e-12)
-    assert r.slope_sign == sign and r.curve.threshold_N_per_mm * sign > 0
+    assert r.slope_sign == sign and (L.left.side, L.right.side) == ("left", "right")
+    k_soft = min(r.stiffness_left_N_per_mm, r.stiffness_right_N_per_mm)
+    assert r.curve.threshold_N_per_mm == pytest.approx(sign * 0.5 * k_soft, rel=1e-12)
+    assert r.dfdd_median == np.median(r.curve.dfdd_N_per_mm)
+    assert (r.n_left, r.n_centre, r.n_right) == (int(r.mask_left.sum()), int(r.mask_centre.sum()),
+                                                 int(r.mask_right.sum())) == (L.left.n, L.centre.n, L.right.n)
 
 
 # ---------------------------------------------------------------------------- the uncertainties, known answers
@@ -334,14 +344,25 @@ def _d_star(a, b, c0, c1):
 
 @pytest.mark.parametrize("centre_slope", [False, True])
 @pytest.mark.parametrize("sign, kw", [(-1, dict(d_noise_ar1=0.6)), (1, dict(stiffness_left_N_per_mm=14e3,
-                                                                         stiffness_right_N_per_mm=20e3))])
-def test_regressions_and_sigmas_match_an_independent_newey_west(centre_slope, sign, kw):
+                                                                         stiffness_right_N_per_mm=20e3)),
+                                      (-1, "spring"), (-1, "three")])
+def test_regressions_and_sigmas_match_an_independent_newey_west(centre_slope, sign, kw, monkeypatch):
     """Every line, covariance, residual and the backlash sigma against a separate implementation of
     the documented estimators (the masks and the low-pass are the result's and the docstring's):
     D on the low-passed G in contact, G's level or line on D in the backlash, Newey-West with lags up to
     hac_lag_s, B's sigma by first-order propagation (here with a numerical Jacobian)."""
-    d, f, _, _ = make_force_fight(np.random.default_rng(12), slope_sign=sign, **kw)
-    r = blf_maint(d, f, FS_HZ, centre_slope=centre_slope)
+    opts = {}
+    if kw == "spring":  # a gap spring at 20 % of the contacts: 1 - b c1 ~ 0.8, the intersections' slope terms count
+        d, f = spring_fight(np.random.default_rng(12), 0.2, sign=sign)
+        monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", 10.0)
+    elif kw == "three":  # the fewest samples a line may have: 3 in the backlash (small-sample factors n - 1, n - 2)
+        d, f, _, _ = make_force_fight(np.random.default_rng(0), n_cycles=1)
+        opts = dict(centre_margin_frac=0.496, min_centre_points=3)
+    else:
+        d, f, _, _ = make_force_fight(np.random.default_rng(12), slope_sign=sign, **kw)
+    r = blf_maint(d, f, FS_HZ, centre_slope=centre_slope, **opts)
+    if kw == "three":
+        assert r.n_centre == 3
     assert r.slope_sign == sign
     lags = round(0.05 * FS_HZ)
     g, g_f = sign * f, sign * _lowpass(f)
@@ -452,3 +473,31 @@ def test_defaults_are_the_documented_ones(name, default, words):
     assert inspect.signature(blf_maint).parameters[name].default == default
     doc = blf_maint.__doc__
     assert words in doc[doc.index(name):], (name, words)
+
+
+def test_constant_d_or_f_is_no_relation_and_says_which_std():
+    d, f, _, _ = make_force_fight(np.random.default_rng(0))
+    # (exactly constant after the low-pass: zeros; a constant 0.25 mm comes out of the filter with 1e-17 of
+    # ripple and is refused by the correlation gate instead)
+    for dd, ff, std_d, std_f in ((np.zeros(d.size), f, "0", None), (d, np.zeros(f.size), None, "0")):
+        with pytest.raises(AnalysisError) as exc:
+            blf_maint(dd, ff, FS_HZ)
+        msg = str(exc.value)
+        assert msg.startswith("no F-D relation: the low-passed D or F is constant (std D = "), msg
+        assert (f"std D = {std_d} mm" in msg) if std_d else (f"std F = {std_f} N)" in msg), msg
+
+
+def test_a_noise_free_gap_force_has_no_level_uncertainty():
+    """Gap force exactly 0 N (no friction, no load-cell noise): the backlash level's variance is 0."""
+    d, f, _, _ = make_force_fight(np.random.default_rng(0), sigma_f_N=0.0)
+    r = blf_maint(d, f, FS_HZ)
+    assert r.lines.centre.f_at_zero_d_N == 0.0 and r.lines.centre.cov[0, 0] == 0.0 and r.lines.centre.rmse_N == 0.0
+
+
+def test_the_default_sample_counts_are_50_per_contact_and_10_in_the_backlash():
+    d, f, _, _ = make_force_fight(np.random.default_rng(0), ramp_s=0.05, n_cycles=1)  # 0.05 s force ramps
+    with pytest.raises(AnalysisError, match=r"^left contact region has too few samples: 46 < 50 "):
+        blf_maint(d, f, FS_HZ)
+    d, f, _, _ = make_force_fight(np.random.default_rng(0), n_cycles=1)
+    with pytest.raises(AnalysisError, match=r"^centre \(backlash\) region has too few samples: 9 < 10 "):
+        blf_maint(d, f, FS_HZ, centre_margin_frac=0.49)  # 2 % of the gap left for the level

@@ -108,12 +108,14 @@ def load_equivalent() -> dict[str, list[dict]]:
 
 
 def matches(entry: dict, diff: list[str], name: str) -> bool:
-    """An equivalent-mutant entry: the function (mutmut's ``x_<function>``) and the changed lines."""
+    """An equivalent-mutant entry: the function (part of mutmut's ``x_<function>`` name) and text of the
+    removed and of the added line."""
     if entry["function"] not in name:
         return False
     removed = [d[1:].strip() for d in diff if d.startswith("-")]
     added = [d[1:].strip() for d in diff if d.startswith("+")]
-    return entry["removed"].strip() in removed and entry["added"].strip() in added
+    return (any(entry["removed"].strip() in line for line in removed)
+            and any(entry["added"].strip() in line for line in added))
 
 
 def run_module(module: str, workroot: Path, equivalent: dict) -> dict:
