@@ -345,15 +345,16 @@ def _d_star(a, b, c0, c1):
 @pytest.mark.parametrize("centre_slope", [False, True])
 @pytest.mark.parametrize("sign, kw", [(-1, dict(d_noise_ar1=0.6)), (1, dict(stiffness_left_N_per_mm=14e3,
                                                                          stiffness_right_N_per_mm=20e3)),
-                                      (-1, "spring"), (-1, "three")])
+                                      (-1, "spring"), (1, "spring"), (-1, "three")])
 def test_regressions_and_sigmas_match_an_independent_newey_west(centre_slope, sign, kw, monkeypatch):
     """Every line, covariance, residual and the backlash sigma against a separate implementation of
     the documented estimators (the masks and the low-pass are the result's and the docstring's):
     D on the low-passed G in contact, G's level or line on D in the backlash, Newey-West with lags up to
     hac_lag_s, B's sigma by first-order propagation (here with a numerical Jacobian)."""
     opts = {}
-    if kw == "spring":  # a gap spring at 20 % of the contacts: 1 - b c1 ~ 0.8, the intersections' slope terms count
-        d, f = spring_fight(np.random.default_rng(12), 0.2, sign=sign)
+    if kw == "spring":  # a gap spring at 20 % of the contacts: 1 - b c1 ~ 0.8, the intersections' slope terms count;
+        d, f = spring_fight(np.random.default_rng(12), 0.2, sign=sign)  # D offset 0.3 mm: the level at D = 0 too
+        d = d + 0.3
         monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", 10.0)
     elif kw == "three":  # the fewest samples a line may have: 3 in the backlash (small-sample factors n - 1, n - 2)
         d, f, _, _ = make_force_fight(np.random.default_rng(0), n_cycles=1)
