@@ -217,7 +217,8 @@ def test_correlation_gate_just_either_side_of_0p3(target_sign):
     f_above = target_sign * (-g_true) + b_above * other
     f_below = target_sign * (-g_true) + b_below * other
     with pytest.raises(AnalysisError, match=r"^no F-D relation: D and F do not move together, as they do in a "
-                                            r"force fight \(correlation of the low-passed D and F -?0.300, \|r\| < 0.3\)$"):
+                                            r"force fight \(correlation of the low-passed D and F -?0.300, "
+                                            r"\|r\| < 0.3\)$"):
         blf_maint(d, f_below, FS_HZ)
     try:
         blf_maint(d, f_above, FS_HZ)
@@ -249,8 +250,9 @@ def test_a_side_loaded_to_10_percent_of_the_other_on_the_limit_and_one_step_shor
     for small, refused in ((math.nextafter(share, 1e9), False), (share, False), (math.nextafter(share, 0.0), True)):
         g = _cloud(small, big) if side == "left" else _cloud(big, small)
         if refused:
+            end = "lower" if side == "left" else "upper"
             with pytest.raises(AnalysisError, match=r"^backlash not traversed: the force fight never reached contact "
-                                                    rf"on the .* side .*, at the {'lower' if side == 'left' else 'upper'} end"
+                                                    rf"on the .* side .*, at the {end} end"
                                                     r".* a contact line needs at least 10 %$"):
                 contact_extremes(g, 1.0, -1, (-0.2, 0.2))
         else:

@@ -159,8 +159,8 @@ def test_maint_budget_terms_each_known():
     u = maint_uncertainty(b, sigma, pr, temperature_error=tau)
     assert u.statistical_mm == sigma and u.pitch_mm == b * pr and u.temperature_mm == b * tau
     assert u.method_mm == METHOD_BOUND_REL * b / math.sqrt(3.0)  # 5 % of 0.4 mm > 5 um
-    assert u.combined_mm == pytest.approx(math.sqrt(sigma**2 + (b * pr) ** 2 + (b * tau) ** 2 + (0.02 / math.sqrt(3.0)) ** 2),
-                                          rel=1e-15)
+    expected = math.sqrt(sigma**2 + (b * pr) ** 2 + (b * tau) ** 2 + (0.02 / math.sqrt(3.0)) ** 2)
+    assert u.combined_mm == pytest.approx(expected, rel=1e-15)
     assert u.expanded_mm == 2.0 * u.combined_mm
 
 
@@ -199,7 +199,8 @@ def test_serv_budget_terms_each_known(method):
     assert rel == {"improved": 0.10, "paper": 0.40}[method]
     assert (u.statistical_mm, u.pitch_mm) == (sigma, pitch)
     assert u.temperature_mm == temp / math.sqrt(3.0) and u.method_mm == rel * b / math.sqrt(3.0)
-    assert u.combined_mm == pytest.approx(math.sqrt(sigma**2 + pitch**2 + u.temperature_mm**2 + u.method_mm**2), rel=1e-15)
+    expected = math.sqrt(sigma**2 + pitch**2 + u.temperature_mm**2 + u.method_mm**2)
+    assert u.combined_mm == pytest.approx(expected, rel=1e-15)
     assert serv_uncertainty(b, sigma, pitch, temp).method_mm == 0.10 * b / math.sqrt(3.0)  # improved by default
 
 

@@ -174,9 +174,9 @@ def main(argv: list[str] | None = None) -> int:
             row = run_module(m, workroot, equivalent)
             rows.append(row)
             c = row["counts"]
+            other = {k: v for k, v in c.items() if k not in (KILLED, SURVIVED)}
             print(f"{m:28s} {row['mutants']:4d} mutants, {row['killed']:4d} killed, "
-                  f"{c.get(SURVIVED, 0):3d} survived ({row['equivalent']} equivalent), "
-                  f"{sum(v for k, v in c.items() if k not in (KILLED, SURVIVED)):3d} other {sorted(set(c) - {KILLED, SURVIVED})}; "
+                  f"{c.get(SURVIVED, 0):3d} survived ({row['equivalent']} equivalent), other {other}; "
                   f"score {100 * row['score']:.1f} % of the non-equivalent; {row['wall_s']:.0f} s", flush=True)
             for s in row["survivors"]:
                 if not s["equivalent"]:
