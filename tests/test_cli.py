@@ -64,8 +64,9 @@ def test_analyze_force_fight_only_says_uncorrected(default_run, tmp_path):
     p = tmp_path / "ff.csv"
     p.write_text("\n".join(",".join(l.split(",")[:7]) for l in keep) + "\n")
     rc = main(["analyze", str(p), "--out", str(tmp_path / "a")])
-    assert rc in (0, 1)
     res = json.loads((tmp_path / "a" / "result.json").read_text())
+    # the shipped rig passes uncalibrated too: U carries the uncalibrated pitch (tests/test_check_known_answer.py)
+    assert rc == 0 and res["status"] == "pass", res.get("verdict")
     assert res["calibration"] == {"ema1": None, "ema2": None}
     assert any("uncorrected" in n for n in res["notes"])
 

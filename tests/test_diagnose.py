@@ -22,6 +22,7 @@ from hil.cli import main
 from sim.replay import ChainParams, replay_chains
 from sim.replay_model import DualEmaReplay
 from support import diagnose_cases as dc
+from support.ci import skip_or_fail
 
 EMPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 
@@ -142,8 +143,9 @@ def test_out_of_library_is_unexplained(tmp_path, short):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not EMPS.exists(), reason=f"EMPS recording not present at {EMPS} (../shared/data)")
 def test_emps_cli(tmp_path):
+    if not EMPS.exists():
+        skip_or_fail(f"EMPS recording not present at {EMPS} (../shared/data)")
     rc = main(["diagnose", str(EMPS), "--model", "single-axis", "--out", str(tmp_path), "--quiet"])
     assert rc == 0
     data = validate(tmp_path / "diagnosis.json", "diagnosis")

@@ -14,10 +14,16 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
+from support.ci import skip_or_fail
 from support.independent_rig import DATA, KEYS, diagnose_file, judge
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(not KEYS, reason=f"independent-rig recordings not present at {DATA} (../shared/data)")]
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(autouse=True)
+def _needs_the_shared_recordings():
+    if not KEYS:
+        skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
 
 
 def _one(name: str) -> tuple[str, bool, str, float]:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import struct
 import subprocess
+import sysconfig
 from pathlib import Path
 
 import pytest
@@ -24,6 +26,7 @@ from hil.canopen.plan import PlanError
 from hil.profiles import default_profile_path, load_actuation
 from hil.rig import plan_for
 from support.canopen_rig import shipped_rig
+from support.ci import skip_or_fail
 from support.profiles import write_profile_variant
 
 
@@ -178,19 +181,41 @@ def test_eds_without_the_reaction_passes_only_where_the_rig_states_another(tmp_p
     assert [d.reaction for d in plan.drives] == [False, False]
 
 
-@pytest.mark.skipif(shutil.which("eds-validate") is None, reason="eds-utils' eds-validate not installed "
-                    "(pip install eds-utils): the shipped EDS is checked by canopen's parser only")
+def _eds_validate() -> list[str]:
+    """The command of eds-utils' ``eds-validate`` (the ``test`` extra installs it).
+
+    pip puts a console script into the scripts directory of the interpreter that installed it (or of
+    the user scheme for ``pip install --user``). That directory is on PATH only while its environment
+    is active: an interpreter run by its path (a venv not activated, ``/path/to/python -m pytest``,
+    pyenv's version directory without its shims) finds eds-utils importable and ``eds-validate`` not on
+    PATH. So the script is looked for next to this interpreter first, then on PATH; where it is
+    absent, the test skips (fails under CI=true).
+    """
+    for scheme in (None, f"{os.name}_user"):
+        try:
+            scripts = sysconfig.get_path("scripts") if scheme is None else sysconfig.get_path("scripts", scheme)
+        except KeyError:
+            continue
+        exe = Path(scripts) / "eds-validate"
+        if exe.is_file() and os.access(exe, os.X_OK):
+            return [str(exe)]
+    found = shutil.which("eds-validate")
+    if found:
+        return [found]
+    skip_or_fail("eds-utils' eds-validate is installed neither next to this interpreter "
+                 f"({sysconfig.get_path('scripts')}) nor on PATH (pip install eds-utils): the shipped EDS is "
+                 "checked by canopen's parser only")
+
+
 @pytest.mark.parametrize("name", ["ema_drive.eds", "cia401_io.eds"])
 def test_shipped_eds_passes_eds_utils_validation(name):
-    r = subprocess.run(["eds-validate", str(default_profile_path(name))], capture_output=True, text=True, timeout=60,
+    r = subprocess.run([*_eds_validate(), str(default_profile_path(name))], capture_output=True, text=True, timeout=60,
                        check=False)
     assert r.returncode == 0 and not r.stdout.strip(), r.stdout + r.stderr
 
 
-@pytest.mark.skipif(shutil.which("eds-validate") is None, reason="eds-utils' eds-validate not installed "
-                    "(pip install eds-utils)")
 def test_eds_utils_refuses_a_broken_eds(tmp_path):
     """The validation above can fail: an object with an invalid data type is refused."""
     bad = _broken(tmp_path, "6007", "DataType", "0x0099")
-    r = subprocess.run(["eds-validate", str(bad)], capture_output=True, text=True, timeout=60, check=False)
+    r = subprocess.run([*_eds_validate(), str(bad)], capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode != 0 and "[6007]" in r.stdout + r.stderr

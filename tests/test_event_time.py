@@ -16,6 +16,7 @@ import pytest
 
 from hil.canopen.frame import Frame
 from hil.link import CanopenLink, StaleData
+from hil.master import HeartbeatLost
 from support.canopen_rig import make_master
 from hil.transport import BusTransport
 
@@ -97,9 +98,15 @@ def test_heartbeat_in_the_backlog_is_not_judged_lost(transport, actuation):
             m.on_frame(f, t)
         m.poll(tr.now())  # judged at the frame's time: never more than one period since the last
     assert m.fault is None
-    # judged at read time instead (what the master did before), the first heartbeat alone would
-    # have been 3 periods old when read: the consumer would have fired
-    assert (now - (start + hb)) > m.nodes[1].hb_timeout_s
+    # the consumer holds each drive's last heartbeat at its arrival time, not at the time it was read
+    # (0.01 s to 0.4 s later): its timeout runs from there, to the float
+    last = start + 4 * hb - 0.01
+    assert [d.last_heartbeat_s for d in m.drives.values()] == pytest.approx([last, last], abs=1e-6)
+    limit = m.drives[1].hb_timeout_s - 0.5 * m.T
+    m.poll(m.drives[1].last_heartbeat_s + limit)
+    assert m.fault is None
+    with pytest.raises(HeartbeatLost):
+        m.poll(m.drives[1].last_heartbeat_s + limit + 1e-6)
 
 
 def test_master_behind_the_bus_stops_with_stale_data(transport, actuation):

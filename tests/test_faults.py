@@ -18,7 +18,9 @@ Stated reaction bounds (T = SYNC period 2 ms, P = heartbeat period 0.1 s):
 
 Overshoot margin on the true force and stroke: what the fastest true rate seen
 in the run allows during 2 T, plus the sensor noise (5 sigma of the load cell,
-the LVDT's peak-to-peak noise).
+the LVDT's peak-to-peak noise). The limit plus that margin must itself stay well
+inside the physics it protects: the force within the hard cap of 25 % of the
+limit load (10 kN of 40 kN), the stroke inside the rig's end stops (20 mm).
 
 Every test that runs a dry-run is ``slow`` (fault-injection end to end); the
 check that every fault kind has a case stays in the fast loop.
@@ -38,6 +40,7 @@ from hil.canopen.cia402 import State, decode_state
 from hil.canopen.frame import Frame
 from hil.canopen.process import DriveMode
 from hil.cli.dry_run import dry_run
+from hil.config import HARD_MAX_FORCE_FRACTION
 from hil.link import SDO_FALLBACK_CYCLES
 from hil.profiles import load_actuation, load_check, load_simrig
 from hil.runfolder import read_signals
@@ -51,6 +54,7 @@ from support.sim_bus import Bus
 
 T = 0.002
 P_HB = 0.1
+END_STOP_MM = load_simrig().params.stroke_limit_mm  #: the simulated rig's mechanical end stops [mm]
 SAFE = {State.SWITCH_ON_DISABLED, State.FAULT}
 
 
@@ -110,6 +114,10 @@ def _peaks_within_limits(tr, t_onset, lim: Limits, act):
     ds = np.max(np.abs(np.diff(tr.s_mm, axis=0))) / T
     f_margin = 2 * T * dF + 5 * act.sensors.loadcell_noise_std_N
     s_margin = 2 * T * ds + act.sensors.lvdt_noise_pp_mm
+    # the bounds themselves well inside the physics: a margin grown from a fast true rate must not
+    # carry the bound to the limit load or the end stops
+    assert lim.max_force_N + f_margin <= HARD_MAX_FORCE_FRACTION * act.mechanics.limit_load_N, f_margin
+    assert lim.max_stroke_mm + s_margin < END_STOP_MM, s_margin
     assert F.max() <= lim.max_force_N + f_margin, (F.max(), f_margin)
     assert s.max() <= lim.max_stroke_mm + s_margin, (s.max(), s_margin)
     return F.max(), s.max()

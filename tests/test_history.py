@@ -24,6 +24,7 @@ from hil.history.record import record_from_result
 from hil.history.store import HistoryStore
 from hil.profiles import load_actuation
 from support import postgres
+from support.ci import skip_or_fail
 from support.wear import SERIALS, true_crossing_fh, wear_results
 
 SCHEMA = json.loads((Path(__file__).resolve().parents[1] / "hil" / "schemas" / "history.schema.json").read_text())
@@ -213,7 +214,7 @@ def test_refused_postgresql_login_and_unreachable_server(tmp_path, capsys):
     try:
         srv = postgres.server()
     except postgres.Unavailable as exc:
-        pytest.skip(f"PostgreSQL server not available: {exc}")
+        skip_or_fail(f"PostgreSQL server not available: {exc}")
     bad = srv.url("postgres", password="wrong-password")
     assert main(["history", "--history", bad]) == 3
     err = capsys.readouterr().err.strip()

@@ -16,12 +16,18 @@ import pytest
 from hil.analysis.maint import analyze_signals, result_dict
 from hil.profiles import load_actuation
 from hil.runfolder import read_signals
+from support.ci import skip_or_fail
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "independent-rig"
 KEYS = json.loads((DATA / "keys.json").read_text()) if (DATA / "keys.json").exists() else {}
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(not KEYS, reason=f"independent-rig recordings not present at {DATA} (../shared/data)")]
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(autouse=True)
+def _needs_the_shared_recordings():
+    if not KEYS:
+        skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
 
 
 @pytest.mark.parametrize("name", sorted(KEYS) or ["none"])

@@ -43,6 +43,7 @@ from hil.runfolder import read_signals
 from hil.supervisor import Limits
 from sim.drives import QUICK_STOP_HOLD_S
 from sim.faults import Fault
+from support.ci import skip_or_fail
 from support.profiles import write_profile_variant
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,6 +103,7 @@ def silent_figures(r, act) -> dict:
     oe = [t for t, st in zip(step_t[after], tr.state[after]) if all(s != "OPERATION_ENABLED" for s in st)]
     before = (tr.t_s <= t_last + 1e-9) & (tr.t_s > t_last - 1.0)
     F, s = tr.F_N, tr.s_mm
+    s_at_loss = s[tr.t_s <= t_last + 1e-9][-1]
     rate_F = float(np.max(np.abs(np.diff(F[tr.t_s <= t_last + 1e-9], axis=0)))) / T
     rate_s = float(np.max(np.abs(np.diff(s[tr.t_s <= t_last + 1e-9], axis=0)))) / T
     return {
@@ -113,10 +115,60 @@ def silent_figures(r, act) -> dict:
         "peak_F_N": float(np.abs(F[after]).max()),
         "peak_fight_N": float(np.abs(F[after, 0] - F[after, 1]).max() / 2),
         "peak_s_mm": float(np.abs(s[after]).max()),
+        "move_s_mm": float(np.abs(s[after] - s_at_loss).max()),
         "rate_F_N_per_s": rate_F, "rate_s_mm_per_s": rate_s,
         "emcy": sorted((e.node_id, e.code) for e in r.master.emcy),
         "free_steps": inj.pair.stats.free_steps,
     }
+
+
+#: "No run-away" after the master's loss: the true force may move by at most this from its value at the loss
+#: [N] (2.5 % of the 40 kN limit load; measured: +338 N in the calibration's quick stop, +17 N at the force
+#: fight's 6 kN)
+RUNAWAY_N = 1000.0
+
+
+def physics_bounds(fig: dict, act, chk, sim) -> list[str]:
+    """The bounds the true force and stroke after the master's loss must keep, each well inside the
+    physics it protects (the 40 kN limit load, the rig's end stops at 20 mm); the ones broken, in words.
+
+    * force and force fight within the supervisor's limits (8 kN and 7 kN: 20 % and 17.5 % of F_limit);
+    * no run-away: the force within RUNAWAY_N of its value at the loss, the stroke within the distance
+      the supervisor's speed limit covers in the time to the safe state (consumer time + quick stop hold
+      + 2 SYNC periods: 10 mm/s x 0.179 s = 1.79 mm) of where it was;
+    * the stroke within the supervisor's stroke limit (19.5 mm), inside the end stops.
+    """
+    lim = Limits.of(act, chk)
+    window = act.canopen.master_consumer_time_s + QUICK_STOP_HOLD_S + 2 * act.timing.sync_period_s
+    assert lim.max_force_N <= 0.25 * act.mechanics.limit_load_N and lim.max_stroke_mm < sim.params.stroke_limit_mm
+    bad = []
+    if not fig["peak_F_N"] <= lim.max_force_N:
+        bad.append(f"peak force {fig['peak_F_N']:.0f} N > {lim.max_force_N:.0f} N")
+    if not fig["peak_fight_N"] <= lim.max_force_fight_N:
+        bad.append(f"peak force fight {fig['peak_fight_N']:.0f} N > {lim.max_force_fight_N:.0f} N")
+    if not fig["peak_F_N"] <= fig["F_at_loss_N"] + RUNAWAY_N:
+        bad.append(f"force ran away: {fig['peak_F_N']:.0f} N after {fig['F_at_loss_N']:.0f} N at the loss")
+    if not fig["move_s_mm"] <= lim.max_velocity_mm_per_s * window:
+        bad.append(f"stroke ran away: moved {fig['move_s_mm']:.3f} mm > {lim.max_velocity_mm_per_s * window:.3f} mm")
+    if not fig["peak_s_mm"] <= lim.max_stroke_mm:
+        bad.append(f"peak stroke {fig['peak_s_mm']:.3f} mm > {lim.max_stroke_mm} mm")
+    return bad
+
+
+@pytest.mark.parametrize("wrong, words", [
+    (dict(peak_F_N=8001.0, F_at_loss_N=7500.0), "peak force 8001 N > 8000 N"),
+    (dict(peak_fight_N=7001.0), "peak force fight 7001 N > 7000 N"),
+    (dict(peak_F_N=6760.0), "force ran away: 6760 N after 5759 N at the loss"),
+    (dict(move_s_mm=1.8), "stroke ran away: moved 1.800 mm > 1.790 mm"),
+    (dict(peak_s_mm=19.51, move_s_mm=0.1), "peak stroke 19.510 mm > 19.5 mm"),
+])
+def test_the_physics_bounds_fail_on_a_run_that_breaks_them(profiles, wrong, words):
+    """The bounds of the master-loss runs can fail: the figures of the force-fight run (measured) pass,
+    each deliberately wrong one fails (the old bounds, 41 104 N and 21.07 mm, passed anything)."""
+    act, chk, sim = profiles
+    good = dict(F_at_loss_N=5759.1, peak_F_N=5776.5, peak_fight_N=5776.5, peak_s_mm=0.64, move_s_mm=0.001)
+    assert physics_bounds(good, act, chk, sim) == []
+    assert physics_bounds(good | wrong, act, chk, sim) == [words]
 
 
 @pytest.fixture(scope="module")
@@ -151,15 +203,8 @@ def test_master_silent_drives_stop_by_themselves(tmp_path, profiles, start_s, wh
     assert fig["sod_s"] <= C + QUICK_STOP_HOLD_S + 2 * T + 1e-9, fig
     assert r.injector.final_states() == (State.SWITCH_ON_DISABLED, State.SWITCH_ON_DISABLED)
     assert fig["free_steps"] > 0  # the rig went on without SYNC until the brakes held it
-    # true force and stroke: within the limits plus what the time to the safe state allows at
-    # the fastest true rate of the run (+ sensor noise, as tests/test_faults.py)
-    lim = Limits.of(act, chk)
-    window = C + QUICK_STOP_HOLD_S + 2 * T
-    f_margin = window * fig["rate_F_N_per_s"] + 5 * act.sensors.loadcell_noise_std_N
-    assert fig["peak_F_N"] <= lim.max_force_N + f_margin, fig
-    assert fig["peak_fight_N"] <= lim.max_force_fight_N + f_margin, fig
-    assert fig["peak_s_mm"] <= lim.max_stroke_mm + window * fig["rate_s_mm_per_s"] + act.sensors.lvdt_noise_pp_mm
-    assert fig["peak_F_N"] <= fig["F_at_loss_N"] + f_margin, fig  # no run-away either
+    # true force and stroke after the loss: within the supervisor's limits and no run-away
+    assert physics_bounds(fig, act, chk, sim) == [], fig
     if what == "force_fight":
         assert fig["F_at_loss_N"] > 5000.0  # the loss came at the force fight's peak
     else:
@@ -199,7 +244,7 @@ def test_sigkill_of_run_leaves_no_drive_enabled(tmp_path):
                         "--check", str(chk), "--json", str(out), "--keep", str(tmp_path / "runs")],
                        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False)
     if r.returncode == 77:
-        pytest.skip(r.stdout.strip().splitlines()[-1])
+        skip_or_fail(r.stdout.strip().splitlines()[-1])
     print(r.stdout[-3000:])
     assert r.returncode == 0, f"seed {KILL_SEED}:\n{r.stdout[-6000:]}\n{r.stderr[-3000:]}"
     res = json.loads(out.read_text())

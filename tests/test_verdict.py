@@ -30,15 +30,21 @@ def validate(path: Path, name: str) -> dict:
 # ---------------------------------------------------------------------------- the rule itself
 
 
-@pytest.mark.parametrize("b, u, limit, status, margin", [
-    (0.100, 0.006, 0.200, "pass", 0.100),          # B + U = 0.106 <= 0.2
-    (0.194, 0.006, 0.200, "pass", 0.006),          # B + U = 0.200: on the limit, still proven
-    (0.197, 0.006, 0.200, "inconclusive", 0.003),  # the limit inside B +- U, below B + U
-    (0.203, 0.006, 0.200, "inconclusive", -0.003),  # the limit inside B +- U, above B - U
-    (0.206, 0.006, 0.200, "inconclusive", -0.006),  # B - U = 0.200 is not > limit
-    (0.207, 0.006, 0.200, "fail", -0.007),         # B - U = 0.201 > 0.2
+@pytest.mark.parametrize("b, u, limit, status, margin, on", [
+    (0.100, 0.006, 0.200, "pass", 0.100, None),          # B + U = 0.106 <= 0.2
+    (0.194, 0.006, 0.200, "pass", 0.006, "B + U"),       # B + U = 0.200: on the limit, still proven
+    (0.197, 0.006, 0.200, "inconclusive", 0.003, None),  # the limit inside B +- U, below B + U
+    (0.203, 0.006, 0.200, "inconclusive", -0.003, None),  # the limit inside B +- U, above B - U
+    # B - U = 0.200 is not > limit. (0.206 - 0.006 is 0.19999999999999998 in floats and would never
+    # reach the boundary; 0.2 + 0.006 = 0.20600000000000002 is the float whose B - U is 0.2 exactly)
+    (0.200 + 0.006, 0.006, 0.200, "inconclusive", -0.006, "B - U"),
+    (0.207, 0.006, 0.200, "fail", -0.007, None),         # B - U = 0.201 > 0.2
 ])
-def test_guard_band_rule_and_exact_margins(b, u, limit, status, margin):
+def test_guard_band_rule_and_exact_margins(b, u, limit, status, margin, on):
+    if on == "B + U":  # the row must sit on the boundary in floats, not near it
+        assert b + u == limit
+    elif on == "B - U":
+        assert b - u == limit
     v = decide(b, u, limit)
     assert v.status == status
     assert v.margin_mm == pytest.approx(margin, abs=1e-12) and v.limit_mm == limit and v.uncertainty_mm == u

@@ -150,9 +150,9 @@ def history_url(kind: str, tmp_path: Path) -> str:
     database on the test server; the test is skipped with the reason where none can be started)."""
     if kind == "sqlite":
         return f"sqlite:///{tmp_path}/history.sqlite"
-    import pytest
+    from support.ci import skip_or_fail
 
     try:
         return server().new_database()
     except Unavailable as exc:
-        pytest.skip(f"PostgreSQL server not available: {exc}")
+        skip_or_fail(f"PostgreSQL server not available: {exc}")

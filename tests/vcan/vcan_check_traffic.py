@@ -360,7 +360,9 @@ def test_whole_check_over_vcan_recovers_truth(full_check, actuation):
     assert meta["can"]["missing_cycles"] <= 0.02 * cycles, meta["can"]
     # run's lag and page-fault counters are recorded, and the lag stayed within safety.max_lag_s
     assert 0 <= meta["can"]["max_lag_ms"] <= 1e3 * meta["profiles"]["check"]["safety"]["max_lag_s"], meta["can"]
-    assert meta["can"]["page_faults"] >= 0, meta["can"]
+    # the loop touches no new memory cycle after cycle (gc frozen, buffers made before it): a page fault
+    # costs ~0.9 ms inside UML (docs/vcan.md), so at most one per 100 cycles (measured: 7 in 5553)
+    assert 0 <= meta["can"]["page_faults"] <= cycles / 100, meta["can"]
     # sim-serve's stats line: it stepped the plant once per SYNC it received
     last = res["serve_out"].splitlines()[-1]
     syncs = int(last.split(" SYNCs")[0].split()[-1])
