@@ -74,6 +74,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from collections.abc import Callable
+from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
@@ -93,12 +94,12 @@ from blf.diagnose_fit import (
     safe_predict,
     screen,
 )
-from blf.errors import AnalysisError
+from blf.errors import AnalysisError, InputError
 from blf.mismatch import RegimeScore, excess, regime_cells, regime_score, regime_words, window_scores
 from blf.validate import positive_scalar
 
-__all__ = ["Param", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location", "FittedEffect",
-           "Diagnosis", "RegimeScore", "diagnose", "place_of"]
+__all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
+           "FittedEffect", "Diagnosis", "RegimeScore", "diagnose", "place_of"]
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,48 @@ class Param:
     scale: float
     lo: float = -np.inf
     hi: float = np.inf
+
+
+@lru_cache(maxsize=64)
+def _positions(names: tuple) -> dict:
+    return {n: j for j, n in enumerate(names)}
+
+
+class ParamVector:
+    """A parameter vector read by name.
+
+    The diagnosis moves a model's nominal parameters as a plain vector in the order of its
+    :class:`Param` tuple; the model reads them by their names (with units), never by position:
+    ``ParamVector(names, theta)["lvdt_pitch1"]``.
+
+    Parameters
+    ----------
+    names : tuple of str
+        The parameters' names, in the order of the vector (``tuple(q.name for q in params)``).
+    values : array_like, shape (len(names),)
+        The values, in each parameter's unit.
+    """
+
+    __slots__ = ("_at", "values")
+
+    def __init__(self, names: tuple, values) -> None:
+        self._at = _positions(tuple(names))
+        self.values = np.asarray(values, dtype=float)
+        if self.values.shape != (len(self._at),):
+            raise InputError(f"a parameter vector of {len(self._at)} named parameters needs shape "
+                             f"({len(self._at)},); got shape {self.values.shape}")
+
+    def __getitem__(self, name: str) -> float:
+        """The value of parameter ``name`` as a float (KeyError names an unknown parameter)."""
+        return float(self.values[self._at[name]])
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._at
+
+    @staticmethod
+    def position(names: tuple, name: str) -> int:
+        """Where parameter ``name`` sits in the vector of ``names``."""
+        return _positions(tuple(names))[name]
 
 
 @dataclass(frozen=True)
