@@ -72,8 +72,8 @@ Method
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Protocol
 
@@ -749,8 +749,8 @@ def _library_effect(cfg: DiagnoseConfig, cur: Standing, scr: Screening, refits: 
         ev += (f"; as good within {cfg.form_margin:g} BIC units, so the form with the fewest parameters is "
                "named: " + ", ".join(f"{r.candidate.name} (BIC {r.delta_bic:+.1f}, linearised)" for r in alike))
     return FittedEffect(name=cand.name, where=cand.where, words=cand.words,
-                        parameters={q.name: float(v) for q, v in zip(cand.params, a.fit.x)},
-                        uncertainty={q.name: float(u) for q, u in zip(cand.params, a.fit.uncertainty)},
+                        parameters={q.name: float(v) for q, v in zip(cand.params, a.fit.x, strict=True)},
+                        uncertainty={q.name: float(u) for q, u in zip(cand.params, a.fit.uncertainty, strict=True)},
                         delta_bic=float(a.delta_bic), delta_chi2_holdout=float(a.delta_chi2_holdout), evidence=ev)
 
 
@@ -937,7 +937,7 @@ def _residual_rms(cmp: Comparison, floor: NoiseFloor, pred_all: dict) -> Residua
 
 
 def _named(params: tuple, theta: np.ndarray) -> dict:
-    return {q.name: float(v) for q, v in zip(params, theta)}
+    return {q.name: float(v) for q, v in zip(params, theta, strict=True)}
 
 
 def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig | None = None,

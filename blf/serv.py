@@ -650,10 +650,7 @@ def blf_serv(d_mm: np.ndarray, sample_rate_Hz: float, *, method: str = "improved
     module docstring (Method).
     """
     d = as_1d_finite(d_mm, "d_mm", "mm", min_len=10)
-    if noise_std_mm is None:
-        sig = robust_noise_std(d)
-    else:
-        sig = positive_scalar(noise_std_mm, "noise_std_mm", "mm")
+    sig = robust_noise_std(d) if noise_std_mm is None else positive_scalar(noise_std_mm, "noise_std_mm", "mm")
     mon = BlfServMonitor(
         sample_rate_Hz, sig, method=method, t0_s=t0_s, lowpass_rad_s=lowpass_rad_s, dt1_rad_s=dt1_rad_s,
         discretisation=discretisation, threshold_factor=threshold_factor, min_jump_mm=min_jump_mm,

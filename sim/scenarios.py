@@ -85,7 +85,7 @@ class OperationProfile:
     offset_mm : ndarray, shape (n,), or None
         Scheduled relative offset ``delta`` of the two motors, mm (EMA 1 at
         ``command + delta/2``, EMA 2 at ``command - delta/2``); None: the
-        force-fight compensation loop sets it (see :func:`simulate_operation`).
+        force-fight compensation loop sets it (see :func:`sim.operation.simulate_operation`).
     lag2_samples : int
         Transport delay of EMA 2's command, samples (0: none).
     ff_bandwidth_rad_s : float
