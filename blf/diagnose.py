@@ -68,6 +68,15 @@ Method
    EMA it is). Otherwise ``explained`` if any
    effect was named, else ``no_mismatch``. ``effects`` lists every effect
    accepted, whatever the verdict.
+
+Each step is a function of this module with a frozen record as its result:
+0 :class:`Comparison`, 1 :class:`NominalFit`, 2 :class:`NoiseFloor`, 3
+:class:`ChannelTests` (over a :class:`TestFrame`), 4 :class:`Screening` (of
+:class:`Screened` candidates, about the :class:`Standing` model of the
+round), 5 the :class:`Refit` candidates and the :class:`Accepted` one, its
+place decided, 6 :class:`NamedReference` parameters, 7 :class:`Verdict`.
+:func:`diagnose` strings them together and builds the :class:`Diagnosis`
+from their records.
 """
 
 from __future__ import annotations
@@ -197,7 +206,9 @@ class ReplayModel(Protocol):
     candidates: tuple  #: of Candidate
     regimes: dict  #: regime variable name -> ndarray (n,)
 
-    def predict(self, theta: np.ndarray, active: list) -> dict: ...
+    def predict(self, theta: np.ndarray, active: list) -> dict:
+        """Predicted channels for the nominal vector ``theta`` (in the order of ``nominal``; read it by
+        name with :class:`ParamVector`) and the active effects [(Candidate, parameters)]."""
 
     # Optional: ``places`` ({channel: place} where :func:`place_of` would not do), ``band_hz`` (the band
     # the model claims, Hz; None: raw), ``references`` (tuple of
