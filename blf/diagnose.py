@@ -82,13 +82,10 @@ from their records.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from functools import lru_cache
-from typing import Protocol
 
 import numpy as np
 
-from blf.band import Band, make_band
+from blf.band import make_band
 from blf.diagnose_fit import (
     CandidateFit,
     JointFit,
@@ -103,410 +100,42 @@ from blf.diagnose_fit import (
     safe_predict,
     screen,
 )
-from blf.errors import AnalysisError, InputError
-from blf.mismatch import RegimeScore, excess, regime_cells, regime_score, regime_words, window_scores
+from blf.diagnose_model import (
+    Candidate,
+    DiagnoseConfig,
+    Diagnosis,
+    FittedEffect,
+    Location,
+    Param,
+    ParamVector,
+    Reference,
+    RegimeScore,
+    ReplayModel,
+    place_of,
+)
+from blf.diagnose_records import (
+    Accepted,
+    ChannelTests,
+    Comparison,
+    NamedReference,
+    NoiseFloor,
+    NominalFit,
+    Refit,
+    ResidualRms,
+    Screened,
+    Screening,
+    Selection,
+    Standing,
+    TestFrame,
+    Verdict,
+)
+from blf.errors import AnalysisError
+from blf.mismatch import excess, regime_cells, regime_score, regime_words, window_scores
 from blf.validate import positive_scalar
 
+#: the model's vocabulary and the result (:mod:`blf.diagnose_model`) are imported from here
 __all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
            "FittedEffect", "Diagnosis", "RegimeScore", "diagnose", "place_of"]
-
-
-@dataclass(frozen=True)
-class Param:
-    """One fitted parameter: name (with unit), start value, scale, bounds."""
-
-    name: str
-    x0: float
-    scale: float
-    lo: float = -np.inf
-    hi: float = np.inf
-
-
-@lru_cache(maxsize=64)
-def _positions(names: tuple) -> dict:
-    return {n: j for j, n in enumerate(names)}
-
-
-class ParamVector:
-    """A parameter vector read by name.
-
-    The diagnosis moves a model's nominal parameters as a plain vector in the order of its
-    :class:`Param` tuple; the model reads them by their names (with units), never by position:
-    ``ParamVector(names, theta)["lvdt_pitch1"]``.
-
-    Parameters
-    ----------
-    names : tuple of str
-        The parameters' names, in the order of the vector (``tuple(q.name for q in params)``).
-    values : array_like, shape (len(names),)
-        The values, in each parameter's unit.
-    """
-
-    __slots__ = ("_at", "values")
-
-    def __init__(self, names: tuple, values) -> None:
-        self._at = _positions(tuple(names))
-        self.values = np.asarray(values, dtype=float)
-        if self.values.shape != (len(self._at),):
-            raise InputError(f"a parameter vector of {len(self._at)} named parameters needs shape "
-                             f"({len(self._at)},); got shape {self.values.shape}")
-
-    def __getitem__(self, name: str) -> float:
-        """The value of parameter ``name`` as a float (KeyError names an unknown parameter)."""
-        return float(self.values[self._at[name]])
-
-    def __contains__(self, name: object) -> bool:
-        return name in self._at
-
-    @staticmethod
-    def position(names: tuple, name: str) -> int:
-        """Where parameter ``name`` sits in the vector of ``names``."""
-        return _positions(tuple(names))[name]
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """A candidate physics term: machine name, place, engineer's words, parameters; ``variant`` tells
-    apart two forms of the same physics at the same place (e.g. friction in the drive or in the load
-    path): at most one of them is accepted."""
-
-    name: str
-    where: str
-    words: str
-    params: tuple
-    variant: str = ""
-
-
-@dataclass(frozen=True)
-class Reference:
-    """A nominal parameter compared with a reference value; named as effect ``name`` at ``where``
-    when it differs significantly. Reported as ``param`` = value - ``offset``."""
-
-    index: int
-    value: float
-    name: str
-    where: str
-    words: str
-    param: str
-    offset: float = 0.0
-    #: references with the same ``common`` = (name, where, words, param) that are all named and agree,
-    #: relative to their reference values, within 3 combined standard uncertainties are one physics
-    #: shared by their places (e.g. both LVDT pitches: the motor-to-ram ratio), named once
-    common: tuple = ()
-
-
-class ReplayModel(Protocol):
-    """What :func:`diagnose` needs from a model of the recording."""
-
-    t_s: np.ndarray
-    channels: tuple
-    measured: dict  #: channel -> ndarray (n,)
-    valid: dict  #: channel -> bool ndarray (n,), samples where the channel is modelled
-    nominal: tuple  #: of Param
-    candidates: tuple  #: of Candidate
-    regimes: dict  #: regime variable name -> ndarray (n,)
-
-    def predict(self, theta: np.ndarray, active: list) -> dict:
-        """Predicted channels for the nominal vector ``theta`` (in the order of ``nominal``; read it by
-        name with :class:`ParamVector`) and the active effects [(Candidate, parameters)]."""
-
-    # Optional: ``places`` ({channel: place} where :func:`place_of` would not do), ``band_hz`` (the band
-    # the model claims, Hz; None: raw), ``references`` (tuple of
-    # Reference), ``derived(channels) -> {name: ndarray}`` and ``derived_valid`` ({name: bool
-    # ndarray}): signals computed from the channels (e.g. the paper's D signals), reported
-    # (excess, locations, RMS) but not fitted, so nothing is counted twice.
-
-
-@dataclass(frozen=True)
-class DiagnoseConfig:
-    """Tuning of :func:`diagnose` (seconds, chi-square units)."""
-
-    block_s: float = 2.0
-    window_s: float = 1.0
-    noise_window_s: float = 0.2
-    excess_threshold: float = 3.0
-    bic_margin: float = 10.0
-    holdout_margin: float = 10.0
-    max_effects: int = 3
-    refit_top: int = 5
-    min_explained_fraction: float = 0.5  #: of each flagged channel's excess above 1, for "explained"
-    regime_bins: int = 10  #: position bins of the regime test (x 2 velocity signs x 2 force signs)
-    regime_threshold: float = 5.0  #: regime score S above which a channel differs (S ~ N(0, 1) under noise)
-    #: forms of one physics at one place whose BIC lies within this of the best are indistinguishable
-    #: (Kass and Raftery 1995: a BIC difference below 2 is "not worth more than a bare mention"):
-    #: the one with the fewest parameters, then the first in the library, is named
-    form_margin: float = 2.0
-
-
-@dataclass(frozen=True)
-class Location:
-    channel: str
-    t_start_s: float
-    t_end_s: float
-    regime: str
-    score: float
-    test: str = "window"  #: "window" (a time window) or "regime" (a regime cell, first to last visit)
-    where: str = ""  #: the place the channel belongs to (ema1, ema2, external)
-
-
-@dataclass(frozen=True)
-class FittedEffect:
-    name: str
-    where: str
-    words: str
-    parameters: dict
-    uncertainty: dict
-    delta_bic: float
-    delta_chi2_holdout: float
-    evidence: str
-    source: str = "library"  #: "library" (a candidate term) or "nominal" (a nominal parameter off its reference)
-
-
-@dataclass(frozen=True)
-class Diagnosis:
-    """Result of :func:`diagnose` (plain dicts inside: JSON-ready, treat as read-only).
-
-    RMS figures without ``raw`` are in the band (:attr:`band`); ``holdout`` ones
-    over the held-out half only (never fitted)."""
-
-    verdict: str
-    effects: tuple
-    locations: tuple
-    where: tuple  #: places of the mismatch left after the effects (unexplained), best first
-    band: Band
-    residual_rms_before: dict
-    residual_rms_after: dict
-    residual_rms_holdout_before: dict
-    residual_rms_holdout_after: dict
-    residual_rms_raw_before: dict
-    residual_rms_raw_after: dict
-    residual_rms_raw_holdout_before: dict
-    residual_rms_raw_holdout_after: dict
-    noise_floor: dict  #: in the band
-    noise_floor_raw: dict
-    excess_before: dict
-    excess_after: dict
-    ic_before: float
-    ic_after: float
-    nominal: dict
-    screening: tuple
-    predicted_before: dict = field(repr=False)
-    predicted_after: dict = field(repr=False)
-    measured: dict = field(repr=False, default_factory=dict)  #: all reported channels, derived included
-    valid: dict = field(repr=False, default_factory=dict)  #: raw samples compared, per channel
-    held_out: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, bool))  #: raw samples never fitted
-    kept: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, np.int64))  #: kept samples of the band
-    kept_valid: dict = field(repr=False, default_factory=dict)  #: per channel, over the kept samples
-    regime_cells_before: dict = field(repr=False, default_factory=dict)  #: channel -> RegimeScore (step 3)
-    regime_cells_after: dict = field(repr=False, default_factory=dict)
-    regime_labels: tuple = ()  #: description of each cell
-
-    @property
-    def regime_before(self) -> dict:
-        """Regime-test score S per channel after the nominal fit."""
-        return {c: r.score for c, r in self.regime_cells_before.items()}
-
-    @property
-    def regime_after(self) -> dict:
-        """Regime-test score S per channel with the accepted effects."""
-        return {c: r.score for c, r in self.regime_cells_after.items()}
-
-
-def place_of(channel: str) -> str:
-    """The place a channel belongs to: ``ema1``/``ema2`` by its number, ``external`` otherwise."""
-    if channel.endswith("1"):
-        return "ema1"
-    if channel.endswith("2"):
-        return "ema2"
-    return "external"
-
-
-# ---------------------------------------------------------------------------------------------- step records
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """Step 0, the band: the recording as the diagnosis compares it.
-
-    ``problem`` (:class:`blf.diagnose_fit.Problem`) holds the kept samples of the band, the fit and
-    held-out halves, the validity per channel and the noise floors (set by steps 1 and 2);
-    ``places`` the model's own channel -> place map (:func:`place_of` where it has none)."""
-
-    model: ReplayModel = field(repr=False)
-    cfg: DiagnoseConfig
-    band: Band
-    problem: Problem = field(repr=False)
-    places: dict
-
-    def place(self, channel: str) -> str:
-        """The place a channel belongs to (the model's map, else :func:`place_of`)."""
-        return self.places.get(channel) or place_of(channel)
-
-    def full(self, channels: dict) -> dict:
-        """The model's channels and the signals it derives from them (reported, not fitted)."""
-        derive = getattr(self.model, "derived", None)
-        return {**channels, **derive(channels)} if derive else dict(channels)
-
-
-@dataclass(frozen=True)
-class NominalFit:
-    """Step 1: the nominal parameters fitted on the fit half (model units, the order of
-    ``model.nominal``) and the model's channels at them."""
-
-    theta: np.ndarray
-    predicted: dict = field(repr=False)
-
-
-@dataclass(frozen=True)
-class NoiseFloor:
-    """Step 2: the reported channels (the model's, then the derived ones), the recording and the
-    nominal model over them, and the RMS noise floor per channel in the band and raw (None where no
-    sample is compared)."""
-
-    channels: tuple
-    measured: dict = field(repr=False)
-    predicted: dict = field(repr=False)
-    in_band: dict = field(default_factory=dict)
-    raw: dict = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class TestFrame:
-    """Step 3's frame over the kept samples: ``n_window`` samples per window of the window test,
-    ``rho`` the square root of the band's ``sum_factor``, the regime cells (index per sample, a
-    label per cell), the regime variables (for the words of a location) and the times (s)."""
-
-    n_window: int
-    rho: float
-    cells: np.ndarray = field(repr=False)
-    labels: tuple = field(repr=False)
-    regimes: dict = field(repr=False)
-    t_s: np.ndarray = field(repr=False)
-
-
-@dataclass(frozen=True)
-class ChannelTests:
-    """Step 3 for one prediction (channels, derived included): per reported channel the band
-    residual in noise sigmas scaled for the window sums (``weighted``), the window excess E and the
-    regime test (:class:`blf.mismatch.RegimeScore`)."""
-
-    predicted: dict = field(repr=False)
-    weighted: dict = field(repr=False)
-    excess: dict = field(default_factory=dict)
-    regime: dict = field(default_factory=dict)
-
-    @property
-    def regime_score(self) -> dict:
-        """Regime-test score S per channel."""
-        return {c: r.score for c, r in self.regime.items()}
-
-
-@dataclass(frozen=True)
-class Standing:
-    """The model at the start of a round of forward selection: nominal parameters, accepted terms
-    [(Candidate, parameters)], chi-square on each half, the linear re-adjustment of the nominal about
-    them (``projector``) and the fit half's weighted residual before (``weighted_fit``) and after
-    (``residual_fit``) that re-adjustment."""
-
-    theta: np.ndarray
-    active: tuple
-    chi2_fit: float
-    chi2_holdout: float
-    projector: Projector = field(repr=False)
-    residual_fit: np.ndarray = field(repr=False)
-    weighted_fit: np.ndarray = field(repr=False)
-
-
-@dataclass(frozen=True)
-class Screened:
-    """Step 4, one candidate: the chi-square it removes on the fit half (linearised, the nominal
-    re-adjusted) and that less its BIC penalty (``gain``; refitted while above ``bic_margin``)."""
-
-    candidate: Candidate
-    delta_chi2: float
-    gain: float
-
-
-@dataclass(frozen=True)
-class Screening:
-    """Step 4, one round: the candidates best first, the BIC penalty of each (:math:`k \\ln N_j`)
-    and the round's entry of :attr:`Diagnosis.screening`."""
-
-    ranked: tuple
-    penalty: dict
-    log: list
-
-
-@dataclass(frozen=True)
-class Refit:
-    """Step 5, one candidate refitted (:class:`blf.diagnose_fit.CandidateFit`), judged on the
-    linearisation: BIC change on the fit half and chi-square change on the held-out half."""
-
-    delta_bic: float
-    delta_chi2_holdout: float
-    candidate: Candidate
-    fit: CandidateFit
-
-
-@dataclass(frozen=True)
-class Accepted:
-    """Steps 5 and 6 (the place), one round: the candidate taken, its BIC change on the fit half and
-    chi-square change on the held-out half, and the exact fit (nominal and candidate) they are of."""
-
-    candidate: Candidate
-    delta_bic: float
-    delta_chi2_holdout: float
-    fit: JointFit
-
-
-@dataclass(frozen=True)
-class Selection:
-    """Steps 4-6 over every round: the nominal parameters and accepted terms at the end, the library
-    effects named, the screening of each round (:attr:`Diagnosis.screening`), and the BIC of the
-    nominal fit and of the final model."""
-
-    theta: np.ndarray
-    active: tuple
-    effects: tuple
-    screening: tuple
-    ic_before: float
-    ic_after: float
-
-
-@dataclass(frozen=True)
-class NamedReference:
-    """A nominal parameter named because it is off its reference: its value and standard
-    uncertainty, and what holding it at the reference costs in chi-square on each half."""
-
-    reference: Reference
-    value: float
-    uncertainty: float
-    delta_chi2_fit: float
-    delta_chi2_holdout: float
-
-
-@dataclass(frozen=True)
-class ResidualRms:
-    """RMS residual per reported channel of one prediction: in the band over the kept samples (whole,
-    held-out half) and in the raw band (whole, held-out half); None where no sample is compared."""
-
-    in_band: dict
-    in_band_holdout: dict
-    raw: dict
-    raw_holdout: dict
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """Step 7: the verdict, and where it is ``unexplained`` the locations and the places where the
-    rest lies (best first)."""
-
-    verdict: str
-    locations: tuple = ()
-    where: tuple = ()
-
-
-# --------------------------------------------------------------------------------------------------- steps
 
 
 def _band(model: ReplayModel, sample_period_s: float, cfg: DiagnoseConfig) -> Comparison:
@@ -822,7 +451,8 @@ def _reference_effects(named: list, refs: tuple, nominal: tuple, lnN: float) -> 
                     done.update(group)
                     out.append(FittedEffect(
                         name, where, words, {param: mean}, {param: sd_mean},
-                        float(-sum(m.delta_chi2_fit - lnN for m in rows)), float(-sum(m.delta_chi2_holdout for m in rows)),
+                        float(-sum(m.delta_chi2_fit - lnN for m in rows)),
+                        float(-sum(m.delta_chi2_holdout for m in rows)),
                         "nominal parameters " + ", ".join(f"{nominal[m.reference.index].name} = {m.value:.6g}"
                                                           for m in rows)
                         + " against " + ", ".join(f"{m.reference.value:.6g}" for m in rows)

@@ -410,7 +410,8 @@ def blf_maint(d_mm: np.ndarray, f_N: np.ndarray, sample_rate_Hz: float, *, lowpa
     # the binned curve along D and its slope (paper Figure 4; refuses D not in mm)
     curve = binned_curve(rel.d_f, rel.g_f, opt.bin_width_mm, opt.half_win, opt.min_count)
     # the regions from the force: both sides loaded, contact lines, corners, backlash samples
-    g_lo, g_hi = contact_extremes(rel.g_f, noise_std(f, rel.f_f), rel.sign, (float(rel.d_f.min()), float(rel.d_f.max())))
+    d_range = (float(rel.d_f.min()), float(rel.d_f.max()))
+    g_lo, g_hi = contact_extremes(rel.g_f, noise_std(f, rel.f_f), rel.sign, d_range)
     reg = locate_regions(d, rel.d_f, rel.g_f, g_lo, g_hi, rel.sign, contact_margin_frac=opt.contact_margin,
                          centre_margin_frac=opt.centre_margin, min_contact=opt.min_contact, min_centre=opt.min_centre)
     fit = _regressions(d, rel, reg, opt)

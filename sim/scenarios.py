@@ -33,8 +33,8 @@ from blf.validate import count, generator, instance_of, scalar
 from sim.params import RigParams
 from sim.truth import chain_stiffness_N_per_mm, force_fight_play_mm, series_stiffness
 
-__all__ = ["AirLoad", "AIR", "OperationProfile", "SCENARIOS", "scenario_profile", "full_stroke_profile", "small_manoeuvre_profile",
-           "gust_profile", "cruise_profile", "ext_crossing_profile"]
+__all__ = ["AirLoad", "AIR", "OperationProfile", "SCENARIOS", "scenario_profile", "full_stroke_profile",
+           "small_manoeuvre_profile", "gust_profile", "cruise_profile", "ext_crossing_profile"]
 
 @dataclass(frozen=True)
 class AirLoad:

@@ -47,15 +47,18 @@ def single_axis_candidates() -> tuple:
     """Candidate library of the single-axis model."""
     return (
         Candidate("stribeck_friction", "axis", "Stribeck (static above Coulomb) friction of the ballscrew",
-                  (Param("extra_force_N", 2.0, 2.0, 0.0, 1e3), Param("stribeck_velocity_m_per_s", 0.01, 0.01, 1e-4, 1.0))),
+                  (Param("extra_force_N", 2.0, 2.0, 0.0, 1e3),
+                   Param("stribeck_velocity_m_per_s", 0.01, 0.01, 1e-4, 1.0))),
         Candidate("asymmetric_friction", "axis",
                   "viscous friction that differs with the direction of motion",
                   (Param("viscous_asymmetry_N_s_per_m", 10.0, 10.0, -1e5, 1e5),)),
-        Candidate("position_dependent_friction", "axis", "friction that varies along the stroke (ballscrew wear or misalignment)",
+        Candidate("position_dependent_friction", "axis",
+                  "friction that varies along the stroke (ballscrew wear or misalignment)",
                   (Param("slope_N_per_m", 10.0, 10.0, -1e5, 1e5),)),
         Candidate("position_dependent_force", "axis",
                   "a force that depends on the position along the stroke (spring, cable carrier or gravity)",
-                  (Param("linear_N_per_m", 10.0, 10.0, -1e6, 1e6), Param("quadratic_N_per_m2", 100.0, 100.0, -1e8, 1e8))),
+                  (Param("linear_N_per_m", 10.0, 10.0, -1e6, 1e6),
+                   Param("quadratic_N_per_m2", 100.0, 100.0, -1e8, 1e8))),
     )
 
 

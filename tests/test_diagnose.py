@@ -362,7 +362,8 @@ def test_regime_test_localises_a_mismatch_the_window_test_misses():
 def test_both_lvdt_pitches_alike_are_one_ratio_named_once():
     # two references of one common physics: folded when both are named and agree (relative to their
     # references) within 3 combined standard uncertainties, else named each at its place
-    from blf.diagnose import NamedReference, Param, Reference, _reference_effects
+    from blf.diagnose import Param, Reference, _reference_effects
+    from blf.diagnose_records import NamedReference
     from sim.replay_model import RATIO
 
     nominal = tuple(Param(f"gain{k}", 1.0, 1.0, 0.5, 1.5) for k in range(2))
@@ -429,8 +430,9 @@ def test_forms_of_one_physics_within_two_bic_units_name_the_simpler():
     form with the fewest parameters is named, then the library's first; beyond it the better BIC
     decides. A simpler form not yet refitted is refitted for the comparison; another place or
     variant never takes part."""
-    from blf.diagnose import Candidate, DiagnoseConfig, Param, Refit, _prefer_simpler_law
+    from blf.diagnose import Candidate, DiagnoseConfig, Param, _prefer_simpler_law
     from blf.diagnose_fit import CandidateFit
+    from blf.diagnose_records import Refit
 
     def cand(name, n, where="ema1", variant="drive"):
         return Candidate(name, where, name, tuple(Param(f"p{k}", 1.0, 1.0) for k in range(n)), variant)
