@@ -266,47 +266,6 @@ def _feed_forward(X, e, mode, val, period):
 
 
 @njit(cache=True, inline="always")
-def _substep(X, P, E, sbuf, dm, j, mode1, val1, wff0, mode2, val2, wff1, load):
-    """One substep h (kick-drift-kick) of both drives and the surface; stores the strokes at its start
-    in ``sbuf[:, j]`` (for the LVDT delay)."""
-    h = P[G_H]
-    hh = 0.5 * h
-    ki = P[G_KI]
-    sbuf[0, j] = X[S_N + SE_S]
-    sbuf[1, j] = X[S_N + SE_N + SE_S]
-    # Maxwell arms: exact exponential update with the deflection frozen over the substep
-    for e in range(2):
-        alpha = E[e, COL_VE_ALPHA]
-        if alpha > 0.0:
-            b = S_N + e * SE_N
-            X[b + SE_ZC] += (dm[2 * e] - X[b + SE_ZC]) * alpha
-            X[b + SE_ZT] += (dm[2 * e + 1] - X[b + SE_ZT]) * alpha
-    # kick (h/2) with the forces at the current positions
-    _, sat0 = _kick(X, P, E, 0, mode1, val1, wff0, hh, False)
-    _, sat1 = _kick(X, P, E, 1, mode2, val2, wff1, hh, False)
-    _kick_surface(X, P, hh, load, False)
-    # drift (h), CSP integrator by the trapezoidal rule, conditional anti-windup
-    for e in range(2):
-        b = S_N + e * SE_N
-        phi = X[b + SE_PHI]
-        phin = phi + h * X[b + SE_W]
-        X[b + SE_PHI] = phin
-        mode = mode1 if e == 0 else mode2
-        if mode == 8 and ki > 0.0:
-            val = val1 if e == 0 else val2
-            err = 0.5 * ((val - phi) + (val - phin))
-            sat = sat0 if e == 0 else sat1
-            if (not sat) or err * X[b + SE_T] < 0.0:
-                X[b + SE_I] += err * h
-    X[S_Y] += h * X[S_V]
-    # forces at the new positions, second kick (h/2)
-    _solve_chains(X, P, E, dm)
-    _kick(X, P, E, 0, mode1, val1, wff0, hh, True)
-    _kick(X, P, E, 1, mode2, val2, wff1, hh, True)
-    _kick_surface(X, P, hh, load, True)
-
-
-@njit(cache=True, inline="always")
 def _remember_targets(X, mode1, val1, mode2, val2):
     """Drive memory for the next period's velocity feed-forward: the POSITION target, or none."""
     for e in range(2):
@@ -320,29 +279,41 @@ def _remember_targets(X, mode1, val1, mode2, val2):
 
 
 @njit(cache=True, inline="always")
-def _lvdt_and_load_cell(X, P, E, sbuf, e, n, t, noise, kn):
-    """LVDT reading (mm; delayed by interpolation in ``sbuf``, gain drift, offset, cubic
-    non-linearity, noise) and load-cell reading (N; gain, noise) of EMA ``e`` at time ``t``."""
+def _sensors(X, P, E, sbuf, n, t, noise, kn):
+    """LVDT readings (mm; delayed by interpolation in ``sbuf``, gain drift, offset, cubic
+    non-linearity, noise) and load-cell readings (N; gain, noise) of both EMAs at time ``t``:
+    (s1, s2, F1, F2)."""
     h = P[G_H]
-    b = S_N + e * SE_N
-    p = G_N + e * E_N
-    delay = E[e, COL_LVDT_DELAY]
-    if delay > 0.0:
-        x = n - delay / h
-        j0 = int(math.floor(x))
-        if j0 >= n:
-            s_true = sbuf[e, n]
+    smeas0 = 0.0
+    smeas1 = 0.0
+    fmeas0 = 0.0
+    fmeas1 = 0.0
+    for e in range(2):
+        b = S_N + e * SE_N
+        p = G_N + e * E_N
+        delay = E[e, COL_LVDT_DELAY]
+        if delay > 0.0:
+            x = n - delay / h
+            j0 = int(math.floor(x))
+            if j0 >= n:
+                s_true = sbuf[e, n]
+            else:
+                fr = x - j0
+                s_true = sbuf[e, j0] * (1.0 - fr) + sbuf[e, j0 + 1] * fr
         else:
-            fr = x - j0
-            s_true = sbuf[e, j0] * (1.0 - fr) + sbuf[e, j0 + 1] * fr
-    else:
-        s_true = X[b + SE_S]
-    s_mm = s_true * 1e3
-    gain = P[p + E_GAIN] * (1.0 + E[e, COL_LVDT_DRIFT] * t)
-    rel = s_mm / P[p + E_FS]
-    sm = P[p + E_OFF] + gain * s_mm + P[p + E_NL] * rel * rel * rel + P[p + E_LSIG] * noise[kn, e]
-    fm = P[p + E_LCG] * X[b + SE_F] + P[p + E_LCSIG] * noise[kn, 2 + e]
-    return sm, fm
+            s_true = X[b + SE_S]
+        s_mm = s_true * 1e3
+        gain = P[p + E_GAIN] * (1.0 + E[e, COL_LVDT_DRIFT] * t)
+        rel = s_mm / P[p + E_FS]
+        sm = P[p + E_OFF] + gain * s_mm + P[p + E_NL] * rel * rel * rel + P[p + E_LSIG] * noise[kn, e]
+        fm = P[p + E_LCG] * X[b + SE_F] + P[p + E_LCSIG] * noise[kn, 2 + e]
+        if e == 0:
+            smeas0 = sm
+            fmeas0 = fm
+        else:
+            smeas1 = sm
+            fmeas1 = fm
+    return smeas0, smeas1, fmeas0, fmeas1
 
 
 @njit(cache=True)
@@ -350,13 +321,47 @@ def advance(X, P, E, sbuf, dm, mode1, val1, mode2, val2, load, noise, kn):
     """Advance one sample period in place; return the measured sample (t, phi1, phi2, s1, s2, F1, F2)
     (s, rad, rad, mm, mm, N, N): the drives' feed-forward, ``P[G_NSUB]`` substeps, the drives'
     memory, then the sensors (resolvers quantised to ``P[G_Q]``)."""
+    h = P[G_H]
+    hh = 0.5 * h
     n = int(P[G_NSUB])
     period = P[G_PERIOD]
+    ki = P[G_KI]
     wff0 = _feed_forward(X, 0, mode1, val1, period)
     wff1 = _feed_forward(X, 1, mode2, val2, period)
     _solve_chains(X, P, E, dm)
-    for j in range(n):
-        _substep(X, P, E, sbuf, dm, j, mode1, val1, wff0, mode2, val2, wff1, load)
+    for j in range(n):  # substeps h: kick (h/2), drift (h), kick (h/2)
+        sbuf[0, j] = X[S_N + SE_S]
+        sbuf[1, j] = X[S_N + SE_N + SE_S]
+        # Maxwell arms: exact exponential update with the deflection frozen over the substep
+        for e in range(2):
+            alpha = E[e, COL_VE_ALPHA]
+            if alpha > 0.0:
+                b = S_N + e * SE_N
+                X[b + SE_ZC] += (dm[2 * e] - X[b + SE_ZC]) * alpha
+                X[b + SE_ZT] += (dm[2 * e + 1] - X[b + SE_ZT]) * alpha
+        # kick (h/2) with the forces at the current positions
+        _, sat0 = _kick(X, P, E, 0, mode1, val1, wff0, hh, False)
+        _, sat1 = _kick(X, P, E, 1, mode2, val2, wff1, hh, False)
+        _kick_surface(X, P, hh, load, False)
+        # drift (h), CSP integrator by the trapezoidal rule, conditional anti-windup
+        for e in range(2):
+            b = S_N + e * SE_N
+            phi = X[b + SE_PHI]
+            phin = phi + h * X[b + SE_W]
+            X[b + SE_PHI] = phin
+            mode = mode1 if e == 0 else mode2
+            if mode == 8 and ki > 0.0:
+                val = val1 if e == 0 else val2
+                err = 0.5 * ((val - phi) + (val - phin))
+                sat = sat0 if e == 0 else sat1
+                if (not sat) or err * X[b + SE_T] < 0.0:
+                    X[b + SE_I] += err * h
+        X[S_Y] += h * X[S_V]
+        # forces at the new positions, second kick (h/2)
+        _solve_chains(X, P, E, dm)
+        _kick(X, P, E, 0, mode1, val1, wff0, hh, True)
+        _kick(X, P, E, 1, mode2, val2, wff1, hh, True)
+        _kick_surface(X, P, hh, load, True)
     sbuf[0, n] = X[S_N + SE_S]
     sbuf[1, n] = X[S_N + SE_N + SE_S]
     k = X[S_K] + 1.0
@@ -366,8 +371,7 @@ def advance(X, P, E, sbuf, dm, mode1, val1, mode2, val2, load, noise, kn):
     q = P[G_Q]
     phim0 = math.floor(X[S_N + SE_PHI] / q + 0.5) * q
     phim1 = math.floor(X[S_N + SE_N + SE_PHI] / q + 0.5) * q
-    smeas0, fmeas0 = _lvdt_and_load_cell(X, P, E, sbuf, 0, n, t, noise, kn)
-    smeas1, fmeas1 = _lvdt_and_load_cell(X, P, E, sbuf, 1, n, t, noise, kn)
+    smeas0, smeas1, fmeas0, fmeas1 = _sensors(X, P, E, sbuf, n, t, noise, kn)
     return t, phim0, phim1, smeas0, smeas1, fmeas0, fmeas1
 
 
