@@ -110,23 +110,11 @@ def _line_value_variance(n: int, dist: int) -> float:
     return 1.0 / n + xbar * xbar / sxx
 
 
-def backlash_error_budget(
-    stroke_mm: float,
-    pitch_error: float,
-    lvdt_noise_std_mm: float,
-    sample_rate_Hz: float,
-    *,
-    backlash_mm: float,
-    residual_pitch_error: float = 1e-3,
-    temperature_error: float = 0.01,
-    jump_bound_mm: float | None = None,
-    lowpass_rad_s: float = 40.0,
-    dt1_rad_s: float = 100.0,
-    plateau_s: float = 0.15,
-    guard_before_s: float = 0.05,
-    guard_after_s: float = 0.02,
-    event_s: float = 0.1,
-) -> AccuracyBudget:
+def backlash_error_budget(stroke_mm: float, pitch_error: float, lvdt_noise_std_mm: float, sample_rate_Hz: float, *,
+                          backlash_mm: float, residual_pitch_error: float = 1e-3, temperature_error: float = 0.01,
+                          jump_bound_mm: float | None = None, lowpass_rad_s: float = 40.0, dt1_rad_s: float = 100.0,
+                          plateau_s: float = 0.15, guard_before_s: float = 0.05, guard_after_s: float = 0.02,
+                          event_s: float = 0.1) -> AccuracyBudget:
     """Compute the backlash error budget of paper 2.3 for BLFmaint and BLFserv.
 
     Parameters
@@ -211,26 +199,36 @@ def backlash_error_budget(
     gb = scalar(guard_before_s, "guard_before_s", "s", lo=0.0)
     ga = scalar(guard_after_s, "guard_after_s", "s", lo=0.0)
     ev = scalar(event_s, "event_s", "s", lo=0.0)
-    filt = design_serv_filters(fs, lowpass_rad_s=lowpass_rad_s, dt1_rad_s=dt1_rad_s)
-    sig_f = filt.noise_gain[0] * sig
-    diff_noise = math.sqrt(2.0) * sig_f
-    n_p = max(3, int(round(plat * fs)))
-    half_ev = 0.5 * ev * fs
-    v = (_line_value_variance(n_p, int(round(gb * fs + half_ev)))
-         + _line_value_variance(n_p, int(round(ga * fs + half_ev))))
-    imp_noise = sig * math.sqrt(v)
-
-    def terms(name: str, travel: float, noise: float, jump: float) -> MethodErrors:
-        pu, pc, te = travel * p, travel * pr, jump * tau
-        return MethodErrors(
-            method=name, travel_mm=travel, pitch_uncompensated_mm=pu, pitch_compensated_mm=pc, noise_mm=noise,
-            jump_mm=jump, temperature_mm=te, total_compensated_mm=math.sqrt(pc * pc + noise * noise + te * te),
-            total_uncompensated_mm=math.sqrt(pu * pu + noise * noise + te * te))
-
+    sig_f, diff_noise, imp_noise = _noise_mm(sig, fs, lowpass_rad_s, dt1_rad_s, plat, gb, ga, ev)
     return AccuracyBudget(
-        maint=terms("BLFmaint", b, diff_noise, b),
-        serv_paper=terms("BLFserv (paper)", s, diff_noise, jb),
-        serv_improved=terms("BLFserv (improved)", s, imp_noise, jb),
+        maint=_method_errors("BLFmaint", b, diff_noise, b, p, pr, tau),
+        serv_paper=_method_errors("BLFserv (paper)", s, diff_noise, jb, p, pr, tau),
+        serv_improved=_method_errors("BLFserv (improved)", s, imp_noise, jb, p, pr, tau),
         stroke_mm=s, pitch_error=p, residual_pitch_error=pr, lvdt_noise_std_mm=sig, filtered_noise_std_mm=sig_f,
         temperature_error=tau, backlash_mm=b, target_mm=b / 10.0,
     )
+
+
+def _noise_mm(sig: float, fs: float, lowpass_rad_s: float, dt1_rad_s: float, plateau_s: float, guard_before_s: float,
+              guard_after_s: float, event_s: float) -> tuple[float, float, float]:
+    """Noise terms (Notes of :func:`backlash_error_budget`), mm: the low-passed noise, a difference of two
+    low-passed readings, and the improved BLFserv's difference of two plateau lines."""
+    filt = design_serv_filters(fs, lowpass_rad_s=lowpass_rad_s, dt1_rad_s=dt1_rad_s)
+    sig_f = filt.noise_gain[0] * sig
+    diff_noise = math.sqrt(2.0) * sig_f
+    n_p = max(3, int(round(plateau_s * fs)))
+    half_ev = 0.5 * event_s * fs
+    v = (_line_value_variance(n_p, int(round(guard_before_s * fs + half_ev)))
+         + _line_value_variance(n_p, int(round(guard_after_s * fs + half_ev))))
+    return sig_f, diff_noise, sig * math.sqrt(v)
+
+
+def _method_errors(name: str, travel: float, noise: float, jump: float, p: float, pr: float, tau: float
+                   ) -> MethodErrors:
+    """One method's terms: pitch over ``travel`` (uncompensated ``p``, calibrated ``pr``), ``noise``,
+    temperature ``tau`` over ``jump`` (mm), and their root sums of squares."""
+    pu, pc, te = travel * p, travel * pr, jump * tau
+    return MethodErrors(
+        method=name, travel_mm=travel, pitch_uncompensated_mm=pu, pitch_compensated_mm=pc, noise_mm=noise,
+        jump_mm=jump, temperature_mm=te, total_compensated_mm=math.sqrt(pc * pc + noise * noise + te * te),
+        total_uncompensated_mm=math.sqrt(pu * pu + noise * noise + te * te))

@@ -190,6 +190,27 @@ def fit_lvdt_calibration(
     true stroke is :math:`x - d`; :math:`d` only shifts :math:`c_0` and the
     corrected strokes by a constant, which cancels in backlash and stiffness.
     """
+    x, s, degree, x_min, x_max = _checked_sweep(x_mm, s_mm, degree, min_span_mm)
+    coeffs, cov, rss = _power_basis_fit(x, s, degree, x_min, x_max)
+    sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    coeff_t = tuple(float(c) for c in coeffs)
+    return LvdtCalibration(
+        coefficients=coeff_t,
+        coefficient_sigmas=tuple(float(v) for v in sig),
+        degree=degree,
+        pitch=float(coeffs[1]),
+        offset_mm=float(coeffs[0]),
+        nonlinearity_mm=_nonlinearity_mm(coeff_t, x_min, x_max),
+        rmse_mm=float(np.sqrt(rss / x.size)),
+        x_min_mm=x_min,
+        x_max_mm=x_max,
+        n=int(x.size),
+        monotone=_is_strictly_monotone(coeff_t, x_min, x_max),
+    )
+
+
+def _checked_sweep(x_mm, s_mm, degree, min_span_mm) -> tuple[np.ndarray, np.ndarray, int, float, float]:
+    """The sweep (x, s in mm), the degree and the swept range (mm), validated in that order."""
     x = as_1d_finite(x_mm, "x_mm", "mm")
     s = as_1d_finite(s_mm, "s_mm", "mm")
     same_shape((x, "x_mm", "mm"), (s, "s_mm", "mm"))
@@ -210,7 +231,13 @@ def fit_lvdt_calibration(
             f"x_mm needs at least {degree + 2} distinct values (mm) for degree {degree}; "
             f"got {np.unique(x).size} in shape {x.shape}"
         )
+    return x, s, degree, x_min, x_max
 
+
+def _power_basis_fit(x: np.ndarray, s: np.ndarray, degree: int, x_min: float, x_max: float
+                     ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Least squares in the centred, scaled variable u (QR), mapped to the power basis in x:
+    coefficients, their covariance and the residual sum of squares (mm^2). Refused when rank deficient."""
     n = x.size
     p = degree + 1
     x_c = 0.5 * (x_min + x_max)
@@ -237,29 +264,15 @@ def fit_lvdt_calibration(
     for k in range(p):
         for j in range(k + 1):
             t_mat[j, k] = comb(k, j) * (-x_c) ** (k - j) / x_h**k
-    coeffs = t_mat @ a_scaled
-    cov = t_mat @ cov_scaled @ t_mat.T
-    sig = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return t_mat @ a_scaled, t_mat @ cov_scaled @ t_mat.T, rss
 
-    coeff_t = tuple(float(c) for c in coeffs)
+
+def _nonlinearity_mm(coeffs: tuple, x_min: float, x_max: float) -> float:
+    """max |P(x) - (a + b x)| over the sweep, a + b x the least-squares line through P on a uniform grid."""
     grid = np.linspace(x_min, x_max, _GRID_POINTS)
-    p_grid = _polyval(coeff_t, grid)
+    p_grid = _polyval(coeffs, grid)
     line = np.polynomial.polynomial.polyfit(grid, p_grid, 1)
-    nonlin = float(np.max(np.abs(p_grid - (line[0] + line[1] * grid))))
-
-    return LvdtCalibration(
-        coefficients=coeff_t,
-        coefficient_sigmas=tuple(float(v) for v in sig),
-        degree=degree,
-        pitch=float(coeffs[1]),
-        offset_mm=float(coeffs[0]),
-        nonlinearity_mm=nonlin,
-        rmse_mm=float(np.sqrt(rss / n)),
-        x_min_mm=x_min,
-        x_max_mm=x_max,
-        n=int(n),
-        monotone=_is_strictly_monotone(coeff_t, x_min, x_max),
-    )
+    return float(np.max(np.abs(p_grid - (line[0] + line[1] * grid))))
 
 
 def correct_linear(s_mm, pitch: float, offset_mm: float) -> np.ndarray:

@@ -68,17 +68,27 @@ Method
    EMA it is). Otherwise ``explained`` if any
    effect was named, else ``no_mismatch``. ``effects`` lists every effect
    accepted, whatever the verdict.
+
+Each step is a function of this module with a frozen record as its result:
+0 :class:`Comparison`, 1 :class:`NominalFit`, 2 :class:`NoiseFloor`, 3
+:class:`ChannelTests` (over a :class:`TestFrame`), 4 :class:`Screening` (of
+:class:`Screened` candidates, about the :class:`Standing` model of the
+round), 5 the :class:`Refit` candidates and the :class:`Accepted` one, its
+place decided, 6 :class:`NamedReference` parameters, 7 :class:`Verdict`.
+:func:`diagnose` strings them together and builds the :class:`Diagnosis`
+from their records.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from collections.abc import Callable
 
 import numpy as np
 
-from blf.band import Band, make_band
+from blf.band import make_band
 from blf.diagnose_fit import (
+    CandidateFit,
+    JointFit,
     Problem,
     Projector,
     clip_nominal,
@@ -90,192 +100,160 @@ from blf.diagnose_fit import (
     safe_predict,
     screen,
 )
+from blf.diagnose_model import (
+    Candidate,
+    DiagnoseConfig,
+    Diagnosis,
+    FittedEffect,
+    Location,
+    Param,
+    ParamVector,
+    Reference,
+    RegimeScore,
+    ReplayModel,
+    place_of,
+)
+from blf.diagnose_records import (
+    Accepted,
+    ChannelTests,
+    Comparison,
+    NamedReference,
+    NoiseFloor,
+    NominalFit,
+    Refit,
+    ResidualRms,
+    Screened,
+    Screening,
+    Selection,
+    Standing,
+    TestFrame,
+    Verdict,
+)
 from blf.errors import AnalysisError
-from blf.mismatch import RegimeScore, excess, regime_cells, regime_score, regime_words, window_scores
+from blf.mismatch import excess, regime_cells, regime_score, regime_words, window_scores
 from blf.validate import positive_scalar
 
-__all__ = ["Param", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location", "FittedEffect",
-           "Diagnosis", "diagnose", "place_of"]
+#: the model's vocabulary and the result (:mod:`blf.diagnose_model`) are imported from here
+__all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
+           "FittedEffect", "Diagnosis", "RegimeScore", "diagnose", "place_of"]
 
 
-@dataclass(frozen=True)
-class Param:
-    """One fitted parameter: name (with unit), start value, scale, bounds."""
-
-    name: str
-    x0: float
-    scale: float
-    lo: float = -np.inf
-    hi: float = np.inf
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """A candidate physics term: machine name, place, engineer's words, parameters; ``variant`` tells
-    apart two forms of the same physics at the same place (e.g. friction in the drive or in the load
-    path): at most one of them is accepted."""
-
-    name: str
-    where: str
-    words: str
-    params: tuple
-    variant: str = ""
+def _band(model: ReplayModel, sample_period_s: float, cfg: DiagnoseConfig) -> Comparison:
+    """Step 0: the band the model claims, the kept samples and the halves."""
+    T = positive_scalar(sample_period_s, "sample_period_s", "s")
+    places = dict(getattr(model, "places", None) or {})
+    band = make_band(1.0 / T, getattr(model, "band_hz", None))
+    dvalid = dict(model.derived_valid) if getattr(model, "derived", None) else {}
+    p = Problem(model, cfg, T, band, dvalid)
+    if p.nfit < 10 * (len(model.nominal) + 1):
+        raise AnalysisError(f"too few samples to compare in the band ({p.nfit} on the fit half) for "
+                            f"{len(model.nominal)} nominal parameters")
+    return Comparison(model, cfg, band, p, places)
 
 
-@dataclass(frozen=True)
-class Reference:
-    """A nominal parameter compared with a reference value; named as effect ``name`` at ``where``
-    when it differs significantly. Reported as ``param`` = value - ``offset``."""
-
-    index: int
-    value: float
-    name: str
-    where: str
-    words: str
-    param: str
-    offset: float = 0.0
-    #: references with the same ``common`` = (name, where, words, param) that are all named and agree,
-    #: relative to their reference values, within 3 combined standard uncertainties are one physics
-    #: shared by their places (e.g. both LVDT pitches: the motor-to-ram ratio), named once
-    common: tuple = ()
-
-
-class ReplayModel(Protocol):
-    """What :func:`diagnose` needs from a model of the recording."""
-
-    t_s: np.ndarray
-    channels: tuple
-    measured: dict  #: channel -> ndarray (n,)
-    valid: dict  #: channel -> bool ndarray (n,), samples where the channel is modelled
-    nominal: tuple  #: of Param
-    candidates: tuple  #: of Candidate
-    regimes: dict  #: regime variable name -> ndarray (n,)
-
-    def predict(self, theta: np.ndarray, active: list) -> dict: ...
-
-    # Optional: ``places`` ({channel: place} where :func:`place_of` would not do), ``band_hz`` (the band
-    # the model claims, Hz; None: raw), ``references`` (tuple of
-    # Reference), ``derived(channels) -> {name: ndarray}`` and ``derived_valid`` ({name: bool
-    # ndarray}): signals computed from the channels (e.g. the paper's D signals), reported
-    # (excess, locations, RMS) but not fitted, so nothing is counted twice.
+def _nominal_fit(cmp: Comparison, say: Callable[[str], None]) -> NominalFit:
+    """Step 1: bounded nonlinear least squares of the nominal parameters on the fit half, the noise
+    floors of the model's channels set from the start values, then again from the fit."""
+    model, p = cmp.model, cmp.problem
+    theta = np.array([q.x0 for q in model.nominal], dtype=float)
+    pred = safe_predict(model, theta, [])
+    if pred is None:
+        raise AnalysisError("the nominal model cannot be evaluated at its start values")
+    say(f"band: {cmp.band.words}")
+    say("nominal fit")
+    p.set_floor(model.measured, pred)
+    theta = fit_nominal(p, theta)
+    pred0 = safe_predict(model, theta, []) or pred
+    p.set_floor(model.measured, pred0)
+    theta = fit_nominal(p, theta, max_nfev=10)
+    pred0 = safe_predict(model, theta, []) or pred0
+    return NominalFit(theta, pred0)
 
 
-@dataclass(frozen=True)
-class DiagnoseConfig:
-    """Tuning of :func:`diagnose` (seconds, chi-square units)."""
-
-    block_s: float = 2.0
-    window_s: float = 1.0
-    noise_window_s: float = 0.2
-    excess_threshold: float = 3.0
-    bic_margin: float = 10.0
-    holdout_margin: float = 10.0
-    max_effects: int = 3
-    refit_top: int = 5
-    min_explained_fraction: float = 0.5  #: of each flagged channel's excess above 1, for "explained"
-    regime_bins: int = 10  #: position bins of the regime test (x 2 velocity signs x 2 force signs)
-    regime_threshold: float = 5.0  #: regime score S above which a channel differs (S ~ N(0, 1) under noise)
-    #: forms of one physics at one place whose BIC lies within this of the best are indistinguishable
-    #: (Kass and Raftery 1995: a BIC difference below 2 is "not worth more than a bare mention"):
-    #: the one with the fewest parameters, then the first in the library, is named
-    form_margin: float = 2.0
+def _rms_floor(sig: dict, valid: dict, channels: tuple) -> dict:
+    return {c: float(np.sqrt(np.mean(sig[c][valid[c]] ** 2))) if valid[c].any() else None for c in channels}
 
 
-@dataclass(frozen=True)
-class Location:
-    channel: str
-    t_start_s: float
-    t_end_s: float
-    regime: str
-    score: float
-    test: str = "window"  #: "window" (a time window) or "regime" (a regime cell, first to last visit)
-    where: str = ""  #: the place the channel belongs to (ema1, ema2, external)
+def _noise_floor(cmp: Comparison, nom: NominalFit) -> NoiseFloor:
+    """Step 2: the noise floor of every reported channel from the nominal model's raw residual."""
+    p = cmp.problem
+    meas = cmp.full(cmp.model.measured)
+    channels = tuple(meas)
+    pred_all = cmp.full(nom.predicted)
+    p.set_floor(meas, pred_all, channels)
+    return NoiseFloor(channels, meas, pred_all, _rms_floor(p.sig, p.valid, channels),
+                      _rms_floor(p.sig_raw, p.valid_raw, channels))
 
 
-@dataclass(frozen=True)
-class FittedEffect:
-    name: str
-    where: str
-    words: str
-    parameters: dict
-    uncertainty: dict
-    delta_bic: float
-    delta_chi2_holdout: float
-    evidence: str
-    source: str = "library"  #: "library" (a candidate term) or "nominal" (a nominal parameter off its reference)
+def _test_frame(cmp: Comparison, nom: NominalFit) -> TestFrame:
+    """Step 3's windows and regime cells. A cell chosen by the sign of a measured force would pick
+    that channel's noise: the force regimes of fitted channels use the nominal model."""
+    model, p, cfg = cmp.model, cmp.problem, cmp.cfg
+    n_window = max(2, int(round(cfg.window_s / (p.T * cmp.band.step))))
+    pred0 = nom.predicted
+    cell_regimes = {k: (pred0[k.split()[-1]] if k.startswith("force ") and k.split()[-1] in pred0 else x)[p.idx]
+                    for k, x in model.regimes.items()}
+    cells, labels = regime_cells(cell_regimes, cfg.regime_bins)
+    return TestFrame(n_window, np.sqrt(cmp.band.sum_factor), cells, tuple(labels),
+                     {k: x[p.idx] for k, x in model.regimes.items()}, model.t_s[p.idx])
 
 
-@dataclass(frozen=True)
-class Diagnosis:
-    """Result of :func:`diagnose` (plain dicts inside: JSON-ready, treat as read-only).
-
-    RMS figures without ``raw`` are in the band (:attr:`band`); ``holdout`` ones
-    over the held-out half only (never fitted)."""
-
-    verdict: str
-    effects: tuple
-    locations: tuple
-    where: tuple  #: places of the mismatch left after the effects (unexplained), best first
-    band: Band
-    residual_rms_before: dict
-    residual_rms_after: dict
-    residual_rms_holdout_before: dict
-    residual_rms_holdout_after: dict
-    residual_rms_raw_before: dict
-    residual_rms_raw_after: dict
-    residual_rms_raw_holdout_before: dict
-    residual_rms_raw_holdout_after: dict
-    noise_floor: dict  #: in the band
-    noise_floor_raw: dict
-    excess_before: dict
-    excess_after: dict
-    ic_before: float
-    ic_after: float
-    nominal: dict
-    screening: tuple
-    predicted_before: dict = field(repr=False)
-    predicted_after: dict = field(repr=False)
-    measured: dict = field(repr=False, default_factory=dict)  #: all reported channels, derived included
-    valid: dict = field(repr=False, default_factory=dict)  #: raw samples compared, per channel
-    held_out: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, bool))  #: raw samples never fitted
-    kept: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, np.int64))  #: kept samples of the band
-    kept_valid: dict = field(repr=False, default_factory=dict)  #: per channel, over the kept samples
-    regime_cells_before: dict = field(repr=False, default_factory=dict)  #: channel -> RegimeScore (step 3)
-    regime_cells_after: dict = field(repr=False, default_factory=dict)
-    regime_labels: tuple = ()  #: description of each cell
-
-    @property
-    def regime_before(self) -> dict:
-        """Regime-test score S per channel after the nominal fit."""
-        return {c: r.score for c, r in self.regime_cells_before.items()}
-
-    @property
-    def regime_after(self) -> dict:
-        """Regime-test score S per channel with the accepted effects."""
-        return {c: r.score for c, r in self.regime_cells_after.items()}
+def _tests(cmp: Comparison, frame: TestFrame, floor: NoiseFloor, pred_all: dict) -> ChannelTests:
+    """Step 3: the window test and the regime test of every reported channel."""
+    p, rho = cmp.problem, frame.rho
+    w = {c: x / rho for c, x in p.weighted(pred_all, floor.measured, floor.channels).items()}
+    return ChannelTests(
+        pred_all, w,
+        {c: excess(window_scores(w[c], p.valid[c], frame.n_window)[0]) for c in floor.channels},
+        {c: regime_score(w[c] * rho, p.valid[c], p.fit, p.block, frame.cells, len(frame.labels))
+         for c in floor.channels})
 
 
-def place_of(channel: str) -> str:
-    """The place a channel belongs to: ``ema1``/``ema2`` by its number, ``external`` otherwise."""
-    if channel.endswith("1"):
-        return "ema1"
-    if channel.endswith("2"):
-        return "ema2"
-    return "external"
+def _standing(cmp: Comparison, theta: np.ndarray, active: tuple) -> Standing:
+    """The model so far, and the linear re-adjustment of its nominal parameters (variable projection)."""
+    p = cmp.problem
+    wb = p.weighted(safe_predict(cmp.model, theta, list(active)))
+    proj = Projector(p, nominal_jacobian(p, theta, list(active), wb))
+    _, rf_b, _ = proj.solve(wb)
+    return Standing(theta, active, p.chi2(wb, p.fit), p.chi2(wb, ~p.fit), proj, rf_b, p.vec(wb, p.fit))
+
+
+def _screen(cmp: Comparison, cur: Standing, taken: set) -> Screening:
+    """Step 4: every candidate not yet named, linearised, ranked by the chi-square it removes less
+    its BIC penalty with the samples it acts on."""
+    rows, pen = [], {}
+    for cand in cmp.model.candidates:
+        if (cand.name, cand.where) in taken:
+            continue
+        sc = screen(cmp.problem, cur.projector, cur.theta, list(cur.active), cand, cur.residual_fit, cur.weighted_fit)
+        if sc is None:
+            continue
+        red, n_eff = sc
+        pen[cand] = len(cand.params) * float(np.log(max(n_eff, 2)))
+        rows.append(Screened(cand, red, red - pen[cand]))
+    rows.sort(key=lambda s: -s.gain)
+    log = [{"name": s.candidate.name, "where": s.candidate.where, "variant": s.candidate.variant,
+            "delta_chi2_linear": round(s.delta_chi2, 1), "delta_bic_linear": round(-s.gain, 1)} for s in rows]
+    return Screening(tuple(rows), pen, log)
+
+
+def _refit_row(cand: Candidate, fit: CandidateFit, penalty: float, chi_fit: float, chi_val: float) -> Refit:
+    return Refit((fit.chi2_fit - chi_fit) + penalty, fit.chi2_holdout - chi_val, cand, fit)
 
 
 def _forms_alike(refits: list, where: str, variant: str, margin: float) -> list:
     """The refits of the forms of one physics at ``where`` (``variant``) whose BIC lies within
     ``margin`` of the best of them: the forms the recording cannot tell apart (step 5)."""
-    forms = [r for r in refits if variant and (r[2].where, r[2].variant) == (where, variant)]
+    forms = [r for r in refits if variant and (r.candidate.where, r.candidate.variant) == (where, variant)]
     if not forms:
         return []
-    lim = min(r[0] for r in forms) + margin
-    return [r for r in forms if r[0] <= lim]
+    lim = min(r.delta_bic for r in forms) + margin
+    return [r for r in forms if r.delta_bic <= lim]
 
 
-def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, margin: float, refit, chi_fit: float,
-                        chi_val: float, say) -> list:
+def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, margin: float,
+                        refit: Callable[[Candidate], CandidateFit | None], chi_fit: float, chi_val: float,
+                        say: Callable[[str], None]) -> list:
     """Among forms of one physics at one place (same ``where`` and non-empty ``variant``, e.g. the
     friction laws of a drive) whose refitted BIC lies within ``margin`` of the best, the one with
     the fewest parameters goes first, then the one listed first in the model's library (which lists
@@ -283,12 +261,13 @@ def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, mar
     1-3 mm/s, Coulomb, viscous and Stribeck friction differ only at the few reversals, and a
     direction-dependent friction at its size looks like a Coulomb one), and the simpler law claims
     less. Beyond ``margin`` the better BIC decides, so a form with more parameters earns them by
-    evidence. The simpler forms not yet refitted are refitted here."""
-    if not refits or not refits[0][2].variant:
+    evidence. The simpler forms not yet refitted are refitted here. ``refits`` are :class:`Refit`
+    sorted by BIC change, best first."""
+    if not refits or not refits[0].candidate.variant:
         return refits
-    best = refits[0][2]
+    best = refits[0].candidate
     order = {c: i for i, c in enumerate(library)}
-    have = {r[2] for r in refits}
+    have = {r.candidate for r in refits}
     for c in library:
         if order[c] >= order[best]:
             break
@@ -299,17 +278,155 @@ def _prefer_simpler_law(refits: list, library: tuple, pen: dict, taken: set, mar
         say(f"refit {c.name} at {c.where} (same physics, simpler form)")
         fitted = refit(c)
         if fitted is not None:
-            x, unc, beta, chi_f, chi_v = fitted
-            refits.append(((chi_f - chi_fit) + pen[c], chi_v - chi_val, c, x, unc, beta))
-    refits.sort(key=lambda r: r[0])
+            refits.append(_refit_row(c, fitted, pen[c], chi_fit, chi_val))
+    refits.sort(key=lambda r: r.delta_bic)
     tied = _forms_alike(refits, best.where, best.variant, margin)
-    first = min(tied, key=lambda r: (len(r[2].params), order.get(r[2], len(order))))
+    first = min(tied, key=lambda r: (len(r.candidate.params), order.get(r.candidate, len(order))))
     return [first] + [r for r in refits if r is not first]
 
 
+def _refits(cmp: Comparison, cur: Standing, scr: Screening, taken: set, say: Callable[[str], None]) -> list:
+    """Step 5, the refits: the best ``refit_top`` candidates above ``bic_margin``, refitted, best
+    first (the simplest of the forms of one physics the recording cannot tell apart first)."""
+    cfg, p = cmp.cfg, cmp.problem
+
+    def refit(cand: Candidate) -> CandidateFit | None:
+        return fit_candidate(p, cur.projector, cur.theta, list(cur.active), cand)
+
+    refits = []
+    for s in scr.ranked[: cfg.refit_top]:
+        if s.gain <= cfg.bic_margin:
+            break
+        say(f"refit {s.candidate.name} at {s.candidate.where}")
+        fitted = refit(s.candidate)
+        if fitted is not None:
+            refits.append(_refit_row(s.candidate, fitted, scr.penalty[s.candidate], cur.chi2_fit, cur.chi2_holdout))
+    refits.sort(key=lambda r: r.delta_bic)
+    return _prefer_simpler_law(refits, cmp.model.candidates, scr.penalty, taken, cfg.form_margin, refit,
+                               cur.chi2_fit, cur.chi2_holdout, say)
+
+
+def _passes(cfg: DiagnoseConfig, delta_bic: float, delta_chi2_holdout: float) -> bool:
+    """Both acceptance tests: BIC on the fit half, chi-square on the held-out half."""
+    return delta_bic < -cfg.bic_margin and delta_chi2_holdout < -cfg.holdout_margin
+
+
+def _exact_fit(cmp: Comparison, cur: Standing, r: Refit, penalty: float) -> JointFit | None:
+    """A refit on the exact replay: the re-adjustment only ranks. First the linearised step itself;
+    if the replay disagrees with it or a bound cuts it (then it is not the bounded optimum: a shared
+    nominal term held at its bound leaves the rest of its channel unfitted), nominal and candidate
+    refitted together."""
+    model, p, cfg = cmp.model, cmp.problem, cmp.cfg
+    scale = np.array([q.scale for q in model.nominal])
+    th_lin = cur.theta + r.fit.nominal_step * scale
+    th_new = clip_nominal(model, th_lin)
+    pr = safe_predict(model, th_new, list(cur.active) + [(r.candidate, r.fit.x)]) \
+        if np.array_equal(th_new, th_lin) else None
+    exact = None
+    if pr is not None:
+        wn = p.weighted(pr)
+        exact = JointFit(th_new, r.fit.x, r.fit.uncertainty, p.chi2(wn, p.fit), p.chi2(wn, ~p.fit))
+    if exact is None or not (exact.chi2_fit - cur.chi2_fit + penalty < -cfg.bic_margin
+                             and exact.chi2_holdout - cur.chi2_holdout < -cfg.holdout_margin):
+        joint = fit_joint(p, cur.theta, list(cur.active), r.candidate, r.fit.x)
+        if joint is not None and (exact is None or joint.chi2_fit < exact.chi2_fit):
+            exact = joint
+    return exact
+
+
+def _accept(cmp: Comparison, cur: Standing, refits: list, pen: dict, say: Callable[[str], None]) -> Accepted | None:
+    """Step 5, the acceptance: the first refit that passes both tests on the linearisation and then on
+    the exact replay (:func:`_exact_fit`); None if none does."""
+    cfg = cmp.cfg
+    for r in refits:
+        if not _passes(cfg, r.delta_bic, r.delta_chi2_holdout):
+            continue
+        exact = _exact_fit(cmp, cur, r, pen[r.candidate])
+        if exact is None:
+            continue
+        dbic = (exact.chi2_fit - cur.chi2_fit) + pen[r.candidate]
+        dval = exact.chi2_holdout - cur.chi2_holdout
+        if _passes(cfg, dbic, dval):
+            return Accepted(r.candidate, dbic, dval, exact)
+        say(f"candidate {r.candidate.name} at {r.candidate.where} not accepted (dBIC {dbic:.1f}, held-out {dval:.1f})")
+    return None
+
+
+def _place(cmp: Comparison, cur: Standing, refits: list, chosen: Accepted, pen: dict,
+           say: Callable[[str], None]) -> Accepted:
+    """Step 5, the place: when the same physics passes at the other place too, the linearised
+    re-adjustment of the nominal ranks places poorly when the term moves the nominal far (a
+    stiffening first read as a stiffer spring), so the place is decided by the joint nonlinear fit of
+    the nominal and each of the two."""
+    cfg, c0 = cmp.cfg, chosen.candidate
+    twin = next((r for r in refits if r.candidate is not c0 and r.candidate.name == c0.name
+                 and r.candidate.variant == c0.variant and r.candidate.where != c0.where
+                 and _passes(cfg, r.delta_bic, r.delta_chi2_holdout)), None)
+    if twin is None:
+        return chosen
+    say(f"{c0.name} at {c0.where} or {twin.candidate.where}: both refitted with the nominal")
+    for c, x0 in ((c0, chosen.fit.x), (twin.candidate, twin.fit.x)):
+        joint = fit_joint(cmp.problem, cur.theta, list(cur.active), c, x0)
+        if joint is None:
+            continue
+        dbic, dval = (joint.chi2_fit - cur.chi2_fit) + pen[c], joint.chi2_holdout - cur.chi2_holdout
+        if dbic < min(chosen.delta_bic, -cfg.bic_margin) and dval < -cfg.holdout_margin:
+            chosen = Accepted(c, dbic, dval, joint)
+    return chosen
+
+
+def _library_effect(cfg: DiagnoseConfig, cur: Standing, scr: Screening, refits: list, a: Accepted) -> FittedEffect:
+    """The effect of an accepted candidate, its evidence in words: what it removed, the next best
+    candidate, and the forms of its physics the recording could not tell from it (said, not hidden)."""
+    cand = a.candidate
+    others = [s for s in scr.ranked if s.candidate is not cand]
+    ev = (f"chi-square on the fit half reduced by {cur.chi2_fit - a.fit.chi2_fit:.0f} (BIC {a.delta_bic:+.0f}), on "
+          f"the held-out half by {-a.delta_chi2_holdout:.0f}; "
+          + (f"next best candidate {others[0].candidate.name} at {others[0].candidate.where} explains "
+             f"{others[0].delta_chi2:.0f} (linearised)" if others else "no other candidate"))
+    alike = [r for r in _forms_alike(refits, cand.where, cand.variant, cfg.form_margin) if r.candidate is not cand]
+    if alike:
+        ev += (f"; as good within {cfg.form_margin:g} BIC units, so the form with the fewest parameters is "
+               "named: " + ", ".join(f"{r.candidate.name} (BIC {r.delta_bic:+.1f}, linearised)" for r in alike))
+    return FittedEffect(name=cand.name, where=cand.where, words=cand.words,
+                        parameters={q.name: float(v) for q, v in zip(cand.params, a.fit.x, strict=True)},
+                        uncertainty={q.name: float(u) for q, u in zip(cand.params, a.fit.uncertainty, strict=True)},
+                        delta_bic=float(a.delta_bic), delta_chi2_holdout=float(a.delta_chi2_holdout), evidence=ev)
+
+
+def _ln_n(p: Problem) -> float:
+    """ln N of BIC's penalty, N the kept samples of the fit half."""
+    return float(np.log(max(p.nfit, 2)))
+
+
+def _select(cmp: Comparison, nom: NominalFit, say: Callable[[str], None]) -> Selection:
+    """Steps 4-6, forward selection: screening, refit and acceptance, place, up to ``max_effects``
+    rounds while a candidate passes both tests."""
+    model, p, cfg = cmp.model, cmp.problem, cmp.cfg
+    pen_cur = len(model.nominal) * _ln_n(p)
+    ic0 = p.chi2(p.weighted(nom.predicted), p.fit) + pen_cur
+    theta, active, effects, log, ic_cur = nom.theta, (), [], [], ic0
+    for _round in range(cfg.max_effects):
+        cur = _standing(cmp, theta, active)
+        say("screening candidates")
+        taken = {(e.name, e.where) for e in effects}
+        scr = _screen(cmp, cur, taken)
+        log.append(scr.log)
+        refits = _refits(cmp, cur, scr, taken, say)
+        chosen = _accept(cmp, cur, refits, scr.penalty, say)
+        if chosen is None:
+            break
+        chosen = _place(cmp, cur, refits, chosen, scr.penalty, say)
+        theta, active = chosen.fit.theta, active + ((chosen.candidate, chosen.fit.x),)
+        pen_cur += scr.penalty[chosen.candidate]
+        ic_cur = chosen.fit.chi2_fit + pen_cur
+        effects.append(_library_effect(cfg, cur, scr, refits, chosen))
+        say(f"accepted {chosen.candidate.name} at {chosen.candidate.where}")
+    return Selection(theta, active, tuple(effects), tuple(log), float(ic0), float(ic_cur))
+
+
 def _reference_effects(named: list, refs: tuple, nominal: tuple, lnN: float) -> list:
-    """The effects of the named nominal parameters (:class:`Reference`), ``named`` as
-    (reference, value, standard uncertainty, chi-square cost on the fit half, on the held-out half).
+    """The effects of the named nominal parameters (:class:`NamedReference`).
 
     References sharing a ``common`` key that are all named and whose relative deviations
     :math:`d_i = v_i / r_i - 1` agree within 3 combined standard uncertainties are named once, as
@@ -317,15 +434,16 @@ def _reference_effects(named: list, refs: tuple, nominal: tuple, lnN: float) -> 
     cause from the same error at every place (both LVDTs reading alike against the motor angles is
     the motor-to-ram ratio differing from the profile's)."""
     out, done = [], set()
-    for ref, v, sd, dfit, dval in named:
+    for n in named:
+        ref = n.reference
         if ref in done:
             continue
         if ref.common:
             group = [r for r in refs if r.common == ref.common]
-            rows = [n for n in named if n[0] in group]
-            if len(rows) == len(group) > 1 and all(n[0].value != 0.0 for n in rows):
-                d = np.array([n[1] / n[0].value - 1.0 for n in rows])
-                u = np.array([n[2] / abs(n[0].value) for n in rows])
+            rows = [m for m in named if m.reference in group]
+            if len(rows) == len(group) > 1 and all(m.reference.value != 0.0 for m in rows):
+                d = np.array([m.value / m.reference.value - 1.0 for m in rows])
+                u = np.array([m.uncertainty / abs(m.reference.value) for m in rows])
                 if np.ptp(d) <= 3.0 * float(np.sqrt(np.sum(u ** 2))):
                     w = 1.0 / np.maximum(u, 1e-300) ** 2
                     name, where, words, param = ref.common
@@ -333,22 +451,134 @@ def _reference_effects(named: list, refs: tuple, nominal: tuple, lnN: float) -> 
                     done.update(group)
                     out.append(FittedEffect(
                         name, where, words, {param: mean}, {param: sd_mean},
-                        float(-sum(n[3] - lnN for n in rows)), float(-sum(n[4] for n in rows)),
-                        "nominal parameters " + ", ".join(f"{nominal[n[0].index].name} = {n[1]:.6g}" for n in rows)
-                        + " against " + ", ".join(f"{n[0].value:.6g}" for n in rows)
+                        float(-sum(m.delta_chi2_fit - lnN for m in rows)),
+                        float(-sum(m.delta_chi2_holdout for m in rows)),
+                        "nominal parameters " + ", ".join(f"{nominal[m.reference.index].name} = {m.value:.6g}"
+                                                          for m in rows)
+                        + " against " + ", ".join(f"{m.reference.value:.6g}" for m in rows)
                         + f": the same relative deviation, {mean:+.3g} ± {sd_mean:.2g}", "nominal"))
                     continue
         out.append(FittedEffect(
-            ref.name, ref.where, ref.words, {ref.param: v - ref.offset}, {ref.param: sd},
-            float(-(dfit - lnN)), float(-dval),
-            f"nominal parameter {nominal[ref.index].name} = {v:.6g} against the simulator's "
-            f"{ref.value:.6g}: holding it there costs {dfit:.0f} in chi-square on the fit half and "
-            f"{dval:.0f} on the held-out half", "nominal"))
+            ref.name, ref.where, ref.words, {ref.param: n.value - ref.offset}, {ref.param: n.uncertainty},
+            float(-(n.delta_chi2_fit - lnN)), float(-n.delta_chi2_holdout),
+            f"nominal parameter {nominal[ref.index].name} = {n.value:.6g} against the simulator's "
+            f"{ref.value:.6g}: holding it there costs {n.delta_chi2_fit:.0f} in chi-square on the fit half and "
+            f"{n.delta_chi2_holdout:.0f} on the held-out half", "nominal"))
     return out
 
 
+def _references(cmp: Comparison, sel: Selection, pred_cur: dict) -> list:
+    """Step 6: the nominal parameters with a reference value (:class:`Reference`) that holding there
+    costs more than BIC's penalty and ``bic_margin`` on the fit half and ``holdout_margin`` on the
+    held-out half, as effects."""
+    model, p, cfg = cmp.model, cmp.problem, cmp.cfg
+    refs = tuple(getattr(model, "references", ()) or ())
+    if not refs:
+        return []
+    lnN = _ln_n(p)
+    active = list(sel.active)
+    wc = p.weighted(pred_cur)
+    Jn = nominal_jacobian(p, sel.theta, active, wc)
+    _, rf_c, rv_c = Projector(p, Jn).solve(wc)
+    cf, cv = float(rf_c @ rf_c), float(rv_c @ rv_c)
+    named = []
+    for ref in refs:
+        res = reference_test(p, sel.theta, active, Jn, ref.index, ref.value, cf, cv)
+        if res is None:
+            continue
+        if res.delta_chi2_fit > lnN + cfg.bic_margin and res.delta_chi2_holdout > cfg.holdout_margin:
+            named.append(NamedReference(ref, float(sel.theta[ref.index]), res.uncertainty, res.delta_chi2_fit,
+                                        res.delta_chi2_holdout))
+    return _reference_effects(named, refs, model.nominal, lnN)
+
+
+def _locate(cmp: Comparison, frame: TestFrame, floor: NoiseFloor, t: ChannelTests) -> list:
+    """Step 7, the locations of what is left: per channel the windows of the window test beyond
+    4 sigma (the five strongest runs) and the three strongest regime cells."""
+    p, cfg, nwin = cmp.problem, cmp.cfg, frame.n_window
+    locs = []
+    rb = {c: p.residual(c, floor.measured[c], t.predicted[c]) for c in floor.channels}
+    for c in floor.channels:
+        z, starts = window_scores(t.weighted[c], p.valid[c], nwin)
+        bad = np.where(np.abs(np.nan_to_num(z)) > 4.0)[0]
+        if bad.size and excess(z) > cfg.excess_threshold:
+            groups = np.split(bad, np.where(np.diff(bad) > 1)[0] + 1)
+            groups.sort(key=lambda g: -float(np.sum(z[g] ** 2)))
+            for g in groups[:5]:
+                i0, i1 = starts[g[0]], min(starts[g[-1]] + nwin, frame.t_s.size)
+                ii = np.arange(i0, i1)
+                ii = ii[p.valid[c][ii]]
+                locs.append(Location(c, float(frame.t_s[i0]), float(frame.t_s[i1 - 1]),
+                                     regime_words(ii, rb[c], frame.regimes), float(np.sum(z[g] ** 2)), "window",
+                                     cmp.place(c)))
+        if c in cmp.model.channels and t.regime[c].score > cfg.regime_threshold:
+            prod = t.regime[c].products
+            for b in np.argsort(-np.nan_to_num(prod, nan=-np.inf))[:3]:
+                sel = np.flatnonzero(p.valid[c] & (frame.cells == b))
+                if not np.isfinite(prod[b]) or prod[b] < 4.0 or sel.size == 0:
+                    continue
+                locs.append(Location(c, float(frame.t_s[sel[0]]), float(frame.t_s[sel[-1]]),
+                                     f"{frame.labels[b]} (mean residual {rb[c][sel].mean():+.3g}, repeated in "
+                                     f"fit and held-out halves)", float(prod[b]), "regime", cmp.place(c)))
+    return locs
+
+
+def _where_the_rest_lies(cmp: Comparison, frame: TestFrame, t: ChannelTests) -> tuple:
+    """Step 7, the places ranked by every fitted channel's evidence in noise sigmas, the ones below
+    the thresholds too (a fault in one EMA's load path shows in both load cells alike; its own LVDT
+    and drive force tell which)."""
+    p = cmp.problem
+    score: dict = {}
+    regime = t.regime_score
+    for c in cmp.model.channels:
+        z = window_scores(t.weighted[c], p.valid[c], frame.n_window)[0]
+        z_excess = (t.excess[c] - 1.0) * np.sqrt(np.isfinite(z).sum() / 2.0)
+        s = max(z_excess, regime[c], 0.0)
+        w = 0.5 if c.startswith("F") and not c.startswith("Fd") else 1.0  # F1 and F2 share the surface
+        if s > 0.0:
+            score[cmp.place(c)] = score.get(cmp.place(c), 0.0) + w * s
+    return tuple(k for k, _ in sorted(score.items(), key=lambda kv: -kv[1]))
+
+
+def _verdict(cmp: Comparison, frame: TestFrame, floor: NoiseFloor, before: ChannelTests, after: ChannelTests,
+             effects: list) -> Verdict:
+    """Step 7: ``unexplained`` if a fitted channel still differs (either test) or a flagged one lost
+    less than ``min_explained_fraction`` of its excess, ``explained`` if an effect was named, else
+    ``no_mismatch``."""
+    cfg, fitted_ch = cmp.cfg, cmp.model.channels
+    excess0, regime0 = before.excess, before.regime_score
+    excess_cur, regime_cur = after.excess, after.regime_score
+    flagged0 = [c for c in fitted_ch if excess0[c] > cfg.excess_threshold]
+    flag_r0 = [c for c in fitted_ch if regime0[c] > cfg.regime_threshold]
+    still = [c for c in fitted_ch if excess_cur[c] > cfg.excess_threshold or regime_cur[c] > cfg.regime_threshold]
+    removed = (all(excess0[c] - excess_cur[c] >= cfg.min_explained_fraction * (excess0[c] - 1.0) for c in flagged0)
+               and all(regime0[c] - regime_cur[c] >= cfg.min_explained_fraction * regime0[c] for c in flag_r0))
+    lib = [e for e in effects if e.source == "library"]
+    if still or (lib and not removed):
+        return Verdict("unexplained", tuple(_locate(cmp, frame, floor, after)), _where_the_rest_lies(cmp, frame, after))
+    return Verdict("explained" if effects else "no_mismatch")
+
+
+def _residual_rms(cmp: Comparison, floor: NoiseFloor, pred_all: dict) -> ResidualRms:
+    p = cmp.problem
+
+    def rms(part=None, raw=False) -> dict:
+        out = {}
+        for c in floor.channels:
+            if raw:
+                sel = p.valid_raw[c] if part is None else p.valid_raw[c] & part
+                out[c] = float(np.sqrt(np.mean((floor.measured[c] - pred_all[c])[sel] ** 2))) if sel.any() else None
+            else:
+                sel = p.valid[c] if part is None else p.valid[c] & part
+                r = p.residual(c, floor.measured[c], pred_all[c])
+                out[c] = float(np.sqrt(np.mean(r[sel] ** 2))) if sel.any() else None
+        return out
+
+    return ResidualRms(rms(), rms(~p.fit), rms(raw=True), rms(~p.fit_raw, raw=True))
+
+
 def _named(params: tuple, theta: np.ndarray) -> dict:
-    return {q.name: float(v) for q, v in zip(params, theta)}
+    return {q.name: float(v) for q, v in zip(params, theta, strict=True)}
 
 
 def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig | None = None,
@@ -388,280 +618,29 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     changes. See the module docstring for the steps.
     """
     cfg = config or DiagnoseConfig()
-    T = positive_scalar(sample_period_s, "sample_period_s", "s")
-    places = dict(getattr(model, "places", None) or {})
-
-    def place(c: str) -> str:
-        return places.get(c) or place_of(c)
-
     say = progress or (lambda s: None)
-    band = make_band(1.0 / T, getattr(model, "band_hz", None))
-    derive = getattr(model, "derived", None)
-    dvalid = dict(model.derived_valid) if derive else {}
-    p = Problem(model, cfg, T, band, dvalid)
-    if p.nfit < 10 * (len(model.nominal) + 1):
-        raise AnalysisError(f"too few samples to compare in the band ({p.nfit} on the fit half) for "
-                            f"{len(model.nominal)} nominal parameters")
-    theta = np.array([q.x0 for q in model.nominal], dtype=float)
-    pred = safe_predict(model, theta, [])
-    if pred is None:
-        raise AnalysisError("the nominal model cannot be evaluated at its start values")
-    say(f"band: {band.words}")
-    say("nominal fit")
-    p.set_floor(model.measured, pred)
-    theta = fit_nominal(p, theta)
-    pred0 = safe_predict(model, theta, []) or pred
-    p.set_floor(model.measured, pred0)
-    theta = fit_nominal(p, theta, max_nfev=10)
-    pred0 = safe_predict(model, theta, []) or pred0
-
-    def full(pr):
-        return {**pr, **derive(pr)} if derive else dict(pr)
-
-    meas = full(model.measured)
-    rep = list(meas)
-    pred0_all = full(pred0)
-    p.set_floor(meas, pred0_all, rep)
-    w0 = p.weighted(pred0)
-    k_nom = len(model.nominal)
-    lnN = float(np.log(max(p.nfit, 2)))
-    ic0 = p.chi2(w0, p.fit) + k_nom * lnN
-    nwin = max(2, int(round(cfg.window_s / (T * band.step))))
-    rho = np.sqrt(band.sum_factor)
-
-    def wall(pred_all):
-        return {c: w / rho for c, w in p.weighted(pred_all, meas, rep).items()}
-
-    def excess_all(w):
-        return {c: excess(window_scores(w[c], p.valid[c], nwin)[0]) for c in rep}
-
-    t_k = model.t_s[p.idx]
-    # a cell chosen by the sign of a measured force would pick that channel's noise: force regimes of
-    # fitted channels use the nominal model
-    cell_regimes = {k: (pred0[k.split()[-1]] if k.startswith("force ") and k.split()[-1] in pred0 else x)[p.idx]
-                    for k, x in model.regimes.items()}
-    regimes_k = {k: x[p.idx] for k, x in model.regimes.items()}
-    cells, cell_labels = regime_cells(cell_regimes, cfg.regime_bins)
-
-    def regime_all(w):
-        return {c: regime_score(w[c] * rho, p.valid[c], p.fit, p.block, cells, len(cell_labels)) for c in rep}
-
-    def band_resid(pred_all):
-        return {c: p.residual(c, meas[c], pred_all[c]) for c in rep}
-
-    def locate(pred_all, w, rs):
-        locs = []
-        rb = band_resid(pred_all)
-        for c in rep:
-            z, starts = window_scores(w[c], p.valid[c], nwin)
-            bad = np.where(np.abs(np.nan_to_num(z)) > 4.0)[0]
-            if bad.size and excess(z) > cfg.excess_threshold:
-                groups = np.split(bad, np.where(np.diff(bad) > 1)[0] + 1)
-                groups.sort(key=lambda g: -float(np.sum(z[g] ** 2)))
-                for g in groups[:5]:
-                    i0, i1 = starts[g[0]], min(starts[g[-1]] + nwin, t_k.size)
-                    ii = np.arange(i0, i1)
-                    ii = ii[p.valid[c][ii]]
-                    locs.append(Location(c, float(t_k[i0]), float(t_k[i1 - 1]), regime_words(ii, rb[c], regimes_k),
-                                         float(np.sum(z[g] ** 2)), "window", place(c)))
-            if c in model.channels and rs[c].score > cfg.regime_threshold:
-                prod = rs[c].products
-                for b in np.argsort(-np.nan_to_num(prod, nan=-np.inf))[:3]:
-                    sel = np.flatnonzero(p.valid[c] & (cells == b))
-                    if not np.isfinite(prod[b]) or prod[b] < 4.0 or sel.size == 0:
-                        continue
-                    locs.append(Location(c, float(t_k[sel[0]]), float(t_k[sel[-1]]),
-                                         f"{cell_labels[b]} (mean residual {rb[c][sel].mean():+.3g}, repeated in "
-                                         f"fit and held-out halves)", float(prod[b]), "regime", place(c)))
-        return locs
-
-    def rms(pred_all, part=None, raw=False):
-        out = {}
-        for c in rep:
-            if raw:
-                sel = p.valid_raw[c] if part is None else p.valid_raw[c] & part
-                out[c] = float(np.sqrt(np.mean((meas[c] - pred_all[c])[sel] ** 2))) if sel.any() else None
-            else:
-                sel = p.valid[c] if part is None else p.valid[c] & part
-                r = p.residual(c, meas[c], pred_all[c])
-                out[c] = float(np.sqrt(np.mean(r[sel] ** 2))) if sel.any() else None
-        return out
-
-    w0_all = wall(pred0_all)
-    excess0 = excess_all(w0_all)
-    rs0 = regime_all(w0_all)
-    regime0 = {c: r.score for c, r in rs0.items()}
-    say("excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in excess0.items()))
-    say("regime score: " + ", ".join(f"{c} {v:.1f}" for c, v in regime0.items()))
-
-    active: list = []
-    accepted: list[FittedEffect] = []
-    screening_log: list = []
-    pen_cur = k_nom * lnN
-    ic_cur = ic0
-    for _round in range(cfg.max_effects):
-        base_pred = safe_predict(model, theta, active)
-        wb = p.weighted(base_pred)
-        chi_fit_cur, chi_val_cur = p.chi2(wb, p.fit), p.chi2(wb, ~p.fit)
-        Jn = nominal_jacobian(p, theta, active, wb)
-        proj = Projector(p, Jn)
-        _, rf_b, _ = proj.solve(wb)
-        wb_fit = p.vec(wb, p.fit)
-        say("screening candidates")
-        scores = []
-        pen: dict = {}
-        taken = {(e.name, e.where) for e in accepted}
-        for cand in model.candidates:
-            if (cand.name, cand.where) in taken:
-                continue
-            sc = screen(p, proj, theta, active, cand, rf_b, wb_fit)
-            if sc is None:
-                continue
-            red, n_eff = sc
-            pen[cand] = len(cand.params) * float(np.log(max(n_eff, 2)))
-            scores.append((red - pen[cand], red, cand))
-        scores.sort(key=lambda s: -s[0])
-        screening_log.append([{"name": c.name, "where": c.where, "variant": c.variant, "delta_chi2_linear": round(r, 1),
-                               "delta_bic_linear": round(-s, 1)} for s, r, c in scores])
-        refits = []
-        for s, red, cand in scores[: cfg.refit_top]:
-            if s <= cfg.bic_margin:
-                break
-            say(f"refit {cand.name} at {cand.where}")
-            fitted = fit_candidate(p, proj, theta, active, cand)
-            if fitted is not None:
-                x, unc, beta, chi_f, chi_v = fitted
-                refits.append(((chi_f - chi_fit_cur) + pen[cand], chi_v - chi_val_cur, cand, x, unc, beta))
-        refits.sort(key=lambda r: r[0])
-        refits = _prefer_simpler_law(refits, model.candidates, pen, taken, cfg.form_margin,
-                                     lambda c: fit_candidate(p, proj, theta, active, c), chi_fit_cur, chi_val_cur, say)
-        chosen = None
-        scale = np.array([q.scale for q in model.nominal])
-        for lin_bic, lin_val, cand, x, unc, beta in refits:
-            if not (lin_bic < -cfg.bic_margin and lin_val < -cfg.holdout_margin):
-                continue
-            # exact acceptance: the re-adjustment only ranks. First the linearised step itself; if the
-            # replay disagrees with it or a bound cuts it (then it is not the bounded optimum: a shared
-            # nominal term held at its bound leaves the rest of its channel unfitted), nominal and
-            # candidate refitted together
-            th_lin = theta + beta * scale
-            th_new = clip_nominal(model, th_lin)
-            pr = safe_predict(model, th_new, active + [(cand, x)]) if np.array_equal(th_new, th_lin) else None
-            exact = None
-            if pr is not None:
-                wn = p.weighted(pr)
-                exact = (th_new, x, unc, p.chi2(wn, p.fit), p.chi2(wn, ~p.fit))
-            if exact is None or not (exact[3] - chi_fit_cur + pen[cand] < -cfg.bic_margin
-                                     and exact[4] - chi_val_cur < -cfg.holdout_margin):
-                joint = fit_joint(p, theta, active, cand, x)
-                if joint is not None and (exact is None or joint[3] < exact[3]):
-                    exact = joint
-            if exact is None:
-                continue
-            th_new, x_new, unc_new, chi_f, chi_v = exact
-            dbic = (chi_f - chi_fit_cur) + pen[cand]
-            dval = chi_v - chi_val_cur
-            if dbic < -cfg.bic_margin and dval < -cfg.holdout_margin:
-                chosen = (dbic, dval, cand, th_new, x_new, unc_new, chi_f)
-                break
-            say(f"candidate {cand.name} at {cand.where} not accepted (dBIC {dbic:.1f}, held-out {dval:.1f})")
-        if chosen is None:
-            break
-        twin = next((r for r in refits if r[2] is not chosen[2] and r[2].name == chosen[2].name
-                     and r[2].variant == chosen[2].variant and r[2].where != chosen[2].where
-                     and r[0] < -cfg.bic_margin and r[1] < -cfg.holdout_margin), None)
-        if twin is not None:
-            # the same physics passes at the other place too: the linearised re-adjustment of the nominal
-            # ranks places poorly when the term moves the nominal far (a stiffening first read as a stiffer
-            # spring), so the place is decided by the joint nonlinear fit of the nominal and each of the two
-            say(f"{chosen[2].name} at {chosen[2].where} or {twin[2].where}: both refitted with the nominal")
-            for c, x0 in ((chosen[2], chosen[4]), (twin[2], twin[3])):
-                joint = fit_joint(p, theta, active, c, x0)
-                if joint is None:
-                    continue
-                th_j, x_j, unc_j, chi_f, chi_v = joint
-                dbic, dval = (chi_f - chi_fit_cur) + pen[c], chi_v - chi_val_cur
-                if dbic < min(chosen[0], -cfg.bic_margin) and dval < -cfg.holdout_margin:
-                    chosen = (dbic, dval, c, th_j, x_j, unc_j, chi_f)
-        dbic, dval, cand, theta, x, unc, chi_f = chosen
-        others = [s for s in scores if s[2] is not cand]
-        active.append((cand, x))
-        pen_cur += pen[cand]
-        ic_cur = chi_f + pen_cur
-        ev = (f"chi-square on the fit half reduced by {chi_fit_cur - chi_f:.0f} (BIC {dbic:+.0f}), on the "
-              f"held-out half by {-dval:.0f}; "
-              + (f"next best candidate {others[0][2].name} at {others[0][2].where} explains {others[0][1]:.0f} "
-                 f"(linearised)" if others else "no other candidate"))
-        # the forms of this physics the recording could not tell from it (step 5): said, not hidden
-        alike = [r for r in _forms_alike(refits, cand.where, cand.variant, cfg.form_margin) if r[2] is not cand]
-        if alike:
-            ev += (f"; as good within {cfg.form_margin:g} BIC units, so the form with the fewest parameters is "
-                   "named: " + ", ".join(f"{r[2].name} (BIC {r[0]:+.1f}, linearised)" for r in alike))
-        accepted.append(FittedEffect(cand.name, cand.where, cand.words,
-                                     {q.name: float(v) for q, v in zip(cand.params, x)},
-                                     {q.name: float(u) for q, u in zip(cand.params, unc)},
-                                     float(dbic), float(dval), ev))
-        say(f"accepted {cand.name} at {cand.where}")
-    # the nominal parameters with a reference value
-    pred_cur = safe_predict(model, theta, active)
-    refs = tuple(getattr(model, "references", ()) or ())
-    if refs:
-        wc = p.weighted(pred_cur)
-        Jn = nominal_jacobian(p, theta, active, wc)
-        _, rf_c, rv_c = Projector(p, Jn).solve(wc)
-        cf, cv = float(rf_c @ rf_c), float(rv_c @ rv_c)
-        named = []
-        for ref in refs:
-            res = reference_test(p, theta, active, Jn, ref.index, ref.value, cf, cv)
-            if res is None:
-                continue
-            dfit, dval, sd = res
-            if dfit > lnN + cfg.bic_margin and dval > cfg.holdout_margin:
-                named.append((ref, float(theta[ref.index]), sd, dfit, dval))
-        accepted += _reference_effects(named, refs, model.nominal, lnN)
-    cur_all = full(pred_cur)
-    w_cur = wall(cur_all)
-    excess_cur = excess_all(w_cur)
-    rs_cur = regime_all(w_cur)
-    regime_cur = {c: r.score for c, r in rs_cur.items()}
-    fitted_ch = model.channels
-    flagged0 = [c for c in fitted_ch if excess0[c] > cfg.excess_threshold]
-    flag_r0 = [c for c in fitted_ch if regime0[c] > cfg.regime_threshold]
-    still = [c for c in fitted_ch if excess_cur[c] > cfg.excess_threshold or regime_cur[c] > cfg.regime_threshold]
-    removed = (all(excess0[c] - excess_cur[c] >= cfg.min_explained_fraction * (excess0[c] - 1.0) for c in flagged0)
-               and all(regime0[c] - regime_cur[c] >= cfg.min_explained_fraction * regime0[c] for c in flag_r0))
-    lib = [e for e in accepted if e.source == "library"]
-    if still or (lib and not removed):
-        verdict = "unexplained"
-    elif accepted:
-        verdict = "explained"
-    else:
-        verdict = "no_mismatch"
-    if verdict == "unexplained":
-        locations = locate(cur_all, w_cur, rs_cur)
-        # every fitted channel's evidence in noise sigmas, the ones below the thresholds too (a fault in
-        # one EMA's load path shows in both load cells alike; its own LVDT and drive force tell which)
-        score: dict = {}
-        for c in fitted_ch:
-            z = window_scores(w_cur[c], p.valid[c], nwin)[0]
-            z_excess = (excess_cur[c] - 1.0) * np.sqrt(np.isfinite(z).sum() / 2.0)
-            s = max(z_excess, regime_cur[c], 0.0)
-            w = 0.5 if c.startswith("F") and not c.startswith("Fd") else 1.0  # F1 and F2 share the surface
-            if s > 0.0:
-                score[place(c)] = score.get(place(c), 0.0) + w * s
-        where = tuple(k for k, _ in sorted(score.items(), key=lambda kv: -kv[1]))
-    else:
-        locations, where = [], ()
-    return Diagnosis(verdict, tuple(accepted), tuple(locations), where, band,
-                     rms(pred0_all), rms(cur_all), rms(pred0_all, ~p.fit), rms(cur_all, ~p.fit),
-                     rms(pred0_all, raw=True), rms(cur_all, raw=True), rms(pred0_all, ~p.fit_raw, raw=True),
-                     rms(cur_all, ~p.fit_raw, raw=True),
-                     {c: float(np.sqrt(np.mean(p.sig[c][p.valid[c]] ** 2))) if p.valid[c].any() else None for c in rep},
-                     {c: float(np.sqrt(np.mean(p.sig_raw[c][p.valid_raw[c]] ** 2))) if p.valid_raw[c].any() else None
-                      for c in rep},
-                     excess0, excess_cur, float(ic0), float(ic_cur), _named(model.nominal, theta),
-                     tuple(screening_log), pred0_all, cur_all, meas, dict(p.valid_raw), ~p.fit_raw, p.idx,
-                     dict(p.valid), rs0, rs_cur, tuple(cell_labels))
-
-
-__all__ += ["RegimeScore"]
+    cmp = _band(model, sample_period_s, cfg)
+    nom = _nominal_fit(cmp, say)
+    floor = _noise_floor(cmp, nom)
+    frame = _test_frame(cmp, nom)
+    before = _tests(cmp, frame, floor, floor.predicted)
+    say("excess over noise: " + ", ".join(f"{c} {v:.2f}" for c, v in before.excess.items()))
+    say("regime score: " + ", ".join(f"{c} {v:.1f}" for c, v in before.regime_score.items()))
+    sel = _select(cmp, nom, say)
+    pred_cur = safe_predict(model, sel.theta, list(sel.active))
+    effects = list(sel.effects) + _references(cmp, sel, pred_cur)
+    after = _tests(cmp, frame, floor, cmp.full(pred_cur))
+    v = _verdict(cmp, frame, floor, before, after, effects)
+    p = cmp.problem
+    rms0, rms1 = _residual_rms(cmp, floor, before.predicted), _residual_rms(cmp, floor, after.predicted)
+    return Diagnosis(
+        verdict=v.verdict, effects=tuple(effects), locations=v.locations, where=v.where, band=cmp.band,
+        residual_rms_before=rms0.in_band, residual_rms_after=rms1.in_band,
+        residual_rms_holdout_before=rms0.in_band_holdout, residual_rms_holdout_after=rms1.in_band_holdout,
+        residual_rms_raw_before=rms0.raw, residual_rms_raw_after=rms1.raw,
+        residual_rms_raw_holdout_before=rms0.raw_holdout, residual_rms_raw_holdout_after=rms1.raw_holdout,
+        noise_floor=floor.in_band, noise_floor_raw=floor.raw, excess_before=before.excess, excess_after=after.excess,
+        ic_before=sel.ic_before, ic_after=sel.ic_after, nominal=_named(model.nominal, sel.theta),
+        screening=sel.screening, predicted_before=before.predicted, predicted_after=after.predicted,
+        measured=floor.measured, valid=dict(p.valid_raw), held_out=~p.fit_raw, kept=p.idx, kept_valid=dict(p.valid),
+        regime_cells_before=before.regime, regime_cells_after=after.regime, regime_labels=frame.labels)

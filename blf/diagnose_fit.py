@@ -13,6 +13,8 @@ Pure: arrays in, arrays out; the model is called, never changed.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -20,8 +22,69 @@ from blf.band import Band
 from blf.errors import BlfError
 from blf.mismatch import noise_floor
 
-__all__ = ["Problem", "fit_nominal", "nominal_jacobian", "Projector", "screen", "fit_candidate",
-           "reference_test", "safe_predict"]
+__all__ = ["Problem", "fit_nominal", "nominal_jacobian", "Projector", "screen", "CandidateFit", "fit_candidate",
+           "ReferenceTest", "reference_test", "JointFit", "fit_joint", "safe_predict"]
+
+
+@dataclass(frozen=True)
+class CandidateFit:
+    """One candidate refitted with the nominal re-adjusted linearly (:func:`fit_candidate`).
+
+    Attributes
+    ----------
+    x, uncertainty : ndarray, shape (k,)
+        The candidate's parameters and their standard uncertainties, in its parameters' units.
+    nominal_step : ndarray, shape (len(nominal),)
+        The linear re-adjustment of the nominal parameters, in units of their ``scale``.
+    chi2_fit, chi2_holdout : float
+        Chi-square on the fit half and on the held-out half after the re-adjustment (linearised).
+    """
+
+    x: np.ndarray
+    uncertainty: np.ndarray
+    nominal_step: np.ndarray
+    chi2_fit: float
+    chi2_holdout: float
+
+
+@dataclass(frozen=True)
+class JointFit:
+    """The nominal parameters and one candidate evaluated on the exact replay (:func:`fit_joint`, or the
+    linearised step of a :class:`CandidateFit` applied).
+
+    Attributes
+    ----------
+    theta : ndarray, shape (len(nominal),)
+        Nominal parameters, in their units.
+    x, uncertainty : ndarray, shape (k,)
+        The candidate's parameters and their standard uncertainties.
+    chi2_fit, chi2_holdout : float
+        Chi-square on the fit half and on the held-out half.
+    """
+
+    theta: np.ndarray
+    x: np.ndarray
+    uncertainty: np.ndarray
+    chi2_fit: float
+    chi2_holdout: float
+
+
+@dataclass(frozen=True)
+class ReferenceTest:
+    """What holding one nominal parameter at its reference value costs (:func:`reference_test`).
+
+    Attributes
+    ----------
+    delta_chi2_fit, delta_chi2_holdout : float
+        Chi-square increase on the fit half and on the held-out half, the other nominal
+        parameters re-adjusted linearly.
+    uncertainty : float
+        Standard uncertainty of the parameter (all nominal parameters free), in its unit.
+    """
+
+    delta_chi2_fit: float
+    delta_chi2_holdout: float
+    uncertainty: float
 
 
 def safe_predict(model, theta: np.ndarray, active: list) -> dict | None:
@@ -214,10 +277,9 @@ def screen(p: Problem, proj: Projector, theta: np.ndarray, active: list, cand, r
     return float(rf_b @ rf_b - r @ r), n_eff
 
 
-def fit_candidate(p: Problem, proj: Projector, theta: np.ndarray, active: list, cand):
-    """Refit one candidate (nonlinear in its parameters, nominal re-adjusted linearly).
-
-    Returns (x, uncertainty, nominal step, chi2 fit half, chi2 held-out half) or None."""
+def fit_candidate(p: Problem, proj: Projector, theta: np.ndarray, active: list, cand) -> CandidateFit | None:
+    """Refit one candidate (nonlinear in its parameters, nominal re-adjusted linearly); None if its
+    replay fails."""
     sc, x0, lo, hi = _bounds(cand.params)
     fail = None
 
@@ -265,15 +327,14 @@ def fit_candidate(p: Problem, proj: Projector, theta: np.ndarray, active: list, 
         unc = np.sqrt(np.maximum(np.diag(cov)[: x.size], 0.0)) * sc
     except np.linalg.LinAlgError:
         unc = np.full(x.size, np.nan)
-    return x * sc, unc, beta, float(rf @ rf), float(rv @ rv)
+    return CandidateFit(x * sc, unc, beta, float(rf @ rf), float(rv @ rv))
 
 
 def reference_test(p: Problem, theta: np.ndarray, active: list, Jn: dict, j: int, ref: float,
-                   chi_fit: float, chi_val: float):
+                   chi_fit: float, chi_val: float) -> ReferenceTest | None:
     """Chi-square increase on each half when nominal parameter ``j`` is held at ``ref``.
 
-    The other nominal parameters are re-adjusted linearly. Returns (increase on the fit half,
-    increase on the held-out half, standard uncertainty of the parameter) or None."""
+    The other nominal parameters are re-adjusted linearly. None if the replay fails there."""
     q = p.m.nominal[j]
     th = theta.copy()
     th[j] = min(max(ref, q.lo), q.hi)
@@ -289,13 +350,13 @@ def reference_test(p: Problem, theta: np.ndarray, active: list, Jn: dict, j: int
         sd = float(np.sqrt(np.sum(Rinv[j] ** 2))) * q.scale
     except np.linalg.LinAlgError:
         sd = float("nan")
-    return float(rf @ rf) - chi_fit, float(rv @ rv) - chi_val, sd
+    return ReferenceTest(float(rf @ rf) - chi_fit, float(rv @ rv) - chi_val, sd)
 
 
-def fit_joint(p: Problem, theta: np.ndarray, active: list, cand, x: np.ndarray, max_nfev: int = 8):
-    """Nonlinear refit of the nominal parameters and one candidate together, from (theta, x).
-
-    Returns (theta, x, uncertainty of x, chi2 fit half, chi2 held-out half) or None."""
+def fit_joint(p: Problem, theta: np.ndarray, active: list, cand, x: np.ndarray,
+              max_nfev: int = 8) -> JointFit | None:
+    """Nonlinear refit of the nominal parameters and one candidate together, from (theta, x); None if
+    the replay fails."""
     sn, _, lon, hin = _bounds(p.m.nominal)
     sc, _, loc, hic = _bounds(cand.params)
     k = sn.size
@@ -335,4 +396,4 @@ def fit_joint(p: Problem, theta: np.ndarray, active: list, cand, x: np.ndarray, 
         unc = np.sqrt(np.maximum(np.diag(cov)[k:], 0.0)) * sc
     except np.linalg.LinAlgError:
         unc = np.full(sc.size, np.nan)
-    return z[:k] * sn, z[k:] * sc, unc, float(rf @ rf), float(rv @ rv)
+    return JointFit(z[:k] * sn, z[k:] * sc, unc, float(rf @ rf), float(rv @ rv))

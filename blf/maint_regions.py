@@ -209,34 +209,73 @@ def locate_regions(d: np.ndarray, d_f: np.ndarray, g_f: np.ndarray, g_lo: float,
     samples. Backlash samples: :math:`d_{lc} + m w \\le D_f \\le d_{rc} - m w`,
     :math:`m` = ``centre_margin_frac``, not a contact sample.
     """
+    c = _contacts(d, d_f, g_f, g_lo, g_hi, sign, contact_margin_frac, min_contact)
+    spread = _distinct_backlash(c, d_f, g_f, sign)
+    d_lc, d_rc, w = c.d_lc, c.d_rc, c.d_rc - c.d_lc
+    mask_l, mask_r = c.mask_left, c.mask_right
+    mask_c = (d_f >= d_lc + centre_margin_frac * w) & (d_f <= d_rc - centre_margin_frac * w) & ~mask_l & ~mask_r
+    n_c = int(np.count_nonzero(mask_c))
+    if n_c < min_centre:
+        raise AnalysisError(
+            f"centre (backlash) region has too few samples: {n_c} < {min_centre} (the force fight crossed the "
+            f"{w:.4f} mm backlash between the corners d_lc = {d_lc:.4f} mm and d_rc = {d_rc:.4f} mm too quickly "
+            "or too rarely to fit its line)"
+        )
+    return Regions(g_gap_N=float(c.g_gap), g_lo_N=float(g_lo), g_hi_N=float(g_hi), d_lc_mm=float(d_lc),
+                   d_rc_mm=float(d_rc), spread_d_mm=spread, mask_left=readonly(mask_l), mask_centre=readonly(mask_c),
+                   mask_right=readonly(mask_r))
+
+
+@dataclass(frozen=True)
+class _Contacts:
+    """The contact samples of both sides, their lines D = a + b G_f (mm, mm/N), the gap's force level
+    G_0 (N) and the corners, the lines' D at G_0 (mm)."""
+
+    mask_left: np.ndarray
+    mask_right: np.ndarray
+    line_left: tuple
+    line_right: tuple
+    g_gap: float
+    d_lc: float
+    d_rc: float
+
+
+def _contact_line(side: str, mask: np.ndarray, d: np.ndarray, d_f: np.ndarray, g_f: np.ndarray, sign: int,
+                  min_contact: int, frac: float) -> tuple[float, float]:
+    """The line D = a + b G_f of one side's contact samples; refused with too few samples or without an
+    elastic slope of the global sign."""
+    n = int(np.count_nonzero(mask))
+    if n < min_contact:
+        raise AnalysisError(
+            f"{side} contact region has too few samples: {n} < {min_contact} (the "
+            f"{_side_name(side, sign)} was loaded beyond {100 * frac:.0f} % of its force "
+            f"span for {n} samples only)"
+        )
+    a, b = _ols(g_f[mask], d[mask])
+    if not b > 0.0:
+        g_a, g_b = float(g_f[mask].min()), float(g_f[mask].max())
+        f_a, f_b = sorted((sign * g_a, sign * g_b))
+        raise AnalysisError(
+            f"{side} contact region has no elastic slope of the global sign: on the "
+            f"{_side_name(side, sign)} D does not follow the force (dD/dF = {sign * b:.4g} mm/N, "
+            f"{b * (g_b - g_a) * 1e3:+.1f} um over the {f_a:.0f} to {f_b:.0f} N loaded, against a D noise "
+            f"of {noise_std(d, d_f) * 1e3:.1f} um std): the contact deflection is lost in the noise; a "
+            "larger force-fight amplitude would show it"
+        )
+    return a, b
+
+
+def _contacts(d: np.ndarray, d_f: np.ndarray, g_f: np.ndarray, g_lo: float, g_hi: float, sign: int,
+              contact_margin_frac: float, min_contact: int) -> _Contacts:
+    """Contact samples, lines, gap level and corners (Notes of :func:`locate_regions`, iterated)."""
     # pass 0: contact beyond half of each extreme (clear of any gap friction); then contact beyond the gap's
     # force band by contact_margin_frac of the span to the extreme, the band and level from the gap samples
     g_gap, band_lo, band_hi, frac = 0.0, 0.0, 0.0, max(contact_margin_frac, 0.5)
     for it in range(_GAP_LEVEL_ITER + 1):
         mask_r = g_f >= band_hi + frac * (g_hi - band_hi)
         mask_l = g_f <= band_lo - frac * (band_lo - g_lo)
-        lines = {}
-        for side, mask in (("left", mask_l), ("right", mask_r)):
-            n = int(np.count_nonzero(mask))
-            if n < min_contact:
-                raise AnalysisError(
-                    f"{side} contact region has too few samples: {n} < {min_contact} (the "
-                    f"{_side_name(side, sign)} was loaded beyond {100 * frac:.0f} % of its force "
-                    f"span for {n} samples only)"
-                )
-            a, b = _ols(g_f[mask], d[mask])
-            if not b > 0.0:
-                g_a, g_b = float(g_f[mask].min()), float(g_f[mask].max())
-                f_a, f_b = sorted((sign * g_a, sign * g_b))
-                raise AnalysisError(
-                    f"{side} contact region has no elastic slope of the global sign: on the "
-                    f"{_side_name(side, sign)} D does not follow the force (dD/dF = {sign * b:.4g} mm/N, "
-                    f"{b * (g_b - g_a) * 1e3:+.1f} um over the {f_a:.0f} to {f_b:.0f} N loaded, against a D noise "
-                    f"of {noise_std(d, d_f) * 1e3:.1f} um std): the contact deflection is lost in the noise; a "
-                    "larger force-fight amplitude would show it"
-                )
-            lines[side] = (a, b)
-        (a_l, b_l), (a_r, b_r) = lines["left"], lines["right"]
+        a_l, b_l = _contact_line("left", mask_l, d, d_f, g_f, sign, min_contact, frac)
+        a_r, b_r = _contact_line("right", mask_r, d, d_f, g_f, sign, min_contact, frac)
         d_lc, d_rc = a_l + b_l * g_gap, a_r + b_r * g_gap
         w = d_rc - d_lc
         inner = (d_f > d_lc + 0.25 * w) & (d_f < d_rc - 0.25 * w) & ~mask_l & ~mask_r
@@ -247,11 +286,19 @@ def locate_regions(d: np.ndarray, d_f: np.ndarray, g_f: np.ndarray, g_lo: float,
         if not (g_lo < new[1] and new[2] < g_hi) or new == (g_gap, band_lo, band_hi, frac):
             break  # a band reaching an extreme is no gap band: the last selection stands
         g_gap, band_lo, band_hi, frac = new
+    return _Contacts(mask_l, mask_r, (a_l, b_l), (a_r, b_r), g_gap, d_lc, d_rc)
 
+
+def _distinct_backlash(c: _Contacts, d_f: np.ndarray, g_f: np.ndarray, sign: int) -> float:
+    """The spread of the low-passed D about the contact lines (1.4826 MAD, mm); refused when the corners
+    are not more than :data:`RESOLUTION_SPREADS` spreads apart."""
+    (a_l, b_l), (a_r, b_r) = c.line_left, c.line_right
+    mask_l, mask_r, d_lc, d_rc = c.mask_left, c.mask_right, c.d_lc, c.d_rc
+    w = d_rc - d_lc
     resid = np.concatenate((d_f[mask_l] - (a_l + b_l * g_f[mask_l]), d_f[mask_r] - (a_r + b_r * g_f[mask_r])))
     spread = float(1.4826 * np.median(np.abs(resid - np.median(resid))))
     if not w > RESOLUTION_SPREADS * spread:
-        f_gap = sign * g_gap if abs(g_gap) >= 0.5 else 0.0  # no "-0 N"
+        f_gap = sign * c.g_gap if abs(c.g_gap) >= 0.5 else 0.0  # no "-0 N"
         res = f"{RESOLUTION_SPREADS:g} x the {spread * 1e3:.2f} um spread of the low-passed D about them"
         where = (f"only {w * 1e3:.1f} um apart (D = {d_lc:.4f} and {d_rc:.4f} mm), not more than {res}: any "
                  "backlash is below that resolution" if w > 0.0 else
@@ -261,17 +308,7 @@ def locate_regions(d: np.ndarray, d_f: np.ndarray, g_f: np.ndarray, g_lo: float,
             "no distinct backlash region: D does not move freely at the gap force; the two contact lines reach "
             f"F = {f_gap:.0f} N {where}"
         )
-    mask_c = (d_f >= d_lc + centre_margin_frac * w) & (d_f <= d_rc - centre_margin_frac * w) & ~mask_l & ~mask_r
-    n_c = int(np.count_nonzero(mask_c))
-    if n_c < min_centre:
-        raise AnalysisError(
-            f"centre (backlash) region has too few samples: {n_c} < {min_centre} (the force fight crossed the "
-            f"{w:.4f} mm backlash between the corners d_lc = {d_lc:.4f} mm and d_rc = {d_rc:.4f} mm too quickly "
-            "or too rarely to fit its line)"
-        )
-    return Regions(g_gap_N=float(g_gap), g_lo_N=float(g_lo), g_hi_N=float(g_hi), d_lc_mm=float(d_lc),
-                   d_rc_mm=float(d_rc), spread_d_mm=spread, mask_left=readonly(mask_l), mask_centre=readonly(mask_c),
-                   mask_right=readonly(mask_r))
+    return spread
 
 
 def binned_curve(d_f: np.ndarray, g_f: np.ndarray, bin_width_mm: float, half_win: int, min_count: int

@@ -135,9 +135,8 @@ def _hand_overs(f1: np.ndarray, f2: np.ndarray, a: int, b: int, T: float) -> lis
     out = []
     for k in flip:
         lo, hi = max(0, k - m), min(b - a, k + m + 1)
-        if np.any(g2[lo:hi] != g2[max(0, lo - 1)]):
-            if not out or k + a - out[-1] > int(round(1.0 / T)):
-                out.append(int(k + a + 1))
+        if np.any(g2[lo:hi] != g2[max(0, lo - 1)]) and (not out or k + a - out[-1] > int(round(1.0 / T))):
+            out.append(int(k + a + 1))
     return out
 
 

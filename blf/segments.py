@@ -77,7 +77,7 @@ def runs(mask) -> list[tuple[int, int]]:
     """
     m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False])).astype(np.int8)
     d = np.diff(m)
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
 def smooth_speed(x_mm, sample_period_s: float, window_s: float = 0.2) -> np.ndarray:

@@ -17,13 +17,12 @@ LVDT strokes alone (no force sensors) and measures their height:
    rebuilds exactly from ``dD/dt`` by inverting the DT1, and for plots;
 2. a traversal is detected where both derivatives leave the threshold zone
    ``{-thresh, thresh}`` (paper 2.2); the thresholds follow from the noise
-   level of the data (:func:`estimate_noise_std_mm`, Notes of
-   :func:`blf_serv`);
+   level of the data (:func:`estimate_noise_std_mm`, Method below);
 3. its height is measured either as in the paper (``method="paper"``: the
    change of the filtered ``D`` while both derivatives stay outside the zone,
    the largest amplitude is the backlash) or from the levels of ``D`` before
-   and after the traversal (``method="improved"``, the default; see
-   :func:`blf_serv` for what changed and why).
+   and after the traversal (``method="improved"``, the default; what changed
+   and why: Method below).
 
 Two forms with identical results: :func:`blf_serv` over a whole recording and
 :class:`BlfServMonitor`, fed sample by sample or chunk by chunk, which keeps
@@ -31,6 +30,94 @@ the filter and detector state across calls (what a real-time system runs).
 Both run the same compiled detector (numba, :mod:`blf.serv_detect`) on the
 same filter outputs (:mod:`blf.serv_filters`), so they agree to the last bit
 whatever the chunking.
+
+Method
+------
+**Filters** (paper eqs. 2, 3; :func:`design_serv_filters`):
+:math:`D_f = G_{LP} D`, :math:`\\dot D = G_{DT1} D_f`,
+:math:`\\ddot D = G_{DT1} \\dot D` with :math:`G_{LP} = 1/(1 + s/\\omega_c)`,
+:math:`G_{DT1} = s/(1 + s/\\omega_d)`, Tustin-discretised; the low-pass
+starts in steady state at the first sample.
+
+**Thresholds, from the noise of the data.** The white-noise level
+:math:`\\hat\\sigma` of D (:func:`estimate_noise_std_mm`: MAD of the second
+differences, robust to jumps and motion) goes through the exact noise
+gains :math:`g_1` [1/s], :math:`g_2` [1/s^2] of the discrete filter chain:
+
+.. math::
+
+    thresh_1 = k\\,g_1\\hat\\sigma \\;[mm/s], \\qquad
+    thresh_2 = k\\,g_2\\hat\\sigma \\;[mm/s^2], \\qquad k = 5
+
+Noise alone leaves a zone with probability 6e-7 per sample and
+derivative; both at once (they are uncorrelated at equal times) about
+3e-13: no false detection in hours of quiet data. (Defaults at 500 Hz
+and 0.025 mm peak-to-peak LVDT noise: 0.21 mm/s and 16 mm/s^2.)
+
+**Detection (both methods, paper 2.2).** A traversal is detected at a
+sample where :math:`|\\dot D| > thresh_1` and
+:math:`|\\ddot D| > thresh_2`. The event around it spans the excursion of
+:math:`|\\ddot D|` beyond :math:`thresh_2` that contains it (excursions
+less than ``merge_gap_s`` apart merged: the rattle after an impact).
+Excursions without a detection (a smooth elastic or motion change that
+moves only one derivative) are ignored.
+
+**Paper method** (``method="paper"``): over each stretch where both
+derivatives are outside the zone, :math:`\\Delta D = D_f(t_{out}) -
+D_f(t_{in})` from the sample where both left to the first sample where
+one returned; the largest :math:`|\\Delta D|` over the recording is the
+backlash; an event counts if its :math:`|\\Delta D| \\ge` ``min_jump_mm``.
+
+**Improved method** (``method="improved"``, the default): what changed
+and why. :math:`\\ddot D` changes sign in the middle of a jump (the
+inflection of the filtered step), so the paper's stretch ends half-way
+and misses the ramp-in and ramp-out of the low-passed jump: the paper
+method reads 32-37 % low (internal channels; 21 % external) on the
+simulated rig with these filters, 13-26 % with a 60 rad/s DT1 corner (the
+paper's "about a quarter lower" is this filter effect), so its value
+depends on the filter corners. The improved
+method uses the filters only to find the event and measures the height
+on the raw D: a straight line is fitted (least squares) on the
+``plateau_s`` of raw D before the event (ending ``guard_before_s`` before
+it, not reaching back into the previous event) and another after it
+(starting ``guard_after_s`` after it); both are evaluated at the instant
+of the jump :math:`t_j` (centroid of :math:`|\\dot D| - thresh_1 > 0` over
+the event, minus the filter delay ``delay_samples``) and
+
+.. math:: h = \\hat D_{after}(t_j) - \\hat D_{before}(t_j) \\quad [mm]
+
+The lines carry the elastic change of D (:math:`-\\dot F/k` while the load
+ramps) and an LVDT pitch error times the velocity through the jump, which
+the paper's :math:`\\Delta D` includes. An event counts if both plateaus
+have at least ``min_plateau_s`` of samples, their fit residuals are below
+``max_residual_factor`` x :math:`\\hat\\sigma` (quiet: no rattle, no second
+traversal inside), the event is shorter than ``max_event_s`` and
+:math:`|h| \\ge` ``min_jump_mm``. The backlash is the **median** of the
+counted :math:`|h|` rather than the paper's largest amplitude: the
+largest of N noisy readings is biased up (by ~1.5 sigma for N = 10)
+and by any single misfit, whereas one clean traversal suffices for the
+median. Its standard uncertainty is :math:`1.2533\\,s/\\sqrt{N}`
+(:math:`s` the spread of the counted heights) for N >= 3, else the fit
+uncertainty :math:`\\hat\\sigma\\sqrt{v_{before} + v_{after}}` of the
+jump, with :math:`v` the variance factor of each line's value at
+:math:`t_j`.
+
+Simulated rig, default noise and LVDT errors with calibration
+(``tests/bench/bench_serv.py``, 20 seeds, five normal-operation scenarios):
+improved bias -1.6 to +4.9 %, seed-to-seed standard deviation 1-2 %,
+worst seed 7.3 % for ``int1``, ``int2`` and, where crossed, ``ext``;
+paper method 21-37 % low.
+
+**Not traversed**: no counted event gives ``backlash_mm`` None and
+``traversals`` 0 (quiet cruise; ``D_ext`` in symmetric operation, where
+both EMA forces change sign together and :math:`D_{ext}` moves by
+:math:`B_{b,2} - B_{b,1}` only).
+
+**Calibration matters.** On raw LVDT data D carries the pitch error
+times the stroke (paper 2.3: +-20 mm x 7.5 % = +-1.5 mm over the full
+stroke); the acceleration phases of a full-rate stroke then look like
+jumps of 0.03 to 0.2 mm in both methods. Calibrate first
+(:mod:`blf.calibration`).
 
 Pure: arrays and an explicit sample rate in, frozen dataclasses out; no
 plotting, logging, file IO or clocks.
@@ -241,10 +328,33 @@ class BlfServMonitor:
         both are always computed).
     t0_s : float, optional
         Time of the first sample, s (default 0).
-    lowpass_rad_s, dt1_rad_s, discretisation, threshold_factor, min_jump_mm,
-    plateau_s, min_plateau_s, guard_before_s, guard_after_s, merge_gap_s,
-    max_event_s, max_residual_factor :
-        As in :func:`blf_serv`.
+    lowpass_rad_s : float, optional
+        Low-pass crossover, rad/s (default 40, paper).
+    dt1_rad_s : float, optional
+        DT1 corner, rad/s (default 100).
+    discretisation : {"tustin", "zoh"}, optional
+        Discretisation of the filters (default ``"tustin"``).
+    threshold_factor : float, optional
+        Thresholds in units of the filtered derivatives' noise standard
+        deviation (default 5).
+    min_jump_mm : float, optional
+        Smallest height counted as a traversal, mm (default
+        ``6 * noise_std_mm``: the peak-to-peak noise of D).
+    plateau_s : float, optional
+        Length of the plateau fits before and after a jump, s (default 0.15).
+    min_plateau_s : float, optional
+        Shortest usable plateau, s (default 0.05).
+    guard_before_s, guard_after_s : float, optional
+        Gaps between the plateaus and the detected event, s (defaults 0.05
+        and 0.02).
+    merge_gap_s : float, optional
+        Excursions of the second derivative closer than this are one event
+        (impact rattle), s (default 0.1).
+    max_event_s : float, optional
+        Longer events are not jumps (``"event too long"``), s (default 1).
+    max_residual_factor : float, optional
+        A plateau whose fit residual exceeds this times ``noise_std_mm`` is
+        not quiet (default 2.5).
 
     Raises
     ------
@@ -257,7 +367,7 @@ class BlfServMonitor:
     ``guard_before_s + 2*plateau_s + max_event_s + merge_gap_s + guard_after_s``
     seconds of raw D per channel plus the counted jumps. Cost per 2 ms sample
     for three channels: about 30 microseconds (two ``lfilter`` calls on a
-    (3, 1) block and one compiled detector step; ``tests/bench_serv.py``).
+    (3, 1) block and one compiled detector step; ``tests/bench/bench_serv.py``).
     """
 
     def __init__(self, sample_rate_Hz: float, noise_std_mm, *, method: str = "improved", t0_s: float = 0.0,
@@ -485,27 +595,12 @@ class BlfServMonitor:
 # ====================================================================== batch
 
 
-def blf_serv(
-    d_mm: np.ndarray,
-    sample_rate_Hz: float,
-    *,
-    method: str = "improved",
-    noise_std_mm: float | None = None,
-    t0_s: float = 0.0,
-    lowpass_rad_s: float = 40.0,
-    dt1_rad_s: float = 100.0,
-    discretisation: str = "tustin",
-    threshold_factor: float = 5.0,
-    min_jump_mm: float | None = None,
-    plateau_s: float = 0.15,
-    min_plateau_s: float = 0.05,
-    guard_before_s: float = 0.05,
-    guard_after_s: float = 0.02,
-    merge_gap_s: float = 0.1,
-    max_event_s: float = 1.0,
-    max_residual_factor: float = 2.5,
-    keep_signals: bool = True,
-) -> BlfServResult:
+def blf_serv(d_mm: np.ndarray, sample_rate_Hz: float, *, method: str = "improved", noise_std_mm: float | None = None,
+             t0_s: float = 0.0, lowpass_rad_s: float = 40.0, dt1_rad_s: float = 100.0, discretisation: str = "tustin",
+             threshold_factor: float = 5.0, min_jump_mm: float | None = None, plateau_s: float = 0.15,
+             min_plateau_s: float = 0.05, guard_before_s: float = 0.05, guard_after_s: float = 0.02,
+             merge_gap_s: float = 0.1, max_event_s: float = 1.0, max_residual_factor: float = 2.5,
+             keep_signals: bool = True) -> BlfServResult:
     """Measure backlash from the jumps of one position difference over a recording.
 
     Parameters
@@ -526,33 +621,10 @@ def blf_serv(
         ``d_mm`` by :func:`estimate_noise_std_mm`.
     t0_s : float, optional
         Time of the first sample, s (default 0).
-    lowpass_rad_s : float, optional
-        Low-pass crossover, rad/s (default 40, paper).
-    dt1_rad_s : float, optional
-        DT1 corner, rad/s (default 100).
-    discretisation : {"tustin", "zoh"}, optional
-        Discretisation of the filters (default ``"tustin"``).
-    threshold_factor : float, optional
-        Thresholds in units of the filtered derivatives' noise standard
-        deviation (default 5).
-    min_jump_mm : float, optional
-        Smallest height counted as a traversal, mm (default
-        ``6 * noise_std_mm``: the peak-to-peak noise of D).
-    plateau_s : float, optional
-        Length of the plateau fits before and after a jump, s (default 0.15).
-    min_plateau_s : float, optional
-        Shortest usable plateau, s (default 0.05).
-    guard_before_s, guard_after_s : float, optional
-        Gaps between the plateaus and the detected event, s (defaults 0.05
-        and 0.02).
-    merge_gap_s : float, optional
-        Excursions of the second derivative closer than this are one event
-        (impact rattle), s (default 0.1).
-    max_event_s : float, optional
-        Longer events are not jumps (``"event too long"``), s (default 1).
-    max_residual_factor : float, optional
-        A plateau whose fit residual exceeds this times ``noise_std_mm`` is
-        not quiet (default 2.5).
+    lowpass_rad_s, dt1_rad_s, discretisation, threshold_factor, min_jump_mm, plateau_s, min_plateau_s,
+    guard_before_s, guard_after_s, merge_gap_s, max_event_s, max_residual_factor : optional
+        The filters' and the detector's options, as in :class:`BlfServMonitor` (units and defaults
+        there).
     keep_signals : bool, optional
         Return the filter outputs (for plotting; the filtered D costs one more
         ``lfilter`` pass), default True.
@@ -573,97 +645,12 @@ def blf_serv(
 
     Notes
     -----
-    **Filters** (paper eqs. 2, 3; :func:`design_serv_filters`):
-    :math:`D_f = G_{LP} D`, :math:`\\dot D = G_{DT1} D_f`,
-    :math:`\\ddot D = G_{DT1} \\dot D` with :math:`G_{LP} = 1/(1 + s/\\omega_c)`,
-    :math:`G_{DT1} = s/(1 + s/\\omega_d)`, Tustin-discretised; the low-pass
-    starts in steady state at the first sample.
-
-    **Thresholds, from the noise of the data.** The white-noise level
-    :math:`\\hat\\sigma` of D (:func:`estimate_noise_std_mm`: MAD of the second
-    differences, robust to jumps and motion) goes through the exact noise
-    gains :math:`g_1` [1/s], :math:`g_2` [1/s^2] of the discrete filter chain:
-
-    .. math::
-
-        thresh_1 = k\\,g_1\\hat\\sigma \\;[mm/s], \\qquad
-        thresh_2 = k\\,g_2\\hat\\sigma \\;[mm/s^2], \\qquad k = 5
-
-    Noise alone leaves a zone with probability 6e-7 per sample and
-    derivative; both at once (they are uncorrelated at equal times) about
-    3e-13: no false detection in hours of quiet data. (Defaults at 500 Hz
-    and 0.025 mm peak-to-peak LVDT noise: 0.21 mm/s and 16 mm/s^2.)
-
-    **Detection (both methods, paper 2.2).** A traversal is detected at a
-    sample where :math:`|\\dot D| > thresh_1` and
-    :math:`|\\ddot D| > thresh_2`. The event around it spans the excursion of
-    :math:`|\\ddot D|` beyond :math:`thresh_2` that contains it (excursions
-    less than ``merge_gap_s`` apart merged: the rattle after an impact).
-    Excursions without a detection (a smooth elastic or motion change that
-    moves only one derivative) are ignored.
-
-    **Paper method** (``method="paper"``): over each stretch where both
-    derivatives are outside the zone, :math:`\\Delta D = D_f(t_{out}) -
-    D_f(t_{in})` from the sample where both left to the first sample where
-    one returned; the largest :math:`|\\Delta D|` over the recording is the
-    backlash; an event counts if its :math:`|\\Delta D| \\ge` ``min_jump_mm``.
-
-    **Improved method** (``method="improved"``, the default): what changed
-    and why. :math:`\\ddot D` changes sign in the middle of a jump (the
-    inflection of the filtered step), so the paper's stretch ends half-way
-    and misses the ramp-in and ramp-out of the low-passed jump: the paper
-    method reads 32-37 % low (internal channels; 21 % external) on the
-    simulated rig with these filters, 13-26 % with a 60 rad/s DT1 corner (the
-    paper's "about a quarter lower" is this filter effect), so its value
-    depends on the filter corners. The improved
-    method uses the filters only to find the event and measures the height
-    on the raw D: a straight line is fitted (least squares) on the
-    ``plateau_s`` of raw D before the event (ending ``guard_before_s`` before
-    it, not reaching back into the previous event) and another after it
-    (starting ``guard_after_s`` after it); both are evaluated at the instant
-    of the jump :math:`t_j` (centroid of :math:`|\\dot D| - thresh_1 > 0` over
-    the event, minus the filter delay ``delay_samples``) and
-
-    .. math:: h = \\hat D_{after}(t_j) - \\hat D_{before}(t_j) \\quad [mm]
-
-    The lines carry the elastic change of D (:math:`-\\dot F/k` while the load
-    ramps) and an LVDT pitch error times the velocity through the jump, which
-    the paper's :math:`\\Delta D` includes. An event counts if both plateaus
-    have at least ``min_plateau_s`` of samples, their fit residuals are below
-    ``max_residual_factor`` x :math:`\\hat\\sigma` (quiet: no rattle, no second
-    traversal inside), the event is shorter than ``max_event_s`` and
-    :math:`|h| \\ge` ``min_jump_mm``. The backlash is the **median** of the
-    counted :math:`|h|` rather than the paper's largest amplitude: the
-    largest of N noisy readings is biased up (by ~1.5 sigma for N = 10)
-    and by any single misfit, whereas one clean traversal suffices for the
-    median. Its standard uncertainty is :math:`1.2533\\,s/\\sqrt{N}`
-    (:math:`s` the spread of the counted heights) for N >= 3, else the fit
-    uncertainty :math:`\\hat\\sigma\\sqrt{v_{before} + v_{after}}` of the
-    jump, with :math:`v` the variance factor of each line's value at
-    :math:`t_j`.
-
-    Simulated rig, default noise and LVDT errors with calibration
-    (``tests/bench_serv.py``, 20 seeds, five normal-operation scenarios):
-    improved bias -1.6 to +4.9 %, seed-to-seed standard deviation 1-2 %,
-    worst seed 7.3 % for ``int1``, ``int2`` and, where crossed, ``ext``;
-    paper method 21-37 % low.
-
-    **Not traversed**: no counted event gives ``backlash_mm`` None and
-    ``traversals`` 0 (quiet cruise; ``D_ext`` in symmetric operation, where
-    both EMA forces change sign together and :math:`D_{ext}` moves by
-    :math:`B_{b,2} - B_{b,1}` only).
-
-    **Calibration matters.** On raw LVDT data D carries the pitch error
-    times the stroke (paper 2.3: +-20 mm x 7.5 % = +-1.5 mm over the full
-    stroke); the acceleration phases of a full-rate stroke then look like
-    jumps of 0.03 to 0.2 mm in both methods. Calibrate first
-    (:mod:`blf.calibration`).
+    The filters (paper eqs. 2, 3), the thresholds from the noise of the data, the detection and
+    the two measurements (the paper's, and the improved one: what changed and why) are in the
+    module docstring (Method).
     """
     d = as_1d_finite(d_mm, "d_mm", "mm", min_len=10)
-    if noise_std_mm is None:
-        sig = robust_noise_std(d)
-    else:
-        sig = positive_scalar(noise_std_mm, "noise_std_mm", "mm")
+    sig = robust_noise_std(d) if noise_std_mm is None else positive_scalar(noise_std_mm, "noise_std_mm", "mm")
     mon = BlfServMonitor(
         sample_rate_Hz, sig, method=method, t0_s=t0_s, lowpass_rad_s=lowpass_rad_s, dt1_rad_s=dt1_rad_s,
         discretisation=discretisation, threshold_factor=threshold_factor, min_jump_mm=min_jump_mm,

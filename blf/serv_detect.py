@@ -90,10 +90,7 @@ def _finalize(ring, ist, fst, c, q1, gnow, gpre, gpost, w, delay, status, out, n
     start = ist[c, I_START]
     last = ist[c, I_LAST]
     if ist[c, I_TRIG] == 1 and nout < out.shape[0]:
-        if fst[c, F_S0] > 0.0:
-            tc = start + fst[c, F_S1] / fst[c, F_S0] - delay
-        else:
-            tc = 0.5 * (start + last) - delay
+        tc = start + fst[c, F_S1] / fst[c, F_S0] - delay if fst[c, F_S0] > 0.0 else 0.5 * (start + last) - delay
         oldest = max(gnow - H + 1, 0)
         p1 = start - gpre
         p0 = max(p1 - w, ist[c, I_PREV] + gpost + 1, oldest)

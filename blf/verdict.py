@@ -28,8 +28,8 @@ Pure: numbers in, frozen dataclasses out.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 from blf.errors import InputError
 from blf.validate import positive_scalar, scalar

@@ -545,7 +545,7 @@ class FaultInjector:
         if not self._truth:
             e = np.empty((0, 2))
             return TruthTrace(np.empty(0), e, e, np.empty((0, 2), dtype=object))
-        t, F, s, st = zip(*self._truth)
+        t, F, s, st = zip(*self._truth, strict=True)
         return TruthTrace(np.asarray(t), np.asarray(F, dtype=float), np.asarray(s, dtype=float),
                           np.asarray(st, dtype=object))
 

@@ -186,16 +186,50 @@ def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.ran
     if abs(profile.sample_period_s - T) > 1e-12:
         raise InputError(f"profile.sample_period_s = {profile.sample_period_s} s differs from "
                          f"params.sample_period_s = {T} s")
-    i_tot = p.i_total_rad_per_mm
     ka = profile.aero_stiffness_N_per_mm
     run_params = replace(p, surface=replace(p.surface, load_stiffness_N_per_mm=p.surface.load_stiffness_N_per_mm + ka))
+    c = _with_warmup(profile, T)
+    k1, k2 = chain_stiffness_N_per_mm(p)
+    gain = T * profile.ff_bandwidth_rad_s / (2.0 * series_stiffness(k1, k2))
+    # start near the equilibrium deflection under the initial load to keep the warm-up short
+    plant = RigPlant(run_params, r, s0_mm=float(np.clip(c.cmd1[0], -p.stroke_limit_mm, p.stroke_limit_mm)))
+    meas, true_f, true_s, offs = _run_positions(plant, c, gain, p.i_total_rad_per_mm)
+    nw = c.n_warmup
+    sl = slice(nw, c.cmd1.size)
+    F = true_f[sl]
+    trav = _traversed(F)
+    truth = rig_truth(p)
+    expected = {ch: (truth.backlash_mm[ch] if trav[ch] else None) for ch in ("int1", "int2", "ext")}
+    return OperationRecord(
+        name=profile.name, t_s=_ro(meas[sl, 0] - meas[nw - 1, 0] if nw else meas[sl, 0]),
+        phi1_rad=_ro(meas[sl, 1]), phi2_rad=_ro(meas[sl, 2]), s1_mm=_ro(meas[sl, 3]), s2_mm=_ro(meas[sl, 4]),
+        F1_N=_ro(meas[sl, 5]), F2_N=_ro(meas[sl, 6]), true_F_N=_ro(F), true_s_mm=_ro(true_s[sl]),
+        offset_mm=_ro(offs[sl]), truth=truth, traversed=trav, expected_backlash_mm=expected,
+        sample_period_s=float(T))
+
+
+@dataclass(frozen=True)
+class _Commands:
+    """A profile with its warm-up prepended, per sample: the commands of EMA 1 and (lagged) EMA 2
+    (mm), the surface load (N) and the scheduled relative offset (mm; None: force-fight
+    compensation); ``n_warmup`` samples of warm-up first."""
+
+    cmd1: np.ndarray
+    cmd2: np.ndarray
+    load: np.ndarray
+    offset: np.ndarray | None
+    n_warmup: int
+
+
+def _with_warmup(profile: OperationProfile, T: float) -> _Commands:
+    """Prepend the warm-up at the first command; the air load and a scheduled offset are faded in
+    smoothly (raised cosine over 70 % of it) so that the lightly damped surface is not set ringing."""
+    ka = profile.aero_stiffness_N_per_mm
     cmd = np.asarray(profile.command_mm, dtype=float)
     load = np.asarray(profile.load_N, dtype=float)
     sched = None if profile.offset_mm is None else np.asarray(profile.offset_mm, dtype=float)
     lag = int(profile.lag2_samples)
     nw = int(round(profile.warmup_s / T))
-    # prepend the warm-up at the first command; the air load and a scheduled offset are faded in
-    # smoothly (raised cosine over 70 % of it) so that the lightly damped surface is not set ringing
     ramp = np.ones(nw)
     nr = int(0.7 * nw)
     if nr > 0:
@@ -206,16 +240,19 @@ def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.ran
     load_all = np.concatenate([ramp * load[0] + (1.0 - ramp) * ka * cmd[0], load])
     sched_all = None if sched is None else np.concatenate([ramp * sched[0], sched])
     cmd2_all = np.concatenate([np.full(lag, cmd_all[0]), cmd_all[:cmd_all.size - lag]]) if lag else cmd_all
-    k1, k2 = chain_stiffness_N_per_mm(p)
-    ks = series_stiffness(k1, k2)
-    gain = T * profile.ff_bandwidth_rad_s / (2.0 * ks)
-    # start near the equilibrium deflection under the initial load to keep the warm-up short
-    plant = RigPlant(run_params, r, s0_mm=float(np.clip(cmd_all[0], -p.stroke_limit_mm, p.stroke_limit_mm)))
-    ntot = cmd_all.size
+    return _Commands(cmd_all, cmd2_all, load_all, sched_all, nw)
+
+
+def _run_positions(plant: RigPlant, c: _Commands, gain: float, i_tot: float) -> tuple:
+    """Both drives in POSITION through the commands, the relative offset scheduled or from the
+    force-fight compensation (integral gain ``gain``, mm/N; clipped to +-1 mm). Returns the measured
+    samples (n, 7), the true forces and strokes (n, 2) and the offsets (n,)."""
+    ntot = c.cmd1.size
     meas = np.empty((ntot, 7))
     true_f = np.empty((ntot, 2))
     true_s = np.empty((ntot, 2))
     offs = np.empty(ntot)
+    sched_all = c.offset
     delta = 0.0 if sched_all is None else float(sched_all[0])
     step = plant.step_raw
     state = plant.state
@@ -223,8 +260,7 @@ def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.ran
         if sched_all is not None:
             delta = float(sched_all[k])
         offs[k] = delta
-        o = step(_POS, (cmd_all[k] + 0.5 * delta) * i_tot, _POS, (cmd2_all[k] - 0.5 * delta) * i_tot,
-                 float(load_all[k]))
+        o = step(_POS, (c.cmd1[k] + 0.5 * delta) * i_tot, _POS, (c.cmd2[k] - 0.5 * delta) * i_tot, float(c.load[k]))
         meas[k] = o
         st = state()
         true_f[k] = st.F_N
@@ -232,22 +268,17 @@ def simulate_operation(params: RigParams, profile: OperationProfile, rng: np.ran
         if sched_all is None and gain > 0.0:
             delta -= gain * (o[5] - o[6])
             delta = min(max(delta, -1.0), 1.0)
-    sl = slice(nw, ntot)
-    F = true_f[sl]
+    return meas, true_f, true_s, offs
+
+
+def _traversed(F: np.ndarray) -> dict:
+    """Which plays the true forces ``F`` (n, 2) crossed (Notes of :func:`simulate_operation`)."""
     fc = CONTACT_FORCE_N
-    trav = {
+    return {
         "int1": bool(np.any(F[:, 0] > fc) and np.any(F[:, 0] < -fc)),
         "int2": bool(np.any(F[:, 1] > fc) and np.any(F[:, 1] < -fc)),
         "ext": bool(np.any((F[:, 0] > fc) & (F[:, 1] < -fc)) and np.any((F[:, 0] < -fc) & (F[:, 1] > fc))),
     }
-    truth = rig_truth(p)
-    expected = {ch: (truth.backlash_mm[ch] if trav[ch] else None) for ch in ("int1", "int2", "ext")}
-    return OperationRecord(
-        name=profile.name, t_s=_ro(meas[sl, 0] - meas[nw - 1, 0] if nw else meas[sl, 0]),
-        phi1_rad=_ro(meas[sl, 1]), phi2_rad=_ro(meas[sl, 2]), s1_mm=_ro(meas[sl, 3]), s2_mm=_ro(meas[sl, 4]),
-        F1_N=_ro(meas[sl, 5]), F2_N=_ro(meas[sl, 6]), true_F_N=_ro(F), true_s_mm=_ro(true_s[sl]),
-        offset_mm=_ro(offs[sl]), truth=truth, traversed=trav, expected_backlash_mm=expected,
-        sample_period_s=float(T))
 
 
 def simulate_calibration_sweep(

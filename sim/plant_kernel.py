@@ -249,36 +249,87 @@ def _kick_surface(X, P, hk, load, implicit):
         X[S_V] += hk * (fsum - P[G_KLOAD] * X[S_Y] + load - P[G_CS] * X[S_V]) / ms
 
 
+@njit(cache=True, inline="always")
+def _feed_forward(X, e, mode, val, period):
+    """Velocity feed-forward of drive ``e`` over this period (rad/s, held over it): the change of its
+    POSITION target since the last period; outside POSITION mode its integrator is reset. Also
+    restarts the period's peak torque."""
+    b = S_N + e * SE_N
+    wff = 0.0
+    if mode == 8:
+        if X[b + SE_PV] > 0.5:
+            wff = (val - X[b + SE_PT]) / period
+    else:
+        X[b + SE_I] = 0.0
+    X[b + SE_TMAX] = 0.0
+    return wff
+
+
+@njit(cache=True, inline="always")
+def _remember_targets(X, mode1, val1, mode2, val2):
+    """Drive memory for the next period's velocity feed-forward: the POSITION target, or none."""
+    for e in range(2):
+        b = S_N + e * SE_N
+        mode = mode1 if e == 0 else mode2
+        if mode == 8:
+            X[b + SE_PT] = val1 if e == 0 else val2
+            X[b + SE_PV] = 1.0
+        else:
+            X[b + SE_PV] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _sensors(X, P, E, sbuf, n, t, noise, kn):
+    """LVDT readings (mm; delayed by interpolation in ``sbuf``, gain drift, offset, cubic
+    non-linearity, noise) and load-cell readings (N; gain, noise) of both EMAs at time ``t``:
+    (s1, s2, F1, F2)."""
+    h = P[G_H]
+    smeas0 = 0.0
+    smeas1 = 0.0
+    fmeas0 = 0.0
+    fmeas1 = 0.0
+    for e in range(2):
+        b = S_N + e * SE_N
+        p = G_N + e * E_N
+        delay = E[e, COL_LVDT_DELAY]
+        if delay > 0.0:
+            x = n - delay / h
+            j0 = int(math.floor(x))
+            if j0 >= n:
+                s_true = sbuf[e, n]
+            else:
+                fr = x - j0
+                s_true = sbuf[e, j0] * (1.0 - fr) + sbuf[e, j0 + 1] * fr
+        else:
+            s_true = X[b + SE_S]
+        s_mm = s_true * 1e3
+        gain = P[p + E_GAIN] * (1.0 + E[e, COL_LVDT_DRIFT] * t)
+        rel = s_mm / P[p + E_FS]
+        sm = P[p + E_OFF] + gain * s_mm + P[p + E_NL] * rel * rel * rel + P[p + E_LSIG] * noise[kn, e]
+        fm = P[p + E_LCG] * X[b + SE_F] + P[p + E_LCSIG] * noise[kn, 2 + e]
+        if e == 0:
+            smeas0 = sm
+            fmeas0 = fm
+        else:
+            smeas1 = sm
+            fmeas1 = fm
+    return smeas0, smeas1, fmeas0, fmeas1
+
+
 @njit(cache=True)
 def advance(X, P, E, sbuf, dm, mode1, val1, mode2, val2, load, noise, kn):
-    """Advance one sample period in place; return the measured sample tuple."""
+    """Advance one sample period in place; return the measured sample (t, phi1, phi2, s1, s2, F1, F2)
+    (s, rad, rad, mm, mm, N, N): the drives' feed-forward, ``P[G_NSUB]`` substeps, the drives'
+    memory, then the sensors (resolvers quantised to ``P[G_Q]``)."""
     h = P[G_H]
     hh = 0.5 * h
     n = int(P[G_NSUB])
     period = P[G_PERIOD]
     ki = P[G_KI]
-
-    # velocity feed-forward of each drive (held over the period)
-    wff0 = 0.0
-    wff1 = 0.0
-    for e in range(2):
-        b = S_N + e * SE_N
-        mode = mode1 if e == 0 else mode2
-        val = val1 if e == 0 else val2
-        wff = 0.0
-        if mode == 8:
-            if X[b + SE_PV] > 0.5:
-                wff = (val - X[b + SE_PT]) / period
-        else:
-            X[b + SE_I] = 0.0
-        if e == 0:
-            wff0 = wff
-        else:
-            wff1 = wff
-        X[b + SE_TMAX] = 0.0
-
+    wff0 = _feed_forward(X, 0, mode1, val1, period)
+    wff1 = _feed_forward(X, 1, mode2, val2, period)
     _solve_chains(X, P, E, dm)
-    for j in range(n):
+    for j in range(n):  # substeps h: kick (h/2), drift (h), kick (h/2)
         sbuf[0, j] = X[S_N + SE_S]
         sbuf[1, j] = X[S_N + SE_N + SE_S]
         # Maxwell arms: exact exponential update with the deflection frozen over the substep
@@ -311,56 +362,16 @@ def advance(X, P, E, sbuf, dm, mode1, val1, mode2, val2, load, noise, kn):
         _kick(X, P, E, 0, mode1, val1, wff0, hh, True)
         _kick(X, P, E, 1, mode2, val2, wff1, hh, True)
         _kick_surface(X, P, hh, load, True)
-
     sbuf[0, n] = X[S_N + SE_S]
     sbuf[1, n] = X[S_N + SE_N + SE_S]
     k = X[S_K] + 1.0
     X[S_K] = k
     t = k * period
-
-    # drive memory for the velocity feed-forward
-    for e in range(2):
-        b = S_N + e * SE_N
-        mode = mode1 if e == 0 else mode2
-        if mode == 8:
-            X[b + SE_PT] = val1 if e == 0 else val2
-            X[b + SE_PV] = 1.0
-        else:
-            X[b + SE_PV] = 0.0
-
-    # sensors
+    _remember_targets(X, mode1, val1, mode2, val2)
     q = P[G_Q]
     phim0 = math.floor(X[S_N + SE_PHI] / q + 0.5) * q
     phim1 = math.floor(X[S_N + SE_N + SE_PHI] / q + 0.5) * q
-    smeas0 = 0.0
-    smeas1 = 0.0
-    fmeas0 = 0.0
-    fmeas1 = 0.0
-    for e in range(2):
-        b = S_N + e * SE_N
-        p = G_N + e * E_N
-        delay = E[e, COL_LVDT_DELAY]
-        if delay > 0.0:
-            x = n - delay / h
-            j0 = int(math.floor(x))
-            if j0 >= n:
-                s_true = sbuf[e, n]
-            else:
-                fr = x - j0
-                s_true = sbuf[e, j0] * (1.0 - fr) + sbuf[e, j0 + 1] * fr
-        else:
-            s_true = X[b + SE_S]
-        s_mm = s_true * 1e3
-        gain = P[p + E_GAIN] * (1.0 + E[e, COL_LVDT_DRIFT] * t)
-        rel = s_mm / P[p + E_FS]
-        sm = P[p + E_OFF] + gain * s_mm + P[p + E_NL] * rel * rel * rel + P[p + E_LSIG] * noise[kn, e]
-        fm = P[p + E_LCG] * X[b + SE_F] + P[p + E_LCSIG] * noise[kn, 2 + e]
-        if e == 0:
-            smeas0 = sm
-            fmeas0 = fm
-        else:
-            smeas1 = sm
-            fmeas1 = fm
+    smeas0, smeas1, fmeas0, fmeas1 = _sensors(X, P, E, sbuf, n, t, noise, kn)
     return t, phim0, phim1, smeas0, smeas1, fmeas0, fmeas1
 
 

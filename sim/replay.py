@@ -160,10 +160,8 @@ def _solve(x1, x2, y, A, klin, c0, f1, d1, f2, d2):
         slope = -klin - d1 - d2
         yn = y - g / slope if slope < 0.0 else y
         if not (lo < yn < hi):
-            if lo > -1e300 and hi < 1e300:
-                yn = 0.5 * (lo + hi)
-            else:
-                yn = y + (1e-4 if g > 0.0 else -1e-4)
+            # outside the bracket: bisect it once both ends are known, else step towards the root
+            yn = 0.5 * (lo + hi) if lo > -1e300 and hi < 1e300 else y + (1e-4 if g > 0.0 else -1e-4)
         elif linear and slope < 0.0 \
                 and _branch(x1 - yn, A[0, 0], A[0, 1]) == _branch(x1 - y, A[0, 0], A[0, 1]) \
                 and _branch(x2 - yn, A[1, 0], A[1, 1]) == _branch(x2 - y, A[1, 0], A[1, 1]):

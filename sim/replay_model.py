@@ -42,6 +42,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import savgol_filter
 
+from blf.diagnose import Candidate, Param, ParamVector, Reference
 from blf.phases import holding, mode_changes, segment_changes, transients
 from blf.validate import as_1d_finite, positive_scalar, same_shape
 from sim.replay import ChainParams, friction_force, lvdt_model, replay_chains
@@ -61,7 +62,6 @@ RATIO = ("transmission_ratio", "external",
 
 
 def _cand(name, where, words, *params, variant=""):
-    from blf.diagnose import Candidate, Param
     return Candidate(name, where, words, tuple(Param(*q) for q in params), variant)
 
 
@@ -107,6 +107,57 @@ def dual_ema_candidates(drive: tuple = (True, True)) -> tuple:
     return tuple(out)
 
 
+def _surface_damping(rig: dict) -> float:
+    """The simulated rig's surface damping (N s/mm), the simulator's default without one."""
+    return float((rig.get("surface") or {}).get("damping_N_s_per_mm", _SIM_SURFACE_DAMPING))
+
+
+def _nominal_params(rig: dict, g0: list, o0: list, drive: bool) -> tuple:
+    """The nominal parameters: per EMA the load path (from the simulated rig ``rig`` where given),
+    the hinge and the contact damping, per EMA the LVDT calibration (from ``g0``, ``o0``, the
+    recording's regression) and, where a drive holds force, the drives' reflected mass and friction."""
+    P = Param
+    nom = []
+    for e in (1, 2):
+        c = rig.get(f"ema{e}") or {}
+        ks = 1.0 / (1.0 / c.get("bearing_stiffness_N_per_mm", 2e5) + 1.0 / c.get("housing_stiffness_N_per_mm", 2e4))
+        nom += [P(f"backlash_int{e}_mm", float(c.get("backlash_int_mm", 0.1)), 0.01, 0.0, 2.0),
+                P(f"stiffness_int{e}_N_per_mm", float(c.get("stiffness_compression_N_per_mm", 8e4)), 1e4, 1e3, 1e7),
+                P(f"backlash_bearing{e}_mm", float(c.get("bearing_backlash_mm", 0.05)), 0.01, 0.0, 2.0),
+                P(f"compliance_ext{e}_mm_per_N", 1.0 / ks, 5e-6, 1e-7, 1e-2)]
+    nom += [P("hinge_viscous_N_s_per_mm", max(_surface_damping(rig), 0.5), 2.0, 0.0, 1e4),
+            P("hinge_coulomb_N", 1.0, 5.0, 0.0, 1e4),
+            P("contact_damping_time_s", 0.0, 1e-3, -0.02, 0.02)]
+    for e in (0, 1):
+        nom += [P(f"lvdt_pitch{e + 1}", g0[e], 1e-3, 0.5, 2.0), P(f"lvdt_offset{e + 1}_mm", o0[e], 1e-3, -5.0, 5.0)]
+    if drive:
+        nom += [P("reflected_mass_kg", 2500.0, 500.0, 0.0, 1e6), P("drive_viscous_N_s_per_mm", 2.5, 5.0, 0.0, 1e4),
+                P("drive_coulomb_N", 1.0, 5.0, 0.0, 1e4)]
+    return tuple(nom)
+
+
+def _references(names: tuple, sens: list, damping: float) -> tuple:
+    """The nominal parameters compared with a reference (the simulated rig's LVDTs ``sens`` and surface
+    damping): LVDT pitch and offset per EMA, the hinge's viscous and Coulomb friction."""
+    def at(name: str) -> int:
+        return ParamVector.position(names, name)
+
+    refs = []
+    for e, s in enumerate(sens):
+        n = e + 1
+        refs += [Reference(at(f"lvdt_pitch{n}"), float(s.get("lvdt_gain", 1.0)), "lvdt_pitch", f"ema{n}",
+                           f"LVDT {n} pitch (gain) differs from nominal: calibrated on the recording",
+                           "gain_error", 1.0, RATIO),
+                 Reference(at(f"lvdt_offset{n}_mm"), float(s.get("lvdt_offset_mm", 0.0)), "lvdt_offset", f"ema{n}",
+                           f"LVDT {n} offset: calibrated on the recording", "offset_mm", 0.0)]
+    refs += [Reference(at("hinge_viscous_N_s_per_mm"), damping, "viscous_friction", "external",
+                       "viscous friction of the surface hinge (the simulator's surface damping differs)",
+                       "coeff_N_s_per_mm", 0.0),
+             Reference(at("hinge_coulomb_N"), 0.0, "coulomb_friction", "external",
+                       "Coulomb friction of the surface hinge", "force_N", 0.0)]
+    return tuple(refs)
+
+
 class DualEmaReplay:
     """The dual-EMA recording and its position-driven replay, for :func:`blf.diagnose.diagnose`.
 
@@ -135,7 +186,6 @@ class DualEmaReplay:
                  sample_period_s: float, mode1=None, sp1=None, mode2=None, sp2=None, *, segments=None,
                  opposing_force_N: float | None = None, force_ramp_s: float = 0.0,
                  nominal_rig: dict | None = None) -> None:
-        from blf.diagnose import Param, Reference
         items = [(as_1d_finite(a, name, unit, min_len=200), name, unit) for a, name, unit in (
             (t_s, "t_s", "s"), (phi1_rad, "phi1_rad", "rad"), (phi2_rad, "phi2_rad", "rad"), (s1_mm, "s1_mm", "mm"),
             (s2_mm, "s2_mm", "mm"), (F1_N, "F1_N", "N"), (F2_N, "F2_N", "N"))]
@@ -174,43 +224,11 @@ class DualEmaReplay:
         self.lvdt_nominal = [(float(s.get("lvdt_nonlinearity_mm", 0.0)), float(s.get("lvdt_full_scale_mm",
                                                                                         _FULL_SCALE_MM))) for s in sens]
         g0, o0 = self._calibration_start(trans)
-        P = Param
-        nom = []
-        for e in (1, 2):
-            c = rig.get(f"ema{e}") or {}
-            ks = 1.0 / (1.0 / c.get("bearing_stiffness_N_per_mm", 2e5) + 1.0 / c.get("housing_stiffness_N_per_mm", 2e4))
-            nom += [P(f"backlash_int{e}_mm", float(c.get("backlash_int_mm", 0.1)), 0.01, 0.0, 2.0),
-                    P(f"stiffness_int{e}_N_per_mm", float(c.get("stiffness_compression_N_per_mm", 8e4)), 1e4, 1e3, 1e7),
-                    P(f"backlash_bearing{e}_mm", float(c.get("bearing_backlash_mm", 0.05)), 0.01, 0.0, 2.0),
-                    P(f"compliance_ext{e}_mm_per_N", 1.0 / ks, 5e-6, 1e-7, 1e-2)]
-        damping = float((rig.get("surface") or {}).get("damping_N_s_per_mm", _SIM_SURFACE_DAMPING))
-        nom += [P("hinge_viscous_N_s_per_mm", max(damping, 0.5), 2.0, 0.0, 1e4),
-                P("hinge_coulomb_N", 1.0, 5.0, 0.0, 1e4),
-                P("contact_damping_time_s", 0.0, 1e-3, -0.02, 0.02)]
-        for e in (0, 1):
-            nom += [P(f"lvdt_pitch{e + 1}", g0[e], 1e-3, 0.5, 2.0), P(f"lvdt_offset{e + 1}_mm", o0[e], 1e-3, -5.0, 5.0)]
         self.drive = (bool(self.valid["Fd1"].any()), bool(self.valid["Fd2"].any()))
-        if any(self.drive):
-            nom += [P("reflected_mass_kg", 2500.0, 500.0, 0.0, 1e6), P("drive_viscous_N_s_per_mm", 2.5, 5.0, 0.0, 1e4),
-                    P("drive_coulomb_N", 1.0, 5.0, 0.0, 1e4)]
-        self.nominal = tuple(nom)
+        self.nominal = _nominal_params(rig, g0, o0, any(self.drive))
+        self.names = tuple(q.name for q in self.nominal)  #: of the nominal vector, read with ParamVector
         self.candidates = dual_ema_candidates(self.drive)
-        ref_gain = [float(s.get("lvdt_gain", 1.0)) for s in sens]
-        ref_off = [float(s.get("lvdt_offset_mm", 0.0)) for s in sens]
-        refs = []
-        for e in (0, 1):
-            n_ = e + 1
-            refs += [Reference(11 + 2 * e, ref_gain[e], "lvdt_pitch", f"ema{n_}",
-                               f"LVDT {n_} pitch (gain) differs from nominal: calibrated on the recording",
-                               "gain_error", 1.0, RATIO),
-                     Reference(12 + 2 * e, ref_off[e], "lvdt_offset", f"ema{n_}",
-                               f"LVDT {n_} offset: calibrated on the recording", "offset_mm", 0.0)]
-        refs += [Reference(8, damping, "viscous_friction", "external",
-                           "viscous friction of the surface hinge (the simulator's surface damping differs)",
-                           "coeff_N_s_per_mm", 0.0),
-                 Reference(9, 0.0, "coulomb_friction", "external", "Coulomb friction of the surface hinge",
-                           "force_N", 0.0)]
-        self.references = tuple(refs)
+        self.references = _references(self.names, sens, _surface_damping(rig))
         xc = 0.5 * (self.xm[0] + self.xm[1])
         self.regimes = {
             "position along the stroke": xc - np.median(xc),
@@ -263,8 +281,9 @@ class DualEmaReplay:
 
     def _trace(self, th, fx):
         chains = []
-        for e, where in enumerate(("ema1", "ema2")):
-            bi, k, bb, cs = (float(v) for v in th[4 * e: 4 * e + 4])
+        for n, where in ((1, "ema1"), (2, "ema2")):
+            bi, k, bb, cs = (th[f"backlash_int{n}_mm"], th[f"stiffness_int{n}_N_per_mm"],
+                             th[f"backlash_bearing{n}_mm"], th[f"compliance_ext{n}_mm_per_N"])
             k = max(k, 1.0)
             asym = fx.get(("stiffness_asymmetry", where, ""))
             kt = max(k * (1.0 + float(asym[0])), 1.0) if asym is not None else k
@@ -273,7 +292,7 @@ class DualEmaReplay:
             prog = fx.get(("progressive_stiffness", where, ""))
             p = float(prog[0]) if prog is not None else 0.0
             chains.append(ChainParams(max(bi, 0.0), k, kt, max(bb, 0.0), max(cs, 1e-9), kv, tau, p))
-        hv, hc = max(float(th[8]), 0.0), max(float(th[9]), 0.0)
+        hv, hc = max(th["hinge_viscous_N_s_per_mm"], 0.0), max(th["hinge_coulomb_N"], 0.0)
         lp = tuple(self._friction_kw(fx, w, "load path") for w in ("ema1", "ema2"))
         key = (tuple(chains), hv, hc, tuple(None if k is None else tuple(sorted(k.items())) for k in lp))
         tr = self._cache.get(key)
@@ -296,34 +315,36 @@ class DualEmaReplay:
         return out[1]
 
     def predict(self, theta: np.ndarray, active: list) -> dict:
-        """Predicted channels for nominal ``theta`` and the active effects [(Candidate, params)]."""
-        th = np.asarray(theta, dtype=float)
+        """Predicted channels for nominal ``theta`` (in the order of :attr:`nominal`, read by name) and
+        the active effects [(Candidate, params)]."""
+        th = ParamVector(self.names, theta)
         fx = {(c.name, c.where, c.variant): np.asarray(x, dtype=float) for c, x in active}
         tr = self._trace(th, fx)
         out = {}
         for e, where in enumerate(("ema1", "ema2")):
-            def g(name):
-                return fx.get((name, where, ""))
+            n = e + 1
+            nl, drift, skew, lc = (fx.get((name, where, "")) for name in (
+                "lvdt_nonlinearity", "lvdt_drift", "time_skew", "loadcell_gain"))
             n3, fs = self.lvdt_nominal[e]
-            kw = {"gain": float(th[11 + 2 * e]), "offset_mm": float(th[12 + 2 * e]), "nonlinearity_mm": n3}
-            if g("lvdt_nonlinearity") is not None:
-                kw["quadratic_mm"] = float(g("lvdt_nonlinearity")[0])
-                kw["nonlinearity_mm"] = n3 + float(g("lvdt_nonlinearity")[1])
-            if g("lvdt_drift") is not None:
-                kw["drift_per_s"] = float(g("lvdt_drift")[0])
-            if g("time_skew") is not None:
-                kw["delay_s"] = float(g("time_skew")[0])
-            out[f"s{e + 1}"] = lvdt_model(tr.s_mm[:, e], self.t_s, full_scale_mm=fs, **kw)
-            lg = 1.0 + (float(g("loadcell_gain")[0]) if g("loadcell_gain") is not None else 0.0)
-            out[f"F{e + 1}"] = lg * (tr.F_N[:, e] + float(th[10]) * self._rate(tr, e))
+            kw = {"gain": th[f"lvdt_pitch{n}"], "offset_mm": th[f"lvdt_offset{n}_mm"], "nonlinearity_mm": n3}
+            if nl is not None:
+                kw["quadratic_mm"] = float(nl[0])
+                kw["nonlinearity_mm"] = n3 + float(nl[1])
+            if drift is not None:
+                kw["drift_per_s"] = float(drift[0])
+            if skew is not None:
+                kw["delay_s"] = float(skew[0])
+            out[f"s{n}"] = lvdt_model(tr.s_mm[:, e], self.t_s, full_scale_mm=fs, **kw)
+            lg = 1.0 + (float(lc[0]) if lc is not None else 0.0)
+            out[f"F{n}"] = lg * (tr.F_N[:, e] + th["contact_damping_time_s"] * self._rate(tr, e))
             if not self.drive[e]:
-                out[f"Fd{e + 1}"] = np.zeros(self.t_s.size)
+                out[f"Fd{n}"] = np.zeros(self.t_s.size)
                 continue
-            M, c, fc = (float(v) for v in th[15:18])
+            M, c, fc = th["reflected_mass_kg"], th["drive_viscous_N_s_per_mm"], th["drive_coulomb_N"]
             ff = friction_force(self.v[e], coulomb_N=fc, viscous_N_s_per_mm=c)
             for variant in ("drive", "load path"):
                 kwf = self._friction_kw(fx, where, variant)
                 if kwf is not None:
                     ff = ff + friction_force(self.v[e], **kwf)
-            out[f"Fd{e + 1}"] = lg * (self.targets[e] - ff - M * 1e-3 * self.a[e])
+            out[f"Fd{n}"] = lg * (self.targets[e] - ff - M * 1e-3 * self.a[e])
         return out

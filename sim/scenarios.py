@@ -33,8 +33,8 @@ from blf.validate import count, generator, instance_of, scalar
 from sim.params import RigParams
 from sim.truth import chain_stiffness_N_per_mm, force_fight_play_mm, series_stiffness
 
-__all__ = ["AirLoad", "AIR", "OperationProfile", "SCENARIOS", "scenario_profile", "full_stroke_profile", "small_manoeuvre_profile",
-           "gust_profile", "cruise_profile", "ext_crossing_profile"]
+__all__ = ["AirLoad", "AIR", "OperationProfile", "SCENARIOS", "scenario_profile", "full_stroke_profile",
+           "small_manoeuvre_profile", "gust_profile", "cruise_profile", "ext_crossing_profile"]
 
 @dataclass(frozen=True)
 class AirLoad:
@@ -85,7 +85,7 @@ class OperationProfile:
     offset_mm : ndarray, shape (n,), or None
         Scheduled relative offset ``delta`` of the two motors, mm (EMA 1 at
         ``command + delta/2``, EMA 2 at ``command - delta/2``); None: the
-        force-fight compensation loop sets it (see :func:`simulate_operation`).
+        force-fight compensation loop sets it (see :func:`sim.operation.simulate_operation`).
     lag2_samples : int
         Transport delay of EMA 2's command, samples (0: none).
     ff_bandwidth_rad_s : float
@@ -451,6 +451,37 @@ def cruise_profile(
                     T, y, load, ka, y0, None, 0, ffb, 1.5)
 
 
+def _reversal_schedule(dp: float, d_fight: float, ramp: float, rate: float, reversals: int, dwell: float,
+                       T: float) -> np.ndarray:
+    """Relative offset (mm) per sample of :func:`ext_crossing_profile`: ``dwell`` s at the force fight
+    (offset ``dp + d_fight``), then per reversal a ramp over ``ramp`` s to the play's edge ``dp``, the
+    crossing of the slack ``2 dp`` at ``rate`` mm/s, a ramp to the opposite force fight and a dwell."""
+    d_end = dp + d_fight
+    # one reversal: ramp d_end -> dp, cross to -dp, ramp -dp -> -d_end
+    t_cross = 2 * dp / rate
+    seg = [dwell]
+    for _ in range(reversals):
+        seg.append(ramp + t_cross + ramp + dwell)
+    total = float(sum(seg))
+    n = int(math.ceil(total / T))
+    t = np.arange(1, n + 1) * T
+    delta = np.full(n, d_end)
+    ts = dwell
+    sgn = 1.0
+    for _ in range(reversals):
+        tau = t - ts
+        a = sgn * (d_end - (d_end - dp) * tau / ramp)
+        b = sgn * (dp - rate * (tau - ramp))
+        c = sgn * (-dp - (d_end - dp) * np.minimum(tau - ramp - t_cross, ramp) / ramp)
+        m = tau > 0
+        delta = np.where(m & (tau <= ramp), a, delta)
+        delta = np.where(m & (tau > ramp) & (tau <= ramp + t_cross), b, delta)
+        delta = np.where(m & (tau > ramp + t_cross), c, delta)
+        ts += ramp + t_cross + ramp + dwell
+        sgn = -sgn
+    return delta
+
+
 def ext_crossing_profile(
     params: RigParams,
     *,
@@ -527,30 +558,8 @@ def ext_crossing_profile(
     T = p.sample_period_s
     k1, k2 = chain_stiffness_N_per_mm(p)
     ks = series_stiffness(k1, k2)
-    dp = force_fight_play_mm(p)
-    d_end = dp + ff / ks
-    # one reversal: ramp d_end -> dp, cross to -dp, ramp -dp -> -d_end
-    t_cross = 2 * dp / rate
-    seg = [dwell]
-    for _ in range(int(reversals)):
-        seg.append(ramp + t_cross + ramp + dwell)
-    total = float(sum(seg))
-    n = int(math.ceil(total / T))
-    t = np.arange(1, n + 1) * T
-    delta = np.full(n, d_end)
-    ts = dwell
-    sgn = 1.0
-    for _ in range(int(reversals)):
-        tau = t - ts
-        a = sgn * (d_end - (d_end - dp) * tau / ramp)
-        b = sgn * (dp - rate * (tau - ramp))
-        c = sgn * (-dp - (d_end - dp) * np.minimum(tau - ramp - t_cross, ramp) / ramp)
-        m = tau > 0
-        delta = np.where(m & (tau <= ramp), a, delta)
-        delta = np.where(m & (tau > ramp) & (tau <= ramp + t_cross), b, delta)
-        delta = np.where(m & (tau > ramp + t_cross), c, delta)
-        ts += ramp + t_cross + ramp + dwell
-        sgn = -sgn
+    delta = _reversal_schedule(force_fight_play_mm(p), ff / ks, ramp, rate, int(reversals), dwell, T)
+    n = delta.size
     y = np.full(n, trim)
     load = np.zeros(n)
     return _profile("ext_crossing",

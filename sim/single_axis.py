@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from blf.diagnose import Candidate, Param, ParamVector
 from blf.validate import as_1d_finite, positive_scalar, same_shape
 
 __all__ = ["SingleAxisReplay", "single_axis_candidates"]
@@ -44,18 +45,20 @@ BAND_HZ = 20.0  #: the band the rigid-body model claims (IDIM-LS's), Hz
 
 def single_axis_candidates() -> tuple:
     """Candidate library of the single-axis model."""
-    from blf.diagnose import Candidate, Param
     return (
         Candidate("stribeck_friction", "axis", "Stribeck (static above Coulomb) friction of the ballscrew",
-                  (Param("extra_force_N", 2.0, 2.0, 0.0, 1e3), Param("stribeck_velocity_m_per_s", 0.01, 0.01, 1e-4, 1.0))),
+                  (Param("extra_force_N", 2.0, 2.0, 0.0, 1e3),
+                   Param("stribeck_velocity_m_per_s", 0.01, 0.01, 1e-4, 1.0))),
         Candidate("asymmetric_friction", "axis",
                   "viscous friction that differs with the direction of motion",
                   (Param("viscous_asymmetry_N_s_per_m", 10.0, 10.0, -1e5, 1e5),)),
-        Candidate("position_dependent_friction", "axis", "friction that varies along the stroke (ballscrew wear or misalignment)",
+        Candidate("position_dependent_friction", "axis",
+                  "friction that varies along the stroke (ballscrew wear or misalignment)",
                   (Param("slope_N_per_m", 10.0, 10.0, -1e5, 1e5),)),
         Candidate("position_dependent_force", "axis",
                   "a force that depends on the position along the stroke (spring, cable carrier or gravity)",
-                  (Param("linear_N_per_m", 10.0, 10.0, -1e6, 1e6), Param("quadratic_N_per_m2", 100.0, 100.0, -1e8, 1e8))),
+                  (Param("linear_N_per_m", 10.0, 10.0, -1e6, 1e6),
+                   Param("quadratic_N_per_m2", 100.0, 100.0, -1e8, 1e8))),
     )
 
 
@@ -72,7 +75,6 @@ class SingleAxisReplay:
     def __init__(self, t_s, q_m, q_ref_m, force_N, sample_period_s: float) -> None:
         from scipy.signal import savgol_filter
 
-        from blf.diagnose import Param
         # any shape, flattened (a .mat file holds columns)
         items = [(as_1d_finite(np.ravel(a), name, unit, min_len=200), name, unit) for a, name, unit in (
             (t_s, "t_s", "s"), (q_m, "q_m", "m"), (q_ref_m, "q_ref_m", "m"), (force_N, "force_N", "N"))]
@@ -92,14 +94,16 @@ class SingleAxisReplay:
         self.valid = {"force": np.ones(n, bool)}
         self.nominal = (Param("mass_kg", 50.0, 10.0, 0.0, 1e5), Param("viscous_N_s_per_m", 100.0, 50.0, 0.0, 1e6),
                         Param("coulomb_N", 20.0, 5.0, 0.0, 1e4), Param("offset_N", 0.0, 5.0, -1e4, 1e4))
+        self.names = tuple(q.name for q in self.nominal)  #: of the nominal vector, read with ParamVector
         self.candidates = single_axis_candidates()
         self.qc = self.q - np.median(self.q)
         self.regimes = {"position along the stroke": self.qc, "velocity": self.v,
                         "acceleration": self.a, "time since start": self.t_s - np.median(self.t_s)}
 
     def predict(self, theta: np.ndarray, active: list) -> dict:
-        """Predicted drive force for nominal ``theta`` (M, Fv, Fc, F0) and the active effects."""
-        M, fv, fc, f0 = theta
+        """Predicted drive force for nominal ``theta`` (M, Fv, Fc, F0, read by name) and the active effects."""
+        th = ParamVector(self.names, theta)
+        M, fv, fc, f0 = th["mass_kg"], th["viscous_N_s_per_m"], th["coulomb_N"], th["offset_N"]
         th = np.tanh(self.v / _BAND_M_S)
         f = M * self.a + fv * self.v + fc * th + f0
         for cand, x in active:

@@ -224,7 +224,7 @@ def apply_wear(params: RigParams, wear: WearParams, flight_hours: float, rng: np
     line = wear_line_mm(params, wear, flight_hours)
     rng = generator(rng)
     scatter = rng.normal(0.0, 1.0, 3) * scalar(wear.scatter_mm, "wear.scatter_mm", "mm", lo=0.0)
-    new = {ch: line[ch] + d for ch, d in zip(("int1", "int2", "ext"), scatter)}
+    new = {ch: line[ch] + d for ch, d in zip(("int1", "int2", "ext"), scatter, strict=True)}
     for ch, v in new.items():
         if v < 0.0:
             raise InputError(f"wear at flight_hours = {flight_hours} gives a negative {ch} backlash ({v:.4f} mm)")

@@ -365,19 +365,21 @@ def test_both_lvdt_pitches_alike_are_one_ratio_named_once():
     # two references of one common physics: folded when both are named and agree (relative to their
     # references) within 3 combined standard uncertainties, else named each at its place
     from blf.diagnose import Param, Reference, _reference_effects
+    from blf.diagnose_records import NamedReference
     from sim.replay_model import RATIO
 
     nominal = tuple(Param(f"gain{k}", 1.0, 1.0, 0.5, 1.5) for k in range(2))
     r1 = Reference(0, 1.075, "lvdt_pitch", "ema1", "LVDT 1 pitch", "gain_error", 1.0, RATIO)
     r2 = Reference(1, 0.98, "lvdt_pitch", "ema2", "LVDT 2 pitch", "gain_error", 1.0, RATIO)
     u = 3e-6
-    alike = [(r1, 1.075 * (1 + 12e-6), 1.075 * u, 40.0, 30.0), (r2, 0.98 * (1 + 16e-6), 0.98 * u, 50.0, 35.0)]
+    alike = [NamedReference(r1, 1.075 * (1 + 12e-6), 1.075 * u, 40.0, 30.0),
+             NamedReference(r2, 0.98 * (1 + 16e-6), 0.98 * u, 50.0, 35.0)]
     (e,) = _reference_effects(alike, (r1, r2), nominal, 10.0)
     assert (e.name, e.where, e.source) == ("transmission_ratio", "external", "nominal")
     assert e.parameters["gain_error"] == pytest.approx(14e-6, abs=1e-9)  # equal weights: the mean
     assert e.uncertainty["gain_error"] == pytest.approx(u / np.sqrt(2), rel=1e-9)
     assert e.delta_bic == pytest.approx(-(30.0 + 40.0)) and e.delta_chi2_holdout == pytest.approx(-65.0)
-    apart = [alike[0], (r2, 0.98 * (1 + 40e-6), 0.98 * u, 50.0, 35.0)]  # 28e-6 apart > 3 x 4.2e-6
+    apart = [alike[0], NamedReference(r2, 0.98 * (1 + 40e-6), 0.98 * u, 50.0, 35.0)]  # 28e-6 apart > 3 x 4.2e-6
     assert [(x.name, x.where) for x in _reference_effects(apart, (r1, r2), nominal, 10.0)] == [
         ("lvdt_pitch", "ema1"), ("lvdt_pitch", "ema2")]
     (one,) = _reference_effects(alike[:1], (r1, r2), nominal, 10.0)  # the other not named: no fold
@@ -431,6 +433,8 @@ def test_forms_of_one_physics_within_two_bic_units_name_the_simpler():
     decides. A simpler form not yet refitted is refitted for the comparison; another place or
     variant never takes part."""
     from blf.diagnose import Candidate, DiagnoseConfig, Param, _prefer_simpler_law
+    from blf.diagnose_fit import CandidateFit
+    from blf.diagnose_records import Refit
 
     def cand(name, n, where="ema1", variant="drive"):
         return Candidate(name, where, name, tuple(Param(f"p{k}", 1.0, 1.0) for k in range(n)), variant)
@@ -444,10 +448,11 @@ def test_forms_of_one_physics_within_two_bic_units_name_the_simpler():
     assert margin == 2.0
 
     def row(bic, c):
-        return (bic, -20.0, c, np.ones(len(c.params)), np.ones(len(c.params)), np.zeros(3))
+        return Refit(bic, -20.0, c, CandidateFit(np.ones(len(c.params)), np.ones(len(c.params)), np.zeros(3), 0.0, 0.0))
 
     def first(refits, refit=lambda c: None):
-        return _prefer_simpler_law(list(refits), lib, pen, set(), margin, refit, 100.0, 100.0, lambda s: None)[0][2]
+        return _prefer_simpler_law(list(refits), lib, pen, set(), margin, refit, 100.0, 100.0,
+                                   lambda s: None)[0].candidate
 
     # a direction-dependent fit 1.3 better than Coulomb: indistinguishable, Coulomb named
     assert first([row(-45.4, asym), row(-44.1, cou), row(-40.0, stri)]) is cou
@@ -461,7 +466,7 @@ def test_forms_of_one_physics_within_two_bic_units_name_the_simpler():
 
     def refit(c):
         calls.append(c.name)
-        return (np.ones(1), np.ones(1), np.zeros(3), 46.0, 80.0) if c is cou else None
+        return CandidateFit(np.ones(1), np.ones(1), np.zeros(3), 46.0, 80.0) if c is cou else None
     assert first([row(-47.0, asym)], refit) is cou
     assert calls == ["coulomb_friction", "viscous_friction", "stribeck_friction"]
 

@@ -4,7 +4,7 @@ Default rig (simrig.toml): LVDT noise 0.025 mm peak to peak, 7.5 % pitch error
 on LVDT 1, 2 % on LVDT 2, offsets and cubic non-linearity; internal backlash
 0.10 / 0.12 mm, external 0.05 + 0.05 mm. The LVDTs are calibrated from
 simulated slow sweeps under an opposing force (paper 2.3), as on the aircraft
-after a maintenance check. Five seeds here; tests/bench_serv.py runs 20.
+after a maintenance check. Five seeds here; tests/bench/bench_serv.py runs 20.
 """
 
 from __future__ import annotations
