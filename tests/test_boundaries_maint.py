@@ -284,11 +284,14 @@ def test_neither_side_loaded_names_the_force_reached():
 # ---------------------------------------------------------------------------- the fitted lines
 
 
-@pytest.mark.parametrize("sign", [-1, 1])
-def test_lines_meet_at_their_intersections_and_give_the_backlash(sign):
+@pytest.mark.parametrize("sign, k_left, k_right", [(-1, 80_000.0, 80_000.0), (1, 80_000.0, 80_000.0),
+                                                   (-1, 90_000.0, 60_000.0), (1, 60_000.0, 90_000.0)])
+def test_lines_meet_at_their_intersections_and_give_the_backlash(sign, k_left, k_right):
     """The three lines' own methods: D on a contact line and its inverse, F on the centre line; the
-    reported intersections lie on both lines they join; B is their distance."""
-    d, f, _, _ = make_force_fight(np.random.default_rng(6), slope_sign=sign)
+    reported intersections lie on both lines they join; B is their distance. The curve's threshold is
+    half the softer contact, whichever side that is."""
+    d, f, _, _ = make_force_fight(np.random.default_rng(6), slope_sign=sign, stiffness_left_N_per_mm=k_left,
+                                  stiffness_right_N_per_mm=k_right)
     r = blf_maint(d, f, FS_HZ, centre_slope=True)
     L = r.lines
     for line in (L.left, L.right):
@@ -307,6 +310,8 @@ def test_lines_meet_at_their_intersections_and_give_the_backlash(sign):
     assert r.stiffness_right_N_per_mm == pytest.approx(1.0 / abs(L.right.compliance_mm_per_N), rel=1e-12)
     assert r.slope_sign == sign and (L.left.side, L.right.side) == ("left", "right")
     k_soft = min(r.stiffness_left_N_per_mm, r.stiffness_right_N_per_mm)
+    if k_left != k_right:  # the softer side is the one made softer
+        assert k_soft == (r.stiffness_right_N_per_mm if k_right < k_left else r.stiffness_left_N_per_mm)
     assert r.curve.threshold_N_per_mm == pytest.approx(sign * 0.5 * k_soft, rel=1e-12)
     assert r.dfdd_median == np.median(r.curve.dfdd_N_per_mm)
     assert (r.n_left, r.n_centre, r.n_right) == (int(r.mask_left.sum()), int(r.mask_centre.sum()),
