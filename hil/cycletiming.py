@@ -15,7 +15,11 @@ Per SYNC cycle :math:`k` with SYNC arrival :math:`t^{sync}_k` [s]:
   process's PDOs of the cycle sent (the master's RPDOs; the drives' TPDOs);
 * **work** :math:`w_k`: the cycle's own computation (the master: sample
   complete to RPDOs sent, i.e. supervisor, sequence, logging; the drives:
-  handling the SYNC, plant step included);
+  handling the SYNC, plant step included), on the wall clock and, where the
+  shell passes it, in the thread's CPU time: a cycle whose wall time far
+  exceeds its CPU time waited (preempted by another process, the GIL, a
+  blocking write), one whose CPU time is long computed (a collection, a
+  first-call compile);
 * **gap** :math:`g_k = t^{sync}_k - t^{sync}_{k-1}`: the SYNC period as this
   process saw it; a gap over 1.5 T means SYNCs missing or late
   (:attr:`TimingSummary.syncs_missing` counts :math:`\\mathrm{round}(g_k/T) - 1`);
@@ -156,7 +160,8 @@ class TimingSummary:
     period_ms: float
     cycles: int  #: SYNCs seen
     reaction: Distribution  #: SYNC arrival to this process's PDOs sent
-    work: Distribution  #: the cycle's own computation
+    work: Distribution  #: the cycle's own computation (wall clock)
+    work_cpu: Distribution  #: the same in the thread's CPU time (n = 0 if not measured)
     gap: Distribution  #: SYNC to SYNC as seen here
     syncs_missing: int  #: SYNC periods without a SYNC (gaps over 1.5 T, in periods)
     unanswered: int  #: cycles that ended without this process's answer
@@ -166,14 +171,15 @@ class TimingSummary:
         return {"period_ms": self.period_ms, "cycles": self.cycles, "syncs_missing": self.syncs_missing,
                 "unanswered": self.unanswered, "late": self.late,
                 "reaction": self.reaction.as_json(), "work": self.work.as_json(),
-                "gap": self.gap.as_json()}
+                "work_cpu": self.work_cpu.as_json(histogram=False), "gap": self.gap.as_json()}
 
     def lines(self, who: str) -> list[str]:
         """The summary for a terminal, one measure per line."""
         return [f"{who} timing: {self.cycles} SYNC cycles, {self.syncs_missing} SYNC periods missing, "
                 f"{self.unanswered} unanswered, {self.late} answered after a period",
                 f"{who} reaction (SYNC in to PDOs out): {self.reaction.line()}",
-                f"{who} work per cycle: {self.work.line()}",
+                f"{who} work per cycle: {self.work.line()}"
+                + (f"; CPU {self.work_cpu.line()}" if self.work_cpu.n else ""),
                 f"{who} SYNC to SYNC: {self.gap.line()}"]
 
 
@@ -190,6 +196,7 @@ class CycleTiming:
         self.T = period_s
         self.reaction = Histogram(period_s, bin_s, range_s, worst_k)
         self.work_h = Histogram(period_s, bin_s, range_s, worst_k)
+        self.work_cpu = Histogram(period_s, bin_s, range_s, worst_k)
         self.gap = Histogram(period_s, bin_s, range_s, worst_k)
         self.cycles = 0
         self.syncs_missing = 0
@@ -212,9 +219,12 @@ class CycleTiming:
         self._t_sync = t_s
         self._answered = False
 
-    def work(self, start_s: float, end_s: float) -> None:
-        """The cycle's computation ran from ``start_s`` to ``end_s`` [s]."""
+    def work(self, start_s: float, end_s: float, cpu_s: float | None = None) -> None:
+        """The cycle's computation ran from ``start_s`` to ``end_s`` [s], using ``cpu_s`` [s] of the
+        thread's CPU time (optional)."""
         self.work_h.add(end_s - start_s, start_s, self.cycles)
+        if cpu_s is not None:
+            self.work_cpu.add(cpu_s, start_s, self.cycles)
 
     def answered(self, t_s: float) -> None:
         """This process's PDOs of the current cycle left at ``t_s`` [s] (later calls in the cycle: ignored)."""
@@ -228,4 +238,4 @@ class CycleTiming:
 
     def summary(self) -> TimingSummary:
         return TimingSummary(round(self.T * 1e3, 6), self.cycles, self.reaction.summary(), self.work_h.summary(),
-                             self.gap.summary(), self.syncs_missing, self.unanswered, self.late)
+                             self.work_cpu.summary(), self.gap.summary(), self.syncs_missing, self.unanswered, self.late)
