@@ -10,13 +10,15 @@ RPDOs out, its work per cycle, SYNC to SYNC), its result.json (the verdict)
 and sim-serve's JSON (its reaction = SYNC in to TPDOs out).
 
 ``--competitor`` runs one CPU-bound process (a Python busy loop) alongside the
-whole time. ``uptime``'s load average is recorded before and after.
+whole time. ``uptime``'s load average is recorded before and after. Both
+processes run under SCHED_FIFO as on a rig (``--rt-priority``: sim-serve 50,
+run 40, as bench_vcan.py) unless ``--rt-sim 0 --rt-run 0``.
 
 Prints one line per check, then completions, per process the reaction's p50,
 p99, p99.9 and max over all checks (max of each check's percentile), the abort
 causes; writes everything to JSON (``--json``, default bench_two_process.json).
 
-Usage: python tests/bench/bench_two_process.py [-n 10] [--competitor] [--check CHECK.toml]
+Usage: python tests/bench/bench_two_process.py [-n 10] [--competitor] [--rt-sim 50] [--rt-run 40] [--check CHECK.toml]
        [--profile ACTUATION.toml] [--sim SIMRIG.toml] [--json FILE] [--keep DIR]
 """
 
@@ -56,7 +58,9 @@ def one_check(k: int, a, folder: Path) -> dict:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     sim_json = folder / f"sim{k}.json"
     run_dir = folder / f"run{k}"
-    sim_cmd = _cmd("sim-serve", "--interface", "udp_multicast", "--channel", channel,
+    rt_sim = ["--rt-priority", str(a.rt_sim)] if a.rt_sim else []
+    rt_run = ["--rt-priority", str(a.rt_run)] if a.rt_run else []
+    sim_cmd = _cmd("sim-serve", "--interface", "udp_multicast", "--channel", channel, *rt_sim,
                    "--timing-json", str(sim_json), *_profile_args(a), *(["--sim", str(a.sim)] if a.sim else []))
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=ROOT)
     t_ready = time.monotonic() + 60
@@ -74,6 +78,7 @@ def one_check(k: int, a, folder: Path) -> dict:
         sim.kill()
         return {"k": k, "channel": channel, "status": "sim-serve not ready", "sim_out": sim_out}
     run_cmd = _cmd("run", "--interface", "udp_multicast", "--channel", channel, "--arm", "--quiet", "--no-history",
+                   *rt_run,
                    "--out", str(run_dir), *_profile_args(a), *(["--check", str(a.check)] if a.check else []))
     t0 = time.monotonic()
     try:
@@ -121,6 +126,8 @@ def main(argv=None) -> int:
     ap.add_argument("--check", type=Path)
     ap.add_argument("--profile", type=Path)
     ap.add_argument("--sim", type=Path)
+    ap.add_argument("--rt-sim", type=int, default=50, help="sim-serve's --rt-priority (default 50; 0: normal)")
+    ap.add_argument("--rt-run", type=int, default=40, help="run's --rt-priority (default 40; 0: normal)")
     ap.add_argument("--timeout", type=float, default=600.0, help="per check [s]")
     ap.add_argument("--json", type=Path, default=Path("bench_two_process.json"))
     ap.add_argument("--keep", type=Path, help="keep the run folders here")
@@ -160,6 +167,7 @@ def main(argv=None) -> int:
         agg[who]["late"] = sum(t["late"] for t in ts)
         agg[who]["unanswered"] = sum(t["unanswered"] for t in ts)
     summary = {"n": a.n, "completed": len(done), "passed": len(passed), "competitor": a.competitor,
+               "rt_priority": {"sim-serve": a.rt_sim, "run": a.rt_run},
                "load_before": load0, "load_after": load1, "cores": os.cpu_count(), "per_process": agg,
                "aborts": [{"k": r["k"], "reason": r["reason"], "cause": cause(r)} for r in rows if r["status"] != "done"]}
     print(f"\n{len(done)} of {a.n} checks completed, {len(passed)} passed; competitor: {a.competitor}; "
