@@ -252,7 +252,9 @@ class CanopenLink:
         """
         self._sync()
         inproc = isinstance(self.tr, InProcessTransport)
-        cycle_end = self.tr.now() + self.tr.T
+        due = self.tr.sync_due() if self.timing is not None else None
+        # a loop-timed SYNC is never held back waiting for a late sample: the cycle ends when it is due
+        cycle_end = due if due is not None else self.tr.now() + self.tr.T
         found = None
         while True:
             got = self.tr.receive(self.tr.now() if inproc else cycle_end)

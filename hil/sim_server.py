@@ -35,6 +35,14 @@ RECV_SLICE_S = 0.002
 TICK_PERIOD_S = 0.002
 
 
+#: The synchronous window (CiA 301 0x1007) as a fraction of the SYNC period (with ``period_s``):
+#: TPDOs of a SYNC that are ready only later than this after the SYNC arrived (this process was
+#: held up) are discarded, not sent: sent after the next SYNC, the master would take them for the
+#: next cycle's, and a cycle's old positions under the next cycle's time read as a doubled speed.
+#: The master sees a missing cycle instead (its freshness limit counts them).
+SYNC_WINDOW_FRACTION = 0.9
+
+
 #: Interval of ``on_stats`` calls while serving [s].
 STATS_PERIOD_S = 1.0
 
@@ -68,13 +76,15 @@ class ServeStats:
     tpdos_sent: int = 0
     rpdos_late: int = 0
     heartbeats_sent: int = 0
+    tpdos_discarded: int = 0  #: TPDOs not sent: their SYNC's window had passed (:data:`SYNC_WINDOW_FRACTION`)
     timing: TimingSummary | None = None  #: the loop's timing per SYNC (with ``period_s`` given to :func:`serve`)
 
     def line(self) -> str:
         """The one-line summary ``sim-serve`` prints at the end."""
         return (f"sim-serve: {self.duration_s:.1f} s, {self.syncs} SYNCs, {self.plant_steps} plant steps, "
                 f"{self.rpdos_late} late RPDOs, {self.frames_rx} frames in, {self.frames_tx} out, "
-                f"{self.send_errors} send errors, {self.frames_ignored} ignored")
+                f"{self.send_errors} send errors, {self.frames_ignored} ignored, "
+                f"{self.tpdos_discarded} TPDOs discarded (past their SYNC's window)")
 
     def lines(self) -> list[str]:
         """The summary: :meth:`line`, then the timing (reaction = SYNC in to TPDOs out)."""
@@ -203,13 +213,15 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
                 send_errors += 1
 
     timing = CycleTiming(period_s) if period_s is not None else None
+    window_s = SYNC_WINDOW_FRACTION * period_s if period_s is not None else float("inf")
+    discarded = 0
 
     def snapshot() -> ServeStats:
         s = pair.stats
         return ServeStats(duration_s=clock() - t0, frames_rx=rx, frames_tx=tx, frames_ignored=io.ignored,
                           send_errors=send_errors, syncs=s.syncs, plant_steps=s.plant_steps,
                           tpdos_sent=s.tpdos_sent, rpdos_late=s.rpdos_late, heartbeats_sent=s.heartbeats_sent,
-                          timing=timing.summary() if timing is not None else None)
+                          tpdos_discarded=discarded, timing=timing.summary() if timing is not None else None)
 
     try:
         send(pair.power_on(clock() - t0))
@@ -231,6 +243,12 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
                     timing.sync(t)
                     cpu = time.thread_time()
                     out = pair.on_frame(f, t)
+                    if out and clock() - t0 - t > window_s:
+                        # the synchronous window has passed (the next SYNC is out): these TPDOs would
+                        # be taken for the next cycle's; discarded, as CiA 301 0x1007 has it
+                        kept = [g for g in out if not 0x180 <= g.arbitration_id < 0x580]
+                        discarded += len(out) - len(kept)
+                        out = kept
                     if out:
                         send(out)
                     done = clock() - t0

@@ -72,3 +72,19 @@ def test_bad_arguments_are_refused_with_their_values():
         Histogram(2e-3, bin_s=0.0)
     with pytest.raises(ValueError, match=r"\(0, 100\]"):
         Histogram(2e-3).percentile(0)
+
+
+def test_the_reports_timing_section_shows_the_measured_percentiles():
+    from hil.report.maint import timing_section
+
+    ct = CycleTiming(2e-3)
+    for k in range(1000):  # reaction 0.105 ms, one cycle 1.505 ms
+        ct.sync(k * 2e-3)
+        ct.work(k * 2e-3, k * 2e-3 + 5e-5, 4e-5)
+        ct.answered(k * 2e-3 + (1.505e-3 if k == 500 else 1.05e-4))
+    html = timing_section({**ct.summary().as_json(), "sync": "loop-timed"})
+    row = html.split("<tr>")[2]
+    assert row.startswith("<td>SYNC received to RPDOs sent</td><td>1000</td><td>0.110</td><td>0.110</td>"
+                          "<td>0.110</td><td>1.505</td>")
+    assert "0 answered after a period, 0 unanswered, 0 SYNC periods missing (SYNC loop-timed)" in html
+    assert "<img src='data:image/png;base64," in html
