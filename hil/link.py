@@ -12,24 +12,31 @@ themselves if the master dies) is whatever :meth:`MasterCore.poll
 <hil.master.MasterCore.poll>` returns: this loop polls after every frame it
 takes, in the preflight, the cycles and the safe-state cycles of
 :meth:`CanopenLink.close`, and its NMT pre-operational ends it. SYNC is
-kernel-timed where the transport can (it would outlive a hung loop); the
-heartbeat never is.
+kernel-timed where the transport can (it would outlive a hung loop), else
+sent by this loop on its monotonic schedule; the heartbeat never is.
+
+On a real bus the link measures its own timing per SYNC cycle
+(:attr:`CanopenLink.timing`, a :class:`hil.cycletiming.CycleTiming`): SYNC
+arrival to the RPDOs sent, sample complete to RPDOs sent (the loop's work),
+SYNC to SYNC; ``emacheck run`` writes it into meta.json ``timing``.
 """
 
 from __future__ import annotations
 
+import time
 from typing import Callable
 
 import can
 
 from hil.canlog import CanLogWriter
 from hil.canopen.cia402 import State
-from hil.canopen.frame import Frame, sync_frame
+from hil.canopen.frame import SYNC_COB_ID, Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.canopen.signalmap import ForceControl
 from hil.config import HARD_MAX_LAG_S
+from hil.cycletiming import CycleTiming
 from hil.errors import KNOWN_ERRORS, EmacheckError
 from hil.master import MasterCore, PreflightError
 from hil.transport import InProcessTransport
@@ -88,6 +95,11 @@ class CanopenLink:
         self.final_states: dict | None = None  #: per EMA, after :meth:`close`
         self._safe_cycles = 0
         self.close_errors: list[str] = []  #: errors met while stopping the drives (recorded, not raised)
+        #: the loop's timing per SYNC cycle on a real bus (None in process, where time is simulated)
+        self.clock = getattr(transport, "clock", None)
+        self.timing = CycleTiming(transport.T) if self.clock is not None else None
+        self._t_sample = 0.0  #: when the current sample was complete [s, transport time]
+        self._cpu_sample = 0.0  #: the thread's CPU time then [s]
 
     # -------------------------------------------------------------- plumbing
 
@@ -103,7 +115,10 @@ class CanopenLink:
         log = self.log
         on_frame = self.m.on_frame
         now = self.tr.now
+        timing = self.timing
         for f, t, msg in got:
+            if timing is not None and f.arbitration_id == SYNC_COB_ID:
+                timing.sync(t)
             if log is not None:
                 if msg.timestamp != t:
                     msg.timestamp = t  # log the time the master saw it
@@ -117,6 +132,13 @@ class CanopenLink:
                 self.on_event(ev)
 
     def _sync(self) -> None:
+        due = self.tr.sync_due() if self.timing is not None else None
+        if due is not None:
+            # the loop's own SYNC: frames until it is due, then SYNC; the master takes it from the bus
+            while self.tr.now() < due:
+                self._take(self.tr.receive(due))
+            self.tr.send_sync()
+            return
         t = self.tr.next_sync()
         if t is not None:
             self.sync_times.append(t)
@@ -199,6 +221,10 @@ class CanopenLink:
             self._safe_cycle()
             return self._last
         self._send(self.m.setpoint_frames(sp1, sp2, self._last))
+        if self.timing is not None:
+            t = self.clock()
+            self.timing.work(self._t_sample, t, time.thread_time() - self._cpu_sample)
+            self.timing.answered(t)
         return self._next_sample()
 
     def abort(self) -> None:
@@ -226,28 +252,37 @@ class CanopenLink:
         """
         self._sync()
         inproc = isinstance(self.tr, InProcessTransport)
-        cycle_end = self.tr.now() + self.tr.T
+        due = self.tr.sync_due() if self.timing is not None else None
+        # a loop-timed SYNC is never held back waiting for a late sample: the cycle ends when it is due
+        cycle_end = due if due is not None else self.tr.now() + self.tr.T
         found = None
         while True:
             got = self.tr.receive(self.tr.now() if inproc else cycle_end)
-            if got:
-                lag = getattr(self.tr, "lag_s", 0.0)
-                # (once stopping after a fault, the safe-state sequence goes on whatever the lag)
-                if lag > self.max_lag_s and self.m.fault is None:
-                    # the master has fallen behind the bus: whatever it computes now is stale
-                    err = StaleData(f"sensor data stale: the master is {lag * 1e3:.0f} ms behind the bus "
-                                    f"(frames wait in its socket; safety.max_lag_s = {self.max_lag_s * 1e3:.0f} ms)")
-                    self.m.latch(err)
-                    raise err
-                self._feed(got)
-            self._send(self.m.poll(self.tr.now()))
+            self._take(got)
             sample = self.m.take_sample()
             if sample is not None:
                 found = sample
+                if self.clock is not None:
+                    self._t_sample = self.clock()
+                    self._cpu_sample = time.thread_time()
                 if stop_at_sample:
                     return found
             if not got or (not inproc and self.tr.now() >= cycle_end):
                 return found
+
+    def _take(self, got: list) -> None:
+        """Frames received: the master falling behind the bus stops the check; else feed them, then poll."""
+        if got:
+            lag = getattr(self.tr, "lag_s", 0.0)
+            # (once stopping after a fault, the safe-state sequence goes on whatever the lag)
+            if lag > self.max_lag_s and self.m.fault is None:
+                # the master has fallen behind the bus: whatever it computes now is stale
+                err = StaleData(f"sensor data stale: the master is {lag * 1e3:.0f} ms behind the bus "
+                                f"(frames wait in its socket; safety.max_lag_s = {self.max_lag_s * 1e3:.0f} ms)")
+                self.m.latch(err)
+                raise err
+            self._feed(got)
+        self._send(self.m.poll(self.tr.now()))
 
     def close(self) -> None:
         """Bring both drives down to the safe state, stop SYNC, NMT pre-operational, close the log.

@@ -18,7 +18,7 @@ from hil import __version__
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import Actuation, Check
 from hil.profiles import actuation_tables, snapshot
-from hil.runfolder import SignalsWriter, write_json_atomic
+from hil.runfolder import DiskSync, SignalsWriter, write_json_atomic
 from hil.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.supervisor import Supervisor
 
@@ -101,6 +101,8 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
     writer = SignalsWriter(run_dir / "signals.csv")
     meta_path = run_dir / "meta.json"
     write_json_atomic(meta_path, meta)
+    # on a real bus, fsync and the JSON files written in the loop: off the loop's thread
+    disk = DiskSync(background=getattr(link, "timing", None) is not None)
     limit = max_duration_s if max_duration_s is not None else 3.0 * seq.planned_duration_s() + 60.0
     sp1 = sp2 = DISABLED
     steps: dict[str, list[float]] = {}
@@ -112,7 +114,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
         record = getattr(link, "preflight_record", None)
         if record is not None:  # the layout, the scalings the drives reported, the drill: on disk now
             meta.update(record())
-            write_json_atomic(meta_path, meta)
+            disk.write_json(meta_path, meta)
         while True:
             viol = sup.check(smp, sp1, sp2)
             if viol is not None:
@@ -135,9 +137,10 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                     steps.setdefault(ev.step.value, [ev.t_s])
                     if ev.step is Step.ABORTED:
                         link.abort()
-                writer.flush(smp.t_s, sync=True)
+                writer.flush(smp.t_s)  # to the OS now, to the disk by the sync thread
+                disk.fsync(writer.fileno())
                 meta["steps"] = steps
-                write_json_atomic(meta_path, meta)
+                disk.write_json(meta_path, meta)
             if on_cycle is not None:
                 on_cycle(seq.progress(smp.t_s), smp)
             sp1, sp2 = out.sp1, out.sp2
@@ -164,11 +167,16 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
             except Exception as exc3:
                 secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
             secondary += _record_safe_state(link, meta)
+            try:
+                disk.close()
+            except OSError as exc4:
+                secondary += f"; while writing the run folder: {type(exc4).__name__}: {exc4}"
             writer.close()
             meta.update(status="aborted", reason=reason + secondary, ended_utc=_now_iso(), steps=steps,
                         samples=writer.rows, duration_s=(smp.t_s - t_start) if smp is not None else 0.0)
             write_json_atomic(meta_path, meta)
         raise
+    disk.close()
     writer.close()
     status = "done" if seq.step_now == Step.DONE else "aborted"
     reason = (seq.abort_reason + stop_note) if seq.abort_reason else stop_note.lstrip("; ")

@@ -22,7 +22,8 @@ from typing import Callable
 
 import can
 
-from hil.canopen.frame import Frame
+from hil.canopen.frame import SYNC_COB_ID, Frame
+from hil.cycletiming import CycleTiming, TimingSummary
 from hil.transport import SocketcanFrames
 
 #: Longest wait for a frame [s] (fixed, so SocketCAN needs no timeout change per frame):
@@ -32,6 +33,14 @@ RECV_SLICE_S = 0.002
 
 #: Interval of ``pair.tick`` calls [s] (heartbeats are due at multiples of 0x1017).
 TICK_PERIOD_S = 0.002
+
+
+#: The synchronous window (CiA 301 0x1007) as a fraction of the SYNC period (with ``period_s``):
+#: TPDOs of a SYNC that are ready only later than this after the SYNC arrived (this process was
+#: held up) are discarded, not sent: sent after the next SYNC, the master would take them for the
+#: next cycle's, and a cycle's old positions under the next cycle's time read as a doubled speed.
+#: The master sees a missing cycle instead (its freshness limit counts them).
+SYNC_WINDOW_FRACTION = 0.9
 
 
 #: Interval of ``on_stats`` calls while serving [s].
@@ -67,12 +76,24 @@ class ServeStats:
     tpdos_sent: int = 0
     rpdos_late: int = 0
     heartbeats_sent: int = 0
+    tpdos_discarded: int = 0  #: TPDOs not sent: their SYNC's window had passed (:data:`SYNC_WINDOW_FRACTION`)
+    timing: TimingSummary | None = None  #: the loop's timing per SYNC (with ``period_s`` given to :func:`serve`)
 
     def line(self) -> str:
         """The one-line summary ``sim-serve`` prints at the end."""
         return (f"sim-serve: {self.duration_s:.1f} s, {self.syncs} SYNCs, {self.plant_steps} plant steps, "
                 f"{self.rpdos_late} late RPDOs, {self.frames_rx} frames in, {self.frames_tx} out, "
-                f"{self.send_errors} send errors, {self.frames_ignored} ignored")
+                f"{self.send_errors} send errors, {self.frames_ignored} ignored, "
+                f"{self.tpdos_discarded} TPDOs discarded (past their SYNC's window)")
+
+    def lines(self) -> list[str]:
+        """The summary: :meth:`line`, then the timing (reaction = SYNC in to TPDOs out)."""
+        return [self.line()] + (self.timing.lines("sim-serve") if self.timing is not None else [])
+
+    def as_json(self) -> dict:
+        out = {k: getattr(self, k) for k in self.__slots__ if k != "timing"}
+        out["timing"] = self.timing.as_json() if self.timing is not None else None
+        return out
 
 
 class _PythonCanIO:
@@ -84,14 +105,15 @@ class _PythonCanIO:
 
     def recv(self, timeout: float) -> tuple[Frame | None, float | None]:
         """One classic data frame (None after ``timeout`` [s] or for an ignored message) and its
-        receive stamp (None: python-can's stamps are not comparable across interfaces)."""
+        receive stamp (python-can's: wall-clock on udp_multicast and virtual, the interface's own
+        elsewhere; :func:`serve` uses it only when it lies within the last second)."""
         msg = self.bus.recv(timeout)
         if msg is None:
             return None, None
         if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.dlc > 8:
             self.ignored += 1
             return None, None
-        return Frame.trusted(msg.arbitration_id, bytes(msg.data)), None
+        return Frame.trusted(msg.arbitration_id, bytes(msg.data)), msg.timestamp
 
     def send(self, f: Frame) -> bool:
         try:
@@ -133,7 +155,8 @@ def _io_for(bus: can.BusABC):
 def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
           clock: Callable[[], float] = time.monotonic,
           on_stats: Callable[[ServeStats], None] | None = None,
-          on_ready: Callable[[], None] | None = None) -> ServeStats:
+          on_ready: Callable[[], None] | None = None,
+          period_s: float | None = None) -> ServeStats:
     """Run the simulated drive pair on ``bus`` until ``stop`` is set.
 
     Parameters
@@ -153,6 +176,10 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
         Called with a :class:`ServeStats` every :data:`STATS_PERIOD_S` and once at the end.
     on_ready : callable, optional
         Called once after power-on (boot-up frames sent), before the first receive.
+    period_s : float, optional
+        The SYNC period [s]: given, the loop measures its timing per SYNC
+        (:class:`hil.cycletiming.CycleTiming`: SYNC arrival to the TPDOs sent,
+        the SYNC's handling, SYNC to SYNC) into :attr:`ServeStats.timing`.
 
     Returns
     -------
@@ -185,11 +212,16 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
             else:
                 send_errors += 1
 
+    timing = CycleTiming(period_s) if period_s is not None else None
+    window_s = SYNC_WINDOW_FRACTION * period_s if period_s is not None else float("inf")
+    discarded = 0
+
     def snapshot() -> ServeStats:
         s = pair.stats
         return ServeStats(duration_s=clock() - t0, frames_rx=rx, frames_tx=tx, frames_ignored=io.ignored,
                           send_errors=send_errors, syncs=s.syncs, plant_steps=s.plant_steps,
-                          tpdos_sent=s.tpdos_sent, rpdos_late=s.rpdos_late, heartbeats_sent=s.heartbeats_sent)
+                          tpdos_sent=s.tpdos_sent, rpdos_late=s.rpdos_late, heartbeats_sent=s.heartbeats_sent,
+                          tpdos_discarded=discarded, timing=timing.summary() if timing is not None else None)
 
     try:
         send(pair.power_on(clock() - t0))
@@ -200,14 +232,33 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
         next_stats = t + STATS_PERIOD_S
         while not stop.is_set():
             f, stamp = io.recv(RECV_SLICE_S)
-            t = clock() - t0
+            now = t = clock() - t0
             if stamp is not None and rt_minus_clock is not None:
-                t = min(t, stamp - rt_minus_clock - t0)  # event time (never later than now)
+                ts = stamp - rt_minus_clock - t0
+                if now - 1.0 < ts < now:
+                    t = ts  # event time (never later than now; a stamp of another base is not used)
             if f is not None:
                 rx += 1
-                out = pair.on_frame(f, t)
-                if out:
-                    send(out)
+                if timing is not None and f.arbitration_id == SYNC_COB_ID:
+                    timing.sync(t)
+                    cpu = time.thread_time()
+                    out = pair.on_frame(f, t)
+                    if out and clock() - t0 - t > window_s:
+                        # the synchronous window has passed (the next SYNC is out): these TPDOs would
+                        # be taken for the next cycle's; discarded, as CiA 301 0x1007 has it
+                        kept = [g for g in out if not 0x180 <= g.arbitration_id < 0x580]
+                        discarded += len(out) - len(kept)
+                        out = kept
+                    if out:
+                        send(out)
+                    done = clock() - t0
+                    timing.work(now, done, time.thread_time() - cpu)
+                    if out:
+                        timing.answered(done)
+                else:
+                    out = pair.on_frame(f, t)
+                    if out:
+                        send(out)
             if t >= next_tick:
                 out = pair.tick(t)
                 if out:

@@ -9,9 +9,11 @@ Two transports move the frames of :class:`hil.link.CanopenLink`:
   fast as the CPU allows (``realtime=True`` paces SYNC at the SYNC period on
   the monotonic clock).
 * :class:`BusTransport` (``emacheck run``): any python-can bus; SYNC by
-  ``send_periodic`` (kernel-timed Broadcast Manager on SocketCAN), frames
-  received on this thread, time from the monotonic clock or, on SocketCAN,
-  the kernel's receive stamp of each frame (event time).
+  ``send_periodic`` where it is kernel- or hardware-timed (Broadcast Manager on
+  SocketCAN), else sent by the loop itself on a monotonic schedule (python-can's
+  fallback, a thread in this process, waits for the GIL while the loop
+  computes); frames received on this thread, time from the monotonic clock or,
+  on SocketCAN, the kernel's receive stamp of each frame (event time).
 
 Both implement :class:`Transport`, the one seam between the link and a bus.
 """
@@ -264,6 +266,14 @@ class BusTransport:
         #: longest single wait for a frame [s]: a receive may end this much after its deadline
         self._slice = sync_period_s / 4
         self._sync_started = 0.0  #: when start_sync() returned [s]
+        #: SYNC sent by the loop (:meth:`sync_due`, :meth:`send_sync`) where the interface has no
+        #: kernel- or hardware-timed periodic send (python-can's fallback is a thread in this process,
+        #: which waits for the GIL while the loop computes: SYNC late by up to the switch interval)
+        self.loop_sync = self._raw is None and (
+            type(bus)._send_periodic_internal is can.BusABC._send_periodic_internal)
+        self._due: float | None = None
+        self.sync_skipped = 0  #: SYNC periods the loop-timed SYNC skipped (the loop was that late)
+        self.sync_late_max_s = 0.0  #: the latest a loop-timed SYNC left after its due time [s]
 
     @property
     def wall_clock_offset_s(self) -> float:
@@ -292,6 +302,16 @@ class BusTransport:
     def _clock(self) -> float:
         self._now = time.monotonic() - self._t0
         return self._now
+
+    def clock(self) -> float:
+        """Monotonic time [s] since the transport was made, read now (for the loop's timing)."""
+        return time.monotonic() - self._t0
+
+    def _arrival(self, msg: can.Message, now: float) -> float:
+        """When ``msg`` arrived [s, this transport's time]: its receive stamp where that is the
+        kernel's wall-clock stamp (udp_multicast, virtual: within a second before ``now``), else ``now``."""
+        t = msg.timestamp - self._rt_minus_mono - self._t0
+        return t if now - 1.0 < t <= now else now
 
     def send(self, frames: list[Frame], t: float) -> list[can.Message]:
         msgs = [_to_msg(f, t) for f in frames]
@@ -333,20 +353,50 @@ class BusTransport:
         out = []
         while msg is not None:
             if not msg.is_extended_id and not msg.is_error_frame and not msg.is_remote_frame and msg.dlc <= 8:
-                out.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), self.now(), msg))
+                now = self.now()
+                t = self._arrival(msg, now)
+                if msg.arbitration_id == SYNC_COB_ID:
+                    self.lag_s = now - t  # how long the SYNC waited before the master took it
+                    if self.lag_s > self.max_lag_s:
+                        self.max_lag_s = self.lag_s
+                out.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), t, msg))
             msg = self.bus.recv(0.0)
         return out
 
     def start_sync(self) -> None:
-        # kernel-timed on socketcan (Broadcast Manager), a thread elsewhere
-        self._task = self.bus.send_periodic(
-            can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False), self.T)
+        # kernel-timed on socketcan (Broadcast Manager), hardware-timed where the interface can,
+        # else sent by the loop on its own schedule (sync_due, send_sync)
+        if self.loop_sync:
+            self._due = self.clock()
+        else:
+            self._task = self.bus.send_periodic(
+                can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False), self.T)
         self._sync_started = time.monotonic() - self._t0
 
     def next_sync(self) -> float | None:
-        return None  # SYNC comes from the periodic task; the master sees it on the bus
+        return None  # SYNC comes from the periodic task or send_sync; the master sees it on the bus
+
+    def sync_due(self) -> float | None:
+        """When the loop must send the next SYNC [s] (loop-timed SYNC running), else None."""
+        return self._due
+
+    def send_sync(self) -> float:
+        """Send the SYNC that is due now; returns when it left [s]. The schedule keeps its phase
+        (due times k T from the first); periods the loop was too late for are skipped, counted in
+        :attr:`sync_skipped`."""
+        self.bus.send(can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False, check=False))
+        t = self.clock()
+        due = self._due
+        late = t - due
+        if late > self.sync_late_max_s:
+            self.sync_late_max_s = late
+        skip = int(late / self.T) if late >= self.T else 0
+        self.sync_skipped += skip
+        self._due = due + (skip + 1) * self.T
+        return t
 
     def stop_sync(self) -> None:
+        self._due = None
         if self._task is not None:
             self._task.stop()
             self._task = None

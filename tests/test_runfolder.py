@@ -56,3 +56,25 @@ def test_bad_recordings(tmp_path, body, header, message):
 def test_gap_is_noted(tmp_path):
     p = _write(tmp_path, "0.002,0,0,0,0,0,0\n0.004,0,0,0,0,0,0\n0.006,0,0,0,0,0,0\n0.020,0,0,0,0,0,0\n")
     assert "gap" in read_signals(p).notes[0]
+
+
+def test_disk_sync_writes_json_in_order_off_the_thread_and_raises_its_errors(tmp_path):
+    import json
+
+    from hil.runfolder import DiskSync, SignalsWriter
+
+    disk = DiskSync()
+    w = SignalsWriter(tmp_path / "signals.csv")
+    meta = {"steps": {}}
+    for k in range(5):  # the loop mutates meta after handing it over: each write is a snapshot
+        meta["steps"][f"s{k}"] = [float(k)]
+        disk.write_json(tmp_path / "meta.json", meta)
+        disk.fsync(w.fileno())
+    disk.close()
+    w.close()
+    assert json.loads((tmp_path / "meta.json").read_text()) == {"steps": {f"s{k}": [float(k)] for k in range(5)}}
+    assert not (tmp_path / "meta.json.tmp").exists() and not disk._thread.is_alive()
+    bad = DiskSync()
+    bad.write_json(tmp_path / "no-such-folder" / "meta.json", {})
+    with pytest.raises(FileNotFoundError):
+        bad.close()

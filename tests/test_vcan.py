@@ -108,7 +108,7 @@ def test_serve_answers_sync_and_stops_on_event():
     ready = threading.Event()
     out: dict = {}
     th = threading.Thread(target=lambda: out.update(stats=serve(
-        can.Bus(interface="virtual", channel=channel), pair, stop=stop, on_ready=ready.set)))
+        can.Bus(interface="virtual", channel=channel), pair, stop=stop, on_ready=ready.set, period_s=0.002)))
     th.start()
     try:
         assert ready.wait(10)
@@ -134,6 +134,11 @@ def test_serve_answers_sync_and_stops_on_event():
     st = out["stats"]
     assert st.syncs == 3 and st.plant_steps == 4 and st.frames_rx == 4 and st.send_errors == 0
     assert st.tpdos_sent == 12 and st.frames_tx >= 2 + 12
+    # the loop's timing: every SYNC a cycle, answered (TPDOs out), its handling timed, SYNC to SYNC twice
+    tm = st.timing
+    assert (tm.cycles, tm.reaction.n, tm.work.n, tm.work_cpu.n, tm.gap.n, tm.unanswered) == (3, 3, 3, 3, 2, 0)
+    assert 0.0 < tm.work.max_ms <= tm.reaction.max_ms
+    assert st.as_json()["timing"]["reaction"]["n"] == 3 and "ready" not in st.lines()[0]
 
 
 def test_serve_with_a_sensor_node_boots_and_answers_it(tmp_path):
@@ -160,7 +165,7 @@ def test_serve_with_a_sensor_node_boots_and_answers_it(tmp_path):
     stop, ready = threading.Event(), threading.Event()
     out: dict = {}
     th = threading.Thread(target=lambda: out.update(stats=serve(
-        can.Bus(interface="virtual", channel=channel), pair, stop=stop, on_ready=ready.set)))
+        can.Bus(interface="virtual", channel=channel), pair, stop=stop, on_ready=ready.set, period_s=0.002)))
     th.start()
     try:
         assert ready.wait(10)

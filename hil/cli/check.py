@@ -268,7 +268,7 @@ def page_faults() -> int:
 
 
 def record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=None,
-                      page_faults: int | None = None) -> None:
+                      page_faults: int | None = None, timing=None) -> None:
     meta["wall_s"] = round(wall, 3)
     meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
                    "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
@@ -277,6 +277,12 @@ def record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=
         meta["can"]["max_lag_ms"] = round(transport.max_lag_s * 1e3, 2)
     if page_faults is not None:
         meta["can"]["page_faults"] = page_faults  # during the check (each costs time)
+    if timing is not None:  # the master's loop per SYNC cycle (hil.cycletiming)
+        meta["timing"] = {**timing.summary().as_json(),
+                          "t0_unix_s": round(getattr(transport, "wall_clock_offset_s", 0.0), 6),
+                          "sync": ("loop-timed" if getattr(transport, "loop_sync", False) else "periodic task"),
+                          "sync_skipped": getattr(transport, "sync_skipped", 0),
+                          "sync_late_max_ms": round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4)}
     # each EMA's identity as the drive reported it by SDO (0x1018) in the preflight
     meta["identity"] = {f"ema{k}": ({"node": n, **master.drives[n].identity} if master.drives[n].identity else None)
                         for k, n in enumerate(master.order, start=1)}

@@ -78,9 +78,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         transport.close()
         bus.shutdown()
         end_realtime()  # the analysis and the report run at normal priority, GC on
-    record_can_stats(out, meta, wall, log, master, transport, page_faults() - faults0)
+    record_can_stats(out, meta, wall, log, master, transport, page_faults() - faults0, link.timing)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
                   f"{log.frames} CAN frames logged")
+    if link.timing is not None:
+        for line in link.timing.summary().lines("master"):
+            console.print(line, highlight=False)
     rc = result_after(out, act, None, meta, outcome, console)
     # the wear history is imported and written only now, after the cyclic loop and the result
     record_history(console, args, act, out / "result.json", run_folder=out)

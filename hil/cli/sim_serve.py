@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import signal
-import threading
 from pathlib import Path
 
 from hil.cli.check import rig_nodes_text
 from hil.cli.common import add_bus_args, add_eds_arg, add_parser, open_bus
 from hil.cli.realtime import prepare_realtime
+from hil.runfolder import write_json_atomic
 
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:
@@ -32,7 +32,7 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
                         serials=simrig.serials)
     bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps)
 
-    stop = threading.Event()
+    stop = _StopFlag()
 
     def _stop(signum, _frame) -> None:
         stop.set()
@@ -45,12 +45,28 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
               flush=True)
 
     try:
-        stats = serve(bus, pair, stop=stop, on_ready=ready)
+        stats = serve(bus, pair, stop=stop, on_ready=ready, period_s=act.timing.sync_period_s)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    print(stats.line(), flush=True)
+    print("\n".join(stats.lines()), flush=True)
+    if args.timing_json is not None:
+        write_json_atomic(args.timing_json, stats.as_json())
     return 0
+
+
+class _StopFlag:
+    """The stop request set by a signal handler: no lock (``threading.Event.set`` takes one, and a
+    second signal arriving inside the first handler's ``set`` deadlocked sim-serve on it)."""
+
+    def __init__(self) -> None:
+        self._set = False
+
+    def set(self) -> None:
+        self._set = True
+
+    def is_set(self) -> bool:
+        return self._set
 
 
 def register(sub) -> None:
@@ -67,3 +83,6 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, help="noise seed (default: the simulated-rig profile's)")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")
+    p.add_argument("--timing-json", metavar="FILE", type=Path,
+                   help="at the end, write the counters and the loop's timing per SYNC cycle (reaction: "
+                        "SYNC in to TPDOs out) to FILE as JSON")

@@ -221,6 +221,43 @@ def uncertainty_section(result: dict) -> str:
     return out
 
 
+def figure_timing(timing: dict):
+    """Histogram of the master's reaction (SYNC in to RPDOs out) [ms] per SYNC cycle, log counts,
+    with its p99.9, maximum and the SYNC period (meta.json ``timing``, :mod:`hil.cycletiming`)."""
+    plt = pyplot()
+    r = timing["reaction"]
+    bins = np.asarray(r["histogram"]["bins"], dtype=float).reshape(-1, 2)
+    w = r["histogram"]["bin_ms"]
+    fig, ax = plt.subplots(figsize=(8, 3.2))
+    ax.bar(bins[:, 0], bins[:, 1], width=w, align="edge", color="#4477aa")
+    ax.set_yscale("log")
+    for x, style, label in ((r["p99.9_ms"], "--", f"p99.9 {r['p99.9_ms']:.3f} ms"),
+                            (r["max_ms"], ":", f"max {r['max_ms']:.3f} ms"),
+                            (timing["period_ms"], "-", f"SYNC period {timing['period_ms']:g} ms")):
+        ax.axvline(x, color="k", ls=style, lw=1, label=label)
+    ax.set_xlabel("SYNC received to RPDOs sent [ms]")
+    ax.set_ylabel("SYNC cycles")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def timing_section(timing: dict) -> str:
+    """The master's loop timing: a table of the measures and the reaction's histogram."""
+    rows = []
+    for key, what in (("reaction", "SYNC received to RPDOs sent"), ("work", "sample complete to RPDOs sent"),
+                      ("work_cpu", "the same, CPU time"), ("gap", "SYNC to SYNC")):
+        q = timing.get(key) or {}
+        if q.get("n"):
+            rows.append([what, q["n"], fmt(q["p50_ms"], 3), fmt(q["p99_ms"], 3), fmt(q["p99.9_ms"], 3),
+                         fmt(q["max_ms"], 3)])
+    tab = table(["measure", "cycles", column("p50", "ms"), column("p99", "ms"), column("p99.9", "ms"),
+                 column("max", "ms")], rows)
+    note = (f"<p>{timing['cycles']} SYNC cycles, {timing['late']} answered after a period, "
+            f"{timing['unanswered']} unanswered, {timing['syncs_missing']} SYNC periods missing "
+            f"(SYNC {esc(timing.get('sync', ''))}).</p>")
+    return tab + note + img(figure_timing(timing), dpi=90, tight=True)
+
+
 def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: dict | None, *,
                  json_name: str = "result.json") -> None:
     """Write the self-contained HTML report (``json_name``: the result file beside it, linked)."""
@@ -251,5 +288,8 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
         parts.append(img(figure_dfdd(ch, d, f, r), dpi=90, tight=True)
                      + img(figure_lines(ch, d, f, r, truth), dpi=90, tight=True))
     parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
+    timing = (meta or {}).get("timing")
+    if timing and timing.get("reaction", {}).get("n"):
+        parts.append("<h2>Loop timing (master)</h2>" + timing_section(timing))
     parts.append(file_link(json_name))
     write_page(path, "emacheck report", parts)
