@@ -222,8 +222,8 @@ def decode_can_log(path: str | Path, act: Actuation, meta: dict | None = None, *
                 setp[pending][k + 1] = 0.0 if value is None else value
         except PdoError:
             bad += 1
-    if cycle > 0 and pending is None:
-        incomplete += 1
+    # (the last SYNC's cycle is judged by no next SYNC: where the recording ends, it is not counted,
+    # as the master counts a cycle incomplete only when the next SYNC comes)
     bad += counts["bad"]
     if not rows:
         raise IncompleteRecordingError(f"{path}: no complete SYNC cycle with the TPDOs of the rig's nodes")

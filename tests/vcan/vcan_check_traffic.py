@@ -341,7 +341,7 @@ def test_whole_check_over_vcan_recovers_truth(full_check, actuation):
     res = full_check
     out = res["out"]
     assert res["rc"] == 0, res["run_out"]
-    assert "nodes 1, 2 on socketcan:" + CHANNEL in res["ready_line"]
+    assert "nodes 1 (EMA 1), 2 (EMA 2) on socketcan:" + CHANNEL in res["ready_line"]
     assert res["serve_rc"] == 0, res["serve_out"]
     result = json.loads((out / "result.json").read_text())
     meta = json.loads((out / "meta.json").read_text())
