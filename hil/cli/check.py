@@ -242,7 +242,7 @@ def rig_hashes(rig) -> dict:
                        **{f"eds_{k}": v for k, v in rig.eds_paths.items() if k not in ("ema1", "ema2")})
 
 
-def canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool):
+def canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool, disk=None):
     """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
     ...) or Ctrl-C has already stopped the drives and closed the log when it arrives here: it
     becomes an aborted outcome with the reason, and result.json says so."""
@@ -251,7 +251,7 @@ def canopen_check(console: Console, act, check, link, out: Path, meta: dict, qui
     t0 = time.perf_counter()
     try:
         with LiveProgress(console, 0.0, not quiet) as live:
-            outcome = run_check(link, act, check, out, meta, on_cycle=live)
+            outcome = run_check(link, act, check, out, meta, on_cycle=live, disk=disk)
     except (*KNOWN_ERRORS, KeyboardInterrupt) as exc:
         reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
         outcome = LoopOutcome("aborted", reason, meta.get("samples", 0), meta.get("duration_s", 0.0),
@@ -277,6 +277,8 @@ def record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=
         meta["can"]["max_lag_ms"] = round(transport.max_lag_s * 1e3, 2)
     if page_faults is not None:
         meta["can"]["page_faults"] = page_faults  # during the check (each costs time)
+    if "loop_page_faults" in meta:  # of those, in the cyclic loop (hil.runner)
+        meta["can"]["loop_page_faults"] = meta.pop("loop_page_faults")
     if timing is not None:  # the master's loop per SYNC cycle (hil.cycletiming)
         meta["timing"] = {**timing.summary().as_json(),
                           "t0_unix_s": round(getattr(transport, "wall_clock_offset_s", 0.0), 6),

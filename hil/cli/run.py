@@ -70,15 +70,20 @@ def cmd_run(args: argparse.Namespace) -> int:
                                                     **rig_hashes(rig)}})
     console.print(f"emacheck run on {args.interface}:{args.channel}, {rig_nodes_text(rig)}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
+    from hil.runfolder import DiskSync
+    # the run folder's writer thread is made before the memory is locked and the loop's page
+    # faults are counted (locked, each page of a new thread's stack faults at once)
+    disk = DiskSync(background=True)
     console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")
     faults0 = page_faults()
     try:
-        outcome, wall = canopen_check(console, act, check, link, out, meta, args.quiet)
+        outcome, wall = canopen_check(console, act, check, link, out, meta, args.quiet, disk)
+        faults = page_faults() - faults0  # the check's, before the bus and real time are let go
     finally:
         transport.close()
         bus.shutdown()
         end_realtime()  # the analysis and the report run at normal priority, GC on
-    record_can_stats(out, meta, wall, log, master, transport, page_faults() - faults0, link.timing)
+    record_can_stats(out, meta, wall, log, master, transport, faults, link.timing)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
                   f"{log.frames} CAN frames logged")
     if link.timing is not None:

@@ -361,8 +361,12 @@ def test_whole_check_over_vcan_recovers_truth(full_check, actuation):
     # run's lag and page-fault counters are recorded, and the lag stayed within safety.max_lag_s
     assert 0 <= meta["can"]["max_lag_ms"] <= 1e3 * meta["profiles"]["check"]["safety"]["max_lag_s"], meta["can"]
     # the loop touches no new memory cycle after cycle (gc frozen, buffers made before it): a page fault
-    # costs ~0.9 ms inside UML (docs/vcan.md), so at most one per 100 cycles (measured: 7 in 5553)
-    assert 0 <= meta["can"]["page_faults"] <= cycles / 100, meta["can"]
+    # costs ~0.9 ms inside UML (docs/vcan.md), so at most one per 100 cycles in the cyclic loop (measured
+    # on the host: 0 in 5553); and the whole check (preflight, drill, safe stop) no locked-in thread
+    # stack: 8 MiB faulted at once is 2048 (measured: 2090 while the disk-sync thread was made after
+    # the memory was locked; 51-67 now on the host)
+    assert 0 <= meta["can"]["loop_page_faults"] <= cycles / 100, meta["can"]
+    assert meta["can"]["loop_page_faults"] <= meta["can"]["page_faults"] <= 512, meta["can"]
     # sim-serve's stats line: it stepped the plant once per SYNC it received
     last = res["serve_out"].splitlines()[-1]
     syncs = int(last.split(" SYNCs")[0].split()[-1])
