@@ -18,7 +18,7 @@ heartbeat never is.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import can
 

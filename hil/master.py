@@ -35,9 +35,9 @@ from __future__ import annotations
 
 import struct
 from collections import deque
+from collections.abc import Generator
 from dataclasses import dataclass, field, replace
 from enum import Enum
-from typing import Generator
 
 from hil.canopen.cia402 import (
     SAFE_STATES,

@@ -45,7 +45,7 @@ from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
 from hil.canopen.nmt import NmtCommand
-from hil.canopen.od import AbortConnectionOption, QUICK_STOP_OPTION, master_loss_steps
+from hil.canopen.od import QUICK_STOP_OPTION, AbortConnectionOption, master_loss_steps
 from hil.canopen.pdo import TYPE_BITS
 from hil.canopen.plan import CSP_BIT, CST_BIT, DrivePlan, NodePlan, RigPlan
 from hil.canopen.sdo import SdoAbortError, SdoTimeout, describe

@@ -125,7 +125,7 @@ class Signals:
     def sample_period_s(self) -> float:
         return float(np.median(np.diff(self.t)))
 
-    def select(self, mask: np.ndarray) -> "Signals":
+    def select(self, mask: np.ndarray) -> Signals:
         kw = {}
         for name in SIGNAL_COLUMNS + EXTRA_COLUMNS:
             v = getattr(self, name)

@@ -18,10 +18,10 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from test_verdict import validate
 
 from hil.cli import main
 from hil.runfolder import read_signals
-from test_verdict import validate
 
 CALIBRATED = {"lvdt_pitch", "lvdt_offset"}
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,8 +17,8 @@ import pytest
 from hil.canopen.frame import Frame
 from hil.link import CanopenLink, StaleData
 from hil.master import HeartbeatLost
-from support.canopen_rig import make_master
 from hil.transport import BusTransport
+from support.canopen_rig import make_master
 
 
 class QueuedSocket:

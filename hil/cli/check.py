@@ -33,7 +33,7 @@ class LiveProgress:
         self._task = self._p.add_task("check", total=1.0, step="", values="")
         self._n = 0
 
-    def __enter__(self) -> "LiveProgress":
+    def __enter__(self) -> LiveProgress:
         self._p.__enter__()
         return self
 

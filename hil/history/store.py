@@ -44,7 +44,7 @@ _CHUNK = 500  # ids per IN (...) list
 
 
 def _utcnow() -> _dt.datetime:
-    return _dt.datetime.now(_dt.timezone.utc).replace(tzinfo=None, microsecond=0)
+    return _dt.datetime.now(_dt.UTC).replace(tzinfo=None, microsecond=0)
 
 
 class HistoryStore:
@@ -71,7 +71,7 @@ class HistoryStore:
     # ------------------------------------------------------------------ opening
 
     @classmethod
-    def open(cls, url: str, *, create: bool = True, timeout_s: float = DEFAULT_TIMEOUT_S) -> "HistoryStore | None":
+    def open(cls, url: str, *, create: bool = True, timeout_s: float = DEFAULT_TIMEOUT_S) -> HistoryStore | None:
         """Connect and bring the schema to :data:`hil.history.schema.LATEST`.
 
         With ``create=False`` an SQLite file that does not exist is not made: None is
@@ -129,7 +129,7 @@ class HistoryStore:
         """Release the connections."""
         self._engine.dispose()
 
-    def __enter__(self) -> "HistoryStore":
+    def __enter__(self) -> HistoryStore:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -237,7 +237,7 @@ class HistoryStore:
 
     # ------------------------------------------------------------------ writing
 
-    def add(self, record: "CheckRecord") -> bool:
+    def add(self, record: CheckRecord) -> bool:
         """Record one result with its readings in one transaction.
 
         Parameters
@@ -255,7 +255,7 @@ class HistoryStore:
         with self._tx(write=True) as conn:
             return self._add(conn, record)
 
-    def add_many(self, records: Sequence["CheckRecord"]) -> int:
+    def add_many(self, records: Sequence[CheckRecord]) -> int:
         """Record several results in one transaction; returns how many were new."""
         with self._tx(write=True) as conn:
             return sum(self._add(conn, r) for r in records)

@@ -65,13 +65,13 @@ TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (support)
 
 from hil.runfolder import read_signals  # noqa: E402
-from support.independent_rig import judge  # noqa: E402
 from support.diagnose_cases import (  # noqa: E402
     NOISE,
     case_list,
     diagnose_signals,
     generate,
 )
+from support.independent_rig import judge  # noqa: E402
 
 #: First seed of the reported run. History (each set was run once, on a method frozen before):
 #: 9001.. made the first report (31 of 33 cases, 84 % of effect cases); 50001.. the second

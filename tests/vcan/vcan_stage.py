@@ -28,9 +28,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 INSIDE_ENV = "EMACHECK_INSIDE_UML"
 CHANNEL = "vcan0"
