@@ -580,7 +580,8 @@ class MasterCore:
         """
         out: list[Frame] = []
         enc = self.encoder
-        for k, (n, sp, phi) in enumerate(((self.order[0], sp1, sample.phi1_rad), (self.order[1], sp2, sample.phi2_rad))):
+        per_drive = ((self.order[0], sp1, sample.phi1_rad), (self.order[1], sp2, sample.phi2_rad))
+        for k, (n, sp, phi) in enumerate(per_drive):
             d = self.drives[n]
             target, torque = phi, 0.0
             if sp.mode is DriveMode.DISABLED:

@@ -432,7 +432,8 @@ class FaultInjector:
         if self.syncs == 0:
             return frozenset()
         return frozenset(nid for k, nid in self._silent_sensor.items()
-                         if self.faults[k].start_s - 1e-9 <= t < self.faults[k].start_s + self.faults[k].duration_s - 1e-9)
+                         if self.faults[k].start_s - 1e-9 <= t
+                         < self.faults[k].start_s + self.faults[k].duration_s - 1e-9)
 
     def _drive_hooks(self, t: float) -> None:
         """Switch the drive faults on or off at bus time ``t`` (their time base: since power-on)."""

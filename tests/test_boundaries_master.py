@@ -57,8 +57,8 @@ def test_boot_timeout_on_its_limit_and_one_step_after(actuation, t0):
         assert m.fault is None and m.phase is Phase.PREFLIGHT, t
     m = make_master(actuation)
     m.start(t0)
-    with pytest.raises(PreflightError, match=r"^node 1 \(EMA 1\), node 2 \(EMA 2\): no boot-up within canopen.boot_timeout_s = "
-                                             r"2.0 s of NMT reset$"):
+    with pytest.raises(PreflightError, match=r"^node 1 \(EMA 1\), node 2 \(EMA 2\): no boot-up within "
+                                             r"canopen.boot_timeout_s = 2.0 s of NMT reset$"):
         m.poll(above)
     assert isinstance(m.fault, PreflightError) and m.quick_stop
 

@@ -85,7 +85,7 @@ def _t_detect(r, meta) -> float:
 
 def _t_safe_command(tr, t_detect: float, reachable=(0, 1)) -> float:
     """First truth time after the detection at which every reachable drive left OPERATION_ENABLED."""
-    for t, st in zip(tr.t_s, tr.state):
+    for t, st in zip(tr.t_s, tr.state, strict=True):
         if t >= t_detect - 1e-9 and all(st[k] != State.OPERATION_ENABLED.name for k in reachable):
             return float(t)
     return math.inf

@@ -183,7 +183,8 @@ def test_preflight_against_simulated_drives_golden_sequence(actuation, pair):
 def test_identity_mismatch_is_refused_naming_the_field(actuation, pair):
     pair.nodes[0].own_data[(0x1018, 2)] = struct.pack("<I", 0x999)  # another drive answers at node 1
     with pytest.raises(PreflightError, match=r"node 1 \(EMA 1\): identity 0x1018 vendor 0x00000E3A product "
-                                             r"0x00000999 does not match the profile .*canopen.product_code 0x00000402"):
+                                             r"0x00000999 does not match the profile "
+                                             r".*canopen.product_code 0x00000402"):
         _preflight(actuation, pair)
 
 

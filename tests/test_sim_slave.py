@@ -554,7 +554,7 @@ def test_round_trip_master_configures_enables_and_follows_a_csp_ramp(rig):
     pair = rig.pair
     nodes = (1, 2)
     plan = shipped_rig().plan
-    for n, name in zip(nodes, ("ema1", "ema2")):
+    for n, name in zip(nodes, ("ema1", "ema2"), strict=True):
         layout = plan.node(name).layout
         writes = layout.configuration_writes()
         # per PDO: disable, clear, count, type, enable + entries; plus the unused PDOs disabled

@@ -352,7 +352,7 @@ class _Planner:
         layouts, channels = self._layouts(entries, drive_info)
         nodes = tuple(self._node_plan(n, layouts[n.name]) for n in self.smap.nodes)
         drives = tuple(DrivePlan(ema, nodes[ema - 1], fc, fc is ForceControl.CST, angle_src, torque_src, reaction)
-                       for ema, (fc, angle_src, torque_src, reaction) in zip((1, 2), drive_info))
+                       for ema, (fc, angle_src, torque_src, reaction) in zip((1, 2), drive_info, strict=True))
         load = self._load(layouts)
         if self.problems:
             raise PlanError(_merged(self.problems))

@@ -70,8 +70,9 @@ def add_eds_arg(p: argparse.ArgumentParser) -> None:
                    help="the drives' EDS file as its vendor ships it (overrides canopen.eds of the profile)")
 
 
-def add_recording_args(p: argparse.ArgumentParser, writes: str, *,
-                       recording_help: str = "run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2) or CAN log (*.log)") -> None:
+def add_recording_args(
+        p: argparse.ArgumentParser, writes: str, *,
+        recording_help: str = "run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2) or CAN log (*.log)") -> None:
     """The recording to read, ``--profile`` to read it with and ``--out`` for what the command ``writes``."""
     p.add_argument("recording", metavar="RECORDING", type=Path, help=recording_help)
     p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,

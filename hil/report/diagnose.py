@@ -47,7 +47,7 @@ def figure_overlay(model, d, channel: str):
     ho = np.asarray(d.held_out, dtype=bool)
     if ho.size == t.size and ho.any():
         edges = np.flatnonzero(np.diff(np.r_[0, ho.astype(np.int8), 0]))
-        for k, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+        for k, (a, b) in enumerate(zip(edges[::2], edges[1::2], strict=True)):
             ax[1].axvspan(t[a], t[b - 1], color="0.5", alpha=0.12, lw=0,
                           label="held out (not fitted)" if k == 0 else None)
     ax[1].axhline(0, color="k", lw=0.5)

@@ -333,7 +333,7 @@ class PdoEngine:
                 plan.append((i, s, off, off + nbytes))
                 off += nbytes
             p.plan = tuple(plan)
-            p.cache_ok = tuple(c in INT_CODES and k not in live for c, k in zip(codes, p.keys))
+            p.cache_ok = tuple(c in INT_CODES and k not in live for c, k in zip(codes, p.keys, strict=True))
             p.all_cache_ok = all(p.cache_ok)
             p.unpack = st.unpack
         elif all(k in live for k in p.keys):
@@ -478,9 +478,9 @@ class PdoEngine:
             values = unpack(data)
             ic = self._icache
             if p.all_cache_ok:
-                ic.update(zip(p.keys, values))
+                ic.update(zip(p.keys, values, strict=True))
             else:
-                for key, v, ok in zip(p.keys, values, p.cache_ok):
+                for key, v, ok in zip(p.keys, values, p.cache_ok, strict=True):
                     if ok:
                         ic[key] = v
                     else:

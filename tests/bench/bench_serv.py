@@ -141,7 +141,8 @@ def timing() -> dict:
     t_batch = best(lambda: [blf_serv(d, FS, keep_signals=False) for d in chans])
     t_batch_sig = best(lambda: [blf_serv(d, FS) for d in chans])
     noise = [sigma, sigma, sigma * np.sqrt(2.0)]
-    t_batch_known = best(lambda: [blf_serv(d, FS, noise_std_mm=s, keep_signals=False) for d, s in zip(chans, noise)])
+    t_batch_known = best(lambda: [blf_serv(d, FS, noise_std_mm=s, keep_signals=False)
+                                  for d, s in zip(chans, noise, strict=True)])
     X = np.column_stack(chans)
     m = 30_000
     mon = BlfServMonitor(FS, noise)

@@ -284,7 +284,7 @@ def generate(case: dict, work: Path, check=None, size: float = 1.0):
     def params(scales):
         rng = np.random.default_rng(case["seed"])
         p, truths = base, []
-        for (kind, where), sc in zip(case["effects"], scales):
+        for (kind, where), sc in zip(case["effects"], scales, strict=True):
             apply, truth = make_effect(kind, where, sc, rng)  # draws even when off: same draws
             if sc > 0:
                 p = apply(p)
