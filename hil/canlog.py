@@ -151,19 +151,20 @@ def _codec(act: Actuation, meta: dict | None, rig=None):
 
 def _frames(path: Path, counts: dict):
     """The frames of a candump log (``.gz`` too), skipping lines python-can cannot parse (counted)."""
+    opener = gzip.open if path.name.lower().endswith(".gz") else open
     try:
-        reader = can.io.CanutilsLogReader(gzip.open(path, "rt") if path.name.lower().endswith(".gz") else str(path))
-        it = iter(reader)
-        while True:
-            try:
-                msg = next(it)
-            except StopIteration:
-                return
-            except (ValueError, IndexError):
-                counts["bad"] += 1
-                continue
-            counts["frames"] += 1
-            yield Frame(msg.arbitration_id, bytes(msg.data))
+        with opener(path, "rt") as fh:  # closed however the reading ends (python-can closes only at the end)
+            it = iter(can.io.CanutilsLogReader(fh))
+            while True:
+                try:
+                    msg = next(it)
+                except StopIteration:
+                    return
+                except (ValueError, IndexError):
+                    counts["bad"] += 1
+                    continue
+                counts["frames"] += 1
+                yield Frame(msg.arbitration_id, bytes(msg.data))
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
 

@@ -8,6 +8,7 @@ numbers (20 mm x 7.5 % = 1.5 mm, 2 mm x 1 % = 0.02 mm).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -207,7 +208,7 @@ def test_result_types_and_readonly_signals():
     r = blf_serv(d, FS)
     assert isinstance(r, BlfServResult) and r.n_samples == d.size
     assert r.d_filtered_mm.shape == d.shape and not r.d_filtered_mm.flags.writeable
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         r.backlash_mm = 1.0
     r2 = blf_serv(d, FS, keep_signals=False, t0_s=100.0)
     assert r2.d_filtered_mm is None and r2.backlash_mm == r.backlash_mm

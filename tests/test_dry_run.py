@@ -69,7 +69,7 @@ def test_can_log_decodes_into_the_csv_signals(dry_run, actuation):
 def test_every_cycle_sync_then_tpdos_then_rpdos(dry_run):
     out, _ = dry_run
     lines = (out / "can.log").read_text().splitlines()
-    ids = [int(l.split()[2].split("#")[0], 16) for l in lines]
+    ids = [int(line.split()[2].split("#")[0], 16) for line in lines]
     syncs = [k for k, i in enumerate(ids) if i == 0x080]
     assert len(syncs) > 55000
     bad = 0

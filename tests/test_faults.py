@@ -369,7 +369,7 @@ def test_drive_booting_into_fault_needs_its_fault_resets(kind, value, resets):
         _walk_up(bus, 2)
         inj.pair.inject_fault(1, 0x2310)
         bus.sync()
-        for k in range(resets):
+        for _ in range(resets):
             assert _state(bus, 2) is State.FAULT
             bus.write(2, 0x6040, 0, "H", 0x00)
             bus.write(2, 0x6040, 0, "H", 0x80)

@@ -342,11 +342,13 @@ def test_a_mode_change_not_confirmed_by_0x6061_in_time_is_a_fault(actuation, sim
     smp = p.sync()
     with pytest.raises(DriveFault, match=r"node 1 \(EMA 1\): modes of operation 8 not confirmed by 0x6061 within "
                                          r"canopen.mode_change_timeout_s = 0.1 s \(0x6061 = 0\)"):
-        for k in range(60):
+        cycles = 0
+        while cycles < 60:
+            cycles += 1
             hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
             p.send(m.setpoint_frames(*hold, smp))
             smp = p.sync()
-    assert k + 1 == 51  # the mode went out with the first RPDOs; 50 cycles (0.1 s) later it is a fault
+    assert cycles == 51  # the mode went out with the first RPDOs; 50 cycles (0.1 s) later it is a fault
 
 
 def test_a_mode_change_confirmed_within_the_timeout_is_not(actuation, pair):
