@@ -4,7 +4,11 @@
 * ``sim`` (physics and simulated drives) imports from ``hil`` only ``hil.canopen``;
 * ``hil.canopen`` (the CANopen vocabulary both ends speak) imports nothing from the
   rest of ``hil``, nor from ``sim`` or ``blf``;
-* no module of the product is longer than 700 lines.
+* no module of the product is longer than 700 lines;
+* no function or method of the product is longer than 100 lines, counted as the source lines of
+  its body without its docstring: from the first statement after the docstring to the function's
+  last line, blank and comment lines inside included (the signature, decorators and docstring are
+  not counted; a nested function counts in its parent and on its own).
 
 Imports inside functions count as much as those at the top of a module.
 """
@@ -19,6 +23,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("hil", "blf", "sim")
 MAX_LINES = 700
+MAX_FUNCTION_LINES = 100
 
 
 def _modules() -> list[Path]:
@@ -108,3 +113,39 @@ def test_import_rules():
 def test_no_module_over_700_lines(path):
     n = len(path.read_text().splitlines())
     assert n <= MAX_LINES, f"{path.relative_to(ROOT)} has {n} lines (at most {MAX_LINES})"
+
+
+def _function_lengths(source: str) -> list[tuple[int, str, int]]:
+    """(line of the ``def``, name, body lines without the docstring) of every function in ``source``."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        body = node.body
+        if isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                and isinstance(body[0].value.value, str):
+            body = body[1:]
+        n = node.end_lineno - body[0].lineno + 1 if body else 0
+        out.append((node.lineno, node.name, n))
+    return out
+
+
+def test_function_length_counts_the_body_without_its_docstring():
+    """The counter itself: signature, decorators and docstring are not counted; blank and comment
+    lines inside the body are; a nested function counts in its parent and on its own."""
+    src = ("@decorator\n"
+           "def f(a,\n      b):\n"
+           '    """Doc\n\n    string."""\n'
+           "    x = 1\n\n    # a comment\n"
+           "    def g():\n        return 2\n"
+           "    return x\n"
+           "def h(): return 3\n"
+           'def k():\n    """Only a docstring."""\n')
+    assert _function_lengths(src) == [(2, "f", 6), (13, "h", 1), (14, "k", 0), (10, "g", 1)]
+
+
+def test_no_function_over_100_lines():
+    bad = [f"{path.relative_to(ROOT)}:{line} {name}: {n} lines"
+           for path in _modules() for line, name, n in _function_lengths(path.read_text()) if n > MAX_FUNCTION_LINES]
+    assert not bad, (f"functions longer than {MAX_FUNCTION_LINES} lines (body without the docstring; split them into "
+                     "named steps):\n" + "\n".join(bad))
