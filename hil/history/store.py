@@ -22,7 +22,6 @@ import contextlib
 import datetime as _dt
 import time
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import sqlalchemy as sa
@@ -301,12 +300,6 @@ class HistoryStore:
         with self._tx(write=False) as conn:
             return int(conn.execute(sa.select(sa.func.count()).select_from(S.checks)).scalar_one())
 
-    def has_result(self, result_sha256: str) -> bool:
-        """True if the result with this SHA-256 is recorded."""
-        with self._tx(write=False) as conn:
-            return conn.execute(sa.select(S.checks.c.id).where(S.checks.c.result_sha256 == result_sha256)
-                                ).first() is not None
-
     def checks(self, *, serial: int | None = None, aircraft: str | None = None) -> list[dict[str, Any]]:
         """The recorded results in time order, each a dict of its columns plus ``identity``
         (``{"ema1": {"vendor_id", "product_code", "revision", "serial", "node"} | None, ...}``) and
@@ -385,8 +378,3 @@ def _sqlite_events(engine: sa.Engine) -> None:
     @sa.event.listens_for(engine, "begin")
     def _begin(conn: sa.Connection) -> None:
         conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get("emacheck_write") else "BEGIN")
-
-
-def sqlite_file(url: str) -> Path | None:
-    """The file of an SQLite history URL, None for a server."""
-    return sqlite_path(url) if dialect(url) == "sqlite" else None
