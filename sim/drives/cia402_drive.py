@@ -72,7 +72,7 @@ from hil.canopen.cia402 import (
     state_word,
 )
 from hil.canopen.emcy import error_register_bits
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.od import AbortConnectionOption
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortCode
@@ -411,7 +411,7 @@ class Cia402Drive:
                 if k is None:
                     k = self._k_inc()
                 v = inc_from_rad(phi, k)
-            except (ValueError, ArithmeticError):  # (InputError is a ValueError)
+            except (ValueError, ArithmeticError):  # (CanopenInputError is a ValueError)
                 return rad_to_increments(phi, self.counts_per_rev)  # raises its own error
             self._pos_memo = v
         return v
@@ -593,7 +593,7 @@ class Cia402Drive:
                     if k is None:
                         k = self._k_inc()
                     value = rad_from_inc(eff, k)  # (an int divided by a float: float(eff) / k)
-                except (ArithmeticError, InputError):
+                except (ArithmeticError, CanopenInputError):
                     value = increments_to_rad(eff, self.counts_per_rev)  # raises its own error
                 mode_out = _MODE_POSITION
             elif mode == _CST and _CST in self._modes:

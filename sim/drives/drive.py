@@ -84,7 +84,7 @@ class SimDrive(Cia402Drive, SimNode):
 
     Raises
     ------
-    hil.canopen.errors.InputError
+    hil.canopen.errors.CanopenInputError
         A measured input the drive cannot serve.
     """
 

@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING
 import canopen.objectdictionary as cod
 
 from hil.canopen.cycle import encode_raw
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtState
 from hil.canopen.od import lookup
@@ -136,7 +136,7 @@ class SimNode(PdoEngine, NmtSlave):
 
     Raises
     ------
-    hil.canopen.errors.InputError
+    hil.canopen.errors.CanopenInputError
         A measured input the node cannot serve.
     """
 
@@ -179,7 +179,7 @@ class SimNode(PdoEngine, NmtSlave):
     def _input_getter(self, k: int, inp: LiveInput) -> Callable[[], int | float]:
         """Getter of measured input ``k``: the plant's value, scaled and rounded into its data type."""
         if inp.scale is None:
-            raise InputError(f"node {self.node_id}: {inp.signal.value} of EMA {inp.ema} at "
+            raise CanopenInputError(f"node {self.node_id}: {inp.signal.value} of EMA {inp.ema} at "
                              f"0x{inp.key[0]:04X}:{inp.key[1]:02X} needs a scaling the profile states")
         slot = SAMPLE_SLOT[inp.signal] + inp.ema - 1
         units, off, dtype = inp.scale.units_per_si, inp.scale.offset, inp.data_type
@@ -247,12 +247,12 @@ class SimNode(PdoEngine, NmtSlave):
 
         Raises
         ------
-        hil.canopen.errors.InputError
+        hil.canopen.errors.CanopenInputError
             The object does not exist in this node's object dictionary.
         """
         var = self.store.var(index, subindex)
         if var is None:
-            raise InputError(f"index:subindex 0x{index:04X}:{subindex:02X} is not in the object "
+            raise CanopenInputError(f"index:subindex 0x{index:04X}:{subindex:02X} is not in the object "
                              f"dictionary of node {self.node_id}")
         return var.decode_raw(self.store.get_data(index, subindex))
 

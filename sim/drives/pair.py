@@ -88,7 +88,7 @@ from collections.abc import Callable
 import canopen.objectdictionary as cod
 
 from hil.canopen.cia402 import State
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import lookup
@@ -130,7 +130,7 @@ def _counts(angle) -> float | None:
 def _od(od_factory: Callable[[str, int], cod.ObjectDictionary], name: str, node_id: int) -> cod.ObjectDictionary:
     od = od_factory(name, node_id)
     if not isinstance(od, cod.ObjectDictionary):
-        raise InputError(f"od_factory({name!r}, {node_id}) must return a canopen ObjectDictionary, "
+        raise CanopenInputError(f"od_factory({name!r}, {node_id}) must return a canopen ObjectDictionary, "
                          f"got {type(od).__name__}")
     return od
 
@@ -175,7 +175,7 @@ class SimDrivePair:
 
     Raises
     ------
-    hil.canopen.errors.InputError
+    hil.canopen.errors.CanopenInputError
         Wrong plant or plan type, ``counts_per_rev``, ``serials``, an object
         dictionary that lacks what a drive needs, or a measured input a node
         cannot serve.
@@ -220,11 +220,12 @@ class SimDrivePair:
     def __init__(self, plant: RigPlant, plan: RigPlan, od_factory: Callable[[str, int], cod.ObjectDictionary], *,
                  counts_per_rev: int | None = None, serials: tuple[int, int] | None = None) -> None:
         if not isinstance(plant, RigPlant):
-            raise InputError(f"plant must be a sim.plant.RigPlant, got {type(plant).__name__}")
+            raise CanopenInputError(f"plant must be a sim.plant.RigPlant, got {type(plant).__name__}")
         if not isinstance(plan, RigPlan):
-            raise InputError(f"plan must be a hil.canopen.plan.RigPlan, got {type(plan).__name__}")
+            raise CanopenInputError(f"plan must be a hil.canopen.plan.RigPlan, got {type(plan).__name__}")
         if not callable(od_factory):
-            raise InputError(f"od_factory must be callable as od_factory(node name, node id), got {od_factory!r}")
+            raise CanopenInputError("od_factory must be callable as od_factory(node name, node id), "
+                                    f"got {od_factory!r}")
         if counts_per_rev is not None:
             counts_per_rev = integer("counts_per_rev", counts_per_rev, 1, 2**32 - 1)  # [increments/rev]
         if serials is not None:
@@ -233,7 +234,7 @@ class SimDrivePair:
             except TypeError:
                 serials = ()
             if len(serials) != 2:
-                raise InputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
+                raise CanopenInputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
             serials = tuple(integer(f"serials[{k}]", v, 0, 2**32 - 1) for k, v in enumerate(serials))
         self.plant = plant
         self.plan = plan
@@ -255,7 +256,7 @@ class SimDrivePair:
             od = _od(od_factory, spec.name, n)
             missing = [f"0x{i:04X}:{s:02X}" for i, s in _SIM_REQUIRED if lookup(od, i, s) is None]
             if missing:
-                raise InputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
+                raise CanopenInputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
                                  + ", ".join(missing))
             torque = plan.map.entry(dp.ema, Signal.TARGET_TORQUE)
             rated = None
@@ -339,7 +340,7 @@ class SimDrivePair:
         plant = self.plant
         try:
             raw = plant.step_raw(mode1, value1, mode2, value2)
-        except (InputError, TypeError):
+        except (CanopenInputError, TypeError):
             plant.step(Setpoint(DriveMode(mode1), value1), Setpoint(DriveMode(mode2), value2))
             raise
         self._raw_sample = raw
@@ -360,13 +361,13 @@ class SimDrivePair:
 
     def _node_index(self, node_index: int) -> SimDrive:
         if isinstance(node_index, bool):
-            raise InputError("node_index must be 0 or 1 (int), got bool")
+            raise CanopenInputError("node_index must be 0 or 1 (int), got bool")
         try:
             k = operator.index(node_index)
         except TypeError:
-            raise InputError(f"node_index must be 0 or 1 (int), got {node_index!r}") from None
+            raise CanopenInputError(f"node_index must be 0 or 1 (int), got {node_index!r}") from None
         if k not in (0, 1):
-            raise InputError(f"node_index = {k} must be 0 (node {self.nodes[0].node_id}) "
+            raise CanopenInputError(f"node_index = {k} must be 0 (node {self.nodes[0].node_id}) "
                              f"or 1 (node {self.nodes[1].node_id})")
         return self.nodes[k]
 
@@ -405,11 +406,11 @@ class SimDrivePair:
 
         Raises
         ------
-        hil.canopen.errors.InputError
+        hil.canopen.errors.CanopenInputError
             ``frame`` is not a :class:`hil.canopen.frame.Frame` or ``t`` not a finite time.
         """
         if not isinstance(frame, Frame):
-            raise InputError(f"frame must be a hil.canopen.frame.Frame, got {type(frame).__name__}")
+            raise CanopenInputError(f"frame must be a hil.canopen.frame.Frame, got {type(frame).__name__}")
         if t.__class__ is float and t - t == 0.0:  # finite float: _clock without the conversions
             now = self._now
             if t > now:
@@ -614,14 +615,14 @@ class SimDrivePair:
 
         Raises
         ------
-        hil.canopen.errors.InputError
+        hil.canopen.errors.CanopenInputError
             ``node_index`` not 0/1, ``emcy_code`` not in 0x0001..0xFFFF, or the
             pair is not powered on.
         """
         node = self._node_index(node_index)
         code = error_code(emcy_code, "emcy_code")
         if not self._powered:
-            raise InputError("inject_fault needs a powered pair: call power_on(t) first")
+            raise CanopenInputError("inject_fault needs a powered pair: call power_on(t) first")
         node._inject_fault(code)
         node._event_tpdos(self._now)
         return self._drain()
@@ -630,5 +631,5 @@ class SimDrivePair:
         """Fault hook: stop (False) or resume (True) the heartbeat frames of drive ``node_index``."""
         node = self._node_index(node_index)
         if not isinstance(enabled, bool):
-            raise InputError(f"enabled must be a bool, got {enabled!r}")
+            raise CanopenInputError(f"enabled must be a bool, got {enabled!r}")
         node.heartbeat_enabled = enabled

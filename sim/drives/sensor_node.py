@@ -67,7 +67,7 @@ class SimSensorNode(SimNode):
 
     Raises
     ------
-    hil.canopen.errors.InputError
+    hil.canopen.errors.CanopenInputError
         An input without a scaling.
     """
 
