@@ -103,7 +103,7 @@ class _PythonCanIO:
 
 
 class _RawIO:
-    """Frames on a SocketCAN socket through :class:`hil.link.SocketcanFrames`."""
+    """Frames on a SocketCAN socket through :class:`hil.transport.SocketcanFrames`."""
 
     def __init__(self, raw: SocketcanFrames) -> None:
         self.raw = raw
@@ -141,7 +141,7 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
     bus : can.BusABC
         Any python-can bus; it is shut down when the loop ends. On SocketCAN
         the frames go through the bus's socket directly (about one system call
-        per frame, see :class:`hil.link.SocketcanFrames`).
+        per frame, see :class:`hil.transport.SocketcanFrames`).
     pair : sim.drives.SimDrivePair
         The two simulated drives (fresh or already powered).
     stop : threading.Event, optional

@@ -22,7 +22,7 @@ from support.canopen_rig import make_master
 
 
 class QueuedSocket:
-    """Stands in for :class:`hil.link.SocketcanFrames`: frames with CLOCK_REALTIME stamps."""
+    """Stands in for :class:`hil.transport.SocketcanFrames`: frames with CLOCK_REALTIME stamps."""
 
     def __init__(self) -> None:
         self.q: deque = deque()

@@ -15,7 +15,7 @@ LD_PRELOAD shim ``xstate_shim.c`` (built here with the host's C compiler): see
 the comment at its top.
 
 Used by ``tests/test_vcan.py`` (the stage in the default test run) and
-``tests/bench_vcan.py``. Nothing here is collected by pytest.
+``tests/bench/bench_vcan.py``. Nothing here is collected by pytest.
 """
 
 from __future__ import annotations
