@@ -204,7 +204,7 @@ def torque_scale(rated_torque_Nm: float, i_total_rad_per_mm: float) -> Scale:
     Notes
     -----
     :math:`F = \\tau / 1000 \\cdot T_r \\cdot 1000\\, i`: one per mille is
-    :math:`T_r\\, i` newton (:func:`hil.canopen.units.N_from_permille`).
+    :math:`T_r\\, i` newton (:func:`hil.canopen.units.permille_to_force_N`).
     """
     return Scale(1.0 / (rated_torque_Nm * i_total_rad_per_mm))
 

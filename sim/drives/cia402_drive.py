@@ -78,14 +78,14 @@ from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortCode
 from hil.canopen.signalmap import Signal, angle_scale_factor_group
 from hil.canopen.units import (
-    N_from_permille,
-    inc_from_rad,
     increments_per_rad,
     increments_to_rad,
-    permille_from_torque,
+    increments_to_rad_unchecked,
     permille_to_force_N,
-    rad_from_inc,
+    permille_to_force_N_unchecked,
     rad_to_increments,
+    rad_to_increments_unchecked,
+    torque_to_permille_unchecked,
 )
 from sim.drives.nmt_slave import EMCY_HEARTBEAT, EMCY_NO_ERROR
 from sim.drives.store import abort
@@ -410,7 +410,7 @@ class Cia402Drive:
                 k = self._inc_per_rad
                 if k is None:
                     k = self._k_inc()
-                v = inc_from_rad(phi, k)
+                v = rad_to_increments_unchecked(phi, k)
             except (ValueError, ArithmeticError):  # (CanopenInputError is a ValueError)
                 return rad_to_increments(phi, self.counts_per_rev)  # raises its own error
             self._pos_memo = v
@@ -419,7 +419,7 @@ class Cia402Drive:
     @property
     def torque_actual_permille(self) -> int:
         """Torque actual value 0x6077 [per mille of the rated torque 0x6076]."""
-        return permille_from_torque(self._torque_Nm, self._rated_Nm())
+        return torque_to_permille_unchecked(self._torque_Nm, self._rated_Nm())
 
     def _rated_Nm(self) -> float:
         """The motor's rated torque [N m]: the profile's where it states it, else 0x6076 [mN m]."""
@@ -592,7 +592,7 @@ class Cia402Drive:
                     k = self._inc_per_rad
                     if k is None:
                         k = self._k_inc()
-                    value = rad_from_inc(eff, k)  # (an int divided by a float: float(eff) / k)
+                    value = increments_to_rad_unchecked(eff, k)  # (an int divided by a float: float(eff) / k)
                 except (ArithmeticError, CanopenInputError):
                     value = increments_to_rad(eff, self.counts_per_rev)  # raises its own error
                 mode_out = _MODE_POSITION
@@ -608,7 +608,7 @@ class Cia402Drive:
                 rated_Nm = self._rated_Nm()
                 i_total = self._i_total
                 if 0.0 < rated_Nm < math.inf and 0.0 < i_total < math.inf:
-                    value = N_from_permille(eff, i_total, rated_Nm)
+                    value = permille_to_force_N_unchecked(eff, i_total, rated_Nm)
                 else:
                     value = permille_to_force_N(eff, i_total, rated_Nm)  # raises its own error
                 mode_out = _MODE_FORCE
