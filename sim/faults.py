@@ -301,7 +301,7 @@ class FaultInjector:
         chans = []
         for ch in plan.channels:
             if ch.scale is None and ch.signal is Signal.MOTOR_ANGLE:
-                ch = _replace(ch, scale=Scale(self._nodes[ch.ema]._k_inc()))
+                ch = _replace(ch, scale=Scale(self._nodes[ch.ema].angle_increments_per_rad()))
             chans.append(ch)
         self._codec = CycleDecoder(plan.tx_pdos, [c for c in chans if c.signal.direction is Direction.TX])
         #: bus time [s] of the last frame that reached the drives (None before the first)

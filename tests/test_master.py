@@ -337,7 +337,7 @@ def test_fault_resets_are_bounded(actuation, simrig, attempts):
 def test_a_mode_change_not_confirmed_by_0x6061_in_time_is_a_fault(actuation, simrig):
     pair = make_pair(_plant(simrig, 4))
     m, p = _preflight(actuation, pair)
-    pair.nodes[0]._mode_written = lambda: None  # EMA 1's 0x6061 does not follow 0x6060 ...
+    pair.nodes[0].mode_written = lambda: None  # EMA 1's 0x6061 does not follow 0x6060 ...
     pair.nodes[0]._mode_display = 0  # ... and shows no mode (the drill had set CSP by SDO)
     smp = p.sync()
     with pytest.raises(DriveFault, match=r"node 1 \(EMA 1\): modes of operation 8 not confirmed by 0x6061 within "
@@ -438,7 +438,7 @@ def test_preflight_configures_reads_back_and_drills_the_drives_reaction_to_the_m
 
 def test_a_drive_that_ignores_the_masters_death_stops_the_preflight_before_any_sync(actuation, simrig):
     pair = make_pair(_plant(simrig, 4))
-    pair.nodes[1]._connection_lost = lambda: None  # EMA 2 accepts 0x6007 = 3, then does nothing
+    pair.nodes[1].connection_lost = lambda: None  # EMA 2 accepts 0x6007 = 3, then does nothing
     with pytest.raises(MasterLossReactionError, match=r"node 2 \(EMA 2\): did not react to the master's death: the "
                        r"master was silent \d+ ms \(its consumer time 0x1016:01 is 125 ms\) and the drive stayed "
                        r"OPERATION ENABLED \(EMCY seen: 0x8130\); the check is not started"):
@@ -451,7 +451,7 @@ def test_the_drill_under_an_external_watchdog_records_no_reaction_and_goes_on(ac
     watchdog = "STO of both drives dropped by the rig's watchdog relay 100 ms after the master's last heartbeat"
     act = dataclasses.replace(actuation, canopen=dataclasses.replace(actuation.canopen, external_watchdog=watchdog))
     pair = make_pair(_plant(simrig, 4))
-    pair.nodes[1]._connection_lost = lambda: None
+    pair.nodes[1].connection_lost = lambda: None
     m, p = _preflight(act, pair)
     rec = m.drives[2].master_loss
     assert rec.drill.outcome is DrillOutcome.NO_REACTION and rec.drill.reaction_ms is None
@@ -532,14 +532,14 @@ def test_a_drive_whose_error_behaviour_stops_it_is_read_after_the_drill(actuatio
 
     pair = make_pair(_plant(simrig, 8))
     node = pair.nodes[1]
-    react = node._connection_lost
+    react = node.connection_lost
 
     def stopped():
         if reacts:
             react()
         node.nmt_state = NmtState.STOPPED
 
-    node._connection_lost = stopped
+    node.connection_lost = stopped
     if reacts:
         m, p = _preflight(actuation, pair)
         drill = m.drives[2].master_loss.drill
@@ -561,14 +561,14 @@ def test_a_drive_that_falls_silent_while_drilled_leaves_the_other_disabled(actua
 
     pair = make_pair(_plant(simrig, 9))
     deaf = pair.nodes[1]
-    serve = deaf._on_sdo
+    serve = deaf.on_sdo
 
     def until_enabled(frame, t):  # EMA 2 stops answering SDO once it is enabled
         if deaf.state_machine.state is State.OPERATION_ENABLED:
             return None
         return serve(frame, t)
 
-    deaf._on_sdo = until_enabled
+    deaf.on_sdo = until_enabled
     tr = InProcessTransport(pair, T, channel="emacheck-test-deaf-drill")
     link = CanopenLink(_master(actuation), tr)
     try:

@@ -806,7 +806,7 @@ def test_heartbeat_consumer_and_abort_connection_entries_are_validated(rig):
     assert exc.value.code is SdoAbortCode.PARAMETER_INCOMPATIBILITY
     rig.write(1, 0x1016, 2, "I", 0x7F_0000)  # time 0: unused, allowed
     rig.write(1, 0x1016, 3, "I", 0x05_0064)
-    assert rig.pair.nodes[0]._hb_consumers == {0x7F: [0.1, None, False], 5: [0.1, None, False]}
+    assert rig.pair.nodes[0].heartbeat_consumers == {0x7F: [0.1, None, False], 5: [0.1, None, False]}
     with pytest.raises(SdoAbortError) as exc:
         rig.write(1, 0x1016, 0, "B", 2)
     assert exc.value.code is SdoAbortCode.WRITE_OF_READ_ONLY
@@ -815,7 +815,7 @@ def test_heartbeat_consumer_and_abort_connection_entries_are_validated(rig):
             rig.write(1, 0x6007, 0, "h", bad)
         assert exc.value.code is SdoAbortCode.VALUE_RANGE_EXCEEDED
     rig.nmt(0x81, 1)  # reset node: the consumer is off again (EDS default 0)
-    assert rig.read(1, 0x1016, 1, "I") == 0 and rig.pair.nodes[0]._hb_consumers == {}
+    assert rig.read(1, 0x1016, 1, "I") == 0 and rig.pair.nodes[0].heartbeat_consumers == {}
 
 
 def test_hung_master_heartbeat_event_quick_stop_then_switch_on_disabled(rig):
