@@ -211,7 +211,7 @@ def add_trace_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--work-order", metavar="ID", help="the work order it is run for (recorded likewise)")
 
 
-def _history_url(text: str) -> str:
+def history_url_type(text: str) -> str:
     """argparse type of ``--history``: a database URL (only its form is checked here; no database
     library is imported before a check)."""
     from hil.history.errors import HistoryInputError
@@ -249,12 +249,12 @@ def add_history_args(p: argparse.ArgumentParser, *, simulated: bool) -> None:
     (``simulated``) only with ``--history``."""
     g = p.add_argument_group("wear history (docs/history.md)")
     if simulated:
-        g.add_argument("--history", nargs="?", const=True, metavar="URL", type=_history_url,
+        g.add_argument("--history", nargs="?", const=True, metavar="URL", type=history_url_type,
                        help="record this simulated check in the wear history, marked simulated (never in a real "
                             "actuator's trend): into URL, else the actuation profile's history.url, else the "
                             "user's SQLite file")
     else:
-        g.add_argument("--history", metavar="URL", type=_history_url,
+        g.add_argument("--history", metavar="URL", type=history_url_type,
                        help="record the result into this database (sqlite:///PATH or postgresql://USER@HOST/DB) "
                             "instead of the actuation profile's history.url or the user's SQLite file")
         g.add_argument("--no-history", action="store_true", help="do not record this result in the wear history")
