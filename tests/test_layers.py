@@ -8,7 +8,11 @@
 * no function or method of the product is longer than 100 lines, counted as the source lines of
   its body without its docstring: from the first statement after the docstring to the function's
   last line, blank and comment lines inside included (the signature, decorators and docstring are
-  not counted; a nested function counts in its parent and on its own).
+  not counted; a nested function counts in its parent and on its own);
+* no module uses another module's underscore names: no ``from m import _x`` of the product, and
+  an attribute ``_x`` (``self._x``, ``obj._x``) only where the module itself defines ``_x``
+  (a ``def``, a class, an assignment to it or to ``self._x``). Parts of one object in several
+  modules (the simulated drive's mixins) share documented public hooks instead.
 
 Imports inside functions count as much as those at the top of a module.
 """
@@ -149,3 +153,70 @@ def test_no_function_over_100_lines():
            for path in _modules() for line, name, n in _function_lengths(path.read_text()) if n > MAX_FUNCTION_LINES]
     assert not bad, (f"functions longer than {MAX_FUNCTION_LINES} lines (body without the docstring; split them into "
                      "named steps):\n" + "\n".join(bad))
+
+
+#: underscore names a module may use without defining them: (module, name) -> why
+FOREIGN_PRIVATE_OK = {
+    ("hil/transport.py", "_check_if_open"): "python-can's can.BusABC helper for its interface subclasses",
+}
+
+
+def _defined_names(tree: ast.AST) -> set[str]:
+    """Names a module defines: functions, classes, assigned names and ``self.``/``cls.`` attributes,
+    loop and ``with`` targets, imported names."""
+    out: set[str] = set()
+    for n in ast.walk(tree):
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(n.name)
+        targets: list = []
+        if isinstance(n, ast.Assign):
+            targets = list(n.targets)
+        elif isinstance(n, (ast.AnnAssign, ast.AugAssign, ast.For, ast.comprehension)):
+            targets = [n.target]
+        elif isinstance(n, ast.With):
+            targets = [i.optional_vars for i in n.items if i.optional_vars is not None]
+        elif isinstance(n, (ast.Import, ast.ImportFrom)):
+            out |= {(a.asname or a.name).split(".")[0] for a in n.names}
+        while targets:
+            e = targets.pop()
+            if isinstance(e, (ast.Tuple, ast.List)):
+                targets += e.elts
+            elif isinstance(e, ast.Starred):
+                targets.append(e.value)
+            elif isinstance(e, ast.Name):
+                out.add(e.id)
+            elif isinstance(e, ast.Attribute) and isinstance(e.value, ast.Name) and e.value.id in ("self", "cls"):
+                out.add(e.attr)
+    return out
+
+
+def _foreign_private(source: str, where: str) -> list[str]:
+    """Uses of underscore names (not dunders) that the module does not define itself."""
+    tree = ast.parse(source)
+    mine = _defined_names(tree)
+    bad = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and n.module and n.module.split(".")[0] in PACKAGES:
+            bad += [f"{where}:{n.lineno} imports {n.module}.{a.name}" for a in n.names
+                    if a.name.startswith("_") and not a.name.startswith("__")]
+        elif (isinstance(n, ast.Attribute) and n.attr.startswith("_") and not n.attr.startswith("__")
+              and n.attr not in mine and (where, n.attr) not in FOREIGN_PRIVATE_OK):
+            bad.append(f"{where}:{n.lineno} uses {ast.unparse(n)} (not defined in this module)")
+    return bad
+
+
+def test_the_private_name_check_sees_what_it_is_meant_to():
+    src = ("from sim.drives.stats import _Counters\n"
+           "class A:\n    def __init__(self):\n        self._mine = 1\n"
+           "    def _own(self):\n        return self._mine + self._theirs + other._x + self.__class__.__name__\n"
+           "    def f(self, node):\n        node._own()\n        return self._own()\n")
+    assert sorted(_foreign_private(src, "m.py")) == [
+        "m.py:1 imports sim.drives.stats._Counters",
+        "m.py:6 uses other._x (not defined in this module)",
+        "m.py:6 uses self._theirs (not defined in this module)"]
+
+
+def test_no_module_uses_another_modules_underscore_names():
+    bad = [b for path in _modules() for b in _foreign_private(path.read_text(), str(path.relative_to(ROOT)))]
+    assert not bad, ("underscore names used outside the module that defines them (make them documented "
+                     "public hooks):\n" + "\n".join(bad))
