@@ -12,6 +12,7 @@ import struct
 import numpy as np
 import pytest
 
+from hil import master_events as event
 from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
@@ -580,3 +581,40 @@ def test_a_drive_that_falls_silent_while_drilled_leaves_the_other_disabled(actua
     assert pair.nodes[0].state_machine.state is State.SWITCH_ON_DISABLED  # EMA 1: disable voltage by SDO
     final = link.final_states
     assert not final["ema2"]["safe"]  # EMA 2 could not be told: the record says so
+
+
+def test_the_masters_events_are_typed_and_matched_by_type(actuation, pair):
+    """One small frozen class per event (h11's events), typed fields, ``str`` the log line."""
+    m, p = _preflight(actuation, pair)
+    p.enable(p.sync(), cycles=60)
+    events = m.drain_events()
+    assert m.drain_events() == []  # drained
+    first = events[0]
+    assert first == event.NmtSent(0.0, 0, NmtCommand.RESET_NODE) and str(first) == "NMT RESET_NODE to all nodes"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        first.node_id = 1
+    boots, silent, resumed, emcy, pdo_states, sdo_states = set(), [], [], [], [], []
+    for ev in events:
+        match ev:
+            case event.BootUp(node_id=n):
+                boots.add(n)
+            case event.MasterFellSilent(last_heartbeat_s=last):
+                silent.append(last)
+            case event.MasterHeartbeatResumed():
+                resumed.append(ev.t_s)
+            case event.EmcyReceived(emcy=e):
+                emcy.append((ev.node_id, e.code))
+            case event.DriveStateChanged(by_sdo=True):
+                sdo_states.append((ev.node_id, ev.new))
+            case event.DriveStateChanged(old=old, new=new):
+                pdo_states.append((ev.node_id, old, new))
+    assert boots == {1, 2}
+    assert silent == [pytest.approx(0.05)] and len(resumed) == 1 and resumed[0] > silent[0]
+    assert emcy == [(1, 0x8130), (2, 0x8130), (1, 0x0000), (2, 0x0000)]  # the drill: heartbeat event, reset
+    assert (1, State.QUICK_STOP_ACTIVE) in sdo_states and (2, State.QUICK_STOP_ACTIVE) in sdo_states
+    assert pdo_states[-2:] == [(1, State.SWITCHED_ON, State.OPERATION_ENABLED),
+                               (2, State.SWITCHED_ON, State.OPERATION_ENABLED)]
+    assert str(event.DriveStateChanged(0.0, 1, State.SWITCHED_ON, State.OPERATION_ENABLED, by_sdo=True)) == \
+        "SWITCHED_ON -> OPERATION_ENABLED (SDO)"
+    assert str(event.CycleIncomplete(0.1, 0, 7)) == "cycle 7: TPDOs incomplete at the next SYNC"
+    assert str(event.MasterFellSilent(0.1, 0, 0.05)) == "the master falls silent (last heartbeat at 0.050 s)"
