@@ -104,6 +104,7 @@ from blf.diagnose_model import (
     Candidate,
     DiagnoseConfig,
     Diagnosis,
+    DiagnosisVerdict,
     FittedEffect,
     Location,
     Param,
@@ -135,7 +136,7 @@ from blf.validate import positive_scalar
 
 #: the model's vocabulary and the result (:mod:`blf.diagnose_model`) are imported from here
 __all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
-           "FittedEffect", "Diagnosis", "RegimeScore", "diagnose", "place_of"]
+           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "diagnose", "place_of"]
 
 
 def _band(model: ReplayModel, sample_period_s: float, cfg: DiagnoseConfig) -> Comparison:
@@ -555,8 +556,9 @@ def _verdict(cmp: Comparison, frame: TestFrame, floor: NoiseFloor, before: Chann
                and all(regime0[c] - regime_cur[c] >= cfg.min_explained_fraction * regime0[c] for c in flag_r0))
     lib = [e for e in effects if e.source == "library"]
     if still or (lib and not removed):
-        return Verdict("unexplained", tuple(_locate(cmp, frame, floor, after)), _where_the_rest_lies(cmp, frame, after))
-    return Verdict("explained" if effects else "no_mismatch")
+        return Verdict(DiagnosisVerdict.UNEXPLAINED, tuple(_locate(cmp, frame, floor, after)),
+                       _where_the_rest_lies(cmp, frame, after))
+    return Verdict(DiagnosisVerdict.EXPLAINED if effects else DiagnosisVerdict.NO_MISMATCH)
 
 
 def _residual_rms(cmp: Comparison, floor: NoiseFloor, pred_all: dict) -> ResidualRms:

@@ -13,6 +13,7 @@ Pure: frozen dataclasses, no IO.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from functools import lru_cache
 from typing import Protocol
 
@@ -23,7 +24,15 @@ from blf.errors import InputError
 from blf.mismatch import RegimeScore
 
 __all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
-           "FittedEffect", "Diagnosis", "RegimeScore", "place_of"]
+           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "place_of"]
+
+
+class DiagnosisVerdict(StrEnum):
+    """What the diagnosis concludes; a ``str`` whose value the diagnosis JSON holds."""
+
+    NO_MISMATCH = "no_mismatch"  #: no significant mismatch between simulation and recording
+    EXPLAINED = "explained"  #: the mismatch is explained by the named effects
+    UNEXPLAINED = "unexplained"  #: a mismatch the candidate library does not explain
 
 
 @dataclass(frozen=True)
@@ -184,7 +193,7 @@ class Diagnosis:
     RMS figures without ``raw`` are in the band (:attr:`band`); ``holdout`` ones
     over the held-out half only (never fitted)."""
 
-    verdict: str
+    verdict: DiagnosisVerdict
     effects: tuple
     locations: tuple
     where: tuple  #: places of the mismatch left after the effects (unexplained), best first

@@ -12,7 +12,7 @@ import numpy as np
 
 from blf.band import Band
 from blf.diagnose_fit import CandidateFit, JointFit, Problem, Projector
-from blf.diagnose_model import Candidate, DiagnoseConfig, Reference, ReplayModel, place_of
+from blf.diagnose_model import Candidate, DiagnoseConfig, DiagnosisVerdict, Reference, ReplayModel, place_of
 
 __all__ = ["Comparison", "NominalFit", "NoiseFloor", "TestFrame", "ChannelTests", "Standing", "Screened",
            "Screening", "Refit", "Accepted", "Selection", "NamedReference", "ResidualRms", "Verdict"]
@@ -195,6 +195,6 @@ class Verdict:
     """Step 7: the verdict, and where it is ``unexplained`` the locations and the places where the
     rest lies (best first)."""
 
-    verdict: str
+    verdict: DiagnosisVerdict
     locations: tuple = ()
     where: tuple = ()

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from enum import StrEnum
 
 from blf.errors import InputError
 from blf.validate import positive_scalar, scalar
@@ -45,7 +46,16 @@ METHOD_BOUND_REL = 0.05  #: ... and relative part (the larger of the two applies
 #: scenarios (docs/blfserv.md), taken as 10 %; the paper's Delta D reads 21-39 % low, taken as 40 %.
 SERV_METHOD_REL = {"improved": 0.10, "paper": 0.40}
 
-PASS, FAIL, INCONCLUSIVE, NOT_TRAVERSED = "pass", "fail", "inconclusive", "not_traversed"
+
+
+class Status(StrEnum):
+    """A channel's or a check's decision; a ``str`` whose value is what result.json and the history
+    hold (``json.dumps(Status.PASS) == '"pass"'``)."""
+
+    PASS = "pass"
+    FAIL = "fail"
+    INCONCLUSIVE = "inconclusive"
+    NOT_TRAVERSED = "not_traversed"  #: BLFserv found no backlash crossing (a channel only, never the check)
 
 
 @dataclass(frozen=True)
@@ -85,8 +95,8 @@ class ChannelVerdict:
 
     Attributes
     ----------
-    status : str
-        ``"pass"``, ``"fail"`` or ``"inconclusive"``.
+    status : Status
+        ``"pass"``, ``"fail"``, ``"inconclusive"`` or (BLFserv) ``"not_traversed"``.
     backlash_mm, uncertainty_mm : float or None
         The reading and its expanded uncertainty U (k = 2); None when not measured.
     limit_mm : float
@@ -97,7 +107,7 @@ class ChannelVerdict:
         The rule that decided, in words, with the numbers.
     """
 
-    status: str
+    status: Status
     backlash_mm: float | None
     uncertainty_mm: float | None
     limit_mm: float
@@ -207,32 +217,32 @@ def decide(backlash_mm: float | None, uncertainty_mm: float | None, limit_mm: fl
     lim = positive_scalar(limit_mm, "limit_mm", "mm")
     if backlash_mm is None:
         if not_traversed:
-            return ChannelVerdict(NOT_TRAVERSED, None, None, lim, None, missing or "no backlash traversal in the "
-                                  "recording")
+            return ChannelVerdict(Status.NOT_TRAVERSED, None, None, lim, None,
+                                  missing or "no backlash traversal in the recording")
         why = missing or "not measured"
-        return ChannelVerdict(INCONCLUSIVE, None, None, lim, None, f"not measured: {why}")
+        return ChannelVerdict(Status.INCONCLUSIVE, None, None, lim, None, f"not measured: {why}")
     b = scalar(backlash_mm, "backlash_mm", "mm")
     u = scalar(uncertainty_mm, "uncertainty_mm", "mm", lo=0.0)
     margin = lim - b
     if b + u <= lim:
-        return ChannelVerdict(PASS, b, u, lim, margin, f"B + U = {b + u:.4f} mm <= limit {lim:.4f} mm")
+        return ChannelVerdict(Status.PASS, b, u, lim, margin, f"B + U = {b + u:.4f} mm <= limit {lim:.4f} mm")
     if b - u > lim:
-        return ChannelVerdict(FAIL, b, u, lim, margin, f"B - U = {b - u:.4f} mm > limit {lim:.4f} mm")
-    return ChannelVerdict(INCONCLUSIVE, b, u, lim, margin,
+        return ChannelVerdict(Status.FAIL, b, u, lim, margin, f"B - U = {b - u:.4f} mm > limit {lim:.4f} mm")
+    return ChannelVerdict(Status.INCONCLUSIVE, b, u, lim, margin,
                           f"the limit {lim:.4f} mm lies within B +- U = {b:.4f} +- {u:.4f} mm: "
                           "neither conformance nor non-conformance is proven")
 
 
-def overall(verdicts: Mapping[str, ChannelVerdict]) -> str:
+def overall(verdicts: Mapping[str, ChannelVerdict]) -> Status:
     """The check's decision from its channels: pass only if every channel passes, fail if any
     fails, else inconclusive. Channels ``not_traversed`` (BLFserv: no backlash crossing in the
     recording, expected for the external channel in symmetric operation) do not count, unless
     no channel was traversed."""
-    states = [v.status for v in verdicts.values() if v.status != NOT_TRAVERSED]
+    states = [v.status for v in verdicts.values() if v.status != Status.NOT_TRAVERSED]
     if not states:
-        return INCONCLUSIVE
-    if any(s == FAIL for s in states):
-        return FAIL
-    if all(s == PASS for s in states):
-        return PASS
-    return INCONCLUSIVE
+        return Status.INCONCLUSIVE
+    if any(s == Status.FAIL for s in states):
+        return Status.FAIL
+    if all(s == Status.PASS for s in states):
+        return Status.PASS
+    return Status.INCONCLUSIVE

@@ -23,7 +23,7 @@ import numpy as np
 
 from hil.canopen.cia402 import OperationMode, enables_operation
 from hil.canopen.cycle import CycleDecoder, SetpointEncoder, from_image
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import SYNC_COB_ID, Frame
 from hil.canopen.pdo import Direction, PdoError
 from hil.canopen.signalmap import Signal, torque_scale
@@ -121,7 +121,7 @@ def _codec(act: Actuation, meta: dict | None, rig=None):
     if image:
         try:
             pdos, chans = from_image(image)
-        except InputError as exc:
+        except CanopenInputError as exc:
             raise RecordingError(f"meta.json: {exc}") from None
     else:
         if rig is None:
@@ -145,25 +145,26 @@ def _codec(act: Actuation, meta: dict | None, rig=None):
     try:
         return (CycleDecoder(tx, [c for c in chans if c.signal.direction is Direction.TX]),
                 SetpointEncoder(rx, [c for c in chans if c.signal.direction is Direction.RX]), tuple(notes))
-    except InputError as exc:
+    except CanopenInputError as exc:
         raise RecordingError(f"process image: {exc}") from None
 
 
 def _frames(path: Path, counts: dict):
     """The frames of a candump log (``.gz`` too), skipping lines python-can cannot parse (counted)."""
+    opener = gzip.open if path.name.lower().endswith(".gz") else open
     try:
-        reader = can.io.CanutilsLogReader(gzip.open(path, "rt") if path.name.lower().endswith(".gz") else str(path))
-        it = iter(reader)
-        while True:
-            try:
-                msg = next(it)
-            except StopIteration:
-                return
-            except (ValueError, IndexError):
-                counts["bad"] += 1
-                continue
-            counts["frames"] += 1
-            yield Frame(msg.arbitration_id, bytes(msg.data))
+        with opener(path, "rt") as fh:  # closed however the reading ends (python-can closes only at the end)
+            it = iter(can.io.CanutilsLogReader(fh))
+            while True:
+                try:
+                    msg = next(it)
+                except StopIteration:
+                    return
+                except (ValueError, IndexError):
+                    counts["bad"] += 1
+                    continue
+                counts["frames"] += 1
+                yield Frame(msg.arbitration_id, bytes(msg.data))
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
 

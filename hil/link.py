@@ -24,7 +24,7 @@ SYNC to SYNC; ``emacheck run`` writes it into meta.json ``timing``.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import can
 

@@ -35,10 +35,11 @@ from __future__ import annotations
 
 import struct
 from collections import deque
+from collections.abc import Generator
 from dataclasses import dataclass, field, replace
 from enum import Enum
-from typing import Generator
 
+from hil import master_events as event
 from hil.canopen.cia402 import (
     SAFE_STATES,
     Command,
@@ -70,7 +71,7 @@ from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent, SdoTimeout, expe
 from hil.canopen.signalmap import ForceControl, NodeRole, ScaleSource, Signal
 from hil.config import Actuation
 from hil.errors import EmacheckError
-from hil.master_events import DriveFault, EventKind, HeartbeatLost, MasterEvent
+from hil.master_events import DriveFault, HeartbeatLost, MasterEvent
 from hil.preflight import (
     Heartbeat,
     LastHeartbeat,
@@ -86,7 +87,7 @@ from hil.preflight import (
     WaitBoot,
 )
 
-__all__ = ["DriveFault", "DriveView", "EventKind", "HeartbeatLost", "MasterCore", "MasterEvent",
+__all__ = ["DriveFault", "DriveView", "HeartbeatLost", "MasterCore", "MasterEvent",
            "MasterLossReactionError", "NodeView", "Phase", "PreflightError", "SAFE_STATES"]
 
 
@@ -207,9 +208,6 @@ class MasterCore:
 
     # ---------------------------------------------------------------- events
 
-    def _event(self, t: float, kind: EventKind, node: int, detail: str) -> None:
-        self.events.append(MasterEvent(t, kind, node, detail))
-
     def drain_events(self) -> list[MasterEvent]:
         ev, self.events = self.events, []
         return ev
@@ -254,7 +252,7 @@ class MasterCore:
             v.identity = self.preflight.identities.get(n, {})
             v.last_heartbeat_s = t  # the consumer starts now
         for node, what in self.preflight.events:
-            self._event(t, EventKind.PREFLIGHT, node, what)
+            self.events.append(event.NodeConfigured(t, node, what))
         self.phase = Phase.CYCLIC
 
     def _advance(self, result: object, t: float, first: bool = False) -> list[Frame]:
@@ -274,8 +272,7 @@ class MasterCore:
             self._pending = req
             if isinstance(req, Nmt):
                 out.append(nmt_frame(req.command, req.node))
-                self._event(t, EventKind.NMT, req.node, f"NMT {req.command.name} to "
-                            + (f"node {req.node}" if req.node else "all nodes"))
+                self.events.append(event.NmtSent(t, req.node, req.command))
                 if req.command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
                     for v in self.nodes.values():
                         if req.node in (0, v.node_id):
@@ -303,11 +300,11 @@ class MasterCore:
             elif isinstance(req, Heartbeat):
                 if req.on:
                     self._hb_next = t
-                    self._event(t, EventKind.DRILL, 0, "the master's heartbeat resumes")
+                    self.events.append(event.MasterHeartbeatResumed(t, 0))
                 else:
                     self._hb_next = None
                     result = self._hb_last if self._hb_last is not None else t
-                    self._event(t, EventKind.DRILL, 0, f"the master falls silent (last heartbeat at {result:.3f} s)")
+                    self.events.append(event.MasterFellSilent(t, 0, result))
             else:  # pragma: no cover
                 raise PreflightError(f"internal: unknown preflight request {req!r}")
 
@@ -320,7 +317,7 @@ class MasterCore:
         d.last_tpdo_s = t
         new = decode_state(sw)
         if new is not d.state:
-            self._event(t, EventKind.STATE, node, f"{d.state.name} -> {new.name} (SDO)")
+            self.events.append(event.DriveStateChanged(t, node, d.state, new, by_sdo=True))
             d.state = new
 
     # -------------------------------------------------------------- frames in
@@ -356,7 +353,7 @@ class MasterCore:
         if self.fault is None:
             raise exc
         self.later_faults.append(f"{type(exc).__name__}: {exc}")
-        self._event(t, EventKind.FAULT, node, str(exc))
+        self.events.append(event.LaterFault(t, node, str(exc)))
 
     def _on_frame(self, frame: Frame, t: float) -> list[Frame]:
         cid = frame.arbitration_id
@@ -390,7 +387,7 @@ class MasterCore:
             return []
         except PdoError as exc:
             self.bad_frames += 1
-            self._event(t, EventKind.BAD_FRAME, split_cob_id(cid)[1], str(exc))
+            self.events.append(event.BadFrame(t, split_cob_id(cid)[1], str(exc)))
             return []
 
     def _on_sdo(self, node: int, frame: Frame, t: float) -> list[Frame]:
@@ -417,7 +414,7 @@ class MasterCore:
         v.last_heartbeat_s = t
         if state == NmtState.BOOT_UP:
             v.booted = True
-            self._event(t, EventKind.BOOT, node, "boot-up")
+            self.events.append(event.BootUp(t, node))
             if self.phase is Phase.PREFLIGHT and isinstance(self._pending, WaitBoot) and \
                     all(x.booted for x in self.nodes.values()):
                 return self._advance(True, t)
@@ -435,7 +432,7 @@ class MasterCore:
             self.bad_frames += 1
             return
         self.emcy.append(e)
-        self._event(t, EventKind.EMCY, node, str(e))
+        self.events.append(event.EmcyReceived(t, node, e))
         if e.code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
             self._fail(DriveFault(str(e)), t, node)
 
@@ -483,7 +480,7 @@ class MasterCore:
                 if not v.lost and v.last_heartbeat_s is not None and \
                         t - v.last_heartbeat_s > v.hb_timeout_s - 0.5 * self.T:
                     v.lost = True
-                    self._event(t, EventKind.HEARTBEAT, n, "heartbeat lost")
+                    self.events.append(event.HeartbeatMissed(t, n))
                     self._fail(HeartbeatLost(f"{v.label}: heartbeat lost (none for {t - v.last_heartbeat_s:.3f} s, "
                                              f"timeout {v.hb_timeout_s:.3f} s)"), t, n)
         return []
@@ -495,7 +492,7 @@ class MasterCore:
             return
         if self.cycle > 0 and not self._complete:
             self.missing_cycles += 1
-            self._event(t, EventKind.MISSING, 0, f"cycle {self.cycle}: TPDOs incomplete at the next SYNC")
+            self.events.append(event.CycleIncomplete(t, 0, self.cycle))
         self.cycle += 1
         self._complete = False
         self._sample = None
@@ -523,7 +520,7 @@ class MasterCore:
                 d.mode_pending = None
         new = decode_state(sw)
         if new is not d.state:
-            self._event(t, EventKind.STATE, d.node_id, f"{d.state.name} -> {new.name}")
+            self.events.append(event.DriveStateChanged(t, d.node_id, d.state, new))
             d.state = new
             if new is not State.FAULT:
                 d.fault_resets = 0
@@ -580,7 +577,8 @@ class MasterCore:
         """
         out: list[Frame] = []
         enc = self.encoder
-        for k, (n, sp, phi) in enumerate(((self.order[0], sp1, sample.phi1_rad), (self.order[1], sp2, sample.phi2_rad))):
+        per_drive = ((self.order[0], sp1, sample.phi1_rad), (self.order[1], sp2, sample.phi2_rad))
+        for k, (n, sp, phi) in enumerate(per_drive):
             d = self.drives[n]
             target, torque = phi, 0.0
             if sp.mode is DriveMode.DISABLED:
@@ -629,7 +627,7 @@ class MasterCore:
                 cw = self.plan.map.entry(d.ema, Signal.CONTROLWORD)
                 out.append(expedited_download_frame(n, cw.index, cw.subindex,
                                                     struct.pack("<H", controlword(Command.QUICK_STOP))))
-                self._event(t, EventKind.SDO, n, "quick stop by SDO (controlword): the drive did not follow the RPDOs")
+                self.events.append(event.QuickStopBySdo(t, n))
         return out
 
     def abort_preflight_frames(self, t: float) -> list[Frame]:
@@ -642,7 +640,7 @@ class MasterCore:
             cw = self.plan.map.entry(setup.ema, Signal.CONTROLWORD)
             out.append(expedited_download_frame(n, cw.index, cw.subindex,
                                                 struct.pack("<H", controlword(Command.DISABLE_VOLTAGE))))
-            self._event(t, EventKind.SDO, n, "disable voltage by SDO: the preflight failed during the drill")
+            self.events.append(event.DisableBySdo(t, n))
         return out
 
     def unreachable(self, t: float) -> list[int]:

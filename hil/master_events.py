@@ -1,13 +1,20 @@
-"""What the master core reports: its events for the log and the faults it raises (typed, naming the node)."""
+"""What the master core reports: its events for the log and the faults it raises (typed, naming the node).
+
+One small frozen class per kind of event (h11's ``_events.py``): a consumer matches by type, never on a
+kind string, and reads typed fields; ``str(event)`` is the line for a log."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
 
+from hil.canopen.cia402 import State
+from hil.canopen.emcy import Emcy
+from hil.canopen.nmt import NmtCommand
 from hil.errors import EmacheckError
 
-__all__ = ["DriveFault", "EventKind", "HeartbeatLost", "MasterEvent"]
+__all__ = ["BadFrame", "BootUp", "CycleIncomplete", "DisableBySdo", "DriveFault", "DriveStateChanged", "EmcyReceived",
+           "HeartbeatLost", "HeartbeatMissed", "LaterFault", "MasterEvent", "MasterFellSilent",
+           "MasterHeartbeatResumed", "NmtSent", "NodeConfigured", "QuickStopBySdo"]
 
 
 class DriveFault(EmacheckError, RuntimeError):
@@ -18,27 +25,135 @@ class HeartbeatLost(EmacheckError, RuntimeError):
     """A node's heartbeat did not arrive within its timeout."""
 
 
-class EventKind(Enum):
-    """What a :class:`MasterEvent` reports."""
+@dataclass(frozen=True, slots=True)
+class MasterEvent:
+    """Something the master saw or did, for the log (the core never prints): the base of the
+    event classes below, one per kind of event, matched by type (``isinstance`` or ``match``).
 
-    NMT = "nmt"  #: an NMT command sent
-    BOOT = "boot"  #: a node's boot-up message
-    SDO = "sdo"  #: an SDO sent outside the preflight (the quick stop by SDO)
-    PREFLIGHT = "preflight"  #: a node identified and configured
-    DRILL = "drill"  #: the master's-death drill: silent, heard back
-    STATE = "state"  #: a drive's CiA 402 state changed
-    EMCY = "emcy"  #: an emergency message
-    MISSING = "missing"  #: a SYNC cycle whose TPDOs were incomplete at the next SYNC
-    BAD_FRAME = "bad_frame"  #: a malformed PDO, counted and ignored
-    HEARTBEAT = "heartbeat"  #: a node's heartbeat lost
-    FAULT = "fault"  #: a fault after the first one (recorded, not raised again)
+    ``str(event)`` is its line for a log.
+    """
+
+    t_s: float  #: the master's time of the event [s]
+    node_id: int  #: the node it concerns, 0 for the master itself or the bus
 
 
 @dataclass(frozen=True, slots=True)
-class MasterEvent:
-    """Something the master saw or did, for the log (the core never prints)."""
+class NmtSent(MasterEvent):
+    """An NMT command sent (``node_id`` 0: to all nodes)."""
 
-    t_s: float
-    kind: EventKind
-    node_id: int
-    detail: str
+    command: NmtCommand
+
+    def __str__(self) -> str:
+        return f"NMT {self.command.name} to " + (f"node {self.node_id}" if self.node_id else "all nodes")
+
+
+@dataclass(frozen=True, slots=True)
+class BootUp(MasterEvent):
+    """A node's boot-up message."""
+
+    def __str__(self) -> str:
+        return "boot-up"
+
+
+@dataclass(frozen=True, slots=True)
+class NodeConfigured(MasterEvent):
+    """The preflight's word on a node: identified and configured, or an option it refused."""
+
+    what: str
+
+    def __str__(self) -> str:
+        return self.what
+
+
+@dataclass(frozen=True, slots=True)
+class MasterFellSilent(MasterEvent):
+    """The master's-death drill: the master stops its heartbeat (``node_id`` 0)."""
+
+    last_heartbeat_s: float  #: when its last heartbeat went out [s]
+
+    def __str__(self) -> str:
+        return f"the master falls silent (last heartbeat at {self.last_heartbeat_s:.3f} s)"
+
+
+@dataclass(frozen=True, slots=True)
+class MasterHeartbeatResumed(MasterEvent):
+    """The master's-death drill: the master's heartbeat resumes (``node_id`` 0)."""
+
+    def __str__(self) -> str:
+        return "the master's heartbeat resumes"
+
+
+@dataclass(frozen=True, slots=True)
+class DriveStateChanged(MasterEvent):
+    """A drive's CiA 402 state changed, as its statusword shows (by PDO, or read by SDO)."""
+
+    old: State
+    new: State
+    by_sdo: bool = False
+
+    def __str__(self) -> str:
+        return f"{self.old.name} -> {self.new.name}" + (" (SDO)" if self.by_sdo else "")
+
+
+@dataclass(frozen=True, slots=True)
+class EmcyReceived(MasterEvent):
+    """An emergency message."""
+
+    emcy: Emcy
+
+    def __str__(self) -> str:
+        return str(self.emcy)
+
+
+@dataclass(frozen=True, slots=True)
+class CycleIncomplete(MasterEvent):
+    """A SYNC cycle whose TPDOs were incomplete at the next SYNC (``node_id`` 0)."""
+
+    cycle: int
+
+    def __str__(self) -> str:
+        return f"cycle {self.cycle}: TPDOs incomplete at the next SYNC"
+
+
+@dataclass(frozen=True, slots=True)
+class BadFrame(MasterEvent):
+    """A malformed PDO, counted and ignored."""
+
+    problem: str
+
+    def __str__(self) -> str:
+        return self.problem
+
+
+@dataclass(frozen=True, slots=True)
+class HeartbeatMissed(MasterEvent):
+    """A node's heartbeat lost (the fault :class:`HeartbeatLost` follows)."""
+
+    def __str__(self) -> str:
+        return "heartbeat lost"
+
+
+@dataclass(frozen=True, slots=True)
+class QuickStopBySdo(MasterEvent):
+    """Quick stop written to a drive's controlword by SDO: it did not follow the RPDOs."""
+
+    def __str__(self) -> str:
+        return "quick stop by SDO (controlword): the drive did not follow the RPDOs"
+
+
+@dataclass(frozen=True, slots=True)
+class DisableBySdo(MasterEvent):
+    """Disable voltage written to a drive's controlword by SDO: the preflight failed during the drill."""
+
+    def __str__(self) -> str:
+        return "disable voltage by SDO: the preflight failed during the drill"
+
+
+@dataclass(frozen=True, slots=True)
+class LaterFault(MasterEvent):
+    """A fault after the first one (recorded, not raised again)."""
+
+    problem: str
+
+    def __str__(self) -> str:
+        return self.problem

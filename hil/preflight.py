@@ -35,6 +35,7 @@ Sequence (CiA 302-style, per node as the rig's :class:`~hil.canopen.plan.RigPlan
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 from collections.abc import Generator
@@ -45,7 +46,7 @@ from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
 from hil.canopen.nmt import NmtCommand
-from hil.canopen.od import AbortConnectionOption, QUICK_STOP_OPTION, master_loss_steps
+from hil.canopen.od import QUICK_STOP_OPTION, AbortConnectionOption, master_loss_steps
 from hil.canopen.pdo import TYPE_BITS
 from hil.canopen.plan import CSP_BIT, CST_BIT, DrivePlan, NodePlan, RigPlan
 from hil.canopen.sdo import SdoAbortError, SdoTimeout, describe
@@ -513,10 +514,8 @@ class Preflight:
             # error is told (a drive that does not follow is stopped by SDO when the master gives up)
             yield Heartbeat(True)
             for d in drives:
-                try:
+                with contextlib.suppress(PreflightError):
                     yield from self._power_down_by_sdo(d)
-                except PreflightError:
-                    pass
             raise
         self.powered = []
 
@@ -639,10 +638,9 @@ class Preflight:
                 previous_cw = controlword(Command.FAULT_RESET)
                 resets += 1
             elif state not in (State.NOT_READY_TO_SWITCH_ON, State.FAULT_REACTION_ACTIVE):  # (those: wait)
-                if target is State.SWITCH_ON_DISABLED:
-                    cmd = Command.DISABLE_VOLTAGE  # from any state: transitions 7, 9, 10, 12
-                else:
-                    cmd = next_command(state, target)
+                # to switch on disabled from any state: transitions 7, 9, 10, 12
+                cmd = (Command.DISABLE_VOLTAGE if target is State.SWITCH_ON_DISABLED
+                       else next_command(state, target))
                 if cmd is not None:
                     cw = controlword(cmd)
                     yield from self._write(node, 0x6040, 0, cw, f"controlword ({cmd.value})")

@@ -14,7 +14,7 @@ from typing import Any
 
 from canopen.objectdictionary import datatypes
 
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.signalmap import (
     DEFAULT_OBJECTS,
     DRIVE_ROLE,
@@ -80,7 +80,7 @@ def _signal_entry(sig: Signal, ema: int, tbl: Any, act: Actuation, fname: str) -
         raise ProfileError(f"{fname}: missing field '{where}.object' (e.g. \"0x6401:01\")")
     try:
         index, sub = parse_object(tbl["object"], f"{where}.object") if "object" in tbl else default
-    except InputError as exc:
+    except CanopenInputError as exc:
         raise ProfileError(f"{fname}: field {exc}") from None
     node = tbl.get("node", f"ema{ema}")
     if not isinstance(node, str):
@@ -212,7 +212,7 @@ def load_signal_map(signals: Any, nodes: Any, cob_ids: Any, act: Actuation, fnam
     if c.gear_ratio_object:
         try:
             parse_object(c.gear_ratio_object, "canopen.gear_ratio_object")
-        except InputError as exc:
+        except CanopenInputError as exc:
             raise ProfileError(f"{fname}: field {exc}") from None
     cobs = []
     for k, v in _table(cob_ids, "canopen.cob_ids", fname).items():

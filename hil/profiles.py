@@ -344,7 +344,7 @@ def effect_registry() -> dict[str, type]:
     if reg is not None:
         return dict(reg)
     import re
-    return {re.sub(r"(?<!^)(?=[A-Z])", "_", c.__name__).lower(): c for c in sim_effects._KNOWN}
+    return {re.sub(r"(?<!^)(?=[A-Z])", "_", c.__name__).lower(): c for c in sim_effects.EFFECTS.values()}
 
 
 def _load_effect(tbl: Any, index: int, fname: str) -> Any:

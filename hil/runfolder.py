@@ -146,7 +146,7 @@ class SignalsWriter:
 
     def __init__(self, path: Path, flush_rows: int = 500) -> None:
         self.path = path
-        self._fh = open(path, "w", buffering=1 << 16)
+        self._fh = open(path, "w", buffering=1 << 16)  # noqa: SIM115 (the writer owns it: close() closes it)
         self._fh.write(",".join(SIGNAL_COLUMNS + EXTRA_COLUMNS) + "\n")
         self._fh.flush()
         self._pending = 0
@@ -214,7 +214,7 @@ class Signals:
     def sample_period_s(self) -> float:
         return float(np.median(np.diff(self.t)))
 
-    def select(self, mask: np.ndarray) -> "Signals":
+    def select(self, mask: np.ndarray) -> Signals:
         kw = {}
         for name in SIGNAL_COLUMNS + EXTRA_COLUMNS:
             v = getattr(self, name)

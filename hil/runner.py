@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import datetime as _dt
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Protocol
+from typing import Protocol
 
 from hil import __version__
 from hil.canopen.process import DriveMode, Sample, Setpoint
@@ -69,7 +70,7 @@ class LoopOutcome:
 
 
 def _now_iso() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 def start_meta(act: Actuation, check: Check, extra: dict) -> dict:

@@ -153,7 +153,8 @@ class CheckSequence:
     (``phi_c = phi - s * i_total``); the calibration needs no better.
     """
 
-    def __init__(self, actuation: Actuation, check: Check, force_by_position: tuple[bool, bool] = (False, False)) -> None:
+    def __init__(self, actuation: Actuation, check: Check,
+                 force_by_position: tuple[bool, bool] = (False, False)) -> None:
         self.act = actuation
         #: per EMA: it holds a force by the master's loop in position mode (its drive has no CST)
         self.force_by_position = (bool(force_by_position[0]), bool(force_by_position[1]))

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import can
 
@@ -125,7 +125,7 @@ class _PythonCanIO:
 
 
 class _RawIO:
-    """Frames on a SocketCAN socket through :class:`hil.link.SocketcanFrames`."""
+    """Frames on a SocketCAN socket through :class:`hil.transport.SocketcanFrames`."""
 
     def __init__(self, raw: SocketcanFrames) -> None:
         self.raw = raw
@@ -164,7 +164,7 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
     bus : can.BusABC
         Any python-can bus; it is shut down when the loop ends. On SocketCAN
         the frames go through the bus's socket directly (about one system call
-        per frame, see :class:`hil.link.SocketcanFrames`).
+        per frame, see :class:`hil.transport.SocketcanFrames`).
     pair : sim.drives.SimDrivePair
         The two simulated drives (fresh or already powered).
     stop : threading.Event, optional

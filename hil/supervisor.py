@@ -79,7 +79,7 @@ class Limits:
     max_frozen_cycles: int
 
     @classmethod
-    def of(cls, actuation: Actuation, check: Check) -> "Limits":
+    def of(cls, actuation: Actuation, check: Check) -> Limits:
         s = check.safety
         f_lim = actuation.mechanics.limit_load_N
         return cls(

@@ -203,7 +203,7 @@ class SocketcanFrames:
         sock.setblocking(True)
 
     @classmethod
-    def for_bus(cls, bus: can.BusABC) -> "SocketcanFrames | None":
+    def for_bus(cls, bus: can.BusABC) -> SocketcanFrames | None:
         """The fast path for a python-can SocketCAN bus, None for any other bus."""
         sock = getattr(bus, "socket", None)
         if isinstance(sock, socket.socket) and sock.family == getattr(socket, "AF_CAN", None):

@@ -301,7 +301,7 @@ class FaultInjector:
         chans = []
         for ch in plan.channels:
             if ch.scale is None and ch.signal is Signal.MOTOR_ANGLE:
-                ch = _replace(ch, scale=Scale(self._nodes[ch.ema]._k_inc()))
+                ch = _replace(ch, scale=Scale(self._nodes[ch.ema].angle_increments_per_rad()))
             chans.append(ch)
         self._codec = CycleDecoder(plan.tx_pdos, [c for c in chans if c.signal.direction is Direction.TX])
         #: bus time [s] of the last frame that reached the drives (None before the first)
@@ -432,7 +432,8 @@ class FaultInjector:
         if self.syncs == 0:
             return frozenset()
         return frozenset(nid for k, nid in self._silent_sensor.items()
-                         if self.faults[k].start_s - 1e-9 <= t < self.faults[k].start_s + self.faults[k].duration_s - 1e-9)
+                         if self.faults[k].start_s - 1e-9 <= t
+                         < self.faults[k].start_s + self.faults[k].duration_s - 1e-9)
 
     def _drive_hooks(self, t: float) -> None:
         """Switch the drive faults on or off at bus time ``t`` (their time base: since power-on)."""

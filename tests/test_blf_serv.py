@@ -8,6 +8,7 @@ numbers (20 mm x 7.5 % = 1.5 mm, 2 mm x 1 % = 0.02 mm).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -75,7 +76,7 @@ def test_noise_gains_match_monte_carlo():
     y0 = signal.lfilter(f.lowpass_b, f.lowpass_a, e)
     y1 = signal.lfilter(f.dt1_b, f.dt1_a, y0)
     y2 = signal.lfilter(f.dt1_b, f.dt1_a, y1)
-    for g, y in zip(f.noise_gain, (y0, y1, y2)):
+    for g, y in zip(f.noise_gain, (y0, y1, y2), strict=True):
         assert np.std(y[2000:]) == pytest.approx(g, rel=0.01)
     # 0.025 mm pp LVDT noise: thresholds 5 sigma of the filtered derivatives
     r = blf_serv(e[:3000] * SIGMA, FS, noise_std_mm=SIGMA)
@@ -207,7 +208,7 @@ def test_result_types_and_readonly_signals():
     r = blf_serv(d, FS)
     assert isinstance(r, BlfServResult) and r.n_samples == d.size
     assert r.d_filtered_mm.shape == d.shape and not r.d_filtered_mm.flags.writeable
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         r.backlash_mm = 1.0
     r2 = blf_serv(d, FS, keep_signals=False, t0_s=100.0)
     assert r2.d_filtered_mm is None and r2.backlash_mm == r.backlash_mm
@@ -233,7 +234,7 @@ def test_bad_input_is_refused_with_the_argument_named(args, kw, needle):
 
 def _compare(a: BlfServResult, b: BlfServResult) -> None:
     assert len(a.jumps) == len(b.jumps)
-    for ja, jb in zip(a.jumps, b.jumps):
+    for ja, jb in zip(a.jumps, b.jumps, strict=True):
         for f in ("t_start_s", "t_end_s", "t_jump_s", "height_mm", "height_sigma_mm", "paper_delta_mm",
                   "residual_before_mm", "residual_after_mm"):
             x, y = getattr(ja, f), getattr(jb, f)
@@ -251,7 +252,7 @@ def test_streaming_equals_batch_sample_by_sample_and_in_chunks():
              synthetic(rng, jumps=((2.0, -0.12), (7.0, 0.12)), slope=-0.1)[1],
              synthetic(rng, jumps=(), slope=0.0)[1]]
     noise = [estimate_noise_std_mm(c) for c in chans]
-    batch = [blf_serv(c, FS, noise_std_mm=s) for c, s in zip(chans, noise)]
+    batch = [blf_serv(c, FS, noise_std_mm=s) for c, s in zip(chans, noise, strict=True)]
     assert [b.traversals for b in batch] == [3, 2, 0]
     X = np.column_stack(chans)
     # sample by sample, three channels at once; an intermediate result() does not disturb

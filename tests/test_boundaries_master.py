@@ -57,8 +57,8 @@ def test_boot_timeout_on_its_limit_and_one_step_after(actuation, t0):
         assert m.fault is None and m.phase is Phase.PREFLIGHT, t
     m = make_master(actuation)
     m.start(t0)
-    with pytest.raises(PreflightError, match=r"^node 1 \(EMA 1\), node 2 \(EMA 2\): no boot-up within canopen.boot_timeout_s = "
-                                             r"2.0 s of NMT reset$"):
+    with pytest.raises(PreflightError, match=r"^node 1 \(EMA 1\), node 2 \(EMA 2\): no boot-up within "
+                                             r"canopen.boot_timeout_s = 2.0 s of NMT reset$"):
         m.poll(above)
     assert isinstance(m.fault, PreflightError) and m.quick_stop
 
@@ -289,7 +289,7 @@ def test_master_lag_on_its_limit_and_one_step_beyond(actuation, simrig, max_lag_
     """lag > safety.max_lag_s stops with StaleData (default: max_missing_cycles periods; capped at 0.5 s)."""
     for lag, trips in ((math.nextafter(expected, 0.0), False), (expected, False),
                        (math.nextafter(expected, 1.0), True)):
-        bus = ScriptedBus(T_EXACT, lag=lambda k: lag)
+        bus = ScriptedBus(T_EXACT, lag=lambda k, lag=lag: lag)
         link = _link(actuation, simrig, bus, max_missing_cycles=5, max_lag_s=max_lag_s)
         assert link.max_lag_s == expected
         if trips:
@@ -305,7 +305,7 @@ def test_master_lag_on_its_limit_and_one_step_beyond(actuation, simrig, max_lag_
 def test_cycles_without_a_complete_sample_on_the_limit_and_one_more(actuation, simrig, max_missing):
     """``max_missing_cycles`` SYNC cycles in a row without a sample are tolerated; one more is stale."""
     for lost, trips in ((max_missing - 1, False), (max_missing, False), (max_missing + 1, True)):
-        bus = ScriptedBus(T_EXACT, silent=lambda k: k <= lost)
+        bus = ScriptedBus(T_EXACT, silent=lambda k, lost=lost: k <= lost)
         link = _link(actuation, simrig, bus, max_missing_cycles=max_missing)
         if trips:
             with pytest.raises(StaleData, match=rf"^sensor data stale: no complete sample for {max_missing + 1} "

@@ -9,6 +9,8 @@ name the argument and its unit (the house rule for errors).
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 
 import pytest
@@ -16,14 +18,11 @@ import pytest
 from blf.errors import InputError
 from blf.verdict import (
     COVERAGE_FACTOR,
-    FAIL,
-    INCONCLUSIVE,
     METHOD_BOUND_MM,
     METHOD_BOUND_REL,
-    NOT_TRAVERSED,
-    PASS,
     SERV_METHOD_REL,
     ChannelVerdict,
+    Status,
     combine,
     decide,
     maint_uncertainty,
@@ -43,7 +42,7 @@ U = 0.006  # the expanded uncertainty of a shipped check's reading [mm]
 def test_pass_rule_on_its_limit_and_one_step_either_side(limit, u):
     below, at, above = around(lambda b: b + u, limit, limit - u)
     assert at + u == limit  # on the limit, in floats
-    for b, status in ((below, PASS), (at, PASS), (above, INCONCLUSIVE)):
+    for b, status in ((below, Status.PASS), (at, Status.PASS), (above, Status.INCONCLUSIVE)):
         v = decide(b, u, limit)
         assert (v.status, v.backlash_mm, v.uncertainty_mm, v.limit_mm) == (status, b, u, limit), (b, v)
         assert v.margin_mm == limit - b
@@ -58,7 +57,7 @@ def test_fail_rule_on_its_limit_and_one_step_either_side(limit, u):
     """B - U = 0.200 exactly is not proven above the limit (inconclusive); one step more is."""
     below, at, above = around(lambda b: b - u, limit, limit + u)
     assert at - u == limit
-    for b, status in ((below, INCONCLUSIVE), (at, INCONCLUSIVE), (above, FAIL)):
+    for b, status in ((below, Status.INCONCLUSIVE), (at, Status.INCONCLUSIVE), (above, Status.FAIL)):
         v = decide(b, u, limit)
         assert (v.status, v.backlash_mm, v.uncertainty_mm) == (status, b, u), (b, v)
         assert v.margin_mm == limit - b
@@ -70,19 +69,19 @@ def test_fail_rule_on_its_limit_and_one_step_either_side(limit, u):
 
 
 def test_without_uncertainty_the_limit_itself_passes_and_one_step_above_fails():
-    assert decide(LIMIT, 0.0, LIMIT).status == PASS
-    assert decide(math.nextafter(LIMIT, 1.0), 0.0, LIMIT).status == FAIL
-    assert decide(math.nextafter(LIMIT, 0.0), 0.0, LIMIT).status == PASS
+    assert decide(LIMIT, 0.0, LIMIT).status == Status.PASS
+    assert decide(math.nextafter(LIMIT, 1.0), 0.0, LIMIT).status == Status.FAIL
+    assert decide(math.nextafter(LIMIT, 0.0), 0.0, LIMIT).status == Status.PASS
 
 
 def test_a_reading_in_micrometres_on_each_side():
     """Whole micrometres, as an inspector reads them: 194 + 6 = 200 passes, 195 + 6 does not;
     206 - 6 = 200 is inconclusive, 207 - 6 fails (the float of each landing where intended)."""
     um = 1e-3
-    assert decide(194 * um, 6 * um, 200 * um).status == PASS
-    assert decide(195 * um, 6 * um, 200 * um).status == INCONCLUSIVE
-    assert decide(205 * um, 6 * um, 200 * um).status == INCONCLUSIVE
-    assert decide(207 * um, 6 * um, 200 * um).status == FAIL
+    assert decide(194 * um, 6 * um, 200 * um).status == Status.PASS
+    assert decide(195 * um, 6 * um, 200 * um).status == Status.INCONCLUSIVE
+    assert decide(205 * um, 6 * um, 200 * um).status == Status.INCONCLUSIVE
+    assert decide(207 * um, 6 * um, 200 * um).status == Status.FAIL
 
 
 # ---------------------------------------------------------------------------- not measured, not traversed
@@ -90,19 +89,19 @@ def test_a_reading_in_micrometres_on_each_side():
 
 def test_a_channel_not_measured_names_why_and_the_default_says_so():
     v = decide(None, None, LIMIT)
-    assert v == ChannelVerdict(INCONCLUSIVE, None, None, LIMIT, None, "not measured: not measured")
+    assert v == ChannelVerdict(Status.INCONCLUSIVE, None, None, LIMIT, None, "not measured: not measured")
     v = decide(None, None, LIMIT, missing="no contact on the tension side")
-    assert v.status == INCONCLUSIVE and v.reason == "not measured: no contact on the tension side"
+    assert v.status == Status.INCONCLUSIVE and v.reason == "not measured: no contact on the tension side"
     # a reading given with missing= is still decided on its numbers
-    assert decide(0.1, 0.01, LIMIT, missing="ignored").status == PASS
+    assert decide(0.1, 0.01, LIMIT, missing="ignored").status == Status.PASS
 
 
 def test_not_traversed_only_with_its_flag_and_only_without_a_reading():
     v = decide(None, None, LIMIT, not_traversed=True)
-    assert v == ChannelVerdict(NOT_TRAVERSED, None, None, LIMIT, None, "no backlash traversal in the recording")
+    assert v == ChannelVerdict(Status.NOT_TRAVERSED, None, None, LIMIT, None, "no backlash traversal in the recording")
     v = decide(None, None, LIMIT, missing="symmetric operation", not_traversed=True)
-    assert v.status == NOT_TRAVERSED and v.reason == "symmetric operation"
-    assert decide(0.1, 0.01, LIMIT, not_traversed=True).status == PASS  # a reading is decided
+    assert v.status == Status.NOT_TRAVERSED and v.reason == "symmetric operation"
+    assert decide(0.1, 0.01, LIMIT, not_traversed=True).status == Status.PASS  # a reading is decided
 
 
 # ---------------------------------------------------------------------------- overall
@@ -113,20 +112,21 @@ def _v(status: str) -> ChannelVerdict:
 
 
 @pytest.mark.parametrize("statuses, expected", [
-    ((PASS,), PASS),
-    ((PASS, PASS, PASS), PASS),
-    ((PASS, INCONCLUSIVE), INCONCLUSIVE),
-    ((INCONCLUSIVE, PASS), INCONCLUSIVE),
-    ((PASS, FAIL), FAIL),
-    ((INCONCLUSIVE, FAIL, PASS), FAIL),  # a proven failure wins over an inconclusive channel
-    ((FAIL, FAIL), FAIL),
-    ((INCONCLUSIVE,), INCONCLUSIVE),
-    ((PASS, NOT_TRAVERSED), PASS),  # not traversed does not count
-    ((FAIL, NOT_TRAVERSED), FAIL),
-    ((INCONCLUSIVE, NOT_TRAVERSED), INCONCLUSIVE),
-    ((NOT_TRAVERSED,), INCONCLUSIVE),  # nothing traversed proves nothing
-    ((NOT_TRAVERSED, NOT_TRAVERSED), INCONCLUSIVE),
-    ((), INCONCLUSIVE),
+    ((Status.PASS,), Status.PASS),
+    ((Status.PASS, Status.PASS, Status.PASS), Status.PASS),
+    ((Status.PASS, Status.INCONCLUSIVE), Status.INCONCLUSIVE),
+    ((Status.INCONCLUSIVE, Status.PASS), Status.INCONCLUSIVE),
+    ((Status.PASS, Status.FAIL), Status.FAIL),
+    # a proven failure wins over an inconclusive channel
+    ((Status.INCONCLUSIVE, Status.FAIL, Status.PASS), Status.FAIL),
+    ((Status.FAIL, Status.FAIL), Status.FAIL),
+    ((Status.INCONCLUSIVE,), Status.INCONCLUSIVE),
+    ((Status.PASS, Status.NOT_TRAVERSED), Status.PASS),  # not traversed does not count
+    ((Status.FAIL, Status.NOT_TRAVERSED), Status.FAIL),
+    ((Status.INCONCLUSIVE, Status.NOT_TRAVERSED), Status.INCONCLUSIVE),
+    ((Status.NOT_TRAVERSED,), Status.INCONCLUSIVE),  # nothing traversed proves nothing
+    ((Status.NOT_TRAVERSED, Status.NOT_TRAVERSED), Status.INCONCLUSIVE),
+    ((), Status.INCONCLUSIVE),
 ])
 def test_overall_decision_of_the_channels(statuses, expected):
     assert overall({f"ch{k}": _v(s) for k, s in enumerate(statuses)}) == expected
@@ -226,3 +226,13 @@ def test_serv_budget_refuses_bad_input_naming_it(args, message):
 def test_decide_refuses_bad_input_naming_it(args, message):
     with pytest.raises(InputError, match=message):
         decide(*args)
+
+
+def test_a_status_is_its_string_in_json():
+    """Status is a StrEnum: equal to its value, and result.json and the history hold the same strings."""
+    assert [str(s) for s in Status] == ["pass", "fail", "inconclusive", "not_traversed"]
+    assert Status.PASS == "pass" and f"{Status.NOT_TRAVERSED}" == "not_traversed"
+    v = decide(0.1, 0.01, LIMIT)
+    text = json.dumps(dataclasses.asdict(v))
+    assert text.startswith('{"status": "pass", ') and text == json.dumps({**dataclasses.asdict(v), "status": "pass"})
+    assert json.dumps({"status": overall({"int1": v})}) == '{"status": "pass"}'

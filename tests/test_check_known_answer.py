@@ -90,5 +90,5 @@ def test_repeatability_over_ten_seeds(tmp_path, actuation, check_profile, simrig
         _assert_within(res, truth)
         rows.append([res["backlash_mm"][ch] for ch in CHANNELS])
     std = np.std(np.array(rows), axis=0, ddof=1)
-    for ch, s in zip(CHANNELS, std):
+    for ch, s in zip(CHANNELS, std, strict=True):
         assert s < 0.003, f"{ch}: backlash std over 10 seeds {s:.5f} mm"

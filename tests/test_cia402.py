@@ -25,7 +25,7 @@ from hil.canopen.cia402 import (
     path,
     state_word,
 )
-from hil.canopen.errors import CanopenError, InputError
+from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.process import DriveMode
 
 S = State
@@ -126,9 +126,9 @@ def test_decode_command_only_reads_command_bits(cw):
 
 
 def test_decode_rejects_non_words():
-    with pytest.raises(InputError, match="0x10000"):
+    with pytest.raises(CanopenInputError, match="0x10000"):
         decode_state(0x10000)
-    with pytest.raises(InputError):
+    with pytest.raises(CanopenInputError):
         decode_command(-1)
 
 
@@ -160,7 +160,7 @@ def test_state_words_golden():
     assert [state_word(s, extra=r) for s in State] == [
         0x0200, 0x0250, 0x0231, 0x0233, 0x0237, 0x0217, 0x021F, 0x0218,
     ]
-    with pytest.raises(InputError, match="state bits"):
+    with pytest.raises(CanopenInputError, match="state bits"):
         state_word(S.FAULT, extra=Statusword.SWITCHED_ON)
 
 

@@ -43,7 +43,7 @@ def test_analyze_bare_csv_finds_segments_itself(default_run, tmp_path):
     run_dir, truth = default_run
     lines = (run_dir / "signals.csv").read_text().splitlines()
     bare = tmp_path / "bare.csv"
-    bare.write_text("\n".join(",".join(l.split(",")[:7]) for l in lines) + "\n")
+    bare.write_text("\n".join(",".join(line.split(",")[:7]) for line in lines) + "\n")
     rc = main(["analyze", str(bare), "--out", str(tmp_path / "a")])
     assert rc == 0
     res = json.loads((tmp_path / "a" / "result.json").read_text())
@@ -60,9 +60,9 @@ def test_analyze_force_fight_only_says_uncorrected(default_run, tmp_path):
     lines = (run_dir / "signals.csv").read_text().splitlines()
     head = lines[0].split(",")
     step = head.index("step")
-    keep = [lines[0]] + [l for l in lines[1:] if l.split(",")[step] == "force_fight"]
+    keep = [lines[0]] + [line for line in lines[1:] if line.split(",")[step] == "force_fight"]
     p = tmp_path / "ff.csv"
-    p.write_text("\n".join(",".join(l.split(",")[:7]) for l in keep) + "\n")
+    p.write_text("\n".join(",".join(line.split(",")[:7]) for line in keep) + "\n")
     rc = main(["analyze", str(p), "--out", str(tmp_path / "a")])
     res = json.loads((tmp_path / "a" / "result.json").read_text())
     # the shipped rig passes uncalibrated too: U carries the uncalibrated pitch (tests/test_check_known_answer.py)

@@ -354,7 +354,7 @@ def test_regime_test_localises_a_mismatch_the_window_test_misses():
     assert d.verdict == "unexplained" and d.effects == ()
     reg = [loc for loc in d.locations if loc.test == "regime"]
     assert reg and all("position along the stroke -1" in loc.regime or "position along the stroke +0" in loc.regime
-                       or "position along the stroke -0" in loc.regime for loc in reg), [l.regime for l in reg]
+                       or "position along the stroke -0" in loc.regime for loc in reg), [loc.regime for loc in reg]
     assert abs(d.nominal["gain"] - 1.02) < 1e-3
     d0 = diagnose(_BandModel(0.0), 0.002)
     assert d0.verdict == "no_mismatch", (d0.excess_before, d0.regime_before)

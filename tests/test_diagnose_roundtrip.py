@@ -18,10 +18,10 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from test_verdict import validate
 
 from hil.cli import main
 from hil.runfolder import read_signals
-from test_verdict import validate
 
 CALIBRATED = {"lvdt_pitch", "lvdt_offset"}
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,7 +61,7 @@ def test_minimal_csv_and_gz(dry, tmp_path):
     sig = read_signals(dry / "signals.csv")
     lines = ["t,phi1,phi2,s1,s2,F1,F2"] + [
         ",".join(f"{v:.9g}" for v in row)
-        for row in zip(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2)]
+        for row in zip(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2, strict=True)]
     text = "\n".join(lines) + "\n"
     (tmp_path / "min.csv").write_text(text)
     with gzip.open(tmp_path / "min.csv.gz", "wt") as fh:

@@ -34,7 +34,7 @@ from hil.profiles import default_profile_path, load_actuation, load_check, load_
 from hil.rig import plan_for
 from sim.drives import SimDrive
 from sim.drives.served import own_data
-from sim.drives.stats import _Counters
+from sim.drives.stats import PairCounters
 from support.sim_bus import Bus
 
 VENDOR = Path(__file__).resolve().parents[2] / "shared" / "data" / "vendor-eds"
@@ -123,20 +123,20 @@ def _drive(od: cod.ObjectDictionary, node_id: int = 1, *, own: bool = True) -> t
                     info.revision_number or 0, DeviceProfile.DRIVE, 0.1, "canopen")
     out: list[Frame] = []
     drive = SimDrive(node_id, 0, od, gear_ratio_rad_per_mm=5.0, counts_per_rev=None, sample_period_s=0.002,
-                     counters=_Counters(), outbox=out,
+                     counters=PairCounters(), outbox=out,
                      own_data=own_data(od, spec, ForceControl.CST) if own else None)
 
     class _One:
         def on_frame(self, frame: Frame, t: float) -> list[Frame]:
             if frame.arbitration_id == drive.sdo_request_cob_id:
-                drive._on_sdo(frame, t)
+                drive.on_sdo(frame, t)
             elif frame.arbitration_id == 0:
-                drive._nmt(frame.data[0], t)
+                drive.on_nmt_command(frame.data[0], t)
             got = out.copy()
             out.clear()
             return got
 
-    drive._boot(0.0, communication_only=False)
+    drive.boot(0.0, communication_only=False)
     out.clear()
     return drive, Bus(_One())
 
@@ -225,7 +225,7 @@ def test_epos4_quick_stop_option_6_stays_until_disable_voltage():
     for cw in (0x06, 0x07, 0x0F, 0x02):
         bus.write(1, 0x6040, 0, "H", cw)
     for _ in range(100):
-        drive._cycle()
+        drive.drive_cycle()
     assert drive.state_machine.state.name == "QUICK_STOP_ACTIVE"
     assert drive.setpoint.mode is DriveMode.POSITION  # holding where the quick stop began
     bus.write(1, 0x6040, 0, "H", 0x00)

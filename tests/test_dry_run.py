@@ -69,11 +69,11 @@ def test_can_log_decodes_into_the_csv_signals(dry_run, actuation):
 def test_every_cycle_sync_then_tpdos_then_rpdos(dry_run):
     out, _ = dry_run
     lines = (out / "can.log").read_text().splitlines()
-    ids = [int(l.split()[2].split("#")[0], 16) for l in lines]
+    ids = [int(line.split()[2].split("#")[0], 16) for line in lines]
     syncs = [k for k, i in enumerate(ids) if i == 0x080]
     assert len(syncs) > 55000
     bad = 0
-    for a, b in zip(syncs[1000:-200], syncs[1001:-199]):
+    for a, b in zip(syncs[1000:-200], syncs[1001:-199], strict=True):
         cyc = ids[a + 1:b]
         tp = [i for i in cyc if i in (0x181, 0x182, 0x281, 0x282)]
         rp = [i for i in cyc if i in (0x201, 0x202)]

@@ -117,7 +117,8 @@ def _plan(tmp_path, eds: Path):
     ("1A01sub2", None, "", r"signals.ema1.force: 0x2101:00 at ema1: no TPDO left to carry it: broken.eds has 2 "
                            r"TPDO\(s\) the master may map and the map needs more"),
     ("6064", "DataType", "0x0003",
-     r"signals.ema1.motor_angle: 0x6064:00 at ema1: data type 0x0003 \(INTEGER16\) .*CiA 402 says 0x0004 \(INTEGER32\)"),
+     r"signals.ema1.motor_angle: 0x6064:00 at ema1: data type 0x0003 \(INTEGER16\) "
+     r".*CiA 402 says 0x0004 \(INTEGER32\)"),
     ("6040", "AccessType", "ro", r"signals.ema1.controlword: 0x6040:00 at ema1: is not writable in broken.eds "
                                  r"\(access ro\)"),
     ("2100", "PDOMapping", "0", r"signals.ema1.lvdt: 0x2100:00 at ema1: is not PDO-mappable in broken.eds"),

@@ -17,12 +17,12 @@ import pytest
 from hil.canopen.frame import Frame
 from hil.link import CanopenLink, StaleData
 from hil.master import HeartbeatLost
-from support.canopen_rig import make_master
 from hil.transport import BusTransport
+from support.canopen_rig import make_master
 
 
 class QueuedSocket:
-    """Stands in for :class:`hil.link.SocketcanFrames`: frames with CLOCK_REALTIME stamps."""
+    """Stands in for :class:`hil.transport.SocketcanFrames`: frames with CLOCK_REALTIME stamps."""
 
     def __init__(self) -> None:
         self.q: deque = deque()

@@ -85,7 +85,7 @@ def _t_detect(r, meta) -> float:
 
 def _t_safe_command(tr, t_detect: float, reachable=(0, 1)) -> float:
     """First truth time after the detection at which every reachable drive left OPERATION_ENABLED."""
-    for t, st in zip(tr.t_s, tr.state):
+    for t, st in zip(tr.t_s, tr.state, strict=True):
         if t >= t_detect - 1e-9 and all(st[k] != State.OPERATION_ENABLED.name for k in reachable):
             return float(t)
     return math.inf
@@ -369,7 +369,7 @@ def test_drive_booting_into_fault_needs_its_fault_resets(kind, value, resets):
         _walk_up(bus, 2)
         inj.pair.inject_fault(1, 0x2310)
         bus.sync()
-        for k in range(resets):
+        for _ in range(resets):
             assert _state(bus, 2) is State.FAULT
             bus.write(2, 0x6040, 0, "H", 0x00)
             bus.write(2, 0x6040, 0, "H", 0x80)

@@ -95,7 +95,8 @@ def test_hard_caps_hold_even_for_a_check_built_past_the_loader(actuation, check_
      r"field 'safety.max_force_fight_N' = 9000.0 is above the hard cap 8000 N"),
     (dict(overrides={"safety": {"max_force_imbalance_N": 5000.0}}),
      r"field 'safety.max_force_imbalance_N' = 5000.0 is above the hard cap 4000 N"),
-    (dict(overrides={"safety": {"max_stale_cycles": 6}}), r"field 'safety.max_stale_cycles' = 6 is above the hard cap 5"),
+    (dict(overrides={"safety": {"max_stale_cycles": 6}}),
+     r"field 'safety.max_stale_cycles' = 6 is above the hard cap 5"),
     (dict(overrides={"safety": {"max_frozen_cycles": 101}}),
      r"field 'safety.max_frozen_cycles' = 101 is above the hard cap 100"),
     (dict(overrides={"safety": {"max_force_fight_N": 5000.0}}),
@@ -175,3 +176,37 @@ def test_can_log_with_garbage_lines_is_refused_but_a_cut_last_line_is_not(tmp_pa
     assert "last line incomplete (recording cut short), dropped" in dec.signals.notes
     (run / "can.log").write_text("\n".join(log[:100] + ["garbage ## line"] + log[100:]) + "\n")
     _analyze_refuses(capsys, run, "line 101: not a candump frame line")
+
+
+@pytest.mark.parametrize("name", ["can.log", "can.log.gz"])
+def test_the_can_log_reader_closes_its_file_however_the_reading_ends(tmp_path, monkeypatch, name):
+    """A reading stopped early (a bad frame raised by the decoder, a consumer that stops) closes the file,
+    plain or gzipped (python-can's reader closes it only at the end of the file)."""
+    import gzip
+
+    from hil import canlog
+
+    text = "(0.000000) can0 080#\n(0.001000) can0 181#0102\n(0.002000) can0 080#\n"
+    path = tmp_path / name
+    if name.endswith(".gz"):
+        with gzip.open(path, "wt") as f:
+            f.write(text)
+    else:
+        path.write_text(text)
+    opened = []
+    real = gzip.open if name.endswith(".gz") else open
+
+    def spy(*args, **kw):
+        opened.append(real(*args, **kw))
+        return opened[-1]
+
+    if name.endswith(".gz"):
+        monkeypatch.setattr(canlog.gzip, "open", spy)
+    else:
+        monkeypatch.setattr(canlog, "open", spy, raising=False)  # the module's name for the builtin
+    counts = {"frames": 0, "bad": 0}
+    frames = canlog._frames(path, counts)
+    assert next(frames).arbitration_id == 0x080
+    assert len(opened) == 1 and not opened[0].closed
+    frames.close()  # the reading ends after one frame
+    assert opened[0].closed and counts == {"frames": 1, "bad": 0}

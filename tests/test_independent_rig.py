@@ -44,5 +44,5 @@ def test_every_channel_measured_within_5_um_and_the_check_passes(name):
         v = r["verdict"][ch]
         assert v["status"] == "pass" and v["backlash_mm"] + v["uncertainty_mm"] <= v["limit_mm"]
     assert r["status"] == "pass"
-    for k, pitch in zip(("ema1", "ema2"), KEYS[name]["lvdt_pitch"]):
+    for k, pitch in zip(("ema1", "ema2"), KEYS[name]["lvdt_pitch"], strict=True):
         assert r["calibration"][k]["pitch"] == pytest.approx(pitch, rel=2e-3)

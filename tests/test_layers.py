@@ -4,7 +4,15 @@
 * ``sim`` (physics and simulated drives) imports from ``hil`` only ``hil.canopen``;
 * ``hil.canopen`` (the CANopen vocabulary both ends speak) imports nothing from the
   rest of ``hil``, nor from ``sim`` or ``blf``;
-* no module of the product is longer than 700 lines.
+* no module of the product is longer than 700 lines;
+* no function or method of the product is longer than 100 lines, counted as the source lines of
+  its body without its docstring: from the first statement after the docstring to the function's
+  last line, blank and comment lines inside included (the signature, decorators and docstring are
+  not counted; a nested function counts in its parent and on its own);
+* no module uses another module's underscore names: no ``from m import _x`` of the product, and
+  an attribute ``_x`` (``self._x``, ``obj._x``) only where the module itself defines ``_x``
+  (a ``def``, a class, an assignment to it or to ``self._x``). Parts of one object in several
+  modules (the simulated drive's mixins) share documented public hooks instead.
 
 Imports inside functions count as much as those at the top of a module.
 """
@@ -19,6 +27,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("hil", "blf", "sim")
 MAX_LINES = 700
+MAX_FUNCTION_LINES = 100
 
 
 def _modules() -> list[Path]:
@@ -108,3 +117,106 @@ def test_import_rules():
 def test_no_module_over_700_lines(path):
     n = len(path.read_text().splitlines())
     assert n <= MAX_LINES, f"{path.relative_to(ROOT)} has {n} lines (at most {MAX_LINES})"
+
+
+def _function_lengths(source: str) -> list[tuple[int, str, int]]:
+    """(line of the ``def``, name, body lines without the docstring) of every function in ``source``."""
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        body = node.body
+        if isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                and isinstance(body[0].value.value, str):
+            body = body[1:]
+        n = node.end_lineno - body[0].lineno + 1 if body else 0
+        out.append((node.lineno, node.name, n))
+    return out
+
+
+def test_function_length_counts_the_body_without_its_docstring():
+    """The counter itself: signature, decorators and docstring are not counted; blank and comment
+    lines inside the body are; a nested function counts in its parent and on its own."""
+    src = ("@decorator\n"
+           "def f(a,\n      b):\n"
+           '    """Doc\n\n    string."""\n'
+           "    x = 1\n\n    # a comment\n"
+           "    def g():\n        return 2\n"
+           "    return x\n"
+           "def h(): return 3\n"
+           'def k():\n    """Only a docstring."""\n')
+    assert _function_lengths(src) == [(2, "f", 6), (13, "h", 1), (14, "k", 0), (10, "g", 1)]
+
+
+def test_no_function_over_100_lines():
+    bad = [f"{path.relative_to(ROOT)}:{line} {name}: {n} lines"
+           for path in _modules() for line, name, n in _function_lengths(path.read_text()) if n > MAX_FUNCTION_LINES]
+    assert not bad, (f"functions longer than {MAX_FUNCTION_LINES} lines (body without the docstring; split them into "
+                     "named steps):\n" + "\n".join(bad))
+
+
+#: underscore names a module may use without defining them: (module, name) -> why
+FOREIGN_PRIVATE_OK = {
+    ("hil/transport.py", "_check_if_open"): "python-can's can.BusABC helper for its interface subclasses",
+}
+
+
+def _defined_names(tree: ast.AST) -> set[str]:
+    """Names a module defines: functions, classes, assigned names and ``self.``/``cls.`` attributes,
+    loop and ``with`` targets, imported names."""
+    out: set[str] = set()
+    for n in ast.walk(tree):
+        if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(n.name)
+        targets: list = []
+        if isinstance(n, ast.Assign):
+            targets = list(n.targets)
+        elif isinstance(n, (ast.AnnAssign, ast.AugAssign, ast.For, ast.comprehension)):
+            targets = [n.target]
+        elif isinstance(n, ast.With):
+            targets = [i.optional_vars for i in n.items if i.optional_vars is not None]
+        elif isinstance(n, (ast.Import, ast.ImportFrom)):
+            out |= {(a.asname or a.name).split(".")[0] for a in n.names}
+        while targets:
+            e = targets.pop()
+            if isinstance(e, (ast.Tuple, ast.List)):
+                targets += e.elts
+            elif isinstance(e, ast.Starred):
+                targets.append(e.value)
+            elif isinstance(e, ast.Name):
+                out.add(e.id)
+            elif isinstance(e, ast.Attribute) and isinstance(e.value, ast.Name) and e.value.id in ("self", "cls"):
+                out.add(e.attr)
+    return out
+
+
+def _foreign_private(source: str, where: str) -> list[str]:
+    """Uses of underscore names (not dunders) that the module does not define itself."""
+    tree = ast.parse(source)
+    mine = _defined_names(tree)
+    bad = []
+    for n in ast.walk(tree):
+        if isinstance(n, ast.ImportFrom) and n.module and n.module.split(".")[0] in PACKAGES:
+            bad += [f"{where}:{n.lineno} imports {n.module}.{a.name}" for a in n.names
+                    if a.name.startswith("_") and not a.name.startswith("__")]
+        elif (isinstance(n, ast.Attribute) and n.attr.startswith("_") and not n.attr.startswith("__")
+              and n.attr not in mine and (where, n.attr) not in FOREIGN_PRIVATE_OK):
+            bad.append(f"{where}:{n.lineno} uses {ast.unparse(n)} (not defined in this module)")
+    return bad
+
+
+def test_the_private_name_check_sees_what_it_is_meant_to():
+    src = ("from sim.drives.stats import _Counters\n"
+           "class A:\n    def __init__(self):\n        self._mine = 1\n"
+           "    def _own(self):\n        return self._mine + self._theirs + other._x + self.__class__.__name__\n"
+           "    def f(self, node):\n        node._own()\n        return self._own()\n")
+    assert sorted(_foreign_private(src, "m.py")) == [
+        "m.py:1 imports sim.drives.stats._Counters",
+        "m.py:6 uses other._x (not defined in this module)",
+        "m.py:6 uses self._theirs (not defined in this module)"]
+
+
+def test_no_module_uses_another_modules_underscore_names():
+    bad = [b for path in _modules() for b in _foreign_private(path.read_text(), str(path.relative_to(ROOT)))]
+    assert not bad, ("underscore names used outside the module that defines them (make them documented "
+                     "public hooks):\n" + "\n".join(bad))

@@ -12,6 +12,7 @@ import struct
 import numpy as np
 import pytest
 
+from hil import master_events as event
 from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
@@ -183,7 +184,8 @@ def test_preflight_against_simulated_drives_golden_sequence(actuation, pair):
 def test_identity_mismatch_is_refused_naming_the_field(actuation, pair):
     pair.nodes[0].own_data[(0x1018, 2)] = struct.pack("<I", 0x999)  # another drive answers at node 1
     with pytest.raises(PreflightError, match=r"node 1 \(EMA 1\): identity 0x1018 vendor 0x00000E3A product "
-                                             r"0x00000999 does not match the profile .*canopen.product_code 0x00000402"):
+                                             r"0x00000999 does not match the profile "
+                                             r".*canopen.product_code 0x00000402"):
         _preflight(actuation, pair)
 
 
@@ -336,16 +338,18 @@ def test_fault_resets_are_bounded(actuation, simrig, attempts):
 def test_a_mode_change_not_confirmed_by_0x6061_in_time_is_a_fault(actuation, simrig):
     pair = make_pair(_plant(simrig, 4))
     m, p = _preflight(actuation, pair)
-    pair.nodes[0]._mode_written = lambda: None  # EMA 1's 0x6061 does not follow 0x6060 ...
+    pair.nodes[0].mode_written = lambda: None  # EMA 1's 0x6061 does not follow 0x6060 ...
     pair.nodes[0]._mode_display = 0  # ... and shows no mode (the drill had set CSP by SDO)
     smp = p.sync()
     with pytest.raises(DriveFault, match=r"node 1 \(EMA 1\): modes of operation 8 not confirmed by 0x6061 within "
                                          r"canopen.mode_change_timeout_s = 0.1 s \(0x6061 = 0\)"):
-        for k in range(60):
+        cycles = 0
+        while cycles < 60:
+            cycles += 1
             hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
             p.send(m.setpoint_frames(*hold, smp))
             smp = p.sync()
-    assert k + 1 == 51  # the mode went out with the first RPDOs; 50 cycles (0.1 s) later it is a fault
+    assert cycles == 51  # the mode went out with the first RPDOs; 50 cycles (0.1 s) later it is a fault
 
 
 def test_a_mode_change_confirmed_within_the_timeout_is_not(actuation, pair):
@@ -435,7 +439,7 @@ def test_preflight_configures_reads_back_and_drills_the_drives_reaction_to_the_m
 
 def test_a_drive_that_ignores_the_masters_death_stops_the_preflight_before_any_sync(actuation, simrig):
     pair = make_pair(_plant(simrig, 4))
-    pair.nodes[1]._connection_lost = lambda: None  # EMA 2 accepts 0x6007 = 3, then does nothing
+    pair.nodes[1].connection_lost = lambda: None  # EMA 2 accepts 0x6007 = 3, then does nothing
     with pytest.raises(MasterLossReactionError, match=r"node 2 \(EMA 2\): did not react to the master's death: the "
                        r"master was silent \d+ ms \(its consumer time 0x1016:01 is 125 ms\) and the drive stayed "
                        r"OPERATION ENABLED \(EMCY seen: 0x8130\); the check is not started"):
@@ -448,7 +452,7 @@ def test_the_drill_under_an_external_watchdog_records_no_reaction_and_goes_on(ac
     watchdog = "STO of both drives dropped by the rig's watchdog relay 100 ms after the master's last heartbeat"
     act = dataclasses.replace(actuation, canopen=dataclasses.replace(actuation.canopen, external_watchdog=watchdog))
     pair = make_pair(_plant(simrig, 4))
-    pair.nodes[1]._connection_lost = lambda: None
+    pair.nodes[1].connection_lost = lambda: None
     m, p = _preflight(act, pair)
     rec = m.drives[2].master_loss
     assert rec.drill.outcome is DrillOutcome.NO_REACTION and rec.drill.reaction_ms is None
@@ -529,14 +533,14 @@ def test_a_drive_whose_error_behaviour_stops_it_is_read_after_the_drill(actuatio
 
     pair = make_pair(_plant(simrig, 8))
     node = pair.nodes[1]
-    react = node._connection_lost
+    react = node.connection_lost
 
     def stopped():
         if reacts:
             react()
         node.nmt_state = NmtState.STOPPED
 
-    node._connection_lost = stopped
+    node.connection_lost = stopped
     if reacts:
         m, p = _preflight(actuation, pair)
         drill = m.drives[2].master_loss.drill
@@ -558,14 +562,14 @@ def test_a_drive_that_falls_silent_while_drilled_leaves_the_other_disabled(actua
 
     pair = make_pair(_plant(simrig, 9))
     deaf = pair.nodes[1]
-    serve = deaf._on_sdo
+    serve = deaf.on_sdo
 
     def until_enabled(frame, t):  # EMA 2 stops answering SDO once it is enabled
         if deaf.state_machine.state is State.OPERATION_ENABLED:
             return None
         return serve(frame, t)
 
-    deaf._on_sdo = until_enabled
+    deaf.on_sdo = until_enabled
     tr = InProcessTransport(pair, T, channel="emacheck-test-deaf-drill")
     link = CanopenLink(_master(actuation), tr)
     try:
@@ -577,3 +581,40 @@ def test_a_drive_that_falls_silent_while_drilled_leaves_the_other_disabled(actua
     assert pair.nodes[0].state_machine.state is State.SWITCH_ON_DISABLED  # EMA 1: disable voltage by SDO
     final = link.final_states
     assert not final["ema2"]["safe"]  # EMA 2 could not be told: the record says so
+
+
+def test_the_masters_events_are_typed_and_matched_by_type(actuation, pair):
+    """One small frozen class per event (h11's events), typed fields, ``str`` the log line."""
+    m, p = _preflight(actuation, pair)
+    p.enable(p.sync(), cycles=60)
+    events = m.drain_events()
+    assert m.drain_events() == []  # drained
+    first = events[0]
+    assert first == event.NmtSent(0.0, 0, NmtCommand.RESET_NODE) and str(first) == "NMT RESET_NODE to all nodes"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        first.node_id = 1
+    boots, silent, resumed, emcy, pdo_states, sdo_states = set(), [], [], [], [], []
+    for ev in events:
+        match ev:
+            case event.BootUp(node_id=n):
+                boots.add(n)
+            case event.MasterFellSilent(last_heartbeat_s=last):
+                silent.append(last)
+            case event.MasterHeartbeatResumed():
+                resumed.append(ev.t_s)
+            case event.EmcyReceived(emcy=e):
+                emcy.append((ev.node_id, e.code))
+            case event.DriveStateChanged(by_sdo=True):
+                sdo_states.append((ev.node_id, ev.new))
+            case event.DriveStateChanged(old=old, new=new):
+                pdo_states.append((ev.node_id, old, new))
+    assert boots == {1, 2}
+    assert silent == [pytest.approx(0.05)] and len(resumed) == 1 and resumed[0] > silent[0]
+    assert emcy == [(1, 0x8130), (2, 0x8130), (1, 0x0000), (2, 0x0000)]  # the drill: heartbeat event, reset
+    assert (1, State.QUICK_STOP_ACTIVE) in sdo_states and (2, State.QUICK_STOP_ACTIVE) in sdo_states
+    assert pdo_states[-2:] == [(1, State.SWITCHED_ON, State.OPERATION_ENABLED),
+                               (2, State.SWITCHED_ON, State.OPERATION_ENABLED)]
+    assert str(event.DriveStateChanged(0.0, 1, State.SWITCHED_ON, State.OPERATION_ENABLED, by_sdo=True)) == \
+        "SWITCHED_ON -> OPERATION_ENABLED (SDO)"
+    assert str(event.CycleIncomplete(0.1, 0, 7)) == "cycle 7: TPDOs incomplete at the next SYNC"
+    assert str(event.MasterFellSilent(0.1, 0, 0.05)) == "the master falls silent (last heartbeat at 0.050 s)"

@@ -99,8 +99,9 @@ def silent_figures(r, act) -> dict:
     # (the heartbeat events of the master's-death drill in the preflight come before the first SYNC)
     events = {n.node_id: [t - inj.t0_bus for t, producer in n.heartbeat_events
                           if producer == 127 and t - inj.t0_bus > t_last] for n in inj.pair.nodes}
-    sod = [t for t, st in zip(step_t[after], tr.state[after]) if all(s == "SWITCH_ON_DISABLED" for s in st)]
-    oe = [t for t, st in zip(step_t[after], tr.state[after]) if all(s != "OPERATION_ENABLED" for s in st)]
+    steps_after = list(zip(step_t[after], tr.state[after], strict=True))
+    sod = [t for t, st in steps_after if all(s == "SWITCH_ON_DISABLED" for s in st)]
+    oe = [t for t, st in steps_after if all(s != "OPERATION_ENABLED" for s in st)]
     before = (tr.t_s <= t_last + 1e-9) & (tr.t_s > t_last - 1.0)
     F, s = tr.F_N, tr.s_mm
     s_at_loss = s[tr.t_s <= t_last + 1e-9][-1]

@@ -15,7 +15,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hil.canopen.busload import bus_load, frame_bits
-from hil.canopen.errors import CanopenError, InputError
+from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.frame import Frame, FrameError, sync_frame
 from hil.canopen.od import load_eds
 from hil.canopen.pdo import Direction, MappedObject, PdoError, PdoLayout, PdoLengthError, PdoSpec, predefined_cob_id
@@ -134,12 +134,12 @@ def test_error_types():
         layout(1)["RPDO1"].pack((0x10000, 0, 0))
     with pytest.raises(PdoError, match=r"cannot encode \(0, 0, 32768\)"):
         layout(1)["RPDO1"].pack((0, 0, 32768))
-    with pytest.raises(InputError, match="72 mapped bits exceed the 64 of a CAN frame"):
+    with pytest.raises(CanopenInputError, match="72 mapped bits exceed the 64 of a CAN frame"):
         PdoSpec("TPDO1", Direction.TX, 1, 0x181, 1, tuple(MappedObject(f"x{k}", 0x6401, k, 0x0003) for k in range(1, 5))
                 + (MappedObject("y", 0x6000, 1, 0x0005),))
-    with pytest.raises(InputError, match="data type 0x0009 cannot be mapped"):
+    with pytest.raises(CanopenInputError, match="data type 0x0009 cannot be mapped"):
         MappedObject("name", 0x1008, 0, 0x0009)
-    with pytest.raises(InputError, match="COB-ID 0x800 is not an 11-bit identifier"):
+    with pytest.raises(CanopenInputError, match="COB-ID 0x800 is not an 11-bit identifier"):
         PdoSpec("TPDO1", Direction.TX, 1, 0x800, 1, ())
     with pytest.raises(FrameError):
         Frame(0x800, b"")
@@ -214,7 +214,7 @@ def test_position_scaling():
     assert rad_to_increments(-20 * I_TOTAL, 4096) == -65536  # -20 mm stroke = -16 motor turns
     assert increments_to_rad(2048, 4096) == pytest.approx(math.pi, rel=1e-15)
     assert rad_to_increments(1e12, 4096) == 2**31 - 1
-    with pytest.raises(InputError, match="counts_per_rev = 0"):
+    with pytest.raises(CanopenInputError, match="counts_per_rev = 0"):
         increments_per_rad(0)
 
 
@@ -228,9 +228,9 @@ def test_force_scaling():
     for F in (-6000.0, -3.0, 0.0, 2.4, 6000.0):
         back = permille_to_force_N(force_to_permille(F, I_TOTAL, 1.0), I_TOTAL, 1.0)
         assert abs(back - F) <= 0.5 * I_TOTAL + 1e-9  # half a per mille = 2.51 N
-    with pytest.raises(InputError, match="F_N"):
+    with pytest.raises(CanopenInputError, match="F_N"):
         force_to_permille(float("nan"), I_TOTAL, 1.0)
-    with pytest.raises(InputError, match=r"i_total_rad_per_mm = -1.0 \[rad/mm\] must be > 0"):
+    with pytest.raises(CanopenInputError, match=r"i_total_rad_per_mm = -1.0 \[rad/mm\] must be > 0"):
         force_to_permille(1.0, -1.0, 1.0)
 
 
@@ -290,15 +290,15 @@ def test_bus_load_with_the_masters_own_heartbeat_period(actuation):
     mode_change = (load.bits_per_cycle_worst + load.event_bits_worst) / 2000
     assert mode_change == pytest.approx(0.4901) and mode_change < 0.5
     assert shipped_rig().plan.load == load
-    with pytest.raises(InputError, match="master_heartbeat_period_s"):
+    with pytest.raises(CanopenInputError, match="master_heartbeat_period_s"):
         bus_load(_layouts(), 1e6, 0.002, [0.1, 0.1], master_heartbeat_period_s=0.0)
 
 
 def test_bus_load_inputs():
     assert bus_load(_layouts(), 500_000, 0.002, [0.0, 0.0]).load_worst == pytest.approx(845 / 1000)
-    with pytest.raises(InputError, match="sync_period_s"):
+    with pytest.raises(CanopenInputError, match="sync_period_s"):
         bus_load(_layouts(), 1e6, 0.0, [0.1])
-    with pytest.raises(InputError, match="layouts must be a non-empty sequence of PdoLayout"):
+    with pytest.raises(CanopenInputError, match="layouts must be a non-empty sequence of PdoLayout"):
         bus_load((), 1e6, 0.002, [0.1])
-    with pytest.raises(InputError, match=r"heartbeat_periods_s\[1\] = -0.1"):
+    with pytest.raises(CanopenInputError, match=r"heartbeat_periods_s\[1\] = -0.1"):
         bus_load(_layouts(), 1e6, 0.002, [0.1, -0.1])

@@ -25,6 +25,9 @@ SHARED = Path(__file__).resolve().parents[2] / "shared"
 VENDOR = SHARED / "data" / "vendor-eds"
 needs_vendor = pytest.mark.skipif(not VENDOR.is_dir(), reason=f"{VENDOR} is absent: the vendor EDS files are "
                                                              "read from ../shared (never copied into the project)")
+# both EMAs' LVDT and force read from the drive's own objects (a vendor EDS has no sensor objects of ours)
+_LVDT_AND_FORCE_AT_6064_6077 = {k: {"lvdt": {"object": "0x6064:00"}, "force": {"object": "0x6077:00"}}
+                                for k in ("ema1", "ema2")}
 
 
 def _profile(tmp_path, name="actuation.toml", **variant) -> Path:
@@ -216,8 +219,7 @@ def _vendor_profile(tmp_path, eds: str, ident: tuple[int, int, int], add=None, *
 def test_technosoft_ipos_cannot_do_the_check_and_profile_check_says_why(tmp_path):
     got = _problems(tmp_path, overrides={"canopen": {"eds": str(VENDOR / "Technosoft_iPOS.eds"), "vendor_id": 0x1A3,
                                                      "product_code": 0, "revision_min": 0},
-                                         "signals": {k: {"lvdt": {"object": "0x6064:00"}, "force": {"object": "0x6077:00"}}
-                                                     for k in ("ema1", "ema2")}})
+                                         "signals": _LVDT_AND_FORCE_AT_6064_6077})
     assert any(p.startswith("canopen.eds: 0x6502:00 (supported drive modes) at ema1, ema2: Technosoft_iPOS.eds "
                             "announces neither CSP nor CST") for p in got), got
     assert any(p.startswith("canopen.external_watchdog: 0x1016:01 (consumer heartbeat time) at ema1, ema2: not in "
@@ -228,8 +230,7 @@ def test_technosoft_ipos_cannot_do_the_check_and_profile_check_says_why(tmp_path
 def test_schunk_prl120_cannot_do_the_check_and_profile_check_says_why(tmp_path):
     got = _problems(tmp_path, overrides={"canopen": {"eds": str(VENDOR / "Schunk_PRL120.eds"), "vendor_id": 0,
                                                      "product_code": 0, "revision_min": 0},
-                                         "signals": {k: {"lvdt": {"object": "0x6064:00"}, "force": {"object": "0x6077:00"}}
-                                                     for k in ("ema1", "ema2")}})
+                                         "signals": _LVDT_AND_FORCE_AT_6064_6077})
     for start in ("canopen.eds: 0x6502:00 (supported drive modes) at ema1, ema2: Schunk_PRL120.eds announces neither",
                   "signals.ema1.target_position: 0x607A:00 at ema1: is not PDO-mappable in Schunk_PRL120.eds",
                   "canopen.external_watchdog: 0x6007:00 (abort connection option code) at ema1, ema2: not in"):
@@ -291,7 +292,8 @@ def test_the_setpoint_encoder_and_its_inverse():
     assert enc.mode_frame(1, 10) == Frame(0x301, b"\x0a") and enc.has_mode_pdo(2)
     back = enc.decode(Frame(0x202, bytes.fromhex("0F 00 00 10 00 00 C5 07")))
     assert (back.ema, back.controlword, back.mode) == (2, 0x000F, None)
-    assert back.target_position_rad == pytest.approx(2 * math.pi) and back.target_torque_N == pytest.approx(1989 * 5.026548245743669)
+    assert back.target_position_rad == pytest.approx(2 * math.pi)
+    assert back.target_torque_N == pytest.approx(1989 * 5.026548245743669)
     assert enc.decode(Frame(0x302, b"\x08")).mode == 8 and enc.decode(Frame(0x181, b"")) is None
 
 

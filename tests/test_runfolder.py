@@ -22,7 +22,8 @@ def test_writer_reader_round_trip(tmp_path):
     w = SignalsWriter(tmp_path / "signals.csv", flush_rows=3)
     sp = (Setpoint(DriveMode.POSITION, 1.25), Setpoint(DriveMode.FORCE, -2000.0))
     for k in range(10):
-        w.write(Sample(0.002 * (k + 1), 0.1 * k, -0.1 * k, 0.01 * k, -0.01 * k, 100.0 * k, -100.0 * k), *sp, "cal1_sweep")
+        smp = Sample(0.002 * (k + 1), 0.1 * k, -0.1 * k, 0.01 * k, -0.01 * k, 100.0 * k, -100.0 * k)
+        w.write(smp, *sp, "cal1_sweep")
     w.close()
     sig = read_signals(tmp_path / "signals.csv")
     assert sig.n == 10

@@ -169,7 +169,7 @@ def test_timeout_with_explicit_time():
         c.poll(10.5)
     e = exc.value
     assert e.abort_frame == F(0x602, "80 08 10 00 00 00 04 05")
-    assert "node 2: SDO timeout, no response within 0.5 s on 0x1008:00" == str(e)
+    assert str(e) == "node 2: SDO timeout, no response within 0.5 s on 0x1008:00"
     assert isinstance(e, TimeoutError) and isinstance(e, CanopenError)
     assert not c.busy
     assert c.on_frame(F(0x582, "41 08 10 00 09 00 00 00"), t=10.6) is None  # late answer dropped

@@ -11,12 +11,12 @@ import pytest
 from blf.calibration import fit_lvdt_calibration
 from hil.canlog import CanLogWriter
 from hil.canopen.frame import sync_frame
-from support.canopen_rig import shipped_rig
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main
 from hil.cli.common import ExitCode
 from sim import operation as op
 from sim import scenarios as sc
+from support.canopen_rig import shipped_rig
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2"
 

@@ -198,7 +198,7 @@ def test_streaming_monitor_equals_batch_on_simulated_gusts(runs, params):
         a, b = run["res"]["gusts"][ch], mon.result(c)
         assert a.noise_std_mm == pytest.approx(noise[c], rel=1e-12)
         assert len(a.jumps) == len(b.jumps)
-        for ja, jb in zip(a.jumps, b.jumps):
+        for ja, jb in zip(a.jumps, b.jumps, strict=True):
             assert ja.t_jump_s == pytest.approx(jb.t_jump_s, abs=1e-12)
             assert (np.isnan(ja.height_mm) and np.isnan(jb.height_mm)) or abs(ja.height_mm - jb.height_mm) < 1e-12
             assert abs(ja.paper_delta_mm - jb.paper_delta_mm) < 1e-12

@@ -197,7 +197,7 @@ def test_sensor_node_silent_fault_drops_everything_it_sends(rig):
     bus.write(IO, 0x1017, 0, "H", 10)
     bus.send(Frame(0x000, bytes([0x01, 0])))
     seen = []
-    for k in range(20):
+    for _ in range(20):
         seen.append(set(bus.sync()) | {f.arbitration_id for f in inj.tick(bus.t + T_S / 2)})
     assert all({0x181, 0x182, 0x183} <= s for s in seen[:9])
     assert any(0x703 in s for s in seen[:9])

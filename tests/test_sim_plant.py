@@ -169,7 +169,7 @@ def _free_motor_reference(prm: RigParams, targets: np.ndarray, wff: np.ndarray, 
     ki = kp / d.position_integral_time_s
     x = np.array([phi0, 0.0, 0.0])
     out = np.empty(len(targets))
-    for k, (th, wf) in enumerate(zip(targets, wff)):
+    for k, (th, wf) in enumerate(zip(targets, wff, strict=True)):
         def rhs(_t, z, th=th, wf=wf):
             e = th - z[0]
             return [z[1], (kp * e + kd * (wf - z[1]) + ki * z[2] - b * z[1]) / J, e]

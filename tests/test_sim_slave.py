@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from hil.canopen.cia402 import State, controlword, decode_state, next_command
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.process import DriveMode
 from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
@@ -554,7 +554,7 @@ def test_round_trip_master_configures_enables_and_follows_a_csp_ramp(rig):
     pair = rig.pair
     nodes = (1, 2)
     plan = shipped_rig().plan
-    for n, name in zip(nodes, ("ema1", "ema2")):
+    for n, name in zip(nodes, ("ema1", "ema2"), strict=True):
         layout = plan.node(name).layout
         writes = layout.configuration_writes()
         # per PDO: disable, clear, count, type, enable + entries; plus the unused PDOs disabled
@@ -662,26 +662,26 @@ def test_random_frames_never_raise_and_the_pair_recovers(rig):
 def test_constructor_and_call_validation(pair):
     plant = pair.plant
     rig = shipped_rig()
-    with pytest.raises(InputError, match="plant"):
+    with pytest.raises(CanopenInputError, match="plant"):
         SimDrivePair("plant", rig.plan, od_factory(rig))
-    with pytest.raises(InputError, match="plan"):
+    with pytest.raises(CanopenInputError, match="plan"):
         SimDrivePair(plant, "plan", od_factory(rig))
-    with pytest.raises(InputError, match="od_factory"):
+    with pytest.raises(CanopenInputError, match="od_factory"):
         SimDrivePair(plant, rig.plan, "profiles/ema_drive.eds")
-    with pytest.raises(InputError, match=r"od_factory\('ema1', 1\) must return"):
+    with pytest.raises(CanopenInputError, match=r"od_factory\('ema1', 1\) must return"):
         SimDrivePair(plant, rig.plan, lambda name, node_id: None)
-    with pytest.raises(InputError, match="counts_per_rev"):
+    with pytest.raises(CanopenInputError, match="counts_per_rev"):
         make_pair(plant, counts_per_rev=0)
-    with pytest.raises(InputError, match="frame"):
+    with pytest.raises(CanopenInputError, match="frame"):
         pair.on_frame(b"\x01\x00", 0.0)
-    with pytest.raises(InputError, match="t ="):
+    with pytest.raises(CanopenInputError, match="t ="):
         pair.tick(float("nan"))
-    with pytest.raises(InputError, match="power_on"):
+    with pytest.raises(CanopenInputError, match="power_on"):
         pair.inject_fault(0, 0x2310)
     pair.power_on(0.0)
-    with pytest.raises(InputError, match="emcy_code"):
+    with pytest.raises(CanopenInputError, match="emcy_code"):
         pair.inject_fault(1, 0)
-    with pytest.raises(InputError, match="node_index"):
+    with pytest.raises(CanopenInputError, match="node_index"):
         pair.inject_fault(2, 0x2310)
 
 
@@ -806,7 +806,7 @@ def test_heartbeat_consumer_and_abort_connection_entries_are_validated(rig):
     assert exc.value.code is SdoAbortCode.PARAMETER_INCOMPATIBILITY
     rig.write(1, 0x1016, 2, "I", 0x7F_0000)  # time 0: unused, allowed
     rig.write(1, 0x1016, 3, "I", 0x05_0064)
-    assert rig.pair.nodes[0]._hb_consumers == {0x7F: [0.1, None, False], 5: [0.1, None, False]}
+    assert rig.pair.nodes[0].heartbeat_consumers == {0x7F: [0.1, None, False], 5: [0.1, None, False]}
     with pytest.raises(SdoAbortError) as exc:
         rig.write(1, 0x1016, 0, "B", 2)
     assert exc.value.code is SdoAbortCode.WRITE_OF_READ_ONLY
@@ -815,7 +815,7 @@ def test_heartbeat_consumer_and_abort_connection_entries_are_validated(rig):
             rig.write(1, 0x6007, 0, "h", bad)
         assert exc.value.code is SdoAbortCode.VALUE_RANGE_EXCEEDED
     rig.nmt(0x81, 1)  # reset node: the consumer is off again (EDS default 0)
-    assert rig.read(1, 0x1016, 1, "I") == 0 and rig.pair.nodes[0]._hb_consumers == {}
+    assert rig.read(1, 0x1016, 1, "I") == 0 and rig.pair.nodes[0].heartbeat_consumers == {}
 
 
 def test_hung_master_heartbeat_event_quick_stop_then_switch_on_disabled(rig):
@@ -913,7 +913,7 @@ def test_serial_numbers_are_the_drives_own_data():
     assert [n.read(0x1018, 4) for n in pair.nodes] == [0x5E000101, 0x5E000102]
     pair.on_frame(Frame(0x000, bytes([0x81, 0])), 0.01)  # NMT reset node, all nodes
     assert [n.read(0x1018, 4) for n in pair.nodes] == [0x5E000101, 0x5E000102]
-    with pytest.raises(InputError, match="serials"):
+    with pytest.raises(CanopenInputError, match="serials"):
         make_pair(RigPlant(make_params(), np.random.default_rng(0)), serials=(1,))
 
 

@@ -106,7 +106,8 @@ def test_simulated_check_passes_with_its_verdict_traceable_and_valid(checked):
     t = r["trace"]
     assert t["operator"] == "A. Inspector" and t["work_order"] == "WO-4711" and len(t["run_id"]) == 32
     assert t["started_utc"].endswith("+00:00") and t["software"]["version"]
-    assert set(t["files_sha256"]) == {"actuation", "check", "simrig"} and all(len(h) == 64 for h in t["files_sha256"].values())
+    assert set(t["files_sha256"]) == {"actuation", "check", "simrig"}
+    assert all(len(h) == 64 for h in t["files_sha256"].values())
     html = (out / "report.html").read_text()
     assert "Uncertainty of the readings" in html and "Traceability" in html and "WO-4711" in html
     assert "<a href='result.json'>" in html and '"backlash_mm"' not in html  # linked, not dumped
@@ -209,7 +210,8 @@ def test_ctrl_c_writes_an_aborted_result_and_names_each_drives_final_state(tmp_p
     ident = r["trace"]["identity"]
     assert (ident["ema1"]["serial"], ident["ema2"]["serial"]) == (0x5E000101, 0x5E000102)
     assert ident["ema1"]["node"] == 1 and ident["ema1"]["vendor_id"] == 0x00000E3A
-    assert "EMA 1 (node 1): SWITCH_ON_DISABLED, safe" in console and "EMA 2 (node 2): SWITCH_ON_DISABLED, safe" in console
+    assert "EMA 1 (node 1): SWITCH_ON_DISABLED, safe" in console
+    assert "EMA 2 (node 2): SWITCH_ON_DISABLED, safe" in console
 
 
 def test_the_eds_device_info_must_agree_with_its_identity_object(tmp_path, capsys):

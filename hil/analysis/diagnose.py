@@ -124,9 +124,9 @@ def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
         "effects": [eff(e) for e in d.effects],
         "where": list(d.where),
         "band": {"cutoff_hz": _r(b.cutoff_hz), "step": int(b.step), "words": b.words},
-        "locations": [{"channel": l.channel, "where": l.where, "t_start_s": _r(l.t_start_s),
-                       "t_end_s": _r(l.t_end_s), "regime": l.regime, "score": _r(l.score), "test": l.test}
-                      for l in d.locations],
+        "locations": [{"channel": loc.channel, "where": loc.where, "t_start_s": _r(loc.t_start_s),
+                       "t_end_s": _r(loc.t_end_s), "regime": loc.regime, "score": _r(loc.score), "test": loc.test}
+                      for loc in d.locations],
         "residual_rms_before": _rd(d.residual_rms_before),
         "residual_rms_after": _rd(d.residual_rms_after),
         "residual_rms_holdout_before": _rd(d.residual_rms_holdout_before),

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.pdo import PdoLayout
 from hil.canopen.validate import finite, integer, positive
 
@@ -123,14 +123,14 @@ def bus_load(
     """
     layouts = tuple(layouts)
     if not layouts or not all(isinstance(x, PdoLayout) for x in layouts):
-        raise InputError(f"layouts must be a non-empty sequence of PdoLayout, got {layouts!r}")
+        raise CanopenInputError(f"layouts must be a non-empty sequence of PdoLayout, got {layouts!r}")
     rate = positive("bitrate_bps", bitrate_bps, "bit/s")
     t_sync = positive("sync_period_s", sync_period_s, "s")
     periods = []
     for k, p in enumerate(heartbeat_periods_s):
         t_hb = finite(f"heartbeat_periods_s[{k}]", p, "s")
         if t_hb < 0.0:
-            raise InputError(f"heartbeat_periods_s[{k}] = {t_hb} [s] must be >= 0 (0 = no heartbeat)")
+            raise CanopenInputError(f"heartbeat_periods_s[{k}] = {t_hb} [s] must be >= 0 (0 = no heartbeat)")
         periods.append(t_hb)
     t_master = None
     if master_heartbeat_period_s is not None:

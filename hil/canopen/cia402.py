@@ -34,7 +34,7 @@ from __future__ import annotations
 from collections import deque
 from enum import Enum, IntEnum, IntFlag
 
-from hil.canopen.errors import CanopenError, InputError
+from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.validate import word16 as _word
 
 
@@ -280,7 +280,7 @@ def state_word(state: State, *, extra: Statusword | int = 0) -> int:
     """
     x = _word("extra", int(extra))
     if x & _STATE_BITS:
-        raise InputError(f"extra = 0x{x:04X} touches the state bits 0x{_STATE_BITS:04X}")
+        raise CanopenInputError(f"extra = 0x{x:04X} touches the state bits 0x{_STATE_BITS:04X}")
     return _STATE_WORD[State(state)] | x
 
 

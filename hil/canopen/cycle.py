@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
 from hil.canopen.pdo import TYPE_RANGE, Direction, PdoSpec
 from hil.canopen.plan import Channel
@@ -41,7 +41,7 @@ SAMPLE_SLOTS: dict[tuple[int, Signal], int] = {
 def _resolved(ch: Channel) -> Scale | None:
     if ch.signal in (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE, Signal.TARGET_POSITION, Signal.TARGET_TORQUE):
         if ch.scale is None:
-            raise InputError(f"{ch.key}: the scale of {ch.signal.value} is not resolved yet ({ch.source.value})")
+            raise CanopenInputError(f"{ch.key}: the scale of {ch.signal.value} is not resolved yet ({ch.source.value})")
         return ch.scale
     return None
 
@@ -82,7 +82,7 @@ class CycleDecoder:
             if ch.signal.direction is not Direction.TX:
                 continue
             if ch.cob_id not in by_cob:
-                raise InputError(f"{ch.key}: COB-ID 0x{ch.cob_id:03X} is not a TPDO of the layout")
+                raise CanopenInputError(f"{ch.key}: COB-ID 0x{ch.cob_id:03X} is not a TPDO of the layout")
             if ch.signal is Signal.STATUSWORD:
                 slot = 6 + ch.ema - 1
             elif ch.signal is Signal.MODE_DISPLAY:
@@ -92,7 +92,7 @@ class CycleDecoder:
             plan.setdefault(ch.cob_id, []).append((slot, ch.position, _resolved(ch)))
         missing = [k for k, s in SAMPLE_SLOTS.items() if not any(x[0] == s for v in plan.values() for x in v)]
         if missing:
-            raise InputError("no channel for " + ", ".join(f"EMA {e} {sig.value}" for e, sig in missing))
+            raise CanopenInputError("no channel for " + ", ".join(f"EMA {e} {sig.value}" for e, sig in missing))
         #: COB-ID -> (PdoSpec, ((slot, position, divisor or None, offset), ...), EMAs whose statusword it carries)
         self._pdos: dict[int, tuple[PdoSpec, tuple, tuple[int, ...]]] = {}
         for cob, items in plan.items():
@@ -221,10 +221,10 @@ class SetpointEncoder:
                 continue
             spec = by_cob.get(ch.cob_id)
             if spec is None:
-                raise InputError(f"{ch.key}: COB-ID 0x{ch.cob_id:03X} is not an RPDO of the layout")
+                raise CanopenInputError(f"{ch.key}: COB-ID 0x{ch.cob_id:03X} is not an RPDO of the layout")
             if ch.signal is Signal.MODE:
                 if len(spec.entries) != 1:
-                    raise InputError(f"{ch.key}: the modes of operation needs an RPDO of its own")
+                    raise CanopenInputError(f"{ch.key}: the modes of operation needs an RPDO of its own")
                 self._mode[ch.ema] = spec
             else:
                 sync[ch.ema].setdefault(ch.cob_id, []).append((ch.position, ch.signal, _resolved(ch)))
@@ -238,7 +238,7 @@ class SetpointEncoder:
             for cob, items in sync[ema].items():
                 spec = by_cob[cob]
                 if len(items) != len(spec.entries):
-                    raise InputError(f"{spec.name} COB-ID 0x{cob:03X} carries objects the check does not set")
+                    raise CanopenInputError(f"{spec.name} COB-ID 0x{cob:03X} carries objects the check does not set")
                 rows = tuple((pos, sig, None if sc is None else sc.units_per_si, spec.entries[pos].data_type)
                              for pos, sig, sc in sorted(items, key=lambda x: x[0]))
                 out.append((spec, rows))
@@ -312,7 +312,7 @@ def image_of(pdos: Sequence[PdoSpec], channels: Sequence[Channel]) -> dict:
 
 
 def from_image(image: dict) -> tuple[tuple[PdoSpec, ...], tuple[Channel, ...]]:
-    """The inverse of :func:`image_of`; InputError naming what is malformed."""
+    """The inverse of :func:`image_of`; CanopenInputError naming what is malformed."""
     from hil.canopen.pdo import MappedObject
     from hil.canopen.signalmap import ScaleSource
 
@@ -326,5 +326,5 @@ def from_image(image: dict) -> tuple[tuple[PdoSpec, ...], tuple[Channel, ...]]:
                               None if c["units_per_si"] is None else Scale(c["units_per_si"], c["offset"]),
                               ScaleSource(c["source"]), str(c["key"])) for c in image["channels"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"process image: malformed ({type(exc).__name__}: {exc})") from None
+        raise CanopenInputError(f"process image: malformed ({type(exc).__name__}: {exc})") from None
     return pdos, chans

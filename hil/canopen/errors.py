@@ -16,8 +16,10 @@ class CanopenError(Exception):
     """Base of every error raised by :mod:`hil.canopen` (and by the simulated drives of sim/drives)."""
 
 
-class InputError(CanopenError, ValueError):
-    """A bad argument to a protocol function: the message names it, its value and its unit or range."""
+class CanopenInputError(CanopenError, ValueError):
+    """A bad argument to a protocol function: the message names it, its value and its unit or range.
+
+    (The pure analysis' and physics' counterpart is :class:`blf.errors.InputError`.)"""
 
 
 class EdsError(CanopenError, ValueError):

@@ -67,7 +67,7 @@ class Frame:
         return f"{self.arbitration_id:03X}#{self.data.hex().upper()}"
 
     @classmethod
-    def trusted(cls, arbitration_id: int, data: bytes) -> "Frame":
+    def trusted(cls, arbitration_id: int, data: bytes) -> Frame:
         """A frame from a source that already guarantees an 11-bit id and <= 8 bytes of
         ``bytes`` (a python-can message, a struct-packed PDO): no re-validation (hot path)."""
         f = object.__new__(cls)

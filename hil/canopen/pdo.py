@@ -33,7 +33,7 @@ from enum import Enum
 
 from canopen.objectdictionary import datatypes as dt
 
-from hil.canopen.errors import CanopenError, InputError
+from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.frame import Frame
 
 __all__ = ["COB_ID_INVALID", "COB_ID_NO_RTR", "Direction", "MappedObject", "PdoError", "PdoLayout",
@@ -105,7 +105,7 @@ class MappedObject:
 
     def __post_init__(self) -> None:
         if self.data_type not in TYPE_BITS:
-            raise InputError(f"{self.name}: data type 0x{self.data_type:04X} cannot be mapped by this codec")
+            raise CanopenInputError(f"{self.name}: data type 0x{self.data_type:04X} cannot be mapped by this codec")
 
     @property
     def bit_length(self) -> int:
@@ -172,10 +172,10 @@ class PdoSpec:
 
     def __post_init__(self) -> None:
         if not 0 <= self.cob_id <= 0x7FF:
-            raise InputError(f"{self.name}: COB-ID 0x{self.cob_id:X} is not an 11-bit identifier")
+            raise CanopenInputError(f"{self.name}: COB-ID 0x{self.cob_id:X} is not an 11-bit identifier")
         object.__setattr__(self, "_struct", struct.Struct(self.struct_format))
         if self._struct.size > 8:
-            raise InputError(f"{self.name}: {self._struct.size * 8} mapped bits exceed the 64 of a CAN frame")
+            raise CanopenInputError(f"{self.name}: {self._struct.size * 8} mapped bits exceed the 64 of a CAN frame")
 
     @property
     def comm_index(self) -> int:

@@ -255,7 +255,8 @@ class PdoPacker:
         if not rec.type_writable and rec.default_type != ttype:
             ok = ttype == 1 and rec.default_type is not None and rec.default_type == 1
             if not ok:
-                self.problem(f"{node.key}.eds", f"0x{(0x1400 if rec.direction is Direction.RX else 0x1800) + rec.number - 1:04X}:02 at {node.name}",
+                comm = (0x1400 if rec.direction is Direction.RX else 0x1800) + rec.number - 1
+                self.problem(f"{node.key}.eds", f"0x{comm:04X}:02 at {node.name}",
                              f"{name}'s transmission type is fixed at {rec.default_type} by {eds.name}; "
                              f"the check needs {ttype} ({'every SYNC' if ttype == 1 else 'event driven'})")
                 return None

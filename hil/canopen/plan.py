@@ -352,7 +352,7 @@ class _Planner:
         layouts, channels = self._layouts(entries, drive_info)
         nodes = tuple(self._node_plan(n, layouts[n.name]) for n in self.smap.nodes)
         drives = tuple(DrivePlan(ema, nodes[ema - 1], fc, fc is ForceControl.CST, angle_src, torque_src, reaction)
-                       for ema, (fc, angle_src, torque_src, reaction) in zip((1, 2), drive_info))
+                       for ema, (fc, angle_src, torque_src, reaction) in zip((1, 2), drive_info, strict=True))
         load = self._load(layouts)
         if self.problems:
             raise PlanError(_merged(self.problems))
@@ -401,15 +401,45 @@ class _Planner:
                              f"= 0x{want:08X}: the EDS describes another device")
 
     def _plan_drive(self, ema: int, node: NodeSpec):
-        """Check one EMA's drive; returns ((force control, angle source, torque source, reaction), entries)."""
-        eds = self.eds[node.name]
+        """Check one EMA's drive; returns ((force control, angle source, torque source, reaction), entries).
+
+        The steps, in the order their problems are listed: the drive modes it announces, the cyclic
+        objects every check needs, the motor angle's scaling, the force control (CST or the master's
+        force loop in CSP) and its objects, the reaction to the master's death, the gear ratio object."""
         smap = self.smap
+        modes, cst_eds = self._drive_modes(ema, node)
+        ents = self._cyclic_entries(ema, node)
+        angle_src = self._angle_source(ema, node)
+        torque, mode, display = (smap.entry(ema, sig) for sig in (Signal.TARGET_TORQUE, Signal.MODE,
+                                                                   Signal.MODE_DISPLAY))
+        fc = smap.force_control
+        reasons = self._no_cst_reasons(ema, node, modes, cst_eds, torque, mode, display)
+        if fc is ForceControl.CST and reasons:
+            for r in reasons:
+                self.problem("canopen.force_control", None, f"EMA {ema}: CST is asked for, but {r}")
+        use_cst = fc is ForceControl.CST or (fc is ForceControl.AUTO and not reasons)
+        fc_eff = ForceControl.CST if use_cst else ForceControl.CSP
+        if fc_eff is ForceControl.CSP and ema == 1:
+            self.notes.append("the EMAs hold forces by the master's own force loop on the measured force in CSP "
+                              + ("(canopen.force_control = \"csp\")" if fc is ForceControl.CSP
+                                 else f"(no CST: {reasons[0]})"))
+        torque_src = None
+        if use_cst:
+            for e in (torque, mode, display):
+                checked = self._check_entry(e, pdo=True)
+                if checked is not None:
+                    ents.append(checked)
+            torque_src = torque.source
+        else:
+            ents += self._csp_mode_entries(node, mode, display)
+        reaction = self._master_loss_reaction(node)
+        self._check_gear_ratio(node)
+        return (fc_eff, angle_src, torque_src, reaction), ents
+
+    def _drive_modes(self, ema: int, node: NodeSpec) -> tuple[object, bool]:
+        """0x6502 (supported drive modes) required, CSP announced; returns (0x6502's default, CST possible)."""
+        eds = self.eds[node.name]
         key = f"{node.key}.eds"
-        ents = []
-
-        def std(sig: Signal) -> SignalEntry | None:
-            return smap.entry(ema, sig)
-
         self._require(node, 0x6502, 0, "supported drive modes", key)
         modes = eds.default(0x6502, 0)
         cst_eds = not isinstance(modes, int) or bool(modes >> CST_BIT & 1)
@@ -418,8 +448,14 @@ class _Planner:
             self.problem(key, f"0x6502:00 (supported drive modes) at {node.name}",
                          f"{eds.name} announces {what} (0x6502 = 0x{modes:08X}): the check commands "
                          f"positions in cyclic synchronous position mode (CSP, 8)")
+        return modes, cst_eds
+
+    def _cyclic_entries(self, ema: int, node: NodeSpec) -> list[SignalEntry]:
+        """The statusword, motor angle, controlword and target position: given, on the drive (the motor
+        angle may come from another node), in PDOs; returns the checked entries."""
+        ents = []
         for sig in (Signal.STATUSWORD, Signal.MOTOR_ANGLE, Signal.CONTROLWORD, Signal.TARGET_POSITION):
-            e = std(sig)
+            e = self.smap.entry(ema, sig)
             if e is None:
                 self.problem(f"signals.ema{ema}.{sig.value}", None, "missing")
                 continue
@@ -429,17 +465,23 @@ class _Planner:
             checked = self._check_entry(e, pdo=True)
             if checked is not None:
                 ents.append(checked)
-        angle = std(Signal.MOTOR_ANGLE)
+        return ents
+
+    def _angle_source(self, ema: int, node: NodeSpec) -> ScaleSource:
+        """Where the motor angle's scaling comes from; the objects it is read from required on the drive."""
+        angle = self.smap.entry(ema, Signal.MOTOR_ANGLE)
         angle_src = angle.source if angle is not None else ScaleSource.PROFILE
         if angle is not None and angle.node == node.name:
             for i, s in angle_src.read_objects:
                 self._require(node, i, s, "position scaling", angle.key,
                               why=f"the motor angle's scaling is {angle_src.value} as read from the drive")
-        # the modes of operation and its display
-        mode, display = std(Signal.MODE), std(Signal.MODE_DISPLAY)
-        torque = std(Signal.TARGET_TORQUE)
-        fc = smap.force_control
-        reasons = []  # why CST cannot be used
+        return angle_src
+
+    def _no_cst_reasons(self, ema: int, node: NodeSpec, modes, cst_eds: bool, torque: SignalEntry | None,
+                        mode: SignalEntry | None, display: SignalEntry | None) -> list[str]:
+        """Why cyclic synchronous torque mode cannot be used on this drive (empty: it can)."""
+        eds = self.eds[node.name]
+        reasons = []
         if torque is None:
             reasons.append(f"signals.ema{ema}.target_torque is not given")
         else:
@@ -458,36 +500,29 @@ class _Planner:
             v = eds.var(obj.index, obj.subindex)
             if v is None or not v.pdo_mappable:
                 reasons.append(f"{obj.where} ({sig.value.replace('_', ' ')}) is not PDO-mappable in {eds.name}")
-        if fc is ForceControl.CST and reasons:
-            for r in reasons:
-                self.problem("canopen.force_control", None, f"EMA {ema}: CST is asked for, but {r}")
-        use_cst = fc is ForceControl.CST or (fc is ForceControl.AUTO and not reasons)
-        fc_eff = ForceControl.CST if use_cst else ForceControl.CSP
-        if fc_eff is ForceControl.CSP and ema == 1:
-            self.notes.append("the EMAs hold forces by the master's own force loop on the measured force in CSP "
-                              + ("(canopen.force_control = \"csp\")" if fc is ForceControl.CSP
-                                 else f"(no CST: {reasons[0]})"))
-        torque_src = None
-        if use_cst:
-            for e in (torque, mode, display):
-                checked = self._check_entry(e, pdo=True)
-                if checked is not None:
-                    ents.append(checked)
-            torque_src = torque.source
-        else:
-            # CSP only: the mode is set once by SDO and its display read back
-            if mode is not None and self._require(node, mode.index, mode.subindex, "modes of operation", mode.key,
-                                                  write=True, read=False):
-                ents.append(replace(mode, data_type=eds.var(mode.index, mode.subindex).data_type))
-            if display is not None:
-                v = eds.var(display.index, display.subindex)
-                if v is not None and v.pdo_mappable and v.readable and v.data_type in TYPE_BITS:
-                    ents.append(replace(display, data_type=v.data_type))
-                else:
-                    self._require(node, display.index, display.subindex, "modes of operation display",
-                                  display.key)
-        # the drive's own reaction to the master's death
-        reaction = True
+        return reasons
+
+    def _csp_mode_entries(self, node: NodeSpec, mode: SignalEntry | None,
+                          display: SignalEntry | None) -> list[SignalEntry]:
+        """CSP only: the mode is set once by SDO and its display read back (in a PDO where it can be)."""
+        eds = self.eds[node.name]
+        ents = []
+        if mode is not None and self._require(node, mode.index, mode.subindex, "modes of operation", mode.key,
+                                              write=True, read=False):
+            ents.append(replace(mode, data_type=eds.var(mode.index, mode.subindex).data_type))
+        if display is not None:
+            v = eds.var(display.index, display.subindex)
+            if v is not None and v.pdo_mappable and v.readable and v.data_type in TYPE_BITS:
+                ents.append(replace(display, data_type=v.data_type))
+            else:
+                self._require(node, display.index, display.subindex, "modes of operation display",
+                              display.key)
+        return ents
+
+    def _master_loss_reaction(self, node: NodeSpec) -> bool:
+        """Whether the drive can be set to stop by itself when the master dies (0x1016:01 and 0x6007
+        writable); required unless the profile states an external watchdog."""
+        eds = self.eds[node.name]
         if not self.watchdog:
             why = ("the drive must stop by itself when the master dies; a rig with another protection states "
                    "it in canopen.external_watchdog")
@@ -495,17 +530,19 @@ class _Planner:
                                write=True, why=why)
             ok &= self._require(node, 0x6007, 0, "abort connection option code", "canopen.external_watchdog",
                                 write=True, why=why)
-            reaction = ok
-        else:
-            reaction = eds.writable(0x1016, 1) and eds.writable(0x6007, 0)
-        if self.gear_ratio_object is not None:
-            gi, gs = self.gear_ratio_object
-            if self._require(node, gi, gs, "gear ratio", "canopen.gear_ratio_object"):
-                t = eds.var(gi, gs).data_type
-                if t not in (dt.REAL32, dt.REAL64):
-                    self.problem("canopen.gear_ratio_object", f"{object_name(gi, gs)} at {node.name}",
-                                 f"has type {type_name(t)}; the gear ratio is read as REAL32 or REAL64 [rad/mm]")
-        return (fc_eff, angle_src, torque_src, reaction), ents
+            return ok
+        return eds.writable(0x1016, 1) and eds.writable(0x6007, 0)
+
+    def _check_gear_ratio(self, node: NodeSpec) -> None:
+        """The profile's gear ratio object, where given: on the drive and a REAL32 or REAL64."""
+        if self.gear_ratio_object is None:
+            return
+        gi, gs = self.gear_ratio_object
+        if self._require(node, gi, gs, "gear ratio", "canopen.gear_ratio_object"):
+            t = self.eds[node.name].var(gi, gs).data_type
+            if t not in (dt.REAL32, dt.REAL64):
+                self.problem("canopen.gear_ratio_object", f"{object_name(gi, gs)} at {node.name}",
+                             f"has type {type_name(t)}; the gear ratio is read as REAL32 or REAL64 [rad/mm]")
 
     # ------------------------------------------------------------ PDOs
 

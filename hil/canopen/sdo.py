@@ -21,7 +21,7 @@ import struct
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
-from hil.canopen.errors import CanopenError, InputError
+from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.frame import SDO_RX_COB_ID_BASE, SDO_TX_COB_ID_BASE, Frame
 from hil.canopen.validate import integer, time_s
 from hil.canopen.validate import node_id as _check_node_id
@@ -233,7 +233,7 @@ def expedited_download_frame(node_id: int, index: int, subindex: int, data: byte
     response is not awaited (the master's quick stop by SDO: fire and forget)."""
     n = len(data)
     if not 1 <= n <= 4:
-        raise InputError(f"data has {n} bytes; an expedited download carries 1..4")
+        raise CanopenInputError(f"data has {n} bytes; an expedited download carries 1..4")
     cmd = (_CCS_INITIATE_DOWNLOAD << 5) | ((4 - n) << 2) | 0x02 | 0x01
     return Frame(SDO_TX_COB_ID_BASE + _check_node_id(node_id), _MUX.pack(cmd, index, subindex) + data.ljust(4, b"\x00"))
 
@@ -279,7 +279,7 @@ class SdoClient:
         self.node_id = _check_node_id(node_id)
         to = time_s(timeout_s, "timeout_s")
         if to <= 0.0:
-            raise InputError(f"timeout_s = {to} [s] must be > 0")
+            raise CanopenInputError(f"timeout_s = {to} [s] must be > 0")
         self.timeout_s = to
         self.tx_cob_id = SDO_TX_COB_ID_BASE + self.node_id  #: requests, client -> server
         self.rx_cob_id = SDO_RX_COB_ID_BASE + self.node_id  #: responses, server -> client
@@ -329,10 +329,10 @@ class SdoClient:
         Expedited for 1..4 bytes, segmented for more.
         """
         if isinstance(data, str):
-            raise InputError("data must be bytes, got str: encode it first (e.g. drive_od.encode_value)")
+            raise CanopenInputError("data must be bytes, got str: encode it first (e.g. drive_od.encode_value)")
         payload = bytes(data)
         if not payload:
-            raise InputError("data is empty [bytes]: an SDO download needs at least 1 byte")
+            raise CanopenInputError("data is empty [bytes]: an SDO download needs at least 1 byte")
         i, s, _ = self._begin(index, subindex, t)
         self._data = payload
         self._phase = _Phase.DOWNLOAD_INIT

@@ -35,7 +35,7 @@ import re
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.pdo import Direction
 
 __all__ = [
@@ -150,10 +150,10 @@ class Scale:
     def __post_init__(self) -> None:
         k = self.units_per_si
         if isinstance(k, bool) or not isinstance(k, (int, float)) or not math.isfinite(k) or k == 0:
-            raise InputError(f"units_per_si = {k!r} must be a finite, non-zero number")
+            raise CanopenInputError(f"units_per_si = {k!r} must be a finite, non-zero number")
         if isinstance(self.offset, bool) or not isinstance(self.offset, (int, float)) \
                 or not math.isfinite(self.offset):
-            raise InputError(f"offset = {self.offset!r} must be a finite number")
+            raise CanopenInputError(f"offset = {self.offset!r} must be a finite number")
         object.__setattr__(self, "units_per_si", float(k))
         object.__setattr__(self, "offset", float(self.offset))
 
@@ -204,7 +204,7 @@ def torque_scale(rated_torque_Nm: float, i_total_rad_per_mm: float) -> Scale:
     Notes
     -----
     :math:`F = \\tau / 1000 \\cdot T_r \\cdot 1000\\, i`: one per mille is
-    :math:`T_r\\, i` newton (:func:`hil.canopen.units.N_from_permille`).
+    :math:`T_r\\, i` newton (:func:`hil.canopen.units.permille_to_force_N`).
     """
     return Scale(1.0 / (rated_torque_Nm * i_total_rad_per_mm))
 
@@ -213,17 +213,17 @@ _OBJ = re.compile(r"^\s*(?:0x)?([0-9A-Fa-f]{4})\s*(?:(?::|sub)\s*(?:0x)?([0-9A-F
 
 
 def parse_object(text: object, key: str) -> tuple[int, int]:
-    """``"0x6064:00"`` as ``(index, subindex)``; InputError naming ``key``.
+    """``"0x6064:00"`` as ``(index, subindex)``; CanopenInputError naming ``key``.
 
     Index and sub-index are hexadecimal as in an EDS (``"0x3160:01"``, ``"3160sub1"``, ``"0x6064"`` for
     sub-index 0)."""
     m = _OBJ.match(text) if isinstance(text, str) else None
     if m is None:
-        raise InputError(f"'{key}' = {text!r} is not an object address like \"0x6064:00\" (index:sub-index)")
+        raise CanopenInputError(f"'{key}' = {text!r} is not an object address like \"0x6064:00\" (index:sub-index)")
     index = int(m.group(1), 16)
     sub = 0 if m.group(2) is None else int(m.group(2), 16)
     if not 0x1000 <= index <= 0xFFFF or not 0 <= sub <= 0xFF:
-        raise InputError(f"'{key}' = {text!r}: index must be 0x1000..0xFFFF and sub-index 0..255")
+        raise CanopenInputError(f"'{key}' = {text!r}: index must be 0x1000..0xFFFF and sub-index 0..255")
     return index, sub
 
 

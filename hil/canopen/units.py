@@ -1,11 +1,11 @@
 """Unit scaling between physical values and the drive objects: the one place for it.
 
-Every conversion exists twice on purpose, as a pair: a validated public
-function (``rad_to_increments``, ...) that checks its arguments and quotes
-name and unit in the error, and the unchecked kernel it is built on
-(``inc_from_rad``, ...), which the simulated drives call on their hot path
-with values they already hold as finite floats. The kernel *is* the formula;
-nobody writes it again.
+One name per conversion, ``<from>_to_<to>``: the public function (``rad_to_increments``, ...)
+validates its arguments and quotes name and unit in the error. Where the simulated drives need a
+conversion on their hot path, with values they already hold as finite floats, its unchecked kernel
+carries the same name with ``_unchecked`` (``rad_to_increments_unchecked``, ...) and takes the
+scale the drive keeps (increments per rad rather than counts per revolution); the public function
+is built on it. The kernel *is* the formula; nobody writes it again.
 
 ============  ====================  ========================================
 object        drive integer         physical value
@@ -29,52 +29,37 @@ _I32_LO, _I32_HI = I32
 _I16_LO, _I16_HI = I16
 
 
-# --------------------------------------------------------------------------- kernels (unchecked)
-
-
-def round_clip_i32(x: float) -> int:
+def _round_clip_i32(x: float) -> int:
     """``round(x)`` (ties to even) clipped to i32; ``x`` finite."""
     v = round(x)
     return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
 
 
-def round_clip_i16(x: float) -> int:
-    """``round(x)`` (ties to even) clipped to i16; ``x`` finite."""
-    v = round(x)
-    return _I16_LO if v < _I16_LO else _I16_HI if v > _I16_HI else v
+# --------------------------------------------------------------------------- kernels (unchecked)
 
 
-def inc_from_rad(phi_rad: float, inc_per_rad: float) -> int:
+def rad_to_increments_unchecked(angle_rad: float, inc_per_rad: float) -> int:
     """Kernel of :func:`rad_to_increments`: ``round(phi k)`` clipped to i32."""
-    v = round(phi_rad * inc_per_rad)  # (round_clip_i32 written out: this runs twice per drive and SYNC)
+    v = round(angle_rad * inc_per_rad)  # (_round_clip_i32 written out: this runs twice per drive and SYNC)
     return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
 
 
-def rad_from_inc(position_inc: float, inc_per_rad: float) -> float:
+def increments_to_rad_unchecked(position_inc: float, inc_per_rad: float) -> float:
     """Kernel of :func:`increments_to_rad`: ``p / k`` [rad]."""
     return position_inc / inc_per_rad
 
 
-def N_from_permille(torque_permille: float, i_total_rad_per_mm: float, rated_torque_Nm: float) -> float:
+def permille_to_force_N_unchecked(torque_permille: float, i_total_rad_per_mm: float,
+                                  rated_torque_Nm: float) -> float:
     """Kernel of :func:`permille_to_force_N` [N]."""
     return torque_permille / 1000.0 * rated_torque_Nm * i_total_rad_per_mm * 1000.0
 
 
-def permille_from_torque(torque_Nm: float, rated_torque_Nm: float) -> int:
-    """Motor torque [N m] in per mille of the rated torque (0x6077), rounded, clipped to i16."""
-    return round_clip_i16(1000.0 * torque_Nm / rated_torque_Nm)
-
-
-def um_from_mm(stroke_mm: float) -> int:
-    """Kernel of :func:`mm_to_lvdt_um` [0.001 mm]."""
-    v = round(stroke_mm * 1000.0)
-    return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
-
-
-def dN_from_N(F_N: float) -> int:
-    """Kernel of :func:`newton_to_force_dN` [0.1 N]."""
-    v = round(F_N * 10.0)
-    return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
+def torque_to_permille_unchecked(torque_Nm: float, rated_torque_Nm: float) -> int:
+    """Kernel of :func:`force_to_permille` after the gear: motor torque [N m] in per mille of the rated
+    torque (0x6077), rounded (ties to even), clipped to i16."""
+    v = round(1000.0 * torque_Nm / rated_torque_Nm)
+    return _I16_LO if v < _I16_LO else _I16_HI if v > _I16_HI else v
 
 
 # --------------------------------------------------------------------------- validated
@@ -112,7 +97,7 @@ def rad_to_increments(angle_rad: float, counts_per_rev: int) -> int:
     -2**31 .. 2**31 - 1.
     """
     phi = finite("angle_rad", angle_rad, "rad")
-    return inc_from_rad(phi, increments_per_rad(counts_per_rev))
+    return rad_to_increments_unchecked(phi, increments_per_rad(counts_per_rev))
 
 
 def increments_to_rad(position_inc: int, counts_per_rev: int) -> float:
@@ -123,7 +108,7 @@ def increments_to_rad(position_inc: int, counts_per_rev: int) -> float:
     :math:`\\varphi = 2\\pi \\, p / N_{rev}` [rad].
     """
     p = finite("position_inc", position_inc, "increments")
-    return rad_from_inc(p, increments_per_rad(counts_per_rev))
+    return increments_to_rad_unchecked(p, increments_per_rad(counts_per_rev))
 
 
 def force_to_permille(F_N: float, i_total_rad_per_mm: float, rated_torque_Nm: float) -> int:
@@ -158,7 +143,7 @@ def force_to_permille(F_N: float, i_total_rad_per_mm: float, rated_torque_Nm: fl
     F = finite("F_N", F_N, "N")
     i_total = positive("i_total_rad_per_mm", i_total_rad_per_mm, "rad/mm")
     t_rated = positive("rated_torque_Nm", rated_torque_Nm, "N m")
-    return permille_from_torque(F / (i_total * 1000.0), t_rated)
+    return torque_to_permille_unchecked(F / (i_total * 1000.0), t_rated)
 
 
 def permille_to_force_N(torque_permille: int, i_total_rad_per_mm: float, rated_torque_Nm: float) -> float:
@@ -172,12 +157,12 @@ def permille_to_force_N(torque_permille: int, i_total_rad_per_mm: float, rated_t
     tau = finite("torque_permille", torque_permille, "per mille")
     i_total = positive("i_total_rad_per_mm", i_total_rad_per_mm, "rad/mm")
     t_rated = positive("rated_torque_Nm", rated_torque_Nm, "N m")
-    return N_from_permille(tau, i_total, t_rated)
+    return permille_to_force_N_unchecked(tau, i_total, t_rated)
 
 
 def mm_to_lvdt_um(stroke_mm: float) -> int:
     """LVDT stroke [mm] to the 0x2100 integer [0.001 mm], rounded, clipped to i32."""
-    return um_from_mm(finite("stroke_mm", stroke_mm, "mm"))
+    return _round_clip_i32(finite("stroke_mm", stroke_mm, "mm") * 1000.0)
 
 
 def lvdt_um_to_mm(lvdt_um: int) -> float:
@@ -187,7 +172,7 @@ def lvdt_um_to_mm(lvdt_um: int) -> float:
 
 def newton_to_force_dN(F_N: float) -> int:
     """Load-cell force [N] to the 0x2101 integer [0.1 N], rounded, clipped to i32."""
-    return dN_from_N(finite("F_N", F_N, "N"))
+    return _round_clip_i32(finite("F_N", F_N, "N") * 10.0)
 
 
 def force_dN_to_newton(force_dN: int) -> float:

@@ -1,7 +1,7 @@
 """Argument validators of the CANopen vocabulary: one place, one message style.
 
 Each returns the value converted (``int`` or ``float``) or raises
-:class:`~hil.canopen.errors.InputError` (or the error class given) naming
+:class:`~hil.canopen.errors.CanopenInputError` (or the error class given) naming
 the argument, its value and its range or unit, e.g.
 ``node_id = 128 is outside 1..127``. Used by the protocol modules of
 :mod:`hil.canopen` and by the simulated drives (sim/drives).
@@ -12,12 +12,12 @@ from __future__ import annotations
 import math
 import operator
 
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 
 MAX_NODE_ID = 127  #: highest CANopen node id (CiA 301)
 
 
-def integer(name: str, value: object, lo: int, hi: int, *, error: type[Exception] = InputError,
+def integer(name: str, value: object, lo: int, hi: int, *, error: type[Exception] = CanopenInputError,
             show: str = "{}", what: str = "") -> int:
     """``value`` as an int in ``lo..hi`` (bool refused).
 
@@ -30,7 +30,7 @@ def integer(name: str, value: object, lo: int, hi: int, *, error: type[Exception
     lo, hi : int
         Inclusive range.
     error : exception type
-        Raised on failure (default :class:`InputError`).
+        Raised on failure (default :class:`CanopenInputError`).
     show : str
         Format of the value and the range in the message, e.g. ``"0x{:X}"``.
     what : str
@@ -70,13 +70,13 @@ def finite(name: str, value: object, unit: str) -> float:
     elif value.__class__ is int:
         return float(value)
     if isinstance(value, bool):
-        raise InputError(f"{name} must be a number [{unit}], got bool")
+        raise CanopenInputError(f"{name} must be a number [{unit}], got bool")
     try:
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number [{unit}], got {value!r}") from None
+        raise CanopenInputError(f"{name} must be a number [{unit}], got {value!r}") from None
     if not math.isfinite(v):
-        raise InputError(f"{name} = {v} [{unit}] must be finite")
+        raise CanopenInputError(f"{name} = {v} [{unit}] must be finite")
     return v
 
 
@@ -84,7 +84,7 @@ def positive(name: str, value: object, unit: str) -> float:
     """A finite float > 0 in ``unit``."""
     v = finite(name, value, unit)
     if v <= 0.0:
-        raise InputError(f"{name} = {v} [{unit}] must be > 0")
+        raise CanopenInputError(f"{name} = {v} [{unit}] must be > 0")
     return v
 
 

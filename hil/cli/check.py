@@ -27,13 +27,14 @@ class LiveProgress:
 
     def __init__(self, console: Console, total_s: float, enabled: bool) -> None:
         self.enabled = enabled and console.is_terminal
-        self._p = Progress(TextColumn("[bold]{task.fields[step]:<12}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                           TextColumn("{task.fields[values]}"), TimeElapsedColumn(), console=console,
-                           transient=False, disable=not self.enabled, refresh_per_second=8)
+        self._p = Progress(TextColumn("[bold]{task.fields[step]:<12}"), BarColumn(),
+                           TextColumn("{task.percentage:>3.0f}%"), TextColumn("{task.fields[values]}"),
+                           TimeElapsedColumn(), console=console, transient=False, disable=not self.enabled,
+                           refresh_per_second=8)
         self._task = self._p.add_task("check", total=1.0, step="", values="")
         self._n = 0
 
-    def __enter__(self) -> "LiveProgress":
+    def __enter__(self) -> LiveProgress:
         self._p.__enter__()
         return self
 
@@ -204,7 +205,7 @@ def simulated_identity(act, simrig) -> dict | None:
     c = act.canopen
     return {f"ema{k}": {"node": n, "vendor_id": c.vendor_id, "product_code": c.product_code,
                         "revision": c.revision_min, "serial": s}
-            for k, (n, s) in enumerate(zip(c.node_ids, simrig.serials), start=1)}
+            for k, (n, s) in enumerate(zip(c.node_ids, simrig.serials, strict=True), start=1)}
 
 
 def truth_dict(truth) -> dict:

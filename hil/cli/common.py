@@ -70,8 +70,9 @@ def add_eds_arg(p: argparse.ArgumentParser) -> None:
                    help="the drives' EDS file as its vendor ships it (overrides canopen.eds of the profile)")
 
 
-def add_recording_args(p: argparse.ArgumentParser, writes: str, *,
-                       recording_help: str = "run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2) or CAN log (*.log)") -> None:
+def add_recording_args(
+        p: argparse.ArgumentParser, writes: str, *,
+        recording_help: str = "run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2) or CAN log (*.log)") -> None:
     """The recording to read, ``--profile`` to read it with and ``--out`` for what the command ``writes``."""
     p.add_argument("recording", metavar="RECORDING", type=Path, help=recording_help)
     p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
@@ -133,12 +134,12 @@ _seed = _count("a seed")
 
 def utc_stamp() -> str:
     """The current UTC time as ``20261123T141500Z`` (for folder names)."""
-    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    return _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
 
 
 def utc_iso() -> str:
     """The current UTC time, ISO 8601 to the second."""
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 @dataclass(frozen=True)
@@ -210,7 +211,7 @@ def add_trace_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--work-order", metavar="ID", help="the work order it is run for (recorded likewise)")
 
 
-def _history_url(text: str) -> str:
+def history_url_type(text: str) -> str:
     """argparse type of ``--history``: a database URL (only its form is checked here; no database
     library is imported before a check)."""
     from hil.history.errors import HistoryInputError
@@ -248,12 +249,12 @@ def add_history_args(p: argparse.ArgumentParser, *, simulated: bool) -> None:
     (``simulated``) only with ``--history``."""
     g = p.add_argument_group("wear history (docs/history.md)")
     if simulated:
-        g.add_argument("--history", nargs="?", const=True, metavar="URL", type=_history_url,
+        g.add_argument("--history", nargs="?", const=True, metavar="URL", type=history_url_type,
                        help="record this simulated check in the wear history, marked simulated (never in a real "
                             "actuator's trend): into URL, else the actuation profile's history.url, else the "
                             "user's SQLite file")
     else:
-        g.add_argument("--history", metavar="URL", type=_history_url,
+        g.add_argument("--history", metavar="URL", type=history_url_type,
                        help="record the result into this database (sqlite:///PATH or postgresql://USER@HOST/DB) "
                             "instead of the actuation profile's history.url or the user's SQLite file")
         g.add_argument("--no-history", action="store_true", help="do not record this result in the wear history")

@@ -38,8 +38,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
     if data["where"]:
         console.print("  the rest lies at: " + ", ".join(data["where"]))
-    for l in data["locations"][:6]:
-        console.print(f"  where: {l['channel']} {l['t_start_s']}-{l['t_end_s']} s ({l['test']} test), {l['regime']}")
+    for loc in data["locations"][:6]:
+        console.print(f"  where: {loc['channel']} {loc['t_start_s']}-{loc['t_end_s']} s ({loc['test']} test), "
+                      f"{loc['regime']}")
     console.print(f"  compared in the band: {d.band.words}")
     console.print("  residual RMS before -> after (band): " + ", ".join(
         f"{c} {data['residual_rms_before'][c]} -> {data['residual_rms_after'][c]}"

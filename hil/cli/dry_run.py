@@ -140,5 +140,6 @@ def register(sub) -> None:
     add_profile_args(p, sim=True)
     add_trace_args(p)
     add_history_args(p, simulated=True)
-    p.add_argument("--realtime", action="store_true", help="pace SYNC at the SYNC period (default: as fast as possible)")
+    p.add_argument("--realtime", action="store_true",
+                   help="pace SYNC at the SYNC period (default: as fast as possible)")
     p.add_argument("--quiet", action="store_true", help="no progress display")

@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from hil.cli.common import EPILOG, ExitCode, _history_url, add_parser, history_url, make_console
+from hil.cli.common import EPILOG, ExitCode, add_parser, history_url, history_url_type, make_console
 
 
 def _serial(text: str) -> int:
@@ -159,7 +159,7 @@ def register(sub) -> None:
                                "reaches B_spec, with a 95 %% interval. A step down (repair) or a new actuator at a "
                                "position starts a new trend. `emacheck history sync RUN_FOLDER...` records "
                                "results that could not be recorded when they were made.")
-    p.add_argument("--history", metavar="URL", type=_history_url,
+    p.add_argument("--history", metavar="URL", type=history_url_type,
                    help="the history database (default: the actuation profile's history.url, else the user's "
                         "SQLite file)")
     p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
@@ -177,7 +177,7 @@ def register(sub) -> None:
                                   "down or locked could not take. A result already recorded is not recorded again.",
                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("folders", nargs="+", metavar="RUN_FOLDER", type=Path, help="run folders or result files")
-    s.add_argument("--history", dest="sync_history", metavar="URL", type=_history_url,
+    s.add_argument("--history", dest="sync_history", metavar="URL", type=history_url_type,
                    help="the history database (default: the profile's history.url, else the user's SQLite file)")
     s.add_argument("--profile", dest="sync_profile", metavar="ACTUATION.toml", type=Path,
                    help="actuation profile whose history.url to read")

@@ -62,7 +62,7 @@ def parse_utc(text: Any) -> _dt.datetime | None:
     except ValueError:
         return None
     if t.tzinfo is not None:
-        t = t.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+        t = t.astimezone(_dt.UTC).replace(tzinfo=None)
     return t
 
 
@@ -116,7 +116,7 @@ def record_from_result(result: dict, *, result_path: Path | None = None, run_fol
         h = file_sha256(Path(rec)) if rec else None
         run_key = f"recording:{h}" if h else f"result:{sha}"
     t = (parse_utc(trace.get("started_utc")) or parse_utc(trace.get("analysed_utc"))
-         or _dt.datetime.now(_dt.timezone.utc).replace(tzinfo=None, microsecond=0))
+         or _dt.datetime.now(_dt.UTC).replace(tzinfo=None, microsecond=0))
     sw = trace.get("software") or {}
     spec = result.get("spec") or {}
     verdict = result.get("verdict") or {}

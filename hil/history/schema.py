@@ -26,8 +26,8 @@ constructs, dialect-neutral), and :data:`LATEST` follows it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import sqlalchemy as sa
 

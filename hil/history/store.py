@@ -22,7 +22,6 @@ import contextlib
 import datetime as _dt
 import time
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import sqlalchemy as sa
@@ -44,7 +43,7 @@ _CHUNK = 500  # ids per IN (...) list
 
 
 def _utcnow() -> _dt.datetime:
-    return _dt.datetime.now(_dt.timezone.utc).replace(tzinfo=None, microsecond=0)
+    return _dt.datetime.now(_dt.UTC).replace(tzinfo=None, microsecond=0)
 
 
 class HistoryStore:
@@ -71,7 +70,7 @@ class HistoryStore:
     # ------------------------------------------------------------------ opening
 
     @classmethod
-    def open(cls, url: str, *, create: bool = True, timeout_s: float = DEFAULT_TIMEOUT_S) -> "HistoryStore | None":
+    def open(cls, url: str, *, create: bool = True, timeout_s: float = DEFAULT_TIMEOUT_S) -> HistoryStore | None:
         """Connect and bring the schema to :data:`hil.history.schema.LATEST`.
 
         With ``create=False`` an SQLite file that does not exist is not made: None is
@@ -129,7 +128,7 @@ class HistoryStore:
         """Release the connections."""
         self._engine.dispose()
 
-    def __enter__(self) -> "HistoryStore":
+    def __enter__(self) -> HistoryStore:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -237,7 +236,7 @@ class HistoryStore:
 
     # ------------------------------------------------------------------ writing
 
-    def add(self, record: "CheckRecord") -> bool:
+    def add(self, record: CheckRecord) -> bool:
         """Record one result with its readings in one transaction.
 
         Parameters
@@ -255,7 +254,7 @@ class HistoryStore:
         with self._tx(write=True) as conn:
             return self._add(conn, record)
 
-    def add_many(self, records: Sequence["CheckRecord"]) -> int:
+    def add_many(self, records: Sequence[CheckRecord]) -> int:
         """Record several results in one transaction; returns how many were new."""
         with self._tx(write=True) as conn:
             return sum(self._add(conn, r) for r in records)
@@ -300,12 +299,6 @@ class HistoryStore:
         """How many results are recorded."""
         with self._tx(write=False) as conn:
             return int(conn.execute(sa.select(sa.func.count()).select_from(S.checks)).scalar_one())
-
-    def has_result(self, result_sha256: str) -> bool:
-        """True if the result with this SHA-256 is recorded."""
-        with self._tx(write=False) as conn:
-            return conn.execute(sa.select(S.checks.c.id).where(S.checks.c.result_sha256 == result_sha256)
-                                ).first() is not None
 
     def checks(self, *, serial: int | None = None, aircraft: str | None = None) -> list[dict[str, Any]]:
         """The recorded results in time order, each a dict of its columns plus ``identity``
@@ -385,8 +378,3 @@ def _sqlite_events(engine: sa.Engine) -> None:
     @sa.event.listens_for(engine, "begin")
     def _begin(conn: sa.Connection) -> None:
         conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get("emacheck_write") else "BEGIN")
-
-
-def sqlite_file(url: str) -> Path | None:
-    """The file of an SQLite history URL, None for a server."""
-    return sqlite_path(url) if dialect(url) == "sqlite" else None

@@ -47,7 +47,7 @@ def figure_overlay(model, d, channel: str):
     ho = np.asarray(d.held_out, dtype=bool)
     if ho.size == t.size and ho.any():
         edges = np.flatnonzero(np.diff(np.r_[0, ho.astype(np.int8), 0]))
-        for k, (a, b) in enumerate(zip(edges[::2], edges[1::2])):
+        for k, (a, b) in enumerate(zip(edges[::2], edges[1::2], strict=True)):
             ax[1].axvspan(t[a], t[b - 1], color="0.5", alpha=0.12, lw=0,
                           label="held out (not fitted)" if k == 0 else None)
     ax[1].axhline(0, color="k", lw=0.5)
@@ -123,8 +123,9 @@ def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosi
     effs = (table([column("effect"), column("where"), column("what"), column("parameters"), column("ΔBIC", "1"),
                    column("Δχ² held out", "1"), column("evidence")], erows, raw=True)
             if erows else "<p>none</p>")
-    locs = "".join(f"<li>{esc(l['channel'])} ({esc(l.get('where', ''))}): {_g(l['t_start_s'])}–{_g(l['t_end_s'])} s "
-                   f"({esc(l['test'])} test), {esc(l['regime'])}</li>" for l in data["locations"][:12])
+    locs = "".join(f"<li>{esc(loc['channel'])} ({esc(loc.get('where', ''))}): "
+                   f"{_g(loc['t_start_s'])}–{_g(loc['t_end_s'])} s "
+                   f"({esc(loc['test'])} test), {esc(loc['regime'])}</li>" for loc in data["locations"][:12])
     css = {"no_mismatch": "pass", "explained": "pass", "unexplained": "fail"}[data["verdict"]]
     where = (f"<p>The rest of the mismatch lies at: <b>{esc(', '.join(data['where']))}</b> (strongest first).</p>"
              if data.get("where") else "")

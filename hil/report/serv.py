@@ -73,7 +73,7 @@ def figure_over_time(an: ServAnalysis, truth: dict | None):
     """Backlash per channel over time: each detected jump's height, and the running result."""
     plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), sharex=True)
-    for a, ch in zip(axes, CHANNELS):
+    for a, ch in zip(axes, CHANNELS, strict=True):
         r = an.results[ch]
         acc = [j for j in r.jumps if j.accepted]
         rej = [j for j in r.jumps if not j.accepted and np.isfinite(j.height_mm)]

@@ -72,20 +72,20 @@ from hil.canopen.cia402 import (
     state_word,
 )
 from hil.canopen.emcy import error_register_bits
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.od import AbortConnectionOption
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortCode
 from hil.canopen.signalmap import Signal, angle_scale_factor_group
 from hil.canopen.units import (
-    N_from_permille,
-    inc_from_rad,
     increments_per_rad,
     increments_to_rad,
-    permille_from_torque,
+    increments_to_rad_unchecked,
     permille_to_force_N,
-    rad_from_inc,
+    permille_to_force_N_unchecked,
     rad_to_increments,
+    rad_to_increments_unchecked,
+    torque_to_permille_unchecked,
 )
 from sim.drives.nmt_slave import EMCY_HEARTBEAT, EMCY_NO_ERROR
 from sim.drives.store import abort
@@ -136,11 +136,11 @@ class Cia402Drive:
     """Mixin of :class:`sim.drives.drive.SimDrive`: the CiA 402 drive and its live values.
 
     The attributes below are the ones this part owns (set in
-    :meth:`_init_drive`, :meth:`_reset_application` and :meth:`_measure`; the
-    pair writes ``_torque_fetch`` once and ``_torque_val`` /
-    ``_torque_stale`` when it fetches the torques). It uses ``ema_index``,
-    ``store``, ``_int``, ``_icache``, ``_store`` and ``_counters`` of the
-    drive, and ``_emcy`` and ``error_register`` of
+    :meth:`init_drive`, :meth:`reset_application` and :meth:`measure`; the
+    pair writes ``torque_fetch`` once and ``torque_value`` /
+    ``torque_stale`` when it fetches the torques). It uses ``ema_index``,
+    ``store``, ``int_value``, ``int_cache``, ``write_object`` and ``counters`` of the
+    drive, and ``send_emcy`` and ``error_register`` of
     :class:`~sim.drives.nmt_slave.NmtSlave`.
 
     Attributes
@@ -168,19 +168,19 @@ class Cia402Drive:
     _qs_cycles : int
         Quick-stop hold in SYNC cycles.
     _phi_rad : float
-        This EMA's motor angle [rad] of the current sample (:meth:`_measure`; the
-        measured inputs read the whole sample ``_raw``).
-    _torque_val : float
-        Drive torque [N m], valid unless ``_torque_stale``.
-    _torque_stale : bool
+        This EMA's motor angle [rad] of the current sample (:meth:`measure`; the
+        measured inputs read the whole sample ``raw_sample``).
+    torque_value : float
+        Drive torque [N m], valid unless ``torque_stale``.
+    torque_stale : bool
         The torque of the current sample is not fetched yet.
-    _torque_fetch : callable
+    torque_fetch : callable
         Fetches it (:meth:`sim.drives.SimDrivePair._fetch_torque`).
     _inc_per_rad : float or None
         Increments per rad, None until needed after a change of 0x608F.
     _pos_memo : int or None
         Position actual value of the current sample (computed once).
-    _memo : list
+    input_memo : list
         The measured inputs' raw values of the current sample (computed once each).
     _sw_state : State or None
         The state whose statusword bits ``_sw_base`` holds.
@@ -207,7 +207,7 @@ class Cia402Drive:
         Fault resets received in the current FAULT (``fault_resets_needed``).
     """
 
-    def _init_drive(self, gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
+    def init_drive(self, gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
                     *, angle_units_per_rad: float | None = None, rated_torque_Nm: float | None = None) -> None:
         """Initial state: drive in SWITCH_ON_DISABLED, no sample yet (see :class:`~sim.drives.drive.SimDrive`)."""
         self._i_total = float(gear_ratio_rad_per_mm)
@@ -225,9 +225,9 @@ class Cia402Drive:
         self.state_machine = DriveStateMachine(remote=True)
         self.command_override: Callable[[Cia402Drive, float, int, float], tuple[int, float]] | None = None
         self._phi_rad = 0.0
-        self._torque_val = 0.0
-        self._torque_stale = False
-        self._torque_fetch: Callable[[], None] = self._no_torque_source  # set by SimDrivePair
+        self.torque_value = 0.0
+        self.torque_stale = False
+        self.torque_fetch: Callable[[], None] = self._no_torque_source  # set by SimDrivePair
         self._inc_per_rad: float | None = None
         self._pos_memo: int | None = None
         self._sw_state: State | None = None  # statusword bits of this state: _sw_base
@@ -238,12 +238,12 @@ class Cia402Drive:
         self._sp_mode = _MODE_DISABLED
         self._sp_value = 0.0
         self._sp_obj: Setpoint | None = None
-        self._reset_application()
+        self.reset_application()
 
-    def _live_objects(self) -> dict[tuple[int, int], Callable[[], int | float]]:
+    def build_live_objects(self) -> dict[tuple[int, int], Callable[[], int | float]]:
         """The objects whose value the drive computes when read: the node's (error register, the
         measured inputs the rig's map puts on this drive), its CiA 402 objects and the gear-ratio object."""
-        live = super()._live_objects()
+        live = super().build_live_objects()
         live.update({
             (0x6041, 0): self._statusword_now,
             (0x6061, 0): lambda: self._mode_display,
@@ -252,21 +252,21 @@ class Cia402Drive:
         })
         if 0x6077 in self.store_od:
             live[(0x6077, 0)] = lambda: self.torque_actual_permille
-        if self._gear_object is not None:
-            live[self._gear_object] = lambda: self._i_total
+        if self.gear_object is not None:
+            live[self.gear_object] = lambda: self._i_total
         return live
 
-    def _input_getter(self, k: int, inp) -> Callable[[], int | float]:
+    def input_getter(self, k: int, inp) -> Callable[[], int | float]:
         """Getter of a measured input; this EMA's motor angle in the drive's own position units
         (0x6064, or the profile leaves the scaling to the drive) is its position actual value."""
         if inp.signal is Signal.MOTOR_ANGLE and inp.ema == self.ema_index + 1 \
                 and (inp.scale is None or inp.key == (0x6064, 0)):
             return self._position_now
-        return super()._input_getter(k, inp)
+        return super().input_getter(k, inp)
 
     # ------------------------------------------------------------------ reset and own data
 
-    def _reset_application(self) -> None:
+    def reset_application(self) -> None:
         """Power-on / reset node: SWITCH_ON_DISABLED (FAULT with ``boot_fault``), 0x6061 from the EDS,
         plant command DISABLED, the modes it supports from its 0x6502 (CSP bit 7, CST bit 9)."""
         modes = self.store.int_or(0x6502, 0, _CSP_CST_BITS)
@@ -286,35 +286,35 @@ class Cia402Drive:
             self.state_machine.fault(self.boot_fault)
             self.state_machine.fault_reaction_done()
 
-    def _after_boot(self) -> None:
+    def after_boot(self) -> None:
         """A drive that booted into FAULT says so (EMCY with its error code)."""
         if self.boot_fault and self.state_machine.state is State.FAULT:
-            self._emcy(self.state_machine.error_code)
+            self.send_emcy(self.state_machine.error_code)
 
-    def _app_error_bits(self) -> int:
+    def app_error_bits(self) -> int:
         """Error register bits of the latched fault (:func:`hil.canopen.emcy.error_register_bits`)."""
         sm = self.state_machine
         if sm.state in _FAULTY and sm.error_code:
             return error_register_bits(sm.error_code)
         return 0
 
-    def _apply_own_data(self) -> None:
+    def apply_own_data(self) -> None:
         """The drive's own data, restored at power-on and reset node: what its EDS leaves open
         (identity, device type, supported modes, rated torque, ... :attr:`own_data`), its serial
         number (0x1018:04) and, where given, its encoder resolution (0x608F)."""
-        super()._apply_own_data()
+        super().apply_own_data()
         if self._cpr_override is not None:
-            self._store(0x608F, 1, struct.pack("<I", self._cpr_override))
-            self._store(0x608F, 2, struct.pack("<I", 1))
+            self.write_object(0x608F, 1, struct.pack("<I", self._cpr_override))
+            self.write_object(0x608F, 2, struct.pack("<I", 1))
 
-    def _check_app_write(self, index: int, subindex: int, value: float | None) -> None:
+    def check_app_write(self, index: int, subindex: int, value: float | None) -> None:
         """Validate an SDO write of a drive object (raise SdoAbortedError to refuse)."""
         if index == 0x6060:
             if value not in self._modes:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
         elif index == 0x607D and subindex in (1, 2):
-            lo = value if subindex == 1 else self._int(0x607D, 1)
-            hi = value if subindex == 2 else self._int(0x607D, 2)
+            lo = value if subindex == 1 else self.int_value(0x607D, 1)
+            hi = value if subindex == 2 else self.int_value(0x607D, 2)
             if hi < lo:
                 raise abort(SdoAbortCode.MAX_LESS_THAN_MIN)
         elif index in (0x6076, 0x608F):
@@ -327,57 +327,57 @@ class Cia402Drive:
             if value not in _QUICK_STOP_OPTIONS:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
 
-    def _mode_written(self) -> None:
+    def mode_written(self) -> None:
         """0x6060 written: a supported mode shows in 0x6061 (another one is ignored; with
         ``mode_frozen`` every one)."""
-        mode = self._int(0x6060)
+        mode = self.int_value(0x6060)
         if mode in self._modes and not self.mode_frozen:
             self._mode_display = mode
 
     # ------------------------------------------------------------------ live values
 
-    def _measure(self, raw: tuple) -> None:
+    def measure(self, raw: tuple) -> None:
         """Take this EMA's values of a plant sample ``(t_s, phi1, phi2, s1, s2, F1, F2)``.
 
         The drive torque is fetched from the plant only when it is first needed
         (0x6077), see :meth:`sim.drives.SimDrivePair._fetch_torque`.
         """
         k = self.ema_index
-        self._raw = raw
+        self.raw_sample = raw
         self._phi_rad = raw[1 + k]
         self._pos_memo = None
-        memo = self._memo
+        memo = self.input_memo
         for j in range(len(memo)):
             memo[j] = None
-        self._torque_stale = True
+        self.torque_stale = True
 
     def _no_torque_source(self) -> None:
-        self._torque_stale = False
+        self.torque_stale = False
 
     @property
     def _torque_Nm(self) -> float:
         """Drive torque [N m] of the current sample."""
-        if self._torque_stale:
-            self._torque_fetch()
-        return self._torque_val
+        if self.torque_stale:
+            self.torque_fetch()
+        return self.torque_value
 
     @property
     def motor_angle_rad(self) -> float:
         """Motor angle [rad] of the current sample (what 0x6064 is computed from)."""
         return self._phi_rad
 
-    def _cpr_changed(self) -> None:
+    def cpr_changed(self) -> None:
         """0x608F (may have) changed: drop the values derived from the counts per revolution."""
         self._inc_per_rad = None
         self._pos_memo = None
 
-    def _k_inc(self) -> float:
+    def angle_increments_per_rad(self) -> float:
         """Increments (position units) per rad, cached: the drive's own units, in this order the
         position factor group 0x6091/0x6092 (where the map reads the angle in user units), the encoder
         resolution 0x608F where the drive has one, the scaling the profile states, 4096 per revolution."""
         k = self._inc_per_rad
         if k is None:
-            if self._factor_group:
+            if self.factor_group:
                 so = self.store.int_or
                 k = angle_scale_factor_group(so(0x6091, 1, 1), so(0x6091, 2, 1), so(0x6092, 1, 1),
                                              so(0x6092, 2, 1)).units_per_si
@@ -409,9 +409,9 @@ class Cia402Drive:
             try:
                 k = self._inc_per_rad
                 if k is None:
-                    k = self._k_inc()
-                v = inc_from_rad(phi, k)
-            except (ValueError, ArithmeticError):  # (InputError is a ValueError)
+                    k = self.angle_increments_per_rad()
+                v = rad_to_increments_unchecked(phi, k)
+            except (ValueError, ArithmeticError):  # (CanopenInputError is a ValueError)
                 return rad_to_increments(phi, self.counts_per_rev)  # raises its own error
             self._pos_memo = v
         return v
@@ -419,7 +419,7 @@ class Cia402Drive:
     @property
     def torque_actual_permille(self) -> int:
         """Torque actual value 0x6077 [per mille of the rated torque 0x6076]."""
-        return permille_from_torque(self._torque_Nm, self._rated_Nm())
+        return torque_to_permille_unchecked(self._torque_Nm, self._rated_Nm())
 
     def _rated_Nm(self) -> float:
         """The motor's rated torque [N m]: the profile's where it states it, else 0x6076 [mN m]."""
@@ -445,9 +445,9 @@ class Cia402Drive:
         state = sm.state
         extra = 0
         if state is _OE:
-            mode = self._icache.get(_K_MODE)
+            mode = self.int_cache.get(_K_MODE)
             if mode is None:
-                mode = self._int(0x6060)
+                mode = self.int_value(0x6060)
             if self.mode_frozen:
                 mode = self._mode_display
             if mode in self._modes:
@@ -479,18 +479,18 @@ class Cia402Drive:
 
     # ------------------------------------------------------------------ the state machine
 
-    def _inject_fault(self, code: int) -> None:
+    def enter_fault(self, code: int) -> None:
         """Transition 13 with error ``code`` and its EMCY."""
         self.state_machine.fault(code)
-        self._emcy(code)
+        self.send_emcy(code)
 
-    def _controlword(self) -> None:
+    def controlword_written(self) -> None:
         """Apply the controlword 0x6040 just written (by RPDO or SDO)."""
         sm = self.state_machine
         old = sm.state
-        cw = self._icache.get(_K_CONTROLWORD)
+        cw = self.int_cache.get(_K_CONTROLWORD)
         if cw is None:
-            cw = self._int(0x6040)
+            cw = self.int_value(0x6040)
         # The master repeats the controlword every cycle: the same word as the previous
         # one in a state where that was seen to be a no-op is a no-op again (the outcome
         # of on_controlword depends only on the state, the previous and this word).
@@ -504,7 +504,7 @@ class Cia402Drive:
         try:
             sm.on_controlword(cw)
         except IllegalTransition:
-            self._counters.illegal_commands += 1
+            self.counters.illegal_commands += 1
             return
         new = sm.state
         if old is State.FAULT and new is not old:
@@ -518,7 +518,7 @@ class Cia402Drive:
             self._cw_noop[cw] = self._cw_noop.get(cw, ()) + (old,)
         self._entered(old, new)
         if old is State.FAULT and new is State.SWITCH_ON_DISABLED:
-            self._emcy(EMCY_NO_ERROR)
+            self.send_emcy(EMCY_NO_ERROR)
 
     def _entered(self, old: State, new: State) -> None:
         """A transition ``old`` -> ``new`` was taken: a quick stop starts as 0x605A says (holding the
@@ -529,14 +529,14 @@ class Cia402Drive:
             self._qs_left = 0 if option == 0 else self._qs_cycles
             self._qs_stay = self.quick_stop_stays or option in _QS_STAY
 
-    def _connection_lost(self) -> None:
+    def connection_lost(self) -> None:
         """The abort connection option 0x6007 on a connection loss (a heartbeat event), through
         the CiA 402 transition table: 1 fault, 2 disable voltage, 3 quick stop (0 nothing)."""
         if self.ignore_abort_connection:
             return  # (fault hook) the EMCY went out, the drive goes on
         sm = self.state_machine
         old = sm.state
-        option = self._int(0x6007) if self.store.var(0x6007, 0) is not None else 0
+        option = self.int_value(0x6007) if self.store.var(0x6007, 0) is not None else 0
         try:
             if option == AbortConnectionOption.FAULT:
                 sm.fault(EMCY_HEARTBEAT)
@@ -546,7 +546,7 @@ class Cia402Drive:
             return  # no such transition in this state (FAULT, NOT_READY_TO_SWITCH_ON): kept
         self._entered(old, sm.state)
 
-    def _cycle(self) -> tuple[int, float]:
+    def drive_cycle(self) -> tuple[int, float]:
         """The drive's control cycle at a SYNC: internal transitions and the plant command.
 
         Returns the plant command ``(mode, value)`` (a DriveMode value and rad / N),
@@ -569,16 +569,16 @@ class Cia402Drive:
         self._target_eff_inc = None
         mode_out, value = _MODE_DISABLED, 0.0
         if sm.state is _OE:
-            ic = self._icache
+            ic = self.int_cache
             mode = ic.get(_K_MODE)
             if mode is None:
-                mode = self._int(0x6060)
+                mode = self.int_value(0x6060)
             if self.mode_frozen:
                 mode = self._mode_display
             if mode == _CSP and _CSP in self._modes:  # (a supported mode, so the effective one)
                 target = ic.get(_K_TARGET_POS)
                 if target is None:
-                    target = self._int(0x607A)
+                    target = self.int_value(0x607A)
                 lo = ic.get(_K_POS_MIN)
                 if lo is None:
                     lo = self.store.int_or(0x607D, 1, -(2**31))
@@ -591,15 +591,15 @@ class Cia402Drive:
                 try:
                     k = self._inc_per_rad
                     if k is None:
-                        k = self._k_inc()
-                    value = rad_from_inc(eff, k)  # (an int divided by a float: float(eff) / k)
-                except (ArithmeticError, InputError):
+                        k = self.angle_increments_per_rad()
+                    value = increments_to_rad_unchecked(eff, k)  # (an int divided by a float: float(eff) / k)
+                except (ArithmeticError, CanopenInputError):
                     value = increments_to_rad(eff, self.counts_per_rev)  # raises its own error
                 mode_out = _MODE_POSITION
             elif mode == _CST and _CST in self._modes:
                 tau = ic.get(_K_TARGET_TORQUE)
                 if tau is None:
-                    tau = self._int(0x6071)
+                    tau = self.int_value(0x6071)
                 tmax = ic.get(_K_MAX_TORQUE)
                 if tmax is None:
                     tmax = self.store.int_or(0x6072, 0, 32767)
@@ -608,7 +608,7 @@ class Cia402Drive:
                 rated_Nm = self._rated_Nm()
                 i_total = self._i_total
                 if 0.0 < rated_Nm < math.inf and 0.0 < i_total < math.inf:
-                    value = N_from_permille(eff, i_total, rated_Nm)
+                    value = permille_to_force_N_unchecked(eff, i_total, rated_Nm)
                 else:
                     value = permille_to_force_N(eff, i_total, rated_Nm)  # raises its own error
                 mode_out = _MODE_FORCE

@@ -19,7 +19,7 @@ from sim.drives.cia402_drive import Cia402Drive
 from sim.drives.node import LiveInput, SimNode
 
 if TYPE_CHECKING:
-    from sim.drives.stats import _Counters
+    from sim.drives.stats import PairCounters
 
 __all__ = ["LiveInput", "SimDrive"]
 
@@ -46,7 +46,7 @@ class SimDrive(Cia402Drive, SimNode):
         power-on and reset node; None keeps the EDS's.
     sample_period_s : float
         The plant's sample period (the SYNC period) [s].
-    counters : sim.drives.pair._Counters
+    counters : sim.drives.stats.PairCounters
         The pair's counters, shared by both nodes.
     outbox : list of Frame
         Where the node appends the frames it transmits (the pair drains it).
@@ -84,23 +84,23 @@ class SimDrive(Cia402Drive, SimNode):
 
     Raises
     ------
-    hil.canopen.errors.InputError
+    hil.canopen.errors.CanopenInputError
         A measured input the drive cannot serve.
     """
 
     def __init__(self, node_id: int, ema_index: int, od: cod.ObjectDictionary, *,
                  gear_ratio_rad_per_mm: float, counts_per_rev: int | None, sample_period_s: float,
-                 counters: _Counters, outbox: list[Frame], serial: int | None = None,
+                 counters: PairCounters, outbox: list[Frame], serial: int | None = None,
                  inputs: tuple[LiveInput, ...] = (), own_data: dict | None = None,
                  gear_object: tuple[int, int] | None = None, factor_group: bool = False,
                  rated_torque_Nm: float | None = None) -> None:
         self.ema_index = ema_index
-        self._gear_object = gear_object
-        self._factor_group = factor_group
+        self.gear_object = gear_object
+        self.factor_group = factor_group
         angle = next((i for i in inputs if i.signal is Signal.MOTOR_ANGLE and i.key == (0x6064, 0)), None)
         angle_k = angle.scale.units_per_si if angle is not None and angle.scale is not None else None
         SimNode.__init__(self, node_id, od, counters=counters, outbox=outbox, serial=serial, inputs=inputs,
                          own_data=own_data)
-        self._init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s,
+        self.init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s,
                          angle_units_per_rad=angle_k, rated_torque_Nm=rated_torque_Nm)
-        self._init_comm()
+        self.init_comm()

@@ -90,13 +90,13 @@ class NmtSlave:
     """Mixin of :class:`sim.drives.node.SimNode`: NMT slave, heartbeat, EMCY, error history.
 
     The attributes below are the ones this part owns (set in
-    :meth:`_init_nmt`). It uses ``node_id``, ``_now``, ``_out``,
-    ``_counters``, ``store``, ``sdo``, ``_icache``, ``_int`` and ``_store``
-    of the node, its application hooks (``_cpr_changed``,
-    ``_apply_own_data``, ``_reset_application``, ``_after_boot``,
-    ``_connection_lost``, ``_app_error_bits``), and ``_comm_error``,
-    the PDO lists, ``_refresh_pdos``, ``_restart_pdos``, ``_drop_latched``
-    and ``_timed_tpdos`` of :class:`~sim.drives.pdo_engine.PdoEngine`.
+    :meth:`init_nmt`). It uses ``node_id``, ``now_s``, ``outbox``,
+    ``counters``, ``store``, ``sdo``, ``int_cache``, ``int_value`` and ``write_object``
+    of the node, its application hooks (``cpr_changed``,
+    ``apply_own_data``, ``reset_application``, ``after_boot``,
+    ``connection_lost``, ``app_error_bits``), and ``comm_error``,
+    the PDO lists, ``refresh_pdos``, ``restart_pdos``, ``drop_latched_rpdos``
+    and ``send_timed_tpdos`` of :class:`~sim.drives.pdo_engine.PdoEngine`.
 
     Attributes
     ----------
@@ -109,11 +109,11 @@ class NmtSlave:
         Heartbeat producer time 0x1017 [s].
     _hb_next : float or None
         Time of the next heartbeat [s], None when the producer is off.
-    _sync_cob_id : int
+    sync_cob_id : int
         COB-ID of the SYNC this node consumes (0x1005).
     _emcy_cob_id : int or None
         COB-ID of its EMCY (0x1014), None when invalid.
-    _hb_consumers : dict
+    heartbeat_consumers : dict
         Heartbeat consumer (0x1016): producer node id -> ``[time_s, last_s, in_error]``
         (``last_s`` None until its first heartbeat).
     _hb_error : bool
@@ -122,68 +122,68 @@ class NmtSlave:
         Time [s] and producer node id of every heartbeat event.
     """
 
-    def _init_nmt(self) -> None:
+    def init_nmt(self) -> None:
         """Initial state (INITIALISING until the pair powers the node on)."""
         self.nmt_state = NmtState.INITIALISING
         self.heartbeat_enabled = True
         self._hb_period_s = 0.0
         self._hb_next: float | None = None
-        self._sync_cob_id = SYNC_COB_ID
+        self.sync_cob_id = SYNC_COB_ID
         self._emcy_cob_id: int | None = EMCY_COB_ID_BASE + self.node_id
-        self._hb_consumers: dict[int, list] = {}
+        self.heartbeat_consumers: dict[int, list] = {}
         self._hb_error = False
         self.heartbeat_events: list[tuple[float, int]] = []
 
     # ------------------------------------------------------------------ boot and NMT commands
 
-    def _boot(self, t: float, *, communication_only: bool) -> None:
+    def boot(self, t: float, *, communication_only: bool) -> None:
         """Power-on / reset: restore defaults, boot-up frame, PRE-OPERATIONAL."""
-        self._now = t
+        self.now_s = t
         self.store.reset(communication_only=communication_only)
-        self._cpr_changed()
+        self.cpr_changed()
         if not communication_only:
-            self._apply_own_data()
-            self._reset_application()
-        self._comm_error = False
+            self.apply_own_data()
+            self.reset_application()
+        self.comm_error = False
         self._hb_error = False
-        self._hb_consumers = {}
+        self.heartbeat_consumers = {}
         self.sdo.reset()
         self.nmt_state = NmtState.INITIALISING
-        self._out.append(heartbeat_frame(self.node_id, NmtState.BOOT_UP))
+        self.outbox.append(heartbeat_frame(self.node_id, NmtState.BOOT_UP))
         self.nmt_state = NmtState.PRE_OPERATIONAL
-        self._refresh_comm(restart_heartbeat=True)
+        self.refresh_comm(restart_heartbeat=True)
         if not communication_only:
-            self._after_boot()
+            self.after_boot()
 
-    def _nmt(self, cs: int, t: float) -> None:
+    def on_nmt_command(self, cs: int, t: float) -> None:
         """Apply NMT command specifier ``cs`` (a valid :class:`NmtCommand` value) at time ``t``."""
-        self._now = t
+        self.now_s = t
         if cs == NmtCommand.START:
             if self.nmt_state is not NmtState.OPERATIONAL:
                 self.nmt_state = NmtState.OPERATIONAL
-                self._restart_pdos()
+                self.restart_pdos()
         elif cs == NmtCommand.STOP:
             self.nmt_state = NmtState.STOPPED
-            self._drop_latched()
+            self.drop_latched_rpdos()
         elif cs == NmtCommand.ENTER_PRE_OPERATIONAL:
             self.nmt_state = NmtState.PRE_OPERATIONAL
-            self._drop_latched()
+            self.drop_latched_rpdos()
         elif cs == NmtCommand.RESET_NODE:
-            self._boot(t, communication_only=False)
+            self.boot(t, communication_only=False)
         elif cs == NmtCommand.RESET_COMMUNICATION:
-            self._boot(t, communication_only=True)
+            self.boot(t, communication_only=True)
 
-    def _refresh_comm(self, *, restart_heartbeat: bool) -> None:
+    def refresh_comm(self, *, restart_heartbeat: bool) -> None:
         """Re-read the communication objects (SYNC, EMCY, heartbeat if asked, PDOs)."""
-        self._sync_cob_id = self.store.int_or(0x1005, 0, SYNC_COB_ID) & 0x7FF
+        self.sync_cob_id = self.store.int_or(0x1005, 0, SYNC_COB_ID) & 0x7FF
         emcy = self.store.int_or(0x1014, 0, EMCY_COB_ID_BASE + self.node_id)
         self._emcy_cob_id = None if emcy & COB_ID_INVALID else emcy & 0x7FF
         if restart_heartbeat:
             period_ms = self.store.int_or(0x1017, 0, 0)
             self._hb_period_s = period_ms / 1000.0
-            self._hb_next = self._now + self._hb_period_s if period_ms > 0 else None
+            self._hb_next = self.now_s + self._hb_period_s if period_ms > 0 else None
         self._refresh_consumers()
-        self._refresh_pdos()
+        self.refresh_pdos()
 
     def _refresh_consumers(self) -> None:
         """Re-read the heartbeat consumer entries 0x1016; an unchanged entry keeps its monitoring,
@@ -191,17 +191,17 @@ class NmtSlave:
         store = self.store
         new: dict[int, list] = {}
         if store.var(0x1016, 0) is not None:
-            for k in range(1, self._int(0x1016, 0) + 1):
+            for k in range(1, self.int_value(0x1016, 0) + 1):
                 if store.var(0x1016, k) is None:
                     continue
-                v = self._int(0x1016, k)
+                v = self.int_value(0x1016, k)
                 node, time_s = v >> 16 & 0xFF, (v & 0xFFFF) / 1000.0
                 if node and time_s:
-                    old = self._hb_consumers.get(node)
+                    old = self.heartbeat_consumers.get(node)
                     new[node] = old if old is not None and old[0] == time_s else [time_s, None, False]
-        self._hb_consumers = new
+        self.heartbeat_consumers = new
 
-    def _check_comm_object_write(self, index: int, subindex: int, value: int) -> None:
+    def check_comm_object_write(self, index: int, subindex: int, value: int) -> None:
         """Validate an SDO write of 0x1005, 0x1014, 0x1003 or 0x1016 (raise SdoAbortedError to refuse)."""
         if index == 0x1005:
             if value & ((1 << 30) | (1 << 29)) or value & 0x1FFFF800:
@@ -209,7 +209,7 @@ class NmtSlave:
         elif index == 0x1014:
             if value & (1 << 29) or value & 0x1FFFF800:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
-            old = self._int(0x1014)
+            old = self.int_value(0x1014)
             if not (old | value) & COB_ID_INVALID and (old ^ value) & 0x7FF:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
         elif index == 0x1003 and subindex == 0:
@@ -219,56 +219,56 @@ class NmtSlave:
             node = value >> 16 & 0xFF
             if value >> 24 or node > 127:
                 raise abort(SdoAbortCode.VALUE_RANGE_EXCEEDED)
-            for k in range(1, self._int(0x1016, 0) + 1):
+            for k in range(1, self.int_value(0x1016, 0) + 1):
                 if k == subindex or self.store.var(0x1016, k) is None:
                     continue
-                other = self._int(0x1016, k)
+                other = self.int_value(0x1016, k)
                 if node and value & 0xFFFF and other >> 16 & 0xFF == node and other & 0xFFFF:
                     raise abort(SdoAbortCode.PARAMETER_INCOMPATIBILITY)  # one entry per producer
 
     # ------------------------------------------------------------------ heartbeat
 
-    def _tick(self, t: float) -> None:
+    def nmt_tick(self, t: float) -> None:
         """Time passes to ``t``: the heartbeat consumer, the heartbeat if due, the timed event TPDOs."""
-        self._now = t
-        if self._hb_consumers:
-            self._supervise(t)
+        self.now_s = t
+        if self.heartbeat_consumers:
+            self.supervise_heartbeats(t)
         if self._hb_next is not None and t >= self._hb_next - TIME_EPS_S:
             if self.heartbeat_enabled:
-                self._out.append(heartbeat_frame(self.node_id, self.nmt_state))
-                self._counters.heartbeats_sent += 1
+                self.outbox.append(heartbeat_frame(self.node_id, self.nmt_state))
+                self.counters.heartbeats_sent += 1
             self._hb_next += self._hb_period_s
             if self._hb_next <= t:
                 self._hb_next = t + self._hb_period_s
-        if self._event_tpdos_list:  # (_timed_tpdos only acts on valid event-driven TPDOs)
-            self._timed_tpdos(t)
+        if self.event_tpdos:  # (_timed_tpdos only acts on valid event-driven TPDOs)
+            self.send_timed_tpdos(t)
 
     # ------------------------------------------------------------------ heartbeat consumer
 
-    def _on_heartbeat(self, producer: int, t: float) -> bool:
+    def on_heartbeat(self, producer: int, t: float) -> bool:
         """A heartbeat (or boot-up) of node ``producer`` at ``t``; False if this node does not consume it."""
-        c = self._hb_consumers.get(producer)
+        c = self.heartbeat_consumers.get(producer)
         if c is None:
             return False
         c[1] = t
         if c[2]:  # the event ends; the drive state is not restored
             c[2] = False
-            if not any(e[2] for e in self._hb_consumers.values()):
+            if not any(e[2] for e in self.heartbeat_consumers.values()):
                 self._hb_error = False
                 if not self.error_register:
-                    self._emcy(EMCY_NO_ERROR)
+                    self.send_emcy(EMCY_NO_ERROR)
         return True
 
-    def _supervise(self, t: float) -> None:
+    def supervise_heartbeats(self, t: float) -> None:
         """Heartbeat events at time ``t``: more than the consumer time since the producer's last heartbeat."""
-        for node, c in self._hb_consumers.items():
+        for node, c in self.heartbeat_consumers.items():
             last = c[1]
             if last is not None and not c[2] and t - last > c[0] + TIME_EPS_S:
                 c[2] = True
                 self._hb_error = True
                 self.heartbeat_events.append((t, node))
-                self._emcy(EMCY_HEARTBEAT)
-                self._connection_lost()
+                self.send_emcy(EMCY_HEARTBEAT)
+                self.connection_lost()
 
     # ------------------------------------------------------------------ EMCY and error history
 
@@ -276,33 +276,33 @@ class NmtSlave:
     def error_register(self) -> int:
         """Error register 0x1001: the application's bits (a drive's latched fault) plus bits 0 and 4 for
         a PDO length error or a heartbeat event."""
-        reg = self._app_error_bits()
-        if self._comm_error or self._hb_error:
+        reg = self.app_error_bits()
+        if self.comm_error or self._hb_error:
             reg |= 0x11
         return reg
 
-    def _emcy(self, code: int) -> None:
+    def send_emcy(self, code: int) -> None:
         """Produce EMCY ``code`` (0: error reset); a code other than 0 goes into 0x1003 first."""
         if code:
             self._push_error(code)
         if self.nmt_state not in _TALKING or self._emcy_cob_id is None:
             return
-        self._out.append(emcy_frame(self._emcy_cob_id, code, self.error_register))
-        self._counters.emcys_sent += 1
+        self.outbox.append(emcy_frame(self._emcy_cob_id, code, self.error_register))
+        self.counters.emcys_sent += 1
 
     def _push_error(self, code: int) -> None:
         store = self.store
         if store.var(0x1003, 0) is None:
             return
-        n = min(self._int(0x1003, 0), ERROR_HISTORY_LEN)
+        n = min(self.int_value(0x1003, 0), ERROR_HISTORY_LEN)
         old = [store.get_data(0x1003, k) for k in range(1, n + 1)]
-        self._store(0x1003, 1, struct.pack("<I", code))
+        self.write_object(0x1003, 1, struct.pack("<I", code))
         for k, raw in enumerate(old[:ERROR_HISTORY_LEN - 1], start=2):
-            self._store(0x1003, k, raw)
-        self._store(0x1003, 0, bytes([min(n + 1, ERROR_HISTORY_LEN)]))
+            self.write_object(0x1003, k, raw)
+        self.write_object(0x1003, 0, bytes([min(n + 1, ERROR_HISTORY_LEN)]))
 
-    def _clear_error_history(self) -> None:
+    def clear_error_history(self) -> None:
         """0 written to 0x1003:00: forget the entries."""
         for k in range(1, ERROR_HISTORY_LEN + 1):
             self.store.data.get(0x1003, {}).pop(k, None)
-            self._icache.pop((0x1003, k), None)
+            self.int_cache.pop((0x1003, k), None)

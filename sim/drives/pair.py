@@ -88,7 +88,7 @@ from collections.abc import Callable
 import canopen.objectdictionary as cod
 
 from hil.canopen.cia402 import State
-from hil.canopen.errors import InputError
+from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import lookup
@@ -102,7 +102,7 @@ from sim.drives.node import SimNode
 from sim.drives.pdo_engine import Pdo
 from sim.drives.sensor_node import SimSensorNode
 from sim.drives.served import live_inputs, own_data
-from sim.drives.stats import SimPairStats, _Counters
+from sim.drives.stats import PairCounters, SimPairStats
 from sim.plant import RigPlant
 
 __all__ = ["FREE_RUN_AFTER_CYCLES", "SimDrivePair", "SimPairStats"]
@@ -130,7 +130,7 @@ def _counts(angle) -> float | None:
 def _od(od_factory: Callable[[str, int], cod.ObjectDictionary], name: str, node_id: int) -> cod.ObjectDictionary:
     od = od_factory(name, node_id)
     if not isinstance(od, cod.ObjectDictionary):
-        raise InputError(f"od_factory({name!r}, {node_id}) must return a canopen ObjectDictionary, "
+        raise CanopenInputError(f"od_factory({name!r}, {node_id}) must return a canopen ObjectDictionary, "
                          f"got {type(od).__name__}")
     return od
 
@@ -175,7 +175,7 @@ class SimDrivePair:
 
     Raises
     ------
-    hil.canopen.errors.InputError
+    hil.canopen.errors.CanopenInputError
         Wrong plant or plan type, ``counts_per_rev``, ``serials``, an object
         dictionary that lacks what a drive needs, or a measured input a node
         cannot serve.
@@ -220,11 +220,12 @@ class SimDrivePair:
     def __init__(self, plant: RigPlant, plan: RigPlan, od_factory: Callable[[str, int], cod.ObjectDictionary], *,
                  counts_per_rev: int | None = None, serials: tuple[int, int] | None = None) -> None:
         if not isinstance(plant, RigPlant):
-            raise InputError(f"plant must be a sim.plant.RigPlant, got {type(plant).__name__}")
+            raise CanopenInputError(f"plant must be a sim.plant.RigPlant, got {type(plant).__name__}")
         if not isinstance(plan, RigPlan):
-            raise InputError(f"plan must be a hil.canopen.plan.RigPlan, got {type(plan).__name__}")
+            raise CanopenInputError(f"plan must be a hil.canopen.plan.RigPlan, got {type(plan).__name__}")
         if not callable(od_factory):
-            raise InputError(f"od_factory must be callable as od_factory(node name, node id), got {od_factory!r}")
+            raise CanopenInputError("od_factory must be callable as od_factory(node name, node id), "
+                                    f"got {od_factory!r}")
         if counts_per_rev is not None:
             counts_per_rev = integer("counts_per_rev", counts_per_rev, 1, 2**32 - 1)  # [increments/rev]
         if serials is not None:
@@ -233,11 +234,11 @@ class SimDrivePair:
             except TypeError:
                 serials = ()
             if len(serials) != 2:
-                raise InputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
+                raise CanopenInputError(f"serials must be two ints (EMA 1, EMA 2), got {serials!r}")
             serials = tuple(integer(f"serials[{k}]", v, 0, 2**32 - 1) for k, v in enumerate(serials))
         self.plant = plant
         self.plan = plan
-        self._counters = _Counters()
+        self._counters = PairCounters()
         self._out: list[Frame] = []
         self._powered = False
         self._now = -math.inf
@@ -255,7 +256,7 @@ class SimDrivePair:
             od = _od(od_factory, spec.name, n)
             missing = [f"0x{i:04X}:{s:02X}" for i, s in _SIM_REQUIRED if lookup(od, i, s) is None]
             if missing:
-                raise InputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
+                raise CanopenInputError(f"node {n} object dictionary lacks objects the simulated drive serves: "
                                  + ", ".join(missing))
             torque = plan.map.entry(dp.ema, Signal.TARGET_TORQUE)
             rated = None
@@ -273,7 +274,7 @@ class SimDrivePair:
                                   rated_torque_Nm=rated))
         self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
         for node in self.nodes:
-            node._torque_fetch = self._fetch_torque
+            node.torque_fetch = self._fetch_torque
         sensors = []
         for np_ in plan.nodes:
             spec = np_.spec
@@ -290,7 +291,7 @@ class SimDrivePair:
         self._sensor_sdo = {s.sdo_request_cob_id: s for s in self.sensors}
         # COB-ID -> ((node, its RPDOs of that COB-ID), ...), valid for the nodes' _rx_by_cob dicts
         self._routes: dict[int, tuple[tuple[SimDrive, list[Pdo]], ...]] = {}
-        self._routes_rx: tuple[dict, dict] = (nodes[0]._rx_by_cob, nodes[1]._rx_by_cob)
+        self._routes_rx: tuple[dict, dict] = (nodes[0].rpdos_by_cob_id, nodes[1].rpdos_by_cob_id)
 
     # ------------------------------------------------------------------ inspection
 
@@ -339,34 +340,34 @@ class SimDrivePair:
         plant = self.plant
         try:
             raw = plant.step_raw(mode1, value1, mode2, value2)
-        except (InputError, TypeError):
+        except (CanopenInputError, TypeError):
             plant.step(Setpoint(DriveMode(mode1), value1), Setpoint(DriveMode(mode2), value2))
             raise
         self._raw_sample = raw
         self._sample = None
         n0, n1 = self.nodes
-        n0._measure(raw)
-        n1._measure(raw)
+        n0.measure(raw)
+        n1.measure(raw)
         if self.sensors:
             for s in self.sensors:
-                s._measure(raw)
+                s.measure(raw)
 
     def _fetch_torque(self) -> None:
         """Read both drive torques [N m] of the last plant step into the nodes."""
         torque = self.plant.state().torque_Nm
         for node in self.nodes:
-            node._torque_val = float(torque[node.ema_index])
-            node._torque_stale = False
+            node.torque_value = float(torque[node.ema_index])
+            node.torque_stale = False
 
     def _node_index(self, node_index: int) -> SimDrive:
         if isinstance(node_index, bool):
-            raise InputError("node_index must be 0 or 1 (int), got bool")
+            raise CanopenInputError("node_index must be 0 or 1 (int), got bool")
         try:
             k = operator.index(node_index)
         except TypeError:
-            raise InputError(f"node_index must be 0 or 1 (int), got {node_index!r}") from None
+            raise CanopenInputError(f"node_index must be 0 or 1 (int), got {node_index!r}") from None
         if k not in (0, 1):
-            raise InputError(f"node_index = {k} must be 0 (node {self.nodes[0].node_id}) "
+            raise CanopenInputError(f"node_index = {k} must be 0 (node {self.nodes[0].node_id}) "
                              f"or 1 (node {self.nodes[1].node_id})")
         return self.nodes[k]
 
@@ -392,7 +393,7 @@ class SimDrivePair:
             self._counters.plant_steps += 1
         self._powered = True
         for node in self.all_nodes:
-            node._boot(now, communication_only=False)
+            node.boot(now, communication_only=False)
         return self._drain()
 
     def on_frame(self, frame: Frame, t: float) -> list[Frame]:
@@ -405,11 +406,11 @@ class SimDrivePair:
 
         Raises
         ------
-        hil.canopen.errors.InputError
+        hil.canopen.errors.CanopenInputError
             ``frame`` is not a :class:`hil.canopen.frame.Frame` or ``t`` not a finite time.
         """
         if not isinstance(frame, Frame):
-            raise InputError(f"frame must be a hil.canopen.frame.Frame, got {type(frame).__name__}")
+            raise CanopenInputError(f"frame must be a hil.canopen.frame.Frame, got {type(frame).__name__}")
         if t.__class__ is float and t - t == 0.0:  # finite float: _clock without the conversions
             now = self._now
             if t > now:
@@ -423,52 +424,52 @@ class SimDrivePair:
         n0, n1 = self.nodes
         if cob == 0:  # NMT_COB_ID
             self._on_nmt(frame, now)
-        elif cob == n0._sync_cob_id or cob == n1._sync_cob_id:
+        elif cob == n0.sync_cob_id or cob == n1.sync_cob_id:
             self._on_sync(frame, now)
         elif cob == n0.sdo_request_cob_id or cob == n1.sdo_request_cob_id:
             consumed = False
             for node in (n0, n1):
                 if cob == node.sdo_request_cob_id:
-                    node._on_sdo(frame, now)
+                    node.on_sdo(frame, now)
                     consumed = True
-                rx = node._rx_by_cob.get(cob)
+                rx = node.rpdos_by_cob_id.get(cob)
                 if rx:
-                    node._on_rpdo(rx, frame, now)
+                    node.on_rpdo(rx, frame, now)
                     consumed = True
             if not consumed:
                 self._counters.bad_frames_ignored += 1
         elif 0x700 < cob <= 0x77F:  # a heartbeat: the nodes' consumers (0x1016)
             used = False
             if len(frame.data) == 1:
-                used = n0._on_heartbeat(cob - 0x700, now)
-                used = n1._on_heartbeat(cob - 0x700, now) or used
+                used = n0.on_heartbeat(cob - 0x700, now)
+                used = n1.on_heartbeat(cob - 0x700, now) or used
                 for s in self.sensors:
-                    used = s._on_heartbeat(cob - 0x700, now) or used
+                    used = s.on_heartbeat(cob - 0x700, now) or used
             if not used:
                 self._counters.bad_frames_ignored += 1
         else:
             # RPDOs (or nothing): the nodes' RPDOs of this COB-ID, looked up once per
             # configuration (a node's RPDO only changes that node's configuration)
-            if n0._rx_by_cob is not self._routes_rx[0] or n1._rx_by_cob is not self._routes_rx[1]:
+            if n0.rpdos_by_cob_id is not self._routes_rx[0] or n1.rpdos_by_cob_id is not self._routes_rx[1]:
                 self._routes = {}
-                self._routes_rx = (n0._rx_by_cob, n1._rx_by_cob)
+                self._routes_rx = (n0.rpdos_by_cob_id, n1.rpdos_by_cob_id)
             route = self._routes.get(cob)
             if route is None:
                 route = self._routes[cob] = tuple(
-                    (node, node._rx_by_cob[cob]) for node in (n0, n1) if node._rx_by_cob.get(cob))
+                    (node, node.rpdos_by_cob_id[cob]) for node in (n0, n1) if node.rpdos_by_cob_id.get(cob))
             if route:
                 for node, rx in route:
-                    node._on_rpdo(rx, frame, now)
+                    node.on_rpdo(rx, frame, now)
             elif not self.sensors or not self._sensor_frame(frame, now):
                 self._counters.bad_frames_ignored += 1
-        if n0._event_tpdos_list:
-            n0._event_tpdos(now)
-        if n1._event_tpdos_list:
-            n1._event_tpdos(now)
+        if n0.event_tpdos:
+            n0.send_event_tpdos(now)
+        if n1.event_tpdos:
+            n1.send_event_tpdos(now)
         if self.sensors:
             for s in self.sensors:
-                if s._event_tpdos_list:
-                    s._event_tpdos(now)
+                if s.event_tpdos:
+                    s.send_event_tpdos(now)
         return self._drain()
 
     def _sensor_frame(self, frame: Frame, now: float) -> bool:
@@ -477,17 +478,17 @@ class SimDrivePair:
         cob = frame.arbitration_id
         node = self._sensor_sdo.get(cob)
         if node is not None:
-            node._on_sdo(frame, now)
+            node.on_sdo(frame, now)
             return True
         used = False
         for s in self.sensors:
-            if cob == s._sync_cob_id and len(frame.data) <= 1:
-                s._now = now
-                s._sync_tpdos(now)
+            if cob == s.sync_cob_id and len(frame.data) <= 1:
+                s.now_s = now
+                s.send_sync_tpdos(now)
                 used = True
-            rx = s._rx_by_cob.get(cob)
+            rx = s.rpdos_by_cob_id.get(cob)
             if rx:
-                s._on_rpdo(rx, frame, now)
+                s.on_rpdo(rx, frame, now)
                 used = True
         return used
 
@@ -505,7 +506,7 @@ class SimDrivePair:
         if not targets:
             self._counters.bad_frames_ignored += 1
         for node in targets:
-            node._nmt(cs, t)
+            node.on_nmt_command(cs, t)
 
     def _on_sync(self, frame: Frame, t: float) -> None:
         if len(frame.data) > 1:
@@ -515,26 +516,26 @@ class SimDrivePair:
         self._last_sync_t = self._last_step_t = t
         cob = frame.arbitration_id
         n0, n1 = self.nodes
-        c0 = n0._sync_cob_id == cob
-        c1 = n1._sync_cob_id == cob
+        c0 = n0.sync_cob_id == cob
+        c1 = n1.sync_cob_id == cob
         if c0:
-            n0._now = t
-            n0._sync_tpdos(t)
+            n0.now_s = t
+            n0.send_sync_tpdos(t)
         if c1:
-            n1._now = t
-            n1._sync_tpdos(t)
+            n1.now_s = t
+            n1.send_sync_tpdos(t)
         if self.sensors:
             for s in self.sensors:
-                if s._sync_cob_id == cob:
-                    s._now = t
-                    s._sync_tpdos(t)
-                    s._apply_latched()
+                if s.sync_cob_id == cob:
+                    s.now_s = t
+                    s.send_sync_tpdos(t)
+                    s.apply_latched_rpdos()
         if c0:
-            n0._apply_latched()
+            n0.apply_latched_rpdos()
         if c1:
-            n1._apply_latched()
-        mode1, value1 = n0._cycle()
-        mode2, value2 = n1._cycle()
+            n1.apply_latched_rpdos()
+        mode1, value1 = n0.drive_cycle()
+        mode2, value2 = n1.drive_cycle()
         if n0.command_override is not None:
             mode1, value1 = n0.command_override(n0, t, mode1, value1)
         if n1.command_override is not None:
@@ -568,7 +569,7 @@ class SimDrivePair:
             if last is not None and now - last > FREE_RUN_AFTER_CYCLES * self._T:
                 self._free_run(now)
             for node in self.all_nodes:
-                node._tick(now)
+                node.nmt_tick(now)
         return self._drain()
 
     def _free_run(self, now: float) -> None:
@@ -582,11 +583,11 @@ class SimDrivePair:
                 return
             tau = self._last_step_t + T
             for node in self.nodes:
-                node._now = tau
-                if node._hb_consumers:
-                    node._supervise(tau)
-            mode1, value1 = n0._cycle()
-            mode2, value2 = n1._cycle()
+                node.now_s = tau
+                if node.heartbeat_consumers:
+                    node.supervise_heartbeats(tau)
+            mode1, value1 = n0.drive_cycle()
+            mode2, value2 = n1.drive_cycle()
             if n0.command_override is not None:
                 mode1, value1 = n0.command_override(n0, tau, mode1, value1)
             if n1.command_override is not None:
@@ -614,21 +615,21 @@ class SimDrivePair:
 
         Raises
         ------
-        hil.canopen.errors.InputError
+        hil.canopen.errors.CanopenInputError
             ``node_index`` not 0/1, ``emcy_code`` not in 0x0001..0xFFFF, or the
             pair is not powered on.
         """
         node = self._node_index(node_index)
         code = error_code(emcy_code, "emcy_code")
         if not self._powered:
-            raise InputError("inject_fault needs a powered pair: call power_on(t) first")
-        node._inject_fault(code)
-        node._event_tpdos(self._now)
+            raise CanopenInputError("inject_fault needs a powered pair: call power_on(t) first")
+        node.enter_fault(code)
+        node.send_event_tpdos(self._now)
         return self._drain()
 
     def set_heartbeat_enabled(self, node_index: int, enabled: bool) -> None:
         """Fault hook: stop (False) or resume (True) the heartbeat frames of drive ``node_index``."""
         node = self._node_index(node_index)
         if not isinstance(enabled, bool):
-            raise InputError(f"enabled must be a bool, got {enabled!r}")
+            raise CanopenInputError(f"enabled must be a bool, got {enabled!r}")
         node.heartbeat_enabled = enabled

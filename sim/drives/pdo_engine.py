@@ -114,7 +114,7 @@ class Pdo:
     cache_ok: tuple[bool, ...] = ()  # per entry: decoded value goes to the decoded-integer cache
     all_cache_ok: bool = False
     touches_cpr: bool = False  # maps 0x608F (counts per revolution)
-    effects: tuple[tuple[int, int], ...] = ()  # entries with side effects (SimDrive._after_write)
+    effects: tuple[tuple[int, int], ...] = ()  # entries with side effects (SimDrive.after_write)
 
     @property
     def is_synchronous(self) -> bool:
@@ -136,39 +136,39 @@ class PdoEngine:
     """Mixin of :class:`sim.drives.drive.SimDrive`: its PDOs, configured by the object dictionary.
 
     The attributes below are the ones this part owns (set in
-    :meth:`_init_pdos` and :meth:`_refresh_pdos`). It uses ``store``,
-    ``_data``, ``_icache``, ``_int``, ``_live``, ``_store``, ``_out``,
-    ``_counters``, ``_now`` and ``_after_write`` of the drive, ``nmt_state``
-    and ``_emcy`` of :class:`~sim.drives.nmt_slave.NmtSlave`, and
-    ``_controlword`` and ``_cpr_changed`` of
+    :meth:`init_pdos` and :meth:`refresh_pdos`). It uses ``store``,
+    ``object_data``, ``int_cache``, ``int_value``, ``live_objects``, ``write_object``, ``outbox``,
+    ``counters``, ``now_s`` and ``after_write`` of the drive, ``nmt_state``
+    and ``send_emcy`` of :class:`~sim.drives.nmt_slave.NmtSlave`, and
+    ``controlword_written`` and ``cpr_changed`` of
     :class:`~sim.drives.cia402_drive.Cia402Drive`.
 
     Attributes
     ----------
     _rpdos, _tpdos : list of Pdo
         Every PDO record of the EDS.
-    _rx_by_cob : dict
+    rpdos_by_cob_id : dict
         COB-ID -> valid RPDOs of that COB-ID (a new dict at each refresh;
         :class:`sim.drives.SimDrivePair` keys its routes on its identity).
-    _sync_tpdos_list, _event_tpdos_list, _timed_tpdos_list : tuple of Pdo
+    _sync_tpdos_list, event_tpdos, _timed_tpdos_list : tuple of Pdo
         Valid TPDOs sent at SYNC (0..240), on events (254/255), on their
         event timer.
     _sync_rpdos : tuple of Pdo
         Valid synchronous RPDOs (the only ones that latch).
-    _comm_error : bool
+    comm_error : bool
         An RPDO length error stands (EMCY sent, 0x1001 bits 0 and 4).
     """
 
-    def _init_pdos(self) -> None:
-        """Discover the PDO records of the EDS (configured by :meth:`_refresh_pdos`)."""
+    def init_pdos(self) -> None:
+        """Discover the PDO records of the EDS (configured by :meth:`refresh_pdos`)."""
         self._sync_tpdos_list: tuple[Pdo, ...] = ()
-        self._event_tpdos_list: tuple[Pdo, ...] = ()
+        self.event_tpdos: tuple[Pdo, ...] = ()
         self._timed_tpdos_list: tuple[Pdo, ...] = ()
         self._sync_rpdos: tuple[Pdo, ...] = ()
-        self._comm_error = False
+        self.comm_error = False
         self._rpdos = self._discover(rx=True)
         self._tpdos = self._discover(rx=False)
-        self._rx_by_cob: dict[int, list[Pdo]] = {}
+        self.rpdos_by_cob_id: dict[int, list[Pdo]] = {}
 
     # ------------------------------------------------------------------ configuration
 
@@ -198,13 +198,13 @@ class PdoEngine:
                 problems.append(f"0x{p.map_index:04X}: {problem[1]}")
         return problems
 
-    def _pdo_by_index(self, index: int) -> Pdo | None:
+    def pdo_by_index(self, index: int) -> Pdo | None:
         for p in self._rpdos + self._tpdos:
             if index in (p.comm_index, p.map_index):
                 return p
         return None
 
-    def _check_pdo_write(self, p: Pdo, index: int, subindex: int, value: int) -> None:
+    def check_pdo_write(self, p: Pdo, index: int, subindex: int, value: int) -> None:
         """Validate an SDO write of ``p``'s communication or mapping record (raise to refuse)."""
         if index == p.comm_index:
             self._check_comm_write(p, subindex, value)
@@ -236,7 +236,7 @@ class PdoEngine:
             if problem is not None:
                 raise abort(problem[0])
         else:
-            if self._int(p.map_index, 0) != 0:
+            if self.int_value(p.map_index, 0) != 0:
                 raise abort(SdoAbortCode.PARAMETER_INCOMPATIBILITY)
             if value != 0 and self._entry_problem(value, p.rx) is not None:
                 raise abort(SdoAbortCode.CANNOT_BE_MAPPED)
@@ -272,7 +272,7 @@ class PdoEngine:
             return SdoAbortCode.EXCEEDS_PDO_LENGTH, f"{total} mapped bits exceed 64"
         return None
 
-    def _refresh_pdos(self) -> None:
+    def refresh_pdos(self) -> None:
         """Re-read every PDO's configuration from the data store; keep runtime state if unchanged."""
         by_cob: dict[int, list[Pdo]] = {}
         int_or = self.store.int_or
@@ -292,8 +292,8 @@ class PdoEngine:
             p.trans_type = int_or(p.comm_index, 2, 255)
             p.entries = tuple(entries)
             p.length = sum(n for _, _, n in entries)
-            p.inhibit_s = self._int(p.comm_index, 3) * 1e-4 if p.has_inhibit else 0.0
-            p.event_timer_s = self._int(p.comm_index, 5) * 1e-3 if p.has_event_timer else 0.0
+            p.inhibit_s = self.int_value(p.comm_index, 3) * 1e-4 if p.has_inhibit else 0.0
+            p.event_timer_s = self.int_value(p.comm_index, 5) * 1e-3 if p.has_event_timer else 0.0
             key = (p.cob_id, p.valid, p.trans_type, p.entries)
             if key != p.key:
                 p.key = key
@@ -301,10 +301,10 @@ class PdoEngine:
             if p.rx and p.valid:
                 by_cob.setdefault(p.cob_id, []).append(p)
             self._compile_pdo(p)
-        self._rx_by_cob = by_cob
+        self.rpdos_by_cob_id = by_cob
         self._sync_tpdos_list = tuple(p for p in self._tpdos if p.valid and p.sync)
-        self._event_tpdos_list = tuple(p for p in self._tpdos if p.valid and p.event)
-        self._timed_tpdos_list = tuple(p for p in self._event_tpdos_list if p.event_timer_s > 0.0)
+        self.event_tpdos = tuple(p for p in self._tpdos if p.valid and p.event)
+        self._timed_tpdos_list = tuple(p for p in self.event_tpdos if p.event_timer_s > 0.0)
         # a latched RPDO is always valid and synchronous: a change of either resets ``latched``
         self._sync_rpdos = tuple(p for p in self._rpdos if p.valid and p.sync)
 
@@ -326,26 +326,26 @@ class PdoEngine:
                 return
             codes.append(code)
         st = struct.Struct("<" + "".join(codes))
-        live = self._live
+        live = self.live_objects
         if p.rx:
             plan, off = [], 0
             for i, s, nbytes in p.entries:
                 plan.append((i, s, off, off + nbytes))
                 off += nbytes
             p.plan = tuple(plan)
-            p.cache_ok = tuple(c in INT_CODES and k not in live for c, k in zip(codes, p.keys))
+            p.cache_ok = tuple(c in INT_CODES and k not in live for c, k in zip(codes, p.keys, strict=True))
             p.all_cache_ok = all(p.cache_ok)
             p.unpack = st.unpack
         elif all(k in live for k in p.keys):
             p.getters = tuple(live[k] for k in p.keys)
             p.pack = st.pack
 
-    def _restart_pdos(self) -> None:
+    def restart_pdos(self) -> None:
         """Entering OPERATIONAL: every PDO starts afresh."""
         for p in self._rpdos + self._tpdos:
             p.restart()
 
-    def _drop_latched(self) -> None:
+    def drop_latched_rpdos(self) -> None:
         for p in self._rpdos:
             p.latched = None
 
@@ -375,18 +375,18 @@ class PdoEngine:
         if payload is None:
             payload = self._assemble(p)
         # 11-bit COB-ID (cob & 0x7FF) and at most 64 mapped bits: a valid frame by construction
-        self._out.append(Frame.trusted(p.cob_id, payload))
+        self.outbox.append(Frame.trusted(p.cob_id, payload))
         p.last_payload = payload
         p.last_sent_t = t
         p.pending = False
-        self._counters.tpdos_sent += 1
+        self.counters.tpdos_sent += 1
 
-    def _sync_tpdos(self, t: float) -> None:
+    def send_sync_tpdos(self, t: float) -> None:
         """Send the synchronous TPDOs due at this SYNC (OPERATIONAL only)."""
         if self.nmt_state is not NmtState.OPERATIONAL:
             return
-        out = self._out
-        counters = self._counters
+        out = self.outbox
+        counters = self.counters
         for p in self._sync_tpdos_list:  # valid, transmission type 0..240
             tt = p.trans_type
             if tt:
@@ -415,11 +415,11 @@ class PdoEngine:
             p.pending = False
             counters.tpdos_sent += 1
 
-    def _event_tpdos(self, t: float) -> None:
+    def send_event_tpdos(self, t: float) -> None:
         """Send event-driven TPDOs (254/255) whose payload changed, respecting the inhibit time."""
-        if not self._event_tpdos_list or self.nmt_state is not NmtState.OPERATIONAL:
+        if not self.event_tpdos or self.nmt_state is not NmtState.OPERATIONAL:
             return
-        for p in self._event_tpdos_list:  # valid, transmission type 254/255
+        for p in self.event_tpdos:  # valid, transmission type 254/255
             payload = self._assemble(p)
             if payload == p.last_payload and not p.pending:
                 continue
@@ -428,36 +428,36 @@ class PdoEngine:
             else:
                 p.pending = True
 
-    def _timed_tpdos(self, t: float) -> None:
+    def send_timed_tpdos(self, t: float) -> None:
         if self.nmt_state is not NmtState.OPERATIONAL:
             return
         for p in self._timed_tpdos_list:  # valid, 254/255, event timer > 0
             if p.last_sent_t is None or t - p.last_sent_t >= p.event_timer_s - TIME_EPS_S:
                 self._send_tpdo(p, t)
-        self._event_tpdos(t)
+        self.send_event_tpdos(t)
 
     # ------------------------------------------------------------------ RPDOs
 
-    def _on_rpdo(self, pdos: list[Pdo], frame: Frame, t: float) -> None:
+    def on_rpdo(self, pdos: list[Pdo], frame: Frame, t: float) -> None:
         """An RPDO frame for ``pdos`` (the node's valid RPDOs of its COB-ID): latch or apply."""
-        self._now = t
+        self.now_s = t
         if self.nmt_state is not NmtState.OPERATIONAL:
-            self._counters.rpdos_dropped += 1
+            self.counters.rpdos_dropped += 1
             return
         n = len(frame.data)
         for p in pdos:
             if n != p.length:
-                self._counters.rpdos_dropped += 1
-                if not self._comm_error:
-                    self._comm_error = True
-                    self._emcy(EMCY_PDO_LENGTH_ERROR if n < p.length else EMCY_PDO_LENGTH_EXCEEDED)
+                self.counters.rpdos_dropped += 1
+                if not self.comm_error:
+                    self.comm_error = True
+                    self.send_emcy(EMCY_PDO_LENGTH_ERROR if n < p.length else EMCY_PDO_LENGTH_EXCEEDED)
                 continue
-            if self._comm_error:
-                self._comm_error = False
-                self._emcy(EMCY_NO_ERROR)
+            if self.comm_error:
+                self.comm_error = False
+                self.send_emcy(EMCY_NO_ERROR)
             if p.sync:
                 if p.latched is not None:
-                    self._counters.rpdos_late += 1
+                    self.counters.rpdos_late += 1
                 p.latched = frame.data
             else:
                 self._apply_rpdo(p, frame.data)
@@ -469,38 +469,38 @@ class PdoEngine:
             # and the decoded integers straight into the decoded-value cache
             if data.__class__ is not bytes:
                 data = bytes(data)
-            store = self._data
+            store = self.object_data
             for index, subindex, a, b in p.plan:
                 d = store.get(index)
                 if d is None:
                     d = store[index] = {}
                 d[subindex] = data[a:b]
             values = unpack(data)
-            ic = self._icache
+            ic = self.int_cache
             if p.all_cache_ok:
-                ic.update(zip(p.keys, values))
+                ic.update(zip(p.keys, values, strict=True))
             else:
-                for key, v, ok in zip(p.keys, values, p.cache_ok):
+                for key, v, ok in zip(p.keys, values, p.cache_ok, strict=True):
                     if ok:
                         ic[key] = v
                     else:
                         ic.pop(key, None)
             if p.touches_cpr:
-                self._cpr_changed()
+                self.cpr_changed()
         else:
             off = 0
             for index, subindex, nbytes in p.entries:
-                self._store(index, subindex, data[off:off + nbytes])
+                self.write_object(index, subindex, data[off:off + nbytes])
                 off += nbytes
-        self._counters.rpdos_applied += 1
+        self.counters.rpdos_applied += 1
         effects = p.effects  # the entries _after_write acts on, in mapping order
         if effects:
             if effects == _ONLY_CONTROLWORD:
-                self._controlword()
+                self.controlword_written()
             else:
-                self._after_write(effects)
+                self.after_write(effects)
 
-    def _apply_latched(self) -> None:
+    def apply_latched_rpdos(self) -> None:
         """At a SYNC: apply the synchronous RPDOs latched since the previous one."""
         for p in self._sync_rpdos:  # (only valid synchronous RPDOs latch)
             if p.latched is not None:

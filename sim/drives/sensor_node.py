@@ -33,7 +33,7 @@ from hil.canopen.frame import Frame
 from sim.drives.node import LiveInput, SimNode
 
 if TYPE_CHECKING:
-    from sim.drives.stats import _Counters
+    from sim.drives.stats import PairCounters
 
 __all__ = ["SimSensorNode"]
 
@@ -67,26 +67,21 @@ class SimSensorNode(SimNode):
 
     Raises
     ------
-    hil.canopen.errors.InputError
+    hil.canopen.errors.CanopenInputError
         An input without a scaling.
     """
 
-    def __init__(self, name: str, node_id: int, od: cod.ObjectDictionary, *, counters: _Counters,
+    def __init__(self, name: str, node_id: int, od: cod.ObjectDictionary, *, counters: PairCounters,
                  outbox: list[Frame], serial: int | None = None, inputs: tuple[LiveInput, ...] = (),
                  own_data: dict | None = None) -> None:
         self.name = name
         super().__init__(node_id, od, counters=counters, outbox=outbox, serial=serial, inputs=inputs,
                          own_data=own_data)
-        self._init_comm()
+        self.init_comm()
 
     def __repr__(self) -> str:
-        return f"SimSensorNode({self.name!r}, node {self.node_id}, {len(self._inputs)} inputs)"
-
-    @property
-    def inputs(self) -> tuple[LiveInput, ...]:
-        """The measured inputs this node serves."""
-        return self._inputs
+        return f"SimSensorNode({self.name!r}, node {self.node_id}, {len(self.inputs)} inputs)"
 
     def value(self, k: int) -> int | float:
         """Raw value of input ``k`` (of :attr:`inputs`) in the current sample, as a TPDO carries it."""
-        return self._live[self._inputs[k].key]()
+        return self.live_objects[self.inputs[k].key]()

@@ -57,7 +57,7 @@ class SimPairStats:
     heartbeats_sent: int = 0
 
 
-class _Counters:
+class PairCounters:
     """Mutable counters shared by the pair and its nodes."""
 
     __slots__ = SimPairStats.__slots__

@@ -44,7 +44,8 @@ def main() -> int:
     chk = load_check(None, act)
     sim = load_simrig()
     # warm up the JIT (compiled once, cached on disk)
-    RigPlant(sim.params, np.random.default_rng(0)).step(Setpoint(DriveMode.DISABLED, 0), Setpoint(DriveMode.DISABLED, 0))
+    off = Setpoint(DriveMode.DISABLED, 0)
+    RigPlant(sim.params, np.random.default_rng(0)).step(off, off)
     loop, plant_t, ana, rep = [], [], [], []
     with tempfile.TemporaryDirectory() as td:
         for k in range(args.repeat):
@@ -55,7 +56,7 @@ def main() -> int:
             sig = read_signals(out / "signals.csv")
             # plant alone: replay the recorded setpoints open loop
             sps = [(Setpoint(DriveMode(int(m1)), v1), Setpoint(DriveMode(int(m2)), v2))
-                   for m1, v1, m2, v2 in zip(sig.mode1, sig.sp1, sig.mode2, sig.sp2)]
+                   for m1, v1, m2, v2 in zip(sig.mode1, sig.sp1, sig.mode2, sig.sp2, strict=True)]
             plant = RigPlant(sim.params, np.random.default_rng(1))
             t0 = time.perf_counter()
             for a, b in sps:

@@ -65,13 +65,13 @@ TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (support)
 
 from hil.runfolder import read_signals  # noqa: E402
-from support.independent_rig import judge  # noqa: E402
 from support.diagnose_cases import (  # noqa: E402
     NOISE,
     case_list,
     diagnose_signals,
     generate,
 )
+from support.independent_rig import judge  # noqa: E402
 
 #: First seed of the reported run. History (each set was run once, on a method frozen before):
 #: 9001.. made the first report (31 of 33 cases, 84 % of effect cases); 50001.. the second
@@ -267,11 +267,14 @@ def tables(summ: dict, results: list, emps: dict | None, argv_line: str) -> str:
          f"| out of library called `unexplained` | >= 80 % | {_frac(summ['out_of_library_called_unexplained'])} |",
          f"| fitted parameters within 20 % of truth (cases named right) | all | {_frac(summ['params_within_20pct'])}"
          f" (median error {100 * (summ['param_rel_err_median'] or 0):.1f} %) |",
-         f"| fitted parameters within 3 of their stated uncertainties | | {_frac(summ['params_within_3_uncertainties'])} |",
-         f"| residual RMS of the affected channel <= 1.2x noise floor | all | {_frac(summ['rms_after_within_1p2_floor'])} |",
+         f"| fitted parameters within 3 of their stated uncertainties | | "
+         f"{_frac(summ['params_within_3_uncertainties'])} |",
+         f"| residual RMS of the affected channel <= 1.2x noise floor | all | "
+         f"{_frac(summ['rms_after_within_1p2_floor'])} |",
          f"| diagnosis time per 111 s check (one core) | < 30 s | median {summ['seconds_median']:.1f} s, "
          f"max {summ['seconds_max']:.1f} s |",
-         f"| largest per-sample signature / noise of any effect | < 1 | {np.floor(summ['max_snr_any_case'] * 1e4) / 1e4:.4f} (truncated) |"]
+         f"| largest per-sample signature / noise of any effect | < 1 | "
+         f"{np.floor(summ['max_snr_any_case'] * 1e4) / 1e4:.4f} (truncated) |"]
     if emps:
         eff = "; ".join(f"`{e['name']}` " + ", ".join(f"{k} = {v:.4g} ± {e['uncertainty'][k]:.2g}"
                                                      for k, v in e["parameters"].items()) for e in emps["effects"])
@@ -287,7 +290,8 @@ def tables(summ: dict, results: list, emps: dict | None, argv_line: str) -> str:
           "signature chi-square in s and F, and the part of it that a re-fit of the nominal load-path "
           "parameters cannot absorb (what is left to find; the drive-force channel adds to both), "
           "then the diagnosis.", "",
-          "| case | truth | max SNR | aggregate chi2 | beyond nominal refit | verdict | named | parameter error | RMS after / floor | s |",
+          "| case | truth | max SNR | aggregate chi2 | beyond nominal refit | verdict | named | parameter error "
+          "| RMS after / floor | s |",
           "|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         truth = ", ".join(f"{t['name']}@{t['where']}" for t in r["truth"]) or "none"
@@ -296,7 +300,9 @@ def tables(summ: dict, results: list, emps: dict | None, argv_line: str) -> str:
             named += " (partial: " + ", ".join(f"{n}@{w}" for n, w in r["partial"]) + ")"
         errs = ", ".join(f"{100 * v:.0f} %" for v in r.get("param_rel_err", {}).values()) or "-"
         ratio = f"{r['rms_after_over_floor']:.2f}" if r.get("rms_after_over_floor") is not None else "-"
-        L.append(f"| {r['id']} ({r['seed']}) | {truth} | {max(r['snr_max'].values()):.2f} | {r['aggregate_chi2']:.0f} | {r['orthogonal_chi2']:.0f} | {r['verdict']}{'' if r['ok'] else ' **(wrong)**'} | {named} | "
+        wrong = "" if r["ok"] else " **(wrong)**"
+        L.append(f"| {r['id']} ({r['seed']}) | {truth} | {max(r['snr_max'].values()):.2f} "
+                 f"| {r['aggregate_chi2']:.0f} | {r['orthogonal_chi2']:.0f} | {r['verdict']}{wrong} | {named} | "
                  f"{errs} | {ratio} | {r['seconds']} |")
     L += [""]
     return "\n".join(L)

@@ -42,7 +42,7 @@ def main(argv: list[str]) -> int:
             effects = [(e.name, e.where) for e in d.effects]
             where = list(getattr(d, "where", ()) or ())
             if not hasattr(d, "where") and d.locations:  # an older Diagnosis: the strongest location's EMA
-                ch = max(d.locations, key=lambda l: l.score).channel
+                ch = max(d.locations, key=lambda loc: loc.score).channel
                 where = ["ema1" if ch.endswith("1") else "ema2" if ch.endswith("2") else "external"]
             ok, why = judge(key["expect"], d.verdict, effects, where)
             row = {"name": name, "expect": key["expect"], "verdict": d.verdict, "effects": effects, "where": where,

@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))  # the repository (hil, blf, sim)
 sys.path.insert(1, str(ROOT / "tests"))  # support
 
-import numpy as np
+import numpy as np  # noqa: E402 (after the repository is put on sys.path)
 
 CHANNELS = ("int1", "int2", "ext")
 VENDOR, PRODUCT = 0x0E3A, 0x0402
@@ -125,7 +125,7 @@ def speed(url: str, pairs: int, checks: int) -> dict:
     res["history_actuator_process_s"] = round(statistics.median(proc), 2)
     base = wear_results(n=1, seed=5, simulated=False)[0]
     recs = []
-    for k in range(31):
+    for _ in range(31):
         r = json.loads(json.dumps(base))
         r["trace"]["run_id"] = uuid.uuid4().hex
         r["trace"]["identity"]["ema1"]["serial"] = serials[0]

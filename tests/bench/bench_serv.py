@@ -33,7 +33,7 @@ sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim)
 from blf.calibration import fit_lvdt_calibration  # noqa: E402
 from blf.serv import BlfServMonitor, blf_serv, design_serv_filters  # noqa: E402
 from hil.profiles import load_simrig  # noqa: E402
-from sim import operation as op
+from sim import operation as op  # noqa: E402
 from sim import scenarios as sc  # noqa: E402
 
 CHANNELS = ("int1", "int2", "ext")
@@ -141,7 +141,8 @@ def timing() -> dict:
     t_batch = best(lambda: [blf_serv(d, FS, keep_signals=False) for d in chans])
     t_batch_sig = best(lambda: [blf_serv(d, FS) for d in chans])
     noise = [sigma, sigma, sigma * np.sqrt(2.0)]
-    t_batch_known = best(lambda: [blf_serv(d, FS, noise_std_mm=s, keep_signals=False) for d, s in zip(chans, noise)])
+    t_batch_known = best(lambda: [blf_serv(d, FS, noise_std_mm=s, keep_signals=False)
+                                  for d, s in zip(chans, noise, strict=True)])
     X = np.column_stack(chans)
     m = 30_000
     mon = BlfServMonitor(FS, noise)

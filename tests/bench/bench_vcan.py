@@ -3,8 +3,8 @@
 Runs the check over SocketCAN for at least ``--minutes`` (default 10) of
 real time: one ``sim-serve`` (SCHED_FIFO 50) for the whole time and ``run``
 repeated (each a complete check with ``--check``, default the shipped profile,
-115.5 s; ``--rt-priority 40``: memory locked, SCHED_FIFO 40), with can-utils' ``candump -L vcan0`` recording everything. Repeating
-whole checks rather than one long check keeps every run a real check and
+115.5 s; ``--rt-priority 40``: memory locked, SCHED_FIFO 40), with can-utils' ``candump -L vcan0``
+recording everything. Repeating whole checks rather than one long check keeps every run a real check and
 includes the start-up of each (preflight, enabling), where timing is worst. Where the host kernel
 has no vcan, the benchmark runs inside user-mode-linux (see
 ``tests/vcan/vcan_stage.py``), whose kernel clock runs a few per cent slow:
@@ -103,7 +103,7 @@ def analyse_capture(path: Path, act) -> dict:
     starts = np.r_[0, gaps + 1]
     ends = np.r_[gaps, len(sync_idx) - 1]
     runs = 0
-    for a, b in zip(starts, ends):
+    for a, b in zip(starts, ends, strict=True):
         if b - a < 100:
             continue
         runs += 1
@@ -120,7 +120,7 @@ def analyse_capture(path: Path, act) -> dict:
             bits_worst += frame_bits(int(n), worst_case=True)
         # per cycle: TPDOs in [SYNC_k, SYNC_k+1), RPDO1 per node
         enabled = False
-        for k0, k1 in zip(s[:-1], s[1:]):
+        for k0, k1 in zip(s[:-1], s[1:], strict=True):
             c = cid[k0 + 1:k1]
             cycles += 1
             want = [base + n for base in TPDO_BASES for n in nodes]
@@ -204,7 +204,8 @@ def bench(minutes: float, check: Path | None, workdir: Path, profile: Path | Non
             meta = json.loads((out / "meta.json").read_text()) if (out / "meta.json").exists() else {}
             runs.append({"rc": rc, "wall_s": round(wall, 2), "master_cpu_s": round(_children_cpu_s() - c0, 2),
                          "status": meta.get("status"), "reason": meta.get("reason", ""),
-                         "duration_s": meta.get("duration_s"), "missing_cycles": meta.get("can", {}).get("missing_cycles"),
+                         "duration_s": meta.get("duration_s"),
+                         "missing_cycles": meta.get("can", {}).get("missing_cycles"),
                          "max_lag_ms": meta.get("can", {}).get("max_lag_ms")})
             print(f"run {k}: exit {rc}, {runs[-1]['status']}, {wall:.1f} s wall, master CPU "
                   f"{runs[-1]['master_cpu_s']:.1f} s", flush=True)

@@ -11,7 +11,7 @@ test then asserts which side the code under test puts each on).
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 #: nextafter steps walked at most to land on the limit (a few are normal; thousands mean a bad start)
 MAX_STEPS = 4096

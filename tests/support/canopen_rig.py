@@ -3,7 +3,7 @@ drive pair built from it (as ``emacheck dry-run`` builds them), without the comm
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from hil.canopen.od import load_eds
@@ -15,7 +15,7 @@ from sim.drives import SimDrivePair
 __all__ = ["make_master", "make_pair", "od_factory", "shipped_rig"]
 
 
-@lru_cache(maxsize=None)
+@cache
 def shipped_rig() -> Rig:
     """The shipped actuation profile and EDS, planned (cached: the plan is immutable)."""
     return plan_for(load_actuation())

@@ -150,7 +150,8 @@ def case_list(first_seed: int) -> list[dict]:
     cases = []
     seed = first_seed
     for k in range(4):
-        cases.append({"id": f"null-{k}", "kind": "null", "effects": [], "seed": seed}); seed += 1
+        cases.append({"id": f"null-{k}", "kind": "null", "effects": [], "seed": seed})
+        seed += 1
     for kind in LIBRARY:
         for where in ("ema1", "ema2"):
             cases.append({"id": f"{kind}-{where}", "kind": "single", "effects": [(kind, where)], "seed": seed})
@@ -159,11 +160,13 @@ def case_list(first_seed: int) -> list[dict]:
                  (("loadcell_gain", "ema1"), ("lvdt_offset", "ema2")),
                  (("stiffness_asymmetry", "ema2"), ("lvdt_nonlinearity", "ema1"))):
         cases.append({"id": "+".join(f"{k}-{w}" for k, w in pair), "kind": "two", "effects": list(pair),
-                      "seed": seed}); seed += 1
+                      "seed": seed})
+        seed += 1
     for kind in OUT_OF_LIBRARY:
         for where in ("ema1", "ema2"):
             cases.append({"id": f"{kind}-{where}", "kind": "out_of_library", "effects": [(kind, where)],
-                          "seed": seed}); seed += 1
+                          "seed": seed})
+            seed += 1
     return cases
 
 
@@ -284,7 +287,7 @@ def generate(case: dict, work: Path, check=None, size: float = 1.0):
     def params(scales):
         rng = np.random.default_rng(case["seed"])
         p, truths = base, []
-        for (kind, where), sc in zip(case["effects"], scales):
+        for (kind, where), sc in zip(case["effects"], scales, strict=True):
             apply, truth = make_effect(kind, where, sc, rng)  # draws even when off: same draws
             if sc > 0:
                 p = apply(p)

@@ -16,9 +16,9 @@ from pathlib import Path
 # tests/ on the path instead of this script's own folder (whose profiles.py would hide the package)
 sys.path[0] = str(Path(__file__).resolve().parents[1])
 
-from hil.history.record import record_from_result
-from hil.history.store import HistoryStore
-from support.wear import wear_results
+from hil.history.record import record_from_result  # noqa: E402 (after sys.path is set)
+from hil.history.store import HistoryStore  # noqa: E402
+from support.wear import wear_results  # noqa: E402
 
 
 def results(tag: str, start: int, n: int) -> list[dict]:

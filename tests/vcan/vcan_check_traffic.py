@@ -27,6 +27,7 @@ stiffness within 3 %.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -104,10 +105,8 @@ class Procs:
             if p.poll() is None:
                 p.kill()
         for p in self.procs:
-            try:
+            with contextlib.suppress(subprocess.TimeoutExpired):
                 p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                pass
 
 
 class Lines:
@@ -170,11 +169,11 @@ def _scenario(base: Path, kill_after_s: float | None) -> dict:
         res["ready_line"] = serve_lines.wait_for("ready", READY_TIMEOUT_S, serve)
         # candump records: the boot-up frames of both drives are in the capture
         _wait_for_file_text(capture, ("701#00", "702#00"), 10.0)
-        run_log = open(base / "run.out", "w")
-        t_run = time.monotonic()
-        run = procs.start(_cli("run", "--interface", "socketcan", "--channel", CHANNEL, "--arm", "--quiet",
-                               "--rt-priority", MASTER_RT_PRIORITY, "--check", str(CHECK), "--out", str(out),
-                               *_profile_args(sim=False)), run_log)
+        with open(base / "run.out", "w") as run_log:  # (the child has its own copy of the fd)
+            t_run = time.monotonic()
+            run = procs.start(_cli("run", "--interface", "socketcan", "--channel", CHANNEL, "--arm", "--quiet",
+                                   "--rt-priority", MASTER_RT_PRIORITY, "--check", str(CHECK), "--out", str(out),
+                                   *_profile_args(sim=False)), run_log)
         if kill_after_s is not None:
             kill_after_rows = int(kill_after_s / load_actuation(ACT).timing.sync_period_s)
             csv = out / "signals.csv"
@@ -192,7 +191,6 @@ def _scenario(base: Path, kill_after_s: float | None) -> dict:
         except subprocess.TimeoutExpired:
             pytest.fail(f"`emacheck run` did not end within {RUN_TIMEOUT_S} s")
         res["run_wall_s"] = time.monotonic() - t_run
-        run_log.close()
         if kill_after_s is None:
             serve.send_signal(signal.SIGTERM)
             res["serve_rc"] = serve.wait(timeout=20)

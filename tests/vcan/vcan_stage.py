@@ -15,11 +15,12 @@ LD_PRELOAD shim ``xstate_shim.c`` (built here with the host's C compiler): see
 the comment at its top.
 
 Used by ``tests/test_vcan.py`` (the stage in the default test run) and
-``tests/bench_vcan.py``. Nothing here is collected by pytest.
+``tests/bench/bench_vcan.py``. Nothing here is collected by pytest.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shlex
 import shutil
@@ -28,9 +29,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 INSIDE_ENV = "EMACHECK_INSIDE_UML"
 CHANNEL = "vcan0"
@@ -201,10 +202,8 @@ class UmlResult:
 
 def _raise_priority(nice: int) -> Callable[[], None]:
     def pre() -> None:
-        try:
+        with contextlib.suppress(OSError):  # not permitted: run at the normal priority
             os.setpriority(os.PRIO_PROCESS, 0, nice)
-        except OSError:
-            pass  # not permitted: run at the normal priority
     return pre
 
 
@@ -247,14 +246,10 @@ def run_in_uml(command: list[str], workdir: Path, timeout_s: float, *, mem: str 
         except subprocess.TimeoutExpired:
             timed_out = True
         finally:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.killpg(proc.pid, signal.SIGKILL)  # the UML kernel's helper and guest processes
-            except ProcessLookupError:
-                pass
-            try:
+            with contextlib.suppress(subprocess.TimeoutExpired):
                 proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                pass
     wall = time.monotonic() - t0
     st = workdir / "status"
     status = int(st.read_text().strip()) if st.exists() and st.read_text().strip() else None
