@@ -1044,16 +1044,33 @@ def test_an_eds_with_a_default_producer_and_consumer_and_without_0x1014():
     assert 0x181 in rig.sync_by_id()
 
 
-def test_an_eds_without_0x1016_and_0x1017():
-    def edit(od):
-        del od[0x1016]
-        del od[0x1017]
-    pair = _custom_pair(edit)
+def test_an_eds_without_0x1016():
+    pair = _custom_pair(lambda od: od.__delitem__(0x1016))
+    pair.power_on(0.0)
+    rig = Rig(pair)
+    rig.write(1, 0x1017, 0, "H", 100)  # the producer works without a consumer object
+    before = pair.stats.bad_frames_ignored
+    assert pair.on_frame(Frame(0x77F, b"\x05"), 0.0) == []  # nobody consumes the master's heartbeat
+    assert pair.stats.bad_frames_ignored == before + 1
+    assert pair.tick(0.1) == [Frame(0x701, b"\x7f")] and pair.tick(5.0) == [Frame(0x701, b"\x7f")]
+    assert pair.nodes[0].heartbeat_events == []
+
+
+def test_an_eds_without_0x1017():
+    pair = _custom_pair(lambda od: od.__delitem__(0x1017))
     pair.power_on(0.0)
     assert pair.tick(0.001) == [] and pair.tick(1.0) == []  # no producer time: no heartbeat
-    before = pair.stats.bad_frames_ignored
-    assert pair.on_frame(Frame(0x77F, b"\x05"), 1.0) == [] and pair.tick(5.0) == []
-    assert pair.stats.bad_frames_ignored == before + 1
+
+
+def test_after_boot_at_power_on_and_reset_node_not_at_reset_communication(rig):
+    """A drive that boots into FAULT says so by EMCY after its boot-up frame: at reset node (the
+    application restarts), not at reset communication (it keeps its state)."""
+    rig.pair.nodes[0].boot_fault = 0x5000
+    emcy = Frame(0x081, bytes.fromhex("0050 01 0000000000"))
+    assert rig.nmt(0x81, 1) == [Frame(0x701, b"\x00"), emcy]
+    assert rig.pair.nodes[0].state_machine.state is State.FAULT
+    assert rig.nmt(0x82, 1) == [Frame(0x701, b"\x00")]
+    assert rig.pair.nodes[0].state_machine.state is State.FAULT
 
 
 def test_the_consumer_entries_read_are_the_ones_sub_index_0_counts_and_the_ones_present():
