@@ -9,10 +9,12 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hil.canopen.cia402 import (
+    MASTER_COMMANDS,
     TRANSITIONS,
     Command,
     Controlword,
     DriveStateMachine,
+    Goal,
     IllegalTransition,
     OperationMode,
     State,
@@ -20,6 +22,8 @@ from hil.canopen.cia402 import (
     controlword,
     decode_command,
     decode_state,
+    enables_operation,
+    master_command,
     match_state,
     next_command,
     path,
@@ -325,3 +329,112 @@ def test_path_drives_the_device_there(src, dst):
 def test_operation_modes():
     assert [int(m) for m in OperationMode] == [1, 3, 6, 7, 8, 9, 10]
     assert OperationMode.CSP == DriveMode.POSITION and OperationMode.CST == DriveMode.FORCE
+
+
+# --------------------------------------------------------------------------- pinned by mutation (issue 26)
+# Each error names its argument exactly (the word validators quote the name they are given), the
+# drive's initial values and the master's table are stated, not assumed.
+
+WORD_RANGE = r" = 0x10000 is outside 0x0\.\.0xFFFF \(16-bit word\)$"
+
+
+@pytest.mark.parametrize("call,name", [
+    (lambda: decode_command(0x10000), "cw"),
+    (lambda: decode_command(0x0080, previous_cw=0x10000), "previous_cw"),
+    (lambda: match_state(0x10000), "sw"),
+    (lambda: decode_state(0x10000), "sw"),
+    (lambda: state_word(S.FAULT, extra=0x10000), "extra"),
+    (lambda: DriveStateMachine().on_controlword(0x10000), "cw"),
+    (lambda: machine_in(S.OPERATION_ENABLED).fault(0x10000), "code"),
+], ids=["cw", "previous_cw", "match_state", "decode_state", "extra", "on_controlword", "fault_code"])
+def test_word_errors_name_the_argument(call, name):
+    with pytest.raises(InputError, match="^" + name + WORD_RANGE):
+        call()
+
+
+def test_a_refused_word_leaves_the_drive_unchanged():
+    drive = machine_in(S.OPERATION_ENABLED)
+    drive.on_controlword(0x000F)
+    with pytest.raises(InputError):
+        drive.on_controlword(0x10000)
+    with pytest.raises(InputError):
+        drive.fault(-1)
+    assert (drive.state, drive.error_code, drive.previous_controlword) == (S.OPERATION_ENABLED, 0, 0x000F)
+
+
+@pytest.mark.parametrize("event,state,message", [
+    ("boot_done", S.SWITCH_ON_DISABLED, "boot done (transition 1) not allowed in state SWITCH_ON_DISABLED"),
+    ("fault_reaction_done", S.FAULT, "fault reaction done (transition 14) not allowed in state FAULT"),
+    ("quick_stop_done", S.OPERATION_ENABLED,
+     "quick stop done (transition 12) not allowed in state OPERATION_ENABLED"),
+])
+def test_internal_event_refusals_word_for_word(event, state, message):
+    drive = machine_in(state)
+    with pytest.raises(IllegalTransition) as exc:
+        getattr(drive, event)()
+    assert str(exc.value) == message
+    assert drive.state is state and drive.last_transition is None
+
+
+def test_a_new_drive_has_no_error_and_saw_controlword_0():
+    drive = DriveStateMachine()
+    assert (drive.state, drive.last_transition, drive.error_code, drive.previous_controlword) == (
+        S.NOT_READY_TO_SWITCH_ON, None, 0, 0)
+    assert type(drive.error_code) is int and type(drive.previous_controlword) is int
+
+
+def test_fault_reset_in_the_first_controlword_is_a_rising_edge():
+    """The word before the first is 0: a drive that boots into FAULT is reset by a first 0x0080."""
+    drive = DriveStateMachine()
+    drive.fault(0x5530)
+    drive.fault_reaction_done()
+    assert drive.error_code == 0x5530
+    assert drive.on_controlword(0x0080) is S.SWITCH_ON_DISABLED and drive.last_transition == 15
+    assert (drive.error_code, drive.previous_controlword) == (0, 0x0080)
+
+
+@pytest.mark.parametrize("remote,words", [
+    (True, [0x0200, 0x0250, 0x0231, 0x0233, 0x0237]),
+    (False, [0x0000, 0x0050, 0x0031, 0x0033, 0x0037]),
+])
+def test_statusword_remote_bit_only_when_remote(remote, words):
+    drive = DriveStateMachine(remote=remote)
+    got = [drive.statusword()]
+    drive.boot_done()
+    got.append(drive.statusword())
+    for cw in (0x06, 0x07, 0x0F):
+        drive.on_controlword(cw)
+        got.append(drive.statusword())
+    assert got == words
+    assert drive.statusword(Statusword.TARGET_REACHED) == words[-1] | 0x0400
+
+
+def test_master_table_commands_are_transitions_or_hold_the_state():
+    for (goal, state), cmd in MASTER_COMMANDS.items():
+        assert master_command(goal, state) is cmd, (goal, state)
+        if cmd is not None:
+            assert (state, cmd) in EXPECTED or (state, cmd) in NO_OP, (goal, state, cmd)
+    assert {(g, s) for g in Goal for s in State if s is not S.QUICK_STOP_ACTIVE} == set(MASTER_COMMANDS)
+
+
+@pytest.mark.parametrize("goal", list(Goal), ids=lambda g: g.name)
+def test_master_in_quick_stop_active_waits_for_standstill(goal):
+    """Quick stop while the drive may still move (the default: not known to stand still), disable
+    voltage (transition 12) once it stands still, whatever the goal."""
+    assert master_command(goal, S.QUICK_STOP_ACTIVE) is C.QUICK_STOP
+    assert master_command(goal, S.QUICK_STOP_ACTIVE, stopped=False) is C.QUICK_STOP
+    assert master_command(goal, S.QUICK_STOP_ACTIVE, stopped=True) is C.DISABLE_VOLTAGE
+
+
+@pytest.mark.parametrize("cw,expected", [
+    (0x000F, True), (0x001F, True), (0x010F, True),  # bits 4..6 and halt do not matter
+    (0x0007, False), (0x000E, False), (0x000B, False), (0x0006, False), (0x0000, False),
+    (0x008F, False),  # bit 7 set: fault reset, not enable operation
+])
+def test_enables_operation(cw, expected):
+    assert enables_operation(cw) is expected
+
+
+def test_enables_operation_names_a_bad_word():
+    with pytest.raises(InputError, match="^cw" + WORD_RANGE):
+        enables_operation(0x10000)

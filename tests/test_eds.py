@@ -12,15 +12,17 @@ from pathlib import Path
 import pytest
 from canopen.objectdictionary import ODRecord
 
-from hil.canopen.errors import EdsError
+from hil.canopen.errors import EdsError, InputError
 from hil.canopen.od import (
     AbortConnectionOption,
     decode_value,
     default_eds_path,
     encode_value,
     load_eds,
+    lookup,
     master_loss_steps,
     od_variable,
+    type_name,
 )
 from hil.canopen.plan import PlanError
 from hil.profiles import default_profile_path, load_actuation
@@ -220,3 +222,88 @@ def test_eds_utils_refuses_a_broken_eds(tmp_path):
     bad = _broken(tmp_path, "6007", "DataType", "0x0099")
     r = subprocess.run([*_eds_validate(), str(bad)], capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode != 0 and "[6007]" in r.stdout + r.stderr
+
+
+# --------------------------------------------------------------------------- pinned by mutation (issue 26)
+# The EdsError messages name the object, the value or bytes and the data type word for word; the
+# loader takes EDS and DCF in any case of the suffix and names a wrong one.
+
+
+def test_type_names():
+    assert type_name(0x0007) == "0x0007 (UNSIGNED32)"
+    assert type_name(0x0003) == "0x0003 (INTEGER16)"
+    assert type_name(0x0099) == "0x0099 (unknown)"
+    assert type_name(None) == "none"
+
+
+def test_codec_errors_word_for_word(od):
+    with pytest.raises(EdsError) as exc:
+        encode_value(od, 0x1017, 0, 70000)
+    assert str(exc.value) == ("0x1017:00 (Producer heartbeat time): cannot encode 70000 as 0x0006 (UNSIGNED16): "
+                              "Value does not fit in specified type")
+    with pytest.raises(EdsError) as exc:
+        decode_value(od, 0x1017, 0, b"\x01\x02\x03")
+    assert str(exc.value) == ("0x1017:00 (Producer heartbeat time): cannot decode 010203 as 0x0006 (UNSIGNED16): "
+                              "Mismatch between expected and actual data size")
+    with pytest.raises(EdsError) as exc:
+        decode_value(od, 0x6007, 0, bytearray(b"\x03"))
+    assert str(exc.value).startswith("0x6007:00 (Abort connection option code): cannot decode 03 as "
+                                     "0x0003 (INTEGER16): ")
+
+
+def test_a_plain_variable_has_only_subindex_0(od):
+    assert lookup(od, 0x1017, 0) is od[0x1017]
+    assert lookup(od, 0x1017, 1) is None and lookup(od, 0x1017, 2) is None
+    assert lookup(od, 0x1016, 1) is od[0x1016][1] and lookup(od, 0x1016, 5) is None
+    assert lookup(od, 0x5FFF, 0) is None
+    with pytest.raises(EdsError, match=r"^object 0x1017:01 is not in the object dictionary$"):
+        od_variable(od, 0x1017, 1)
+
+
+@pytest.mark.parametrize("name", ["drive.eds", "drive.EDS", "drive.dcf", "drive.DCF", "drive.Dcf"])
+def test_eds_and_dcf_load_whatever_the_case_of_the_suffix(tmp_path, name):
+    p = tmp_path / name
+    shutil.copyfile(default_eds_path(), p)
+    assert load_eds(p, node_id=3).device_information.product_name == "EMA drive (simulated)"
+
+
+@pytest.mark.parametrize("name,suffix", [("drive.txt", "'.txt'"), ("drive", "''"), ("drive.eds.bak", "'.bak'"),
+                                         ("drive.xdd", "'.xdd'")])
+def test_other_suffixes_refused_naming_the_suffix(tmp_path, name, suffix):
+    p = tmp_path / name
+    shutil.copyfile(default_eds_path(), p)
+    with pytest.raises(EdsError) as exc:
+        load_eds(p)
+    assert str(exc.value) == f"{p}: not an EDS/DCF file (suffix {suffix})"
+
+
+def test_invalid_eds_error_names_the_file_and_the_parser_error(tmp_path):
+    bad = tmp_path / "bad.eds"
+    bad.write_text("[DeviceInfo]\nVendorName=x\n\n[6041]\nObjectType=0x7\n")  # no ParameterName
+    with pytest.raises(EdsError) as exc:
+        load_eds(bad)
+    assert str(exc.value) == f"{bad}: not a valid EDS: NoOptionError: No option 'ParameterName' in section: '6041'"
+    with pytest.raises(EdsError) as exc:
+        load_eds(tmp_path / "nope.eds")
+    assert str(exc.value) == f"{tmp_path / 'nope.eds'}: EDS not found"
+
+
+@pytest.mark.parametrize("node,ms,word", [(1, 1, "01000100"), (127, 65535, "ffff7f00"), (0x12, 0x3456, "56341200")])
+def test_master_loss_steps_pack_node_and_time(node, ms, word):
+    steps = master_loss_steps(node, ms)
+    assert [(st.index, st.subindex, st.data.hex(), st.what, st.write) for st in steps] == [
+        (0x1016, 1, word, "consumer heartbeat time 1", True), (0x6007, 0, "0300", "abort connection option code", True)]
+
+
+@pytest.mark.parametrize("node,ms,message", [
+    (0, 125, "master_node_id = 0 is outside 1..127"),
+    (128, 125, "master_node_id = 128 is outside 1..127"),
+    (True, 125, "master_node_id must be an int in 1..127, got bool"),
+    (127, 0, "consumer_ms = 0 is outside 1..65535 ms (0x1016 bits 0..15)"),
+    (127, 65536, "consumer_ms = 65536 is outside 1..65535 ms (0x1016 bits 0..15)"),
+    (127, 125.0, "consumer_ms must be an int in 1..65535 ms (0x1016 bits 0..15), got float 125.0"),
+])
+def test_master_loss_steps_refuse_what_0x1016_cannot_hold(node, ms, message):
+    with pytest.raises(InputError) as exc:
+        master_loss_steps(node, ms)
+    assert str(exc.value) == message

@@ -969,3 +969,263 @@ def test_quick_stop_option_values_are_validated_and_a_drive_without_605a_takes_2
     rig.cycle((0x02, 0x0F))
     words = [status(rig.cycle((0x02, 0x0F)), 1) for _ in range(hold + 3)]
     assert words == [SW_QSA] * hold + [SW_SOD] * 3
+
+
+# ------------------------------------------------------------------ NMT slave pinned by mutation (issue 26)
+# sim/drives/nmt_slave.py: what its objects' absence, defaults and rewrites do, each observed at the
+# pair's frames and by SDO. Node 1 of _custom_pair gets an edited object dictionary (an EDS of
+# another vendor: optional objects present or absent, consumer and producer set by default).
+
+HB_EMCY_DATA = bytes.fromhex("3081 11 0000000000")  # EMCY 0x8130, error register bits 0 and 4
+
+
+def _add(od, name: str, index: int, data_type: int, default: int) -> None:
+    import canopen.objectdictionary as cod
+
+    var = cod.ODVariable(name, index, 0)
+    var.data_type, var.access_type, var.default = data_type, "rw", default
+    od.add_object(var)
+
+
+def _custom_pair(edit) -> SimDrivePair:
+    """The shipped pair with node 1's object dictionary edited by ``edit(od)`` (not powered on)."""
+    rig = shipped_rig()
+    factory = od_factory(rig)
+
+    def make(name, node_id):
+        od = factory(name, node_id)
+        if node_id == 1:
+            edit(od)
+        return od
+
+    return SimDrivePair(RigPlant(make_params(), np.random.default_rng(0)), rig.plan, make)
+
+
+def _abort_code(rig: Rig, node: int, index: int, sub: int, fmt: str, value: int):
+    with pytest.raises(SdoAbortError) as exc:
+        rig.write(node, index, sub, fmt, value)
+    return exc.value.code
+
+
+def test_before_power_on_nodes_are_initialising_without_errors(pair):
+    assert [n.nmt_state for n in pair.nodes] == [NmtState.INITIALISING] * 2
+    assert [n.error_register for n in pair.nodes] == [0, 0]
+
+
+def test_an_eds_with_a_default_producer_and_consumer_and_without_0x1014():
+    """0x1017 = 100 ms and 0x1016:01 = master 0x7F, 100 ms by default, no EMCY COB-ID object (EMCY
+    on 0x80 + node id) and no SYNC COB-ID object (SYNC on 0x80): the heartbeat runs from power-on and
+    from each reset, the consumer watches the master from its first heartbeat, without a write."""
+    def edit(od):
+        od[0x1017].default = 100
+        od[0x1016][1].default = 0x7F_0064
+        del od[0x1014]
+        del od[0x1005]
+    pair = _custom_pair(edit)
+    assert pair.power_on(0.5) == [Frame(0x701, b"\x00"), Frame(0x702, b"\x00")]
+    assert pair.tick(0.55) == []
+    assert pair.tick(0.6) == [Frame(0x701, b"\x7f")]
+    assert pair.on_frame(Frame(0x77F, b"\x05"), 0.6) == []
+    out = pair.tick(0.7 + 2e-9)
+    assert Frame(0x081, HB_EMCY_DATA) in out and pair.nodes[0].heartbeat_events == [(0.7 + 2e-9, 0x7F)]
+    assert pair.nodes[0].error_register & 0x11 == 0x11
+    rig = Rig(pair)
+    rig.t = 0.75
+    assert rig.nmt(0x82, 1) == [Frame(0x701, b"\x00")]  # reset communication: the schedule restarts
+    assert pair.nodes[0].nmt_state is NmtState.PRE_OPERATIONAL
+    assert pair.tick(0.8) == [] and pair.tick(0.85) == [Frame(0x701, b"\x7f")]
+    rig.t = 0.9
+    assert rig.nmt(0x81, 1) == [Frame(0x701, b"\x00")]  # reset node: the same
+    assert pair.tick(0.95) == [] and pair.tick(1.0) == [Frame(0x701, b"\x7f")]
+    assert pair.tick(2.0) == [Frame(0x701, b"\x7f")]  # the consumer waits for the master again
+    assert pair.nodes[0].heartbeat_events == [(0.7 + 2e-9, 0x7F)]
+    rig.t = 2.0
+    rig.nmt(0x01)
+    assert 0x181 in rig.sync_by_id()
+
+
+def test_an_eds_without_0x1016():
+    pair = _custom_pair(lambda od: od.__delitem__(0x1016))
+    pair.power_on(0.0)
+    rig = Rig(pair)
+    rig.write(1, 0x1017, 0, "H", 100)  # the producer works without a consumer object
+    before = pair.stats.bad_frames_ignored
+    assert pair.on_frame(Frame(0x77F, b"\x05"), 0.0) == []  # nobody consumes the master's heartbeat
+    assert pair.stats.bad_frames_ignored == before + 1
+    assert pair.tick(0.1) == [Frame(0x701, b"\x7f")] and pair.tick(5.0) == [Frame(0x701, b"\x7f")]
+    assert pair.nodes[0].heartbeat_events == []
+
+
+def test_an_eds_without_0x1017():
+    pair = _custom_pair(lambda od: od.__delitem__(0x1017))
+    pair.power_on(0.0)
+    assert pair.tick(0.001) == [] and pair.tick(1.0) == []  # no producer time: no heartbeat
+
+
+def test_after_boot_at_power_on_and_reset_node_not_at_reset_communication(rig):
+    """A drive that boots into FAULT says so by EMCY after its boot-up frame: at reset node (the
+    application restarts), not at reset communication (it keeps its state)."""
+    rig.pair.nodes[0].boot_fault = 0x5000
+    emcy = Frame(0x081, bytes.fromhex("0050 01 0000000000"))
+    assert rig.nmt(0x81, 1) == [Frame(0x701, b"\x00"), emcy]
+    assert rig.pair.nodes[0].state_machine.state is State.FAULT
+    assert rig.nmt(0x82, 1) == [Frame(0x701, b"\x00")]
+    assert rig.pair.nodes[0].state_machine.state is State.FAULT
+
+
+def test_the_consumer_entries_read_are_the_ones_sub_index_0_counts_and_the_ones_present():
+    def count_1(od):  # entry 2 beyond the count: not an entry
+        od[0x1016][0].default = 1
+        od[0x1016][2].default = 0x7F_0064
+    pair = _custom_pair(count_1)
+    pair.power_on(0.0)
+    pair.on_frame(Frame(0x77F, b"\x05"), 0.0)
+    assert pair.tick(1.0) == [] and pair.nodes[0].heartbeat_events == []
+    rig = Rig(pair)
+    rig.write(1, 0x1016, 1, "I", 0x7F_00C8)  # entry 2 is no entry: no duplicate
+
+    def no_entry_1(od):  # entry 1 absent, entry 2 watches the master
+        del od[0x1016].subindices[1]
+        od[0x1016][2].default = 0x7F_0064
+    pair = _custom_pair(no_entry_1)
+    pair.power_on(0.0)
+    pair.on_frame(Frame(0x77F, b"\x05"), 0.0)
+    assert Frame(0x081, HB_EMCY_DATA) in pair.tick(0.2) and pair.nodes[0].heartbeat_events == [(0.2, 0x7F)]
+
+
+def test_heartbeats_of_a_producer_nobody_consumes_are_counted_as_ignored(rig):
+    before = rig.pair.stats.bad_frames_ignored
+    assert rig.send(Frame(0x77F, b"\x05")) == []
+    assert rig.pair.stats.bad_frames_ignored == before + 1
+    rig.write(1, 0x1016, 1, "I", 0x7F_0064)
+    assert rig.send(Frame(0x77F, b"\x05")) == []
+    assert rig.pair.stats.bad_frames_ignored == before + 1  # consumed by node 1
+
+
+def test_a_consumer_in_a_later_entry_and_rewrites_of_other_entries_keep_the_monitoring(rig):
+    rig.write(1, 0x1016, 3, "I", 0x7F_0064)  # entries 1 and 2 unused
+    rig.send(Frame(0x77F, b"\x05"))  # t = 0: monitoring starts
+    rig.t = 0.05
+    rig.write(1, 0x1016, 2, "I", 0x05_0064)  # another producer: entry 3 keeps its last heartbeat
+    rig.write(1, 0x1016, 3, "I", 0x7F_0064)  # the same value again: unchanged
+    out = rig.pair.tick(0.1 + 2e-9)
+    assert Frame(0x081, HB_EMCY_DATA) in out and rig.pair.nodes[0].heartbeat_events == [(0.1 + 2e-9, 0x7F)]
+
+
+def test_a_changed_consumer_time_waits_for_the_producer_again(rig):
+    rig.write(1, 0x1016, 1, "I", 0x7F_0064)
+    rig.send(Frame(0x77F, b"\x05"))
+    rig.write(1, 0x1016, 1, "I", 0x7F_00C8)  # 200 ms: a new entry
+    assert rig.pair.tick(1.0) == [] and rig.pair.nodes[0].heartbeat_events == []
+
+
+def test_consumer_entries_one_per_producer_in_any_entry(rig):
+    rig.write(1, 0x1016, 2, "I", 0x7F_0000)  # time 0: unused, does not count
+    rig.write(1, 0x1016, 1, "I", 0x7F_0064)
+    rig.write(1, 0x1016, 1, "I", 0x7F_00C8)  # its own entry rewritten
+    rig.write(1, 0x1016, 2, "I", 0x7E_0000)
+    for used, other in ((2, 1), (3, 1), (4, 1), (4, 3)):
+        for k in (1, 2, 3, 4):
+            rig.write(1, 0x1016, k, "I", 0)
+        rig.write(1, 0x1016, used, "I", 0x7F_0064)
+        assert _abort_code(rig, 1, 0x1016, other, "I", 0x7F_00C8) is SdoAbortCode.PARAMETER_INCOMPATIBILITY, \
+            (used, other)
+        rig.write(1, 0x1016, other, "I", 0x7E_00C8)  # another producer: fine
+
+
+def _optional_comm_objects(od):
+    _add(od, "Inhibit time EMCY", 0x1015, 0x0006, 0)
+
+
+def test_sync_cob_id_0x1005_written_and_refused():
+    pair = _custom_pair(_optional_comm_objects)
+    rig = Rig(pair)
+    pair.power_on(0.0)
+    rig.nmt(0x01)
+    assert 0x181 in rig.sync_by_id()
+    for bad in (0x4000_0080, 0x2000_0080, 0x1000_0080, 0x0000_0880, 0x6000_0080):
+        assert _abort_code(rig, 1, 0x1005, 0, "I", bad) is SdoAbortCode.VALUE_RANGE_EXCEEDED, hex(bad)
+    rig.write(1, 0x1005, 0, "I", 0x8000_0085)  # bit 31 is "don't care"
+    rig.write(1, 0x1006, 0, "I", 2000)  # 0x1006 is not checked as a COB-ID
+    rig.write(1, 0x1015, 0, "H", 10)  # nor 0x1015
+    assert rig.read(1, 0x1005, 0, "I") == 0x8000_0085
+    rig.t += T_S
+    by_id = {f.arbitration_id: f for f in rig.send(Frame(0x085, b""))}
+    assert 0x181 in by_id and 0x182 not in by_id  # node 1 on 0x85 now
+    by_id = rig.sync_by_id()
+    assert 0x182 in by_id and 0x181 not in by_id
+
+
+def test_emcy_cob_id_0x1014_refusals(rig):
+    for bad in (0x2000_0081, 0x0000_0881, 0x1000_0081):
+        assert _abort_code(rig, 1, 0x1014, 0, "I", bad) is SdoAbortCode.VALUE_RANGE_EXCEEDED, hex(bad)
+    rig.write(1, 0x1014, 0, "I", 0x0000_0081)  # valid, the same CAN-ID: accepted
+    for other in (0x0000_0095, 0x0000_0002):  # valid, another CAN-ID while valid: refused
+        assert _abort_code(rig, 1, 0x1014, 0, "I", other) is SdoAbortCode.VALUE_RANGE_EXCEEDED, hex(other)
+    rig.write(1, 0x1014, 0, "I", 0x8000_0081)
+    rig.write(1, 0x1014, 0, "I", 0x8000_0002)  # invalid: the CAN-ID may change
+    rig.write(1, 0x1014, 0, "I", 0x0000_0002)
+    assert rig.pair.inject_fault(0, 0x2310) == [Frame(0x002, bytes.fromhex("1023 03 0000000000"))]
+
+
+def test_error_history_0x1003_keeps_the_last_four_newest_first_and_0_clears_it(rig):
+    def history():
+        return [rig.read(1, 0x1003, 0, "B")] + [rig.read(1, 0x1003, k, "I") for k in (1, 2, 3, 4)]
+    codes = (0x2310, 0x3210, 0x4210, 0x5530, 0x6320)
+    seen = []
+    for code in codes:
+        rig.pair.inject_fault(0, code)
+        rig.sync()
+        rig.write(1, 0x6040, 0, "H", 0x00)
+        rig.write(1, 0x6040, 0, "H", 0x80)  # fault reset: EMCY 0000 is not recorded
+        seen.append(history())
+    assert seen == [[1, 0x2310, 0, 0, 0], [2, 0x3210, 0x2310, 0, 0], [3, 0x4210, 0x3210, 0x2310, 0],
+                    [4, 0x5530, 0x4210, 0x3210, 0x2310], [4, 0x6320, 0x5530, 0x4210, 0x3210]]
+    for k in (1, 2, 3, 4):
+        assert _abort_code(rig, 1, 0x1003, k, "I", 0) is SdoAbortCode.WRITE_OF_READ_ONLY
+    assert _abort_code(rig, 1, 0x1003, 0, "B", 1) is SdoAbortCode.VALUE_RANGE_EXCEEDED
+    rig.write(1, 0x1003, 0, "B", 0)
+    assert history() == [0, 0, 0, 0, 0]
+    rig.pair.inject_fault(0, 0x7300)
+    assert history() == [1, 0x7300, 0, 0, 0]
+
+
+def test_clearing_the_error_history_leaves_0_whatever_the_eds_default():
+    def edit(od):
+        od[0x1003][0].default = 1
+    pair = _custom_pair(edit)
+    pair.power_on(0.0)
+    rig = Rig(pair)
+    assert rig.read(1, 0x1003, 0, "B") == 1
+    rig.write(1, 0x1003, 0, "B", 0)
+    assert rig.read(1, 0x1003, 0, "B") == 0
+
+
+def test_reset_communication_keeps_the_application_objects_and_restarts_the_producer(rig):
+    rig.write(1, 0x6072, 0, "H", 5000)
+    rig.write(1, 0x1017, 0, "H", 100)
+    rig.t = 0.05
+    assert rig.nmt(0x82, 1) == [Frame(0x701, b"\x00")]
+    assert rig.read(1, 0x6072, 0, "H") == 5000 and rig.read(1, 0x1017, 0, "H") == 0
+    assert rig.pair.tick(0.1) == [] and rig.pair.tick(0.2) == []  # the EDS's 0: no heartbeat
+
+
+def test_nmt_enter_pre_operational(rig):
+    rig.nmt(0x01)
+    assert [n.nmt_state for n in rig.pair.nodes] == [NmtState.OPERATIONAL] * 2
+    rig.nmt(0x80, 2)
+    assert [n.nmt_state for n in rig.pair.nodes] == [NmtState.OPERATIONAL, NmtState.PRE_OPERATIONAL]
+    assert rig.read(2, 0x1017, 0, "H") == 0  # SDO served in PRE-OPERATIONAL
+
+
+def test_heartbeat_producer_of_1_ms_and_ticks_off_the_schedule(rig):
+    rig.write(1, 0x1017, 0, "H", 100)  # at t = 0
+    rig.write(2, 0x1017, 0, "H", 1)
+    assert rig.pair.tick(0.001) == [Frame(0x702, b"\x7f")]
+    hb = Frame(0x701, b"\x7f")
+
+    def node_1(t):
+        return [f for f in rig.pair.tick(t) if f.arbitration_id == 0x701]
+    assert [node_1(t) for t in (0.13, 0.19, 0.2)] == [[hb], [], [hb]]  # the schedule is kept: 0.1, 0.2, ...
+    # a tick a whole period late: one heartbeat, the schedule restarts from that tick
+    assert node_1(0.4) == [hb] and node_1(0.4) == [] and node_1(0.45) == [] and node_1(0.5) == [hb]

@@ -21,6 +21,7 @@ import canopen.objectdictionary as cod
 from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.errors import EdsError
+from hil.canopen.validate import integer, node_id as _node_id
 
 DEFAULT_EDS = "ema_drive.eds"  #: file name of the shipped EDS in the ``profiles`` package
 
@@ -101,8 +102,16 @@ def master_loss_steps(master_node_id: int, consumer_ms: int) -> tuple[ConfigStep
     the master) and 0x6007 = 3 (quick stop on the loss), each written and read
     back. That is what the drive was *told*; whether it reacts is what the
     master's drill observes (:mod:`hil.master`).
+
+    Raises
+    ------
+    InputError
+        ``master_node_id`` outside 1..127 or ``consumer_ms`` outside 1..65535 (an entry of 0x1016
+        holds the node id in bits 16..23 and the time in bits 0..15; 0 in either is unused).
     """
-    return (ConfigStep(0x1016, 1, struct.pack("<I", master_node_id << 16 | consumer_ms),
+    node = _node_id(master_node_id, "master_node_id")
+    ms = integer("consumer_ms", consumer_ms, 1, 0xFFFF, what=" ms (0x1016 bits 0..15)")
+    return (ConfigStep(0x1016, 1, struct.pack("<I", node << 16 | ms),
                        "consumer heartbeat time 1", True),
             ConfigStep(0x6007, 0, struct.pack("<h", AbortConnectionOption.QUICK_STOP),
                        "abort connection option code", True))
