@@ -238,4 +238,5 @@ class CycleTiming:
 
     def summary(self) -> TimingSummary:
         return TimingSummary(round(self.T * 1e3, 6), self.cycles, self.reaction.summary(), self.work_h.summary(),
-                             self.work_cpu.summary(), self.gap.summary(), self.syncs_missing, self.unanswered, self.late)
+                             self.work_cpu.summary(), self.gap.summary(), self.syncs_missing, self.unanswered,
+                             self.late)

@@ -86,7 +86,7 @@ class DiskSync:
         import threading
 
         self.background = background
-        self._q: "queue.SimpleQueue" = queue.SimpleQueue()
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._errors: list[BaseException] = []
         self._thread = threading.Thread(target=self._run, name="emacheck-disk-sync", daemon=True)
         if background:

@@ -348,16 +348,16 @@ WORD_RANGE = r" = 0x10000 is outside 0x0\.\.0xFFFF \(16-bit word\)$"
     (lambda: machine_in(S.OPERATION_ENABLED).fault(0x10000), "code"),
 ], ids=["cw", "previous_cw", "match_state", "decode_state", "extra", "on_controlword", "fault_code"])
 def test_word_errors_name_the_argument(call, name):
-    with pytest.raises(InputError, match="^" + name + WORD_RANGE):
+    with pytest.raises(CanopenInputError, match="^" + name + WORD_RANGE):
         call()
 
 
 def test_a_refused_word_leaves_the_drive_unchanged():
     drive = machine_in(S.OPERATION_ENABLED)
     drive.on_controlword(0x000F)
-    with pytest.raises(InputError):
+    with pytest.raises(CanopenInputError):
         drive.on_controlword(0x10000)
-    with pytest.raises(InputError):
+    with pytest.raises(CanopenInputError):
         drive.fault(-1)
     assert (drive.state, drive.error_code, drive.previous_controlword) == (S.OPERATION_ENABLED, 0, 0x000F)
 
@@ -436,5 +436,5 @@ def test_enables_operation(cw, expected):
 
 
 def test_enables_operation_names_a_bad_word():
-    with pytest.raises(InputError, match="^cw" + WORD_RANGE):
+    with pytest.raises(CanopenInputError, match="^cw" + WORD_RANGE):
         enables_operation(0x10000)

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from canopen.objectdictionary import ODRecord
 
-from hil.canopen.errors import EdsError, InputError
+from hil.canopen.errors import CanopenInputError, EdsError
 from hil.canopen.od import (
     AbortConnectionOption,
     decode_value,
@@ -304,6 +304,6 @@ def test_master_loss_steps_pack_node_and_time(node, ms, word):
     (127, 125.0, "consumer_ms must be an int in 1..65535 ms (0x1016 bits 0..15), got float 125.0"),
 ])
 def test_master_loss_steps_refuse_what_0x1016_cannot_hold(node, ms, message):
-    with pytest.raises(InputError) as exc:
+    with pytest.raises(CanopenInputError) as exc:
         master_loss_steps(node, ms)
     assert str(exc.value) == message

@@ -21,7 +21,8 @@ import canopen.objectdictionary as cod
 from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.errors import EdsError
-from hil.canopen.validate import integer, node_id as _node_id
+from hil.canopen.validate import integer
+from hil.canopen.validate import node_id as _node_id
 
 DEFAULT_EDS = "ema_drive.eds"  #: file name of the shipped EDS in the ``profiles`` package
 
@@ -105,7 +106,7 @@ def master_loss_steps(master_node_id: int, consumer_ms: int) -> tuple[ConfigStep
 
     Raises
     ------
-    InputError
+    CanopenInputError
         ``master_node_id`` outside 1..127 or ``consumer_ms`` outside 1..65535 (an entry of 0x1016
         holds the node id in bits 16..23 and the time in bits 0..15; 0 in either is unused).
     """

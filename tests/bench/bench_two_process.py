@@ -111,7 +111,8 @@ def cause(r: dict) -> str:
     if mt:
         bits.append(f"master: reaction max {mt['reaction']['max_ms']:.2f} ms, {mt['late']} late, "
                     f"{mt['unanswered']} unanswered, SYNC skipped {mt.get('sync_skipped')}, "
-                    f"SYNC late max {mt.get('sync_late_max_ms')} ms, lag max {(r.get('can') or {}).get('max_lag_ms')} ms")
+                    f"SYNC late max {mt.get('sync_late_max_ms')} ms, "
+                    f"lag max {(r.get('can') or {}).get('max_lag_ms')} ms")
     if st:
         bits.append(f"sim-serve: reaction max {st['reaction']['max_ms']:.2f} ms, {st['late']} late, "
                     f"{st['unanswered']} unanswered, SYNC gaps max {st['gap']['max_ms']:.2f} ms "
@@ -158,7 +159,8 @@ def main(argv=None) -> int:
     done = [r for r in rows if r["status"] == "done"]
     passed = [r for r in done if r.get("verdict") == "pass"]
     agg = {}
-    for who, get in (("master", lambda r: r.get("master_timing")), ("sim-serve", lambda r: (r.get("sim") or {}).get("timing"))):
+    for who, get in (("master", lambda r: r.get("master_timing")),
+                     ("sim-serve", lambda r: (r.get("sim") or {}).get("timing"))):
         ts = [get(r) for r in rows if get(r)]
         if not ts:
             continue
@@ -169,7 +171,8 @@ def main(argv=None) -> int:
     summary = {"n": a.n, "completed": len(done), "passed": len(passed), "competitor": a.competitor,
                "rt_priority": {"sim-serve": a.rt_sim, "run": a.rt_run},
                "load_before": load0, "load_after": load1, "cores": os.cpu_count(), "per_process": agg,
-               "aborts": [{"k": r["k"], "reason": r["reason"], "cause": cause(r)} for r in rows if r["status"] != "done"]}
+               "aborts": [{"k": r["k"], "reason": r["reason"], "cause": cause(r)}
+                          for r in rows if r["status"] != "done"]}
     print(f"\n{len(done)} of {a.n} checks completed, {len(passed)} passed; competitor: {a.competitor}; "
           f"load average before {load0}, after {load1}")
     for who, g in agg.items():

@@ -12,7 +12,7 @@ from hil.profiles import load_actuation
 from hil.rig import Rig, plan_for
 from sim.drives import SimDrivePair
 
-__all__ = ["make_master", "make_pair", "od_factory", "shipped_rig"]
+__all__ = ["cyclic_master", "make_master", "make_pair", "od_factory", "shipped_rig"]
 
 
 @cache
@@ -39,3 +39,24 @@ def make_master(act=None, *, profile_path: str | Path | None = None, eds=None) -
     if act is None:
         act = load_actuation(profile_path)
     return MasterCore(act, plan_for(act, profile_path, eds).plan)
+
+
+def cyclic_master(act, plant) -> MasterCore:
+    """A master for ``act`` through its preflight against a simulated pair around ``plant``, every frame
+    at t = 0 (its heartbeat consumers start then), in the cyclic phase. The drill of the master's death,
+    which lets time pass, is skipped (test_master.py tests it)."""
+    from dataclasses import replace
+
+    from hil.master import Phase
+
+    act = replace(act, canopen=replace(act.canopen, skip_master_loss_drill="tested elsewhere"))
+    pair = make_pair(plant)
+    m = make_master(act)
+    to_slaves, to_master = list(m.start(0.0)), list(pair.power_on(0.0))
+    while to_slaves or to_master:
+        while to_slaves:
+            to_master += pair.on_frame(to_slaves.pop(0), 0.0)
+        while to_master:
+            to_slaves += m.on_frame(to_master.pop(0), 0.0)
+    assert m.preflight_done and m.fault is None and m.phase is Phase.CYCLIC
+    return m
