@@ -366,7 +366,8 @@ def test_whole_check_over_vcan_recovers_truth(full_check, actuation):
     assert 0 <= meta["can"]["loop_page_faults"] <= cycles / 100, meta["can"]
     assert meta["can"]["loop_page_faults"] <= meta["can"]["page_faults"] <= 512, meta["can"]
     # sim-serve's stats line: it stepped the plant once per SYNC it received
-    last = res["serve_out"].splitlines()[-1]
+    last = next(line for line in reversed(res["serve_out"].splitlines())
+                if line.startswith("sim-serve: ") and " SYNCs, " in line)  # (its timing lines follow)
     syncs = int(last.split(" SYNCs")[0].split()[-1])
     steps = int(last.split(" plant steps")[0].split()[-1])
     late = int(last.split(" late RPDOs")[0].split()[-1])
