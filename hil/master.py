@@ -624,9 +624,7 @@ class MasterCore:
         out = []
         for n, d in self.drives.items():
             if self.quick_stop and d.state is State.OPERATION_ENABLED and self._confirmed(d, t):
-                cw = self.plan.map.entry(d.ema, Signal.CONTROLWORD)
-                out.append(expedited_download_frame(n, cw.index, cw.subindex,
-                                                    struct.pack("<H", controlword(Command.QUICK_STOP))))
+                out.append(self._controlword_by_sdo(n, d.ema, Command.QUICK_STOP))
                 self.events.append(event.QuickStopBySdo(t, n))
         return out
 
@@ -637,11 +635,15 @@ class MasterCore:
         out = []
         for setup in self.preflight.powered:
             n = setup.plan.node.spec.node_id
-            cw = self.plan.map.entry(setup.ema, Signal.CONTROLWORD)
-            out.append(expedited_download_frame(n, cw.index, cw.subindex,
-                                                struct.pack("<H", controlword(Command.DISABLE_VOLTAGE))))
+            out.append(self._controlword_by_sdo(n, setup.ema, Command.DISABLE_VOLTAGE))
             self.events.append(event.DisableBySdo(t, n))
         return out
+
+    def _controlword_by_sdo(self, node: int, ema: int, command: Command) -> Frame:
+        """An expedited SDO download of ``command``'s controlword to the drive's mapped controlword
+        object (fire and forget: the statusword confirms)."""
+        cw = self.plan.map.entry(ema, Signal.CONTROLWORD)
+        return expedited_download_frame(node, cw.index, cw.subindex, struct.pack("<H", controlword(command)))
 
     def unreachable(self, t: float) -> list[int]:
         """Drives the master cannot reach: heartbeat lost and no statusword for a heartbeat timeout."""

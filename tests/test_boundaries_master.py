@@ -33,7 +33,7 @@ from hil.link import CanopenLink, StaleData
 from hil.master import HeartbeatLost, MasterCore, Phase, PreflightError
 from sim.plant import RigPlant
 from support.boundary import around
-from support.canopen_rig import make_master, make_pair
+from support.canopen_rig import cyclic_master, make_master
 
 SW_SOD, SW_OE = 0x0250, 0x0237  # statuswords: switch on disabled, operation enabled
 
@@ -112,18 +112,8 @@ def test_sdo_timeout_trips_on_its_limit_not_one_step_before(actuation, t_boot):
 
 def _through_preflight(act, simrig) -> MasterCore:
     """A master through its preflight against the simulated drives, every frame at t = 0 (the
-    consumer starts then), in the cyclic phase."""
-    # (the drill of the master's death, which lets time pass, is tested in test_master.py)
-    act = _replace_canopen(act, skip_master_loss_drill="tested elsewhere")
-    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(1)))
-    m = make_master(act)
-    to_slaves, to_master = list(m.start(0.0)), list(pair.power_on(0.0))
-    while to_slaves or to_master:
-        while to_slaves:
-            to_master += pair.on_frame(to_slaves.pop(0), 0.0)
-        while to_master:
-            to_slaves += m.on_frame(to_master.pop(0), 0.0)
-    assert m.preflight_done and m.fault is None and m.phase is Phase.CYCLIC
+    consumer starts then), in the cyclic phase (:func:`support.canopen_rig.cyclic_master`)."""
+    m = cyclic_master(act, RigPlant(simrig.params, np.random.default_rng(1)))
     assert [d.last_heartbeat_s for d in m.drives.values()] == [0.0, 0.0]
     return m
 

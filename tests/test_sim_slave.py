@@ -24,7 +24,7 @@ from hil.canopen.cia402 import State, controlword, decode_state, next_command
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.process import DriveMode
-from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient, SdoEvent
+from hil.canopen.sdo import SdoAbortCode, SdoAbortError
 from hil.canopen.units import permille_to_force_N
 from hil.profiles import load_actuation
 from hil.rig import plan_for
@@ -34,6 +34,7 @@ from sim.plant import RigPlant
 from support.canopen_rig import make_pair, od_factory, shipped_rig
 from support.profiles import write_profile_variant
 from support.rigs import I_TOTAL, T_S, brief_rig, quiet
+from support.sim_bus import Bus
 
 INC_PER_MM = I_TOTAL * 4096 / (2 * math.pi)  # 3276.8 increments per mm of stroke
 
@@ -71,46 +72,19 @@ def tpdo2(frame: Frame) -> tuple[int, int]:
     return struct.unpack("<ii", frame.data)
 
 
-class Rig:
-    """A minimal master: time, frames to the pair, SDO transfers, SYNC cycles."""
+class Rig(Bus):
+    """The shared minimal master (:class:`support.sim_bus.Bus`: time, frames to the pair, SDO
+    transfers, NMT), with SYNC cycles of both drives' RPDOs."""
 
     def __init__(self, pair: SimDrivePair) -> None:
-        self.pair = pair
-        self.t = 0.0
-
-    def send(self, frame: Frame) -> list[Frame]:
-        return self.pair.on_frame(frame, self.t)
-
-    def nmt(self, cs: int, node: int = 0) -> list[Frame]:
-        return self.send(Frame(0x000, bytes([cs, node])))
+        super().__init__(pair, T_S)
 
     def sync(self) -> list[Frame]:
         self.t += T_S
         return self.send(sync_frame())
 
     def sync_by_id(self) -> dict[int, Frame]:
-        frames = self.sync()
-        return {f.arbitration_id: f for f in frames}
-
-    def sdo(self, node: int, index: int, sub: int, data: bytes | None = None) -> bytes:
-        """One SDO transfer; returns the uploaded (or written) bytes, raises SdoAbortError."""
-        client = SdoClient(node)
-        req = client.start_upload(index, sub, self.t) if data is None else \
-            client.start_download(index, sub, data, self.t)
-        for _ in range(64):
-            replies = [f for f in self.send(req) if f.arbitration_id == 0x580 + node]
-            assert len(replies) == 1
-            result = client.on_frame(replies[0], self.t)
-            if isinstance(result, SdoEvent):
-                return result.data
-            req = result
-        raise AssertionError("SDO transfer did not finish")
-
-    def write(self, node: int, index: int, sub: int, fmt: str, value: int) -> None:
-        self.sdo(node, index, sub, struct.pack("<" + fmt, value))
-
-    def read(self, node: int, index: int, sub: int, fmt: str) -> int:
-        return struct.unpack("<" + fmt, self.sdo(node, index, sub))[0]
+        return {f.arbitration_id: f for f in self.sync()}
 
     def cycle(self, cw: tuple[int, int], pos: tuple[int, int] = (0, 0),
               torque: tuple[int, int] = (0, 0)) -> dict[int, Frame]:
