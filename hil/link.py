@@ -117,19 +117,28 @@ class CanopenLink:
         now = self.tr.now
         timing = self.timing
         for f, t, msg in got:
-            if timing is not None and f.arbitration_id == SYNC_COB_ID:
+            sync = f.arbitration_id == SYNC_COB_ID
+            if sync and timing is not None:
                 timing.sync(t)
             if log is not None:
                 if msg.timestamp != t:
                     msg.timestamp = t  # log the time the master saw it
                 log.write_msg(msg)
-            out = on_frame(f, now())
+            # a SYNC at its own time (the slot of the loop-timed SYNC, else when it arrived), so that
+            # the sample answering it carries that time however late the master takes it
+            out = on_frame(f, self._sync_time(t) if sync else now())
             if out:
                 self._send(out)
         events = self.m.drain_events()  # drained always: the master's list must not grow in the loop
         if self.on_event is not None:
             for ev in events:
                 self.on_event(ev)
+
+    def _sync_time(self, arrived: float) -> float:
+        """The time of a SYNC received [s]: its slot on the schedule where the loop sends SYNC itself
+        (:meth:`hil.transport.BusTransport.send_sync`), else when it arrived (the kernel's stamp)."""
+        slot = getattr(self.tr, "sync_slot_s", None)
+        return slot if slot is not None and self.tr.sync_due() is not None else arrived
 
     def _sync(self) -> None:
         due = self.tr.sync_due() if self.timing is not None else None

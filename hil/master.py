@@ -51,7 +51,7 @@ from hil.canopen.cia402 import (
     decode_state,
     master_command,
 )
-from hil.canopen.cycle import CycleDecoder, SetpointEncoder, image_of
+from hil.canopen.cycle import CycleDecoder, SetpointEncoder, SyncSchedule, image_of
 from hil.canopen.emcy import Emcy, EmcyCode, decode_emcy
 from hil.canopen.frame import (
     EMCY_COB_ID_BASE,
@@ -184,6 +184,8 @@ class MasterCore:
         self.events: list[MasterEvent] = []
         self.emcy: list[Emcy] = []
         self.cycle = 0  #: SYNC frames seen in the cyclic phase
+        #: each SYNC's period (its sample's time), SYNC periods passed without one (``skipped``)
+        self.sync_schedule = SyncSchedule(self.T)
         self.missing_cycles = 0  #: cycles whose TPDOs were incomplete at the next SYNC
         self.bad_frames = 0
         self.unknown_frames = 0
@@ -370,7 +372,7 @@ class MasterCore:
                             self._on_status(self.drives[self.order[ema - 1]], t)
                         if not self._complete and dec.complete:
                             self._complete = True
-                            self._sample = dec.sample(self.cycle * self.T)
+                            self._sample = dec.sample(self.sync_schedule.t_s)  # (not the SYNC count)
                     return []
             base, node = split_cob_id(cid)
             if node in self.nodes:
@@ -494,6 +496,10 @@ class MasterCore:
             self.missing_cycles += 1
             self.events.append(event.CycleIncomplete(t, 0, self.cycle))
         self.cycle += 1
+        skipped = self.sync_schedule.on_sync(t)
+        if skipped:
+            self.events.append(event.SyncPeriodsSkipped(t, 0, self.sync_schedule.slot - skipped - 1,
+                                                        self.sync_schedule.slot))
         self._complete = False
         self._sample = None
         self.decoder.reset()

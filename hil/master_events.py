@@ -14,7 +14,7 @@ from hil.errors import EmacheckError
 
 __all__ = ["BadFrame", "BootUp", "CycleIncomplete", "DisableBySdo", "DriveFault", "DriveStateChanged", "EmcyReceived",
            "HeartbeatLost", "HeartbeatMissed", "LaterFault", "MasterEvent", "MasterFellSilent",
-           "MasterHeartbeatResumed", "NmtSent", "NodeConfigured", "QuickStopBySdo"]
+           "MasterHeartbeatResumed", "NmtSent", "NodeConfigured", "QuickStopBySdo", "SyncPeriodsSkipped"]
 
 
 class DriveFault(EmacheckError, RuntimeError):
@@ -113,6 +113,19 @@ class CycleIncomplete(MasterEvent):
 
     def __str__(self) -> str:
         return f"cycle {self.cycle}: TPDOs incomplete at the next SYNC"
+
+
+@dataclass(frozen=True, slots=True)
+class SyncPeriodsSkipped(MasterEvent):
+    """SYNC periods of the cyclic phase without a SYNC (``node_id`` 0): the SYNC after period
+    ``last`` came in period ``slot`` (counted from the first cyclic SYNC)."""
+
+    last: int
+    slot: int
+
+    def __str__(self) -> str:
+        n = self.slot - self.last - 1
+        return f"SYNC periods {self.last + 1}..{self.slot - 1} without a SYNC ({n} skipped)"
 
 
 @dataclass(frozen=True, slots=True)

@@ -25,6 +25,12 @@ opposite excursions ``+delta`` (EMA 1) and ``-delta`` (EMA 2) and integrates
 with ``F_dem`` a triangle through ``+-amplitude_fraction_of_limit * F_limit``.
 The rate limit makes the backlash be traversed quasi-statically.
 
+Time: each sample's own time (the SYNC period it answers). A step's profile
+runs on the samples: periods without one (a late SYNC, a cycle whose sample
+did not complete; the drives held their last setpoints) are held, so the
+profile resumes where it stood instead of leaping ahead by them; the step
+just takes that much longer. Events carry the samples' time.
+
 Opposing force of the calibration: the opposing EMA ``j`` holds ``F_opp`` in
 FORCE mode (the drive's CST). A drive without CST (``force_by_position``)
 holds it by the same kind of loop in position mode: it follows the sweeping
@@ -165,6 +171,9 @@ class CheckSequence:
         self.T = actuation.timing.sync_period_s
         self._step = Step.IDLE
         self._t0 = 0.0  # start time of the current step
+        #: time of the current step without a sample beyond one period per sample [s]: the step's
+        #: profile waits for it (a late SYNC, a missing sample: the drives held their last setpoints)
+        self._held_s = 0.0
         self._events: list[Event] = []
         self._phi_hold = [0.0, 0.0]  # position targets (rad)
         self._phi_start = [0.0, 0.0]
@@ -250,6 +259,7 @@ class CheckSequence:
             raise SequenceError(f"illegal step transition {self._step.name} -> {new.name}")
         self._step = new
         self._t0 = t_s
+        self._held_s = 0.0
         self._events.append(Event(t_s, new, detail))
 
     def _pos(self, k: int) -> Setpoint:
@@ -257,13 +267,19 @@ class CheckSequence:
 
     def _cycle(self, smp: Sample) -> CycleOutput:
         t = smp.t_s
-        if self._t_last is not None and not t > self._t_last:
-            raise SequenceError(f"sample time not increasing: {t} after {self._t_last}")
+        last = self._t_last
+        if last is not None:
+            if not t > last:
+                raise SequenceError(f"sample time not increasing: {t} after {last}")
+            if t - last > 1.5 * self.T:
+                # periods without a sample: the profile resumes where it was, it does not jump ahead
+                # (setpoints leaping by the periods missed would make the motion the stall did not)
+                self._held_s += t - last - self.T
         self._t_last = t
         phi = (smp.phi1_rad, smp.phi2_rad)
         c = self.check
         i = self.i
-        dt = t - self._t0
+        dt = t - self._t0 - self._held_s  # the step's profile time (its time on the samples' clock)
         st = self._step
         settle = c.approach.settle_s
 

@@ -274,6 +274,9 @@ class BusTransport:
         self._due: float | None = None
         self.sync_skipped = 0  #: SYNC periods the loop-timed SYNC skipped (the loop was that late)
         self.sync_late_max_s = 0.0  #: the latest a loop-timed SYNC left after its due time [s]
+        #: the slot on the schedule (k T from the first) of the last loop-timed SYNC sent [s]: the
+        #: time of the sample that answers it (:meth:`send_sync`); None before the first
+        self.sync_slot_s: float | None = None
 
     @property
     def wall_clock_offset_s(self) -> float:
@@ -381,18 +384,27 @@ class BusTransport:
         return self._due
 
     def send_sync(self) -> float:
-        """Send the SYNC that is due now; returns when it left [s]. The schedule keeps its phase
-        (due times k T from the first); periods the loop was too late for are skipped, counted in
-        :attr:`sync_skipped`."""
+        """Send the SYNC that is due now; returns when it left [s].
+
+        The schedule keeps its phase (slots k T from the first). A SYNC belongs
+        to the slot nearest to when it left, :attr:`sync_slot_s`: one that left
+        more than half a period after its due time is the next slot's (sent
+        early for it), so every SYNC leaves within T/2 of its slot and the
+        sample answering it carries that slot's time. Slots passed over are
+        counted in :attr:`sync_skipped`; the next is due one period after the
+        slot taken.
+        """
         self.bus.send(can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False, check=False))
         t = self.clock()
         due = self._due
         late = t - due
         if late > self.sync_late_max_s:
             self.sync_late_max_s = late
-        skip = int(late / self.T) if late >= self.T else 0
+        skip = int(late / self.T + 0.5) if late > 0.5 * self.T else 0
         self.sync_skipped += skip
-        self._due = due + (skip + 1) * self.T
+        slot = due + skip * self.T
+        self.sync_slot_s = slot
+        self._due = slot + self.T
         return t
 
     def stop_sync(self) -> None:

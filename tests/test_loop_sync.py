@@ -22,10 +22,11 @@ def test_loop_sync_schedule_keeps_phase_and_counts_skipped_periods():
         for t in (0.0001, 0.0021, 0.0071, 0.0095, 0.0105):
             now[0] = t
             sent.append((tr.send_sync(), tr.sync_due()))
-        # on time: next due one period on; the 4 ms SYNC sent 3.1 ms late: the 6 ms one skipped, next at 8 ms
-        assert sent == [(0.0001, 0.002), (0.0021, 0.004), (0.0071, pytest.approx(0.008)),
-                        (0.0095, pytest.approx(0.010)), (0.0105, pytest.approx(0.012))]
-        assert tr.sync_skipped == 1 and tr.sync_late_max_s == pytest.approx(0.0031)
+        # on time: next due one period on; the 4 ms SYNC sent 3.1 ms late is the 8 ms slot's (the nearest):
+        # the 4 and 6 ms slots skipped, next at 10 ms
+        assert sent == [(0.0001, 0.002), (0.0021, 0.004), (0.0071, pytest.approx(0.010)),
+                        (0.0095, pytest.approx(0.012)), (0.0105, pytest.approx(0.014))]
+        assert tr.sync_skipped == 2 and tr.sync_late_max_s == pytest.approx(0.0031)
         assert [m.arbitration_id for m in iter(lambda: bus.recv(0.1), None)] == [0x080] * 5
         tr.stop_sync()
         assert tr.sync_due() is None

@@ -873,8 +873,10 @@ def test_drive_cycle_on_its_own_clock_stops_at_the_next_sync(rig):
     pair.tick(t_last + 6 * T_S + 1e-4)  # lost: caught up from the last SYNC
     assert pair.stats.free_steps == 6
     assert pair.plant.t_s == pytest.approx((pair.stats.plant_steps + 6) * T_S)
-    rig.t = t_last + 6.5 * T_S
-    frames = rig.sync_by_id()  # SYNC back: TPDOs and one step as usual, no more own steps
+    rig.t = t_last + 6.2 * T_S
+    # SYNC back 1.2 periods after the last own step (within half a period of the next: no own step
+    # before it, hil.canopen.cycle.SyncSchedule's rule): TPDOs and one step as usual, no more own steps
+    frames = rig.sync_by_id()
     assert decode_state(status(frames, 1)) is State.OPERATION_ENABLED
     pair.tick(rig.t + 4 * T_S)
     assert pair.stats.free_steps == 6

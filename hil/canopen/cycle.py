@@ -30,7 +30,7 @@ from hil.canopen.plan import Channel
 from hil.canopen.process import Sample
 from hil.canopen.signalmap import Scale, Signal
 
-__all__ = ["CycleDecoder", "RxValues", "SAMPLE_SLOTS", "SetpointEncoder", "encode_raw"]
+__all__ = ["CycleDecoder", "RxValues", "SAMPLE_SLOTS", "SetpointEncoder", "SyncSchedule", "encode_raw"]
 
 #: Slot of each physical input in :attr:`CycleDecoder.values` (the order of :class:`Sample` after ``t_s``).
 SAMPLE_SLOTS: dict[tuple[int, Signal], int] = {
@@ -328,3 +328,41 @@ def from_image(image: dict) -> tuple[tuple[PdoSpec, ...], tuple[Channel, ...]]:
     except (KeyError, TypeError, ValueError) as exc:
         raise CanopenInputError(f"process image: malformed ({type(exc).__name__}: {exc})") from None
     return pdos, chans
+
+
+class SyncSchedule:
+    """The SYNC period each SYNC of the cyclic phase answers: the time of its sample.
+
+    A SYNC arrives within T/2 of its slot on the schedule (the kernel's or a
+    drive's timer; the master's own loop-timed SYNC is given its slot's time),
+    so its period is the nearest multiple of T from the first,
+
+    .. math:: k_n = 1 + \\lfloor (t_n - t_1)/T + 1/2 \\rfloor, \\qquad k_n \\ge k_{n-1} + 1,
+
+    and the sample answering it is at :math:`k_n T` [s], however many SYNCs
+    were seen: periods without a SYNC (its producer was late) are counted in
+    :attr:`skipped`, not read as one period's motion.
+    """
+
+    def __init__(self, period_s: float) -> None:
+        self.T = period_s
+        self.slot = 0  #: the period of the last SYNC (1: the first), 0 before it
+        self.skipped = 0  #: periods passed without a SYNC
+        self._t1 = 0.0  #: when the first SYNC came [s]
+
+    def on_sync(self, t: float) -> int:
+        """A SYNC at ``t`` [s]; returns the periods skipped before it (0 on time)."""
+        last = self.slot
+        if last == 0:
+            self._t1, self.slot = t, 1
+            return 0
+        slot = max(last + 1, 1 + int((t - self._t1) / self.T + 0.5))
+        self.slot = slot
+        self.skipped += slot - last - 1
+        return slot - last - 1
+
+    @property
+    def t_s(self) -> float:
+        """The time of the last SYNC's period [s] (``slot`` T)."""
+        return self.slot * self.T
+

@@ -57,6 +57,10 @@ on the drives' clock. It does so while a drive's power stage is on
 (OPERATION_ENABLED, QUICK_STOP_ACTIVE, FAULT_REACTION_ACTIVE); with every
 drive disabled (holding brakes) the rig is at rest and is not stepped. These
 steps are counted in ``stats.free_steps``, not in ``stats.plant_steps``.
+The same holds for a late SYNC: one that comes more than 1.5 periods after
+the last step first lets the drives' own cycle run up to the period nearest
+to it (so that its TPDOs carry the rig at that time, as real drives' would),
+however short the gap was for :meth:`SimDrivePair.tick` to notice.
 
 Choices
 -------
@@ -513,6 +517,10 @@ class SimDrivePair:
             self._counters.bad_frames_ignored += 1
             return
         self._counters.syncs += 1
+        if self._last_sync_t is not None and t - self._last_step_t > 1.5 * self._T:
+            # SYNC periods passed without a SYNC (its producer was late): the rig did not wait, the
+            # drives ran their own cycle on the last setpoints; this SYNC takes the nearest period
+            self._free_run(t - 0.5 * self._T)
         self._last_sync_t = self._last_step_t = t
         cob = frame.arbitration_id
         n0, n1 = self.nodes
