@@ -22,7 +22,7 @@ import can
 import numpy as np
 
 from hil.canopen.cia402 import OperationMode, enables_operation
-from hil.canopen.cycle import CycleDecoder, SetpointEncoder, from_image
+from hil.canopen.cycle import CycleDecoder, SetpointEncoder, SyncSchedule, from_image
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import SYNC_COB_ID, Frame
 from hil.canopen.pdo import Direction, PdoError
@@ -150,7 +150,8 @@ def _codec(act: Actuation, meta: dict | None, rig=None):
 
 
 def _frames(path: Path, counts: dict):
-    """The frames of a candump log (``.gz`` too), skipping lines python-can cannot parse (counted)."""
+    """The frames of a candump log (``.gz`` too) with their stamps [s], skipping lines python-can cannot
+    parse (counted)."""
     opener = gzip.open if path.name.lower().endswith(".gz") else open
     try:
         with opener(path, "rt") as fh:  # closed however the reading ends (python-can closes only at the end)
@@ -164,7 +165,7 @@ def _frames(path: Path, counts: dict):
                     counts["bad"] += 1
                     continue
                 counts["frames"] += 1
-                yield Frame(msg.arbitration_id, bytes(msg.data))
+                yield Frame(msg.arbitration_id, bytes(msg.data)), msg.timestamp
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
 
@@ -174,7 +175,8 @@ def decode_can_log(path: str | Path, act: Actuation, meta: dict | None = None, *
 
     A sample is formed for every SYNC cycle in which every TPDO with an input
     arrived (:class:`hil.canopen.cycle.CycleDecoder`, as the master forms it);
-    its time is the cycle number times the SYNC period, as the master logs it.
+    its time is its SYNC's period (:class:`hil.canopen.cycle.SyncSchedule` on the SYNCs' stamps: the
+    nearest multiple of the SYNC period from the first), as the master logs it.
     Setpoint columns come from the RPDOs sent after that sample (mode from the
     modes-of-operation RPDO, targets from the synchronous RPDOs, the mode column
     0 while the controlword does not enable operation). The layout and scalings
@@ -192,8 +194,9 @@ def decode_can_log(path: str | Path, act: Actuation, meta: dict | None = None, *
     mode = {1: 0, 2: 0}
     counts = {"frames": 0, "bad": 0}
     cycle = syncs = incomplete = bad = 0
+    schedule = SyncSchedule(T)  # each sample's time: its SYNC's period, as the master gives it
     pending: int | None = None  # index of the last row waiting for its setpoints
-    for f in _frames(path, counts):
+    for f, stamp in _frames(path, counts):
         cid = f.arbitration_id
         try:
             if cid == SYNC_COB_ID:
@@ -201,12 +204,13 @@ def decode_can_log(path: str | Path, act: Actuation, meta: dict | None = None, *
                 if cycle > 0 and pending is None:
                     incomplete += 1
                 cycle += 1
+                schedule.on_sync(stamp)
                 pending = None
                 dec.reset()
                 continue
             if dec.feed(f) is not None:
                 if pending is None and cycle > 0 and dec.complete:
-                    rows.append([cycle * T, *dec.values])
+                    rows.append([schedule.t_s, *dec.values])
                     setp.append([0.0, 0.0, 0.0, 0.0])
                     pending = len(rows) - 1  # the RPDOs until the next SYNC carry this sample's setpoints
                 continue

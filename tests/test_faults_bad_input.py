@@ -206,7 +206,7 @@ def test_the_can_log_reader_closes_its_file_however_the_reading_ends(tmp_path, m
         monkeypatch.setattr(canlog, "open", spy, raising=False)  # the module's name for the builtin
     counts = {"frames": 0, "bad": 0}
     frames = canlog._frames(path, counts)
-    assert next(frames).arbitration_id == 0x080
+    assert next(frames)[0].arbitration_id == 0x080
     assert len(opened) == 1 and not opened[0].closed
     frames.close()  # the reading ends after one frame
     assert opened[0].closed and counts == {"frames": 1, "bad": 0}
