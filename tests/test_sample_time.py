@@ -190,12 +190,29 @@ def test_the_link_gives_the_master_a_sync_at_its_slot_not_when_it_was_read():
 
 
 def test_sync_schedule_takes_the_nearest_period_on_its_boundary():
-    """hil.canopen.cycle.SyncSchedule: a SYNC up to T/2 from its slot is that slot's; never the last one's
-    again (a SYNC early by more than T/2 is the next period's)."""
+    """hil.canopen.cycle.SyncSchedule: the periods since the last SYNC are the nearest whole number, at
+    least one (a SYNC up to T/2 late is its period's; an early one is never the last one's again)."""
     from hil.canopen.cycle import SyncSchedule
 
-    T, t1 = 0.002, 10.0
+    T = 0.002
     s = SyncSchedule(T)
-    got = [(s.on_sync(t1 + dt), s.slot) for dt in (0.0, T + 0.0004, 2.5 * T - 1e-9, 3.5 * T + 1e-9, 3.6 * T, 8 * T)]
+    t, got = 10.0, []
+    for gap in (0.0, 1.2 * T, 1.5 * T - 1e-9, 1.5 * T + 1e-9, 0.3 * T, 3 * T):
+        t += gap
+        got.append((s.on_sync(t), s.slot))
     assert got == [(0, 1), (0, 2), (0, 3), (1, 5), (0, 6), (2, 9)]
     assert s.skipped == 3 and s.t_s == pytest.approx(9 * T)
+
+
+@pytest.mark.parametrize("ppm", [-100.0, 100.0])
+def test_sync_schedule_follows_a_producer_whose_clock_runs_apart(ppm):
+    """A SYNC producer on its own clock (a drive), 100 ppm fast or slow, for 60 s at 2 ms: no period is
+    ever taken as skipped (counted from the first SYNC, one would be every 5 000 SYNCs)."""
+    from hil.canopen.cycle import SyncSchedule
+
+    T = 0.002
+    s = SyncSchedule(T)
+    n = 30_000
+    for k in range(n):
+        s.on_sync(5.0 + k * T * (1 + ppm * 1e-6))
+    assert s.skipped == 0 and s.slot == n

@@ -333,33 +333,37 @@ def from_image(image: dict) -> tuple[tuple[PdoSpec, ...], tuple[Channel, ...]]:
 class SyncSchedule:
     """The SYNC period each SYNC of the cyclic phase answers: the time of its sample.
 
-    A SYNC arrives within T/2 of its slot on the schedule (the kernel's or a
-    drive's timer; the master's own loop-timed SYNC is given its slot's time),
-    so its period is the nearest multiple of T from the first,
+    A SYNC comes within T/2 of one period after the last one unless periods
+    passed without a SYNC (the kernel's or a drive's timer; the master's own
+    loop-timed SYNC is given its slot's time), so the periods between two
+    SYNCs are the nearest whole number of periods, at least one,
 
-    .. math:: k_n = 1 + \\lfloor (t_n - t_1)/T + 1/2 \\rfloor, \\qquad k_n \\ge k_{n-1} + 1,
+    .. math:: k_n = k_{n-1} + \\max(1,\\ \\lfloor (t_n - t_{n-1})/T + 1/2 \\rfloor), \\qquad k_1 = 1,
 
     and the sample answering it is at :math:`k_n T` [s], however many SYNCs
     were seen: periods without a SYNC (its producer was late) are counted in
-    :attr:`skipped`, not read as one period's motion.
+    :attr:`skipped`, not read as one period's motion. Counted from the last
+    SYNC, not the first: a producer whose clock runs apart from this one (a
+    drive as SYNC producer, 100 ppm is 0.2 us per 2 ms period) never makes a
+    period appear skipped.
     """
 
     def __init__(self, period_s: float) -> None:
         self.T = period_s
         self.slot = 0  #: the period of the last SYNC (1: the first), 0 before it
         self.skipped = 0  #: periods passed without a SYNC
-        self._t1 = 0.0  #: when the first SYNC came [s]
+        self._t_last = 0.0  #: when the last SYNC came [s]
 
     def on_sync(self, t: float) -> int:
         """A SYNC at ``t`` [s]; returns the periods skipped before it (0 on time)."""
-        last = self.slot
-        if last == 0:
-            self._t1, self.slot = t, 1
+        if self.slot == 0:
+            self._t_last, self.slot = t, 1
             return 0
-        slot = max(last + 1, 1 + int((t - self._t1) / self.T + 0.5))
-        self.slot = slot
-        self.skipped += slot - last - 1
-        return slot - last - 1
+        skipped = max(0, int((t - self._t_last) / self.T - 0.5))
+        self._t_last = t
+        self.slot += 1 + skipped
+        self.skipped += skipped
+        return skipped
 
     @property
     def t_s(self) -> float:
