@@ -176,7 +176,7 @@ def decode_can_log(path: str | Path, act: Actuation, meta: dict | None = None, *
     A sample is formed for every SYNC cycle in which every TPDO with an input
     arrived (:class:`hil.canopen.cycle.CycleDecoder`, as the master forms it);
     its time is its SYNC's period (:class:`hil.canopen.cycle.SyncSchedule` on the SYNCs' stamps: the
-    nearest multiple of the SYNC period from the first), as the master logs it.
+    periods since the last SYNC, the nearest whole number and at least one), as the master logs it.
     Setpoint columns come from the RPDOs sent after that sample (mode from the
     modes-of-operation RPDO, targets from the synchronous RPDOs, the mode column
     0 while the controlword does not enable operation). The layout and scalings
