@@ -37,6 +37,15 @@ class IncompleteRecordingError(RecordingError):
     """A recording that is well-formed but ends too early or holds no data (e.g. a killed run)."""
 
 
+class RunRecordError(RecordingError):
+    """A run folder's meta.json holds a field of the wrong type or value; ``field`` names it
+    (dotted: ``steps.cal1_sweep``, ``drives_final.ema2.safe``)."""
+
+    def __init__(self, field: str, problem: str, source: str) -> None:
+        super().__init__(f"{source}: field '{field}': {problem}")
+        self.field = field
+
+
 class InterfaceError(EmacheckError, OSError):
     """A CAN interface that cannot be opened; the message names interface, channel and what to check."""
 

@@ -1,0 +1,676 @@
+"""The run record: what a run folder's meta.json holds, as frozen dataclasses, and its one writer.
+
+A run's record is built once (:func:`start_record`: a new run id, this software, the start time,
+status ``running``, the profiles' snapshot), changed only by :func:`dataclasses.replace` or the
+record's named methods (each returns a new record), written only by :class:`MetaWriter` (the one
+owner of ``meta.json`` and of the run folder's :class:`~hil.runfolder.DiskSync`) and read back only
+by :func:`read_record` / :meth:`RunRecord.from_json` (``analyze``, ``serv``, ``diagnose``, the
+report, the result's trace).
+
+JSON: :meth:`RunRecord.as_json` gives the keys in the order of :class:`RunRecord`'s fields, a field
+that is None absent (parts spread flat: :class:`Bus`, :class:`Attribution`, :class:`Installation`),
+with two placements kept from the format's history: ``identity`` follows ``files_sha256`` when
+there was no preflight (``simulate``: as the simulated drives would report it), and
+``loop_page_faults`` sits in ``can`` once a CANopen run has its CAN statistics. The reader takes
+the partial record of a killed run (``status`` still ``running``, no end) and any subset of the
+fields (a folder made by hand); a field of the wrong type or value is a :class:`RunRecordError`
+naming it; keys it does not know are ignored. Profile snapshots, the simulated rig, the truth,
+faults, the process image and each drive's master-loss record stay the JSON their producers
+wrote (read-only by convention: the record never changes them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as _dt
+import json
+import uuid
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+from hil.errors import RecordingError, RunRecordError
+from hil.runfolder import DiskSync, write_json_atomic
+
+#: the record's file in a run folder
+META_NAME = "meta.json"
+
+
+class RunStatus(StrEnum):
+    """Where a run is: ``running`` until its loop ends (a folder still saying so was cut off)."""
+
+    RUNNING = "running"
+    DONE = "done"
+    ABORTED = "aborted"
+
+
+class RunMode(StrEnum):
+    """The command that made the run."""
+
+    DRY_RUN = "dry-run"
+    RUN = "run"
+    SIMULATE = "simulate"
+    SIMULATE_SCENARIO = "simulate-scenario"
+
+
+def utc_now_iso() -> str:
+    """The current UTC time, ISO 8601 to the second (``started_utc``, ``ended_utc``)."""
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+
+
+# ------------------------------------------------------------------ reading JSON, field by field
+
+def _show(v: Any) -> str:
+    text = json.dumps(v, default=str) if not isinstance(v, str) else repr(v)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+_KINDS = {
+    "text": (lambda v: isinstance(v, str), "a string"),
+    "int": (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
+    "number": (lambda v: isinstance(v, int | float) and not isinstance(v, bool), "a number"),
+    "bool": (lambda v: isinstance(v, bool), "true or false"),
+    "object": (lambda v: isinstance(v, dict), "a JSON object"),
+    "list": (lambda v: isinstance(v, list), "a list"),
+    "texts": (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of strings"),
+    "text map": (lambda v: isinstance(v, dict) and all(isinstance(x, str) for x in v.values()),
+                 "an object of strings"),
+}
+
+
+class _Fields:
+    """A JSON object read field by field; each problem a :class:`RunRecordError` naming the dotted field."""
+
+    def __init__(self, obj: Any, where: str, source: str) -> None:
+        if not isinstance(obj, dict):
+            raise RunRecordError(where or "(top level)", f"expected a JSON object, got {_show(obj)}", source)
+        self.obj, self.where, self.source = obj, where, source
+
+    def name(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def error(self, key: str, problem: str) -> RunRecordError:
+        return RunRecordError(self.name(key), problem, self.source)
+
+    def has(self, *keys: str) -> bool:
+        return any(k in self.obj for k in keys)
+
+    def get(self, key: str, kind: str, *, required: bool = False) -> Any:
+        """The field's value checked against ``kind``; None when absent or null (an error if ``required``)."""
+        v = self.obj.get(key)
+        if v is None:
+            if required:
+                raise self.error(key, "missing" if key not in self.obj else "null, expected a value")
+            return None
+        ok, what = _KINDS[kind]
+        if not ok(v):
+            raise self.error(key, f"expected {what}, got {_show(v)}")
+        return v
+
+    def sub(self, key: str) -> _Fields:
+        return _Fields(self.obj[key], self.name(key), self.source)
+
+    def enum(self, key: str, cls: type[StrEnum]) -> Any:
+        v = self.get(key, "text")
+        return None if v is None else _member(cls, v, self.name(key), self.source)
+
+
+def _member(cls: type[StrEnum], v: Any, field: str, source: str) -> Any:
+    try:
+        return cls(v)
+    except ValueError:
+        allowed = ", ".join(m.value for m in cls)
+        raise RunRecordError(field, f"{_show(v)} is not one of {allowed}", source) from None
+
+
+# ------------------------------------------------------------------ the parts with a fixed shape
+
+class _Part:
+    """A part of the record: ``as_json`` and ``read`` (from a :class:`_Fields`) each part has;
+    :meth:`from_json` reads one from its JSON."""
+
+    @classmethod
+    def from_json(cls, obj: Any, where: str = "", source: str = META_NAME):
+        """The part from its JSON ``obj`` (a malformed field: :class:`RunRecordError` naming ``where.field``)."""
+        return cls.read(_Fields(obj, where or cls.__name__, source))
+
+@dataclass(frozen=True)
+class Software(_Part):
+    """The software that made the run."""
+
+    name: str
+    version: str
+
+    def as_json(self) -> dict:
+        return {"name": self.name, "version": self.version}
+
+    @classmethod
+    def read(cls, f: _Fields) -> Software:
+        return cls(f.get("name", "text", required=True), f.get("version", "text", required=True))
+
+
+@dataclass(frozen=True)
+class Profiles(_Part):
+    """The snapshots of the profiles the run used (:func:`hil.profiles.actuation_tables`, ``snapshot``)."""
+
+    actuation: dict | None = None
+    check: dict | None = None
+
+    def as_json(self) -> dict:
+        return {k: v for k, v in (("actuation", self.actuation), ("check", self.check)) if v is not None}
+
+    @classmethod
+    def read(cls, f: _Fields) -> Profiles:
+        return cls(f.get("actuation", "object"), f.get("check", "object"))
+
+
+@dataclass(frozen=True)
+class StepTime:
+    """When a step of the check began and ended (check time [s]); ``t_end_s`` None: the last one, open."""
+
+    name: str
+    t_start_s: float
+    t_end_s: float | None = None
+
+    def as_json(self) -> list:
+        return [self.t_start_s] if self.t_end_s is None else [self.t_start_s, self.t_end_s]
+
+
+def _read_steps(f: _Fields) -> tuple[StepTime, ...]:
+    out = []
+    for name, span in f.obj.items():
+        if not (isinstance(span, list) and 1 <= len(span) <= 2 and all(_KINDS["number"][0](t) for t in span)):
+            raise f.error(name, f"expected [t_start, t_end] or [t_start] in s, got {_show(span)}")
+        out.append(StepTime(name, *span))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Bus(_Part):
+    """The CAN interface of a run on real drives (``emacheck run``)."""
+
+    interface: str
+    channel: str
+    bitrate_bps: int
+
+    def as_json(self) -> dict:
+        return {"interface": self.interface, "channel": self.channel, "bitrate_bps": self.bitrate_bps}
+
+    @classmethod
+    def read(cls, f: _Fields) -> Bus:
+        return cls(f.get("interface", "text", required=True), f.get("channel", "text", required=True),
+                   f.get("bitrate_bps", "int", required=True))
+
+
+@dataclass(frozen=True)
+class BusLoad(_Part):
+    """The planned bus load (fractions of the bit rate)."""
+
+    nominal: float
+    worst: float
+
+    def as_json(self) -> dict:
+        return {"nominal": self.nominal, "worst": self.worst}
+
+    @classmethod
+    def read(cls, f: _Fields) -> BusLoad:
+        return cls(f.get("nominal", "number", required=True), f.get("worst", "number", required=True))
+
+
+@dataclass(frozen=True)
+class Attribution(_Part):
+    """Who made the check and for which work order (None where nobody said)."""
+
+    operator: str | None = None
+    work_order: str | None = None
+
+    def as_json(self) -> dict:
+        return {"operator": self.operator, "work_order": self.work_order}
+
+    @classmethod
+    def read(cls, f: _Fields) -> Attribution:
+        return cls(f.get("operator", "text"), f.get("work_order", "text"))
+
+
+@dataclass(frozen=True)
+class Installation(_Part):
+    """Where and when in the aircraft's life (the wear history's keys; None where nobody said)."""
+
+    aircraft: str | None = None
+    position: str | None = None
+    rig: str | None = None
+    flight_hours: float | None = None
+    flight_cycles: int | None = None
+
+    def as_json(self) -> dict:
+        return {"aircraft": self.aircraft, "position": self.position, "rig": self.rig,
+                "flight_hours": self.flight_hours, "flight_cycles": self.flight_cycles}
+
+    @classmethod
+    def read(cls, f: _Fields) -> Installation:
+        return cls(f.get("aircraft", "text"), f.get("position", "text"), f.get("rig", "text"),
+                   f.get("flight_hours", "number"), f.get("flight_cycles", "int"))
+
+
+#: the JSON keys of :class:`Installation`, in order
+INSTALLATION_KEYS = tuple(f.name for f in dataclasses.fields(Installation))
+
+
+@dataclass(frozen=True)
+class Wear(_Part):
+    """The simulated rig worn to ``flight_hours`` (``sim.truth.apply_wear``): its ``[wear]`` table and
+    each channel's backlash on the wear line [mm]."""
+
+    flight_hours: float
+    params: dict
+    line_mm: dict
+
+    def as_json(self) -> dict:
+        return {"flight_hours": self.flight_hours, "params": self.params, "line_mm": self.line_mm}
+
+    @classmethod
+    def read(cls, f: _Fields) -> Wear:
+        return cls(f.get("flight_hours", "number", required=True), f.get("params", "object", required=True),
+                   f.get("line_mm", "object", required=True))
+
+
+@dataclass(frozen=True)
+class Identity(_Part):
+    """A drive's identity object 0x1018 as it reported it, with its node id. ``serial`` None: the read
+    was refused; ``serial_listed`` False: its EDS has no 0x1018:04 (no ``serial`` key in the JSON)."""
+
+    node: int
+    vendor_id: int
+    product_code: int
+    revision: int
+    serial: int | None = None
+    serial_listed: bool = True
+
+    def as_json(self) -> dict:
+        out = {"node": self.node, "vendor_id": self.vendor_id, "product_code": self.product_code,
+               "revision": self.revision}
+        if self.serial_listed:
+            out["serial"] = self.serial
+        return out
+
+    @classmethod
+    def read(cls, f: _Fields) -> Identity:
+        return cls(*(f.get(k, "int", required=True) for k in ("node", "vendor_id", "product_code", "revision")),
+                   serial=f.get("serial", "int"), serial_listed=f.has("serial"))
+
+    @classmethod
+    def of(cls, node: int, read: Mapping) -> Identity | None:
+        """From what the preflight read of 0x1018 (:attr:`hil.preflight.Preflight.identities`); None if nothing."""
+        return cls.from_json({"node": node, **read}, f"identity (node {node})", "preflight") if read else None
+
+
+@dataclass(frozen=True)
+class SafetyViolation(_Part):
+    """The supervisor's latched violation (:class:`hil.supervisor.Violation`): the limit, its value in
+    force, the measured value (the limit's unit) and when [s, check time]."""
+
+    limit: str
+    detail: str
+    t_s: float
+    value: float
+    threshold: float
+
+    def as_json(self) -> dict:
+        return {"limit": self.limit, "detail": self.detail, "t_s": self.t_s, "value": self.value,
+                "threshold": self.threshold}
+
+    @classmethod
+    def read(cls, f: _Fields) -> SafetyViolation:
+        return cls(f.get("limit", "text", required=True), f.get("detail", "text", required=True),
+                   *(f.get(k, "number", required=True) for k in ("t_s", "value", "threshold")))
+
+    @classmethod
+    def of(cls, viol) -> SafetyViolation:
+        return cls(viol.limit, viol.detail, viol.t_s, viol.value, viol.threshold)
+
+
+@dataclass(frozen=True)
+class DriveFinal(_Part):
+    """A drive's last known CiA 402 state after the check (:meth:`hil.master.MasterCore.safe_state_report`):
+    reachable (heartbeat), confirmed by a fresh statusword, safe (Switch on disabled, confirmed), and
+    its protection against the master's death (the preflight's record, JSON; ``{}`` if none)."""
+
+    node: int
+    state: str
+    reachable: bool
+    confirmed: bool
+    safe: bool
+    master_loss: dict = dataclasses.field(default_factory=dict)
+
+    def as_json(self) -> dict:
+        return {"node": self.node, "state": self.state, "reachable": self.reachable, "confirmed": self.confirmed,
+                "safe": self.safe, "master_loss": self.master_loss}
+
+    @classmethod
+    def read(cls, f: _Fields) -> DriveFinal:
+        return cls(f.get("node", "int", required=True), f.get("state", "text", required=True),
+                   *(f.get(k, "bool", required=True) for k in ("reachable", "confirmed", "safe")),
+                   master_loss=f.get("master_loss", "object") or {})
+
+    def unsafe_note(self, ema: str) -> str:
+        """``EMA 2 (node 2) unreachable (heartbeat lost), last known state FAULT``: for the abort reason."""
+        how = ("unreachable (heartbeat lost), last known state " if not self.reachable else
+               "state not confirmed (no statusword), last known " if not self.confirmed else "in ")
+        return f"EMA {ema[-1]} (node {self.node}) {how}{self.state}"
+
+
+@dataclass(frozen=True)
+class CanStats(_Part):
+    """The CAN side of a CANopen run: frames logged, SYNC cycles without a complete sample, frames the
+    master refused or did not know, its largest lag behind the bus [ms] and the page faults of the
+    check (``emacheck run``)."""
+
+    frames_logged: int
+    missing_cycles: int
+    bad_frames: int
+    unknown_frames: int
+    max_lag_ms: float | None = None
+    page_faults: int | None = None
+
+    def as_json(self) -> dict:
+        out = {"frames_logged": self.frames_logged, "missing_cycles": self.missing_cycles,
+               "bad_frames": self.bad_frames, "unknown_frames": self.unknown_frames}
+        if self.max_lag_ms is not None:
+            out["max_lag_ms"] = self.max_lag_ms
+        if self.page_faults is not None:
+            out["page_faults"] = self.page_faults
+        return out
+
+    @classmethod
+    def read(cls, f: _Fields) -> CanStats:
+        return cls(*(f.get(k, "int", required=True) for k in ("frames_logged", "missing_cycles", "bad_frames",
+                                                                "unknown_frames")),
+                   max_lag_ms=f.get("max_lag_ms", "number"), page_faults=f.get("page_faults", "int"))
+
+
+#: the measures of :class:`Timing`, each a distribution (:meth:`hil.cycletiming.Distribution.as_json`)
+TIMING_MEASURES = ("reaction", "work", "work_cpu", "gap")
+
+
+@dataclass(frozen=True)
+class Timing(_Part):
+    """The master's loop per SYNC cycle on a real bus (:meth:`hil.cycletiming.TimingSummary.as_json`:
+    counts and the four measures' distributions as JSON), with the SYNC's source and its lateness."""
+
+    period_ms: float
+    cycles: int
+    syncs_missing: int
+    unanswered: int
+    late: int
+    reaction: dict
+    work: dict
+    work_cpu: dict
+    gap: dict
+    t0_unix_s: float  #: the wall clock at the check's time 0 [s since the epoch]
+    sync: str  #: "loop-timed" or "periodic task"
+    sync_skipped: int
+    sync_late_max_ms: float
+
+    def as_json(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def read(cls, f: _Fields) -> Timing:
+        kinds = {"period_ms": "number", "t0_unix_s": "number", "sync_late_max_ms": "number", "sync": "text",
+                 **dict.fromkeys(TIMING_MEASURES, "object")}
+        return cls(**{x.name: f.get(x.name, kinds.get(x.name, "int"), required=True)
+                      for x in dataclasses.fields(cls)})
+
+
+def _ema_map(f: _Fields, key: str, part: type, nullable: bool = False) -> dict | None:
+    """``{"ema1": part, ...}`` of the object at ``key`` (entries may be null if ``nullable``); None if absent."""
+    if f.get(key, "object") is None:
+        return None
+    g = f.sub(key)
+    return {k: None if (v is None and nullable) else part.read(g.sub(k)) for k, v in g.obj.items()}
+
+
+# ------------------------------------------------------------------ the record
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a run folder's meta.json holds; None: the key is absent. Fields in the JSON's order.
+
+    Built by :func:`start_record`; the fields after ``wear`` are added as the run goes: the preflight
+    (``process_image``, ``master_loss``, ``identity``), the loop (``steps``, ``safety``, ``drives_final``,
+    ``stop_errors``, ``loop_page_faults``, ``reason`` ... ``duration_s``), the command after it
+    (``wall_s``, ``can``, ``timing``).
+    """
+
+    run_id: str | None = None
+    software: Software | None = None
+    started_utc: str | None = None
+    status: RunStatus | None = None
+    profiles: Profiles | None = None
+    steps: tuple[StepTime, ...] | None = None
+    mode: RunMode | None = None
+    scenario: str | None = None  #: the normal-operation scenario (``simulate --scenario``)
+    seed: int | None = None
+    realtime: bool | None = None
+    bus: Bus | None = None
+    simrig: dict | None = None  #: the simulated rig's parameters (snapshot)
+    truth: dict | None = None  #: the simulator's truth, in result.json's shape
+    faults: tuple[dict, ...] | None = None  #: the injected faults (snapshots)
+    bus_load: BusLoad | None = None
+    eds: str | None = None  #: the drives' EDS file
+    eds_nodes: dict[str, str] | None = None  #: node name -> its EDS file
+    plan_notes: tuple[str, ...] | None = None
+    force_control: dict[str, str] | None = None  #: EMA -> "cst" or "csp"
+    attribution: Attribution | None = None
+    installation: Installation | None = None
+    files_sha256: dict[str, str] | None = None  #: file name -> SHA-256
+    wear: Wear | None = None
+    process_image: dict | None = None  #: :func:`hil.canopen.cycle.image_of`
+    master_loss: dict[str, dict] | None = None  #: EMA -> :meth:`hil.preflight.MasterLossRecord.as_json`
+    identity: dict[str, Identity | None] | None = None  #: EMA -> identity (None: not read)
+    safety: SafetyViolation | None = None
+    drives_final: dict[str, DriveFinal] | None = None  #: EMA -> its final state
+    stop_errors: tuple[str, ...] | None = None  #: errors met while stopping the drives (at most 10)
+    loop_page_faults: int | None = None  #: page faults of this process inside the cyclic loop
+    reason: str | None = None  #: why it stopped ("" when it ran to the end)
+    ended_utc: str | None = None
+    samples: int | None = None
+    duration_s: float | None = None  #: rig time of the check [s]
+    wall_s: float | None = None  #: wall time of the check loop [s]
+    can: CanStats | None = None
+    timing: Timing | None = None
+
+    def __post_init__(self) -> None:  # an illegal status or mode is refused, as in from_json
+        if self.status is not None and not isinstance(self.status, RunStatus):
+            object.__setattr__(self, "status", _member(RunStatus, self.status, "status", "run record"))
+        if self.mode is not None and not isinstance(self.mode, RunMode):
+            object.__setattr__(self, "mode", _member(RunMode, self.mode, "mode", "run record"))
+
+    # -------------------------------------------------------------- changes (each a new record)
+
+    def with_step(self, name: str, t_s: float) -> RunRecord:
+        """Step ``name`` began at ``t_s``: the open step ends there, ``name`` is added unless it ran before."""
+        steps = tuple(s if s.t_end_s is not None else dataclasses.replace(s, t_end_s=t_s) for s in self.steps or ())
+        if all(s.name != name for s in steps):
+            steps += (StepTime(name, t_s),)
+        return dataclasses.replace(self, steps=steps)
+
+    def with_preflight(self, preflight: Mapping) -> RunRecord:
+        """``process_image``, ``master_loss`` and ``identity`` from the link's preflight record (JSON,
+        :meth:`hil.link.CanopenLink.preflight_record`), read and checked as meta.json is."""
+        got = RunRecord.from_json(preflight, "preflight record")
+        return dataclasses.replace(self, process_image=got.process_image, master_loss=got.master_loss,
+                                   identity=got.identity)
+
+    def with_final_states(self, final: Mapping, errors: list[str] | None) -> RunRecord:
+        """``drives_final`` from the link's report after it closed (JSON,
+        :meth:`hil.master.MasterCore.safe_state_report`) and the first 10 ``errors`` met while stopping."""
+        got = RunRecord.from_json({"drives_final": final}, "final states")
+        more = {"stop_errors": tuple(errors[:10])} if errors else {}
+        return dataclasses.replace(self, drives_final=got.drives_final, **more)
+
+    def ended(self, status: RunStatus, reason: str, samples: int, duration_s: float, **more) -> RunRecord:
+        """The loop's end: status, why, the time now, samples and rig time (``more``: other fields)."""
+        return dataclasses.replace(self, status=RunStatus(status), reason=reason, ended_utc=utc_now_iso(),
+                                   samples=samples, duration_s=duration_s, **more)
+
+    # -------------------------------------------------------------- JSON
+
+    def as_json(self) -> dict:
+        """meta.json's content (see the module's docstring for the layout)."""
+        out: dict[str, Any] = {}
+        can_json = self.can.as_json() if self.can is not None else None
+        if can_json is not None and self.loop_page_faults is not None:
+            can_json["loop_page_faults"] = self.loop_page_faults
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name == "can":
+                v = can_json
+            elif f.name == "loop_page_faults" and can_json is not None:
+                continue
+            elif f.name == "identity" and self.process_image is None:
+                continue  # placed after files_sha256 (below)
+            if v is not None:
+                out.update(_json_of(f.name, v))
+            if f.name == "files_sha256" and self.process_image is None and self.identity is not None:
+                out.update(_json_of("identity", self.identity))
+        return out
+
+    @classmethod
+    def from_json(cls, obj: Any, source: str = META_NAME) -> RunRecord:
+        """The record of meta.json's content ``obj``: any subset of the fields (a killed run's, a folder
+        made by hand); a malformed field raises :class:`RunRecordError` naming it (``source`` first)."""
+        f = _Fields(obj, "", source)
+        parts = {name: part.read(f.sub(name)) for name, part in _PARTS.items() if f.get(name, "object") is not None}
+        flat = {name: part.read(f) for name, part in _FLAT_PARTS.items() if f.has(*part_keys(part))}
+        fields = {name: f.get(name, kind) for name, kind in _PLAIN.items()}
+        can = f.obj.get("can")
+        lpf = f.sub("can").get("loop_page_faults", "int") if isinstance(can, dict) else None
+        return cls(**fields, **parts, **flat,
+                   status=f.enum("status", RunStatus), mode=f.enum("mode", RunMode),
+                   steps=_read_steps(f.sub("steps")) if f.get("steps", "object") is not None else None,
+                   faults=_tuple(f.get("faults", "list")), plan_notes=_tuple(f.get("plan_notes", "texts")),
+                   stop_errors=_tuple(f.get("stop_errors", "texts")),
+                   loop_page_faults=lpf if lpf is not None else f.get("loop_page_faults", "int"),
+                   identity=_ema_map(f, "identity", Identity, nullable=True),
+                   drives_final=_ema_map(f, "drives_final", DriveFinal))
+
+
+def part_keys(part: type) -> tuple[str, ...]:
+    """The JSON keys of a part spread flat into the record (:class:`Bus`, :class:`Attribution`, ...)."""
+    return tuple(f.name for f in dataclasses.fields(part))
+
+
+def _tuple(v: list | None) -> tuple | None:
+    return None if v is None else tuple(v)
+
+
+#: parts under a key of their own / spread flat / plain fields (JSON types as they are)
+_PARTS = {"software": Software, "profiles": Profiles, "bus_load": BusLoad, "wear": Wear,
+          "safety": SafetyViolation, "can": CanStats, "timing": Timing}
+_FLAT_PARTS = {"bus": Bus, "attribution": Attribution, "installation": Installation}
+_PLAIN = {"run_id": "text", "started_utc": "text", "scenario": "text", "seed": "int", "realtime": "bool",
+          "simrig": "object", "truth": "object", "eds": "text", "eds_nodes": "text map", "force_control": "text map",
+          "files_sha256": "text map", "process_image": "object", "master_loss": "object", "reason": "text",
+          "ended_utc": "text", "samples": "int", "duration_s": "number", "wall_s": "number"}
+
+
+def _json_of(name: str, v: Any) -> dict:
+    """The JSON key(s) of field ``name`` holding ``v`` (not None)."""
+    if name in _FLAT_PARTS:
+        return v.as_json()
+    if name == "steps":
+        return {name: {s.name: s.as_json() for s in v}}
+    if name in ("identity", "drives_final"):
+        return {name: {k: None if p is None else p.as_json() for k, p in v.items()}}
+    if isinstance(v, StrEnum):
+        return {name: v.value}
+    if isinstance(v, tuple):
+        return {name: list(v)}
+    return {name: v.as_json() if hasattr(v, "as_json") else v}
+
+
+def start_record(act, check, **fields) -> RunRecord:
+    """A new run's record: a new run id, this software, the time now, status ``running``, the snapshots
+    of ``act`` and ``check``, no steps yet; ``fields``: the other :class:`RunRecord` fields (``status``
+    too: a recording made whole at once is ``done``)."""
+    from hil import __version__
+    from hil.profiles import actuation_tables, snapshot
+
+    base = {"run_id": uuid.uuid4().hex, "software": Software("emacheck", __version__),
+            "started_utc": utc_now_iso(), "status": RunStatus.RUNNING,
+            "profiles": Profiles(actuation_tables(act), snapshot(check)), "steps": ()}
+    return RunRecord(**{**base, **fields})
+
+
+# ------------------------------------------------------------------ the file
+
+def has_record(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds a meta.json."""
+    return (Path(run_dir) / META_NAME).exists()
+
+
+def read_record(run_dir: Path | None) -> RunRecord | None:
+    """A run folder's record, or None (no run folder, or no meta.json in it); not JSON, or a malformed
+    field: a :class:`~hil.errors.RecordingError` naming the file (and the field)."""
+    if run_dir is None or not has_record(run_dir):
+        return None
+    path = Path(run_dir) / META_NAME
+    try:
+        obj = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
+    return RunRecord.from_json(obj, str(path))
+
+
+class MetaWriter:
+    """The one writer of a run folder's meta.json: owns its path, the record as last written and,
+    while the check loop runs, the folder's :class:`~hil.runfolder.DiskSync`.
+
+    :meth:`write` writes at once on the caller's thread (atomically, fsynced); :meth:`post` hands the
+    record to the DiskSync (in the background on a real bus, so the loop never waits for the disk);
+    :meth:`fsync` fsyncs another file of the folder (signals.csv) in order with those writes.
+    """
+
+    def __init__(self, run_dir: Path, record: RunRecord, disk: DiskSync | None = None) -> None:
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / META_NAME
+        self.record = record  #: the record as last written (or as given, before the first write)
+        self.disk = disk
+
+    def write(self, record: RunRecord | None = None) -> RunRecord:
+        """Write ``record`` (default: the current one) now; returns it."""
+        if record is not None:
+            self.record = record
+        write_json_atomic(self.path, self.record.as_json())
+        return self.record
+
+    def post(self, record: RunRecord) -> RunRecord:
+        """Write ``record`` through the DiskSync (at once without one); returns it."""
+        if self.disk is None:
+            return self.write(record)
+        self.record = record
+        self.disk.write_json(self.path, record.as_json())
+        return record
+
+    def open_disk(self, background: bool) -> None:
+        """Make the DiskSync unless one was given (``background``: its own thread)."""
+        if self.disk is None:
+            self.disk = DiskSync(background=background)
+
+    def fsync(self, fd: int) -> None:
+        """fsync the open file ``fd`` through the DiskSync (at once without one)."""
+        if self.disk is None:
+            import os
+
+            os.fsync(fd)
+        else:
+            self.disk.fsync(fd)
+
+    def close_disk(self) -> None:
+        """Wait for the DiskSync's jobs and let it go (raises its first error); later writes are at once."""
+        disk, self.disk = self.disk, None
+        if disk is not None:
+            disk.close()
