@@ -30,6 +30,7 @@ from hil.canopen.signalmap import Signal, torque_scale
 from hil.config import Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import Signals
+from hil.runrecord import RunRecord
 
 
 class CanLogWriter:
@@ -112,11 +113,11 @@ def _check_lines(path: Path) -> bool:
     return cut_short
 
 
-def _codec(act: Actuation, meta: dict | None, rig=None):
+def _codec(act: Actuation, meta, rig=None):
     """The cycle codec of a recorded check: meta.json's process image where the run folder has one,
     else the profile's plan (scalings the drives report are then not known: the rated torque is taken
     as 1 N m for the setpoint columns, a motor angle scaled by the drive refuses the log)."""
-    image = (meta or {}).get("process_image")
+    image = meta.process_image if meta is not None else None
     notes = []
     if image:
         try:
@@ -170,7 +171,7 @@ def _frames(path: Path, counts: dict):
         raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
 
 
-def decode_can_log(path: str | Path, act: Actuation, meta: dict | None = None, *, rig=None) -> DecodedLog:
+def decode_can_log(path: str | Path, act: Actuation, meta: RunRecord | None = None, *, rig=None) -> DecodedLog:
     """Decode a candump log of a check into run-folder signals.
 
     A sample is formed for every SYNC cycle in which every TPDO with an input

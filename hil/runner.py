@@ -8,18 +8,14 @@ is the same for all of them, so the sequence core runs unchanged on hardware.
 
 from __future__ import annotations
 
-import datetime as _dt
-import uuid
 from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, replace
 from typing import Protocol
 
-from hil import __version__
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import Actuation, Check
-from hil.profiles import actuation_tables, snapshot
-from hil.runfolder import DiskSync, SignalsWriter, write_json_atomic
+from hil.runfolder import SignalsWriter
+from hil.runrecord import MetaWriter, RunRecord, RunStatus, SafetyViolation, StepTime
 from hil.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.supervisor import Supervisor
 
@@ -62,55 +58,35 @@ class PlantLink:
 
 @dataclass(frozen=True)
 class LoopOutcome:
-    status: str  #: "done" or "aborted"
+    status: RunStatus  #: done or aborted
     reason: str
     samples: int
     duration_s: float  #: rig (simulated or real) time
-    steps: dict  #: step name -> [t_start, t_end]
+    steps: tuple[StepTime, ...]  #: when each step began and ended
 
 
-def _now_iso() -> str:
-    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-
-
-def start_meta(act: Actuation, check: Check, extra: dict) -> dict:
-    """The meta.json content at the start of a run (with a new run id)."""
-    return {
-        "run_id": uuid.uuid4().hex,
-        "software": {"name": "emacheck", "version": __version__},
-        "started_utc": _now_iso(),
-        "status": "running",
-        "profiles": {"actuation": actuation_tables(act), "check": snapshot(check)},
-        "steps": {},
-        **extra,
-    }
-
-
-def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dict,
+def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
               on_cycle: Callable[[Progress, Sample], None] | None = None,
-              max_duration_s: float | None = None, disk: DiskSync | None = None) -> LoopOutcome:
-    """Run the check over ``link``, logging every cycle into ``run_dir``.
+              max_duration_s: float | None = None) -> LoopOutcome:
+    """Run the check over ``link``, logging every cycle into ``meta``'s run folder.
 
-    ``meta`` is written to meta.json at the start and updated at each step
-    change and at the end. Any exception aborts the sequence, stops both
-    drives (DISABLED), closes the log and is re-raised. ``disk`` writes the
-    run folder's JSON and fsyncs (default: in the background on a real bus,
-    at once on simulated time); it is closed here.
+    The record is written to meta.json at the start and updated at each step change and at the end
+    (``meta.record`` is the run's record then, also when this raises). Any exception aborts the
+    sequence, stops both drives (DISABLED), closes the log and is re-raised. ``meta``'s DiskSync
+    writes the record and fsyncs (unless one was given: in the background on a real bus, at once on
+    simulated time); it is closed here.
     """
-    run_dir.mkdir(parents=True, exist_ok=True)
+    meta.run_dir.mkdir(parents=True, exist_ok=True)
     # a drive without CST holds the calibration's opposing force by the sequence's position-mode loop
     seq = CheckSequence(act, check, force_by_position=getattr(link, "force_by_position", (False, False)))
     sup = Supervisor(act, check)
-    writer = SignalsWriter(run_dir / "signals.csv")
-    meta_path = run_dir / "meta.json"
-    write_json_atomic(meta_path, meta)
+    writer = SignalsWriter(meta.run_dir / "signals.csv")
+    rec = meta.write()
     # on a real bus, fsync and the JSON files written in the loop: off the loop's thread (the caller
     # may have made the thread before it went real-time); on simulated time, at once
-    if disk is None:
-        disk = DiskSync(background=getattr(link, "timing", None) is not None)
+    meta.open_disk(background=getattr(link, "timing", None) is not None)
     limit = max_duration_s if max_duration_s is not None else 3.0 * seq.planned_duration_s() + 60.0
     sp1 = sp2 = DISABLED
-    steps: dict[str, list[float]] = {}
     smp: Sample | None = None
     t_start = 0.0
     try:
@@ -118,15 +94,13 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
         t_start = smp.t_s
         record = getattr(link, "preflight_record", None)
         if record is not None:  # the layout, the scalings the drives reported, the drill: on disk now
-            meta.update(record())
-            disk.write_json(meta_path, meta)
+            rec = meta.post(rec.with_preflight(record()))
         faults0 = _page_faults()
         while True:
             viol = sup.check(smp, sp1, sp2)
             if viol is not None:
-                if "safety" not in meta:
-                    meta["safety"] = {"limit": viol.limit, "detail": viol.detail, "t_s": viol.t_s,
-                                      "value": viol.value, "threshold": viol.threshold}
+                if rec.safety is None:
+                    rec = replace(rec, safety=SafetyViolation.of(viol))
                 out: CycleOutput = seq.abort(smp.t_s, f"safety limit {viol.limit}: {viol.detail}")
             elif smp.t_s - t_start > limit:
                 out = seq.abort(smp.t_s, f"check exceeded {limit:.0f} s")
@@ -137,16 +111,12 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                 writer.flush(smp.t_s)
             if out.events:
                 for ev in out.events:
-                    for v in steps.values():
-                        if len(v) == 1:
-                            v.append(ev.t_s)
-                    steps.setdefault(ev.step.value, [ev.t_s])
+                    rec = rec.with_step(ev.step.value, ev.t_s)
                     if ev.step is Step.ABORTED:
                         link.abort()
                 writer.flush(smp.t_s)  # to the OS now, to the disk by the sync thread
-                disk.fsync(writer.fileno())
-                meta["steps"] = steps
-                disk.write_json(meta_path, meta)
+                meta.fsync(writer.fileno())
+                rec = meta.post(rec)
             if on_cycle is not None:
                 on_cycle(seq.progress(smp.t_s), smp)
             sp1, sp2 = out.sp1, out.sp2
@@ -155,7 +125,7 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                 break
             smp = link.exchange(sp1, sp2)
         link.close()
-        stop_note = _record_safe_state(link, meta)
+        rec, stop_note = _record_safe_state(link, rec)
     except BaseException as exc:
         # fail closed: stop both drives, keep the log, record why, re-raise
         reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"error: {type(exc).__name__}: {exc}"
@@ -172,26 +142,24 @@ def run_check(link: Link, act: Actuation, check: Check, run_dir: Path, meta: dic
                 link.close()
             except Exception as exc3:
                 secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
-            secondary += _record_safe_state(link, meta)
+            rec, note = _record_safe_state(link, rec)
+            secondary += note
             try:
-                disk.close()
+                meta.close_disk()
             except OSError as exc4:
                 secondary += f"; while writing the run folder: {type(exc4).__name__}: {exc4}"
             writer.close()
-            meta.update(status="aborted", reason=reason + secondary, ended_utc=_now_iso(), steps=steps,
-                        samples=writer.rows, duration_s=(smp.t_s - t_start) if smp is not None else 0.0)
-            write_json_atomic(meta_path, meta)
+            meta.write(rec.ended(RunStatus.ABORTED, reason + secondary, writer.rows,
+                                 (smp.t_s - t_start) if smp is not None else 0.0))
         raise
     # the cyclic loop touches no new memory (a page fault costs ~0.9 ms in user-mode-linux)
-    meta["loop_page_faults"] = _page_faults() - faults0
-    disk.close()
+    loop_page_faults = _page_faults() - faults0
+    meta.close_disk()
     writer.close()
-    status = "done" if seq.step_now == Step.DONE else "aborted"
+    status = RunStatus.DONE if seq.step_now == Step.DONE else RunStatus.ABORTED
     reason = (seq.abort_reason + stop_note) if seq.abort_reason else stop_note.lstrip("; ")
-    meta.update(status=status, reason=reason, ended_utc=_now_iso(), steps=steps,
-                samples=writer.rows, duration_s=smp.t_s - t_start)
-    write_json_atomic(meta_path, meta)
-    return LoopOutcome(status, reason, writer.rows, smp.t_s - t_start, steps)
+    rec = meta.write(rec.ended(status, reason, writer.rows, smp.t_s - t_start, loop_page_faults=loop_page_faults))
+    return LoopOutcome(status, reason, writer.rows, smp.t_s - t_start, rec.steps)
 
 
 def _page_faults() -> int:
@@ -209,18 +177,12 @@ def _page_faults() -> int:
 FLUSH_PERIOD_S = 0.5
 
 
-def _record_safe_state(link, meta: dict) -> str:
-    """Put the drives' final states (:attr:`CanopenLink.final_states`) into meta; returns a
-    note for the abort reason naming any drive that could not be brought to the safe state."""
+def _record_safe_state(link, rec: RunRecord) -> tuple[RunRecord, str]:
+    """The record with the drives' final states (:attr:`CanopenLink.final_states`), and a note for the
+    abort reason naming any drive that could not be brought to the safe state."""
     final = getattr(link, "final_states", None)
     if not final:
-        return ""
-    meta["drives_final"] = final
-    errs = getattr(link, "close_errors", None)
-    if errs:
-        meta["stop_errors"] = errs[:10]
-    bad = [f"EMA {k[-1]} (node {v['node']}) "
-           + ("unreachable (heartbeat lost), last known state " if not v["reachable"] else
-              "state not confirmed (no statusword), last known " if not v["confirmed"] else "in ")
-           + v["state"] for k, v in final.items() if not v["safe"]]
-    return f"; not in the safe state: {', '.join(bad)}" if bad else ""
+        return rec, ""
+    rec = rec.with_final_states(final, getattr(link, "close_errors", None))
+    bad = [d.unsafe_note(k) for k, d in rec.drives_final.items() if not d.safe]
+    return rec, (f"; not in the safe state: {', '.join(bad)}" if bad else "")

@@ -9,8 +9,9 @@ report, the result's trace).
 
 JSON: :meth:`RunRecord.as_json` gives the keys in the order of :class:`RunRecord`'s fields, a field
 that is None absent (parts spread flat: :class:`Bus`, :class:`Attribution`, :class:`Installation`),
-with two placements kept from the format's history: ``identity`` follows ``files_sha256`` when
-there was no preflight (``simulate``: as the simulated drives would report it), and
+with two placements kept from the format's history: ``identity`` sits where it was recorded (with
+the preflight after ``master_loss``; else, for a run stopped before it, last, with the CAN
+statistics; else after ``files_sha256``: ``simulate``, as the simulated drives would report it), and
 ``loop_page_faults`` sits in ``can`` once a CANopen run has its CAN statistics. The reader takes
 the partial record of a killed run (``status`` still ``running``, no end) and any subset of the
 fields (a folder made by hand); a field of the wrong type or value is a :class:`RunRecordError`
@@ -524,17 +525,16 @@ class RunRecord:
         can_json = self.can.as_json() if self.can is not None else None
         if can_json is not None and self.loop_page_faults is not None:
             can_json["loop_page_faults"] = self.loop_page_faults
+        # identity where it was recorded: with the preflight, else after the loop with the CAN
+        # statistics (a run that stopped before its preflight), else at the start (simulate)
+        ident_after = ("master_loss" if self.process_image is not None else
+                       "timing" if self.can is not None else "files_sha256")
         for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if f.name == "can":
-                v = can_json
-            elif f.name == "loop_page_faults" and can_json is not None:
-                continue
-            elif f.name == "identity" and self.process_image is None:
-                continue  # placed after files_sha256 (below)
-            if v is not None:
+            v = can_json if f.name == "can" else getattr(self, f.name)
+            skip = f.name == "identity" or (f.name == "loop_page_faults" and can_json is not None)
+            if v is not None and not skip:
                 out.update(_json_of(f.name, v))
-            if f.name == "files_sha256" and self.process_image is None and self.identity is not None:
+            if f.name == ident_after and self.identity is not None:
                 out.update(_json_of("identity", self.identity))
         return out
 

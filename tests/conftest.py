@@ -40,14 +40,15 @@ def simrig():
 def simulate_run(out: Path, act, check, simrig_profile, seed: int):
     """The check on the plant, as `emacheck simulate` runs it, without the terminal."""
     from hil.cli.check import truth_dict
-    from hil.runner import PlantLink, run_check, start_meta
+    from hil.runner import PlantLink, run_check
+    from hil.runrecord import MetaWriter, RunMode, start_record
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 
     plant = RigPlant(simrig_profile.params, np.random.default_rng(seed))
     truth = truth_dict(rig_truth(simrig_profile.params))
-    meta = start_meta(act, check, {"mode": "simulate", "seed": seed, "truth": truth})
-    outcome = run_check(PlantLink(plant), act, check, out, meta)
+    meta = MetaWriter(out, start_record(act, check, mode=RunMode.SIMULATE, seed=seed, truth=truth))
+    outcome = run_check(PlantLink(plant), act, check, meta)
     return outcome, truth
 
 

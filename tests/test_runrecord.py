@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import json
 from pathlib import Path
 
 import pytest
 
+from hil.cli import main
 from hil.cycletiming import CycleTiming
 from hil.errors import KNOWN_ERRORS, RecordingError, RunRecordError
 from hil.runrecord import (
@@ -95,6 +97,8 @@ def test_json_layout_order_absent_keys_and_the_two_historical_placements():
     assert j["steps"] == {"enable": [0.014, 0.514], "approach": [0.514, 1.0], "aborted": [1.0]}
     assert j["identity"]["ema2"] is None and j["status"] == "aborted" and type(j["status"]) is str
     assert j["operator"] == "Ann" and j["work_order"] is None and j["flight_cycles"] == 900
+    # a CANopen run stopped before its preflight: identity comes with the CAN statistics, last
+    assert list(_full(process_image=None, master_loss=None).as_json())[-1] == "identity"
     # a simulated run: no preflight, no CAN statistics
     sim = _full(process_image=None, master_loss=None, can=None, timing=None, bus=None, safety=None).as_json()
     assert sim["loop_page_faults"] == 3 and list(sim).index("loop_page_faults") == list(sim).index("stop_errors") + 1
@@ -121,6 +125,19 @@ def test_timing_mirrors_the_cycle_timing_summary():
     extra = {"t0_unix_s": 1.0, "sync": "periodic task", "sync_skipped": 0, "sync_late_max_ms": 0.0}
     j = {**ct.summary().as_json(), **extra}
     assert Timing.from_json(j).as_json() == j and list(Timing.from_json(j).as_json()) == list(j)
+
+
+@pytest.mark.slow
+def test_the_default_dry_runs_meta_json_reads_and_writes_back_byte_for_byte(dry_run):
+    """The whole record of a real run (the session's default dry-run): read, written again as the
+    writer writes it, the same bytes: nothing lost, nothing added, the keys in their order."""
+    out, rc = dry_run
+    text = (out / "meta.json").read_text()
+    rec = read_record(out)
+    assert rc == 0 and rec.status is RunStatus.DONE and rec.mode is RunMode.DRY_RUN
+    assert rec.steps[-1] == StepTime("done", rec.steps[-2].t_end_s) and rec.can.frames_logged > 0
+    assert isinstance(rec.loop_page_faults, int) and all(d.safe for d in rec.drives_final.values())
+    assert json.dumps(rec.as_json(), indent=2) + "\n" == text
 
 
 def test_a_killed_runs_partial_record_reads():
@@ -211,6 +228,18 @@ def test_the_writer_posts_through_its_disk_sync_and_then_writes_at_once(tmp_path
     assert meta2.disk is given  # one given (emacheck run makes it before going real-time) is kept
 
 
+def test_analyze_names_the_bad_field_of_a_run_folders_meta_json(tmp_path, capsys):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "signals.csv").write_text("t,phi1,phi2,s1,s2,F1,F2\n" + "".join(
+        f"{k * 0.002:.4f},0,0,0,0,0,0\n" for k in range(1, 20)))
+    (run / "meta.json").write_text(json.dumps({"status": "done", "steps": {"enable": "0.5"}}))
+    assert main(["analyze", str(run), "--out", str(tmp_path / "out")]) == 3
+    err = capsys.readouterr().err
+    assert f"{run / 'meta.json'}: field 'steps.enable': expected [t_start, t_end]" in err
+    assert "Traceback" not in err
+
+
 # ---------------------------------------------------------------- one writer of meta.json
 
 WRITERS = {"write_json_atomic", "write_json", "write_text", "write_bytes", "dump"}
@@ -249,3 +278,11 @@ def test_the_meta_json_check_sees_what_it_is_meant_to(tmp_path):
                  "def e(run):\n    return open(run.meta_file).read()\n")
     lines = sorted({ln for ln, _ in _meta_json_writes(p)})
     assert lines == [3, 5, 7, 8]
+
+
+def test_no_module_but_the_run_record_writes_meta_json():
+    found = [f"{p.relative_to(ROOT)}:{ln}: {what}"
+             for p in sorted(q for pkg in ("hil", "blf", "sim") for q in (ROOT / pkg).rglob("*.py"))
+             if p != ROOT / "hil" / "runrecord.py" for ln, what in _meta_json_writes(p)]
+    assert not found, ("meta.json is named and written only by hil/runrecord.py (has_record, read_record, "
+                       "MetaWriter):\n" + "\n".join(found))

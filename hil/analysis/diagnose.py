@@ -18,12 +18,12 @@ import numpy as np
 from hil.errors import RecordingError
 
 
-def _check_for(meta: dict | None, act):
+def _check_for(meta, act):
     """The check profile a recording was made with (meta.json's snapshot), else the shipped one."""
     from hil.config import Check
     from hil.profile_tables import build_dataclass
     from hil.profiles import load_check
-    snap = ((meta or {}).get("profiles") or {}).get("check")
+    snap = meta.profiles.check if meta is not None and meta.profiles is not None else None
     if snap is not None:
         try:
             return build_dataclass(Check, snap, "meta.json (check snapshot)")
@@ -38,12 +38,13 @@ def load_dual(path: Path, profile: Path | None):
     from blf.errors import AnalysisError
     from hil.analysis.maint import check_units, find_segments
     from hil.canlog import decode_can_log
-    from hil.cli.common import actuation_for, read_meta
+    from hil.cli.common import actuation_for
     from hil.runfolder import is_can_log, read_signals, resolve_recording
+    from hil.runrecord import read_record
     from sim.replay_model import DualEmaReplay
 
     sig_path, run_dir = resolve_recording(path)
-    meta = read_meta(run_dir)
+    meta = read_record(run_dir)
     act = actuation_for(profile, meta)
     sig = decode_can_log(sig_path, act).signals if is_can_log(sig_path) else read_signals(sig_path)
     if sig.n < 1000:
@@ -59,7 +60,7 @@ def load_dual(path: Path, profile: Path | None):
                           act.mechanics.i_total_rad_per_mm, period, sig.mode1, sig.sp1, sig.mode2, sig.sp2,
                           segments=seg, opposing_force_N=check.calibration.opposing_force_N,
                           force_ramp_s=check.calibration.force_ramp_s,
-                          nominal_rig=(meta or {}).get("simrig"))
+                          nominal_rig=meta.simrig if meta is not None else None)
     return model, period
 
 

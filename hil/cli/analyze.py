@@ -17,11 +17,11 @@ from hil.cli.common import (
     installation,
     make_console,
     outputs_for,
-    read_meta,
     record_history,
 )
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import resolve_recording, write_json_atomic
+from hil.runrecord import RunStatus, has_record, read_record
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -31,27 +31,28 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     try:
         sig_path, run_dir = resolve_recording(arg)
     except IncompleteRecordingError:
-        if not (arg.is_dir() and (arg / "meta.json").exists()):
+        if not (arg.is_dir() and has_record(arg)):
             raise
         sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
-    meta = read_meta(run_dir)
+    meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
     outputs = outputs_for(args.out, sig_path, run_dir, "analysis")
     out = outputs.folder
-    truth = meta.get("truth") if meta else None
-    incomplete = meta is not None and meta.get("status") == "running"
-    extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta)}
+    truth = meta.truth if meta is not None else None
+    status = meta.status if meta is not None else None
+    incomplete = status is RunStatus.RUNNING
+    extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta).as_json()}
     try:
         result = analyze_and_report(sig_path, act, outputs, truth, meta, console, trace_extra=extra)
     except (IncompleteRecordingError, AnalysisError) as exc:
         # (bad content, e.g. garbage lines or NaN, is refused whatever the run's status)
-        if not incomplete and not (meta is not None and meta.get("status") == "aborted"):
+        if not incomplete and status is not RunStatus.ABORTED:
             if str(exc).startswith(str(sig_path)):
                 raise
             raise RecordingError(f"{sig_path}: cannot be analysed: {exc}") from None
         # an interrupted run with too little data for the analysis: say so, keep what is known
         result = {"status": "incomplete" if incomplete else "aborted",
-                  "reason": INCOMPLETE_REASON if incomplete else meta.get("reason", ""),
+                  "reason": INCOMPLETE_REASON if incomplete else meta.reason or "",
                   "analysis_error": f"{type(exc).__name__}: {exc}", "recording": str(sig_path),
                   "trace": trace_of(meta, sig_path, extra)}
         if truth is not None:

@@ -7,6 +7,7 @@ handling, and the analysis plus report at the end.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -16,10 +17,20 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from blf.signals import CHANNELS
-from hil.cli.common import INSTALLATION_KEYS, ExitCode, Outputs, load_recording, utc_iso
+from hil.cli.common import ExitCode, Outputs, load_recording, utc_iso
 from hil.config import Actuation
 from hil.errors import KNOWN_ERRORS
 from hil.runfolder import write_json_atomic
+from hil.runrecord import (
+    INSTALLATION_KEYS,
+    CanStats,
+    Identity,
+    MetaWriter,
+    RunRecord,
+    RunStatus,
+    Timing,
+    Wear,
+)
 
 
 class LiveProgress:
@@ -110,32 +121,35 @@ def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
         console.print(f"written to: {out_dir}")
 
 
-def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> dict:
+def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) -> dict:
     """The traceability block of result.json: when, which software, which actuators (0x1018 read in the
-    preflight), who and for which work order, which files (SHA-256), which run and recording."""
+    preflight), who and for which work order, which files (SHA-256), which run and recording; ``extra``
+    (the command's flags: operator, work order, installation) before the record's."""
     from hil import __version__
 
-    meta, extra = meta or {}, extra or {}
-    place = {k: extra[k] if extra.get(k) is not None else meta.get(k) for k in INSTALLATION_KEYS}
+    rec, extra = meta or RunRecord(), extra or {}
+    held = rec.installation.as_json() if rec.installation is not None else {}
+    place = {k: extra[k] if extra.get(k) is not None else held.get(k) for k in INSTALLATION_KEYS}
     extra = {k: v for k, v in extra.items() if v}
+    who = rec.attribution
     return {
-        "run_id": meta.get("run_id"),
-        "started_utc": meta.get("started_utc"),
+        "run_id": rec.run_id,
+        "started_utc": rec.started_utc,
         "analysed_utc": utc_iso(),
         "software": {"name": "emacheck", "version": __version__,
-                     "check_run_with": (meta.get("software") or {}).get("version")},
-        "operator": extra.get("operator", meta.get("operator")),
-        "work_order": extra.get("work_order", meta.get("work_order")),
-        "identity": meta.get("identity") or {},
-        "files_sha256": meta.get("files_sha256") or {},
+                     "check_run_with": rec.software.version if rec.software is not None else None},
+        "operator": extra.get("operator", who.operator if who is not None else None),
+        "work_order": extra.get("work_order", who.work_order if who is not None else None),
+        "identity": {k: None if v is None else v.as_json() for k, v in (rec.identity or {}).items()},
+        "files_sha256": rec.files_sha256 or {},
         "recording": str(sig_path),
-        "mode": meta.get("mode"),
+        "mode": rec.mode.value if rec.mode is not None else None,
         # each drive's reaction to losing the master: configured, and what the drill observed (or the
         # external watchdog stated instead)
-        "master_loss": meta.get("master_loss") or {k: v.get("master_loss") for k, v in
-                                                   (meta.get("drives_final") or {}).items() if v.get("master_loss")},
+        "master_loss": rec.master_loss or {k: d.master_loss for k, d in (rec.drives_final or {}).items()
+                                           if d.master_loss},
         # how each EMA held a force: its drive's CST, or the master's force loop in CSP
-        "force_control": meta.get("force_control") or {},
+        "force_control": rec.force_control or {},
         # where and when in the aircraft's life (the wear history's keys): aircraft, position, rig,
         # flight hours and cycles
         **place,
@@ -143,7 +157,7 @@ def trace_of(meta: dict | None, sig_path: Path, extra: dict | None = None) -> di
 
 
 def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: dict | None,
-                       meta: dict | None, console: Console, trace_extra: dict | None = None) -> dict:
+                       meta: RunRecord | None, console: Console, trace_extra: dict | None = None) -> dict:
     """Read the signals back, analyse, write result.json and report.html into ``outputs``."""
     # imported here, not at the top: `emacheck run` loads the analysis only after the cyclic loop
     from hil.analysis.maint import analyze_signals, result_dict
@@ -152,10 +166,11 @@ def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: 
     sig = load_recording(sig_path, act, meta)
     an = analyze_signals(sig, act)
     result = result_dict(an, act, truth)
-    if meta is not None and meta.get("status") == "aborted":
+    status = meta.status if meta is not None else None
+    if status is RunStatus.ABORTED:
         result["status"] = "aborted"
-        result["reason"] = meta.get("reason", "")
-    elif meta is not None and meta.get("status") == "running":
+        result["reason"] = meta.reason or ""
+    elif status is RunStatus.RUNNING:
         result["status"] = "incomplete"
         result["reason"] = INCOMPLETE_REASON
     if sig.notes:
@@ -192,19 +207,17 @@ def worn_simrig(simrig, flight_hours: float | None, seed: int):
     from sim.truth import apply_wear, wear_line_mm
 
     params = apply_wear(simrig.params, simrig.wear, flight_hours, np.random.default_rng([seed, 0x16]))
-    info = {"flight_hours": flight_hours, "params": snapshot(simrig.wear),
-            "line_mm": wear_line_mm(simrig.params, simrig.wear, flight_hours)}
+    info = Wear(flight_hours, snapshot(simrig.wear), wear_line_mm(simrig.params, simrig.wear, flight_hours))
     return dataclasses.replace(simrig, params=params), info
 
 
-def simulated_identity(act, simrig) -> dict | None:
+def simulated_identity(act, simrig) -> dict[str, Identity] | None:
     """The identity (0x1018) the simulated drives report, for a check without them (``simulate``):
     vendor and product the profile expects, its lowest revision, the simulated rig's serial numbers."""
     if simrig.serials is None:
         return None
     c = act.canopen
-    return {f"ema{k}": {"node": n, "vendor_id": c.vendor_id, "product_code": c.product_code,
-                        "revision": c.revision_min, "serial": s}
+    return {f"ema{k}": Identity(n, c.vendor_id, c.product_code, c.revision_min, s)
             for k, (n, s) in enumerate(zip(c.node_ids, simrig.serials, strict=True), start=1)}
 
 
@@ -229,9 +242,10 @@ def rig_nodes_text(rig) -> str:
 
 
 def rig_meta(rig) -> dict:
-    """What meta.json records of the planned rig: the drives' EDS, every node's EDS, the notes of the plan."""
+    """What the run record holds of the planned rig (:class:`~hil.runrecord.RunRecord` fields): the
+    drives' EDS, every node's EDS, the notes of the plan, how each EMA holds a force."""
     return {"eds": str(rig.eds_paths["ema1"]), "eds_nodes": {k: str(v) for k, v in rig.eds_paths.items()},
-            "plan_notes": list(rig.plan.notes),
+            "plan_notes": tuple(rig.plan.notes),
             "force_control": {f"ema{d.ema}": d.force_control.value for d in rig.plan.drives}}
 
 
@@ -243,7 +257,7 @@ def rig_hashes(rig) -> dict:
                        **{f"eds_{k}": v for k, v in rig.eds_paths.items() if k not in ("ema1", "ema2")})
 
 
-def canopen_check(console: Console, act, check, link, out: Path, meta: dict, quiet: bool, disk=None):
+def canopen_check(console: Console, act, check, link, meta: MetaWriter, quiet: bool):
     """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
     ...) or Ctrl-C has already stopped the drives and closed the log when it arrives here: it
     becomes an aborted outcome with the reason, and result.json says so."""
@@ -252,11 +266,12 @@ def canopen_check(console: Console, act, check, link, out: Path, meta: dict, qui
     t0 = time.perf_counter()
     try:
         with LiveProgress(console, 0.0, not quiet) as live:
-            outcome = run_check(link, act, check, out, meta, on_cycle=live, disk=disk)
+            outcome = run_check(link, act, check, meta, on_cycle=live)
     except (*KNOWN_ERRORS, KeyboardInterrupt) as exc:
         reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
-        outcome = LoopOutcome("aborted", reason, meta.get("samples", 0), meta.get("duration_s", 0.0),
-                              meta.get("steps", {}))
+        rec = meta.record
+        outcome = LoopOutcome(RunStatus.ABORTED, reason, rec.samples if rec.samples is not None else 0,
+                              rec.duration_s if rec.duration_s is not None else 0.0, rec.steps or ())
     wall = time.perf_counter() - t0
     return outcome, wall
 
@@ -268,52 +283,49 @@ def page_faults() -> int:
     return r.ru_minflt + r.ru_majflt
 
 
-def record_can_stats(out: Path, meta: dict, wall: float, log, master, transport=None,
-                      page_faults: int | None = None, timing=None) -> None:
-    meta["wall_s"] = round(wall, 3)
-    meta["can"] = {"frames_logged": log.frames, "missing_cycles": master.missing_cycles,
-                   "bad_frames": master.bad_frames, "unknown_frames": master.unknown_frames}
-    if transport is not None and hasattr(transport, "max_lag_s"):
-        # how far the master fell behind the bus at worst (a frame waiting in its socket) [ms]
-        meta["can"]["max_lag_ms"] = round(transport.max_lag_s * 1e3, 2)
-    if page_faults is not None:
-        meta["can"]["page_faults"] = page_faults  # during the check (each costs time)
-    if "loop_page_faults" in meta:  # of those, in the cyclic loop (hil.runner)
-        meta["can"]["loop_page_faults"] = meta.pop("loop_page_faults")
+def record_can_stats(meta: MetaWriter, wall: float, log, master, transport=None,
+                     page_faults: int | None = None, timing=None) -> None:
+    """Into the run record after the loop: its wall time, the CAN statistics, the master's loop timing
+    (``timing``, a :class:`hil.cycletiming.CycleTiming`) and each EMA's identity."""
+    # how far the master fell behind the bus at worst (a frame waiting in its socket) [ms]
+    lag = round(transport.max_lag_s * 1e3, 2) if transport is not None and hasattr(transport, "max_lag_s") else None
+    can = CanStats(log.frames, master.missing_cycles, master.bad_frames, master.unknown_frames,
+                   max_lag_ms=lag, page_faults=page_faults)  # page faults: during the check (each costs time)
+    loop = None
     if timing is not None:  # the master's loop per SYNC cycle (hil.cycletiming)
-        meta["timing"] = {**timing.summary().as_json(),
-                          "t0_unix_s": round(getattr(transport, "wall_clock_offset_s", 0.0), 6),
-                          "sync": ("loop-timed" if getattr(transport, "loop_sync", False) else "periodic task"),
-                          "sync_skipped": getattr(transport, "sync_skipped", 0),
-                          "sync_late_max_ms": round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4)}
+        loop = Timing.from_json({**timing.summary().as_json(),
+                                 "t0_unix_s": round(getattr(transport, "wall_clock_offset_s", 0.0), 6),
+                                 "sync": ("loop-timed" if getattr(transport, "loop_sync", False) else "periodic task"),
+                                 "sync_skipped": getattr(transport, "sync_skipped", 0),
+                                 "sync_late_max_ms": round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4)})
     # each EMA's identity as the drive reported it by SDO (0x1018) in the preflight
-    meta["identity"] = {f"ema{k}": ({"node": n, **master.drives[n].identity} if master.drives[n].identity else None)
-                        for k, n in enumerate(master.order, start=1)}
-    write_json_atomic(out / "meta.json", meta)
+    ident = {f"ema{k}": Identity.of(n, master.drives[n].identity) for k, n in enumerate(master.order, start=1)}
+    meta.write(dataclasses.replace(meta.record, wall_s=round(wall, 3), can=can, timing=loop or meta.record.timing,
+                                   identity=ident))
 
 
-def print_drives_final(console: Console, meta: dict) -> None:
+def print_drives_final(console: Console, meta: RunRecord) -> None:
     """Each drive's last known CiA 402 state after the check (meta.json ``drives_final``)."""
-    for ema, d in (meta.get("drives_final") or {}).items():
-        safe = "safe" if d.get("safe") else "[red]NOT confirmed safe[/red]"
-        how = "" if d.get("reachable") else ", unreachable (heartbeat lost)"
-        console.print(f"EMA {ema[-1]} (node {d.get('node')}): {d.get('state')}, {safe}{how}")
+    for ema, d in (meta.drives_final or {}).items():
+        safe = "safe" if d.safe else "[red]NOT confirmed safe[/red]"
+        how = "" if d.reachable else ", unreachable (heartbeat lost)"
+        console.print(f"EMA {ema[-1]} (node {d.node}): {d.state}, {safe}{how}")
 
 
-def result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -> int:
+def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Console) -> int:
     """Analyse a finished check; an aborted one gets result.json with the reason (and the
     analysis where enough data was recorded) and the console says where each drive ended."""
     run = Outputs(out)
-    if outcome.status != "done":
+    rec = meta.record
+    if outcome.status is not RunStatus.DONE:
         console.print(f"[red]aborted:[/red] {outcome.reason}")
-        meta["status"], meta["reason"] = "aborted", meta.get("reason") or outcome.reason
-        write_json_atomic(out / "meta.json", meta)
-        print_drives_final(console, meta)
+        rec = meta.write(dataclasses.replace(rec, status=RunStatus.ABORTED, reason=rec.reason or outcome.reason))
+        print_drives_final(console, rec)
         try:
-            result = analyze_and_report(out / "signals.csv", act, run, truth, meta, console)
+            result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
         except KNOWN_ERRORS as exc:
-            result = {"status": "aborted", "reason": meta["reason"], "analysis_error": str(exc),
-                      "trace": trace_of(meta, out / "signals.csv")}
+            result = {"status": "aborted", "reason": rec.reason, "analysis_error": str(exc),
+                      "trace": trace_of(rec, out / "signals.csv")}
             if truth is not None:
                 result["truth"] = truth
             write_json_atomic(out / "result.json", result)
@@ -321,6 +333,6 @@ def result_after(out: Path, act, truth, meta: dict, outcome, console: Console) -
             return ExitCode.ABORTED
         print_summary(console, result, out)
         return ExitCode.ABORTED
-    result = analyze_and_report(out / "signals.csv", act, run, truth, meta, console)
+    result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
     print_summary(console, result, out)
     return exit_for(result)

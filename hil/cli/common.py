@@ -8,15 +8,14 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
-import json
 from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
 
 from hil.config import Actuation
-from hil.errors import RecordingError
 from hil.profiles import actuation_from_snapshot, load_actuation
 from hil.runfolder import is_can_log, read_signals
+from hil.runrecord import INSTALLATION_KEYS, Installation, RunRecord
 
 
 class ExitCode(IntEnum):
@@ -238,10 +237,6 @@ def _flight_hours(text: str) -> float:
 _flight_cycles = _count("flight cycles")
 
 
-#: what the history records about where and when a check was made (flags, else meta.json, else the
-#: actuation profile's [history] table)
-INSTALLATION_KEYS = ("aircraft", "position", "rig", "flight_hours", "flight_cycles")
-
 
 def add_history_args(p: argparse.ArgumentParser, *, simulated: bool) -> None:
     """The wear history's flags (docs/history.md): where the result is recorded and what the record
@@ -268,19 +263,20 @@ def add_history_args(p: argparse.ArgumentParser, *, simulated: bool) -> None:
     g.add_argument("--flight-cycles", type=_flight_cycles, metavar="N", help="the aircraft's flight cycles")
 
 
-def installation(args: argparse.Namespace, act: Actuation, meta: dict | None = None) -> dict:
-    """Aircraft, position, rig, flight hours and cycles of a check: the flags, else the run's
-    meta.json, else the actuation profile's ``[history]`` (None where nobody said)."""
-    meta = meta or {}
+def installation(args: argparse.Namespace, act: Actuation, meta: RunRecord | None = None) -> Installation:
+    """Aircraft, position, rig, flight hours and cycles of a check (what the history records about where
+    and when it was made): the flags, else the run's record, else the actuation profile's ``[history]``
+    (None where nobody said)."""
+    held = meta.installation if meta is not None and meta.installation is not None else Installation()
     out = {}
     for k in INSTALLATION_KEYS:
         v = getattr(args, k, None)
         if v is None:
-            v = meta.get(k)
+            v = getattr(held, k)
         if v is None and k in ("aircraft", "position", "rig"):
             v = getattr(act.history, k) or None
         out[k] = v
-    return out
+    return Installation(**out)
 
 
 def history_url(url: str | None, act: Actuation) -> str:
@@ -346,9 +342,9 @@ def out_dir(args: argparse.Namespace, kind: str) -> Path:
     return default_out(kind)
 
 
-def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
+def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None):
     """Signals from a CSV, or decoded from a raw CAN log (``*.log``, ``*.log.gz``), step labels from
-    meta.json."""
+    the run record's step times."""
     if not is_can_log(sig_path):
         return read_signals(sig_path)
     import dataclasses
@@ -359,34 +355,23 @@ def load_recording(sig_path: Path, act: Actuation, meta: dict | None):
 
     dec = decode_can_log(sig_path, act, meta)
     sig = dec.signals
-    steps = (meta or {}).get("steps") or {}
+    steps = meta.steps if meta is not None else None
     if steps:
         label = np.full(sig.n, "", dtype=object)
-        for name, span in steps.items():
-            t0 = span[0]
-            t1 = span[1] if len(span) > 1 else np.inf
-            label[(sig.t >= t0 - 1e-9) & (sig.t < t1 - 1e-9)] = name
+        for s in steps:
+            t1 = s.t_end_s if s.t_end_s is not None else np.inf
+            label[(sig.t >= s.t_start_s - 1e-9) & (sig.t < t1 - 1e-9)] = s.name
         sig = dataclasses.replace(sig, step=label.astype(str),
                                   notes=sig.notes + ("step labels from meta.json step times",))
     return sig
 
 
-def read_meta(run_dir: Path | None) -> dict | None:
-    """A run folder's meta.json, or None (no run folder, or no meta.json in it)."""
-    if run_dir is None or not (run_dir / "meta.json").exists():
-        return None
-    try:
-        return json.loads((run_dir / "meta.json").read_text())
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{run_dir / 'meta.json'}: not valid JSON: {exc}") from None
-
-
-def actuation_for(profile: Path | None, meta: dict | None) -> Actuation:
+def actuation_for(profile: Path | None, meta: RunRecord | None) -> Actuation:
     """The actuation to analyse a recording with: ``--profile`` if given, else the run folder's
     snapshot (what the run used), else the shipped profile."""
     if profile is not None:
         return load_actuation(profile)
-    snap = ((meta or {}).get("profiles") or {}).get("actuation")
+    snap = meta.profiles.actuation if meta is not None and meta.profiles is not None else None
     if snap is not None:
         return actuation_from_snapshot(snap)
     return load_actuation(None)

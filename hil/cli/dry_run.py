@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,7 +32,7 @@ from hil.cli.common import (
     record_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
-from hil.runfolder import write_json_atomic
+from hil.runrecord import Attribution, BusLoad, MetaWriter, RunMode, start_record
 
 
 @dataclass
@@ -55,8 +56,8 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
 
     ``faults`` (a :class:`sim.faults.Fault` sequence) replaces the simulated-rig profile's
     ``[[faults]]``. The profiles are validated by the caller; nothing is sent on the bus before
-    the EDS and the bus load are checked here. ``trace`` (operator, work order, file hashes)
-    goes into meta.json and from there into result.json.
+    the EDS and the bus load are checked here. ``trace`` (run record fields: ``attribution``,
+    ``installation``, ``files_sha256``, ``wear``) goes into meta.json and from there into result.json.
     """
     import numpy as np
 
@@ -64,7 +65,6 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     from hil.canopen.od import load_eds
     from hil.link import CanopenLink
     from hil.master import MasterCore
-    from hil.runner import start_meta
     from hil.transport import InProcessTransport
     from sim.drives import SimDrivePair
     from sim.faults import FaultInjector
@@ -83,13 +83,12 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                         serials=simrig.serials)
     injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=bool(faults))
     truth = truth_dict(rig_truth(simrig.params))
-    meta = start_meta(act, check, {"mode": "dry-run", "seed": seed, "realtime": bool(realtime),
-                                   "simrig": snapshot(simrig.params), "truth": truth,
-                                   "faults": [snapshot(f) for f in faults],
-                                   "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
-                                   **rig_meta(rig), **(trace or {})})
-    meta.setdefault("files_sha256", {}).update(rig_hashes(rig))
-    write_json_atomic(out / "meta.json", meta)  # the run folder says "running" from the start
+    record = start_record(act, check, mode=RunMode.DRY_RUN, seed=seed, realtime=bool(realtime),
+                          simrig=snapshot(simrig.params), truth=truth, faults=tuple(snapshot(f) for f in faults),
+                          bus_load=BusLoad(load.load_nominal, load.load_worst), **rig_meta(rig), **(trace or {}))
+    meta = MetaWriter(out, dataclasses.replace(record, files_sha256={**(record.files_sha256 or {}),
+                                                                     **rig_hashes(rig)}))
+    meta.write()  # the run folder says "running" from the start
     # a channel of its own: python-can's virtual channels are process-global by name
     transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
                                    realtime=realtime)
@@ -101,10 +100,10 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                   f"in-process virtual CAN bus, seed {seed}, bus load {load.load_worst:.1%} worst case"
                   + (f", {len(faults)} injected fault(s)" if faults else "") + f"; run folder {out}")
     try:
-        outcome, wall = canopen_check(console, act, check, link, out, meta, quiet)
+        outcome, wall = canopen_check(console, act, check, link, meta, quiet)
     finally:
         transport.close()
-    record_can_stats(out, meta, wall, log, master)
+    record_can_stats(meta, wall, log, master)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated in {wall:.2f} s wall "
                   f"({outcome.duration_s / max(wall, 1e-9):.1f}x real time); {log.frames} CAN frames logged")
     rc = result_after(out, act, truth, meta, outcome, console)
@@ -120,7 +119,7 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     simrig = load_simrig(args.sim)
     out = out_dir(args, "dry-run")
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
-    trace = {"operator": args.operator, "work_order": args.work_order, **installation(args, act),
+    trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),
              "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim)}
     if wear is not None:
         trace["wear"] = wear

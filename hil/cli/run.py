@@ -37,7 +37,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from hil.canlog import CanLogWriter
     from hil.link import CanopenLink
     from hil.master import MasterCore
-    from hil.runner import start_meta
+    from hil.runrecord import Attribution, Bus, BusLoad, MetaWriter, RunMode, start_record
     from hil.transport import BusTransport
 
     console = make_console()
@@ -61,29 +61,27 @@ def cmd_run(args: argparse.Namespace) -> int:
     log = CanLogWriter(out / "can.log", channel=args.channel, time_offset_s=transport.wall_clock_offset_s)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
-    meta = start_meta(act, check, {"mode": "run", "interface": args.interface, "channel": args.channel,
-                                   "bitrate_bps": bitrate,
-                                   "bus_load": {"nominal": load.load_nominal, "worst": load.load_worst},
-                                   **rig_meta(rig), "operator": args.operator, "work_order": args.work_order,
-                                   **installation(args, act),
-                                   "files_sha256": {**file_hashes(actuation=args.profile, check=args.check),
-                                                    **rig_hashes(rig)}})
+    record = start_record(act, check, mode=RunMode.RUN, bus=Bus(args.interface, args.channel, bitrate),
+                          bus_load=BusLoad(load.load_nominal, load.load_worst), **rig_meta(rig),
+                          attribution=Attribution(args.operator, args.work_order),
+                          installation=installation(args, act),
+                          files_sha256={**file_hashes(actuation=args.profile, check=args.check), **rig_hashes(rig)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, {rig_nodes_text(rig)}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
     from hil.runfolder import DiskSync
     # the run folder's writer thread is made before the memory is locked and the loop's page
     # faults are counted (locked, each page of a new thread's stack faults at once)
-    disk = DiskSync(background=True)
+    meta = MetaWriter(out, record, DiskSync(background=True))
     console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")
     faults0 = page_faults()
     try:
-        outcome, wall = canopen_check(console, act, check, link, out, meta, args.quiet, disk)
+        outcome, wall = canopen_check(console, act, check, link, meta, args.quiet)
         faults = page_faults() - faults0  # the check's, before the bus and real time are let go
     finally:
         transport.close()
         bus.shutdown()
         end_realtime()  # the analysis and the report run at normal priority, GC on
-    record_can_stats(out, meta, wall, log, master, transport, faults, link.timing)
+    record_can_stats(meta, wall, log, master, transport, faults, link.timing)
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s in {wall:.2f} s wall; "
                   f"{log.frames} CAN frames logged")
     if link.timing is not None:

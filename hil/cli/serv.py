@@ -23,11 +23,11 @@ from hil.cli.common import (
     load_recording,
     make_console,
     outputs_for,
-    read_meta,
     record_history,
 )
 from hil.errors import RecordingError
 from hil.runfolder import resolve_recording, write_json_atomic
+from hil.runrecord import read_record
 
 
 def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) -> None:
@@ -79,7 +79,7 @@ def cmd_serv(args: argparse.Namespace) -> int:
     if method not in METHODS:
         raise RecordingError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
     sig_path, run_dir = resolve_recording(args.recording)
-    meta = read_meta(run_dir)
+    meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
     try:
         sig = load_recording(sig_path, act, meta)
@@ -87,12 +87,12 @@ def cmd_serv(args: argparse.Namespace) -> int:
         an = analyse(sig, act, corr, method)
     except (InputError, AnalysisError) as exc:
         raise RecordingError(f"{sig_path}: {exc}") from None
-    truth = meta.get("truth") if isinstance(meta, dict) else None
+    truth = meta.truth if meta is not None else None
     outputs = outputs_for(args.out, sig_path, run_dir, "serv")
     outputs.folder.mkdir(parents=True, exist_ok=True)
     data = serv_dict(an, truth, str(sig_path))
     data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order,
-                                              **installation(args, act, meta)})
+                                              **installation(args, act, meta).as_json()})
     data["analysis_s"] = round(time.perf_counter() - t0, 3)
     write_json_atomic(outputs.path("serv.json"), data)
     report = not getattr(args, "no_report", False)

@@ -19,6 +19,7 @@ from hil.cli.common import (
     record_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
+from hil.runrecord import Attribution, MetaWriter, RunMode, RunStatus, start_record
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -28,7 +29,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         return simulate_scenario(args)
     import numpy as np
 
-    from hil.runner import PlantLink, run_check, start_meta
+    from hil.runner import PlantLink, run_check
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 
@@ -42,21 +43,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(seed)
     plant = RigPlant(simrig.params, rng)
     truth = truth_dict(rig_truth(simrig.params))
-    meta = start_meta(act, check, {"mode": "simulate", "seed": seed,
-                                   "simrig": snapshot(simrig.params), "truth": truth,
-                                   "operator": args.operator, "work_order": args.work_order,
-                                   **installation(args, act),
-                                   "files_sha256": file_hashes(actuation=args.profile, check=args.check,
-                                                               simrig=args.sim)})
-    ident = simulated_identity(act, simrig)
-    if ident is not None:  # as the simulated drives would report it (there are none without CAN)
-        meta["identity"] = ident
-    if wear is not None:
-        meta["wear"] = wear
+    # identity: as the simulated drives would report it (there are none without CAN)
+    meta = MetaWriter(out, start_record(act, check, mode=RunMode.SIMULATE, seed=seed,
+                                        simrig=snapshot(simrig.params), truth=truth,
+                                        attribution=Attribution(args.operator, args.work_order),
+                                        installation=installation(args, act),
+                                        files_sha256=file_hashes(actuation=args.profile, check=args.check,
+                                                                 simrig=args.sim),
+                                        identity=simulated_identity(act, simrig), wear=wear))
     console.print(f"emacheck simulate: seed {seed}, run folder {out}")
     t0 = time.perf_counter()
     with LiveProgress(console, 0.0, not args.quiet) as live:
-        outcome = run_check(PlantLink(plant), act, check, out, meta, on_cycle=live)
+        outcome = run_check(PlantLink(plant), act, check, meta, on_cycle=live)
     wall = time.perf_counter() - t0
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated "
                   f"({outcome.samples} samples) in {wall:.2f} s wall")
@@ -71,8 +69,6 @@ def simulate_scenario(args: argparse.Namespace) -> int:
     meta.json with the simulator's truth) that ``emacheck serv`` reads as it is."""
     import numpy as np
 
-    from hil.runfolder import write_json_atomic
-    from hil.runner import start_meta
     from sim.operation import simulate_calibration_sweep, simulate_operation
     from sim.scenarios import SCENARIOS, scenario_profile
 
@@ -103,15 +99,13 @@ def simulate_scenario(args: argparse.Namespace) -> int:
                      f"{cols['s2_mm'][k]:.6f},{cols['F1_N'][k]:.3f},{cols['F2_N'][k]:.3f},{steps[k]}\n")
     truth = truth_dict(rec.truth)
     truth["traversed"] = {k: bool(v) for k, v in rec.traversed.items()}
-    meta = start_meta(act, check, {"mode": "simulate-scenario", "scenario": args.scenario, "seed": seed,
-                                   "simrig": snapshot(params), "truth": truth, "status": "done",
-                                   "operator": args.operator, "work_order": args.work_order,
-                                   "files_sha256": file_hashes(actuation=args.profile, check=args.check,
-                                                               simrig=args.sim)})
-    ident = simulated_identity(act, simrig)
-    if ident is not None:  # as the simulated drives would report it: `serv` of this recording traces it
-        meta["identity"] = ident
-    write_json_atomic(out / "meta.json", meta)
+    # identity: as the simulated drives would report it (`serv` of this recording traces it)
+    MetaWriter(out, start_record(act, check, mode=RunMode.SIMULATE_SCENARIO, scenario=args.scenario, seed=seed,
+                                 simrig=snapshot(params), truth=truth, status=RunStatus.DONE,
+                                 attribution=Attribution(args.operator, args.work_order),
+                                 files_sha256=file_hashes(actuation=args.profile, check=args.check,
+                                                          simrig=args.sim),
+                                 identity=simulated_identity(act, simrig))).write()
     crossed = ", ".join(k for k, v in rec.traversed.items() if v) or "none"
     console.print(f"{steps.size} samples ({steps.size * T:.1f} s: two calibration sweeps, then the scenario); "
                   f"backlash crossed in truth: {crossed}")

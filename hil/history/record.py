@@ -203,13 +203,14 @@ def results_in(path: Path) -> list[tuple[Path, Path | None]]:
     ``--out`` its result.json / serv.json; a file itself.
     """
     from hil.errors import RecordingError
+    from hil.runrecord import has_record
 
     path = Path(path)
     if path.is_file():
-        return [(path, path.parent if (path.parent / "meta.json").exists() else None)]
+        return [(path, path.parent if has_record(path.parent) else None)]
     if not path.is_dir():
         raise RecordingError(f"{path}: no such run folder or result file")
-    run = path if (path / "meta.json").exists() else None
+    run = path if has_record(path) else None
     found = [(p, run) for p in (path / "result.json", path / "serv.json") if p.is_file()]
     for sub in sorted(path.iterdir()):
         if sub.is_dir() and (sub.name.startswith("analysis-") or sub.name.startswith("serv-")):

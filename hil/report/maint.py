@@ -18,6 +18,7 @@ from hil.analysis.maint import Analysis
 from hil.config import Actuation
 from hil.report.shell import column, esc, file_link, fmt, img, notes, pyplot, table, thin, trace_lines, write_page
 from hil.runfolder import Signals
+from hil.runrecord import RunRecord, Timing
 
 _LABEL = {"int1": ("F_1", "D_{int,1}"), "int2": ("F_2", "D_{int,2}"), "ext": ("F_2 - F_1", "D_{ext}")}
 
@@ -221,11 +222,11 @@ def uncertainty_section(result: dict) -> str:
     return out
 
 
-def figure_timing(timing: dict):
+def figure_timing(timing: Timing):
     """Histogram of the master's reaction (SYNC in to RPDOs out) [ms] per SYNC cycle, log counts,
     with its p99.9, maximum and the SYNC period (meta.json ``timing``, :mod:`hil.cycletiming`)."""
     plt = pyplot()
-    r = timing["reaction"]
+    r = timing.reaction
     bins = np.asarray(r["histogram"]["bins"], dtype=float).reshape(-1, 2)
     w = r["histogram"]["bin_ms"]
     fig, ax = plt.subplots(figsize=(8, 3.2))
@@ -233,7 +234,7 @@ def figure_timing(timing: dict):
     ax.set_yscale("log")
     for x, style, label in ((r["p99.9_ms"], "--", f"p99.9 {r['p99.9_ms']:.3f} ms"),
                             (r["max_ms"], ":", f"max {r['max_ms']:.3f} ms"),
-                            (timing["period_ms"], "-", f"SYNC period {timing['period_ms']:g} ms")):
+                            (timing.period_ms, "-", f"SYNC period {timing.period_ms:g} ms")):
         ax.axvline(x, color="k", ls=style, lw=1, label=label)
     ax.set_xlabel("SYNC received to RPDOs sent [ms]")
     ax.set_ylabel("SYNC cycles")
@@ -241,24 +242,23 @@ def figure_timing(timing: dict):
     return fig
 
 
-def timing_section(timing: dict) -> str:
+def timing_section(timing: Timing) -> str:
     """The master's loop timing: a table of the measures and the reaction's histogram."""
     rows = []
-    for key, what in (("reaction", "SYNC received to RPDOs sent"), ("work", "sample complete to RPDOs sent"),
-                      ("work_cpu", "the same, CPU time"), ("gap", "SYNC to SYNC")):
-        q = timing.get(key) or {}
+    for q, what in ((timing.reaction, "SYNC received to RPDOs sent"), (timing.work, "sample complete to RPDOs sent"),
+                    (timing.work_cpu, "the same, CPU time"), (timing.gap, "SYNC to SYNC")):
         if q.get("n"):
             rows.append([what, q["n"], fmt(q["p50_ms"], 3), fmt(q["p99_ms"], 3), fmt(q["p99.9_ms"], 3),
                          fmt(q["max_ms"], 3)])
     tab = table(["measure", "cycles", column("p50", "ms"), column("p99", "ms"), column("p99.9", "ms"),
                  column("max", "ms")], rows)
-    note = (f"<p>{timing['cycles']} SYNC cycles, {timing['late']} answered after a period, "
-            f"{timing['unanswered']} unanswered, {timing['syncs_missing']} SYNC periods missing "
-            f"(SYNC {esc(timing.get('sync', ''))}).</p>")
+    note = (f"<p>{timing.cycles} SYNC cycles, {timing.late} answered after a period, "
+            f"{timing.unanswered} unanswered, {timing.syncs_missing} SYNC periods missing "
+            f"(SYNC {esc(timing.sync)}).</p>")
     return tab + note + img(figure_timing(timing), dpi=90, tight=True)
 
 
-def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: dict | None, *,
+def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
                  json_name: str = "result.json") -> None:
     """Write the self-contained HTML report (``json_name``: the result file beside it, linked)."""
     status = result["status"]
@@ -270,8 +270,8 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
              f"{esc(source.get(an.segments.source, an.segments.source))}.</p>"]
     if result.get("reason"):
         parts.append(f"<p class='aborted'>{esc(status.capitalize())}: {esc(result['reason'])}</p>")
-    if meta is not None and "seed" in meta:
-        parts.append(f"<p>Simulated rig, seed {meta['seed']}.</p>")
+    if meta is not None and meta.seed is not None:
+        parts.append(f"<p>Simulated rig, seed {meta.seed}.</p>")
     parts.append("<h2>Summary</h2>" + summary_table(result))
     parts.append(notes(result.get("notes", []), css=""))
     parts.append(trace_lines(result.get("trace")))
@@ -288,8 +288,8 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
         parts.append(img(figure_dfdd(ch, d, f, r), dpi=90, tight=True)
                      + img(figure_lines(ch, d, f, r, truth), dpi=90, tight=True))
     parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
-    timing = (meta or {}).get("timing")
-    if timing and timing.get("reaction", {}).get("n"):
+    timing = meta.timing if meta is not None else None
+    if timing is not None and timing.reaction.get("n"):
         parts.append("<h2>Loop timing (master)</h2>" + timing_section(timing))
     parts.append(file_link(json_name))
     write_page(path, "emacheck report", parts)

@@ -165,7 +165,8 @@ def e2e_seed(seed: int) -> dict:
     from hil.history.trends import build_series, history_document
     from hil.profiles import load_actuation, load_check, load_simrig
     from hil.runfolder import read_signals
-    from hil.runner import PlantLink, run_check, start_meta
+    from hil.runner import PlantLink, run_check
+    from hil.runrecord import Installation, MetaWriter, RunMode, start_record
     from sim.plant import RigPlant
     from sim.truth import apply_wear, rig_truth
     from support.wear import WEAR, true_crossing_fh
@@ -182,15 +183,15 @@ def e2e_seed(seed: int) -> dict:
                 truth = truth_dict(rig_truth(params))
                 out = Path(td) / f"run{k}"
                 t = start + _dt.timedelta(days=30 * k)
-                meta = start_meta(act, check, {"mode": "simulate", "seed": seed, "truth": truth,
-                                               "identity": simulated_identity(act, simrig), "flight_hours": float(fh),
-                                               "aircraft": "D-AXYZ", "position": "left aileron"})
-                meta["started_utc"] = t.isoformat() + "+00:00"
+                meta = MetaWriter(out, start_record(
+                    act, check, mode=RunMode.SIMULATE, seed=seed, truth=truth, started_utc=t.isoformat() + "+00:00",
+                    identity=simulated_identity(act, simrig),
+                    installation=Installation(aircraft="D-AXYZ", position="left aileron", flight_hours=float(fh))))
                 plant = RigPlant(params, np.random.default_rng([seed, k]))
-                outcome = run_check(PlantLink(plant), act, check, out, meta)
+                outcome = run_check(PlantLink(plant), act, check, meta)
                 assert outcome.status == "done", outcome.reason
                 result = result_dict(analyze_signals(read_signals(out / "signals.csv"), act), act, truth)
-                result["trace"] = trace_of(meta, out / "signals.csv")
+                result["trace"] = trace_of(meta.record, out / "signals.csv")
                 store.add(record_from_result(result, result_path=out / "result.json", run_folder=out))
             rows = store.checks()
     doc = history_document(rows, build_series(rows), url="bench", filters={})

@@ -277,12 +277,14 @@ def one_kill(k: int, delay_s: float, args, act, work: Path) -> dict:
 
 def check_duration_s(act, chk, sim_path: Path, work: Path) -> float:
     """The check's duration on the plant alone (no CAN, as `emacheck simulate` runs it) [s]."""
-    from hil.runner import PlantLink, run_check, start_meta
+    from hil.runner import PlantLink, run_check
+    from hil.runrecord import MetaWriter, RunMode, start_record
     from sim.plant import RigPlant
 
     sim = load_simrig(sim_path)
     plant = RigPlant(sim.params, np.random.default_rng(sim.seed))
-    out = run_check(PlantLink(plant), act, chk, work / "duration", start_meta(act, chk, {"mode": "simulate"}))
+    meta = MetaWriter(work / "duration", start_record(act, chk, mode=RunMode.SIMULATE))
+    out = run_check(PlantLink(plant), act, chk, meta)
     return out.duration_s
 
 

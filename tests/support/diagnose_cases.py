@@ -28,7 +28,8 @@ import numpy as np
 
 from hil.profiles import load_actuation, load_check, load_simrig
 from hil.runfolder import read_signals
-from hil.runner import PlantLink, run_check, start_meta
+from hil.runner import PlantLink, run_check
+from hil.runrecord import MetaWriter, start_record
 from sim import effects as fx
 from sim.plant import RigPlant
 
@@ -62,8 +63,8 @@ def short_check():
 def record(params, seed: int, out: Path, check=None):
     act = load_actuation(None)
     check = check or load_check(None, act)
-    run_check(PlantLink(RigPlant(params, np.random.default_rng(seed))), act, check, out,
-              start_meta(act, check, {"seed": seed}))
+    run_check(PlantLink(RigPlant(params, np.random.default_rng(seed))), act, check,
+              MetaWriter(out, start_record(act, check, seed=seed)))
     return read_signals(out / "signals.csv")
 
 
