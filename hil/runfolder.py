@@ -5,7 +5,8 @@ Format (see README, "File formats")::
     RUN/signals.csv   t,phi1,phi2,s1,s2,F1,F2,mode1,sp1,mode2,sp2,step
                       t in s, phi in rad, s in mm, F in N; mode is the CiA 402
                       mode (0 disabled, 8 CSP, 10 CST), sp the setpoint (rad or N)
-    RUN/meta.json     profiles snapshot, software version, seed, step times
+    RUN/meta.json     the run record (hil.runrecord): profiles snapshot, software version,
+                      seed, step times, ...; written by MetaWriter only
     RUN/result.json   the analysis result
     RUN/report.html   the report
 
@@ -29,6 +30,7 @@ import numpy as np
 
 from hil.canopen.process import MEASURED_CHANNELS, Sample, Setpoint
 from hil.errors import IncompleteRecordingError, RecordingError
+from hil.runrecord import META_NAME, RunRecord
 
 SIGNAL_COLUMNS = tuple(name for name, _ in MEASURED_CHANNELS)
 EXTRA_COLUMNS = ("mode1", "sp1", "mode2", "sp2", "step")
@@ -130,6 +132,74 @@ class DiskSync:
             self._thread.join()
         if self._errors:
             raise self._errors[0]
+
+
+def has_record(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds a meta.json."""
+    return (Path(run_dir) / META_NAME).exists()
+
+
+def read_record(run_dir: Path | None) -> RunRecord | None:
+    """A run folder's record (:class:`hil.runrecord.RunRecord`), or None (no run folder, or no meta.json
+    in it); not JSON, or a malformed field: a :class:`~hil.errors.RecordingError` naming the file (and
+    the field)."""
+    if run_dir is None or not has_record(run_dir):
+        return None
+    path = Path(run_dir) / META_NAME
+    try:
+        obj = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
+    return RunRecord.from_json(obj, str(path))
+
+
+class MetaWriter:
+    """The one writer of a run folder's meta.json (IO shell): owns its path, the record as last
+    written and, while the check loop runs, the folder's :class:`DiskSync`.
+
+    :meth:`write` writes at once on the caller's thread (atomically, fsynced); :meth:`post` hands the
+    record to the DiskSync (in the background on a real bus, so the loop never waits for the disk);
+    :meth:`fsync` fsyncs another file of the folder (signals.csv) in order with those writes.
+    """
+
+    def __init__(self, run_dir: Path, record: RunRecord, disk: DiskSync | None = None) -> None:
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / META_NAME
+        self.record = record  #: the record as last written (or as given, before the first write)
+        self.disk = disk
+
+    def write(self, record: RunRecord | None = None) -> RunRecord:
+        """Write ``record`` (default: the current one) now; returns it."""
+        if record is not None:
+            self.record = record
+        write_json_atomic(self.path, self.record.as_json())
+        return self.record
+
+    def post(self, record: RunRecord) -> RunRecord:
+        """Write ``record`` through the DiskSync (at once without one); returns it."""
+        if self.disk is None:
+            return self.write(record)
+        self.record = record
+        self.disk.write_json(self.path, record.as_json())
+        return record
+
+    def open_disk(self, background: bool) -> None:
+        """Make the DiskSync unless one was given (``background``: its own thread)."""
+        if self.disk is None:
+            self.disk = DiskSync(background=background)
+
+    def fsync(self, fd: int) -> None:
+        """fsync the open file ``fd`` through the DiskSync (at once without one)."""
+        if self.disk is None:
+            os.fsync(fd)
+        else:
+            self.disk.fsync(fd)
+
+    def close_disk(self) -> None:
+        """Wait for the DiskSync's jobs and let it go (raises its first error); later writes are at once."""
+        disk, self.disk = self.disk, None
+        if disk is not None:
+            disk.close()
 
 
 def json_default(o: Any) -> Any:

@@ -14,8 +14,8 @@ from typing import Protocol
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import Actuation, Check
-from hil.runfolder import SignalsWriter
-from hil.runrecord import MetaWriter, RunRecord, RunStatus, SafetyViolation, StepTime
+from hil.runfolder import MetaWriter, SignalsWriter
+from hil.runrecord import RunRecord, RunStatus, SafetyViolation, StepTime
 from hil.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.supervisor import Supervisor
 

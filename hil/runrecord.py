@@ -2,10 +2,10 @@
 
 A run's record is built once (:func:`start_record`: a new run id, this software, the start time,
 status ``running``, the profiles' snapshot), changed only by :func:`dataclasses.replace` or the
-record's named methods (each returns a new record), written only by :class:`MetaWriter` (the one
-owner of ``meta.json`` and of the run folder's :class:`~hil.runfolder.DiskSync`) and read back only
-by :func:`read_record` / :meth:`RunRecord.from_json` (``analyze``, ``serv``, ``diagnose``, the
-report, the result's trace).
+record's named methods (each returns a new record), written only by :class:`hil.runfolder.MetaWriter`
+(the one owner of ``meta.json`` and of the run folder's :class:`~hil.runfolder.DiskSync`) and read
+back only by :func:`hil.runfolder.read_record` / :meth:`RunRecord.from_json` (``analyze``, ``serv``,
+``diagnose``, the report, the result's trace). This module does no IO.
 
 JSON: :meth:`RunRecord.as_json` gives the keys in the order of :class:`RunRecord`'s fields, a field
 that is None absent (parts spread flat: :class:`Bus`, :class:`Attribution`, :class:`Installation`),
@@ -29,13 +29,12 @@ import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
-from pathlib import Path
 from typing import Any
 
-from hil.errors import RecordingError, RunRecordError
-from hil.runfolder import DiskSync, write_json_atomic
+from hil.cycletiming import Distribution, TimingSummary, Worst
+from hil.errors import RunRecordError
 
-#: the record's file in a run folder
+#: the record's file in a run folder (written by :class:`hil.runfolder.MetaWriter` only)
 META_NAME = "meta.json"
 
 
@@ -391,38 +390,57 @@ class CanStats(_Part):
                    max_lag_ms=f.get("max_lag_ms", "number"), page_faults=f.get("page_faults", "int"))
 
 
-#: the measures of :class:`Timing`, each a distribution (:meth:`hil.cycletiming.Distribution.as_json`)
-TIMING_MEASURES = ("reaction", "work", "work_cpu", "gap")
+def _read_distribution(f: _Fields, histogram: bool) -> Distribution:
+    """A :class:`hil.cycletiming.Distribution` from its JSON (``histogram`` False: none was recorded)."""
+    nums = [f.get(k, "number", required=True) for k in ("p50_ms", "p90_ms", "p99_ms", "p99.9_ms", "max_ms", "mean_ms")]
+    worst = tuple(Worst(g.get("ms", "number", required=True), g.get("t_s", "number", required=True),
+                        g.get("cycle", "int", required=True))
+                  for g in (_Fields(w, f"{f.name('worst')}[{i}]", f.source)
+                            for i, w in enumerate(f.get("worst", "list", required=True))))
+    bin_ms, bins = 0.0, ()
+    if histogram:
+        f.get("histogram", "object", required=True)
+        h = f.sub("histogram")
+        bin_ms = h.get("bin_ms", "number", required=True)
+        bins = tuple(tuple(b) for b in h.get("bins", "list", required=True))
+        if not all(len(b) == 2 and _KINDS["number"][0](b[0]) and _KINDS["int"][0](b[1]) for b in bins):
+            raise h.error("bins", "expected [[lower edge ms, count], ...]")
+    return Distribution(f.get("n", "int", required=True), *nums, f.get("over_period", "int", required=True),
+                        worst, bin_ms, bins)
 
 
 @dataclass(frozen=True)
 class Timing(_Part):
-    """The master's loop per SYNC cycle on a real bus (:meth:`hil.cycletiming.TimingSummary.as_json`:
-    counts and the four measures' distributions as JSON), with the SYNC's source and its lateness."""
+    """The master's loop per SYNC cycle on a real bus (:class:`hil.cycletiming.TimingSummary`), with the
+    SYNC's source and its lateness. The CPU time's histogram is not recorded (as
+    :meth:`~hil.cycletiming.TimingSummary.as_json` leaves it out): ``summary.work_cpu`` holds none."""
 
-    period_ms: float
-    cycles: int
-    syncs_missing: int
-    unanswered: int
-    late: int
-    reaction: dict
-    work: dict
-    work_cpu: dict
-    gap: dict
+    summary: TimingSummary
     t0_unix_s: float  #: the wall clock at the check's time 0 [s since the epoch]
     sync: str  #: "loop-timed" or "periodic task"
-    sync_skipped: int
-    sync_late_max_ms: float
+    sync_skipped: int  #: SYNCs the loop-timed source skipped
+    sync_late_max_ms: float  #: the latest SYNC behind its schedule [ms]
+
+    def __post_init__(self) -> None:
+        cpu = self.summary.work_cpu
+        if cpu.histogram or cpu.bin_ms:
+            cpu = dataclasses.replace(cpu, bin_ms=0.0, histogram=())
+            object.__setattr__(self, "summary", dataclasses.replace(self.summary, work_cpu=cpu))
 
     def as_json(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {**self.summary.as_json(), "t0_unix_s": self.t0_unix_s, "sync": self.sync,
+                "sync_skipped": self.sync_skipped, "sync_late_max_ms": self.sync_late_max_ms}
 
     @classmethod
     def read(cls, f: _Fields) -> Timing:
-        kinds = {"period_ms": "number", "t0_unix_s": "number", "sync_late_max_ms": "number", "sync": "text",
-                 **dict.fromkeys(TIMING_MEASURES, "object")}
-        return cls(**{x.name: f.get(x.name, kinds.get(x.name, "int"), required=True)
-                      for x in dataclasses.fields(cls)})
+        for k in ("reaction", "work", "work_cpu", "gap"):
+            f.get(k, "object", required=True)
+        summary = TimingSummary(f.get("period_ms", "number", required=True), f.get("cycles", "int", required=True),
+                                *(_read_distribution(f.sub(k), histogram=k != "work_cpu")
+                                  for k in ("reaction", "work", "work_cpu", "gap")),
+                                *(f.get(k, "int", required=True) for k in ("syncs_missing", "unanswered", "late")))
+        return cls(summary, f.get("t0_unix_s", "number", required=True), f.get("sync", "text", required=True),
+                   f.get("sync_skipped", "int", required=True), f.get("sync_late_max_ms", "number", required=True))
 
 
 def _ema_map(f: _Fields, key: str, part: type, nullable: bool = False) -> dict | None:
@@ -603,74 +621,3 @@ def start_record(act, check, **fields) -> RunRecord:
             "started_utc": utc_now_iso(), "status": RunStatus.RUNNING,
             "profiles": Profiles(actuation_tables(act), snapshot(check)), "steps": ()}
     return RunRecord(**{**base, **fields})
-
-
-# ------------------------------------------------------------------ the file
-
-def has_record(run_dir: Path) -> bool:
-    """Whether ``run_dir`` holds a meta.json."""
-    return (Path(run_dir) / META_NAME).exists()
-
-
-def read_record(run_dir: Path | None) -> RunRecord | None:
-    """A run folder's record, or None (no run folder, or no meta.json in it); not JSON, or a malformed
-    field: a :class:`~hil.errors.RecordingError` naming the file (and the field)."""
-    if run_dir is None or not has_record(run_dir):
-        return None
-    path = Path(run_dir) / META_NAME
-    try:
-        obj = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
-    return RunRecord.from_json(obj, str(path))
-
-
-class MetaWriter:
-    """The one writer of a run folder's meta.json: owns its path, the record as last written and,
-    while the check loop runs, the folder's :class:`~hil.runfolder.DiskSync`.
-
-    :meth:`write` writes at once on the caller's thread (atomically, fsynced); :meth:`post` hands the
-    record to the DiskSync (in the background on a real bus, so the loop never waits for the disk);
-    :meth:`fsync` fsyncs another file of the folder (signals.csv) in order with those writes.
-    """
-
-    def __init__(self, run_dir: Path, record: RunRecord, disk: DiskSync | None = None) -> None:
-        self.run_dir = Path(run_dir)
-        self.path = self.run_dir / META_NAME
-        self.record = record  #: the record as last written (or as given, before the first write)
-        self.disk = disk
-
-    def write(self, record: RunRecord | None = None) -> RunRecord:
-        """Write ``record`` (default: the current one) now; returns it."""
-        if record is not None:
-            self.record = record
-        write_json_atomic(self.path, self.record.as_json())
-        return self.record
-
-    def post(self, record: RunRecord) -> RunRecord:
-        """Write ``record`` through the DiskSync (at once without one); returns it."""
-        if self.disk is None:
-            return self.write(record)
-        self.record = record
-        self.disk.write_json(self.path, record.as_json())
-        return record
-
-    def open_disk(self, background: bool) -> None:
-        """Make the DiskSync unless one was given (``background``: its own thread)."""
-        if self.disk is None:
-            self.disk = DiskSync(background=background)
-
-    def fsync(self, fd: int) -> None:
-        """fsync the open file ``fd`` through the DiskSync (at once without one)."""
-        if self.disk is None:
-            import os
-
-            os.fsync(fd)
-        else:
-            self.disk.fsync(fd)
-
-    def close_disk(self) -> None:
-        """Wait for the DiskSync's jobs and let it go (raises its first error); later writes are at once."""
-        disk, self.disk = self.disk, None
-        if disk is not None:
-            disk.close()

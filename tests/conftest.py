@@ -40,8 +40,9 @@ def simrig():
 def simulate_run(out: Path, act, check, simrig_profile, seed: int):
     """The check on the plant, as `emacheck simulate` runs it, without the terminal."""
     from hil.cli.check import truth_dict
+    from hil.runfolder import MetaWriter
     from hil.runner import PlantLink, run_check
-    from hil.runrecord import MetaWriter, RunMode, start_record
+    from hil.runrecord import RunMode, start_record
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 

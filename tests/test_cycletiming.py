@@ -76,13 +76,15 @@ def test_bad_arguments_are_refused_with_their_values():
 
 def test_the_reports_timing_section_shows_the_measured_percentiles():
     from hil.report.maint import timing_section
+    from hil.runrecord import Timing
 
     ct = CycleTiming(2e-3)
     for k in range(1000):  # reaction 0.105 ms, one cycle 1.505 ms
         ct.sync(k * 2e-3)
         ct.work(k * 2e-3, k * 2e-3 + 5e-5, 4e-5)
         ct.answered(k * 2e-3 + (1.505e-3 if k == 500 else 1.05e-4))
-    html = timing_section({**ct.summary().as_json(), "sync": "loop-timed"})
+    html = timing_section(Timing(ct.summary(), t0_unix_s=0.0, sync="loop-timed", sync_skipped=0,
+                                 sync_late_max_ms=0.0))
     row = html.split("<tr>")[2]
     assert row.startswith("<td>SYNC received to RPDOs sent</td><td>1000</td><td>0.110</td><td>0.110</td>"
                           "<td>0.110</td><td>1.505</td>")

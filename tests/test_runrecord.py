@@ -1,8 +1,10 @@
-"""The run record (hil/runrecord.py): meta.json as frozen dataclasses, its JSON both ways, its one writer.
+"""The run record (hil/runrecord.py): meta.json as frozen dataclasses, its JSON both ways, its one
+writer (hil/runfolder.py: MetaWriter).
 
 Unit tests of the record (round trip, the layout the format has had, a killed run's partial record,
 malformed fields named, illegal statuses refused), and a source check that no module of the product
-but hil/runrecord.py writes meta.json (an AST walk, as tests/test_layers.py walks the imports).
+but hil/runfolder.py writes meta.json and none but hil/runrecord.py names the file (an AST walk, as
+tests/test_layers.py walks the imports).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import pytest
 from hil.cli import main
 from hil.cycletiming import CycleTiming
 from hil.errors import KNOWN_ERRORS, RecordingError, RunRecordError
+from hil.runfolder import MetaWriter, read_record
 from hil.runrecord import (
     Attribution,
     Bus,
@@ -25,7 +28,6 @@ from hil.runrecord import (
     DriveFinal,
     Identity,
     Installation,
-    MetaWriter,
     Profiles,
     RunMode,
     RunRecord,
@@ -35,7 +37,6 @@ from hil.runrecord import (
     StepTime,
     Timing,
     Wear,
-    read_record,
     start_record,
 )
 
@@ -50,8 +51,7 @@ def _timing() -> Timing:
         ct.sync(t)
         ct.work(t + 1e-4, t + 3e-4 + (k % 7) * 1e-5, cpu_s=1.5e-4)
         ct.answered(t + 4e-4 + (k % 5) * 2e-5)
-    return Timing.from_json({**ct.summary().as_json(), "t0_unix_s": 1.7e9, "sync": "loop-timed",
-                             "sync_skipped": 1, "sync_late_max_ms": 0.25})
+    return Timing(ct.summary(), t0_unix_s=1.7e9, sync="loop-timed", sync_skipped=1, sync_late_max_ms=0.25)
 
 
 def _full(**over) -> RunRecord:
@@ -116,15 +116,20 @@ def test_identity_without_0x1018_sub_4_has_no_serial_key():
     assert Identity.from_json(unlisted.as_json()) == unlisted and Identity.of(1, {}) is None
 
 
-def test_timing_mirrors_the_cycle_timing_summary():
-    """Timing holds every key of hil.cycletiming's summary JSON plus the SYNC's own: nothing is dropped."""
-    ct = CycleTiming(2e-3)
-    ct.sync(0.0)
-    ct.answered(3e-4)
-    ct.sync(2e-3)
-    extra = {"t0_unix_s": 1.0, "sync": "periodic task", "sync_skipped": 0, "sync_late_max_ms": 0.0}
-    j = {**ct.summary().as_json(), **extra}
-    assert Timing.from_json(j).as_json() == j and list(Timing.from_json(j).as_json()) == list(j)
+def test_timing_is_the_cycle_timing_summary_as_its_producer_writes_it():
+    """Timing's JSON is hil.cycletiming's summary JSON plus the SYNC's own keys, read back whole (the
+    CPU time's histogram, which that JSON leaves out, is not kept)."""
+    t = _timing()
+    summary = t.summary
+    assert summary.reaction.histogram and summary.work_cpu.n == 50 and summary.work_cpu.histogram == ()
+    j = t.as_json()
+    assert list(j)[-4:] == ["t0_unix_s", "sync", "sync_skipped", "sync_late_max_ms"] and j["sync_skipped"] == 1
+    assert {k: v for k, v in j.items() if k in summary.as_json()} == summary.as_json()
+    assert Timing.from_json(j) == t and Timing.from_json(json.loads(json.dumps(j))) == t
+    with pytest.raises(RunRecordError, match=r"field 'timing.gap.histogram.bins': expected \[\[lower edge"):
+        Timing.from_json({**j, "gap": {**j["gap"], "histogram": {"bin_ms": 0.01, "bins": [[0.1]]}}}, "timing")
+    with pytest.raises(RunRecordError, match=r"field 'timing.reaction.worst\[0\].cycle': missing"):
+        Timing.from_json({**j, "reaction": {**j["reaction"], "worst": [{"ms": 1.0, "t_s": 0.1}]}}, "timing")
 
 
 @pytest.mark.slow
@@ -245,15 +250,18 @@ def test_analyze_names_the_bad_field_of_a_run_folders_meta_json(tmp_path, capsys
 WRITERS = {"write_json_atomic", "write_json", "write_text", "write_bytes", "dump"}
 
 
-def _meta_json_writes(path: Path) -> list[tuple[int, str]]:
-    """(line, what) of each place a module builds the path meta.json or hands something named meta
-    to a file writer (``write_json_atomic``, ``DiskSync.write_json``, ``write_text``, ``json.dump``,
-    ``open(..., "w")``)."""
+def _meta_json_writes(path: Path) -> list[tuple[int, str, str]]:
+    """(line, kind, what) of each place a module names the file meta.json (kind "name": the string, or
+    ``hil.runrecord.META_NAME``) or hands something named meta to a file writer (kind "write":
+    ``write_json_atomic``, ``DiskSync.write_json``, ``write_text``, ``json.dump``, ``open(..., "w")``)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Constant) and node.value == "meta.json":
-            out.append((node.lineno, "the path 'meta.json'"))
+            out.append((node.lineno, "name", "the file name 'meta.json'"))
+        if (isinstance(node, ast.Name) and node.id == "META_NAME") or (
+                isinstance(node, ast.ImportFrom) and any(a.name == "META_NAME" for a in node.names)):
+            out.append((node.lineno, "name", "META_NAME"))
         if not isinstance(node, ast.Call):
             continue
         name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
@@ -264,7 +272,7 @@ def _meta_json_writes(path: Path) -> list[tuple[int, str]]:
                 names = [n.id for n in ast.walk(a) if isinstance(n, ast.Name)] + \
                         [n.attr for n in ast.walk(a) if isinstance(n, ast.Attribute)]
                 if any("meta" in n.lower() for n in names if n != name):
-                    out.append((node.lineno, f"{name}(...) of {ast.unparse(a)}"))
+                    out.append((node.lineno, "write", f"{name}(...) of {ast.unparse(a)}"))
     return out
 
 
@@ -275,14 +283,19 @@ def test_the_meta_json_check_sees_what_it_is_meant_to(tmp_path):
                  "def b(disk, meta_path, rec):\n    disk.write_json(meta_path, rec)\n"
                  "def c(run, meta):\n    with open(run.meta_file, 'w') as fh:\n        json.dump(meta, fh)\n"
                  "def d(out, result):\n    write_json_atomic(out / 'result.json', result)\n"
-                 "def e(run):\n    return open(run.meta_file).read()\n")
-    lines = sorted({ln for ln, _ in _meta_json_writes(p)})
-    assert lines == [3, 5, 7, 8]
+                 "def e(run):\n    return open(run.meta_file).read()\n"
+                 "from hil.runrecord import META_NAME\n"
+                 "def f(run, rec):\n    p = run / META_NAME\n    write_json_atomic(p, rec)\n")
+    assert sorted({(ln, kind) for ln, kind, _ in _meta_json_writes(p)}) == \
+        [(3, "name"), (3, "write"), (5, "write"), (7, "write"), (8, "write"), (13, "name"), (15, "name")]
 
 
-def test_no_module_but_the_run_record_writes_meta_json():
+def test_no_module_but_the_writer_writes_meta_json():
+    """meta.json is written by hil/runfolder.py (MetaWriter, read_record) and named there and in
+    hil/runrecord.py (META_NAME) only."""
+    writer, record = ROOT / "hil" / "runfolder.py", ROOT / "hil" / "runrecord.py"
+    allowed = {"write": {writer}, "name": {writer, record}}
     found = [f"{p.relative_to(ROOT)}:{ln}: {what}"
              for p in sorted(q for pkg in ("hil", "blf", "sim") for q in (ROOT / pkg).rglob("*.py"))
-             if p != ROOT / "hil" / "runrecord.py" for ln, what in _meta_json_writes(p)]
-    assert not found, ("meta.json is named and written only by hil/runrecord.py (has_record, read_record, "
-                       "MetaWriter):\n" + "\n".join(found))
+             for ln, kind, what in _meta_json_writes(p) if p not in allowed[kind]]
+    assert not found, "meta.json outside hil.runfolder.MetaWriter / hil.runrecord.META_NAME:\n" + "\n".join(found)

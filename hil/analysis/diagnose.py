@@ -39,8 +39,7 @@ def load_dual(path: Path, profile: Path | None):
     from hil.analysis.maint import check_units, find_segments
     from hil.canlog import decode_can_log
     from hil.cli.common import actuation_for
-    from hil.runfolder import is_can_log, read_signals, resolve_recording
-    from hil.runrecord import read_record
+    from hil.runfolder import is_can_log, read_record, read_signals, resolve_recording
     from sim.replay_model import DualEmaReplay
 
     sig_path, run_dir = resolve_recording(path)

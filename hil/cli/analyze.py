@@ -20,8 +20,8 @@ from hil.cli.common import (
     record_history,
 )
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.runfolder import resolve_recording, write_json_atomic
-from hil.runrecord import RunStatus, has_record, read_record
+from hil.runfolder import has_record, read_record, resolve_recording, write_json_atomic
+from hil.runrecord import RunStatus
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:

@@ -20,12 +20,11 @@ from blf.signals import CHANNELS
 from hil.cli.common import ExitCode, Outputs, load_recording, utc_iso
 from hil.config import Actuation
 from hil.errors import KNOWN_ERRORS
-from hil.runfolder import write_json_atomic
+from hil.runfolder import MetaWriter, write_json_atomic
 from hil.runrecord import (
     INSTALLATION_KEYS,
     CanStats,
     Identity,
-    MetaWriter,
     RunRecord,
     RunStatus,
     Timing,
@@ -293,11 +292,10 @@ def record_can_stats(meta: MetaWriter, wall: float, log, master, transport=None,
                    max_lag_ms=lag, page_faults=page_faults)  # page faults: during the check (each costs time)
     loop = None
     if timing is not None:  # the master's loop per SYNC cycle (hil.cycletiming)
-        loop = Timing.from_json({**timing.summary().as_json(),
-                                 "t0_unix_s": round(getattr(transport, "wall_clock_offset_s", 0.0), 6),
-                                 "sync": ("loop-timed" if getattr(transport, "loop_sync", False) else "periodic task"),
-                                 "sync_skipped": getattr(transport, "sync_skipped", 0),
-                                 "sync_late_max_ms": round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4)})
+        loop = Timing(timing.summary(), t0_unix_s=round(getattr(transport, "wall_clock_offset_s", 0.0), 6),
+                      sync="loop-timed" if getattr(transport, "loop_sync", False) else "periodic task",
+                      sync_skipped=getattr(transport, "sync_skipped", 0),
+                      sync_late_max_ms=round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4))
     # each EMA's identity as the drive reported it by SDO (0x1018) in the preflight
     ident = {f"ema{k}": Identity.of(n, master.drives[n].identity) for k, n in enumerate(master.order, start=1)}
     meta.write(dataclasses.replace(meta.record, wall_s=round(wall, 3), can=can, timing=loop or meta.record.timing,

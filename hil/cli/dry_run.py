@@ -32,7 +32,8 @@ from hil.cli.common import (
     record_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
-from hil.runrecord import Attribution, BusLoad, MetaWriter, RunMode, start_record
+from hil.runfolder import MetaWriter
+from hil.runrecord import Attribution, BusLoad, RunMode, start_record
 
 
 @dataclass
@@ -120,9 +121,7 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     out = out_dir(args, "dry-run")
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
     trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),
-             "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim)}
-    if wear is not None:
-        trace["wear"] = wear
+             "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim), "wear": wear}
     rc = dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
                  console=console, profile_path=args.profile, trace=trace, eds=args.eds).exit_code
     record_history(console, args, act, out / "result.json", run_folder=out)

@@ -37,7 +37,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from hil.canlog import CanLogWriter
     from hil.link import CanopenLink
     from hil.master import MasterCore
-    from hil.runrecord import Attribution, Bus, BusLoad, MetaWriter, RunMode, start_record
+    from hil.runfolder import DiskSync, MetaWriter
+    from hil.runrecord import Attribution, Bus, BusLoad, RunMode, start_record
     from hil.transport import BusTransport
 
     console = make_console()
@@ -68,7 +69,6 @@ def cmd_run(args: argparse.Namespace) -> int:
                           files_sha256={**file_hashes(actuation=args.profile, check=args.check), **rig_hashes(rig)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, {rig_nodes_text(rig)}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
-    from hil.runfolder import DiskSync
     # the run folder's writer thread is made before the memory is locked and the loop's page
     # faults are counted (locked, each page of a new thread's stack faults at once)
     meta = MetaWriter(out, record, DiskSync(background=True))

@@ -26,8 +26,7 @@ from hil.cli.common import (
     record_history,
 )
 from hil.errors import RecordingError
-from hil.runfolder import resolve_recording, write_json_atomic
-from hil.runrecord import read_record
+from hil.runfolder import read_record, resolve_recording, write_json_atomic
 
 
 def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) -> None:

@@ -19,7 +19,8 @@ from hil.cli.common import (
     record_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
-from hil.runrecord import Attribution, MetaWriter, RunMode, RunStatus, start_record
+from hil.runfolder import MetaWriter
+from hil.runrecord import Attribution, RunMode, RunStatus, start_record
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:

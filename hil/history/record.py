@@ -203,7 +203,7 @@ def results_in(path: Path) -> list[tuple[Path, Path | None]]:
     ``--out`` its result.json / serv.json; a file itself.
     """
     from hil.errors import RecordingError
-    from hil.runrecord import has_record
+    from hil.runfolder import has_record
 
     path = Path(path)
     if path.is_file():

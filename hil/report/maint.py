@@ -226,15 +226,15 @@ def figure_timing(timing: Timing):
     """Histogram of the master's reaction (SYNC in to RPDOs out) [ms] per SYNC cycle, log counts,
     with its p99.9, maximum and the SYNC period (meta.json ``timing``, :mod:`hil.cycletiming`)."""
     plt = pyplot()
-    r = timing.reaction
-    bins = np.asarray(r["histogram"]["bins"], dtype=float).reshape(-1, 2)
-    w = r["histogram"]["bin_ms"]
+    r = timing.summary.reaction
+    bins = np.asarray(r.histogram, dtype=float).reshape(-1, 2)
+    w = r.bin_ms
     fig, ax = plt.subplots(figsize=(8, 3.2))
     ax.bar(bins[:, 0], bins[:, 1], width=w, align="edge", color="#4477aa")
     ax.set_yscale("log")
-    for x, style, label in ((r["p99.9_ms"], "--", f"p99.9 {r['p99.9_ms']:.3f} ms"),
-                            (r["max_ms"], ":", f"max {r['max_ms']:.3f} ms"),
-                            (timing.period_ms, "-", f"SYNC period {timing.period_ms:g} ms")):
+    for x, style, label in ((r.p999_ms, "--", f"p99.9 {r.p999_ms:.3f} ms"),
+                            (r.max_ms, ":", f"max {r.max_ms:.3f} ms"),
+                            (timing.summary.period_ms, "-", f"SYNC period {timing.summary.period_ms:g} ms")):
         ax.axvline(x, color="k", ls=style, lw=1, label=label)
     ax.set_xlabel("SYNC received to RPDOs sent [ms]")
     ax.set_ylabel("SYNC cycles")
@@ -245,15 +245,15 @@ def figure_timing(timing: Timing):
 def timing_section(timing: Timing) -> str:
     """The master's loop timing: a table of the measures and the reaction's histogram."""
     rows = []
-    for q, what in ((timing.reaction, "SYNC received to RPDOs sent"), (timing.work, "sample complete to RPDOs sent"),
-                    (timing.work_cpu, "the same, CPU time"), (timing.gap, "SYNC to SYNC")):
-        if q.get("n"):
-            rows.append([what, q["n"], fmt(q["p50_ms"], 3), fmt(q["p99_ms"], 3), fmt(q["p99.9_ms"], 3),
-                         fmt(q["max_ms"], 3)])
+    s = timing.summary
+    for q, what in ((s.reaction, "SYNC received to RPDOs sent"), (s.work, "sample complete to RPDOs sent"),
+                    (s.work_cpu, "the same, CPU time"), (s.gap, "SYNC to SYNC")):
+        if q.n:
+            rows.append([what, q.n, fmt(q.p50_ms, 3), fmt(q.p99_ms, 3), fmt(q.p999_ms, 3), fmt(q.max_ms, 3)])
     tab = table(["measure", "cycles", column("p50", "ms"), column("p99", "ms"), column("p99.9", "ms"),
                  column("max", "ms")], rows)
-    note = (f"<p>{timing.cycles} SYNC cycles, {timing.late} answered after a period, "
-            f"{timing.unanswered} unanswered, {timing.syncs_missing} SYNC periods missing "
+    note = (f"<p>{s.cycles} SYNC cycles, {s.late} answered after a period, "
+            f"{s.unanswered} unanswered, {s.syncs_missing} SYNC periods missing "
             f"(SYNC {esc(timing.sync)}).</p>")
     return tab + note + img(figure_timing(timing), dpi=90, tight=True)
 
@@ -289,7 +289,7 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
                      + img(figure_lines(ch, d, f, r, truth), dpi=90, tight=True))
     parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
     timing = meta.timing if meta is not None else None
-    if timing is not None and timing.reaction.get("n"):
+    if timing is not None and timing.summary.reaction.n:
         parts.append("<h2>Loop timing (master)</h2>" + timing_section(timing))
     parts.append(file_link(json_name))
     write_page(path, "emacheck report", parts)

@@ -164,9 +164,9 @@ def e2e_seed(seed: int) -> dict:
     from hil.history.store import HistoryStore
     from hil.history.trends import build_series, history_document
     from hil.profiles import load_actuation, load_check, load_simrig
-    from hil.runfolder import read_signals
+    from hil.runfolder import MetaWriter, read_signals
     from hil.runner import PlantLink, run_check
-    from hil.runrecord import Installation, MetaWriter, RunMode, start_record
+    from hil.runrecord import Installation, RunMode, start_record
     from sim.plant import RigPlant
     from sim.truth import apply_wear, rig_truth
     from support.wear import WEAR, true_crossing_fh

@@ -277,8 +277,9 @@ def one_kill(k: int, delay_s: float, args, act, work: Path) -> dict:
 
 def check_duration_s(act, chk, sim_path: Path, work: Path) -> float:
     """The check's duration on the plant alone (no CAN, as `emacheck simulate` runs it) [s]."""
+    from hil.runfolder import MetaWriter
     from hil.runner import PlantLink, run_check
-    from hil.runrecord import MetaWriter, RunMode, start_record
+    from hil.runrecord import RunMode, start_record
     from sim.plant import RigPlant
 
     sim = load_simrig(sim_path)

@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from hil.profiles import load_actuation, load_check, load_simrig
-from hil.runfolder import read_signals
+from hil.runfolder import MetaWriter, read_signals
 from hil.runner import PlantLink, run_check
-from hil.runrecord import MetaWriter, start_record
+from hil.runrecord import start_record
 from sim import effects as fx
 from sim.plant import RigPlant
 
