@@ -117,6 +117,16 @@ class _Fields:
         return None if v is None else _member(cls, v, self.name(key), self.source)
 
 
+def _only(obj: Mapping, known, where: str, source: str) -> None:
+    """At a seam where the record is built from another module's JSON (the link's preflight record,
+    the master's final states, a drive's identity): a key the record has no field for is refused, not
+    dropped (a field added there must be added here)."""
+    extra = [k for k in obj if k not in known]
+    if extra:
+        name = f"{where}.{extra[0]}" if where else extra[0]
+        raise RunRecordError(name, "no field of the run record holds it (hil/runrecord.py)", source)
+
+
 def _member(cls: type[StrEnum], v: Any, field: str, source: str) -> Any:
     try:
         return cls(v)
@@ -135,6 +145,7 @@ class _Part:
     def from_json(cls, obj: Any, where: str = "", source: str = META_NAME):
         """The part from its JSON ``obj`` (a malformed field: :class:`RunRecordError` naming ``where.field``)."""
         return cls.read(_Fields(obj, where or cls.__name__, source))
+
 
 @dataclass(frozen=True)
 class Software(_Part):
@@ -303,7 +314,14 @@ class Identity(_Part):
     @classmethod
     def of(cls, node: int, read: Mapping) -> Identity | None:
         """From what the preflight read of 0x1018 (:attr:`hil.preflight.Preflight.identities`); None if nothing."""
-        return cls.from_json({"node": node, **read}, f"identity (node {node})", "preflight") if read else None
+        if not read:
+            return None
+        _only(read, IDENTITY_KEYS, f"identity (node {node})", "preflight")
+        return cls.from_json({"node": node, **read}, f"identity (node {node})", "preflight")
+
+
+#: the JSON keys of :class:`Identity`
+IDENTITY_KEYS = ("node", "vendor_id", "product_code", "revision", "serial")
 
 
 @dataclass(frozen=True)
@@ -519,6 +537,9 @@ class RunRecord:
     def with_preflight(self, preflight: Mapping) -> RunRecord:
         """``process_image``, ``master_loss`` and ``identity`` from the link's preflight record (JSON,
         :meth:`hil.link.CanopenLink.preflight_record`), read and checked as meta.json is."""
+        _only(preflight, ("process_image", "master_loss", "identity"), "", "preflight record")
+        for k, v in (preflight.get("identity") or {}).items():
+            _only(v or {}, IDENTITY_KEYS, f"identity.{k}", "preflight record")
         got = RunRecord.from_json(preflight, "preflight record")
         return dataclasses.replace(self, process_image=got.process_image, master_loss=got.master_loss,
                                    identity=got.identity)
@@ -526,13 +547,15 @@ class RunRecord:
     def with_final_states(self, final: Mapping, errors: list[str] | None) -> RunRecord:
         """``drives_final`` from the link's report after it closed (JSON,
         :meth:`hil.master.MasterCore.safe_state_report`) and the first 10 ``errors`` met while stopping."""
+        for k, v in final.items():
+            _only(v, part_keys(DriveFinal), f"drives_final.{k}", "final states")
         got = RunRecord.from_json({"drives_final": final}, "final states")
         more = {"stop_errors": tuple(errors[:10])} if errors else {}
         return dataclasses.replace(self, drives_final=got.drives_final, **more)
 
     def ended(self, status: RunStatus, reason: str, samples: int, duration_s: float, **more) -> RunRecord:
         """The loop's end: status, why, the time now, samples and rig time (``more``: other fields)."""
-        return dataclasses.replace(self, status=RunStatus(status), reason=reason, ended_utc=utc_now_iso(),
+        return dataclasses.replace(self, status=status, reason=reason, ended_utc=utc_now_iso(),
                                    samples=samples, duration_s=duration_s, **more)
 
     # -------------------------------------------------------------- JSON
@@ -577,7 +600,7 @@ class RunRecord:
 
 
 def part_keys(part: type) -> tuple[str, ...]:
-    """The JSON keys of a part spread flat into the record (:class:`Bus`, :class:`Attribution`, ...)."""
+    """The JSON keys of a part whose fields are its keys (:class:`Bus`, :class:`Attribution`, ...)."""
     return tuple(f.name for f in dataclasses.fields(part))
 
 

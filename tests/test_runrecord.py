@@ -196,6 +196,25 @@ def test_an_illegal_status_is_refused_from_json_and_in_python():
         RunRecord.from_json([1, 2])
 
 
+def test_a_key_from_the_link_or_master_the_record_has_no_field_for_is_refused_not_dropped():
+    """Where the record is built from another module's JSON (the link's preflight record, the master's
+    final states, the preflight's identity), a key added there without a field here fails loudly."""
+    rec = RunRecord()
+    pre = {"process_image": {"pdos": []}, "master_loss": {}, "identity": {"ema1": {"node": 1, "vendor_id": 1,
+                                                                                   "product_code": 2, "revision": 3}}}
+    assert rec.with_preflight(pre).identity["ema1"] == Identity(1, 1, 2, 3, serial_listed=False)
+    with pytest.raises(RunRecordError, match="preflight record: field 'bus_errors': no field of the run record"):
+        rec.with_preflight({**pre, "bus_errors": 3})
+    with pytest.raises(RunRecordError, match="field 'identity.ema1.firmware'"):
+        rec.with_preflight({**pre, "identity": {"ema1": {**pre["identity"]["ema1"], "firmware": "1.2"}}})
+    final = {"node": 2, "state": "FAULT", "reachable": True, "confirmed": True, "safe": False, "master_loss": {}}
+    assert rec.with_final_states({"ema2": final}, []).drives_final["ema2"].state == "FAULT"
+    with pytest.raises(RunRecordError, match="final states: field 'drives_final.ema2.temperature_C'"):
+        rec.with_final_states({"ema2": {**final, "temperature_C": 40.0}}, None)
+    with pytest.raises(RunRecordError, match=r"preflight: field 'identity \(node 3\).hw'"):
+        Identity.of(3, {"vendor_id": 1, "product_code": 2, "revision": 3, "hw": 1})
+
+
 def test_steps_start_and_close_as_the_loop_reports_them():
     rec = RunRecord(steps=())
     rec = rec.with_step("enable", 0.0).with_step("approach", 0.5).with_step("aborted", 0.7)
