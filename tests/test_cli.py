@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 
 from hil.cli import main
+from hil.runfolder import MetaWriter, read_record
 from support.profiles import write_profile_variant
 
 
@@ -18,9 +20,9 @@ def test_simulate_writes_run_folder_and_passes(tmp_path):
     for f in ("signals.csv", "meta.json", "result.json", "report.html"):
         assert (out / f).stat().st_size > 0, f
     res = json.loads((out / "result.json").read_text())
-    meta = json.loads((out / "meta.json").read_text())
-    assert res["status"] == "pass" and meta["seed"] == 7 and meta["status"] == "done"
-    assert meta["software"]["name"] == "emacheck"
+    meta = read_record(out)
+    assert res["status"] == "pass" and meta.seed == 7 and meta.status == "done"
+    assert meta.software.name == "emacheck" and meta.mode == "simulate"
     assert set(res["backlash_mm"]) == {"int1", "int2", "ext"}
     assert abs(res["backlash_mm"]["int2"] - res["truth"]["backlash_mm"]["int2"]) < 0.005
     html = (out / "report.html").read_text()
@@ -104,9 +106,10 @@ def test_safety_violation_aborts_with_reason_and_exit_2(tmp_path):
     rc = main(["simulate", "--check", str(chk), "--out", str(out), "--quiet"])
     assert rc == 2
     res = json.loads((out / "result.json").read_text())
-    meta = json.loads((out / "meta.json").read_text())
-    assert res["status"] == "aborted" and meta["status"] == "aborted"
-    assert "max_following_error_mm" in res["reason"] and "following error" in meta["reason"]
+    meta = read_record(out)
+    assert res["status"] == "aborted" and meta.status == "aborted"
+    assert "max_following_error_mm" in res["reason"] and "following error" in meta.reason
+    assert meta.safety.limit == "max_following_error_mm" and meta.safety.value > meta.safety.threshold == 0.002
     # both drives were commanded to DISABLED on the abort, and the data up to it is kept
     lines = (out / "signals.csv").read_text().splitlines()
     last = lines[-1].split(",")
@@ -125,9 +128,7 @@ def test_run_cut_just_after_the_force_fight_began_is_incomplete_not_a_crash(defa
     step = lines[0].split(",").index("step")
     first_ff = next(k for k, ln in enumerate(lines) if k and ln.split(",")[step] == "force_fight")
     (out / "signals.csv").write_text("\n".join(lines[: first_ff + 5]) + "\n")
-    meta = json.loads((src / "meta.json").read_text())
-    meta["status"] = "running"
-    (out / "meta.json").write_text(json.dumps(meta))
+    MetaWriter(out, dataclasses.replace(read_record(src), status="running")).write()
     assert main(["analyze", str(out), "--out", str(out)]) == 2
     res = json.loads((out / "result.json").read_text())
     assert res["status"] == "incomplete"

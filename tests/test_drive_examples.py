@@ -32,6 +32,7 @@ from hil.canopen.sdo import SdoAbortCode, SdoAbortError
 from hil.canopen.signalmap import DeviceProfile, ForceControl, NodeRole, NodeSpec
 from hil.profiles import default_profile_path, load_actuation, load_check, load_simrig
 from hil.rig import plan_for
+from hil.runfolder import read_record
 from sim.drives import SimDrive
 from sim.drives.served import own_data
 from sim.drives.stats import PairCounters
@@ -75,15 +76,15 @@ def test_example_dry_run_recovers_the_truth(tmp_path, profile):
                 eds=_eds(RUNNABLE[profile]))
     assert r.exit_code == 0
     res = json.loads((r.out / "result.json").read_text())
-    meta = json.loads((r.out / "meta.json").read_text())
-    assert meta["status"] == "done" and res["status"] == "pass"
+    meta = read_record(r.out)
+    assert meta.status == "done" and res["status"] == "pass"
     assert {ch: res["verdict"][ch]["status"] for ch in CHANNELS} == {ch: "pass" for ch in CHANNELS}
     truth = res["truth"]
     for ch in CHANNELS:
         assert abs(res["backlash_mm"][ch] - truth["backlash_mm"][ch]) < 0.005, ch
     for k in ("ema1", "ema2"):
         assert res["calibration"][k]["pitch"] == pytest.approx(truth["calibration"][k]["pitch"], rel=1e-3)
-    assert meta["can"]["missing_cycles"] == 0 and meta["can"]["bad_frames"] == 0
+    assert meta.can.missing_cycles == 0 and meta.can.bad_frames == 0
     pair = r.injector.pair
     assert len(pair.sensors) == (1 if "cia401" in profile else 0)
 

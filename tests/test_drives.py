@@ -12,7 +12,7 @@ import pytest
 from hil.cli.dry_run import dry_run
 from hil.profiles import load_actuation, load_check
 from hil.report.shell import master_loss_text
-from hil.runfolder import read_signals
+from hil.runfolder import read_record, read_signals
 from support.eds import write_eds_variant
 from support.profiles import write_profile_variant
 
@@ -47,17 +47,17 @@ def test_dry_run_with_drives_without_cst_holds_the_opposing_force_in_csp(tmp_pat
 @pytest.mark.slow
 def test_the_default_dry_run_records_the_drill_and_reports_it(dry_run):
     out, rc = dry_run
-    meta = json.loads((out / "meta.json").read_text())
+    meta = read_record(out)
     res = json.loads((out / "result.json").read_text())
     for k in ("ema1", "ema2"):
-        ml = meta["master_loss"][k]
+        ml = meta.master_loss[k]
         assert ml["configured"] and ml["drill"]["outcome"] == "reacted"
         assert 125.0 <= ml["drill"]["reaction_ms"] <= 129.0  # consumer time + two SYNC cycles
         assert res["trace"]["master_loss"][k] == ml
-        assert meta["drives_final"][k]["state"] == "SWITCH_ON_DISABLED" and meta["drives_final"][k]["safe"]
+        assert meta.drives_final[k].state == "SWITCH_ON_DISABLED" and meta.drives_final[k].safe
     report = html.unescape((out / "report.html").read_text())
     assert "drill: reacted 126.0 ms after the master's last heartbeat" in report
-    cob_ids = {p["cob_id"] for p in meta["process_image"]["pdos"]}
+    cob_ids = {p["cob_id"] for p in meta.process_image["pdos"]}
     assert cob_ids == {0x181, 0x182, 0x281, 0x282, 0x201, 0x202, 0x301, 0x302}
 
 

@@ -22,7 +22,8 @@ import pytest
 from blf.signals import CHANNELS
 from hil.canlog import decode_can_log
 from hil.cli import main
-from hil.runfolder import read_signals
+from hil.runfolder import read_record, read_signals
+from hil.runrecord import RunMode, RunStatus
 from support.profiles import write_profile_variant
 
 
@@ -31,9 +32,9 @@ def test_dry_run_recovers_truth_through_canopen(dry_run):
     out, rc = dry_run
     assert rc == 0
     res = json.loads((out / "result.json").read_text())
-    meta = json.loads((out / "meta.json").read_text())
+    meta = read_record(out)
     truth = res["truth"]
-    assert meta["mode"] == "dry-run" and meta["status"] == "done"
+    assert meta.mode is RunMode.DRY_RUN and meta.status is RunStatus.DONE
     for ch in CHANNELS:
         assert abs(res["backlash_mm"][ch] - truth["backlash_mm"][ch]) < 0.005, ch
         for side in ("left", "right"):
@@ -41,8 +42,8 @@ def test_dry_run_recovers_truth_through_canopen(dry_run):
             assert abs(got / want - 1) < 0.03, (ch, side, got, want)
     for k in ("ema1", "ema2"):
         assert res["calibration"][k]["pitch"] == pytest.approx(truth["calibration"][k]["pitch"], rel=1e-3)
-    assert meta["bus_load"]["worst"] < 0.5
-    assert meta["can"]["missing_cycles"] == 0 and meta["can"]["bad_frames"] == 0
+    assert meta.bus_load.worst < 0.5
+    assert meta.can.missing_cycles == 0 and meta.can.bad_frames == 0
 
 
 @pytest.mark.slow

@@ -43,7 +43,7 @@ from hil.cli.dry_run import dry_run
 from hil.config import HARD_MAX_FORCE_FRACTION
 from hil.link import SDO_FALLBACK_CYCLES
 from hil.profiles import load_actuation, load_check, load_simrig
-from hil.runfolder import read_signals
+from hil.runfolder import read_record, read_signals
 from hil.supervisor import Limits
 from sim.faults import Fault, FaultInjector, FaultKind
 from sim.plant import RigPlant
@@ -72,13 +72,13 @@ def _check_with(tmp_path: Path, act, **overrides) -> object:
 def _run(tmp_path, profiles, fault: Fault, check=None):
     act, chk, sim = profiles
     r = dry_run(act, check or chk, sim, tmp_path / "run", faults=[fault])
-    meta = json.loads((r.out / "meta.json").read_text())
+    meta = read_record(r.out)
     return r, meta
 
 
 def _t_detect(r, meta) -> float:
-    if "safety" in meta:
-        return meta["safety"]["t_s"]
+    if meta.safety is not None:
+        return meta.safety.t_s
     assert r.master.fault_cycle is not None, "neither the supervisor nor the master reacted"
     return r.master.fault_cycle * T
 
@@ -92,18 +92,18 @@ def _t_safe_command(tr, t_detect: float, reachable=(0, 1)) -> float:
 
 
 def _assert_run_folder(r, meta, t_detect, act):
-    assert meta["status"] == "aborted" and meta["reason"]
+    assert meta.status == "aborted" and meta.reason
     res = json.loads((r.out / "result.json").read_text())
-    assert res["status"] == "aborted" and res["reason"] == meta["reason"]
+    assert res["status"] == "aborted" and res["reason"] == meta.reason
     sig = read_signals(r.out / "signals.csv")
     # the data up to the detection is kept (the samples the detection waited for cannot be)
-    lost = (3 if "StaleData" in meta["reason"] else 1) * T
+    lost = (3 if "StaleData" in meta.reason else 1) * T
     assert sig.t[-1] >= t_detect - lost - 1e-9
-    if "safety" in meta:
+    if meta.safety is not None:
         assert sig.step[-1] == "aborted" and sig.mode1[-1] == 0 and sig.mode2[-1] == 0
     dec = decode_can_log(r.out / "can.log", act)
     assert dec.signals.t[-1] >= t_detect - lost - 1e-9
-    assert meta["drives_final"]["ema1"]["node"] == 1
+    assert meta.drives_final["ema1"].node == 1
     return sig
 
 
@@ -147,7 +147,7 @@ def test_fault_reaction_safe_state_and_run_folder(tmp_path, profiles, fault, wor
     act, chk, _ = profiles
     r, meta = _run(tmp_path, profiles, fault)
     assert r.exit_code == 2 and r.outcome.status == "aborted"
-    assert words in meta["reason"]
+    assert words in meta.reason
     onset = r.injector.onset_s[fault.kind]
     assert onset == pytest.approx(fault.start_s, abs=T / 2)
     t_det = _t_detect(r, meta)
@@ -163,7 +163,7 @@ def test_fault_reaction_safe_state_and_run_folder(tmp_path, profiles, fault, wor
         assert _t_safe_command(tr, t_det, (fault.ema - 1,)) - t_det <= (SDO_FALLBACK_CYCLES + 2) * T + 1e-9
     _peaks_within_limits(tr, onset, Limits.of(act, chk), act)
     assert set(r.injector.final_states()) <= SAFE
-    assert all(v["safe"] for v in meta["drives_final"].values()), meta["drives_final"]
+    assert all(v.safe for v in meta.drives_final.values()), meta.drives_final
     _assert_run_folder(r, meta, t_det, act)
 
 
@@ -176,8 +176,8 @@ def test_unreachable_drive_other_goes_safe_and_reason_names_it(tmp_path, profile
     ema1, ema2 = r.injector.final_states()
     assert ema1 is State.SWITCH_ON_DISABLED  # the reachable drive went to the safe state
     assert ema2 is State.OPERATION_ENABLED  # the silent one heard nothing (holds its last target)
-    assert "EMA 2 (node 2) unreachable (heartbeat lost)" in meta["reason"]
-    assert meta["drives_final"]["ema1"]["safe"] and not meta["drives_final"]["ema2"]["reachable"]
+    assert "EMA 2 (node 2) unreachable (heartbeat lost)" in meta.reason
+    assert meta.drives_final["ema1"].safe and not meta.drives_final["ema2"].reachable
     assert _t_safe_command(r.injector.truth, t_det, reachable=(0,)) - t_det <= 2 * T + 1e-9
     _assert_run_folder(r, meta, t_det, act)
 
@@ -204,8 +204,8 @@ def _t0_of_sync(out: Path) -> float:
 def test_sdo_abort_in_preflight_aborts_before_anything_moves(tmp_path, profiles):
     r, meta = _run(tmp_path, profiles, Fault("sdo_abort", 2, value=float(0x1017)))
     assert r.exit_code == 2
-    assert "SdoAbortError" in meta["reason"] and "0x08000020" in meta["reason"]
-    assert "0x1017" in meta["reason"]
+    assert "SdoAbortError" in meta.reason and "0x08000020" in meta.reason
+    assert "0x1017" in meta.reason
     assert r.injector.syncs == 0  # no SYNC: nothing was enabled
     assert set(r.injector.final_states()) == {State.SWITCH_ON_DISABLED}
     res = json.loads((r.out / "result.json").read_text())
@@ -219,14 +219,14 @@ def test_force_limit_reaction_within_two_cycles(tmp_path, profiles):
     chk = _check_with(tmp_path, act, safety={"max_following_error_mm": 2.0, "max_force_fight_N": 7900.0,
                                              "max_force_imbalance_N": 4000.0})
     r, meta = _run(tmp_path, profiles, Fault("runaway", 1, 0.6, value=5.0), check=chk)
-    assert meta["safety"]["limit"] in ("max_force_N", "max_force_fight_N"), meta["reason"]
+    assert meta.safety.limit in ("max_force_N", "max_force_fight_N"), meta.reason
     lim = Limits.of(act, chk)
     sig = read_signals(r.out / "signals.csv")
-    fl = {"max_force_N": lim.max_force_N, "max_force_fight_N": lim.max_force_fight_N}[meta["safety"]["limit"]]
-    q = np.maximum(np.abs(sig.F1), np.abs(sig.F2)) if meta["safety"]["limit"] == "max_force_N" \
+    fl = {"max_force_N": lim.max_force_N, "max_force_fight_N": lim.max_force_fight_N}[meta.safety.limit]
+    q = np.maximum(np.abs(sig.F1), np.abs(sig.F2)) if meta.safety.limit == "max_force_N" \
         else np.abs(sig.F1 - sig.F2) / 2
     t_first = sig.t[np.flatnonzero(q > fl)[0]]
-    t_det = meta["safety"]["t_s"]
+    t_det = meta.safety.t_s
     assert t_det - t_first <= 2 * T + 1e-9
     tr = r.injector.truth
     assert _t_safe_command(tr, t_det) - t_first <= 2 * T + 1e-9
@@ -241,10 +241,10 @@ def test_stroke_limit_reaction_within_two_cycles(tmp_path, profiles):
     chk = _check_with(tmp_path, act, calibration={"sweep_amplitude_mm": 2.5},
                       safety={"max_stroke_mm": 3.0, "max_following_error_mm": 2.0})
     r, meta = _run(tmp_path, profiles, Fault("runaway", 1, 2.7, value=5.0), check=chk)
-    assert meta["safety"]["limit"] == "max_stroke_mm", meta["reason"]
+    assert meta.safety.limit == "max_stroke_mm", meta.reason
     sig = read_signals(r.out / "signals.csv")
     t_first = sig.t[np.flatnonzero(np.maximum(np.abs(sig.s1), np.abs(sig.s2)) > 3.0)[0]]
-    t_det = meta["safety"]["t_s"]
+    t_det = meta.safety.t_s
     assert t_det - t_first <= 2 * T + 1e-9
     tr = r.injector.truth
     assert _t_safe_command(tr, t_det) - t_first <= 2 * T + 1e-9
@@ -261,8 +261,8 @@ def test_faults_from_the_simrig_profile(tmp_path):
     from hil.cli import main
     rc = main(["dry-run", "--sim", str(p), "--out", str(tmp_path / "run"), "--quiet"])
     assert rc == 2
-    meta = json.loads((tmp_path / "run" / "meta.json").read_text())
-    assert "EMCY 0x4310" in meta["reason"] and meta["faults"][0]["kind"] == "emcy_over_temperature"
+    meta = read_record(tmp_path / "run")
+    assert "EMCY 0x4310" in meta.reason and meta.faults[0]["kind"] == "emcy_over_temperature"
     bad = write_profile_variant("simrig.toml", tmp_path / "bad.toml", add={"faults": [{"kind": "hartbeat_stop"}]})
     with pytest.raises(ValueError, match=r"faults\[0\]\.kind.*did you mean 'heartbeat_stop'"):
         load_simrig(bad)
@@ -279,8 +279,8 @@ def test_sensor_node_silent_stops_the_check_and_both_drives(tmp_path, profiles):
     act = load_actuation(path)
     r = dry_run(act, load_check(None, act), sim, tmp_path / "run", faults=[Fault("sensor_node_silent", start_s=2.0)],
                 profile_path=path)
-    meta = json.loads((r.out / "meta.json").read_text())
-    assert r.exit_code == 2 and "StaleData" in meta["reason"] and "missing: COB-ID 0x183" in meta["reason"]
+    meta = read_record(r.out)
+    assert r.exit_code == 2 and "StaleData" in meta.reason and "missing: COB-ID 0x183" in meta.reason
     onset = r.injector.onset_s["sensor_node_silent"]
     assert onset == pytest.approx(2.0, abs=T / 2)
     t_det = _t_detect(r, meta)
@@ -436,8 +436,8 @@ _HANDLED = [c[0] for c in DRIVE_CASES if c[1] is None]
 @pytest.mark.slow
 def test_drive_fault_is_refused_before_any_sync(tmp_path, profiles, fault, words):
     r, meta = _run(tmp_path, profiles, fault)
-    assert r.exit_code == 2 and meta["status"] == "aborted"
-    assert words in meta["reason"] and f"node {fault.ema} (EMA {fault.ema})" in meta["reason"]
+    assert r.exit_code == 2 and meta.status == "aborted"
+    assert words in meta.reason and f"node {fault.ema} (EMA {fault.ema})" in meta.reason
     assert r.injector.syncs == 0  # no check started
     assert r.injector.onset_s == {fault.kind: 0.0}
 

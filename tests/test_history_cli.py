@@ -12,6 +12,7 @@ import pytest
 
 from hil.cli import main
 from hil.history.store import HistoryStore
+from hil.runfolder import read_record
 from support.profiles import write_profile_variant
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,8 +32,9 @@ def test_simulate_with_wear_records_a_simulated_check_at_its_flight_hours(tmp_pa
     assert rc == 0
     assert "recorded in the history" in capsys.readouterr().out
     res = json.loads((out / "result.json").read_text())
-    meta = json.loads((out / "meta.json").read_text())
-    assert meta["wear"]["line_mm"]["int1"] == pytest.approx(0.15)
+    meta = read_record(out)
+    assert meta.wear.line_mm["int1"] == pytest.approx(0.15) and meta.wear.flight_hours == 2000.0
+    assert meta.installation.flight_cycles == 1600 and meta.installation.aircraft == "D-AXYZ"
     assert res["truth"]["backlash_mm"]["int1"] == pytest.approx(0.15, abs=0.004)  # the line + 1 um scatter
     for ch in ("int1", "int2", "ext"):
         assert res["backlash_mm"][ch] == pytest.approx(res["truth"]["backlash_mm"][ch], abs=0.005), ch

@@ -37,7 +37,8 @@ import pytest
 
 import hil.report.maint
 from hil.cli import main
-from hil.runfolder import read_signals, resolve_recording
+from hil.runfolder import read_record, read_signals, resolve_recording
+from hil.runrecord import RunRecord
 
 #: twenty dry-runs killed and analysed: not in the fast loop (-m "not slow")
 pytestmark = pytest.mark.slow
@@ -137,16 +138,21 @@ def _no_report(path, *args, **kwargs) -> None:
 _no_report.calls = 0
 
 
-def _meta(out) -> dict:
-    return json.loads((out / "meta.json").read_text())
+def _meta(out) -> RunRecord:
+    return read_record(out)
 
 
-def _wait_for_step(out, t_meta: float, step: str, timeout_s: float = 60.0) -> tuple[float, dict]:
+def _steps(meta: RunRecord) -> dict[str, list[float]]:
+    """Step name -> [t_start, t_end] (the open one [t_start]) of a run record, as meta.json holds them."""
+    return {s.name: s.as_json() for s in meta.steps or ()}
+
+
+def _wait_for_step(out, t_meta: float, step: str, timeout_s: float = 60.0) -> tuple[float, RunRecord]:
     """Wall time [s from meta.json] at which meta.json first shows ``step`` (or the run ended)."""
     while True:
         meta = _meta(out)
         now = time.monotonic() - t_meta
-        if step in meta.get("steps", {}) or meta["status"] != "running":
+        if step in _steps(meta) or meta.status != "running":
             return now, meta
         assert now < timeout_s, f"{out}: no step {step!r} within {timeout_s} s"
         time.sleep(0.001)
@@ -161,8 +167,9 @@ def _probe(args: list[str], out) -> dict:
     w_end, meta = _wait_for_step(out, t_meta, "done")
     _, status = os.waitpid(pid, 0)
     meta = _meta(out)
-    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0 and meta["status"] == "done", (status, meta)
-    return {"steps": meta["steps"], "rate": w_ff / meta["steps"]["force_fight"][0], "wall_s": w_end}
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0 and meta.status == "done", (status, meta)
+    steps = _steps(meta)
+    return {"steps": steps, "rate": w_ff / steps["force_fight"][0], "wall_s": w_end}
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
@@ -179,7 +186,7 @@ def test_twenty_kills_leave_analysable_run_folders(tmp_path, capsys, monkeypatch
     t_a = ff0 + (ff1 - ff0) / CYCLES  # the first fight cycle on disk: BLFmaint has both contacts
     rng = np.random.default_rng(SEED)
     kills = {"analysable": [], "early": []}
-    redrawn = {"after the loop": 0, "in the fight's first cycle": 0}
+    redrawn = {"after the loop": 0, "in the fight's first cycle": 0, "before the first step": 0}
     for k in range(3 * (N_KILLS + N_EARLY_KILLS)):
         if len(kills["analysable"]) == N_KILLS and len(kills["early"]) >= N_EARLY_KILLS:
             break
@@ -201,11 +208,14 @@ def test_twenty_kills_leave_analysable_run_folders(tmp_path, capsys, monkeypatch
         _, status = os.waitpid(pid, 0)
         meta = _meta(out)
         where = f"seed {SEED}, kill {k} at check time {t_kill:.3f} s ({delay:.3f} s wall, aimed {aim})"
-        if meta["status"] != "running":  # a run quicker than its pace said: another instant is drawn
+        if meta.status != "running":  # a run quicker than its pace said: another instant is drawn
             redrawn["after the loop"] += 1
             continue
         assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, f"{where}: ended before the kill"
-        steps = meta.get("steps") or {}
+        steps = _steps(meta)
+        if not steps:  # killed before its first step change reached the disk (a slow start): drawn again
+            redrawn["before the first step"] += 1
+            continue
         sig_path, _ = resolve_recording(out)
         t_logged = read_signals(sig_path).t[-1]
         # where the kill landed, from the folder: before the fight, or past its first cycle on disk

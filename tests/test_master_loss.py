@@ -39,7 +39,7 @@ from hil.canlog import decode_can_log
 from hil.canopen.cia402 import State
 from hil.errors import ProfileError
 from hil.profiles import load_actuation, load_check, load_simrig
-from hil.runfolder import read_signals
+from hil.runfolder import read_record, read_signals
 from hil.supervisor import Limits
 from sim.drives import QUICK_STOP_HOLD_S
 from sim.faults import Fault
@@ -188,7 +188,7 @@ def test_master_silent_drives_stop_by_themselves(tmp_path, profiles, start_s, wh
     T = act.timing.sync_period_s
     C = act.canopen.master_consumer_time_s
     r = dry_run(act, chk, sim, tmp_path / "run", faults=[Fault("master_silent", 1, start_s)])
-    meta = json.loads((r.out / "meta.json").read_text())
+    meta = read_record(r.out)
     fig = silent_figures(r, act)
     t_last = fig["t_last_s"]
     assert r.injector.onset_s["master_silent"] == pytest.approx(start_s, abs=T / 2)
@@ -215,13 +215,13 @@ def test_master_silent_drives_stop_by_themselves(tmp_path, profiles, start_s, wh
     log = (r.out / "can.log").read_text()
     assert " 081#3081" in log and " 082#3081" in log
     # the run folder: the master stopped on stale data; everything up to the loss is there
-    assert meta["status"] == "aborted" and "StaleData" in meta["reason"], meta["reason"]
+    assert meta.status == "aborted" and "StaleData" in meta.reason, meta.reason
     assert json.loads((r.out / "result.json").read_text())["status"] == "aborted"
     assert sig.t[-1] >= t_last - T - 1e-9
     dec = decode_can_log(r.out / "can.log", act)
     assert dec.signals.t[-1] >= t_last - T - 1e-9 and dec.bad_lines == 0
     # (the master cannot confirm the drives' state: no statusword reaches it)
-    assert not any(v["confirmed"] for v in meta["drives_final"].values())
+    assert not any(v.confirmed for v in meta.drives_final.values())
     print(f"\nmaster_silent at {start_s} s ({what}): last frame {t_last:.3f} s; out of Operation enabled "
           f"after {fig['out_of_oe_s'] * 1e3:.0f} ms, switch on disabled after {fig['sod_s'] * 1e3:.0f} ms "
           f"(consumer {C * 1e3:.0f} ms); |F| {fig['F_at_loss_N']:.0f} N at the loss, peak {fig['peak_F_N']:.0f} N")

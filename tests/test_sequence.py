@@ -84,13 +84,16 @@ def test_force_fight_demand_triangle():
 
 @pytest.mark.slow  # the session's whole simulated check
 def test_run_goes_through_all_steps_in_order(default_run):
-    import json
+    from hil.runfolder import read_record
+    from hil.runrecord import RunStatus
+
     run_dir, _ = default_run
-    meta = json.loads((run_dir / "meta.json").read_text())
-    names = list(meta["steps"])
+    meta = read_record(run_dir)
+    names = [s.name for s in meta.steps]
     assert names == ["enable", "approach", "cal1_load", "cal1_sweep", "cal1_unload", "cal2_load",
                      "cal2_sweep", "cal2_unload", "force_fight", "unload", "done"]
-    assert meta["status"] == "done"
+    assert meta.status is RunStatus.DONE
+    assert all(a.t_end_s == b.t_start_s for a, b in zip(meta.steps, meta.steps[1:], strict=False))
 
 
 # ------------------------------------------------------------------ a drive without CST: the position-mode force loop

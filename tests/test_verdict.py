@@ -14,6 +14,7 @@ import pytest
 from blf.verdict import COVERAGE_FACTOR, combine, decide, maint_uncertainty, overall, serv_uncertainty
 from hil.cli import main
 from hil.cli.common import ExitCode
+from hil.runfolder import read_record
 from support.profiles import write_profile_variant
 
 
@@ -204,8 +205,8 @@ def test_ctrl_c_writes_an_aborted_result_and_names_each_drives_final_state(tmp_p
     assert rc == ExitCode.ABORTED
     r = validate(out / "result.json", "result")
     assert r["status"] == "aborted" and r["reason"].startswith("interrupted by the operator")
-    meta = json.loads((out / "meta.json").read_text())
-    assert meta["status"] == "aborted" and all(d["safe"] for d in meta["drives_final"].values())
+    meta = read_record(out)
+    assert meta.status == "aborted" and all(d.safe for d in meta.drives_final.values())
     # the drives' identity as read by SDO in the preflight: the simulated rig's serial numbers
     ident = r["trace"]["identity"]
     assert (ident["ema1"]["serial"], ident["ema2"]["serial"]) == (0x5E000101, 0x5E000102)
