@@ -64,6 +64,9 @@ class LoopOutcome:
     duration_s: float  #: rig (simulated or real) time
     steps: tuple[StepTime, ...]  #: when each step began and ended
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", RunStatus(self.status))  # "done"/"aborted" as a RunStatus; else raises
+
 
 def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
               on_cycle: Callable[[Progress, Sample], None] | None = None,

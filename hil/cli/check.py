@@ -315,7 +315,7 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
     analysis where enough data was recorded) and the console says where each drive ended."""
     run = Outputs(out)
     rec = meta.record
-    if outcome.status is not RunStatus.DONE:
+    if outcome.status != RunStatus.DONE:
         console.print(f"[red]aborted:[/red] {outcome.reason}")
         rec = meta.write(dataclasses.replace(rec, status=RunStatus.ABORTED, reason=rec.reason or outcome.reason))
         print_drives_final(console, rec)
