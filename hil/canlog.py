@@ -29,24 +29,28 @@ from hil.canopen.pdo import Direction, PdoError
 from hil.canopen.signalmap import Signal, torque_scale
 from hil.config import Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.runfolder import Signals
+from hil.runfolder import DiskSync, LoopFile, Signals
 from hil.runrecord import RunRecord
 
 
 class CanLogWriter:
     """Append frames to a candump ``.log`` file as they happen.
 
-    Flushed to the OS every ``flush_frames`` frames and whenever the frame time
-    moved ``flush_period_s`` past the last flush, so a killed master loses at
-    most that much of the log (the last line may be cut short: readers drop it).
+    Flushed every ``flush_frames`` frames and whenever the frame time moved
+    ``flush_period_s`` past the last flush, so a killed master loses at most
+    that much of the log (the last line may be cut short: readers drop it).
+    The lines are formatted by python-can's :class:`can.io.CanutilsLogWriter`
+    into a :class:`hil.runfolder.LoopFile`: with ``disk`` (a background
+    :class:`~hil.runfolder.DiskSync`, ``emacheck run``) a flush hands them to its
+    thread and no write to the file lands on the loop's; without, written at once.
     ``time_offset_s`` is added to every stamp: ``emacheck run`` logs wall-clock
     (UNIX) time as candump does; a dry-run logs its simulated time from 0.
     """
 
     def __init__(self, path: Path, channel: str = "can0", flush_frames: int = 2000,
-                 flush_period_s: float = 0.5, time_offset_s: float = 0.0) -> None:
+                 flush_period_s: float = 0.5, time_offset_s: float = 0.0, disk: DiskSync | None = None) -> None:
         self.path = path
-        self._w = can.io.CanutilsLogWriter(str(path), channel=channel)
+        self._w = can.io.CanutilsLogWriter(LoopFile(path, disk), channel=channel)
         self._n = 0
         self._flush_frames = flush_frames
         self._flush_period_s = flush_period_s

@@ -83,11 +83,11 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
     # a drive without CST holds the calibration's opposing force by the sequence's position-mode loop
     seq = CheckSequence(act, check, force_by_position=getattr(link, "force_by_position", (False, False)))
     sup = Supervisor(act, check)
-    writer = SignalsWriter(meta.run_dir / "signals.csv")
     rec = meta.write()
-    # on a real bus, fsync and the JSON files written in the loop: off the loop's thread (the caller
-    # may have made the thread before it went real-time); on simulated time, at once
+    # on a real bus, the signals' writes, fsync and the JSON files written in the loop: off the loop's
+    # thread (the caller may have made the thread before it went real-time); on simulated time, at once
     meta.open_disk(background=getattr(link, "timing", None) is not None)
+    writer = SignalsWriter(meta.run_dir / "signals.csv", disk=meta.disk)
     limit = max_duration_s if max_duration_s is not None else 3.0 * seq.planned_duration_s() + 60.0
     sp1 = sp2 = DISABLED
     smp: Sample | None = None
@@ -117,8 +117,7 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
                     rec = rec.with_step(ev.step.value, ev.t_s)
                     if ev.step is Step.ABORTED:
                         link.abort()
-                writer.flush(smp.t_s)  # to the OS now, to the disk by the sync thread
-                meta.fsync(writer.fileno())
+                writer.flush(smp.t_s, sync=True)  # to the OS and the disk (by the sync thread on a real bus)
                 rec = meta.post(rec)
             if on_cycle is not None:
                 on_cycle(seq.progress(smp.t_s), smp)

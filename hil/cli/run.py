@@ -18,6 +18,7 @@ from hil.cli.check import (
 from hil.cli.common import (
     ExitCode,
     add_bus_args,
+    add_cpu_latency_arg,
     add_history_args,
     add_parser,
     add_profile_args,
@@ -58,8 +59,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     transport = BusTransport(bus, act.timing.sync_period_s)
     master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
-    # wall-clock stamps in the CAN log, as candump writes them
-    log = CanLogWriter(out / "can.log", channel=args.channel, time_offset_s=transport.wall_clock_offset_s)
+    # the run folder's writer thread (the CAN log, signals.csv, meta.json) is made before the memory
+    # is locked and the loop's page faults are counted (locked, each page of a new thread's stack
+    # faults at once); wall-clock stamps in the CAN log, as candump writes them
+    disk = DiskSync(background=True)
+    log = CanLogWriter(out / "can.log", channel=args.channel, time_offset_s=transport.wall_clock_offset_s,
+                       disk=disk)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
     record = start_record(act, check, mode=RunMode.RUN, bus=Bus(args.interface, args.channel, bitrate),
@@ -69,10 +74,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                           files_sha256={**file_hashes(actuation=args.profile, check=args.check), **rig_hashes(rig)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, {rig_nodes_text(rig)}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
-    # the run folder's writer thread is made before the memory is locked and the loop's page
-    # faults are counted (locked, each page of a new thread's stack faults at once)
-    meta = MetaWriter(out, record, DiskSync(background=True))
-    console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True)}")
+    meta = MetaWriter(out, record, disk)
+    console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True, cpu_latency_us=args.cpu_latency_us)}")
     faults0 = page_faults()
     try:
         outcome, wall = canopen_check(console, act, check, link, meta, args.quiet)
@@ -108,3 +111,4 @@ def register(sub) -> None:
                    help="run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "
                         "default 0: normal scheduling); analysis and report run at normal priority "
                         "after it. Memory is locked either way (best effort).")
+    add_cpu_latency_arg(p)
