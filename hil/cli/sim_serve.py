@@ -7,7 +7,7 @@ import signal
 from pathlib import Path
 
 from hil.cli.check import rig_nodes_text
-from hil.cli.common import add_bus_args, add_eds_arg, add_parser, open_bus
+from hil.cli.common import add_bus_args, add_cpu_latency_arg, add_eds_arg, add_parser, open_bus
 from hil.cli.realtime import prepare_realtime
 from hil.runfolder import write_json_atomic
 
@@ -38,7 +38,7 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
         stop.set()
 
     old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    rt = prepare_realtime(args.rt_priority)
+    rt = prepare_realtime(args.rt_priority, cpu_latency_us=args.cpu_latency_us)
 
     def ready() -> None:
         print(f"sim-serve: {rig_nodes_text(rig)} on {args.interface}:{args.channel}, seed {seed}, {rt}; ready",
@@ -83,6 +83,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, help="noise seed (default: the simulated-rig profile's)")
     p.add_argument("--rt-priority", type=int, default=0, metavar="N",
                    help="run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")
+    add_cpu_latency_arg(p)
     p.add_argument("--timing-json", metavar="FILE", type=Path,
                    help="at the end, write the counters and the loop's timing per SYNC cycle (reaction: "
                         "SYNC in to TPDOs out) to FILE as JSON")
