@@ -438,6 +438,9 @@ class Timing(_Part):
     sync: str  #: "loop-timed" or "periodic task"
     sync_skipped: int  #: SYNCs the loop-timed source skipped
     sync_late_max_ms: float  #: the latest SYNC behind its schedule [ms]
+    #: SYNC periods the master saw pass without a SYNC (:class:`hil.canopen.cycle.SyncSchedule`); None:
+    #: a record from before it was kept
+    sync_periods_skipped: int | None = None
 
     def __post_init__(self) -> None:
         cpu = self.summary.work_cpu
@@ -447,7 +450,8 @@ class Timing(_Part):
 
     def as_json(self) -> dict:
         return {**self.summary.as_json(), "t0_unix_s": self.t0_unix_s, "sync": self.sync,
-                "sync_skipped": self.sync_skipped, "sync_late_max_ms": self.sync_late_max_ms}
+                "sync_skipped": self.sync_skipped, "sync_late_max_ms": self.sync_late_max_ms,
+                **({} if self.sync_periods_skipped is None else {"sync_periods_skipped": self.sync_periods_skipped})}
 
     @classmethod
     def read(cls, f: _Fields) -> Timing:
@@ -458,7 +462,8 @@ class Timing(_Part):
                                   for k in ("reaction", "work", "work_cpu", "gap")),
                                 *(f.get(k, "int", required=True) for k in ("syncs_missing", "unanswered", "late")))
         return cls(summary, f.get("t0_unix_s", "number", required=True), f.get("sync", "text", required=True),
-                   f.get("sync_skipped", "int", required=True), f.get("sync_late_max_ms", "number", required=True))
+                   f.get("sync_skipped", "int", required=True), f.get("sync_late_max_ms", "number", required=True),
+                   f.get("sync_periods_skipped", "int"))
 
 
 def _ema_map(f: _Fields, key: str, part: type, nullable: bool = False) -> dict | None:

@@ -51,7 +51,8 @@ def _timing() -> Timing:
         ct.sync(t)
         ct.work(t + 1e-4, t + 3e-4 + (k % 7) * 1e-5, cpu_s=1.5e-4)
         ct.answered(t + 4e-4 + (k % 5) * 2e-5)
-    return Timing(ct.summary(), t0_unix_s=1.7e9, sync="loop-timed", sync_skipped=1, sync_late_max_ms=0.25)
+    return Timing(ct.summary(), t0_unix_s=1.7e9, sync="loop-timed", sync_skipped=1, sync_late_max_ms=0.25,
+                  sync_periods_skipped=2)
 
 
 def _full(**over) -> RunRecord:
@@ -123,7 +124,10 @@ def test_timing_is_the_cycle_timing_summary_as_its_producer_writes_it():
     summary = t.summary
     assert summary.reaction.histogram and summary.work_cpu.n == 50 and summary.work_cpu.histogram == ()
     j = t.as_json()
-    assert list(j)[-4:] == ["t0_unix_s", "sync", "sync_skipped", "sync_late_max_ms"] and j["sync_skipped"] == 1
+    assert list(j)[-5:] == ["t0_unix_s", "sync", "sync_skipped", "sync_late_max_ms", "sync_periods_skipped"]
+    assert j["sync_skipped"] == 1 and j["sync_periods_skipped"] == 2
+    older = {k: v for k, v in j.items() if k != "sync_periods_skipped"}  # a record from before the field
+    assert Timing.from_json(older).sync_periods_skipped is None and Timing.from_json(older).as_json() == older
     assert {k: v for k, v in j.items() if k in summary.as_json()} == summary.as_json()
     assert Timing.from_json(j) == t and Timing.from_json(json.loads(json.dumps(j))) == t
     with pytest.raises(RunRecordError, match=r"field 'timing.gap.histogram.bins': expected \[\[lower edge"):

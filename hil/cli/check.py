@@ -295,7 +295,8 @@ def record_can_stats(meta: MetaWriter, wall: float, log, master, transport=None,
         loop = Timing(timing.summary(), t0_unix_s=round(getattr(transport, "wall_clock_offset_s", 0.0), 6),
                       sync="loop-timed" if getattr(transport, "loop_sync", False) else "periodic task",
                       sync_skipped=getattr(transport, "sync_skipped", 0),
-                      sync_late_max_ms=round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4))
+                      sync_late_max_ms=round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4),
+                      sync_periods_skipped=master.sync_schedule.skipped)
     # each EMA's identity as the drive reported it by SDO (0x1018) in the preflight
     ident = {f"ema{k}": Identity.of(n, master.drives[n].identity) for k, n in enumerate(master.order, start=1)}
     meta.write(dataclasses.replace(meta.record, wall_s=round(wall, 3), can=can, timing=loop or meta.record.timing,
