@@ -210,3 +210,30 @@ def test_the_can_log_reader_closes_its_file_however_the_reading_ends(tmp_path, m
     assert len(opened) == 1 and not opened[0].closed
     frames.close()  # the reading ends after one frame
     assert opened[0].closed and counts == {"frames": 1, "bad": 0}
+
+
+def test_the_can_log_reader_times_a_sample_by_its_sync_period_not_by_count_or_stamp(tmp_path, short_run, actuation):
+    """A SYNC period with no SYNC in the log (the loop-timed SYNC skipped one) leaves its slot empty:
+    the samples after it keep their own times (counted, they would all be one period early). A SYNC
+    logged 0.4 T late, its answers with it, still gives its sample the time of its period (by its
+    stamp it would be 0.4 T late; more than T/2 late, it is taken for the next period), as the
+    master timed it in the run (hil.canopen.cycle.SyncSchedule)."""
+    from hil.canlog import decode_can_log
+
+    T = actuation.timing.sync_period_s
+    lines = (short_run / "can.log").read_text().splitlines()
+    base = decode_can_log(short_run / "can.log", actuation).signals.t
+    syncs = [i for i, line in enumerate(lines) if " 080#" in line]
+    assert len(syncs) - 1 <= len(base) <= len(syncs) and len(base) > 1000  # (an aborted run: the last cut off)
+
+    def late(line: str, dt: float) -> str:
+        stamp, rest = line[1:].split(")", 1)
+        return f"({float(stamp) + dt:.6f}){rest}"
+
+    j, k = len(syncs) // 2, len(syncs) // 2 + 10  # SYNC j's cycle left out, SYNC k's cycle late
+    np.testing.assert_allclose(np.diff(base[:k + 10]), T, atol=1e-9)  # every SYNC on time there
+    mutated = (lines[:syncs[j]] + lines[syncs[j + 1]:syncs[k]]
+               + [late(line, 0.4 * T) for line in lines[syncs[k]:syncs[k + 1]]] + lines[syncs[k + 1]:])
+    (tmp_path / "can.log").write_text("\n".join(mutated) + "\n")
+    t = decode_can_log(tmp_path / "can.log", actuation).signals.t
+    np.testing.assert_allclose(t, np.delete(base, j), atol=1e-9)
