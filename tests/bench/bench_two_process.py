@@ -14,12 +14,16 @@ whole time. ``uptime``'s load average is recorded before and after. Both
 processes run under SCHED_FIFO as on a rig (``--rt-priority``: sim-serve 50,
 run 40, as bench_vcan.py) unless ``--rt-sim 0 --rt-run 0``.
 
-Prints one line per check, then completions, per process the reaction's p50,
-p99, p99.9 and max over all checks (max of each check's percentile), the abort
+First measures the machine's floor (``--floor-s``, default 20 s): a lone
+process sleeping to 2 ms deadlines, how late it wakes, then running for half
+as long, the longest it was held while it ran (a virtual machine's vCPU
+descheduled by its host); no loop can be more punctual than that. Prints
+one line per check, then completions, per process the reaction's p50, p99,
+p99.9 and max over all checks (max of each check's percentile), the abort
 causes; writes everything to JSON (``--json``, default bench_two_process.json).
 
 Usage: python tests/bench/bench_two_process.py [-n 10] [--competitor] [--rt-sim 50] [--rt-run 40] [--check CHECK.toml]
-       [--profile ACTUATION.toml] [--sim SIMRIG.toml] [--json FILE] [--keep DIR]
+       [--profile ACTUATION.toml] [--sim SIMRIG.toml] [--json FILE] [--keep DIR] [--floor-s 20]
 """
 
 from __future__ import annotations
@@ -112,12 +116,55 @@ def cause(r: dict) -> str:
         bits.append(f"master: reaction max {mt['reaction']['max_ms']:.2f} ms, {mt['late']} late, "
                     f"{mt['unanswered']} unanswered, SYNC skipped {mt.get('sync_skipped')}, "
                     f"SYNC late max {mt.get('sync_late_max_ms')} ms, "
+                    f"periods without a SYNC {mt.get('sync_periods_skipped')}, "
                     f"lag max {(r.get('can') or {}).get('max_lag_ms')} ms")
     if st:
         bits.append(f"sim-serve: reaction max {st['reaction']['max_ms']:.2f} ms, {st['late']} late, "
                     f"{st['unanswered']} unanswered, SYNC gaps max {st['gap']['max_ms']:.2f} ms "
                     f"({st['syncs_missing']} periods missing), {(r.get('sim') or {}).get('rpdos_late')} late RPDOs")
     return "; ".join(bits)
+
+
+#: a lone process sleeping to 2 ms deadlines (select, as the loops wait), SCHED_FIFO where permitted:
+#: how late this machine wakes a sleeping process, whatever emacheck does (printed as JSON)
+_FLOOR = """
+import json, os, select, socket, sys, time
+try:
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
+except OSError:
+    pass
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+T, late = 0.002, []
+t_next = time.monotonic() + T
+end = t_next + float(sys.argv[1])
+while t_next < end:
+    while (now := time.monotonic()) < t_next:
+        select.select([s], [], [], t_next - now)
+    late.append(now - t_next)
+    t_next += T
+late.sort()
+n = len(late)
+# then running, not sleeping, for half as long: the longest time the process was held while it ran
+# (at normal priority: a SCHED_FIFO process that never sleeps is stopped by Linux's real-time
+# throttling, 50 ms in every second)
+os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+held, t_prev = [], time.monotonic()
+end = t_prev + float(sys.argv[1]) / 2
+while (now := time.monotonic()) < end:
+    if now - t_prev > 1e-4:
+        held.append(now - t_prev)
+    t_prev = now
+print(json.dumps({"seconds": float(sys.argv[1]), "n": n, "p50_ms": late[n // 2] * 1e3,
+                  "p99.9_ms": late[int(n * 0.999)] * 1e3, "max_ms": late[-1] * 1e3,
+                  "over_1ms": sum(x > 1e-3 for x in late), "over_3ms": sum(x > 3e-3 for x in late),
+                  "held_max_ms": max(held, default=0.0) * 1e3, "held_over_1ms": sum(x > 1e-3 for x in held)}))
+"""
+
+
+def wake_floor(seconds: float) -> dict:
+    """How late a lone process sleeping to 2 ms deadlines wakes on this machine (p50, p99.9, max [ms])."""
+    r = subprocess.run([sys.executable, "-c", _FLOOR, str(seconds)], capture_output=True, text=True, check=True)
+    return json.loads(r.stdout)
 
 
 def main(argv=None) -> int:
@@ -132,7 +179,15 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=600.0, help="per check [s]")
     ap.add_argument("--json", type=Path, default=Path("bench_two_process.json"))
     ap.add_argument("--keep", type=Path, help="keep the run folders here")
+    ap.add_argument("--floor-s", type=float, default=20.0,
+                    help="first measure this machine's wake-up floor for this long [s] (0: not)")
     a = ap.parse_args(argv)
+    floor = wake_floor(a.floor_s) if a.floor_s > 0 else None
+    if floor is not None:
+        print(f"wake-up floor (a lone process sleeping to 2 ms deadlines, {a.floor_s:.0f} s): p50 "
+              f"{floor['p50_ms']:.3f}  p99.9 {floor['p99.9_ms']:.3f}  max {floor['max_ms']:.3f} ms late; "
+              f"{floor['over_1ms']} over 1 ms, {floor['over_3ms']} over 3 ms; running for {a.floor_s / 2:.0f} s, "
+              f"held at most {floor['held_max_ms']:.3f} ms, {floor['held_over_1ms']} times over 1 ms", flush=True)
     comp = None
     if a.competitor:
         comp = subprocess.Popen([sys.executable, "-c", "while True: pass"])
@@ -170,7 +225,8 @@ def main(argv=None) -> int:
         agg[who]["unanswered"] = sum(t["unanswered"] for t in ts)
     summary = {"n": a.n, "completed": len(done), "passed": len(passed), "competitor": a.competitor,
                "rt_priority": {"sim-serve": a.rt_sim, "run": a.rt_run},
-               "load_before": load0, "load_after": load1, "cores": os.cpu_count(), "per_process": agg,
+               "load_before": load0, "load_after": load1, "wake_floor": floor, "cores": os.cpu_count(),
+               "per_process": agg,
                "aborts": [{"k": r["k"], "reason": r["reason"], "cause": cause(r)}
                           for r in rows if r["status"] != "done"]}
     print(f"\n{len(done)} of {a.n} checks completed, {len(passed)} passed; competitor: {a.competitor}; "
