@@ -46,7 +46,8 @@ def integer(name: str, value: object, lo: int, hi: int, *, error: type[Exception
     except TypeError:
         raise error(f"{name} must be an int in {span}{what}, got {type(value).__name__} {value!r}") from None
     if not lo <= v <= hi:
-        raise error(f"{name} = {show.format(v)} is outside {span}{what}")
+        shown = show.format(v) if v >= 0 else "-" + show.format(-v)  # -0x1, not 0x-1
+        raise error(f"{name} = {shown} is outside {span}{what}")
     return v
 
 
