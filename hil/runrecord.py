@@ -137,9 +137,30 @@ def _member(cls: type[StrEnum], v: Any, field: str, source: str) -> Any:
 
 # ------------------------------------------------------------------ the parts with a fixed shape
 
+def _req(kind: str) -> Any:
+    """A part's field that its JSON must hold, of JSON ``kind`` (a key of ``_KINDS``)."""
+    return dataclasses.field(metadata={"kind": kind, "required": True})
+
+
+def _opt(kind: str) -> Any:
+    """A part's field its JSON may leave out or null (None), of JSON ``kind``."""
+    return dataclasses.field(default=None, metadata={"kind": kind, "required": False})
+
+
 class _Part:
     """A part of the record: ``as_json`` and ``read`` (from a :class:`_Fields`) each part has;
-    :meth:`from_json` reads one from its JSON."""
+    :meth:`from_json` reads one from its JSON.
+
+    The defaults serve a part whose JSON keys are its fields, in order, each declared with
+    :func:`_req` or :func:`_opt` (its JSON kind); a part of another shape overrides both."""
+
+    def as_json(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    @classmethod
+    def read(cls, f: _Fields):
+        return cls(**{d.name: f.get(d.name, d.metadata["kind"], required=d.metadata["required"])
+                      for d in dataclasses.fields(cls)})
 
     @classmethod
     def from_json(cls, obj: Any, where: str = "", source: str = META_NAME):
@@ -151,15 +172,8 @@ class _Part:
 class Software(_Part):
     """The software that made the run."""
 
-    name: str
-    version: str
-
-    def as_json(self) -> dict:
-        return {"name": self.name, "version": self.version}
-
-    @classmethod
-    def read(cls, f: _Fields) -> Software:
-        return cls(f.get("name", "text", required=True), f.get("version", "text", required=True))
+    name: str = _req("text")
+    version: str = _req("text")
 
 
 @dataclass(frozen=True)
@@ -202,67 +216,36 @@ def _read_steps(f: _Fields) -> tuple[StepTime, ...]:
 class Bus(_Part):
     """The CAN interface of a run on real drives (``emacheck run``)."""
 
-    interface: str
-    channel: str
-    bitrate_bps: int
-
-    def as_json(self) -> dict:
-        return {"interface": self.interface, "channel": self.channel, "bitrate_bps": self.bitrate_bps}
-
-    @classmethod
-    def read(cls, f: _Fields) -> Bus:
-        return cls(f.get("interface", "text", required=True), f.get("channel", "text", required=True),
-                   f.get("bitrate_bps", "int", required=True))
+    interface: str = _req("text")
+    channel: str = _req("text")
+    bitrate_bps: int = _req("int")
 
 
 @dataclass(frozen=True)
 class BusLoad(_Part):
     """The planned bus load (fractions of the bit rate)."""
 
-    nominal: float
-    worst: float
-
-    def as_json(self) -> dict:
-        return {"nominal": self.nominal, "worst": self.worst}
-
-    @classmethod
-    def read(cls, f: _Fields) -> BusLoad:
-        return cls(f.get("nominal", "number", required=True), f.get("worst", "number", required=True))
+    nominal: float = _req("number")
+    worst: float = _req("number")
 
 
 @dataclass(frozen=True)
 class Attribution(_Part):
     """Who made the check and for which work order (None where nobody said)."""
 
-    operator: str | None = None
-    work_order: str | None = None
-
-    def as_json(self) -> dict:
-        return {"operator": self.operator, "work_order": self.work_order}
-
-    @classmethod
-    def read(cls, f: _Fields) -> Attribution:
-        return cls(f.get("operator", "text"), f.get("work_order", "text"))
+    operator: str | None = _opt("text")
+    work_order: str | None = _opt("text")
 
 
 @dataclass(frozen=True)
 class Installation(_Part):
     """Where and when in the aircraft's life (the wear history's keys; None where nobody said)."""
 
-    aircraft: str | None = None
-    position: str | None = None
-    rig: str | None = None
-    flight_hours: float | None = None
-    flight_cycles: int | None = None
-
-    def as_json(self) -> dict:
-        return {"aircraft": self.aircraft, "position": self.position, "rig": self.rig,
-                "flight_hours": self.flight_hours, "flight_cycles": self.flight_cycles}
-
-    @classmethod
-    def read(cls, f: _Fields) -> Installation:
-        return cls(f.get("aircraft", "text"), f.get("position", "text"), f.get("rig", "text"),
-                   f.get("flight_hours", "number"), f.get("flight_cycles", "int"))
+    aircraft: str | None = _opt("text")
+    position: str | None = _opt("text")
+    rig: str | None = _opt("text")
+    flight_hours: float | None = _opt("number")
+    flight_cycles: int | None = _opt("int")
 
 
 #: the JSON keys of :class:`Installation`, in order
@@ -274,17 +257,9 @@ class Wear(_Part):
     """The simulated rig worn to ``flight_hours`` (``sim.truth.apply_wear``): its ``[wear]`` table and
     each channel's backlash on the wear line [mm]."""
 
-    flight_hours: float
-    params: dict
-    line_mm: dict
-
-    def as_json(self) -> dict:
-        return {"flight_hours": self.flight_hours, "params": self.params, "line_mm": self.line_mm}
-
-    @classmethod
-    def read(cls, f: _Fields) -> Wear:
-        return cls(f.get("flight_hours", "number", required=True), f.get("params", "object", required=True),
-                   f.get("line_mm", "object", required=True))
+    flight_hours: float = _req("number")
+    params: dict = _req("object")
+    line_mm: dict = _req("object")
 
 
 @dataclass(frozen=True)
@@ -329,20 +304,11 @@ class SafetyViolation(_Part):
     """The supervisor's latched violation (:class:`hil.supervisor.Violation`): the limit, its value in
     force, the measured value (the limit's unit) and when [s, check time]."""
 
-    limit: str
-    detail: str
-    t_s: float
-    value: float
-    threshold: float
-
-    def as_json(self) -> dict:
-        return {"limit": self.limit, "detail": self.detail, "t_s": self.t_s, "value": self.value,
-                "threshold": self.threshold}
-
-    @classmethod
-    def read(cls, f: _Fields) -> SafetyViolation:
-        return cls(f.get("limit", "text", required=True), f.get("detail", "text", required=True),
-                   *(f.get(k, "number", required=True) for k in ("t_s", "value", "threshold")))
+    limit: str = _req("text")
+    detail: str = _req("text")
+    t_s: float = _req("number")
+    value: float = _req("number")
+    threshold: float = _req("number")
 
     @classmethod
     def of(cls, viol) -> SafetyViolation:
