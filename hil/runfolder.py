@@ -174,7 +174,7 @@ class LoopFile:
 
     def __init__(self, path: Path, disk: DiskSync | None = None) -> None:
         self.path = Path(path)
-        self.disk = disk
+        self.disk = disk if disk is not None else DiskSync(background=False)  # (none: each job at once)
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
         self._parts: list[str] = []
         self.closed = False
@@ -188,17 +188,11 @@ class LoopFile:
         if self._parts:
             data = "".join(self._parts).encode()
             self._parts.clear()
-            if self.disk is None:
-                _do(("append", self._fd, data))
-            else:
-                self.disk.append(self._fd, data)
+            self.disk.append(self._fd, data)
 
     def fsync(self) -> None:
         """After what was flushed: to the disk itself (survives a power cut)."""
-        if self.disk is None:
-            os.fsync(self._fd)
-        else:
-            self.disk.fsync(self._fd)
+        self.disk.fsync(self._fd)
 
     def fileno(self) -> int:
         return self._fd
@@ -209,10 +203,7 @@ class LoopFile:
             return
         self.flush()
         self.closed = True
-        if self.disk is None:
-            _do(("close_synced" if sync else "close", self._fd))
-        else:
-            self.disk.close_file(self._fd, sync)
+        self.disk.close_file(self._fd, sync)
 
 
 def has_record(run_dir: Path) -> bool:

@@ -14,7 +14,7 @@ def test_the_latency_request_is_written_as_linux_reads_it_held_and_let_go(tmp_pa
     file is closed: written as 4 bytes, held after the call, closed by end_realtime()."""
     dev = tmp_path / "cpu_dma_latency"
     dev.write_bytes(b"")
-    assert realtime.hold_cpu_latency(0, str(dev)) == "CPU wake-up latency <= 0 us"
+    assert realtime.hold_cpu_latency(0, str(dev)) == "CPU wake-up latency <= 0 us requested"
     fd = realtime._latency_fd
     assert fd is not None and dev.read_bytes() == (0).to_bytes(4, "little")
     os.fstat(fd)  # still open: the request holds

@@ -76,7 +76,7 @@ def hold_cpu_latency(max_us: int, device: str = CPU_LATENCY_DEVICE) -> str:
         return f"CPU wake-up latency not held ({device}: {exc.strerror})"
     release_cpu_latency()
     _latency_fd = fd
-    return f"CPU wake-up latency <= {max_us} us"
+    return f"CPU wake-up latency <= {max_us} us requested"
 
 
 def release_cpu_latency() -> None:
