@@ -86,22 +86,53 @@ def add_bus_args(p: argparse.ArgumentParser, interfaces: str) -> None:
     p.add_argument("--interface", required=True, help=f"python-can interface, e.g. {interfaces}")
     p.add_argument("--channel", required=True, help="channel, e.g. can0 or vcan0")
     p.add_argument("--bitrate", type=int, metavar="BPS", help="bit rate (default: the actuation profile's)")
+    p.add_argument("--multicast-hops", type=_multicast_hops, default=None, metavar="N",
+                   help="udp_multicast only: the datagrams' IP hop limit (TTL), 0-255. Default 0: the frames "
+                        "stay on this host (both processes on one machine) and never reach a network card; "
+                        "1 reaches the other hosts of the local network (sim-serve on another machine)")
 
 
-def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages: bool = False):
-    """A python-can bus, or :class:`hil.errors.InterfaceError` saying what to check (exit status 3)."""
+#: udp_multicast's hop limit when --multicast-hops is not given: the frames never leave this host. With
+#: python-can's default (1) every frame also went out of the network card: in a virtual machine each
+#: was a transmit to its host, and the sends held both loops for milliseconds (docs/performance.md)
+MULTICAST_HOPS_DEFAULT = 0
+
+
+def _multicast_hops(text: str) -> int:
+    """argparse type of ``--multicast-hops``: an IP hop limit, a whole number from 0 to 255."""
+    v = _count("an IP hop limit")(text)
+    if v > 255:
+        raise argparse.ArgumentTypeError(f"{v} is over 255; an IP hop limit (TTL) is 0-255")
+    return v
+
+
+_multicast_hops.__name__ = "IP hop limit"
+
+
+def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages: bool = False,
+             multicast_hops: int | None = None):
+    """A python-can bus, or :class:`hil.errors.InterfaceError` saying what to check (exit status 3).
+
+    ``multicast_hops``: udp_multicast's IP hop limit (default :data:`MULTICAST_HOPS_DEFAULT`: this host
+    only); given for another interface, it is refused.
+    """
     import can
+
+    from hil.errors import InterfaceError
 
     kwargs = {"interface": interface, "channel": channel}
     if interface not in ("virtual", "socketcan", "udp_multicast"):
         kwargs["bitrate"] = bitrate
     if receive_own_messages:
         kwargs["receive_own_messages"] = True
+    if interface == "udp_multicast":
+        kwargs["hop_limit"] = MULTICAST_HOPS_DEFAULT if multicast_hops is None else multicast_hops
+    elif multicast_hops is not None:
+        raise InterfaceError(f"--multicast-hops {multicast_hops}: applies to --interface udp_multicast only "
+                             f"(not {interface!r})")
     try:
         return can.Bus(**kwargs)
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
-        from hil.errors import InterfaceError
-
         hint = ("check that the interface exists and is up (`ip link show {ch}`; "
                 "`sudo ip link set {ch} up type can bitrate {br}`)" if interface == "socketcan" else
                 "check that the adapter is connected, its driver installed and the channel name right")

@@ -54,7 +54,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     bitrate = args.bitrate or act.canopen.bitrate_bps
     # the bus first: an interface that cannot be opened leaves no half-made run folder behind
     # (virtual: the SYNC task's frames are part of the traffic the master follows)
-    bus = open_bus(args.interface, args.channel, bitrate, receive_own_messages=args.interface == "virtual")
+    bus = open_bus(args.interface, args.channel, bitrate, receive_own_messages=args.interface == "virtual",
+                   multicast_hops=args.multicast_hops)
     out = out_dir(args, "run")
     out.mkdir(parents=True, exist_ok=True)
     transport = BusTransport(bus, act.timing.sync_period_s)

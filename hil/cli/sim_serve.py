@@ -30,7 +30,8 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     plant = RigPlant(simrig.params, np.random.default_rng(seed))
     pair = SimDrivePair(plant, rig.plan, lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id),
                         serials=simrig.serials)
-    bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps)
+    bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps,
+                   multicast_hops=args.multicast_hops)
 
     stop = _StopFlag()
 

@@ -22,13 +22,26 @@ one line per check, then completions, per process the reaction's p50, p99,
 p99.9 and max over all checks (max of each check's percentile), the abort
 causes; writes everything to JSON (``--json``, default bench_two_process.json).
 
+Bystanders (``--witness``, default on): during each check one more process
+per CPU, pinned to it (SCHED_FIFO 60 where permitted, above both loops), does
+nothing but sleep to 2 ms deadlines and record every wake-up later than
+0.3 ms with its wall-clock time. After the check the master's CAN log is read
+for stalls: a SYNC or a drive's TPDO stream silent for more than 2.5 periods
+(the freshness limit stops the check at 3 periods without a sample). Each
+stall is printed with who went silent (SYNC: the master's loop; a TPDO while
+SYNCs came: sim-serve) and how long each bystander was held in the same
+interval: a stall the bystanders share is the machine's (a vCPU its host did
+not run), one they do not share is the loop's own.
+
 Usage: python tests/bench/bench_two_process.py [-n 10] [--competitor] [--rt-sim 50] [--rt-run 40] [--check CHECK.toml]
-       [--profile ACTUATION.toml] [--sim SIMRIG.toml] [--json FILE] [--keep DIR] [--floor-s 20]
+       [--profile ACTUATION.toml] [--sim SIMRIG.toml] [--json FILE] [--keep DIR] [--floor-s 20] [--no-witness]
 """
 
 from __future__ import annotations
 
 import argparse
+import bisect
+import itertools
 import json
 import os
 import signal
@@ -57,6 +70,127 @@ def _profile_args(a) -> list[str]:
     return out
 
 
+#: a bystander: pinned to one CPU, SCHED_FIFO 60 where permitted (above both loops), sleeping to 2 ms
+#: deadlines as the loops wait; every wake-up later than 0.3 ms as [wall-clock time of the wake-up [s],
+#: how late [s]], written as JSON to argv[2] when stopped (SIGINT/SIGTERM)
+_WITNESS = """
+import json, os, select, signal, socket, sys, time
+cpu, out = int(sys.argv[1]), sys.argv[2]
+os.sched_setaffinity(0, {cpu})
+try:
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(60))
+    fifo = True
+except OSError:
+    fifo = False
+stop = []
+signal.signal(signal.SIGINT, lambda *_: stop.append(1))
+signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+T, n, late = 0.002, 0, []
+mono, wall = time.monotonic, time.time
+t_next = mono() + T
+print("ready", flush=True)
+while not stop:
+    while (now := mono()) < t_next:
+        select.select([s], [], [], t_next - now)
+    d = now - t_next
+    if d > 3e-4:
+        late.append((round(wall(), 6), round(d, 6)))
+    n += 1
+    t_next += T * (1 + int(d // T))  # a stall skips the deadlines it missed, as the loops do
+json.dump({"cpu": cpu, "fifo": fifo, "wakeups": n, "late": late}, open(out, "w"))
+"""
+
+
+def start_witnesses(folder: Path, k: int) -> list[tuple[subprocess.Popen, Path]]:
+    """One bystander per CPU this process may run on (see :data:`_WITNESS`), each ready when returned."""
+    out = []
+    for cpu in sorted(os.sched_getaffinity(0)):
+        path = folder / f"witness{k}_cpu{cpu}.json"
+        w = subprocess.Popen([sys.executable, "-c", _WITNESS, str(cpu), str(path)], stdout=subprocess.PIPE, text=True)
+        w.stdout.readline()
+        out.append((w, path))
+    return out
+
+
+def stop_witnesses(ws: list[tuple[subprocess.Popen, Path]]) -> list[dict]:
+    for w, _ in ws:
+        w.send_signal(signal.SIGINT)
+    got = []
+    for w, path in ws:
+        w.wait(timeout=10)
+        got.append(json.loads(path.read_text()))
+    return got
+
+
+def stalls(can_log: Path, period_s: float = 0.002, limit_periods: float = 2.5) -> list[dict]:
+    """Where the check's cyclic streams went silent, from the master's CAN log (wall-clock stamps).
+
+    A stream is the SYNC (0x080) or a drive's TPDO (COB-IDs 0x180-0x1FF, 0x280-0x2FF, 0x380-0x3FF,
+    0x480-0x4FF; udp_multicast echoes the master's own RPDOs, which are not counted) with at least half as
+    many frames as SYNCs; a stall is a gap in one longer than ``limit_periods`` periods.
+    Overlapping stalls are merged; each keeps its first gap (``first``: start, end [s], ms) and names who
+    went silent first (the SYNC: the master; a TPDO while SYNCs kept coming: sim-serve). What follows an
+    abort (the master's safe stop) is merged into the stall that caused it.
+    """
+    import can
+
+    times: dict[int, list[float]] = {}
+    with open(can_log) as fh:
+        for msg in can.io.CanutilsLogReader(fh):
+            cid = msg.arbitration_id
+            if cid == 0x80 or (cid >> 7 in (3, 5, 7, 9) and msg.is_rx):
+                times.setdefault(cid, []).append(msg.timestamp)
+    n_sync = len(times.get(0x80, ()))
+    gaps = []
+    for cid, ts in times.items():
+        if len(ts) < n_sync / 2:
+            continue
+        for a, b in itertools.pairwise(ts):
+            if b - a > limit_periods * period_s:
+                gaps.append((a, b, cid))
+    gaps.sort()
+    merged: list[dict] = []
+    for a, b, cid in gaps:
+        if merged and a <= merged[-1]["end"]:
+            m = merged[-1]
+            m["end"] = max(m["end"], b)
+            m["streams"].add(cid)
+        else:
+            merged.append({"start": a, "end": b, "streams": {cid}, "first": (a, b, cid)})
+    for m in merged:
+        m["ms"] = round((m["end"] - m["start"]) * 1e3, 2)
+        a, b, cid = m["first"]
+        m["silent"] = "master (SYNC)" if cid == 0x80 else "sim-serve (TPDO)"
+        m["first"] = {"start": a, "end": b, "ms": round((b - a) * 1e3, 2)}
+        m["streams"] = sorted(f"0x{c:03X}" for c in m["streams"])
+    return merged
+
+
+def is_shared(stall: dict, period_s: float = 0.002) -> bool:
+    """A bystander was held at least half as long as the stall's first gap was late (its length less one
+    period)."""
+    late_ms = stall["first"]["ms"] - period_s * 1e3
+    return max(stall.get("bystanders_held_ms", {}).values(), default=0.0) >= late_ms / 2
+
+
+def shared(stall: dict, witnesses: list[dict]) -> dict[int, float]:
+    """Per bystander CPU, the longest it was held (a wake-up that late [ms]) overlapping the stall's first
+    gap (what the stall began with, before any abort followed it)."""
+    stall = stall["first"]
+    out = {}
+    for w in witnesses:
+        late = w["late"]
+        ends = [t for t, _ in late]
+        i = bisect.bisect_left(ends, stall["start"])
+        held = 0.0
+        while i < len(late) and late[i][0] - late[i][1] <= stall["end"]:
+            held = max(held, late[i][1])
+            i += 1
+        out[w["cpu"]] = round(held * 1e3, 2)
+    return out
+
+
 def one_check(k: int, a, folder: Path) -> dict:
     channel = f"239.74.{(os.getpid() >> 8) % 250 + 1}.{(os.getpid() + k) % 250 + 1}"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -66,6 +200,7 @@ def one_check(k: int, a, folder: Path) -> dict:
     rt_run = ["--rt-priority", str(a.rt_run)] if a.rt_run else []
     sim_cmd = _cmd("sim-serve", "--interface", "udp_multicast", "--channel", channel, *rt_sim,
                    "--timing-json", str(sim_json), *_profile_args(a), *(["--sim", str(a.sim)] if a.sim else []))
+    ws = start_witnesses(folder, k) if a.witness else []
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=ROOT)
     t_ready = time.monotonic() + 60
     ready = False
@@ -80,6 +215,7 @@ def one_check(k: int, a, folder: Path) -> dict:
             break
     if not ready:
         sim.kill()
+        stop_witnesses(ws)
         return {"k": k, "channel": channel, "status": "sim-serve not ready", "sim_out": sim_out}
     run_cmd = _cmd("run", "--interface", "udp_multicast", "--channel", channel, "--arm", "--quiet", "--no-history",
                    *rt_run,
@@ -98,13 +234,22 @@ def one_check(k: int, a, folder: Path) -> dict:
     except subprocess.TimeoutExpired:
         sim.kill()
         sim_out.append("sim-serve did not stop within 20 s of SIGINT: killed")
+    witnesses = stop_witnesses(ws)
+    found = stalls(run_dir / "can.log") if (run_dir / "can.log").exists() else []
+    for st in found:
+        st["bystanders_held_ms"] = shared(st, witnesses)
     meta = json.loads((run_dir / "meta.json").read_text()) if (run_dir / "meta.json").exists() else {}
     result = json.loads((run_dir / "result.json").read_text()) if (run_dir / "result.json").exists() else {}
     simj = json.loads(sim_json.read_text()) if sim_json.exists() else {}
     return {"k": k, "channel": channel, "rc": rc, "wall_s": round(wall, 2), "status": meta.get("status"),
             "verdict": result.get("status"), "reason": meta.get("reason"), "safety": meta.get("safety"),
             "can": meta.get("can"), "master_timing": meta.get("timing"), "sim": simj,
-            "run_out_tail": run_out.splitlines()[-12:], "sim_out": sim_out[-8:]}
+            "run_out_tail": run_out.splitlines()[-12:], "sim_out": sim_out[-8:], "stalls": found,
+            "witnesses": [{"cpu": w["cpu"], "fifo": w["fifo"], "wakeups": w["wakeups"],
+                           "late_over_1ms": sum(d > 1e-3 for _, d in w["late"]),
+                           "late_over_3ms": sum(d > 3e-3 for _, d in w["late"]),
+                           "late_max_ms": round(max((d for _, d in w["late"]), default=0.0) * 1e3, 2)}
+                          for w in witnesses]}
 
 
 def cause(r: dict) -> str:
@@ -179,6 +324,8 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=600.0, help="per check [s]")
     ap.add_argument("--json", type=Path, default=Path("bench_two_process.json"))
     ap.add_argument("--keep", type=Path, help="keep the run folders here")
+    ap.add_argument("--no-witness", dest="witness", action="store_false",
+                    help="no bystander process per CPU during the checks (see the module's docstring)")
     ap.add_argument("--floor-s", type=float, default=20.0,
                     help="first measure this machine's wake-up floor for this long [s] (0: not)")
     a = ap.parse_args(argv)
@@ -206,6 +353,14 @@ def main(argv=None) -> int:
                 print(f"check {k + 1}/{a.n}: {r['status']} {r.get('verdict')} ({r.get('wall_s')} s); reaction "
                       f"p50/p99/p99.9/max ms: master {fm(mt)}, sim-serve {fm(st)}"
                       + (f"; ABORT: {r['reason']} [{cause(r)}]" if r["status"] != "done" else ""), flush=True)
+                for st in r.get("stalls", ()):
+                    print(f"    stall {st['ms']:.1f} ms at {st['start']:.3f} (first gap {st['first']['ms']:.1f} ms): "
+                          f"{st['silent']} silent ({', '.join(st['streams'])}); bystanders held "
+                          + ", ".join(f"CPU{c} {v:.1f} ms" for c, v in st.get("bystanders_held_ms", {}).items()),
+                          flush=True)
+                for w in r.get("witnesses", ()):
+                    print(f"    bystander CPU{w['cpu']}: {w['wakeups']} wake-ups, {w['late_over_1ms']} over 1 ms, "
+                          f"{w['late_over_3ms']} over 3 ms late, max {w['late_max_ms']:.2f} ms", flush=True)
     finally:
         if comp is not None:
             comp.kill()
@@ -229,6 +384,10 @@ def main(argv=None) -> int:
                "per_process": agg,
                "aborts": [{"k": r["k"], "reason": r["reason"], "cause": cause(r)}
                           for r in rows if r["status"] != "done"]}
+    all_stalls = [st for r in rows for st in r.get("stalls", ())]
+    summary["stalls"] = {"n": len(all_stalls), "shared": sum(is_shared(st) for st in all_stalls),
+                         "by_master": sum(st["silent"].startswith("master") for st in all_stalls),
+                         "max_ms": max((st["ms"] for st in all_stalls), default=0.0)}
     print(f"\n{len(done)} of {a.n} checks completed, {len(passed)} passed; competitor: {a.competitor}; "
           f"load average before {load0}, after {load1}")
     for who, g in agg.items():
@@ -237,6 +396,11 @@ def main(argv=None) -> int:
             print(f"{who:9s} {m:8s} worst over checks: p50 {q['p50_ms']:.3f}  p99 {q['p99_ms']:.3f}  "
                   f"p99.9 {q['p99.9_ms']:.3f}  max {q['max_ms']:.3f} ms")
         print(f"{who:9s} late answers {g['late']}, unanswered cycles {g['unanswered']}")
+    if a.witness:
+        g = summary["stalls"]
+        print(f"stalls (a stream silent over 2.5 periods): {g['n']}, {g['by_master']} of them the SYNC, longest "
+              f"{g['max_ms']:.1f} ms; shared with a bystander (held at least half as long as the stall was "
+              f"late): {g['shared']} of {g['n']}")
     for ab in summary["aborts"]:
         print(f"abort {ab['k'] + 1}: {ab['reason']}\n    {ab['cause']}")
     a.json.write_text(json.dumps({"summary": summary, "checks": rows}, indent=1))

@@ -1,0 +1,99 @@
+"""udp_multicast's hop limit (``--multicast-hops``): by default the frames stay on this host.
+
+python-can's default hop limit (1) sends every frame out of the network card as well as to the local
+sockets; in a virtual machine each frame was a transmit to its host, and those sends held both loops for
+milliseconds (docs/performance.md). emacheck opens udp_multicast with hop limit 0 unless told otherwise:
+Linux loops a hop-limit-0 datagram back to this host's members and sends it nowhere else.
+"""
+
+from __future__ import annotations
+
+import socket
+
+import pytest
+
+from hil.cli import main
+from hil.cli.common import MULTICAST_HOPS_DEFAULT, open_bus
+from hil.errors import InterfaceError
+
+can = pytest.importorskip("can")
+pytest.importorskip("msgpack", reason="python-can's udp_multicast needs msgpack (the [test] extra)")
+
+GROUP_V4 = "239.74.201.9"
+GROUP_V6 = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173"
+
+
+def _pair(group: str, hops: int | None):
+    try:
+        return open_bus("udp_multicast", group, 500_000, multicast_hops=hops), \
+            open_bus("udp_multicast", group, 500_000, multicast_hops=hops)
+    except InterfaceError as exc:
+        pytest.skip(f"udp_multicast cannot be opened on this host (no multicast route?): {exc}")
+
+
+def _hops(bus, group: str) -> int:
+    sock = bus._multicast._socket  # python-can's GeneralPurposeUdpMulticastBus: the socket it sends with
+    if ":" in group:
+        return sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS)
+    return sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
+
+
+@pytest.mark.parametrize("group", [GROUP_V4, GROUP_V6])
+@pytest.mark.parametrize("hops,expected", [(None, 0), (0, 0), (1, 1), (255, 255)])
+def test_the_hop_limit_is_the_one_asked_for_and_0_by_default(group, hops, expected):
+    """The socket's hop limit as Linux reports it; a frame sent still reaches another bus on this host."""
+    assert MULTICAST_HOPS_DEFAULT == 0
+    a, b = _pair(group, hops)
+    try:
+        assert _hops(a, group) == expected and _hops(b, group) == expected
+        a.send(can.Message(arbitration_id=0x80, data=b"", is_extended_id=False))
+        got = b.recv(2.0)
+        assert got is not None and got.arbitration_id == 0x80
+    finally:
+        a.shutdown()
+        b.shutdown()
+
+
+def test_a_hop_limit_for_another_interface_is_refused_naming_the_flag():
+    with pytest.raises(InterfaceError, match=r"--multicast-hops 1: applies to --interface udp_multicast only "
+                                             r"\(not 'virtual'\)"):
+        open_bus("virtual", "x", 500_000, multicast_hops=1)
+
+
+@pytest.mark.parametrize("command,module", [(["run", "--arm"], "hil.cli.run"), (["sim-serve"], "hil.cli.sim_serve")])
+@pytest.mark.parametrize("flag,expected", [([], None), (["--multicast-hops", "7"], 7)])
+def test_both_commands_pass_the_flag_to_the_bus(command, module, flag, expected, monkeypatch, capsys):
+    """The value given (None when not) reaches open_bus; the spy then refuses the bus (exit 3, one line)."""
+    import importlib
+
+    seen = []
+
+    def spy(interface, channel, bitrate, **kw):
+        seen.append(kw.get("multicast_hops"))
+        raise InterfaceError("spy: no bus")
+
+    monkeypatch.setattr(importlib.import_module(module), "open_bus", spy)
+    rc = main([*command, "--interface", "udp_multicast", "--channel", GROUP_V4, *flag])
+    out = capsys.readouterr()
+    assert rc == 3 and seen == [expected]
+    assert "spy: no bus" in out.out + out.err and "Traceback" not in out.out + out.err
+
+
+@pytest.mark.parametrize("value,ok", [("0", True), ("255", True), ("-1", False), ("256", False), ("1.5", False)])
+def test_the_flag_takes_0_to_255(value, ok, capsys):
+    """On its boundaries: 0 and 255 are taken, -1, 256 and 1.5 refused with the flag named (exit 3, no
+    traceback). (Without --arm, run refuses to move anything after parsing: exit 3 either way, so the
+    message tells which.)"""
+    args = ["run", "--interface", "udp_multicast", "--channel", GROUP_V4, "--multicast-hops", value]
+    if ok:
+        rc = main(args)
+    else:
+        with pytest.raises(SystemExit) as exc:
+            main(args)
+        rc = exc.value.code
+    err = capsys.readouterr()
+    assert rc == 3
+    if ok:
+        assert "argument --multicast-hops" not in err.err and "refusing to move anything" in err.out
+    else:
+        assert "argument --multicast-hops" in err.err and "Traceback" not in err.err
