@@ -219,6 +219,14 @@ class Bus(_Part):
     interface: str = _req("text")
     channel: str = _req("text")
     bitrate_bps: int = _req("int")
+    #: udp_multicast's IP hop limit (0: the frames stayed on this host); None (not written) for other interfaces
+    multicast_hops: int | None = _opt("int")
+
+    def as_json(self) -> dict:
+        out = super().as_json()
+        if self.multicast_hops is None:
+            del out["multicast_hops"]
+        return out
 
 
 @dataclass(frozen=True)

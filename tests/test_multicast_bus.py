@@ -97,3 +97,28 @@ def test_the_flag_takes_0_to_255(value, ok, capsys):
         assert "argument --multicast-hops" not in err.err and "refusing to move anything" in err.out
     else:
         assert "argument --multicast-hops" in err.err and "Traceback" not in err.err
+
+
+@pytest.mark.parametrize("interface,channel,flag,expected", [
+    ("udp_multicast", GROUP_V4, [], MULTICAST_HOPS_DEFAULT),
+    ("udp_multicast", GROUP_V4, ["--multicast-hops", "1"], 1),
+    ("virtual", "emacheck-hops-record", [], None),
+])
+def test_run_records_the_hop_limit_it_opened_the_bus_with(interface, channel, flag, expected, monkeypatch, capsys,
+                                                          tmp_path):
+    """meta.json's bus part says which hop limit the frames had (udp_multicast only; another interface has
+    no such key). A spy takes the record's bus part and ends the run there (exit 3)."""
+    import hil.runrecord
+
+    seen = []
+
+    def spy(*args, bus=None, **kw):
+        seen.append(bus)
+        raise InterfaceError("spy: stop after the record's bus part")
+
+    monkeypatch.setattr(hil.runrecord, "start_record", spy)
+    rc = main(["run", "--arm", "--interface", interface, "--channel", channel, "--out", str(tmp_path / "r"), *flag])
+    capsys.readouterr()
+    assert rc == 3 and len(seen) == 1
+    assert seen[0].multicast_hops == expected
+    assert ("multicast_hops" in seen[0].as_json()) is (expected is not None)

@@ -110,6 +110,19 @@ def test_json_layout_order_absent_keys_and_the_two_historical_placements():
     assert bare == {"run_id": "x", "operator": None, "work_order": None}
 
 
+def test_the_bus_part_keeps_the_multicast_hop_limit_only_where_there_is_one():
+    udp = Bus("udp_multicast", "239.74.0.1", 500_000, 0)
+    assert udp.as_json() == {"interface": "udp_multicast", "channel": "239.74.0.1", "bitrate_bps": 500_000,
+                             "multicast_hops": 0}
+    assert Bus.from_json(udp.as_json()) == udp
+    sock = Bus("socketcan", "can0", 500_000)
+    assert "multicast_hops" not in sock.as_json() and Bus.from_json(sock.as_json()) == sock
+    rec = _full(bus=udp)
+    assert rec.as_json()["multicast_hops"] == 0 and RunRecord.from_json(rec.as_json()) == rec
+    with pytest.raises(RunRecordError, match="multicast_hops"):
+        Bus.from_json({**udp.as_json(), "multicast_hops": "0"})
+
+
 def test_identity_without_0x1018_sub_4_has_no_serial_key():
     listed = Identity.of(1, {"vendor_id": 1, "product_code": 2, "revision": 3, "serial": None})
     unlisted = Identity.of(1, {"vendor_id": 1, "product_code": 2, "revision": 3})

@@ -109,6 +109,14 @@ def _multicast_hops(text: str) -> int:
 _multicast_hops.__name__ = "IP hop limit"
 
 
+def multicast_hops_for(interface: str, multicast_hops: int | None) -> int | None:
+    """The IP hop limit a bus on ``interface`` is opened with: udp_multicast's (``multicast_hops``, else
+    :data:`MULTICAST_HOPS_DEFAULT`), None for any other interface (where ``--multicast-hops`` is refused)."""
+    if interface == "udp_multicast":
+        return MULTICAST_HOPS_DEFAULT if multicast_hops is None else multicast_hops
+    return None
+
+
 def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages: bool = False,
              multicast_hops: int | None = None):
     """A python-can bus, or :class:`hil.errors.InterfaceError` saying what to check (exit status 3).
@@ -126,7 +134,7 @@ def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages
     if receive_own_messages:
         kwargs["receive_own_messages"] = True
     if interface == "udp_multicast":
-        kwargs["hop_limit"] = MULTICAST_HOPS_DEFAULT if multicast_hops is None else multicast_hops
+        kwargs["hop_limit"] = multicast_hops_for(interface, multicast_hops)
     elif multicast_hops is not None:
         raise InterfaceError(f"--multicast-hops {multicast_hops}: applies to --interface udp_multicast only "
                              f"(not {interface!r})")

@@ -26,6 +26,7 @@ from hil.cli.common import (
     file_hashes,
     installation,
     make_console,
+    multicast_hops_for,
     open_bus,
     out_dir,
     record_history,
@@ -68,7 +69,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                        disk=disk)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
-    record = start_record(act, check, mode=RunMode.RUN, bus=Bus(args.interface, args.channel, bitrate),
+    bus_rec = Bus(args.interface, args.channel, bitrate, multicast_hops_for(args.interface, args.multicast_hops))
+    record = start_record(act, check, mode=RunMode.RUN, bus=bus_rec,
                           bus_load=BusLoad(load.load_nominal, load.load_worst), **rig_meta(rig),
                           attribution=Attribution(args.operator, args.work_order),
                           installation=installation(args, act),

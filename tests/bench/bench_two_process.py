@@ -1,4 +1,4 @@
-"""Benchmark (not a test): N two-process checks at the shipped SYNC rate over udp_multicast.
+"""Benchmark (not a test): N two-process checks at the shipped SYNC rate over udp_multicast (or SocketCAN).
 
 Each check is two processes on this machine, as on a hardware-in-the-loop
 bench: ``emacheck sim-serve`` (the simulated drives, ``--timing-json``) and
@@ -33,8 +33,21 @@ SYNCs came: sim-serve) and how long each bystander was held in the same
 interval: a stall the bystanders share is the machine's (a vCPU its host did
 not run), one they do not share is the loop's own.
 
+Kernel trace (``--kernel-trace``, root and tracefs at /sys/kernel/tracing): during each check a
+tracefs instance of its own records every hard-interrupt handler's entry and exit (local timer, IPIs,
+device interrupts; clock CLOCK_MONOTONIC). Each handler's duration is read back; a stall is printed with
+the slowest handler inside it. A handler normally takes microseconds; in a virtual machine whose host
+stops the vCPU while the guest handles a timer interrupt (its exit to the host), the handler lasts as long
+as the host held it: that names the host as a stall's cause, with the CPU and the time.
+
+``--interface socketcan --channel vcan0`` (or a real CAN interface) runs the same checks over SocketCAN,
+where ``run`` sends SYNC kernel-timed (Broadcast Manager); a kernel with CAN is needed (not a kernel
+without it, as this project's development machine: there ``tests/bench/bench_vcan.py`` runs in
+user-mode-linux).
+
 Usage: python tests/bench/bench_two_process.py [-n 10] [--competitor] [--rt-sim 50] [--rt-run 40] [--check CHECK.toml]
        [--profile ACTUATION.toml] [--sim SIMRIG.toml] [--json FILE] [--keep DIR] [--floor-s 20] [--no-witness]
+       [--kernel-trace] [--interface {udp_multicast,socketcan}] [--channel CHANNEL]
 """
 
 from __future__ import annotations
@@ -44,11 +57,13 @@ import bisect
 import itertools
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -191,14 +206,159 @@ def shared(stall: dict, witnesses: list[dict]) -> dict[int, float]:
     return out
 
 
-def one_check(k: int, a, folder: Path) -> dict:
-    channel = f"239.74.{(os.getpid() >> 8) % 250 + 1}.{(os.getpid() + k) % 250 + 1}"
+TRACEFS = Path("/sys/kernel/tracing")
+#: the hard-interrupt handlers timed (tracefs event groups and names, each with _entry and _exit)
+IRQ_EVENTS = (("irq_vectors", "local_timer"), ("irq_vectors", "call_function_single"),
+              ("irq_vectors", "call_function"), ("irq_vectors", "reschedule"), ("irq_vectors", "irq_work"),
+              ("irq", "irq_handler"))
+#: a handler at least this long is kept with its time (the rest only counted) [ms]
+SLOW_HANDLER_MS = 0.2
+#: a CPU without any interrupt for at least this long is kept as a silence [ms] (with the bystanders on,
+#: each CPU takes a timer interrupt every 2 ms: longer, the CPU had interrupts off or its host did not run it)
+SILENT_MS = 2.5
+_TRACE_LINE = re.compile(r"\[(\d+)\]\s+\S+\s+(\d+\.\d+): (\w+)_(entry|exit):")
+_LOST = re.compile(r"CPU:(\d+) \[LOST (\d+) EVENTS\]")
+
+
+@dataclass(frozen=True)
+class Handler:
+    """One hard-interrupt handler that took at least :data:`SLOW_HANDLER_MS`."""
+
+    cpu: int
+    start_s: float  #: when it began [s, the clock the trace was converted to]
+    ms: float  #: how long it ran [ms]
+    name: str  #: e.g. local_timer, call_function_single, irq_handler
+
+
+@dataclass(frozen=True)
+class Silence:
+    """A CPU that took no interrupt (no handler began or ended) for at least :data:`SILENT_MS`."""
+
+    cpu: int
+    start_s: float  #: its last interrupt event before [s]
+    ms: float  #: until its next [ms]
+
+
+def parse_irq_trace(lines, offset_s: float = 0.0, slow_ms: float = SLOW_HANDLER_MS,
+                    silent_ms: float = SILENT_MS) -> dict:
+    """Hard-interrupt handler durations from tracefs text (``trace`` of an instance with the
+    :data:`IRQ_EVENTS` enabled).
+
+    Each ``<name>_entry`` is paired with the next ``<name>_exit`` on the same CPU; the duration is exit
+    minus entry [ms]. An exit without its entry (the trace began inside the handler) is not counted.
+    ``offset_s`` is added to the trace's stamps (CLOCK_MONOTONIC to wall clock: ``time.time() -
+    time.monotonic()``). Returns ``n``, ``p50_us``, ``p99_us``, ``p99.9_us``, ``max_ms``, ``over_1ms``,
+    ``lost_events`` (the ring buffer overflowed: some handlers are missing), ``slow``: a
+    :class:`Handler` for each handler of at least ``slow_ms``, and ``silent``: a :class:`Silence` for each
+    interval of at least ``silent_ms`` in which a CPU logged no interrupt event (both in time order).
+    """
+    import numpy as np
+
+    open_: dict[tuple[int, str], float] = {}
+    durations: list[float] = []
+    slow: list[Handler] = []
+    silent: list[Silence] = []
+    last: dict[int, float] = {}
+    lost = 0
+    for line in lines:
+        m = _TRACE_LINE.search(line)
+        if m is None:
+            if (lm := _LOST.search(line)) is not None:
+                lost += int(lm.group(2))
+            continue
+        cpu, t, name, edge = int(m.group(1)), float(m.group(2)), m.group(3), m.group(4)
+        gap_ms = round((t - last.get(cpu, t)) * 1e3, 3)
+        if gap_ms >= silent_ms:
+            silent.append(Silence(cpu, last[cpu] + offset_s, gap_ms))
+        last[cpu] = t
+        if edge == "entry":
+            open_[(cpu, name)] = t
+        elif (t0 := open_.pop((cpu, name), None)) is not None:
+            ms = round((t - t0) * 1e3, 3)  # the trace's stamps are whole microseconds
+            durations.append(ms)
+            if ms >= slow_ms:
+                slow.append(Handler(cpu, t0 + offset_s, ms, name))
+    d = np.asarray(durations)
+    q = (lambda p: round(float(np.percentile(d, p)) * 1e3, 1)) if d.size else (lambda p: None)  # noqa: E731
+    return {"n": int(d.size), "p50_us": q(50), "p99_us": q(99), "p99.9_us": q(99.9),
+            "max_ms": round(float(d.max()), 3) if d.size else None, "over_1ms": int((d > 1.0).sum()),
+            "lost_events": lost, "slow": sorted(slow, key=lambda h: h.start_s),
+            "silent": sorted(silent, key=lambda x: x.start_s)}
+
+
+def slowest_inside(stall: dict, slow: list[Handler] | list[Silence]) -> Handler | Silence | None:
+    """The longest slow handler (or CPU silence) overlapping the stall's first gap, if any."""
+    a, b = stall["first"]["start"], stall["first"]["end"]
+    inside = [h for h in slow if h.start_s < b and h.start_s + h.ms / 1e3 > a]
+    return max(inside, key=lambda h: h.ms, default=None)
+
+
+class KernelTrace:
+    """Hard-interrupt handler durations during a check, from a tracefs instance of its own.
+
+    :meth:`problem` says why it cannot run here (None: it can). :meth:`start` clears and starts the
+    instance; :meth:`stop` stops it and returns :func:`parse_irq_trace` of what it holds (wall-clock
+    times); :meth:`close` removes the instance.
+    """
+
+    def __init__(self, root: Path = TRACEFS, name: str = "emacheck-bench", buffer_kb: int = 49152) -> None:
+        self.root = root
+        self.dir = root / "instances" / name
+        self.buffer_kb = buffer_kb
+
+    @staticmethod
+    def problem(root: Path = TRACEFS) -> str | None:
+        if not (root / "available_events").exists():
+            return (f"tracefs is not mounted at {root} (as root: mount -t tracefs nodev {root})")
+        if not os.access(root / "instances", os.W_OK):
+            return f"{root}/instances is not writable (run as root)"
+        have = set((root / "available_events").read_text().split())
+        missing = [f"{g}:{e}_{x}" for g, e in IRQ_EVENTS for x in ("entry", "exit")
+                   if f"{g}:{e}_{x}" not in have and e in ("local_timer", "irq_handler")]
+        return f"this kernel has no trace event {', '.join(missing)}" if missing else None
+
+    def _w(self, rel: str, value: str) -> None:
+        (self.dir / rel).write_text(value)
+
+    def start(self) -> None:
+        if not self.dir.exists():
+            self.dir.mkdir()
+        self._w("tracing_on", "0")
+        self._w("trace_clock", "mono")
+        self._w("buffer_size_kb", str(self.buffer_kb))
+        for g, e in IRQ_EVENTS:
+            for x in ("entry", "exit"):
+                ev = self.dir / "events" / g / f"{e}_{x}" / "enable"
+                if ev.exists():
+                    ev.write_text("1")
+        self._w("trace", "")
+        self.offset_s = time.time() - time.monotonic()
+        self._w("tracing_on", "1")
+
+    def stop(self) -> dict:
+        self._w("tracing_on", "0")
+        with open(self.dir / "trace") as fh:
+            got = parse_irq_trace(fh, self.offset_s)
+        self._w("trace", "")
+        return got
+
+    def close(self) -> None:
+        try:
+            self._w("tracing_on", "0")
+            self.dir.rmdir()
+        except OSError:
+            pass
+
+
+def one_check(k: int, a, folder: Path, ktrace: KernelTrace | None = None) -> dict:
+    # udp_multicast: a group of this check's own; SocketCAN: the interface given
+    channel = a.channel or f"239.74.{(os.getpid() >> 8) % 250 + 1}.{(os.getpid() + k) % 250 + 1}"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     sim_json = folder / f"sim{k}.json"
     run_dir = folder / f"run{k}"
     rt_sim = ["--rt-priority", str(a.rt_sim)] if a.rt_sim else []
     rt_run = ["--rt-priority", str(a.rt_run)] if a.rt_run else []
-    sim_cmd = _cmd("sim-serve", "--interface", "udp_multicast", "--channel", channel, *rt_sim,
+    sim_cmd = _cmd("sim-serve", "--interface", a.interface, "--channel", channel, *rt_sim,
                    "--timing-json", str(sim_json), *_profile_args(a), *(["--sim", str(a.sim)] if a.sim else []))
     ws = start_witnesses(folder, k) if a.witness else []
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=ROOT)
@@ -217,9 +377,11 @@ def one_check(k: int, a, folder: Path) -> dict:
         sim.kill()
         stop_witnesses(ws)
         return {"k": k, "channel": channel, "status": "sim-serve not ready", "sim_out": sim_out}
-    run_cmd = _cmd("run", "--interface", "udp_multicast", "--channel", channel, "--arm", "--quiet", "--no-history",
+    run_cmd = _cmd("run", "--interface", a.interface, "--channel", channel, "--arm", "--quiet", "--no-history",
                    *rt_run,
                    "--out", str(run_dir), *_profile_args(a), *(["--check", str(a.check)] if a.check else []))
+    if ktrace is not None:
+        ktrace.start()
     t0 = time.monotonic()
     try:
         r = subprocess.run(run_cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=a.timeout)
@@ -235,9 +397,16 @@ def one_check(k: int, a, folder: Path) -> dict:
         sim.kill()
         sim_out.append("sim-serve did not stop within 20 s of SIGINT: killed")
     witnesses = stop_witnesses(ws)
+    irq = ktrace.stop() if ktrace is not None else None
     found = stalls(run_dir / "can.log") if (run_dir / "can.log").exists() else []
     for st in found:
         st["bystanders_held_ms"] = shared(st, witnesses)
+        if irq is not None:
+            h = slowest_inside(st, irq["slow"])
+            st["slowest_irq"] = None if h is None else {"cpu": h.cpu, "name": h.name, "ms": h.ms,
+                                                        "start": round(h.start_s, 6)}
+            q = slowest_inside(st, irq["silent"])
+            st["cpu_silent"] = None if q is None else {"cpu": q.cpu, "ms": q.ms, "start": round(q.start_s, 6)}
     meta = json.loads((run_dir / "meta.json").read_text()) if (run_dir / "meta.json").exists() else {}
     result = json.loads((run_dir / "result.json").read_text()) if (run_dir / "result.json").exists() else {}
     simj = json.loads(sim_json.read_text()) if sim_json.exists() else {}
@@ -249,7 +418,22 @@ def one_check(k: int, a, folder: Path) -> dict:
                            "late_over_1ms": sum(d > 1e-3 for _, d in w["late"]),
                            "late_over_3ms": sum(d > 3e-3 for _, d in w["late"]),
                            "late_max_ms": round(max((d for _, d in w["late"]), default=0.0) * 1e3, 2)}
-                          for w in witnesses]}
+                          for w in witnesses],
+            "irq": None if irq is None else {**{k_: v for k_, v in irq.items() if k_ not in ("slow", "silent")},
+                                             "slow": [{"cpu": h.cpu, "name": h.name, "ms": h.ms,
+                                                       "start": round(h.start_s, 6)} for h in irq["slow"]],
+                                             "silent": [{"cpu": x.cpu, "ms": x.ms, "start": round(x.start_s, 6)}
+                                                        for x in irq["silent"]]}}
+
+
+def _irq_text(st: dict) -> str:
+    if "slowest_irq" not in st:
+        return ""
+    h, q = st["slowest_irq"], st.get("cpu_silent")
+    return ((f"; no interrupt handler over {SLOW_HANDLER_MS} ms inside" if h is None
+             else f"; slowest interrupt handler inside: {h['name']} on CPU{h['cpu']}, {h['ms']:.2f} ms")
+            + (f"; no CPU without interrupts for {SILENT_MS} ms" if q is None
+               else f"; CPU{q['cpu']} took no interrupt for {q['ms']:.2f} ms"))
 
 
 def cause(r: dict) -> str:
@@ -328,7 +512,22 @@ def main(argv=None) -> int:
                     help="no bystander process per CPU during the checks (see the module's docstring)")
     ap.add_argument("--floor-s", type=float, default=20.0,
                     help="first measure this machine's wake-up floor for this long [s] (0: not)")
+    ap.add_argument("--kernel-trace", action="store_true",
+                    help="time every hard-interrupt handler during each check (tracefs, root) and name the "
+                         "slowest inside each stall")
+    ap.add_argument("--interface", choices=("udp_multicast", "socketcan"), default="udp_multicast",
+                    help="the bus of both processes (default udp_multicast; socketcan: a kernel with CAN)")
+    ap.add_argument("--channel", help="socketcan: the interface (vcan0, can0); udp_multicast: one group for "
+                                      "every check (default: a group of each check's own)")
     a = ap.parse_args(argv)
+    if a.interface == "socketcan" and not a.channel:
+        ap.error("--interface socketcan needs --channel (e.g. vcan0)")
+    ktrace = None
+    if a.kernel_trace:
+        why = KernelTrace.problem()
+        if why is not None:
+            ap.error(f"--kernel-trace: {why}")
+        ktrace = KernelTrace()
     floor = wake_floor(a.floor_s) if a.floor_s > 0 else None
     if floor is not None:
         print(f"wake-up floor (a lone process sleeping to 2 ms deadlines, {a.floor_s:.0f} s): p50 "
@@ -345,7 +544,7 @@ def main(argv=None) -> int:
             folder = a.keep or Path(tmp)
             folder.mkdir(parents=True, exist_ok=True)
             for k in range(a.n):
-                r = one_check(k, a, folder)
+                r = one_check(k, a, folder, ktrace)
                 rows.append(r)
                 mt, st = r.get("master_timing") or {}, (r.get("sim") or {}).get("timing") or {}
                 fm = lambda t: (f"{t['reaction']['p50_ms']:.3f}/{t['reaction']['p99_ms']:.3f}/"  # noqa: E731
@@ -356,8 +555,13 @@ def main(argv=None) -> int:
                 for st in r.get("stalls", ()):
                     print(f"    stall {st['ms']:.1f} ms at {st['start']:.3f} (first gap {st['first']['ms']:.1f} ms): "
                           f"{st['silent']} silent ({', '.join(st['streams'])}); bystanders held "
-                          + ", ".join(f"CPU{c} {v:.1f} ms" for c, v in st.get("bystanders_held_ms", {}).items()),
-                          flush=True)
+                          + ", ".join(f"CPU{c} {v:.1f} ms" for c, v in st.get("bystanders_held_ms", {}).items())
+                          + _irq_text(st), flush=True)
+                if r.get("irq") is not None:
+                    q = r["irq"]
+                    print(f"    interrupt handlers: {q['n']}, p50 {q['p50_us']} us, p99.9 {q['p99.9_us']} us, "
+                          f"max {q['max_ms']} ms, {q['over_1ms']} over 1 ms"
+                          + (f"; {q['lost_events']} trace events LOST" if q["lost_events"] else ""), flush=True)
                 for w in r.get("witnesses", ()):
                     print(f"    bystander CPU{w['cpu']}: {w['wakeups']} wake-ups, {w['late_over_1ms']} over 1 ms, "
                           f"{w['late_over_3ms']} over 3 ms late, max {w['late_max_ms']:.2f} ms", flush=True)
@@ -365,6 +569,8 @@ def main(argv=None) -> int:
         if comp is not None:
             comp.kill()
             comp.wait()
+        if ktrace is not None:
+            ktrace.close()
     load1 = _load()
     done = [r for r in rows if r["status"] == "done"]
     passed = [r for r in done if r.get("verdict") == "pass"]
@@ -388,6 +594,16 @@ def main(argv=None) -> int:
     summary["stalls"] = {"n": len(all_stalls), "shared": sum(is_shared(st) for st in all_stalls),
                          "by_master": sum(st["silent"].startswith("master") for st in all_stalls),
                          "max_ms": max((st["ms"] for st in all_stalls), default=0.0)}
+    if ktrace is not None:
+        summary["stalls"]["with_irq_over_1ms"] = sum((st.get("slowest_irq") or {}).get("ms", 0.0) > 1.0
+                                                     for st in all_stalls)
+        summary["stalls"]["with_cpu_silent"] = sum(st.get("cpu_silent") is not None for st in all_stalls)
+        irqs = [r["irq"] for r in rows if r.get("irq")]
+        summary["irq"] = {"n": sum(q["n"] for q in irqs), "over_1ms": sum(q["over_1ms"] for q in irqs),
+                          "max_ms": max((q["max_ms"] or 0.0 for q in irqs), default=None),
+                          "p99.9_us_worst": max((q["p99.9_us"] or 0.0 for q in irqs), default=None),
+                          "lost_events": sum(q["lost_events"] for q in irqs)}
+    summary["interface"] = a.interface
     print(f"\n{len(done)} of {a.n} checks completed, {len(passed)} passed; competitor: {a.competitor}; "
           f"load average before {load0}, after {load1}")
     for who, g in agg.items():
@@ -401,6 +617,13 @@ def main(argv=None) -> int:
         print(f"stalls (a stream silent over 2.5 periods): {g['n']}, {g['by_master']} of them the SYNC, longest "
               f"{g['max_ms']:.1f} ms; shared with a bystander (held at least half as long as the stall was "
               f"late): {g['shared']} of {g['n']}")
+    if ktrace is not None:
+        q, g = summary["irq"], summary["stalls"]
+        print(f"interrupt handlers (kernel trace): {q['n']}, worst p99.9 {q['p99.9_us_worst']} us, max "
+              f"{q['max_ms']} ms, {q['over_1ms']} over 1 ms; stalls with a handler over 1 ms inside: "
+              f"{g['with_irq_over_1ms']} of {g['n']}; with a CPU that took no interrupt for {SILENT_MS} ms or "
+              f"more: {g['with_cpu_silent']} of {g['n']}" + (f"; {q['lost_events']} trace events LOST"
+                                                         if q["lost_events"] else ""))
     for ab in summary["aborts"]:
         print(f"abort {ab['k'] + 1}: {ab['reason']}\n    {ab['cause']}")
     a.json.write_text(json.dumps({"summary": summary, "checks": rows}, indent=1))
