@@ -14,6 +14,7 @@ from bench.bench_two_process import (
     Handler,
     KernelTrace,
     Silence,
+    is_shared,
     parse_irq_trace,
     slowest_inside,
     stalls,
@@ -117,7 +118,19 @@ def test_stalls_from_a_can_log(tmp_path):
     assert len(got) == 1
     st = got[0]
     assert st["silent"] == "sim-serve (TPDO)" and st["streams"] == ["0x181"]
-    assert st["first"]["ms"] == pytest.approx(8.0, abs=1e-3)
+    assert st["first"]["ms"] == pytest.approx(8.0, abs=1e-3) and st["period_ms"] == 2.0
+    # at the vcan stage's 10 ms SYNC period the same log has no stall (8 ms < 2.5 periods), and the SYNC
+    # stream itself is judged on that period
+    assert stalls(log, period_s=0.010) == []
+    assert [x["period_ms"] for x in stalls(log, period_s=0.003)] == [3.0]  # 8 ms > 7.5 ms
+
+
+@pytest.mark.parametrize("held_ms,shared", [(3.0, True), (2.99, False)])
+def test_a_stall_is_shared_when_a_bystander_was_held_half_as_long_as_it_was_late(held_ms, shared):
+    """First gap 8 ms at a 2 ms period: 6 ms late; a bystander held 3 ms shares it, 2.99 ms does not."""
+    st = {"first": {"start": 0.0, "end": 0.008, "ms": 8.0}, "period_ms": 2.0,
+          "bystanders_held_ms": {0: 0.0, 1: held_ms}}
+    assert is_shared(st) is shared
 
 
 def test_kernel_trace_says_why_it_cannot_run(tmp_path):

@@ -175,6 +175,7 @@ def stalls(can_log: Path, period_s: float = 0.002, limit_periods: float = 2.5) -
             merged.append({"start": a, "end": b, "streams": {cid}, "first": (a, b, cid)})
     for m in merged:
         m["ms"] = round((m["end"] - m["start"]) * 1e3, 2)
+        m["period_ms"] = period_s * 1e3
         a, b, cid = m["first"]
         m["silent"] = "master (SYNC)" if cid == 0x80 else "sim-serve (TPDO)"
         m["first"] = {"start": a, "end": b, "ms": round((b - a) * 1e3, 2)}
@@ -182,10 +183,10 @@ def stalls(can_log: Path, period_s: float = 0.002, limit_periods: float = 2.5) -
     return merged
 
 
-def is_shared(stall: dict, period_s: float = 0.002) -> bool:
+def is_shared(stall: dict) -> bool:
     """A bystander was held at least half as long as the stall's first gap was late (its length less one
     period)."""
-    late_ms = stall["first"]["ms"] - period_s * 1e3
+    late_ms = stall["first"]["ms"] - stall["period_ms"]
     return max(stall.get("bystanders_held_ms", {}).values(), default=0.0) >= late_ms / 2
 
 
@@ -398,7 +399,10 @@ def one_check(k: int, a, folder: Path, ktrace: KernelTrace | None = None) -> dic
         sim_out.append("sim-serve did not stop within 20 s of SIGINT: killed")
     witnesses = stop_witnesses(ws)
     irq = ktrace.stop() if ktrace is not None else None
-    found = stalls(run_dir / "can.log") if (run_dir / "can.log").exists() else []
+    meta = json.loads((run_dir / "meta.json").read_text()) if (run_dir / "meta.json").exists() else {}
+    # the check's SYNC period (the master's timing record; the shipped profile's 2 ms where there is none)
+    period_s = ((meta.get("timing") or {}).get("period_ms") or 2.0) / 1e3
+    found = stalls(run_dir / "can.log", period_s) if (run_dir / "can.log").exists() else []
     for st in found:
         st["bystanders_held_ms"] = shared(st, witnesses)
         if irq is not None:
@@ -407,7 +411,6 @@ def one_check(k: int, a, folder: Path, ktrace: KernelTrace | None = None) -> dic
                                                         "start": round(h.start_s, 6)}
             q = slowest_inside(st, irq["silent"])
             st["cpu_silent"] = None if q is None else {"cpu": q.cpu, "ms": q.ms, "start": round(q.start_s, 6)}
-    meta = json.loads((run_dir / "meta.json").read_text()) if (run_dir / "meta.json").exists() else {}
     result = json.loads((run_dir / "result.json").read_text()) if (run_dir / "result.json").exists() else {}
     simj = json.loads(sim_json.read_text()) if sim_json.exists() else {}
     return {"k": k, "channel": channel, "rc": rc, "wall_s": round(wall, 2), "status": meta.get("status"),
@@ -554,8 +557,9 @@ def main(argv=None) -> int:
                       + (f"; ABORT: {r['reason']} [{cause(r)}]" if r["status"] != "done" else ""), flush=True)
                 for st in r.get("stalls", ()):
                     print(f"    stall {st['ms']:.1f} ms at {st['start']:.3f} (first gap {st['first']['ms']:.1f} ms): "
-                          f"{st['silent']} silent ({', '.join(st['streams'])}); bystanders held "
-                          + ", ".join(f"CPU{c} {v:.1f} ms" for c, v in st.get("bystanders_held_ms", {}).items())
+                          f"{st['silent']} silent ({', '.join(st['streams'])})"
+                          + ("; bystanders held " + ", ".join(f"CPU{c} {v:.1f} ms" for c, v in held.items())
+                             if (held := st.get("bystanders_held_ms")) else "")
                           + _irq_text(st), flush=True)
                 if r.get("irq") is not None:
                     q = r["irq"]
