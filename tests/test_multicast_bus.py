@@ -15,6 +15,7 @@ import pytest
 from hil.cli import main
 from hil.cli.common import MULTICAST_HOPS_DEFAULT, open_bus
 from hil.errors import InterfaceError
+from support.run_flags import assert_run_flag
 
 can = pytest.importorskip("can")
 pytest.importorskip("msgpack", reason="python-can's udp_multicast needs msgpack (the [test] extra)")
@@ -84,19 +85,8 @@ def test_the_flag_takes_0_to_255(value, ok, capsys):
     """On its boundaries: 0 and 255 are taken, -1, 256 and 1.5 refused with the flag named (exit 3, no
     traceback). (Without --arm, run refuses to move anything after parsing: exit 3 either way, so the
     message tells which.)"""
-    args = ["run", "--interface", "udp_multicast", "--channel", GROUP_V4, "--multicast-hops", value]
-    if ok:
-        rc = main(args)
-    else:
-        with pytest.raises(SystemExit) as exc:
-            main(args)
-        rc = exc.value.code
-    err = capsys.readouterr()
-    assert rc == 3
-    if ok:
-        assert "argument --multicast-hops" not in err.err and "refusing to move anything" in err.out
-    else:
-        assert "argument --multicast-hops" in err.err and "Traceback" not in err.err
+    assert_run_flag(["run", "--interface", "udp_multicast", "--channel", GROUP_V4, "--multicast-hops", value],
+                    "--multicast-hops", ok, capsys)
 
 
 @pytest.mark.parametrize("interface,channel,flag,expected", [

@@ -6,7 +6,8 @@ import os
 
 import pytest
 
-from hil.cli import main, realtime
+from hil.cli import realtime
+from support.run_flags import assert_run_flag
 
 
 def test_the_latency_request_is_written_as_linux_reads_it_held_and_let_go(tmp_path):
@@ -43,16 +44,5 @@ def test_the_cpu_latency_flag_takes_whole_microseconds_from_0_or_off(value, ok, 
     """On its boundary: 0 is taken, -1 refused with the flag named (exit 3, no traceback); 'off' means
     no request. (Without --arm, run refuses to move anything after parsing: exit 3 either way, so the
     message tells which.)"""
-    args = ["run", "--interface", "virtual", "--channel", "x", "--cpu-latency-us", value]
-    if ok:
-        rc = main(args)
-    else:
-        with pytest.raises(SystemExit) as exc:
-            main(args)
-        rc = exc.value.code
-    err = capsys.readouterr()
-    assert rc == 3
-    if ok:
-        assert "argument --cpu-latency-us" not in err.err and "refusing to move anything" in err.out
-    else:
-        assert "argument --cpu-latency-us" in err.err and "Traceback" not in err.err
+    assert_run_flag(["run", "--interface", "virtual", "--channel", "x", "--cpu-latency-us", value],
+                    "--cpu-latency-us", ok, capsys)

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import argparse
 import bisect
+import dataclasses
 import itertools
 import json
 import os
@@ -406,11 +407,8 @@ def one_check(k: int, a, folder: Path, ktrace: KernelTrace | None = None) -> dic
     for st in found:
         st["bystanders_held_ms"] = shared(st, witnesses)
         if irq is not None:
-            h = slowest_inside(st, irq["slow"])
-            st["slowest_irq"] = None if h is None else {"cpu": h.cpu, "name": h.name, "ms": h.ms,
-                                                        "start": round(h.start_s, 6)}
-            q = slowest_inside(st, irq["silent"])
-            st["cpu_silent"] = None if q is None else {"cpu": q.cpu, "ms": q.ms, "start": round(q.start_s, 6)}
+            st["slowest_irq"] = _as_json(slowest_inside(st, irq["slow"]))
+            st["cpu_silent"] = _as_json(slowest_inside(st, irq["silent"]))
     result = json.loads((run_dir / "result.json").read_text()) if (run_dir / "result.json").exists() else {}
     simj = json.loads(sim_json.read_text()) if sim_json.exists() else {}
     return {"k": k, "channel": channel, "rc": rc, "wall_s": round(wall, 2), "status": meta.get("status"),
@@ -422,11 +420,12 @@ def one_check(k: int, a, folder: Path, ktrace: KernelTrace | None = None) -> dic
                            "late_over_3ms": sum(d > 3e-3 for _, d in w["late"]),
                            "late_max_ms": round(max((d for _, d in w["late"]), default=0.0) * 1e3, 2)}
                           for w in witnesses],
-            "irq": None if irq is None else {**{k_: v for k_, v in irq.items() if k_ not in ("slow", "silent")},
-                                             "slow": [{"cpu": h.cpu, "name": h.name, "ms": h.ms,
-                                                       "start": round(h.start_s, 6)} for h in irq["slow"]],
-                                             "silent": [{"cpu": x.cpu, "ms": x.ms, "start": round(x.start_s, 6)}
-                                                        for x in irq["silent"]]}}
+            "irq": None if irq is None else {k_: [_as_json(x) for x in v] if k_ in ("slow", "silent") else v
+                                             for k_, v in irq.items()}}
+
+
+def _as_json(x: Handler | Silence | None) -> dict | None:
+    return None if x is None else dataclasses.asdict(x)
 
 
 def _irq_text(st: dict) -> str:

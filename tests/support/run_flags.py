@@ -1,0 +1,27 @@
+"""A flag of ``emacheck run`` on its boundary: taken, or refused by argparse naming it.
+
+Without ``--arm``, run refuses to move anything after parsing: exit 3 either way, so the messages tell
+which (a value taken reaches the refusal; a value refused names the flag, with no traceback).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hil.cli import main
+
+
+def assert_run_flag(args: list[str], flag: str, ok: bool, capsys) -> None:
+    """``emacheck run ARGS`` (no --arm): ``flag``'s value taken when ``ok``, else refused naming ``flag``."""
+    if ok:
+        rc = main(args)
+    else:
+        with pytest.raises(SystemExit) as exc:
+            main(args)
+        rc = exc.value.code
+    err = capsys.readouterr()
+    assert rc == 3
+    if ok:
+        assert f"argument {flag}" not in err.err and "refusing to move anything" in err.out
+    else:
+        assert f"argument {flag}" in err.err and "Traceback" not in err.err
