@@ -88,13 +88,34 @@ def _flatness(d, f, monkeypatch):
     return lhs, min(r.stiffness_left_N_per_mm, r.stiffness_right_N_per_mm)
 
 
-@pytest.mark.parametrize("seed", [0, 2])
-def test_soft_spring_refusal_on_its_limit_and_one_step_below(seed, monkeypatch):
-    """With the limit set to this record's own statistic / stiffness (exact in floats), the record
-    is measured (the rule is ``>``); one float step lower, it is refused."""
-    d, f = spring_fight(np.random.default_rng(seed), 0.3)
-    lhs, k_soft = _flatness(d, f, monkeypatch)
-    below, at, above = around(lambda x: x * k_soft, lhs, lhs / k_soft)
+def _records_on_their_limit(monkeypatch, wanted: int = 2, seeds: int = 12):
+    """The first ``wanted`` spring-fight records (seeds 0, 1, ...) whose limit lands exactly in floats.
+
+    ``limit * k_soft == lhs`` has no float solution for some records (the product jumps over ``lhs``),
+    and which ones depends on the last bits of the regression, so on the machine's BLAS: a fixed seed
+    that lands on one machine jumps on another (seeds 0 and 2 did on this project's CI machines until
+    2026-11-26). The records are taken in seed order, so the choice is deterministic on a machine."""
+    found = []
+    for seed in range(seeds):
+        d, f = spring_fight(np.random.default_rng(seed), 0.3)
+        lhs, k_soft = _flatness(d, f, monkeypatch)
+        try:
+            found.append((d, f, around(lambda x, k=k_soft: x * k, lhs, lhs / k_soft)))
+        except AssertionError:
+            continue
+        if len(found) == wanted:
+            return found
+    raise AssertionError(f"only {len(found)} of {seeds} records land on their limit in floats")
+
+
+def test_soft_spring_refusal_on_its_limit_and_one_step_below(monkeypatch):
+    """With the limit set to a record's own statistic / stiffness (exact in floats), the record
+    is measured (the rule is ``>``); one float step lower, it is refused (two records)."""
+    for d, f, (below, at, above) in _records_on_their_limit(monkeypatch):
+        _limit_sides(d, f, below, at, above, monkeypatch)
+
+
+def _limit_sides(d, f, below, at, above, monkeypatch):
     assert 0.25 < at < 0.3
     for limit, refused in ((above, False), (at, False), (below, True)):
         monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", limit)
