@@ -112,3 +112,62 @@ def test_run_records_the_hop_limit_it_opened_the_bus_with(interface, channel, fl
     assert rc == 3 and len(seen) == 1
     assert seen[0].multicast_hops == expected
     assert ("multicast_hops" in seen[0].as_json()) is (expected is not None)
+
+
+# --- two buses on two groups on one host: no frame crosses (IP_MULTICAST_ALL off) ---
+
+OTHER_V4 = "239.74.201.10"
+OTHER_V6 = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6174"
+
+
+def _multicast_all(bus, group: str) -> int:
+    sock = bus._multicast._socket
+    if ":" in group:
+        return sock.getsockopt(socket.IPPROTO_IPV6, 29)  # IPV6_MULTICAST_ALL
+    return sock.getsockopt(socket.IPPROTO_IP, 49)  # IP_MULTICAST_ALL
+
+
+@pytest.mark.skipif(not hasattr(socket, "AF_NETLINK"), reason="IP_MULTICAST_ALL is Linux's")
+@pytest.mark.parametrize("group,other", [(GROUP_V4, OTHER_V4), (GROUP_V6, OTHER_V6)])
+def test_two_buses_on_two_groups_do_not_hear_each_other(group, other):
+    """Each bus hears its own group (a second bus on it gets the frame) and nothing of the other group;
+    python-can alone (the option left on) delivers the other group's frames too (checked first, so the
+    test shows the host would leak)."""
+    try:
+        raw = can.Bus(interface="udp_multicast", channel=other, hop_limit=0)
+    except Exception as exc:  # noqa: BLE001 - a host without multicast routes
+        pytest.skip(f"udp_multicast cannot be opened on this host: {exc}")
+    a, a2 = _pair(group, None)
+    b = open_bus("udp_multicast", other, 500_000)
+    try:
+        assert _multicast_all(a, group) == 0 and _multicast_all(b, other) == 0 and _multicast_all(raw, other) == 1
+        for k in range(20):
+            a.send(can.Message(arbitration_id=0x100 + k, data=bytes([k]), is_extended_id=False))
+        got_own = [a2.recv(1.0) for _ in range(20)]
+        assert [m.arbitration_id for m in got_own if m is not None] == [0x100 + k for k in range(20)]
+        leaked = raw.recv(0.5)
+        assert leaked is not None and leaked.arbitration_id == 0x100  # the host does deliver across groups
+        assert b.recv(0.5) is None  # emacheck's bus on the other group: nothing crosses
+        b.send(can.Message(arbitration_id=0x7FF, data=b"", is_extended_id=False))
+        heard = [m.arbitration_id for bus in (a, a2) for m in iter(lambda bus=bus: bus.recv(0.3), None)]
+        assert 0x7FF not in heard  # what a and a2 still hold: a's own echoes of its 20 frames, nothing of b
+        assert sorted(set(heard)) == [0x100 + k for k in range(20)]
+    finally:
+        for bus in (a, a2, b, raw):
+            bus.shutdown()
+
+
+def test_a_bus_that_cannot_be_isolated_is_closed_and_refused(monkeypatch):
+    """Fail closed: if python-can's socket cannot be reached, the bus is shut down and open_bus refuses it."""
+    closed = []
+
+    class Opaque:
+        def shutdown(self):
+            closed.append(True)
+
+    monkeypatch.setattr(can, "Bus", lambda **kw: Opaque())
+    monkeypatch.setattr("sys.platform", "linux")
+    with pytest.raises(InterfaceError, match=r"udp_multicast group '239\.74\.201\.9': cannot make the bus hear its "
+                                             r"own group only \(AttributeError"):
+        open_bus("udp_multicast", GROUP_V4, 500_000)
+    assert closed == [True]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import sys
 from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
@@ -139,7 +140,7 @@ def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages
         raise InterfaceError(f"--multicast-hops {multicast_hops}: applies to --interface udp_multicast only "
                              f"(not {interface!r})")
     try:
-        return can.Bus(**kwargs)
+        bus = can.Bus(**kwargs)
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         hint = ("check that the interface exists and is up (`ip link show {ch}`; "
                 "`sudo ip link set {ch} up type can bitrate {br}`)" if interface == "socketcan" else
@@ -148,6 +149,44 @@ def open_bus(interface: str, channel: str, bitrate: int, *, receive_own_messages
         raise InterfaceError(
             f"cannot open CAN interface {interface!r} channel {channel!r}: {type(exc).__name__}: {exc}; "
             + hint.format(ch=channel, br=bitrate) + f"; --interface must be one python-can knows ({known})"
+        ) from None
+    if interface == "udp_multicast":
+        _hear_own_group_only(bus, channel)
+    return bus
+
+
+#: Linux's socket options that make a socket bound to a port on every address receive only the multicast
+#: groups it joined itself (linux/in.h IP_MULTICAST_ALL, linux/in6.h IPV6_MULTICAST_ALL; default 1: every
+#: group joined by any socket on the host)
+_IP_MULTICAST_ALL = 49
+_IPV6_MULTICAST_ALL = 29
+
+
+def _hear_own_group_only(bus, channel: str) -> None:
+    """Make a udp_multicast bus receive its own group only (Linux), or close it and refuse (fail closed).
+
+    python-can binds the port on every address; on Linux such a socket receives every group joined on the
+    host (IP_MULTICAST_ALL defaults to on), so two emacheck buses on two groups would hear each other: a
+    check took another job's SDO answer. Turning the option off leaves exactly the group the bus joined.
+    Other systems are left as python-can opens them (not verified there; docs/vcan.md).
+    """
+    import socket
+
+    from hil.errors import InterfaceError
+
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        sock = bus._multicast._socket  # python-can's GeneralPurposeUdpMulticastBus: its one socket
+        if ":" in channel:
+            sock.setsockopt(socket.IPPROTO_IPV6, _IPV6_MULTICAST_ALL, 0)
+        else:
+            sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+    except (AttributeError, OSError) as exc:
+        bus.shutdown()
+        raise InterfaceError(
+            f"udp_multicast group {channel!r}: cannot make the bus hear its own group only "
+            f"({type(exc).__name__}: {exc}); without it, it would receive every group joined on this host"
         ) from None
 
 
