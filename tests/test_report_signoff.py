@@ -344,3 +344,29 @@ def test_a_whole_inconclusive_report_of_a_simulated_check(default_run, tmp_path)
     for v in result["verdict"].values():
         assert doc.count(html.escape(v["reason"])) == 1
     assert "D-EMAX" in doc and "1234 FH" in doc and "<div class='signoff'>" in doc
+
+
+@pytest.mark.slow
+def test_the_serv_report_of_a_simulated_recording(tmp_path):
+    """serv_report.html: SIMULATED in heading and title, the serials in hex, the sign-off after the
+    decision, the statistical sigma labelled, every ± a U of serv.json."""
+    import json
+
+    from hil.cli import main
+
+    rec = tmp_path / "rec"
+    assert main(["simulate", "--scenario", "full-stroke", "--out", str(rec)]) == 0
+    out = tmp_path / "serv"
+    assert main(["serv", str(rec), "--out", str(out), "--operator", "A. Inspector", "--work-order", "WO-4711"]) == 0
+    data = json.loads((out / "serv.json").read_text())
+    doc = (out / "serv_report.html").read_text()
+    assert "<span class='badge pass'>PASS</span> <span class='simulated'>SIMULATED</span></h1>" in doc
+    assert "<title>emacheck serv: PASS (SIMULATED, not a real actuator)</title>" in doc
+    assert "0x5E000101" in doc and str(0x5E000101) not in doc
+    decision = section(doc, "<h2>Decision</h2>")
+    assert "<th>check run by (operator)</th><td>A. Inspector</td>" in decision
+    assert "<th>work order</th><td>WO-4711</td>" in decision
+    assert "σ (statistical) [mm]" in doc and "±1σ" not in doc
+    us = [v["uncertainty_mm"] for v in data["verdict"].values() if v["uncertainty_mm"] is not None]
+    for v in plus_minus_values(text_of(doc)):
+        assert any(v == f"{u:.{len(v.split('.')[1])}f}" for u in us), v
