@@ -122,9 +122,8 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
     for ch, (dd, ff_force) in pairs.items():
         try:
             maint[ch] = blf_maint(dd[ff], ff_force[ff], rate)
-        except AnalysisError as exc:
+        except AnalysisError as exc:  # the channel's verdict says why (its reason), once
             maint[ch] = str(exc)
-            notes.append(f"{ch}: {exc}")
     p_rel = {k: (UNCALIBRATED_PITCH_UNCERTAINTY if c is None else abs(c.coefficient_sigmas[1] / c.pitch))
              for k, c in cal.items()}
     p_ch = {"int1": p_rel["ema1"], "int2": p_rel["ema2"], "ext": (p_rel["ema1"] ** 2 + p_rel["ema2"] ** 2) ** 0.5}

@@ -120,6 +120,13 @@ def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
         console.print(f"written to: {out_dir}")
 
 
+def _recording_hash(path: Path) -> dict:
+    from hil.history.record import file_sha256
+
+    h = file_sha256(path)
+    return {"recording": h} if h else {}
+
+
 def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) -> dict:
     """The traceability block of result.json: when, which software, which actuators (0x1018 read in the
     preflight), who and for which work order, which files (SHA-256), which run and recording; ``extra``
@@ -140,7 +147,8 @@ def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) 
         "operator": extra.get("operator", who.operator if who is not None else None),
         "work_order": extra.get("work_order", who.work_order if who is not None else None),
         "identity": {k: None if v is None else v.as_json() for k, v in (rec.identity or {}).items()},
-        "files_sha256": rec.files_sha256 or {},
+        # a recording without run record (analyze file.csv): the file's own hash names what was analysed
+        "files_sha256": rec.files_sha256 or ({} if meta is not None else _recording_hash(sig_path)),
         "recording": str(sig_path),
         "mode": rec.mode.value if rec.mode is not None else None,
         # each drive's reaction to losing the master: configured, and what the drill observed (or the

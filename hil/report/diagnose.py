@@ -116,11 +116,12 @@ def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosi
         "noise_floor", "residual_rms_raw_holdout_before", "residual_rms_raw_holdout_after", "noise_floor_raw",
         "excess_before", "excess_after", "regime_score_before", "regime_score_after"))] for c in channels]
     erows = [[f"<b>{esc(e['name'])}</b>", esc(e["where"]), esc(e["words"]),
-              "<br>".join(f"{esc(k)} = {_g(v)} ± {_g(e['uncertainty'].get(k), 2)} {esc(_param_unit(k))}"
+              "<br>".join(f"{esc(k)} = {_g(v)} {esc(_param_unit(k))} (σ {_g(e['uncertainty'].get(k), 2)})"
                           for k, v in e["parameters"].items()),
               f"{_g(e.get('delta_bic'))}", f"{_g(e.get('delta_chi2_holdout'))}",
               f"<small>{esc(e['evidence'])}</small>"] for e in data["effects"]]
-    effs = (table([column("effect"), column("where"), column("what"), column("parameters"), column("ΔBIC", "1"),
+    effs = (table([column("effect"), column("where"), column("what"), column("parameters (σ: standard uncertainty)"),
+                   column("ΔBIC", "1"),
                    column("Δχ² held out", "1"), column("evidence")], erows, raw=True)
             if erows else "<p>none</p>")
     locs = "".join(f"<li>{esc(loc['channel'])} ({esc(loc.get('where', ''))}): "

@@ -88,7 +88,7 @@ def _trend_rows(doc: dict) -> list[list[str]]:
         dlo, dhi = t["limit_at_date_interval"]
         rows.append([who, t["channel"], esc(where) + (" <i>(simulated)</i>" if t["simulated"] else ""),
                      f"{t['segment'] + 1}{'' if t['current'] else ' (old)'}", t["n"],
-                     "—" if rate is None else f"{rate:.4f} ± {t['rate_sigma']:.4f} {t['rate_unit']}",
+                     "—" if rate is None else f"{rate:.4f} {t['rate_unit']} (σ {t['rate_sigma']:.4f})",
                      fmt(t["backlash_now_mm"]), fmt(t["limit_mm"], 3),
                      "—" if t["limit_at_fh"] is None else f"{t['limit_at_fh']:.0f}",
                      "—" if (lo, hi) == (None, None) else f"{'…' if lo is None else f'{lo:.0f}'} – "
@@ -125,7 +125,8 @@ def write_history_report(path: Path, doc: dict, series: list[Series], *, json_na
         "down (repair) or another actuator at a position starts a new segment. Simulated checks are never in a "
         "real actuator's trend. BLFserv readings are shown, not fitted.</p>")
     parts.append("<h2>Trends</h2>" + table(
-        ["actuator", "channel", "where", "segment", "n", column("rate ± σ"), column("backlash now", "mm"),
+        ["actuator", "channel", "where", "segment", "n", column("rate (σ: standard uncertainty)"),
+         column("backlash now", "mm"),
          column("B_spec", "mm"), column("B_spec reached", "FH"), column("95 % interval", "FH"), "date",
          "date 95 % interval", "note"], _trend_rows(doc), raw=True))
     for k, s in enumerate(series):

@@ -16,7 +16,24 @@ from blf.maint import BlfMaintResult
 from blf.signals import CHANNELS
 from hil.analysis.maint import Analysis
 from hil.config import Actuation
-from hil.report.shell import column, esc, file_link, fmt, img, notes, pyplot, table, thin, trace_lines, write_page
+from hil.report.shell import (
+    column,
+    esc,
+    file_link,
+    fmt,
+    heading,
+    identification,
+    img,
+    notes,
+    page_title,
+    pyplot,
+    signoff_block,
+    simulated_banner,
+    table,
+    thin,
+    trace_lines,
+    write_page,
+)
 from hil.runfolder import Signals
 from hil.runrecord import RunRecord, Timing
 
@@ -58,7 +75,7 @@ def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
     """Paper Figure 4: F versus D and the binned derivative dF/dD with median, D_lc, D_rc."""
     fl, dl = _LABEL[ch]
     sl = thin(d.size)
-    fig, (a0, a1) = pyplot().subplots(2, 1, figsize=(6.5, 6), sharex=True)
+    fig, (a0, a1) = pyplot().subplots(2, 1, figsize=(9, 6), sharex=True)
     a0.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.3, label="samples")
     a0.plot(r.curve.d_mm, r.curve.f_N / 1e3, "-", color="k", lw=1, label="binned (median per bin)")
     a0.set_ylabel(f"${fl}$ [kN]")
@@ -70,7 +87,7 @@ def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
         a.axvline(r.d_lc_mm, color="gray", ls="--", lw=0.8)
         a.axvline(r.d_rc_mm, color="gray", ls="--", lw=0.8)
         a.grid(alpha=0.3)
-        a.legend(fontsize=7, loc="best")
+        outside_legend(a)
     a1.set_ylabel("dF/dD [kN/mm]")
     a1.set_xlabel(f"${dl}$ [mm]   (dashed verticals: D_lc = {r.d_lc_mm:.4f}, D_rc = {r.d_rc_mm:.4f})")
     a0.set_title(f"{ch}: F versus D and its derivative (paper Fig. 4)")
@@ -78,12 +95,29 @@ def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
     return fig
 
 
-def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth: dict | None):
-    """Paper Figures 5/6: the three regression lines, backlash and stiffness."""
+def outside_legend(ax) -> None:
+    """The axes' legend to the right of them, outside, so that it never covers a data point."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+
+
+def reading_text(ch: str, r: BlfMaintResult, u_mm: float | None, truth: dict | None) -> str:
+    """The reading as the decision table gives it: B ± U (expanded, k = 2), then the regression's
+    statistical sigma labelled as such (never behind a bare ±), then the truth of simulated data."""
+    txt = f"B = {r.backlash_mm:.4f} mm" + ("" if u_mm is None else f" ± {u_mm:.4f} mm (U, k = 2)")
+    txt += f"\nσ (statistical) = {r.backlash_sigma_mm:.4f} mm"
+    if truth is not None:
+        txt += f"\ntruth {truth['backlash_mm'][ch]:.4f} mm"
+    return txt
+
+
+def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth: dict | None,
+                 u_mm: float | None = None):
+    """Paper Figures 5/6: the three regression lines, backlash (± U, the decision's expanded uncertainty
+    ``u_mm``) and stiffness; legend and reading beside the axes, off the data."""
     fl, dl = _LABEL[ch]
     sl = thin(d.size)
     L = r.lines
-    fig, ax = pyplot().subplots(figsize=(6.5, 4.5))
+    fig, ax = pyplot().subplots(figsize=(9, 4.5))
     ax.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.25, color="C0", label="samples")
     for line, col in ((L.left, "C3"), (L.right, "C2")):
         fr = np.linspace(min(line.f_min_N, 0.0), max(line.f_max_N, 0.0), 50)
@@ -94,16 +128,13 @@ def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth
     ax.plot([L.d_left_mm, L.d_right_mm], [L.f_left_N / 1e3, L.f_right_N / 1e3], "ko", ms=5)
     ax.annotate("", xy=(L.d_right_mm, 0), xytext=(L.d_left_mm, 0),
                 arrowprops=dict(arrowstyle="<->", color="k"))
-    txt = f"B = {r.backlash_mm:.4f} ± {r.backlash_sigma_mm:.4f} mm"
-    if truth is not None:
-        txt += f"\ntruth {truth['backlash_mm'][ch]:.4f} mm"
-    ax.text(0.02, 0.04, txt, transform=ax.transAxes, fontsize=9,
-            bbox=dict(facecolor="white", alpha=0.8, edgecolor="none"))
+    ax.text(1.01, 0.0, reading_text(ch, r, u_mm, truth), transform=ax.transAxes, fontsize=8, va="bottom",
+            ha="left")
     ax.set_xlabel(f"${dl}$ [mm]")
     ax.set_ylabel(f"${fl}$ [kN]")
     ax.set_title(f"{ch}: backlash and stiffness (paper Fig. {'6' if ch == 'ext' else '5'})")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper right")
+    outside_legend(ax)
     fig.tight_layout()
     return fig
 
@@ -138,13 +169,9 @@ def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
     return fig
 
 
-_WORDS = {"pass": "PASS", "fail": "FAIL", "inconclusive": "INCONCLUSIVE", "aborted": "ABORTED",
-          "incomplete": "INCOMPLETE"}
-
-
-def summary_table(result: dict) -> str:
+def decision_table(result: dict) -> str:
     """Per channel: the decision against the limit with U and the margin, then stiffness (truth beside
-    it for simulated data), then the LVDT calibration."""
+    it for simulated data); the rule, and each channel's reason once."""
     truth = result.get("truth")
     verdict = result.get("verdict", {})
     cols = [column("channel"), column("verdict"), column("backlash", "mm"), column("U (k = 2)", "mm"),
@@ -164,7 +191,15 @@ def summary_table(result: dict) -> str:
             ts = truth["stiffness_N_per_mm"][ch]
             cells += [fmt(tb), f"{ts['left']:.0f} / {ts['right']:.0f}", fmt(None if b is None else b - tb)]
         rows.append(cells)
-    reasons = "".join(f"<li>{ch}: {esc(verdict[ch]['reason'])}</li>" for ch in CHANNELS if ch in verdict)
+    reasons = "".join(f"<li><span class='{esc(verdict[ch].get('status', ''))}'>{ch}</span>: "
+                      f"{esc(verdict[ch]['reason'])}</li>" for ch in CHANNELS if ch in verdict)
+    return (table(cols, rows, raw=True)
+            + f"<p>{esc(result.get('decision_rule', ''))}.</p><ul class='reasons'>{reasons}</ul>")
+
+
+def calibration_table(result: dict) -> str:
+    """The LVDT calibration of this check (truth beside the pitch for simulated data)."""
+    truth = result.get("truth")
     cal_rows = []
     for k in ("ema1", "ema2"):
         c = result["calibration"][k]
@@ -174,11 +209,23 @@ def summary_table(result: dict) -> str:
         tp = f" (truth {truth['calibration'][k]['pitch']:.5f})" if truth else ""
         cal_rows.append([k, f"{c['pitch']:.5f}{tp}", f"{c['offset_mm']:+.4f}", f"{c['nonlinearity_mm']:.4f}",
                          f"{c['rmse_mm']:.4f}"])
-    return (table(cols, rows, raw=True)
-            + f"<p>{esc(result.get('decision_rule', ''))}.</p><ul>{reasons}</ul>"
-            + "<h3>LVDT calibration</h3>"
-            + table([column("LVDT"), column("pitch"), column("offset", "mm"), column("non-linearity", "mm"),
-                     column("rmse", "mm")], cal_rows))
+    return table([column("LVDT"), column("pitch"), column("offset", "mm"), column("non-linearity", "mm"),
+                  column("rmse", "mm")], cal_rows)
+
+
+def head_parts(result: dict, intro: str) -> list[str]:
+    """The report's first page: heading (verdict in its colour, SIMULATED for simulated data), what was
+    checked, ``intro`` (the actuation and the recording), why it stopped, and the decision section: each
+    channel's verdict and reason once, the notes, the sign-off block."""
+    parts = [heading("emacheck maintenance check", result), simulated_banner(result), identification(result),
+             intro]
+    if result.get("reason"):
+        st = result["status"]
+        parts.append(f"<p class='{esc(st)}'>{esc(st.capitalize())}: {esc(result['reason'])}</p>")
+    parts.append("<h2>Decision</h2>" + decision_table(result) + notes(result.get("notes", []), css="")
+                 + signoff_block(result))
+    parts.append("<h3>LVDT calibration</h3>" + calibration_table(result))
+    return parts
 
 
 def uncertainty_section(result: dict) -> str:
@@ -193,11 +240,12 @@ def uncertainty_section(result: dict) -> str:
         rows.append([ch, f"{u['statistical']:.5f}", f"{u['pitch']:.5f}", f"{u['temperature']:.5f}",
                      f"{u['method']:.5f}", f"{u['combined']:.5f}", f"{u['expanded']:.5f}"])
     out = ("<h2>Uncertainty of the readings</h2><p>Standard uncertainties of each backlash reading, combined "
-           "as a root sum of squares and expanded with k = 2 (U, used by the decision). Statistical: the "
-           "regression's scatter (Newey-West); pitch: the LVDT pitch left after this check's calibration over "
-           "the travel across the play; temperature: none, the calibration ran minutes before in the same "
-           "check (paper 2.3); method: BLFmaint's validated accuracy bound, max(5 um, 5 %), rectangular.</p>"
-           + table([column("channel"), column("statistical", "mm"), column("pitch", "mm"),
+           "as a root sum of squares and expanded with k = 2 (U, used by the decision; the ± of this report). "
+           "σ (statistical): the regression's scatter (Newey-West); pitch: the LVDT pitch left after this "
+           "check's calibration over the travel across the play; temperature: none, the calibration ran "
+           "minutes before in the same check (paper 2.3); method: BLFmaint's validated accuracy bound, "
+           "max(5 um, 5 %), rectangular.</p>"
+           + table([column("channel"), column("σ (statistical)", "mm"), column("pitch", "mm"),
                     column("temperature", "mm"), column("method", "mm"), column("combined u", "mm"),
                     column("U (k = 2)", "mm")], rows))
     b = result.get("accuracy")
@@ -261,19 +309,14 @@ def timing_section(timing: Timing) -> str:
 def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
                  json_name: str = "result.json") -> None:
     """Write the self-contained HTML report (``json_name``: the result file beside it, linked)."""
-    status = result["status"]
     source = {"step column": "the run's step column", "detected": "the recording itself (no step column)"}
-    parts = [f"<h1>emacheck maintenance check: <span class='{status}'>{_WORDS.get(status, status.upper())}</span></h1>",
-             f"<p>Actuation: {esc(getattr(act, 'name', ''))}; B_spec internal {act.mechanics.backlash_spec_int_mm} mm, "
+    intro = (f"<p>Actuation: {esc(getattr(act, 'name', ''))}; B_spec internal {act.mechanics.backlash_spec_int_mm} mm, "
              f"external {act.mechanics.backlash_spec_ext_mm} mm; {sig.n} samples, "
              f"{sig.t[-1] - sig.t[0]:.1f} s; calibration sweeps and force fight found from "
-             f"{esc(source.get(an.segments.source, an.segments.source))}.</p>"]
-    if result.get("reason"):
-        parts.append(f"<p class='aborted'>{esc(status.capitalize())}: {esc(result['reason'])}</p>")
+             f"{esc(source.get(an.segments.source, an.segments.source))}.</p>")
     if meta is not None and meta.seed is not None:
-        parts.append(f"<p>Simulated rig, seed {meta.seed}.</p>")
-    parts.append("<h2>Summary</h2>" + summary_table(result))
-    parts.append(notes(result.get("notes", []), css=""))
+        intro += f"<p>Simulated rig, seed {meta.seed}.</p>"
+    parts = head_parts(result, intro)
     parts.append(trace_lines(result.get("trace")))
     parts.append(uncertainty_section(result))
     parts.append(f"<h2>Force fight (paper Fig. 3)</h2>{img(figure_time(sig, an, act), dpi=90, tight=True)}")
@@ -282,14 +325,15 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
         r = an.maint[ch]
         parts.append(f"<h2>{ch}</h2>")
         if not isinstance(r, BlfMaintResult):
-            parts.append(f"<p class='inconclusive'>Not measured: {esc(r)}</p>")
+            parts.append("<p class='inconclusive'>Not measured (the reason is in the decision above).</p>")
             continue
         d, f = _channel_data(sig, an, ch)
         parts.append(img(figure_dfdd(ch, d, f, r), dpi=90, tight=True)
-                     + img(figure_lines(ch, d, f, r, truth), dpi=90, tight=True))
+                     + img(figure_lines(ch, d, f, r, truth, (result.get("verdict", {}).get(ch) or {})
+                                        .get("uncertainty_mm")), dpi=90, tight=True))
     parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
     timing = meta.timing if meta is not None else None
     if timing is not None and timing.summary.reaction.n:
         parts.append("<h2>Loop timing (master)</h2>" + timing_section(timing))
     parts.append(file_link(json_name))
-    write_page(path, "emacheck report", parts)
+    write_page(path, page_title("emacheck maintenance check", result), parts)

@@ -10,11 +10,26 @@ from blf.serv import BlfServResult
 from blf.signals import CHANNELS
 from hil.analysis.serv import ServAnalysis
 from hil.config import Actuation
-from hil.report.shell import column, esc, file_link, fmt, img, notes, pyplot, table, thin, trace_lines, write_page
+from hil.report.shell import (
+    column,
+    esc,
+    file_link,
+    fmt,
+    heading,
+    identification,
+    img,
+    notes,
+    page_title,
+    pyplot,
+    signoff_block,
+    simulated_banner,
+    table,
+    thin,
+    trace_lines,
+    write_page,
+)
 
 _LABEL = {"int1": "D_{int,1}", "int2": "D_{int,2}", "ext": "D_{ext}"}
-
-
 
 
 def figure_serv(ch: str, t: np.ndarray, d: np.ndarray, r: BlfServResult, truth_b: float | None):
@@ -107,14 +122,13 @@ def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation, 
     """The self-contained HTML report of ``emacheck serv`` (``json_name``: serv.json beside it, linked)."""
     truth = data.get("truth")
     t = an.sig.t
-    st = data.get("status", "")
-    parts = [f"<h1>emacheck serv: in-service backlash (BLFserv, paper 2.2): <span class='{st}'>{esc(st.upper())}"
-             "</span></h1>",
+    parts = [heading("emacheck serv: in-service backlash (BLFserv, paper 2.2)", data), simulated_banner(data),
+             identification(data),
              f"<p>{esc(act.name)}; recording {esc(data['recording']['source'])}: "
              f"{an.sig.n} samples, {data['recording']['duration_s']:.1f} s; method <b>{an.method}</b>; "
              f"LVDT calibration: {esc(an.correction.source)}.</p>",
              notes(data["notes"])]
-    cols = [column("channel"), column("backlash", "mm"), column("±1σ", "mm"), column("traversals"),
+    cols = [column("channel"), column("backlash", "mm"), column("σ (statistical)", "mm"), column("traversals"),
             column("improved", "mm"), column("paper", "mm"), column("paper traversals"), column("noise σ", "mm"),
             column("thresh dD/dt", "mm/s"), column("thresh d²D/dt²", "mm/s²")]
     if truth:
@@ -139,7 +153,7 @@ def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation, 
                           column("reason")], vrows, raw=True)
                  + f"<p>{esc(data.get('decision_rule', ''))}. U combines the spread of the counted jumps, the "
                  "LVDT pitch left after calibration over the stroke, the temperature bound of paper 2.3 and the "
-                 "method's validated accuracy.</p>")
+                 "method's validated accuracy.</p>" + signoff_block(data, "in-service backlash reading"))
     parts.append(trace_lines(data.get("trace")))
     parts.append("<h2>Readings</h2>" + table(cols, rows))
     c = an.correction
@@ -152,7 +166,8 @@ def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation, 
         parts.append(f"<h2>{ch} (paper Fig. 8)</h2>{img(figure_serv(ch, t, an.d[ch], an.results[ch], tb))}")
     b = an.budget
     parts.append("<h2>Accuracy of the backlash measurement (paper 2.3)</h2>"
-                 f"<p>Stroke ±{b.stroke_mm:g} mm, uncompensated pitch error {b.pitch_error:.2%}, residual after "
+                 f"<p>Stroke {-b.stroke_mm:g} to +{b.stroke_mm:g} mm, uncompensated pitch error {b.pitch_error:.2%}, "
+                 "residual after "
                  f"calibration {b.residual_pitch_error:.2%}, LVDT noise σ {b.lvdt_noise_std_mm:.4f} mm "
                  f"({b.filtered_noise_std_mm:.4f} mm after the low-pass), temperature error "
                  f"{b.temperature_error:.0%}; target {b.target_mm:.3f} mm (a tenth of B_spec = "
@@ -168,4 +183,4 @@ def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation, 
                  + "<p>BLFmaint's temperature term is zero in practice: the calibration runs minutes before it "
                  "(paper 2.3); its noise term is the single-reading bound before regression averaging.</p>")
     parts.append(file_link(json_name))
-    write_page(path, "emacheck serv", parts)
+    write_page(path, page_title("emacheck serv", data), parts)

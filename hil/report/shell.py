@@ -17,12 +17,32 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from hil.history.record import is_simulated
+from hil.history.trends import fmt_serial
+
 CSS = """body{font-family:sans-serif;max-width:1300px;margin:1em auto;color:#222;line-height:1.35}
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}
 th{background:#eee}td:first-child,th:first-child{text-align:left}img{max-width:100%}
-.pass{color:#070}.fail{color:#b00}.aborted,.incomplete{color:#b60}.warn{color:#b60}
+.pass{color:#070}.fail{color:#b00}.inconclusive{color:#b36b00}.aborted,.incomplete{color:#666}.warn{color:#b60}
+h1 .badge{color:#fff;padding:0 .35em;border-radius:3px}h1 .pass{background:#070}h1 .fail{background:#b00}
+h1 .inconclusive{background:#d98a00}h1 .aborted,h1 .incomplete{background:#777}
+h1 .simulated,.simulated{color:#fff;background:#5a3d99;padding:0 .35em;border-radius:3px}
+p.simulated{padding:.3em .5em}
+.signoff{border:2px solid #222;padding:.5em 1em;margin:1.5em 0;max-width:60em}
+.signoff table{width:100%}.signoff td,.signoff th{text-align:left;border:none;padding:6px 8px}
+.signoff th{background:none;width:14em}.signoff td.line{border-bottom:1px solid #222;height:2em}
 details{margin:1em 0}summary{cursor:pointer;color:#555}pre{font-size:85%;background:#f6f6f6;padding:.5em}
-small{color:#555}"""
+small{color:#555}
+@page{size:A4;margin:15mm 12mm}
+@media print{body{max-width:none;margin:0;font-size:9pt;-webkit-print-color-adjust:exact;print-color-adjust:exact}
+img{max-width:100%;height:auto;page-break-inside:avoid;break-inside:avoid}
+table,.signoff,figure,tr{page-break-inside:avoid;break-inside:avoid}td,th{padding:2px 4px}
+h1,h2,h3{page-break-after:avoid;break-after:avoid}details{display:block}summary{display:none}
+.signoff{page-break-before:auto}}"""
+
+#: the verdict words of a report's heading, each with its CSS class (colour)
+STATUS_WORDS = {"pass": "PASS", "fail": "FAIL", "inconclusive": "INCONCLUSIVE", "aborted": "ABORTED",
+                "incomplete": "INCOMPLETE"}
 
 
 def pyplot():
@@ -89,6 +109,108 @@ def file_link(name: str, what: str = "the machine-readable result") -> str:
     return f"<p>{esc(what).capitalize()}: <a href='{esc(name)}'>{esc(name)}</a></p>"
 
 
+def heading(what: str, data: dict) -> str:
+    """A report's ``<h1>``: what it is, the verdict in its colour (pass green, fail red, inconclusive
+    amber, aborted and incomplete grey) and SIMULATED for simulated data (:func:`is_simulated`)."""
+    status = str(data.get("status") or "")
+    word = STATUS_WORDS.get(status, status.upper())
+    sim = " <span class='simulated'>SIMULATED</span>" if is_simulated(data) else ""
+    return f"<h1>{esc(what)}: <span class='badge {esc(status)}'>{esc(word)}</span>{sim}</h1>"
+
+
+def page_title(what: str, data: dict) -> str:
+    """The page's ``<title>`` (what a browser's tab and a printed page's header show): the verdict, and
+    SIMULATED for simulated data."""
+    status = str(data.get("status") or "")
+    return (f"{what}: {STATUS_WORDS.get(status, status.upper())}"
+            + (" (SIMULATED, not a real actuator)" if is_simulated(data) else ""))
+
+
+_SIMULATED_WHAT = {"dry-run": "a dry-run: the check over CANopen against two simulated drives",
+                   "simulate": "the check against the simulated plant (no CAN in between)",
+                   "simulate-scenario": "a simulated normal-operation recording"}
+
+
+def simulated_banner(data: dict) -> str:
+    """For simulated data: a line under the heading saying so and what made it ("" for real data)."""
+    if not is_simulated(data):
+        return ""
+    mode = (data.get("trace") or {}).get("mode")
+    what = _SIMULATED_WHAT.get(mode, "simulated data (the simulator's truth is beside it)")
+    return (f"<p class='simulated'><b>SIMULATED</b>: {esc(what)}. Not a real actuator: this report is no "
+            "record of any aircraft's actuation.</p>")
+
+
+def installation_rows(trace: dict) -> list[list[str]]:
+    """Where and when in the aircraft's life (``--aircraft``, ``--position``, ``--rig``, ``--flight-hours``,
+    ``--flight-cycles`` or the profile's ``[history]``), "—" where nobody said."""
+    fh, fc = trace.get("flight_hours"), trace.get("flight_cycles")
+    return [["aircraft", trace.get("aircraft") or "—"], ["position", trace.get("position") or "—"],
+            ["rig", trace.get("rig") or "—"], ["flight hours", "—" if fh is None else f"{fh:g} FH"],
+            ["flight cycles", "—" if fc is None else str(fc)]]
+
+
+def serials(trace: dict) -> list[tuple[str, str]]:
+    """Each EMA and its serial number as the plate and the history write it (``0x5E000101``)."""
+    return [(f"EMA {k[-1]}", fmt_serial(ident.get("serial")))
+            for k, ident in sorted((trace.get("identity") or {}).items()) if ident]
+
+
+def recording_text(trace: dict) -> str:
+    """The recording a result was analysed from, with its SHA-256 where the result carries it
+    ("" inside a run folder of the check itself)."""
+    rec = trace.get("recording")
+    if not rec or trace.get("run_id"):
+        return ""
+    sha = (trace.get("files_sha256") or {}).get("recording")
+    return (f"file <b>{esc(Path(rec).name)}</b> ({esc(rec)}" + (f", sha256 <code>{esc(sha)}</code>" if sha else "")
+            + ")")
+
+
+def identification(data: dict) -> str:
+    """One paragraph under the heading naming what was checked: aircraft, position, flight hours,
+    each EMA's serial, work order, and the file for a bare recording."""
+    trace = data.get("trace") or {}
+    fh = trace.get("flight_hours")
+    items = [("aircraft", trace.get("aircraft")), ("position", trace.get("position")),
+             ("flight hours", None if fh is None else f"{fh:g} FH"), ("work order", trace.get("work_order"))]
+    text = [f"{k} <b>{esc(v)}</b>" for k, v in items if v is not None and v != ""]
+    text += [f"{k} serial <b>{esc(v)}</b>" for k, v in serials(trace)]
+    rec = recording_text(trace)
+    if rec:
+        text.append("analysed from the " + rec)
+    line = "; ".join(text) or "no installation given"
+    return f"<p class='ident'>{line[0].upper() + line[1:]}.</p>"
+
+
+def signoff_block(data: dict, what: str = "maintenance check") -> str:
+    """The block an inspector signs, at the end of the decision: the verdict signed for, who ran the
+    check and for which work order (filled in where given), and lines for the inspector's name, the
+    date and the signature (printable: never split over two pages)."""
+    trace = data.get("trace") or {}
+    status = str(data.get("status") or "")
+
+    def given(v: object) -> str:
+        return f"<td>{esc(v)}</td>" if v else "<td class='line'></td>"
+
+    fh = trace.get("flight_hours")
+    where = ", ".join(esc(v) for v in (trace.get("aircraft"), trace.get("position"),
+                                       None if fh is None else f"{fh:g} FH") if v)
+    sn = ", ".join(f"{k} {esc(v)}" for k, v in serials(trace))
+    sim = ("<p class='simulated'><b>SIMULATED</b>: not a real actuator; not for release to service.</p>"
+           if is_simulated(data) else "")
+    return (f"<div class='signoff'><h3>Sign-off</h3>{sim}"
+            f"<p>The {esc(what)} above, verdict <b class='{esc(status)}'>"
+            f"{esc(STATUS_WORDS.get(status, status.upper()))}</b>"
+            + (f", run {esc(trace['run_id'])}" if trace.get("run_id") else "")
+            + (f"; {where}" if where else "") + (f"; {sn}" if sn else "") + ".</p><table>"
+            f"<tr><th>check run by (operator)</th>{given(trace.get('operator'))}</tr>"
+            f"<tr><th>work order</th>{given(trace.get('work_order'))}</tr>"
+            "<tr><th>inspected by (name, licence)</th><td class='line'></td></tr>"
+            "<tr><th>date</th><td class='line'></td></tr>"
+            "<tr><th>signature</th><td class='line'></td></tr></table></div>")
+
+
 def trace_lines(trace: dict | None) -> str:
     """The traceability block of a report: when, what software, which actuators, who, for what work order."""
     if not trace:
@@ -96,12 +218,13 @@ def trace_lines(trace: dict | None) -> str:
     rows = [["started (UTC)", trace.get("started_utc") or "—"], ["analysed (UTC)", trace.get("analysed_utc") or "—"],
             ["software", f"{trace.get('software', {}).get('name', '')} {trace.get('software', {}).get('version', '')}"],
             ["operator", trace.get("operator") or "—"], ["work order", trace.get("work_order") or "—"],
-            ["run id", trace.get("run_id") or "—"]]
+            ["run id", trace.get("run_id") or "—"], ["mode", trace.get("mode") or "— (a recording without run record)"],
+            *installation_rows(trace), ["recording", trace.get("recording") or "—"]]
     for k, ident in (trace.get("identity") or {}).items():
         if ident:
             rows.append([f"{k} identity (0x1018)",
                          f"vendor 0x{ident.get('vendor_id', 0):08X}, product 0x{ident.get('product_code', 0):08X}, "
-                         f"revision 0x{ident.get('revision', 0):08X}, serial {ident.get('serial', '—')}"])
+                         f"revision 0x{ident.get('revision', 0):08X}, serial {fmt_serial(ident.get('serial'))}"])
     for k, ml in (trace.get("master_loss") or {}).items():
         rows.append([f"{k} reaction to losing the master", master_loss_text(ml)])
     for k, fc in (trace.get("force_control") or {}).items():
