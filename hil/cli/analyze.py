@@ -20,7 +20,7 @@ from hil.cli.common import (
     record_history,
 )
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.runfolder import has_record, read_record, resolve_recording, write_json_atomic
+from hil.runfolder import has_record, read_record, resolve_recording
 from hil.runrecord import RunStatus
 
 
@@ -36,7 +36,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
-    outputs = outputs_for(args.out, sig_path, run_dir, "analysis")
+    outputs = outputs_for(args.out, sig_path, run_dir, "analysis", ("result.json", "report.html"))
     out = outputs.folder
     truth = meta.truth if meta is not None else None
     status = meta.status if meta is not None else None
@@ -57,8 +57,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                   "trace": trace_of(meta, sig_path, extra)}
         if truth is not None:
             result["truth"] = truth
-        out.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(outputs.path("result.json"), result)
+        outputs.write_json("result.json", result)
         console.print(f"[yellow]{result['status']}:[/yellow] {result['reason']}; no analysis: {exc}")
         record_history(console, args, act, outputs.path("result.json"), run_folder=run_dir, recording=sig_path)
         return ExitCode.ABORTED

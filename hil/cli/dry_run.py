@@ -88,7 +88,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                           simrig=snapshot(simrig.params), truth=truth, faults=tuple(snapshot(f) for f in faults),
                           bus_load=BusLoad(load.load_nominal, load.load_worst), **rig_meta(rig), **(trace or {}))
     meta = MetaWriter(out, dataclasses.replace(record, files_sha256={**(record.files_sha256 or {}),
-                                                                     **rig_hashes(rig)}))
+                                                                     **rig_hashes(rig)}), new=True)
     meta.write()  # the run folder says "running" from the start
     # a channel of its own: python-can's virtual channels are process-global by name
     transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
