@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hil.runrecord import shared_serial
+
 #: modes of simulated checks (meta.json ``mode``): never mixed into a real actuator's trend
 SIMULATED_MODES = ("dry-run", "simulate", "simulate-scenario")
 CHANNELS = ("int1", "int2", "ext")
@@ -104,6 +106,12 @@ def record_from_result(result: dict, *, result_path: Path | None = None, run_fol
         so that analysing the same recording twice is one check in the trend.
     """
     trace = result.get("trace") or {}
+    clash = shared_serial(trace.get("identity"))
+    if clash is not None:
+        from hil.history.errors import HistoryInputError
+
+        raise HistoryInputError(f"{result_path or 'the result'}: {clash}; not recorded (the history would "
+                                f"mix two actuators' readings in one trend)")
     kind = kind_of(result)
     sha = result_sha256(result)
     run_id = trace.get("run_id") or None
