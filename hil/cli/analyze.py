@@ -18,6 +18,7 @@ from hil.cli.common import (
     make_console,
     outputs_for,
     record_history,
+    refuse_foreign_history,
 )
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import has_record, read_record, resolve_recording
@@ -36,6 +37,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
+    refuse_foreign_history(args, act)
     outputs = outputs_for(args.out, sig_path, run_dir, "analysis", ("result.json", "report.html"))
     out = outputs.folder
     truth = meta.truth if meta is not None else None

@@ -448,6 +448,21 @@ def history_url(url: str | None, act: Actuation) -> str:
     return default_url()
 
 
+def refuse_foreign_history(args: argparse.Namespace, act: Actuation, *, simulated: bool = False) -> None:
+    """Before a command that records does anything: a history database given to it (``--history URL``,
+    else the actuation profile's ``history.url``) that is an SQLite file of another program is refused
+    (exit 3) and left untouched (:mod:`hil.history.guard`; the standard library's sqlite3 only). A
+    ``simulated`` check records only with ``--history``."""
+    explicit = getattr(args, "history", None)
+    if getattr(args, "no_history", False) or (simulated and explicit is None):
+        return
+    url = explicit if isinstance(explicit, str) else act.history.url or None
+    if url:
+        from hil.history.guard import refuse_foreign
+
+        refuse_foreign(url)
+
+
 def record_history(console, args: argparse.Namespace, act: Actuation, result_path: Path, *,
                    run_folder: Path | None, recording: Path | None = None) -> None:
     """After a command wrote its result: record it in the wear history, one line on the console

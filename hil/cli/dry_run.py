@@ -30,6 +30,7 @@ from hil.cli.common import (
     make_console,
     out_dir,
     record_history,
+    refuse_foreign_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
 from hil.runfolder import MetaWriter
@@ -118,6 +119,7 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
+    refuse_foreign_history(args, act, simulated=True)
     out = out_dir(args, "dry-run")
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
     trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),

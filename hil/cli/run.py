@@ -31,6 +31,7 @@ from hil.cli.common import (
     open_bus,
     out_dir,
     record_history,
+    refuse_foreign_history,
 )
 from hil.profiles import load_actuation, load_check
 
@@ -54,6 +55,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                       "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
         return ExitCode.INPUT
     check_new_run_folder(args.out)  # a check's record is written once: refused before the bus is opened
+    refuse_foreign_history(args, act)
     bitrate = args.bitrate or act.canopen.bitrate_bps
     # the bus first: an interface that cannot be opened leaves no half-made run folder behind
     # (virtual: the SYNC task's frames are part of the traffic the master follows)

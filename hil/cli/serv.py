@@ -24,6 +24,7 @@ from hil.cli.common import (
     make_console,
     outputs_for,
     record_history,
+    refuse_foreign_history,
 )
 from hil.errors import RecordingError
 from hil.runfolder import read_record, resolve_recording
@@ -80,6 +81,7 @@ def cmd_serv(args: argparse.Namespace) -> int:
     sig_path, run_dir = resolve_recording(args.recording)
     meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
+    refuse_foreign_history(args, act)
     try:
         sig = load_recording(sig_path, act, meta)
         corr = choose_calibration(sig, act, run_dir, getattr(args, "calibration", None))

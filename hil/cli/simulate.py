@@ -24,6 +24,7 @@ from hil.cli.common import (
     make_console,
     out_dir,
     record_history,
+    refuse_foreign_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
 from hil.runfolder import MetaWriter, open_new
@@ -46,6 +47,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
     refuse_shared_serial(act, simrig, args.sim)
+    refuse_foreign_history(args, act, simulated=True)
     seed = simrig.seed if args.seed is None else args.seed
     out = out_dir(args, "simulate")
     simrig, wear = worn_simrig(simrig, args.flight_hours, seed)
