@@ -93,7 +93,10 @@ def print_history(console, doc: dict, series: list, *, detail: bool) -> None:
     groups: dict[tuple, list] = {}
     for t in trends:
         groups.setdefault((t["simulated"], t["aircraft"], t["position"]), []).append(t)
-    console.print(f"[bold]Wear trends[/bold] in {escape(doc['history'])}: {len(doc['checks'])} result(s)")
+    old = sum(not c.get("current", True) for c in doc["checks"])
+    console.print(f"[bold]Wear trends[/bold] in {escape(doc['history'])}: {len(doc['checks'])} result(s)"
+                  + (f", {old} superseded by a later analysis of the same run (kept; the latest is current)"
+                     if old else ""))
     for (sim, aircraft, position), ts in groups.items():
         where = ", ".join(x for x in (aircraft, position) if x) or "installation not recorded"
         tab = Table(title=escape(where + (" [simulated]" if sim else "")), title_justify="left",

@@ -35,6 +35,12 @@ class CheckRecord:
     readings: list = field(default_factory=list)  #: column -> value of ``emacheck_readings`` per channel
 
 
+def rank(analysed_utc: _dt.datetime | None, check_id: int) -> tuple:
+    """The order of the results of one run and kind (a check and its re-analyses): by analysis time (none:
+    first), then as recorded. The last is the run's current result; each supersedes the one before."""
+    return (analysed_utc or _dt.datetime.min, check_id)
+
+
 def result_sha256(result: dict) -> str:
     """SHA-256 of a result's canonical JSON (sorted keys, no blanks): the same result, the same key."""
     from hil.runfolder import json_default

@@ -31,6 +31,7 @@ from hil import __version__
 from hil.history import guard
 from hil.history import schema as S
 from hil.history.errors import HistoryError, HistoryInputError, HistoryUnavailableError
+from hil.history.record import rank
 from hil.history.url import check_url, dialect, masked, sqlite_path
 
 if TYPE_CHECKING:  # (record imports no store)
@@ -287,12 +288,22 @@ class HistoryStore:
         return int(conn.execute(sa.select(a.c.id).where(a.c.serial == serial, a.c.vendor_id == vendor,
                                                         a.c.product_code == product)).scalar_one())
 
+    def _superseded(self, conn: sa.Connection, row: dict) -> int | None:
+        """The result of the same run and kind ranked just before ``row`` (:func:`hil.history.record.rank`):
+        the one ``row`` supersedes (both stay; None: the run's first)."""
+        c = S.checks
+        before = [r for r in conn.execute(sa.select(c.c.id, c.c.analysed_utc).where(
+            c.c.run_key == row["run_key"], c.c.kind == row["kind"], c.c.result_sha256 != row["result_sha256"]))
+            if rank(r.analysed_utc, r.id) <= rank(row.get("analysed_utc"), 1 << 62)]
+        return max(before, key=lambda r: rank(r.analysed_utc, r.id)).id if before else None
+
     def _add(self, conn: sa.Connection, record) -> bool:
         row = dict(record.check)
         for ema in ("ema1", "ema2"):
             key = record.identity.get(ema)
             row[f"{ema}_actuator_id"] = None if key is None else self._actuator_id(conn, key)
         row.setdefault("recorded_utc", _utcnow())
+        row["supersedes_id"] = self._superseded(conn, row)
         stmt = (self._insert()(S.checks).values(**row)
                 .on_conflict_do_nothing(index_elements=["result_sha256"]).returning(S.checks.c.id))
         cid = conn.execute(stmt).scalar()
