@@ -199,21 +199,28 @@ def test_analyze_out_an_empty_folder_writes_into_it(run_copy, tmp_path):
     assert sorted(os.listdir(out)) == ["report.html", "result.json"]
 
 
-def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run_copy, tmp_path):
+def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run_copy, tmp_path, capsys):
     folder = tmp_path / "bare"
     folder.mkdir()
     csv = folder / "f.csv"
     csv.write_bytes((run_copy / "signals.csv").read_bytes())
     with gzip.open(folder / "f.csv.gz", "wb") as fh:
         fh.write(csv.read_bytes())
-    assert main(["analyze", str(csv), "--no-history"]) == ExitCode.PASS
+    url = f"sqlite:///{tmp_path / 'h.sqlite'}"
+    assert main(["analyze", str(csv), "--history", url]) == ExitCode.PASS
     first = tree(folder)
     assert {"f.result.json", "f.report.html"} <= set(first)
-    assert main(["analyze", str(csv), "--no-history"]) == ExitCode.PASS
+    assert main(["analyze", str(csv), "--history", url]) == ExitCode.PASS
     second = tree(folder)
     assert {k: second[k] for k in first} == first
     assert sorted(set(second) - set(first)) == ["f.2.report.html", "f.2.result.json"]
     assert "f.2.result.json" in (folder / "f.2.report.html").read_text()
+    # the history keeps both, each pointing at its own unchanged file; the second is current
+    capsys.readouterr()
+    assert main(["history", "--history", url, "--json"]) == ExitCode.PASS
+    checks = json.loads(capsys.readouterr().out)["checks"]
+    assert [Path(c["result_path"]).name for c in checks] == ["f.result.json", "f.2.result.json"]
+    assert [c["current"] for c in checks] == [False, True] and checks[1]["supersedes"] == checks[0]["id"]
     assert main(["analyze", str(folder / "f.csv.gz"), "--no-history"]) == ExitCode.PASS
     third = tree(folder)
     assert {k: third[k] for k in second} == second
