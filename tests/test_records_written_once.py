@@ -275,3 +275,12 @@ def test_a_bare_file_in_a_read_only_folder_is_exit_3_naming_the_output(run_copy,
     err = capsys.readouterr().err
     assert rc == ExitCode.INPUT and sorted(os.listdir(folder)) == ["f.csv"]
     assert f"{folder / 'f.result.json'}: cannot be written" in err and err.count("\n") == 1
+
+
+def test_a_run_folder_that_cannot_be_analysed_gets_no_empty_sub_folder(run_copy, capsys):
+    bad = run_copy / "signals.csv"
+    bad.write_text(bad.read_text().replace("\n", "\nnot,a,number,row,here,at,all,0,0,0,0,x\n", 1))
+    before = tree(run_copy)
+    assert main(["analyze", str(run_copy), "--no-history"]) == ExitCode.INPUT
+    assert "line 2" in capsys.readouterr().err
+    assert tree(run_copy) == before and not [p for p in run_copy.iterdir() if p.is_dir()]

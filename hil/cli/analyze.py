@@ -46,7 +46,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta).as_json()}
     try:
         result = analyze_and_report(sig_path, act, outputs, truth, meta, console, trace_extra=extra)
-    except (IncompleteRecordingError, AnalysisError) as exc:
+    except BaseException as exc:
+        outputs.discard_if_empty()  # no empty analysis-<UTC>/ left behind by a recording that cannot be read
+        if not isinstance(exc, (IncompleteRecordingError, AnalysisError)):
+            raise
         # (bad content, e.g. garbage lines or NaN, is refused whatever the run's status)
         if not incomplete and status is not RunStatus.ABORTED:
             if str(exc).startswith(str(sig_path)):
@@ -59,6 +62,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                   "trace": trace_of(meta, sig_path, extra)}
         if truth is not None:
             result["truth"] = truth
+        outputs.folder.mkdir(parents=True, exist_ok=True)
         outputs.write_json("result.json", result)
         console.print(f"[yellow]{result['status']}:[/yellow] {result['reason']}; no analysis: {exc}")
         record_history(console, args, act, outputs.path("result.json"), run_folder=run_dir, recording=sig_path)

@@ -212,10 +212,19 @@ class Outputs:
     folder: Path
     prefix: str = ""
     own: bool = False
+    made: bool = False  #: the folder was made for these outputs (:meth:`discard_if_empty` may remove it)
 
     def path(self, name: str) -> Path:
         """The path of output ``name`` (e.g. ``"result.json"``)."""
         return self.folder / f"{self.prefix}{name}"
+
+    def discard_if_empty(self) -> None:
+        """After a command failed before writing: remove the folder it made for its outputs, if still empty."""
+        if self.made:
+            import contextlib
+
+            with contextlib.suppress(OSError):
+                self.folder.rmdir()  # (fails, and is left, where anything was written into it)
 
     def write_json(self, name: str, obj) -> Path:
         """Output ``name`` as JSON: created (:class:`hil.errors.OutputError` if it exists), or for ``own``
@@ -317,8 +326,9 @@ def fresh_outputs(out: Path, kind: str) -> Outputs:
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out}: a file, not a folder; give a new or empty folder (or omit --out)")
     if not out.exists() or is_empty_folder(out):
-        return Outputs(make_folder(out))
-    return Outputs(new_folder(out, f"{kind}-{utc_stamp()}"))
+        made = not out.exists()
+        return Outputs(make_folder(out), made=made)
+    return Outputs(new_folder(out, f"{kind}-{utc_stamp()}"), made=True)
 
 
 def outputs_for(out: Path | None, recording: Path, run_dir: Path | None, kind: str,
@@ -331,7 +341,7 @@ def outputs_for(out: Path | None, recording: Path, run_dir: Path | None, kind: s
     if out is not None:
         return fresh_outputs(out, kind)
     if run_dir is not None:
-        return Outputs(new_folder(run_dir, f"{kind}-{utc_stamp()}"))
+        return Outputs(new_folder(run_dir, f"{kind}-{utc_stamp()}"), made=True)
     stem, folder = output_stem(recording), recording.parent
     k = 1
     while True:

@@ -21,7 +21,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
                           ("diagnosis.json", "diagnosis_report.html"))
     t0 = time.perf_counter()
-    d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    try:
+        d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    except BaseException:
+        outputs.discard_if_empty()
+        raise
     secs = time.perf_counter() - t0
     data = diagnosis_dict(d, args.model, secs)
     outputs.write_json("diagnosis.json", data)
