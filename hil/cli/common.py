@@ -32,7 +32,8 @@ class ExitCode(IntEnum):
 EPILOG = """\
 exit status: 0 pass (diagnose, sim-serve: done), 1 fail (a backlash proven above B_spec),
 2 check aborted or run incomplete (result.json says why), 3 bad input (profile,
-recording, EDS, CAN interface, arguments: the message names the file, field or line),
+recording, EDS, CAN interface, arguments, an --out that is a file or, for a check, holds
+files, two EMAs of one serial: the message names the file, field or line),
 4 internal error, 5 inconclusive (a reading whose uncertainty straddles B_spec, or a
 channel not measured). history: 2 its database is down or locked, 3 its URL, file or
 login cannot be used; a check's recording in the history never changes its exit status.
