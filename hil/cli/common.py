@@ -250,21 +250,6 @@ class Outputs:
         return create_with(path, write)
 
 
-_RECORDING_SUFFIXES = (".gz", ".csv", ".log", ".mat", ".txt")
-
-
-def recording_stem(path: Path) -> str:
-    """A recording's name without its recording suffixes (``flight.csv.gz`` -> ``flight``)."""
-    name = path.name
-    while True:
-        for suf in _RECORDING_SUFFIXES:
-            if name.lower().endswith(suf) and len(name) > len(suf):
-                name = name[: -len(suf)]
-                break
-        else:
-            return name
-
-
 def output_stem(path: Path) -> str:
     """The name an analysis of a bare recording is named after: a ``.csv`` file's stem (``flight.csv`` ->
     ``flight``), any other recording's whole name (``flight.csv.gz``, ``flight.log``), so that two
