@@ -284,3 +284,18 @@ def test_a_run_folder_that_cannot_be_analysed_gets_no_empty_sub_folder(run_copy,
     assert main(["analyze", str(run_copy), "--no-history"]) == ExitCode.INPUT
     assert "line 2" in capsys.readouterr().err
     assert tree(run_copy) == before and not [p for p in run_copy.iterdir() if p.is_dir()]
+
+
+def test_a_read_only_file_system_is_one_line_naming_the_output(tmp_path, monkeypatch):
+    import errno
+    import tempfile
+
+    def read_only(*a, **k):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS))
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    with pytest.raises(OutputError) as err:
+        create_json(tmp_path / "flight.result.json", {"status": "pass"})
+    assert str(err.value) == (f"{tmp_path / 'flight.result.json'}: cannot be written (Read-only file system); "
+                              f"give --out a folder you can write to")
+    assert os.listdir(tmp_path) == []
