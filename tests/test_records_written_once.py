@@ -228,11 +228,11 @@ def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run
     assert json.loads((folder / "f.csv.gz.result.json").read_text())["trace"]["recording"].endswith("f.csv.gz")
 
 
-@pytest.mark.parametrize("command", ["analyze", "diagnose"])
+@pytest.mark.parametrize("command", ["analyze", "serv", "diagnose"])
 def test_out_an_existing_file_is_refused_with_exit_3(command, run_copy, tmp_path, capsys):
     out = tmp_path / "taken"
     out.write_bytes(b"x")
-    rc = main([command, str(run_copy), "--out", str(out)] + (["--no-history"] if command == "analyze" else []))
+    rc = main([command, str(run_copy), "--out", str(out)] + (["--no-history"] if command != "diagnose" else []))
     err = capsys.readouterr().err
     assert rc == ExitCode.INPUT and out.read_bytes() == b"x"
     assert f"--out {out}: a file, not a folder" in err and err.count("\n") == 1
