@@ -192,11 +192,17 @@ def test_analyze_out_a_folder_with_files_writes_a_new_sub_folder(run_copy, tmp_p
     assert sorted(set(after) - set(before)) == [f"{sub}/report.html", f"{sub}/result.json"]
 
 
-def test_analyze_out_an_empty_folder_writes_into_it(run_copy, tmp_path):
+def test_a_derived_out_folder_is_used_while_empty_and_gets_a_sub_folder_with_one_file(tmp_path):
+    from hil.cli.common import fresh_outputs
+
     out = tmp_path / "empty"
     out.mkdir()
-    assert main(["analyze", str(run_copy / "signals.csv"), "--out", str(out), "--no-history"]) == ExitCode.PASS
-    assert sorted(os.listdir(out)) == ["report.html", "result.json"]
+    assert fresh_outputs(out, "analysis") == Outputs(out, made=False)  # there before: never removed
+    assert fresh_outputs(tmp_path / "new", "analysis") == Outputs(tmp_path / "new", made=True)
+    (out / "result.json").write_text("{}")  # the boundary: one file
+    sub = fresh_outputs(out, "analysis").folder
+    assert sub.parent == out and sub.name.startswith("analysis-") and sorted(os.listdir(out)) == [sub.name,
+                                                                                                 "result.json"]
 
 
 def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run_copy, tmp_path, capsys):
