@@ -7,12 +7,14 @@ from __future__ import annotations
 import copy
 import datetime as _dt
 import json
-import sqlite3
+
+import pytest
 
 from hil.cli import main
 from hil.cli.common import ExitCode
 from hil.history.record import record_from_result
 from hil.history.store import HistoryStore
+from support import postgres
 from support.wear import wear_results
 
 
@@ -61,17 +63,23 @@ def test_a_re_analysis_keeps_both_and_the_latest_is_current(tmp_path, capsys):
         " ".join(capsys.readouterr().out.split())
 
 
-def test_a_version_1_database_is_migrated_keeping_its_rows(tmp_path, capsys):
-    path = tmp_path / "v1.sqlite"
-    url = f"sqlite:///{path}"
+@pytest.fixture(params=["sqlite", "postgresql"])
+def url(request, tmp_path):
+    return postgres.history_url(request.param, tmp_path)
+
+
+def test_a_version_1_database_is_migrated_keeping_its_rows(url, capsys):
+    import sqlalchemy as sa
+
     first, again = _results()
     with HistoryStore.open(url) as store:
         assert [store.add(record_from_result(r)) for r in (first, again)] == [True, True]
-    conn = sqlite3.connect(path)  # back to what version 1 wrote: no supersedes_id, no version 2
-    conn.execute("ALTER TABLE emacheck_checks DROP COLUMN supersedes_id")
-    conn.execute("DELETE FROM emacheck_schema WHERE version = 2")
-    conn.commit()
-    conn.close()
+    engine = sa.create_engine(url.replace("sqlite://", "sqlite+pysqlite://").replace(
+        "postgresql://", "postgresql+psycopg://"))
+    with engine.begin() as conn:  # back to what version 1 wrote: no supersedes_id, no version 2
+        conn.execute(sa.text("ALTER TABLE emacheck_checks DROP COLUMN supersedes_id"))
+        conn.execute(sa.text("DELETE FROM emacheck_schema WHERE version = 2"))
+    engine.dispose()
     with HistoryStore.open(url) as store:
         assert store.schema_version() == 2
         rows = store.checks()
