@@ -50,6 +50,14 @@ class InterfaceError(EmacheckError, OSError):
     """A CAN interface that cannot be opened; the message names interface, channel and what to check."""
 
 
+class OutputError(EmacheckError, OSError):
+    """A command's output cannot be written where asked: ``--out`` is a file or a folder that holds files
+    already (a check's record is written once), a file of that name exists (never overwritten), or the
+    folder cannot be written (read-only, no permission). The message names the path (exit status 3)."""
+
+    bad_input = True
+
+
 class SequenceError(EmacheckError, RuntimeError):
     """The check sequence reached a state it cannot continue from."""
 

@@ -63,11 +63,18 @@ from hil.config import Actuation
 from hil.errors import EmacheckError
 
 __all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
-           "MasterLossReactionError", "ReactionConfig"]
+           "MasterLossReactionError", "ReactionConfig", "SameSerialError"]
 
 
 class PreflightError(EmacheckError, RuntimeError):
     """A node does not match the profile or did not come up."""
+
+
+class SameSerialError(PreflightError):
+    """EMA 1 and EMA 2 report one identity (vendor, product and a serial number other than 0): the check
+    could not say which actuator it measured, so it is refused before anything moves (exit status 3)."""
+
+    bad_input = True
 
 
 class MasterLossReactionError(PreflightError):
@@ -335,10 +342,30 @@ class Preflight:
         if ident["revision"] < spec.revision_min:
             raise PreflightError(f"{spec.label}: revision 0x{ident['revision']:08X} below "
                                  f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
+        self._distinct_serial(spec)
         devtype = int((yield from self._read(node, 0x1000, 0, "device type")))
         if devtype & 0xFFFF != spec.device_profile:
             raise PreflightError(f"{spec.label}: device type 0x{devtype:08X} is not a CiA {spec.device_profile} "
                                  f"device (0x1000 bits 0..15 = {devtype & 0xFFFF})")
+
+    def _distinct_serial(self, spec) -> None:
+        """The drive ``spec`` must not report the serial number (0x1018:04, with vendor and product) of the
+        other drive identified before it: two actuators of one serial cannot be told apart in the record
+        (:class:`SameSerialError`). A serial of 0 (none set, the EDS default) or none read is not compared."""
+        drives = [d.plan.node.spec for d in self.drives]
+        if spec.node_id not in [s.node_id for s in drives]:
+            return
+        key = tuple(self.identities[spec.node_id].get(k) for k in ("vendor_id", "product_code", "serial"))
+        if not key[2]:
+            return
+        for other in drives:
+            if other.node_id == spec.node_id or other.node_id not in self.identities:
+                continue
+            if tuple(self.identities[other.node_id].get(k) for k in ("vendor_id", "product_code", "serial")) == key:
+                raise SameSerialError(
+                    f"{other.label} and {spec.label} both report serial number 0x{key[2]:08X} (0x1018:04, "
+                    f"vendor 0x{key[0]:08X}, product 0x{key[1]:08X}): two actuators of one serial cannot be "
+                    f"traced; check each drive's identity (a copied parameter set?) before the check")
 
     def _common(self, node: NodePlan) -> Generator:
         hb_ms = int(round(node.spec.heartbeat_period_s * 1000))

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from hil.canopen.process import MEASURED_CHANNELS, Sample, Setpoint
-from hil.errors import IncompleteRecordingError, RecordingError
+from hil.errors import IncompleteRecordingError, OutputError, RecordingError
 from hil.runrecord import META_NAME, RunRecord
 
 SIGNAL_COLUMNS = tuple(name for name, _ in MEASURED_CHANNELS)
@@ -46,6 +46,94 @@ def write_json_atomic(path: Path, obj: Any) -> None:
         fh.flush()
         os.fsync(fh.fileno())
     os.replace(tmp, path)
+
+
+def output_error(path: Path, exc: OSError) -> OutputError:
+    """An OSError met writing an output, as one line naming the path (exit status 3)."""
+    if isinstance(exc, FileExistsError):
+        return OutputError(f"{path}: exists; emacheck never overwrites a record (give another --out, or omit "
+                           f"--out for a new folder)")
+    return OutputError(f"{path}: cannot be written ({exc.strerror or type(exc).__name__}); give --out a "
+                       f"folder you can write to")
+
+
+def _link_new(src: Path, dst: Path) -> None:
+    """Give the complete file ``src`` the name ``dst`` only if ``dst`` does not exist (``os.link`` fails
+    then, even in a race: never a replace); ``src`` is removed either way. Where the file system has no
+    hard links, ``dst`` is created with ``O_EXCL`` and ``src`` copied into it."""
+    import errno
+    import shutil
+
+    try:
+        try:
+            os.link(src, dst)
+        except OSError as exc:
+            if exc.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK,
+                                 errno.ENOSYS):
+                raise
+            with open(src, "rb") as fin, open(dst, "xb") as fout:
+                shutil.copyfileobj(fin, fout)
+                fout.flush()
+                os.fsync(fout.fileno())
+    except OSError as exc:
+        raise output_error(dst, exc) from None
+    finally:
+        with _suppress_os():
+            os.unlink(src)
+
+
+def _suppress_os():
+    import contextlib
+
+    return contextlib.suppress(OSError)
+
+
+def create_with(path: Path, write) -> Path:
+    """Create the file ``path`` by ``write(tmp)`` (any writer taking a path: a report) without ever
+    replacing a file: written complete under a temporary name beside it, then linked to ``path`` only if
+    ``path`` does not exist (:class:`~hil.errors.OutputError` naming it otherwise, exit status 3)."""
+    import tempfile
+
+    path = Path(path)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+        os.close(fd)
+    except OSError as exc:
+        raise output_error(path, exc) from None
+    try:
+        write(Path(tmp))
+    except BaseException:
+        with _suppress_os():
+            os.unlink(tmp)
+        raise
+    _link_new(Path(tmp), path)
+    return path
+
+
+def create_bytes(path: Path, data: bytes) -> Path:
+    """Create the file ``path`` holding ``data`` (fsynced) only if it does not exist (:func:`create_with`)."""
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+
+    return create_with(path, write)
+
+
+def create_json(path: Path, obj: Any) -> Path:
+    """Create the JSON file ``path`` only if it does not exist: a record written once, never replaced."""
+    text = json.dumps(obj, indent=2, sort_keys=False, default=json_default) + "\n"
+    return create_bytes(path, text.encode())
+
+
+def open_new(path: Path):
+    """``open(path, "x")``: a new text file, never one that exists (:class:`~hil.errors.OutputError`)."""
+    try:
+        return open(path, "x")
+    except OSError as exc:
+        raise output_error(Path(path), exc) from None
 
 
 def _write_bytes_atomic(path: Path, data: bytes) -> None:
@@ -175,7 +263,10 @@ class LoopFile:
     def __init__(self, path: Path, disk: DiskSync | None = None) -> None:
         self.path = Path(path)
         self.disk = disk if disk is not None else DiskSync(background=False)  # (none: each job at once)
-        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        try:  # a new file: a run's can.log and signals.csv are written once, never over an older one
+            self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+        except OSError as exc:
+            raise output_error(self.path, exc) from None
         self._parts: list[str] = []
         self.closed = False
 
@@ -229,27 +320,34 @@ class MetaWriter:
     """The one writer of a run folder's meta.json (IO shell): owns its path, the record as last
     written and, while the check loop runs, the folder's :class:`DiskSync`.
 
-    :meth:`write` writes at once on the caller's thread (atomically, fsynced); :meth:`post` hands the
+    :meth:`write` writes at once on the caller's thread (atomically, fsynced; with ``new`` the first write
+    creates the file and refuses one that exists, :class:`~hil.errors.OutputError`); :meth:`post` hands the
     record to the DiskSync (in the background on a real bus, so the loop never waits for the disk),
     which also writes and fsyncs signals.csv (:class:`SignalsWriter`) in order with it.
     """
 
-    def __init__(self, run_dir: Path, record: RunRecord, disk: DiskSync | None = None) -> None:
+    def __init__(self, run_dir: Path, record: RunRecord, disk: DiskSync | None = None, *, new: bool = False) -> None:
         self.run_dir = Path(run_dir)
         self.path = self.run_dir / META_NAME
         self.record = record  #: the record as last written (or as given, before the first write)
         self.disk = disk
+        #: the first write creates meta.json (a new run: never over another run's); later ones replace it
+        self._create = new
 
     def write(self, record: RunRecord | None = None) -> RunRecord:
         """Write ``record`` (default: the current one) now; returns it."""
         if record is not None:
             self.record = record
-        write_json_atomic(self.path, self.record.as_json())
+        if self._create:
+            create_json(self.path, self.record.as_json())
+            self._create = False
+        else:
+            write_json_atomic(self.path, self.record.as_json())
         return self.record
 
     def post(self, record: RunRecord) -> RunRecord:
-        """Write ``record`` through the DiskSync (at once without one); returns it."""
-        if self.disk is None:
+        """Write ``record`` through the DiskSync (at once without one, or when it creates the file); returns it."""
+        if self.disk is None or self._create:
             return self.write(record)
         self.record = record
         self.disk.write_json(self.path, record.as_json())

@@ -63,6 +63,8 @@ class LoopOutcome:
     samples: int
     duration_s: float  #: rig (simulated or real) time
     steps: tuple[StepTime, ...]  #: when each step began and ended
+    #: stopped by bad input found on the bus (two drives of one serial): the command exits 3, not 2
+    bad_input: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "status", RunStatus(self.status))  # "done"/"aborted" as a RunStatus; else raises

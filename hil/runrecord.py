@@ -270,6 +270,20 @@ class Wear(_Part):
     line_mm: dict = _req("object")
 
 
+def shared_serial(identity: Mapping | None) -> str | None:
+    """What is wrong when EMA 1 and EMA 2 of an identity block (JSON form: ``{"ema1": {"node", "vendor_id",
+    "product_code", "serial", ...} | None, "ema2": ...}``) report one actuator identity (vendor, product and
+    a serial other than 0), as a sentence naming both nodes and the serial; None when they differ or a
+    serial is missing (0: none set)."""
+    one, two = ((identity or {}).get(k) or {} for k in ("ema1", "ema2"))
+    keys = [tuple(d.get(f) for f in ("vendor_id", "product_code", "serial")) for d in (one, two)]
+    serial = keys[0][2]
+    if not isinstance(serial, int) or isinstance(serial, bool) or serial == 0 or keys[0] != keys[1]:
+        return None
+    return (f"EMA 1 (node {one.get('node')}) and EMA 2 (node {two.get('node')}) report the same serial number "
+            f"0x{serial:08X}: two actuators of one serial cannot be traced")
+
+
 @dataclass(frozen=True)
 class Identity(_Part):
     """A drive's identity object 0x1018 as it reported it, with its node id. ``serial`` None: the read

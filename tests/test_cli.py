@@ -130,6 +130,7 @@ def test_run_cut_just_after_the_force_fight_began_is_incomplete_not_a_crash(defa
     (out / "signals.csv").write_text("\n".join(lines[: first_ff + 5]) + "\n")
     MetaWriter(out, dataclasses.replace(read_record(src), status="running")).write()
     assert main(["analyze", str(out), "--out", str(out)]) == 2
-    res = json.loads((out / "result.json").read_text())
+    (made,) = out.glob("analysis-*/result.json")  # a new sub-folder: the run folder's files stay
+    res = json.loads(made.read_text())
     assert res["status"] == "incomplete"
     assert "force-fight segment too short for BLFmaint: 5 samples (need >= 200)" in res["analysis_error"]

@@ -97,7 +97,8 @@ def test_analyze_from_can_log_alone(dry_run, tmp_path):
         shutil.copy(out / f, run / f)
     rc = main(["analyze", str(run), "--out", str(run)])
     assert rc == 0
-    res = json.loads((run / "result.json").read_text())
+    (made,) = run.glob("analysis-*/result.json")  # a new sub-folder: the run folder's files stay
+    res = json.loads(made.read_text())
     ref = json.loads((out / "result.json").read_text())
     for ch in CHANNELS:
         assert res["backlash_mm"][ch] == pytest.approx(ref["backlash_mm"][ch], abs=2e-4), ch

@@ -18,9 +18,10 @@ from hil.cli.common import (
     make_console,
     outputs_for,
     record_history,
+    refuse_foreign_history,
 )
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.runfolder import has_record, read_record, resolve_recording, write_json_atomic
+from hil.runfolder import has_record, read_record, resolve_recording
 from hil.runrecord import RunStatus
 
 
@@ -36,7 +37,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
-    outputs = outputs_for(args.out, sig_path, run_dir, "analysis")
+    refuse_foreign_history(args, act)
+    outputs = outputs_for(args.out, sig_path, run_dir, "analysis", ("result.json", "report.html"))
     out = outputs.folder
     truth = meta.truth if meta is not None else None
     status = meta.status if meta is not None else None
@@ -44,7 +46,10 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta).as_json()}
     try:
         result = analyze_and_report(sig_path, act, outputs, truth, meta, console, trace_extra=extra)
-    except (IncompleteRecordingError, AnalysisError) as exc:
+    except BaseException as exc:
+        outputs.discard_if_empty()  # no empty analysis-<UTC>/ left behind by a recording that cannot be read
+        if not isinstance(exc, (IncompleteRecordingError, AnalysisError)):
+            raise
         # (bad content, e.g. garbage lines or NaN, is refused whatever the run's status)
         if not incomplete and status is not RunStatus.ABORTED:
             if str(exc).startswith(str(sig_path)):
@@ -57,8 +62,8 @@ def cmd_analyze(args: argparse.Namespace) -> int:
                   "trace": trace_of(meta, sig_path, extra)}
         if truth is not None:
             result["truth"] = truth
-        out.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(outputs.path("result.json"), result)
+        outputs.folder.mkdir(parents=True, exist_ok=True)
+        outputs.write_json("result.json", result)
         console.print(f"[yellow]{result['status']}:[/yellow] {result['reason']}; no analysis: {exc}")
         record_history(console, args, act, outputs.path("result.json"), run_folder=run_dir, recording=sig_path)
         return ExitCode.ABORTED

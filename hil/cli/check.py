@@ -186,8 +186,9 @@ def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: 
     result["trace"] = trace_of(meta, sig_path, trace_extra)
     result["analysis_s"] = round(time.perf_counter() - t0, 3)
     outputs.folder.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(outputs.path("result.json"), result)
-    write_report(outputs.path("report.html"), sig, an, result, act, meta, json_name=outputs.path("result.json").name)
+    outputs.write_json("result.json", result)  # created, never over another result (but a run's own)
+    outputs.write_with("report.html", lambda path: write_report(path, sig, an, result, act, meta,
+                                                                json_name=outputs.path("result.json").name))
     return result
 
 
@@ -226,6 +227,20 @@ def simulated_identity(act, simrig) -> dict[str, Identity] | None:
     c = act.canopen
     return {f"ema{k}": Identity(n, c.vendor_id, c.product_code, c.revision_min, s)
             for k, (n, s) in enumerate(zip(c.node_ids, simrig.serials, strict=True), start=1)}
+
+
+def refuse_shared_serial(act, simrig, sim_path) -> None:
+    """``simulate`` has no preflight to read the drives' identity: a simulated-rig profile whose
+    ``[identity]`` gives both EMAs one serial is refused here instead (:class:`hil.errors.ProfileError`,
+    exit status 3), as the preflight of a dry-run or run refuses two such drives."""
+    from hil.errors import ProfileError
+    from hil.runrecord import shared_serial
+
+    ident = simulated_identity(act, simrig) or {}
+    clash = shared_serial({k: v.as_json() for k, v in ident.items()})
+    if clash is not None:
+        raise ProfileError(f"{sim_path or 'simrig.toml (shipped)'}: identity.serial_ema1 = identity.serial_ema2: "
+                           f"{clash}; give each simulated EMA its own serial")
 
 
 def truth_dict(truth) -> dict:
@@ -278,7 +293,8 @@ def canopen_check(console: Console, act, check, link, meta: MetaWriter, quiet: b
         reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
         rec = meta.record
         outcome = LoopOutcome(RunStatus.ABORTED, reason, rec.samples if rec.samples is not None else 0,
-                              rec.duration_s if rec.duration_s is not None else 0.0, rec.steps or ())
+                              rec.duration_s if rec.duration_s is not None else 0.0, rec.steps or (),
+                              bad_input=bool(getattr(exc, "bad_input", False)))
     wall = time.perf_counter() - t0
     return outcome, wall
 
@@ -306,7 +322,10 @@ def record_can_stats(meta: MetaWriter, wall: float, log, master, transport=None,
                       sync_late_max_ms=round(getattr(transport, "sync_late_max_s", 0.0) * 1e3, 4),
                       sync_periods_skipped=master.sync_schedule.skipped)
     # each EMA's identity as the drive reported it by SDO (0x1018) in the preflight
-    ident = {f"ema{k}": Identity.of(n, master.drives[n].identity) for k, n in enumerate(master.order, start=1)}
+    # (a preflight that stopped early: what it had read, e.g. two drives of one serial)
+    read = getattr(getattr(master, "preflight", None), "identities", {})
+    ident = {f"ema{k}": Identity.of(n, master.drives[n].identity or read.get(n, {}))
+             for k, n in enumerate(master.order, start=1)}
     meta.write(dataclasses.replace(meta.record, wall_s=round(wall, 3), can=can, timing=loop or meta.record.timing,
                                    identity=ident))
 
@@ -322,7 +341,7 @@ def print_drives_final(console: Console, meta: RunRecord) -> None:
 def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Console) -> int:
     """Analyse a finished check; an aborted one gets result.json with the reason (and the
     analysis where enough data was recorded) and the console says where each drive ended."""
-    run = Outputs(out)
+    run = Outputs(out, own=True)  # the run's own result, written into its folder as the run ends
     rec = meta.record
     if outcome.status != RunStatus.DONE:
         console.print(f"[red]aborted:[/red] {outcome.reason}")
@@ -337,9 +356,9 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
                 result["truth"] = truth
             write_json_atomic(out / "result.json", result)
             console.print(f"no analysis: {exc}")
-            return ExitCode.ABORTED
+            return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
         print_summary(console, result, out)
-        return ExitCode.ABORTED
+        return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
     result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
     print_summary(console, result, out)
     return exit_for(result)

@@ -33,7 +33,8 @@ class ExitCode(IntEnum):
 EPILOG = """\
 exit status: 0 pass (diagnose, sim-serve: done), 1 fail (a backlash proven above B_spec),
 2 check aborted or run incomplete (result.json says why), 3 bad input (profile,
-recording, EDS, CAN interface, arguments: the message names the file, field or line),
+recording, EDS, CAN interface, arguments, an --out that is a file or, for a check, holds
+files, two EMAs of one serial: the message names the file, field or line),
 4 internal error, 5 inconclusive (a reading whose uncertainty straddles B_spec, or a
 channel not measured). history: 2 its database is down or locked, 3 its URL, file or
 login cannot be used; a check's recording in the history never changes its exit status.
@@ -242,45 +243,137 @@ def utc_iso() -> str:
 
 @dataclass(frozen=True)
 class Outputs:
-    """Where a command writes its files: a folder and a prefix for the file names."""
+    """Where a command writes its files: a folder and a prefix for the file names.
+
+    Its files are created, never written over an existing one (:meth:`write_json`, :meth:`write_with`),
+    unless ``own``: a run's own result.json and report.html, written into its run folder during the run.
+    """
 
     folder: Path
     prefix: str = ""
+    own: bool = False
+    made: bool = False  #: the folder was made for these outputs (:meth:`discard_if_empty` may remove it)
 
     def path(self, name: str) -> Path:
         """The path of output ``name`` (e.g. ``"result.json"``)."""
         return self.folder / f"{self.prefix}{name}"
 
+    def discard_if_empty(self) -> None:
+        """After a command failed before writing: remove the folder it made for its outputs, if still empty."""
+        if self.made:
+            import contextlib
 
-_RECORDING_SUFFIXES = (".gz", ".csv", ".log", ".mat", ".txt")
+            with contextlib.suppress(OSError):
+                self.folder.rmdir()  # (fails, and is left, where anything was written into it)
+
+    def write_json(self, name: str, obj) -> Path:
+        """Output ``name`` as JSON: created (:class:`hil.errors.OutputError` if it exists), or for ``own``
+        replaced atomically."""
+        from hil.runfolder import create_json, write_json_atomic
+
+        path = self.path(name)
+        if self.own:
+            write_json_atomic(path, obj)
+            return path
+        return create_json(path, obj)
+
+    def write_with(self, name: str, write) -> Path:
+        """Output ``name`` written by ``write(path)`` (a report writer): created under a temporary name and
+        linked to its own only if that does not exist; for ``own`` written in place."""
+        from hil.runfolder import create_with
+
+        path = self.path(name)
+        if self.own:
+            write(path)
+            return path
+        return create_with(path, write)
 
 
-def recording_stem(path: Path) -> str:
-    """A recording's name without its recording suffixes (``flight.csv.gz`` -> ``flight``)."""
-    name = path.name
+def output_stem(path: Path) -> str:
+    """The name an analysis of a bare recording is named after: a ``.csv`` file's stem (``flight.csv`` ->
+    ``flight``), any other recording's whole name (``flight.csv.gz``, ``flight.log``), so that two
+    recordings beside each other never share their outputs' names."""
+    if path.name.lower().endswith(".csv") and len(path.name) > 4:
+        return path.name[:-4]
+    return path.name
+
+
+def make_folder(folder: Path) -> Path:
+    """Make ``folder`` (and its parents); :class:`hil.errors.OutputError` naming it if it cannot be made."""
+    from hil.errors import OutputError
+    from hil.runfolder import output_error
+
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise OutputError(f"{folder}: a file, not a folder; give --out a new or empty folder") from None
+    except OSError as exc:
+        raise output_error(folder, exc) from None
+    if not folder.is_dir():
+        raise OutputError(f"{folder}: a file, not a folder; give --out a new or empty folder")
+    return folder
+
+
+def new_folder(parent: Path, name: str) -> Path:
+    """A new folder ``parent/name`` (``name-2``, ``name-3`` ... where it exists), made here and now (mkdir
+    is exclusive: two commands in the same second get two folders)."""
+    from hil.runfolder import output_error
+
+    make_folder(parent)
+    k = 1
     while True:
-        for suf in _RECORDING_SUFFIXES:
-            if name.lower().endswith(suf) and len(name) > len(suf):
-                name = name[: -len(suf)]
-                break
-        else:
-            return name
-
-
-def outputs_for(out: Path | None, recording: Path, run_dir: Path | None, kind: str) -> Outputs:
-    """Where an analysis of a recording writes, never over what is there: ``--out`` if given; for a
-    run folder a new sub-folder ``<kind>-<UTC time>/`` (the check's own result stays untouched); for
-    a bare file, files named after it next to it (``flight.csv`` -> ``flight.result.json``)."""
-    if out is not None:
-        return Outputs(Path(out))
-    if run_dir is not None:
-        folder = run_dir / f"{kind}-{utc_stamp()}"
-        k = 1
-        while folder.exists():  # two analyses within one second
+        folder = Path(parent) / (name if k == 1 else f"{name}-{k}")
+        try:
+            folder.mkdir()
+            return folder
+        except FileExistsError:
             k += 1
-            folder = run_dir / f"{kind}-{utc_stamp()}-{k}"
-        return Outputs(folder)
-    return Outputs(recording.parent, prefix=f"{recording_stem(recording)}.")
+        except OSError as exc:
+            raise output_error(folder, exc) from None
+
+
+def is_empty_folder(path: Path) -> bool:
+    """True for a folder that holds nothing."""
+    try:
+        return path.is_dir() and next(path.iterdir(), None) is None
+    except OSError:
+        return False
+
+
+def fresh_outputs(out: Path, kind: str) -> Outputs:
+    """``--out`` of a command that derives files (analyze, serv, diagnose, history): a new or empty folder
+    is used as it is; a folder that holds files already (a run folder, an earlier analysis) gets a new
+    sub-folder ``<kind>-<UTC time>/``, so nothing in it is written over; a file is refused (exit 3)."""
+    from hil.errors import OutputError
+
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: a file, not a folder; give a new or empty folder (or omit --out)")
+    if not out.exists() or is_empty_folder(out):
+        made = not out.exists()
+        return Outputs(make_folder(out), made=made)
+    return Outputs(new_folder(out, f"{kind}-{utc_stamp()}"), made=True)
+
+
+def outputs_for(out: Path | None, recording: Path, run_dir: Path | None, kind: str,
+                names: tuple[str, ...] = ()) -> Outputs:
+    """Where an analysis of a recording writes, never over what is there: ``--out`` as
+    :func:`fresh_outputs` says; for a run folder a new sub-folder ``<kind>-<UTC time>/`` (the check's own
+    result stays untouched); for a bare file, files named after it next to it (``flight.csv`` ->
+    ``flight.result.json``; ``flight.2.result.json`` where any of ``names`` exists already, then
+    ``flight.3.`` ...). The files are created exclusively (:meth:`Outputs.write_json`)."""
+    if out is not None:
+        return fresh_outputs(out, kind)
+    if run_dir is not None:
+        return Outputs(new_folder(run_dir, f"{kind}-{utc_stamp()}"), made=True)
+    stem, folder = output_stem(recording), recording.parent
+    k = 1
+    while True:
+        prefix = f"{stem}." if k == 1 else f"{stem}.{k}."
+        if not any((folder / f"{prefix}{n}").exists() or (folder / f"{prefix}{n}").is_symlink() for n in names):
+            return Outputs(folder, prefix=prefix)
+        k += 1
 
 
 def file_hashes(**paths: Path | None) -> dict[str, str]:
@@ -390,6 +483,21 @@ def history_url(url: str | None, act: Actuation) -> str:
     return default_url()
 
 
+def refuse_foreign_history(args: argparse.Namespace, act: Actuation, *, simulated: bool = False) -> None:
+    """Before a command that records does anything: a history database given to it (``--history URL``,
+    else the actuation profile's ``history.url``) that is an SQLite file of another program is refused
+    (exit 3) and left untouched (:mod:`hil.history.guard`; the standard library's sqlite3 only). A
+    ``simulated`` check records only with ``--history``."""
+    explicit = getattr(args, "history", None)
+    if getattr(args, "no_history", False) or (simulated and explicit is None):
+        return
+    url = explicit if isinstance(explicit, str) else act.history.url or None
+    if url:
+        from hil.history.guard import refuse_foreign
+
+        refuse_foreign(url)
+
+
 def record_history(console, args: argparse.Namespace, act: Actuation, result_path: Path, *,
                    run_folder: Path | None, recording: Path | None = None) -> None:
     """After a command wrote its result: record it in the wear history, one line on the console
@@ -429,15 +537,35 @@ def make_console(**kwargs):
 
 
 def default_out(kind: str) -> Path:
-    """``emacheck-runs/<local time>-<kind>``: where a command writes when ``--out`` is not given."""
+    """``emacheck-runs/<local time>-<kind>``, made here (``-2``, ``-3`` ... for a second one in the same
+    second): where a command writes when ``--out`` is not given."""
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return Path("emacheck-runs") / f"{stamp}-{kind}"
+    return new_folder(Path("emacheck-runs"), f"{stamp}-{kind}")
+
+
+def check_new_run_folder(out: Path | None) -> None:
+    """``--out`` of a check (run, dry-run, simulate): a check's record is written once, so a folder that
+    holds anything, or a file, is refused (:class:`hil.errors.OutputError`, exit 3) before anything
+    is done; a new or empty folder is fine."""
+    from hil.errors import OutputError
+
+    if out is None:
+        return
+    out = Path(out)
+    hint = "choose another, or omit --out for a new folder emacheck-runs/<time>-<command>"
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out}: a file, not a run folder; {hint}")
+    if out.is_dir() and not is_empty_folder(out):
+        raise OutputError(f"--out {out}: the folder holds files already (a check's record is written once, "
+                          f"never into another's); {hint}")
 
 
 def out_dir(args: argparse.Namespace, kind: str) -> Path:
-    """``--out`` if given, else :func:`default_out`."""
+    """The run folder of a check, made: ``--out`` if it is new or empty (:func:`check_new_run_folder`),
+    else :func:`default_out`."""
     if args.out is not None:
-        return Path(args.out)
+        check_new_run_folder(args.out)
+        return make_folder(Path(args.out))
     return default_out(kind)
 
 

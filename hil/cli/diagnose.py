@@ -15,21 +15,23 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from blf.diagnose import diagnose
     from hil.analysis.diagnose import diagnosis_dict, load_model
     from hil.report.diagnose import write_report
-    from hil.runfolder import write_json_atomic
     console = make_console()
     path = Path(args.recording)
     model, period = load_model(path, args.model, args.profile)
-    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose")
-    out = outputs.folder
-    out.mkdir(parents=True, exist_ok=True)
+    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
+                          ("diagnosis.json", "diagnosis_report.html"))
     t0 = time.perf_counter()
-    d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    try:
+        d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    except BaseException:
+        outputs.discard_if_empty()
+        raise
     secs = time.perf_counter() - t0
     data = diagnosis_dict(d, args.model, secs)
-    write_json_atomic(outputs.path("diagnosis.json"), data)
+    outputs.write_json("diagnosis.json", data)
     if not args.no_report:
-        write_report(outputs.path("diagnosis_report.html"), model, d, data,
-                     json_name=outputs.path("diagnosis.json").name)
+        outputs.write_with("diagnosis_report.html", lambda p: write_report(
+            p, model, d, data, json_name=outputs.path("diagnosis.json").name))
     words = {"no_mismatch": "no significant mismatch between simulation and recording",
              "explained": "mismatch explained", "unexplained": "mismatch NOT explained by the candidate library"}
     console.print(f"[bold]{words[d.verdict]}[/bold] ({secs:.1f} s)")

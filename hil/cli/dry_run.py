@@ -25,11 +25,13 @@ from hil.cli.common import (
     add_parser,
     add_profile_args,
     add_trace_args,
+    check_new_run_folder,
     file_hashes,
     installation,
     make_console,
     out_dir,
     record_history,
+    refuse_foreign_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
 from hil.runfolder import MetaWriter
@@ -52,13 +54,15 @@ class DryRun:
 
 def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=None, realtime: bool = False,
             quiet: bool = True, console: Console | None = None, profile_path=None,
-            trace: dict | None = None, eds=None) -> DryRun:
+            trace: dict | None = None, eds=None, rig=None) -> DryRun:
     """The check over CANopen against two simulated drives on an in-process virtual bus.
 
     ``faults`` (a :class:`sim.faults.Fault` sequence) replaces the simulated-rig profile's
     ``[[faults]]``. The profiles are validated by the caller; nothing is sent on the bus before
     the EDS and the bus load are checked here. ``trace`` (run record fields: ``attribution``,
     ``installation``, ``files_sha256``, ``wear``) goes into meta.json and from there into result.json.
+    ``rig``: the planned rig (:func:`hil.cli.check.master_setup` of the profile and ``eds``) if the caller
+    has planned it already.
     """
     import numpy as np
 
@@ -73,7 +77,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     from sim.truth import rig_truth
 
     console = console or make_console(quiet=quiet)
-    rig = master_setup(act, profile_path, eds)
+    rig = rig if rig is not None else master_setup(act, profile_path, eds)
     load = rig.plan.load
     seed = simrig.seed if seed is None else seed
     faults = tuple(simrig.faults if faults is None else faults)
@@ -88,7 +92,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                           simrig=snapshot(simrig.params), truth=truth, faults=tuple(snapshot(f) for f in faults),
                           bus_load=BusLoad(load.load_nominal, load.load_worst), **rig_meta(rig), **(trace or {}))
     meta = MetaWriter(out, dataclasses.replace(record, files_sha256={**(record.files_sha256 or {}),
-                                                                     **rig_hashes(rig)}))
+                                                                     **rig_hashes(rig)}), new=True)
     meta.write()  # the run folder says "running" from the start
     # a channel of its own: python-can's virtual channels are process-global by name
     transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
@@ -118,12 +122,15 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
+    refuse_foreign_history(args, act, simulated=True)
+    check_new_run_folder(args.out)
+    rig = master_setup(act, args.profile, args.eds)  # a bad EDS or map: refused before a run folder is made
     out = out_dir(args, "dry-run")
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
     trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),
              "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim), "wear": wear}
     rc = dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
-                 console=console, profile_path=args.profile, trace=trace, eds=args.eds).exit_code
+                 console=console, profile_path=args.profile, trace=trace, eds=args.eds, rig=rig).exit_code
     record_history(console, args, act, out / "result.json", run_folder=out)
     return rc
 

@@ -8,7 +8,15 @@ import json
 import sys
 from pathlib import Path
 
-from hil.cli.common import EPILOG, ExitCode, add_parser, history_url, history_url_type, make_console
+from hil.cli.common import (
+    EPILOG,
+    ExitCode,
+    add_parser,
+    fresh_outputs,
+    history_url,
+    history_url_type,
+    make_console,
+)
 
 
 def _serial(text: str) -> int:
@@ -46,14 +54,13 @@ def cmd_history(args: argparse.Namespace) -> int:
             rows = store.checks(serial=args.actuator, aircraft=args.aircraft)
     series = build_series(rows, serial=args.actuator)
     doc = history_document(rows, series, url=masked(url), filters=filters)
+    outputs = None
     if args.out is not None:
         from hil.report.history import write_history_report
-        from hil.runfolder import write_json_atomic
 
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(out / "history.json", doc)
-        write_history_report(out / "history.html", doc, series, json_name="history.json")
+        outputs = fresh_outputs(args.out, "history")  # never over earlier files there
+        outputs.write_json("history.json", doc)
+        outputs.write_with("history.html", lambda p: write_history_report(p, doc, series, json_name="history.json"))
     if args.json:
         json.dump(doc, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -62,8 +69,8 @@ def cmd_history(args: argparse.Namespace) -> int:
     print_history(console, doc, series, detail=bool(args.actuator is not None or args.aircraft or len(series) <= 12))
     if store is None:
         console.print(f"no checks recorded yet in {masked(url)}")
-    if args.out is not None:
-        console.print(f"history.html and history.json in {args.out}")
+    if outputs is not None:
+        console.print(f"history.html and history.json in {outputs.folder}")
     return ExitCode.PASS
 
 
@@ -86,7 +93,10 @@ def print_history(console, doc: dict, series: list, *, detail: bool) -> None:
     groups: dict[tuple, list] = {}
     for t in trends:
         groups.setdefault((t["simulated"], t["aircraft"], t["position"]), []).append(t)
-    console.print(f"[bold]Wear trends[/bold] in {escape(doc['history'])}: {len(doc['checks'])} result(s)")
+    old = sum(not c.get("current", True) for c in doc["checks"])
+    console.print(f"[bold]Wear trends[/bold] in {escape(doc['history'])}: {len(doc['checks'])} result(s)"
+                  + (f", {old} superseded by a later analysis of the same run (kept; the latest is current)"
+                     if old else ""))
     for (sim, aircraft, position), ts in groups.items():
         where = ", ".join(x for x in (aircraft, position) if x) or "installation not recorded"
         tab = Table(title=escape(where + (" [simulated]" if sim else "")), title_justify="left",

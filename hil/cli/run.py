@@ -23,6 +23,7 @@ from hil.cli.common import (
     add_parser,
     add_profile_args,
     add_trace_args,
+    check_new_run_folder,
     file_hashes,
     installation,
     make_console,
@@ -30,6 +31,7 @@ from hil.cli.common import (
     open_bus,
     out_dir,
     record_history,
+    refuse_foreign_history,
 )
 from hil.profiles import load_actuation, load_check
 
@@ -52,6 +54,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         console.print("[red]refusing to move anything:[/red] `emacheck run` drives real actuators; "
                       "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
         return ExitCode.INPUT
+    check_new_run_folder(args.out)  # a check's record is written once: refused before the bus is opened
+    refuse_foreign_history(args, act)
     bitrate = args.bitrate or act.canopen.bitrate_bps
     # the bus first: an interface that cannot be opened leaves no half-made run folder behind
     # (virtual: the SYNC task's frames are part of the traffic the master follows)
@@ -77,7 +81,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                           files_sha256={**file_hashes(actuation=args.profile, check=args.check), **rig_hashes(rig)})
     console.print(f"emacheck run on {args.interface}:{args.channel}, {rig_nodes_text(rig)}; run folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
-    meta = MetaWriter(out, record, disk)
+    meta = MetaWriter(out, record, disk, new=True)
     console.print(f"real time: {prepare_realtime(args.rt_priority, bounded=True, cpu_latency_us=args.cpu_latency_us)}")
     faults0 = page_faults()
     try:

@@ -24,9 +24,10 @@ from hil.cli.common import (
     make_console,
     outputs_for,
     record_history,
+    refuse_foreign_history,
 )
 from hil.errors import RecordingError
-from hil.runfolder import read_record, resolve_recording, write_json_atomic
+from hil.runfolder import read_record, resolve_recording
 
 
 def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) -> None:
@@ -80,6 +81,7 @@ def cmd_serv(args: argparse.Namespace) -> int:
     sig_path, run_dir = resolve_recording(args.recording)
     meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
+    refuse_foreign_history(args, act)
     try:
         sig = load_recording(sig_path, act, meta)
         corr = choose_calibration(sig, act, run_dir, getattr(args, "calibration", None))
@@ -87,16 +89,16 @@ def cmd_serv(args: argparse.Namespace) -> int:
     except (InputError, AnalysisError) as exc:
         raise RecordingError(f"{sig_path}: {exc}") from None
     truth = meta.truth if meta is not None else None
-    outputs = outputs_for(args.out, sig_path, run_dir, "serv")
-    outputs.folder.mkdir(parents=True, exist_ok=True)
+    report = not getattr(args, "no_report", False)
+    outputs = outputs_for(args.out, sig_path, run_dir, "serv", ("serv.json", "serv_report.html"))
     data = serv_dict(an, truth, str(sig_path))
     data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order,
                                               **installation(args, act, meta).as_json()})
     data["analysis_s"] = round(time.perf_counter() - t0, 3)
-    write_json_atomic(outputs.path("serv.json"), data)
-    report = not getattr(args, "no_report", False)
+    outputs.write_json("serv.json", data)
     if report:
-        write_serv_report(outputs.path("serv_report.html"), an, data, act, json_name=outputs.path("serv.json").name)
+        outputs.write_with("serv_report.html", lambda path: write_serv_report(
+            path, an, data, act, json_name=outputs.path("serv.json").name))
     print_summary(console, data, outputs, report)
     record_history(console, args, act, outputs.path("serv.json"), run_folder=run_dir, recording=sig_path)
     return exit_for(data)

@@ -6,7 +6,14 @@ import argparse
 import time
 from pathlib import Path
 
-from hil.cli.check import LiveProgress, result_after, simulated_identity, truth_dict, worn_simrig
+from hil.cli.check import (
+    LiveProgress,
+    refuse_shared_serial,
+    result_after,
+    simulated_identity,
+    truth_dict,
+    worn_simrig,
+)
 from hil.cli.common import (
     add_history_args,
     add_parser,
@@ -17,9 +24,10 @@ from hil.cli.common import (
     make_console,
     out_dir,
     record_history,
+    refuse_foreign_history,
 )
 from hil.profiles import load_actuation, load_check, load_simrig, snapshot
-from hil.runfolder import MetaWriter
+from hil.runfolder import MetaWriter, open_new
 from hil.runrecord import Attribution, RunMode, RunStatus, start_record
 
 
@@ -38,6 +46,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
+    refuse_shared_serial(act, simrig, args.sim)
+    refuse_foreign_history(args, act, simulated=True)
     seed = simrig.seed if args.seed is None else args.seed
     out = out_dir(args, "simulate")
     simrig, wear = worn_simrig(simrig, args.flight_hours, seed)
@@ -51,7 +61,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                                         installation=installation(args, act),
                                         files_sha256=file_hashes(actuation=args.profile, check=args.check,
                                                                  simrig=args.sim),
-                                        identity=simulated_identity(act, simrig), wear=wear))
+                                        identity=simulated_identity(act, simrig), wear=wear), new=True)
     console.print(f"emacheck simulate: seed {seed}, run folder {out}")
     t0 = time.perf_counter()
     with LiveProgress(console, 0.0, not args.quiet) as live:
@@ -77,9 +87,9 @@ def simulate_scenario(args: argparse.Namespace) -> int:
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
     simrig = load_simrig(args.sim)
+    refuse_shared_serial(act, simrig, args.sim)
     seed = simrig.seed if args.seed is None else args.seed
     out = out_dir(args, f"simulate-{args.scenario}")
-    out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     params = simrig.params
     console.print(f"emacheck simulate --scenario {args.scenario}: {SCENARIOS[args.scenario]}; seed {seed}")
@@ -93,7 +103,7 @@ def simulate_scenario(args: argparse.Namespace) -> int:
     steps = np.concatenate([np.full(x.t_s.size, name, dtype=object) for x, name in parts])
     T = params.sample_period_s
     t = (np.arange(steps.size) + 1) * T
-    with open(out / "signals.csv", "w") as fh:
+    with open_new(out / "signals.csv") as fh:
         fh.write("t,phi1,phi2,s1,s2,F1,F2,step\n")
         for k in range(steps.size):
             fh.write(f"{t[k]:.4f},{cols['phi1_rad'][k]:.7f},{cols['phi2_rad'][k]:.7f},{cols['s1_mm'][k]:.6f},"
@@ -106,7 +116,7 @@ def simulate_scenario(args: argparse.Namespace) -> int:
                                  attribution=Attribution(args.operator, args.work_order),
                                  files_sha256=file_hashes(actuation=args.profile, check=args.check,
                                                           simrig=args.sim),
-                                 identity=simulated_identity(act, simrig))).write()
+                                 identity=simulated_identity(act, simrig)), new=True).write()
     crossed = ", ".join(k for k, v in rec.traversed.items() if v) or "none"
     console.print(f"{steps.size} samples ({steps.size * T:.1f} s: two calibration sweeps, then the scenario); "
                   f"backlash crossed in truth: {crossed}")

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hil.runrecord import shared_serial
+
 #: modes of simulated checks (meta.json ``mode``): never mixed into a real actuator's trend
 SIMULATED_MODES = ("dry-run", "simulate", "simulate-scenario")
 CHANNELS = ("int1", "int2", "ext")
@@ -31,6 +33,12 @@ class CheckRecord:
     check: dict  #: column -> value of ``emacheck_checks`` (without the actuator ids)
     identity: dict  #: ``{"ema1": (vendor_id, product_code, serial) | None, "ema2": ...}``
     readings: list = field(default_factory=list)  #: column -> value of ``emacheck_readings`` per channel
+
+
+def rank(analysed_utc: _dt.datetime | None, check_id: int) -> tuple:
+    """The order of the results of one run and kind (a check and its re-analyses): by analysis time (none:
+    first), then as recorded. The last is the run's current result; each supersedes the one before."""
+    return (analysed_utc or _dt.datetime.min, check_id)
 
 
 def result_sha256(result: dict) -> str:
@@ -104,6 +112,12 @@ def record_from_result(result: dict, *, result_path: Path | None = None, run_fol
         so that analysing the same recording twice is one check in the trend.
     """
     trace = result.get("trace") or {}
+    clash = shared_serial(trace.get("identity"))
+    if clash is not None:
+        from hil.history.errors import HistoryInputError
+
+        raise HistoryInputError(f"{result_path or 'the result'}: {clash}; not recorded (the history would "
+                                f"mix two actuators' readings in one trend)")
     kind = kind_of(result)
     sha = result_sha256(result)
     run_id = trace.get("run_id") or None

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import sqlalchemy as sa
 
+from hil.history.record import rank
+
 METADATA = sa.MetaData()
 
 #: the channels of a check, as in result.json
@@ -98,6 +100,9 @@ checks = sa.Table(
     sa.Column("run_folder", sa.Text, nullable=True),
     sa.Column("result_path", sa.Text, nullable=True),
     sa.Column("recording", sa.Text, nullable=True),
+    # (version 2) the result of the same run and kind this one supersedes: the one ranked just before it
+    # by analysis time when it was recorded; both stay, the latest is the run's current result
+    sa.Column("supersedes_id", sa.Integer, nullable=True),
     sa.UniqueConstraint("result_sha256", name="uq_emacheck_checks_result"),
 )
 sa.Index("ix_emacheck_checks_ema1", checks.c.ema1_actuator_id)
@@ -138,9 +143,27 @@ def _v1(conn: sa.Connection) -> None:
     METADATA.create_all(conn, tables=[actuators, checks, readings])
 
 
+def _v2(conn: sa.Connection) -> None:
+    """Version 2: ``emacheck_checks.supersedes_id`` (a database made at version 2 has it from version 1's
+    tables already), filled in for the runs recorded before it: each result supersedes the one ranked
+    before it among the results of its run and kind."""
+    have = {c["name"] for c in sa.inspect(conn).get_columns(checks.name)}
+    if "supersedes_id" not in have:
+        col = sa.schema.CreateColumn(checks.c.supersedes_id).compile(dialect=conn.dialect)
+        conn.execute(sa.text(f"ALTER TABLE {checks.name} ADD COLUMN {col}"))
+    runs: dict[tuple, list] = {}
+    for r in conn.execute(sa.select(checks.c.id, checks.c.run_key, checks.c.kind, checks.c.analysed_utc)):
+        runs.setdefault((r.run_key, r.kind), []).append(r)
+    for rows in runs.values():
+        rows.sort(key=lambda r: rank(r.analysed_utc, r.id))  # (hil.history.record.rank)
+        for before, r in zip(rows, rows[1:], strict=False):
+            conn.execute(sa.update(checks).where(checks.c.id == r.id).values(supersedes_id=before.id))
+
+
 #: every migration in order; a database at version n gets those above n
 MIGRATIONS: tuple[Migration, ...] = (
     Migration(1, "actuators, checks and readings", _v1),
+    Migration(2, "checks.supersedes_id: a re-analysis keeps the result it supersedes", _v2),
 )
 #: the schema version this emacheck writes
 LATEST = MIGRATIONS[-1].version

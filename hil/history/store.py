@@ -28,8 +28,10 @@ import sqlalchemy as sa
 from sqlalchemy import exc as sa_exc
 
 from hil import __version__
+from hil.history import guard
 from hil.history import schema as S
 from hil.history.errors import HistoryError, HistoryInputError, HistoryUnavailableError
+from hil.history.record import rank
 from hil.history.url import check_url, dialect, masked, sqlite_path
 
 if TYPE_CHECKING:  # (record imports no store)
@@ -73,24 +75,30 @@ class HistoryStore:
     def open(cls, url: str, *, create: bool = True, timeout_s: float = DEFAULT_TIMEOUT_S) -> HistoryStore | None:
         """Connect and bring the schema to :data:`hil.history.schema.LATEST`.
 
-        With ``create=False`` an SQLite file that does not exist is not made: None is
-        returned (nothing recorded yet).
+        A database that is not emacheck's is refused (:class:`HistoryInputError`) and left as it was:
+        an SQLite file holding other tables and no ``emacheck_schema`` (:mod:`hil.history.guard`, before
+        any connection), a database holding ``emacheck_`` tables without their version. With
+        ``create=False`` (a read: ``emacheck history``) nothing is made or changed where nothing was
+        recorded yet: an SQLite file that does not exist or is empty, a server database without
+        emacheck's tables; None is returned.
         """
         url = check_url(url)
         if dialect(url) == "sqlite":
             path = sqlite_path(url)
-            if not path.exists():
-                if not create:
-                    return None
+            kind = guard.refuse_foreign(url)
+            if kind in (guard.MISSING, guard.EMPTY) and not create:
+                return None
+            if kind == guard.MISSING:
                 try:
                     path.parent.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
                     raise HistoryInputError(f"history {masked(url)}: cannot create the folder {path.parent}: "
                                             f"{exc.strerror or exc}") from None
-            elif path.is_dir():
-                raise HistoryInputError(f"history {masked(url)}: {path} is a folder, not an SQLite file")
         store = cls(url, timeout_s=timeout_s)
         try:
+            if not create and store.schema_version() == 0:
+                store.close()
+                return None
             store.migrate()
         except BaseException:
             store.close()
@@ -221,6 +229,8 @@ class HistoryStore:
             if self.dialect == "postgresql":
                 conn.execute(sa.text("SELECT pg_advisory_xact_lock(:k)"), {"k": _PG_LOCK_KEY})
             v = _version(conn)
+            if v == 0:
+                _refuse_unversioned(conn, self.shown)
             if v > S.LATEST:
                 raise HistoryInputError(f"history {self.shown}: schema version {v} was written by a newer emacheck "
                                         f"(this one knows up to {S.LATEST}); upgrade emacheck")
@@ -278,12 +288,22 @@ class HistoryStore:
         return int(conn.execute(sa.select(a.c.id).where(a.c.serial == serial, a.c.vendor_id == vendor,
                                                         a.c.product_code == product)).scalar_one())
 
+    def _superseded(self, conn: sa.Connection, row: dict) -> int | None:
+        """The result of the same run and kind ranked just before ``row`` (:func:`hil.history.record.rank`):
+        the one ``row`` supersedes (both stay; None: the run's first)."""
+        c = S.checks
+        before = [r for r in conn.execute(sa.select(c.c.id, c.c.analysed_utc).where(
+            c.c.run_key == row["run_key"], c.c.kind == row["kind"], c.c.result_sha256 != row["result_sha256"]))
+            if rank(r.analysed_utc, r.id) <= rank(row.get("analysed_utc"), 1 << 62)]
+        return max(before, key=lambda r: rank(r.analysed_utc, r.id)).id if before else None
+
     def _add(self, conn: sa.Connection, record) -> bool:
         row = dict(record.check)
         for ema in ("ema1", "ema2"):
             key = record.identity.get(ema)
             row[f"{ema}_actuator_id"] = None if key is None else self._actuator_id(conn, key)
         row.setdefault("recorded_utc", _utcnow())
+        row["supersedes_id"] = self._superseded(conn, row)
         stmt = (self._insert()(S.checks).values(**row)
                 .on_conflict_do_nothing(index_elements=["result_sha256"]).returning(S.checks.c.id))
         cid = conn.execute(stmt).scalar()
@@ -351,6 +371,14 @@ def _version(conn: sa.Connection) -> int:
         return 0
     v = conn.execute(sa.select(sa.func.max(S.schema_versions.c.version))).scalar()
     return int(v or 0)
+
+
+def _refuse_unversioned(conn: sa.Connection, shown: str) -> None:
+    """A database with ``emacheck_`` tables but no schema version is not one emacheck made: refused."""
+    found = sorted(n for n in sa.inspect(conn).get_table_names() if n.startswith("emacheck_"))
+    if found:
+        raise HistoryInputError(f"history {shown}: holds {', '.join(found)} but no {S.schema_versions.name}: not "
+                                f"made by emacheck (or damaged); emacheck writes only to its own database")
 
 
 def _first_line(text: str) -> str:

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from blf.wear import LimitCrossing, WearFit, fit_wear, limit_crossing, wear_segments
+from hil.history.record import rank
 
 CHANNELS = ("int1", "int2", "ext")
 #: statuses whose readings enter a trend (an aborted or incomplete check's do not)
@@ -133,8 +134,7 @@ def latest_per_run(rows: list[dict]) -> list[dict]:
     for r in rows:
         k = (r["run_key"], r["kind"])
         cur = best.get(k)
-        rank = (r.get("analysed_utc") or _dt.datetime.min, r["id"])
-        if cur is None or rank > (cur.get("analysed_utc") or _dt.datetime.min, cur["id"]):
+        if cur is None or rank(r.get("analysed_utc"), r["id"]) > rank(cur.get("analysed_utc"), cur["id"]):
             best[k] = r
     keep = {id(r) for r in best.values()}
     return [r for r in rows if id(r) in keep]
@@ -296,8 +296,9 @@ def trend_dict(s: Series, j: int) -> dict[str, Any]:
     return d
 
 
-def check_dict(r: dict, in_trend: set[int]) -> dict[str, Any]:
-    """The JSON of one recorded result (``checks`` of the history document)."""
+def check_dict(r: dict, in_trend: set[int], current: set[int] | None = None) -> dict[str, Any]:
+    """The JSON of one recorded result (``checks`` of the history document); ``current``: the ids of the
+    latest result of each run (a result superseded by a re-analysis stays, marked not current)."""
     rd = r["readings"]
     ident = {e: (None if v is None else {k: v[k] for k in ("vendor_id", "product_code", "revision", "serial")})
              for e, v in r["identity"].items()}
@@ -317,6 +318,8 @@ def check_dict(r: dict, in_trend: set[int]) -> dict[str, Any]:
                             "rmse_mm": r.get(f"{e}_lvdt_rmse_mm")} for e in ("ema1", "ema2")},
         "software_version": r["software_version"], "run_folder": r["run_folder"], "result_path": r["result_path"],
         "in_trend": r["id"] in in_trend,
+        "id": r["id"], "supersedes": r.get("supersedes_id"),
+        "current": current is None or r["id"] in current,
     }
 
 
@@ -324,4 +327,6 @@ def history_document(rows: list[dict], series: list[Series], *, url: str, filter
     """The document of ``emacheck history --json`` (schema ``hil/schemas/history.schema.json``)."""
     in_trend = {p.row["id"] for s in series for p in s.points}
     trends = [trend_dict(s, j) for s in series for j in range(len(s.segments))]
-    return {"history": url, "filters": filters, "checks": [check_dict(r, in_trend) for r in rows], "trends": trends}
+    current = {r["id"] for r in latest_per_run(rows)}
+    return {"history": url, "filters": filters, "checks": [check_dict(r, in_trend, current) for r in rows],
+            "trends": trends}

@@ -232,7 +232,16 @@ def trace_lines(trace: dict | None) -> str:
                      "the master's force loop on the measured force in CSP (its drive has no CST)"])
     for k, h in (trace.get("files_sha256") or {}).items():
         rows.append([f"{k} (sha256)", h[:16] + "…" if h else "—"])
-    return "<h2>Traceability</h2>" + table(["item", "value"], rows)
+    return "<h2>Traceability</h2>" + identity_warning(trace.get("identity")) + table(["item", "value"], rows)
+
+
+def identity_warning(identity: dict | None) -> str:
+    """A line saying so where EMA 1 and EMA 2 report one serial number (hil.runrecord.shared_serial);
+    empty otherwise."""
+    from hil.runrecord import shared_serial
+
+    clash = shared_serial(identity)
+    return "" if clash is None else f"<p class='fail'><b>Identity:</b> {esc(clash)}.</p>"
 
 
 def master_loss_text(ml: dict) -> str:
