@@ -12,7 +12,8 @@ position (m/s, m/s^2) and F the drive force ``gtau * vir`` (N). The channel
 compared is ``force``; driving by the measured position removes the
 controller from the comparison.
 
-The comparison band (``band_hz``) is 20 Hz, as in the dataset authors'
+The comparison band (``band_hz``) is 20 Hz (at most 80 % of the Nyquist
+frequency of a slower recording), as in the dataset authors'
 IDIM-LS (low-pass without phase shift, then decimation, :mod:`blf.band`):
 above it lie the controller's reaction to encoder quantisation and the
 noise of the twice-differentiated position, which a rigid-body model does
@@ -35,6 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from blf.diagnose import Candidate, Param, ParamVector
+from blf.errors import InputError
 from blf.validate import as_1d_finite, positive_scalar, same_shape
 
 __all__ = ["SingleAxisReplay", "single_axis_candidates"]
@@ -70,9 +72,12 @@ class SingleAxisReplay:
     t_s, q_m, q_ref_m, force_N : ndarray, shape (n,)
         Time (s), measured and reference position (m), drive force (N).
     sample_period_s : float
+    valid : array_like of bool, shape (n,), optional
+        Samples whose force is compared (default all): a drive's current says nothing about the
+        force in a dwell at holding current or in the catch-up after a set-point step.
     """
 
-    def __init__(self, t_s, q_m, q_ref_m, force_N, sample_period_s: float) -> None:
+    def __init__(self, t_s, q_m, q_ref_m, force_N, sample_period_s: float, valid=None) -> None:
         from scipy.signal import savgol_filter
 
         # any shape, flattened (a .mat file holds columns)
@@ -88,10 +93,14 @@ class SingleAxisReplay:
         self.v = savgol_filter(self.q, 21, 3, deriv=1, delta=T, mode="interp")
         self.a = savgol_filter(self.q, 21, 3, deriv=2, delta=T, mode="interp")
         self.channels = ("force",)
-        self.band_hz = BAND_HZ
+        # the band follows the recording's Nyquist frequency: at most 80 % of it
+        self.band_hz = min(BAND_HZ, 0.4 / T)
         self.places = {"force": "axis"}
         self.measured = {"force": arrs[3]}
-        self.valid = {"force": np.ones(n, bool)}
+        ok = np.ones(n, bool) if valid is None else np.asarray(valid, bool).ravel()
+        if ok.shape != (n,) or not ok.any():
+            raise InputError(f"valid must be a bool array of shape ({n},) with a sample compared; got {ok.shape}")
+        self.valid = {"force": ok}
         self.nominal = (Param("mass_kg", 50.0, 10.0, 0.0, 1e5), Param("viscous_N_s_per_m", 100.0, 50.0, 0.0, 1e6),
                         Param("coulomb_N", 20.0, 5.0, 0.0, 1e4), Param("offset_N", 0.0, 5.0, -1e4, 1e4))
         self.names = tuple(q.name for q in self.nominal)  #: of the nominal vector, read with ParamVector
