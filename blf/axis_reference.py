@@ -206,7 +206,7 @@ def effort_mask(t_s, q_m, q_ref_m, sample_rate_hz: float, *, dwell_says_nothing:
     dwell = ~moving if dwell_says_nothing else np.zeros(t.size, bool)
     transient = np.zeros(t.size, bool)
     if mask_transients:
-        transient = _transients(q, qr, vr, vmax, moving, max(2, int(round(hold_s * fs))))
+        transient = _transients(q, qr, vr, vmax, moving, max(2, int(round(hold_s * fs)))) & ~dwell
     used = ~dwell & ~transient
     words = (f"{int(dwell.sum())} samples of dwell at holding current and {int(transient.sum())} of catch-up "
              f"after a set-point step masked; {int(used.sum())} of {t.size} compared")
@@ -226,6 +226,8 @@ def _transients(q, qr, vr, vmax, moving, hold) -> np.ndarray:
     sigma = 1.4826 * float(np.median(np.abs(dev - np.median(dev)))) or float(np.std(dev)) or 1e-12
     calm = np.abs(e - steady) <= 3 * sigma
     steps = np.flatnonzero(np.abs(np.diff(vr)) > _MOVING * vmax) + 1
+    if moving[0]:  # a recording that starts moving starts with a step
+        steps = np.r_[0, steps]
     out = np.zeros(e.size, bool)
     for k in steps:
         j = k
