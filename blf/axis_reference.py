@@ -506,8 +506,9 @@ def identify_current_per_force(current_A, load_N, v_dir, used, law: str) -> Curr
     u = np.asarray(used, bool) & (d != 0)
     same_shape((i, "current_A", "A"), (L, "load_N", "N"), (d, "v_dir", "1"), (u, "used", ""))
     levels = np.unique(np.round(L[u], 6))
-    if u.sum() < 20 or np.all(levels == 0):
-        raise AnalysisError("identifying the current per newton needs a known non-zero load while moving")
+    if u.sum() < 20 or np.all(levels == 0) or not (np.any(d[u] > 0) and np.any(d[u] < 0)):
+        raise AnalysisError("identifying the current per newton needs a known non-zero load while moving in "
+                            "both directions")
     load_col = -L * d if law == "power" else -L
     cols = [np.ones_like(i) if law == "power" else d, load_col]
     if levels.size >= 2:

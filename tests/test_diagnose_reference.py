@@ -181,18 +181,22 @@ def _dual_csv(path):
     return path
 
 
-@pytest.mark.parametrize("case", ["other_model", "other_rate", "other_columns", "no_law", "too_short"])
+@pytest.mark.parametrize("case", ["other_model", "other_rate", "other_columns", "no_law", "too_short",
+                                  "too_short_stated_gain"])
 def test_bad_reference_or_effort_exits_3_and_writes_nothing(tmp_path, case):
     new = write_csv(tmp_path / "new.csv")
     ref = {"other_model": lambda: _dual_csv(tmp_path / "dual.csv"),
            "other_rate": lambda: write_csv(tmp_path / "r.csv", fs=50.0),
            "other_columns": lambda: write_csv(tmp_path / "r.csv", effort="force"),
            "no_law": lambda: write_csv(tmp_path / "r.csv"),
-           "too_short": lambda: write_csv(tmp_path / "r.csv", cycles=1)}[case]()
-    if case == "too_short":  # one cycle, then cut to its first stroke: nothing moving in both directions
+           "too_short": lambda: write_csv(tmp_path / "r.csv", cycles=1),
+           "too_short_stated_gain": lambda: write_csv(tmp_path / "r.csv", cycles=1)}[case]()
+    if case.startswith("too_short"):  # one cycle, then cut to its first stroke: nothing moving in both directions
         rows = ref.read_text().splitlines()
         ref.write_text("\n".join(rows[:210]) + "\n")
     law = [] if case == "no_law" else ["--current-law", "power"]
+    if case == "too_short_stated_gain":
+        law += ["--current-per-force", str(K_A_PER_N)]
     out = tmp_path / "o"
     assert main(["diagnose", str(new), "--model", "single-axis", "--reference", str(ref), *law,
                  "--out", str(out), "--quiet"]) == 3

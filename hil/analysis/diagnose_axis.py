@@ -188,9 +188,14 @@ def _check_pair(new: AxisRecording, ref: AxisRecording) -> None:
                              f"{new.sample_rate_hz:.6g} Hz: not comparable")
 
 
-def _common(a, b):
-    """The identifiability of the less identifiable of the two (both fitted with the same terms)."""
-    return a if len(a.columns) <= len(b.columns) else b
+def _common(ref, new, ref_path: Path):
+    """The terms both recordings are fitted with: the new recording's, which the reference must cover."""
+    missing = [c for c in new.columns if c not in ref.columns]
+    if missing:
+        raise RecordingError(f"{ref_path}: reference too short to identify the nominal model: it cannot separate "
+                             f"{', '.join(missing)}, which the recording diagnosed can ("
+                             + "; ".join(f"{why}: needs {motion}" for _, _, why, motion in ref.merged) + ")")
+    return new
 
 
 def _floors(opts: AxisOptions, speed: float) -> dict:
@@ -233,7 +238,7 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     _check_pair(new, ref)
     k, conv_words = conversion(new, opts, ref)
     pn, pr = _prepare(new, opts, k), _prepare(ref, opts, k)
-    ident = _common(pr.ident, pn.ident)
+    ident = _common(pr.ident, pn.ident, ref.path)
     try:
         fr = fit_axis(pr.force, pr.v, pr.a, pr.mask.used, ident, ref.load)
     except AnalysisError as exc:
