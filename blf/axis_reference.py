@@ -391,7 +391,8 @@ def fit_axis(force_N, v_m_per_s, a_m_per_s2, used, ident: Identifiability, load_
 
 
 _CHANGE_WORDS = {
-    "friction_N": "friction at the running speed (both directions alike)",
+    "friction_N": "friction at the running speed (both directions alike; from a supply current, the drive's own "
+                  "loss at that speed reads as friction too)",
     "coulomb_N": "Coulomb friction", "viscous_N_s_per_m": "viscous friction", "mass_kg": "moving mass",
     "offset_N": "a force in one direction: an offset, a friction that differs with direction or a load other "
                 "than the one stated (this recording cannot tell them apart)",

@@ -24,7 +24,7 @@ from hil.errors import RecordingError
 
 #: default relevance floor of a force parameter (friction, offset), N: 3 x the RMS of the
 #: session-to-session changes of the healthy Cranfield actuator (``normal`` runs 1-5 against 6-10 at
-#: +20 and +40 kgf: friction +15.2 and -45.1 N, offset -7.9 and +7.1 N; RMS 24.3 N, x 3 = 73 N),
+#: +20 and +40 kgf: friction +15.0 and -44.2 N, offset -7.2 and +5.8 N; RMS 23.8 N, x 3 = 71.4 N),
 #: rounded up to 75 N (docs/diagnose.md, "Floors"; tests/bench/bench_diagnose_cranfield.py --repeatability)
 FORCE_FLOOR_N = 75.0
 EFFORTS = ("force", "torque", "current")
@@ -189,13 +189,25 @@ def _check_pair(new: AxisRecording, ref: AxisRecording) -> None:
 
 
 def _common(ref, new, ref_path: Path):
-    """The terms both recordings are fitted with: the new recording's, which the reference must cover."""
-    missing = [c for c in new.columns if c not in ref.columns]
-    if missing:
-        raise RecordingError(f"{ref_path}: reference too short to identify the nominal model: it cannot separate "
-                             f"{', '.join(missing)}, which the recording diagnosed can ("
-                             + "; ".join(f"{why}: needs {motion}" for _, _, why, motion in ref.merged) + ")")
-    return new
+    """The terms both recordings are fitted with: those both can separate.
+
+    The reference must run in every direction and at every speed level of the recording diagnosed
+    (else it is too short to identify the nominal model: :class:`RecordingError`); a term only one
+    of them can separate (the mass, where only one has acceleration content) is fixed in both, and
+    said so."""
+    import dataclasses
+    lacks = [f"direction {'+' if d > 0 else '-'}" for d in new.directions if d not in ref.directions]
+    lacks += [f"speed {s:.4g} m/s" for s in new.speed_levels_m_per_s
+              if not any(abs(s / r - 1) <= 0.1 for r in ref.speed_levels_m_per_s)]
+    if lacks or not ref.columns:
+        raise RecordingError(f"{ref_path}: reference too short to identify the nominal model: no motion in "
+                             f"{', '.join(lacks) or 'any direction'} of the recording diagnosed")
+    cols = tuple(c for c in new.columns if c in ref.columns)
+    dropped = [c for c in new.columns + ref.columns if c not in cols]
+    merged = list(new.merged) + [((c,), "", "separable in only one of the two recordings: held in both",
+                                  "the same motion in both") for c in dict.fromkeys(dropped)]
+    fixed = dict(new.fixed) | dict(ref.fixed) | {c: 0.0 for c in dropped}
+    return dataclasses.replace(new, columns=cols, fixed=fixed, merged=tuple(merged))
 
 
 def _floors(opts: AxisOptions, speed: float) -> dict:
