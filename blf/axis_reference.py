@@ -58,7 +58,7 @@ from blf.validate import as_1d_finite, one_of, positive_scalar, same_shape, scal
 
 __all__ = ["EffortMask", "Identifiability", "AxisFit", "ParameterChange", "CurrentGain",
            "effort_mask", "axis_kinematics", "identifiability", "fit_axis", "compare_fits",
-           "effort_to_force", "identify_current_per_force", "NOMINAL_UNITS", "LAWS"]
+           "effort_to_force", "identify_current_per_force", "design_columns", "separable", "NOMINAL_UNITS", "LAWS"]
 
 #: the nominal parameters and their units
 NOMINAL_UNITS = {"mass_kg": "kg", "viscous_N_s_per_m": "N s/m", "coulomb_N": "N", "friction_N": "N",
@@ -238,6 +238,8 @@ def _transients(q, qr, vr, vmax, moving, hold) -> np.ndarray:
 
 
 def _levels(speeds: np.ndarray) -> tuple:
+    """Speed levels: gaps of more than 10 % split the sorted speeds; a group that itself spans a range
+    (5th to 95th percentile more than 1.5 apart: a speed varying continuously) gives its two ends."""
     if speeds.size == 0:
         return ()
     s = np.sort(speeds)
@@ -246,7 +248,11 @@ def _levels(speeds: np.ndarray) -> tuple:
         if i == s.size or s[i] > s[i - 1] * (1 + _LEVEL_GAP):
             groups.append(s[start:i])
             start = i
-    return tuple(float(np.median(g)) for g in groups if g.size >= _MIN_SHARE * s.size)
+    out = []
+    for g in (g for g in groups if g.size >= _MIN_SHARE * s.size):
+        lo, hi = np.percentile(g, [5, 95])
+        out += [float(lo), float(hi)] if hi > 1.5 * lo else [float(np.median(g))]
+    return tuple(out)
 
 
 def _vif(X: np.ndarray) -> np.ndarray:
@@ -330,6 +336,34 @@ def identifiability(v_m_per_s, a_m_per_s2, v_ref_m_per_s, used, accel_noise_m_pe
         merged.append(((name,), "", f"variance inflation {vif[name]:.3g} over the samples compared: "
                        "not separable from the other terms", "motion that excites it on its own"))
     return Identifiability(tuple(cols), fixed, tuple(merged), levels, dirs, a_rms, noise, vif)
+
+
+def design_columns(cols, v_m_per_s, a_m_per_s2) -> np.ndarray:
+    """The nominal model's regressor columns ``cols`` (names of :data:`NOMINAL_UNITS`), shape (n, len(cols))."""
+    return _design(tuple(cols), np.asarray(v_m_per_s, float), np.asarray(a_m_per_s2, float))
+
+
+def separable(nominal, term) -> bool:
+    """Whether a term's columns can be told apart from the nominal columns (and from each other).
+
+    Parameters
+    ----------
+    nominal : array_like, shape (n, p)
+        The nominal model's regressor columns over the samples compared.
+    term : array_like, shape (n, m)
+        The term's columns (its sensitivities) over the same samples.
+
+    Returns
+    -------
+    bool
+        False when any of the term's columns has a variance inflation above 1000 against the others
+        (:math:`\\|r\\|^2 < 10^{-3}\\|x\\|^2`, r its part not in the span of the others): e.g. a friction
+        in :math:`|\\dot q|` against an offset at one speed, a Stribeck curve against a Coulomb
+        friction at one speed.
+    """
+    X = np.column_stack([np.asarray(nominal, float), np.asarray(term, float)])
+    m = np.asarray(term).reshape(X.shape[0], -1).shape[1]
+    return bool(np.all(_vif(X)[-m:] <= _VIF_MAX))
 
 
 def _design(cols, v, a) -> np.ndarray:

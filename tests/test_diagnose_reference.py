@@ -208,3 +208,25 @@ def test_a_current_without_a_stated_gain_or_reference_exits_3(tmp_path):
     assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--out",
                  str(tmp_path / "o"), "--quiet"]) == 3
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("speeds, asym, stribeck", [
+    ((0.024,), False, False), ((0.012, 0.024), True, False), ((0.006, 0.012, 0.018, 0.024), True, True)])
+def test_a_term_the_recording_cannot_separate_is_no_candidate(tmp_path, speeds, asym, stribeck):
+    """One speed: |v| is a constant and a Stribeck curve a Coulomb friction: neither is screened, the mass is
+    held (no acceleration in the samples compared) and Coulomb and viscous are one friction. Two speed levels
+    separate Coulomb from viscous and |v| from an offset, not yet a two-parameter Stribeck curve from
+    Coulomb plus viscous (two speeds per direction, four odd terms); four levels do."""
+    from hil.analysis.diagnose_axis import AxisOptions, single_axis_model
+    rng = np.random.default_rng(5)
+    t, qr, q, d = trapezoid(8, speeds=speeds, rng=rng)
+    i = power_current(qr, q, d, 1600.0, 196.0, rng)
+    cols = np.column_stack([t, q, qr, i, np.full(t.size, 196.0)])
+    path = tmp_path / "x.csv"
+    np.savetxt(path, cols, delimiter=",", header="t,q,q_ref,current,load", comments="")
+    model, _ = single_axis_model(path, AxisOptions(current_law="power", current_a_per_N=K_A_PER_N))
+    names = {c.name for c in model.candidates}
+    assert ("asymmetric_friction" in names) is asym and ("stribeck_friction" in names) is stribeck
+    assert ("viscous_N_s_per_m" in model.names) is asym
+    assert "mass_kg" not in model.names
+    assert not model.valid["force"].all()  # dwells and catch-ups not compared

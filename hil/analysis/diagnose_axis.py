@@ -218,6 +218,14 @@ def _floors(opts: AxisOptions, speed: float) -> dict:
     return out
 
 
+def identifiability_dict(model) -> dict | None:
+    """diagnosis.json's ``identifiability`` of a single-axis replay model (None for another model)."""
+    ident = getattr(model, "identifiability", None)
+    if ident is None:
+        return None
+    return _ident_dict(ident) | {"not_candidates": [{"name": n, "why": w} for n, w in model.not_candidates]}
+
+
 def _ident_dict(ident) -> dict:
     return {"fitted": list(ident.columns), "fixed": dict(ident.fixed),
             "cannot_tell_apart": [{"terms": list(t), "into": into, "why": why, "would_separate": motion}

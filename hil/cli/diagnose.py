@@ -29,6 +29,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
     secs = time.perf_counter() - t0
     data = diagnosis_dict(d, args.model, secs)
+    from hil.analysis.diagnose_axis import identifiability_dict
+    ident = identifiability_dict(model)
+    if ident is not None:
+        data["identifiability"] = ident
     write_json_atomic(outputs.path("diagnosis.json"), data)
     if not args.no_report:
         write_report(outputs.path("diagnosis_report.html"), model, d, data,
@@ -41,6 +45,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
             f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
     if data["where"]:
         console.print("  the rest lies at: " + ", ".join(data["where"]))
+    for m in (ident or {}).get("cannot_tell_apart", []):
+        console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
+    for m in (ident or {}).get("not_candidates", []):
+        console.print(f"  not a candidate: {m['name']}: {m['why']}")
     for loc in data["locations"][:6]:
         console.print(f"  where: {loc['channel']} {loc['t_start_s']}-{loc['t_end_s']} s ({loc['test']} test), "
                       f"{loc['regime']}")
