@@ -158,6 +158,8 @@ def test_reference_mode_names_a_friction_increase_and_states_change_and_floor(tm
     assert data["floor"]["force_N"] == 75.0
     assert data["mask"]["dwell_masked"] > 0 and data["mask"]["transient_masked"] > 0
     assert {"coulomb_N", "viscous_N_s_per_m"} in [set(m["terms"]) for m in data["identifiability"]["cannot_tell_apart"]]
+    html = (out / "diagnosis_report.html").read_text()
+    assert "friction_N" in html and "a second speed level" in html and "named" in html
 
 
 def test_reference_mode_reports_a_real_change_under_its_floor_without_naming_it(tmp_path):

@@ -93,6 +93,10 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
     outputs = outputs_for(args.out, path, None, "diagnose")
     outputs.folder.mkdir(parents=True, exist_ok=True)
     write_json_atomic(outputs.path("diagnosis.json"), data)
+    if not args.no_report:
+        from hil.report.diagnose import write_reference_report
+        write_reference_report(outputs.path("diagnosis_report.html"), data,
+                               json_name=outputs.path("diagnosis.json").name)
     console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
                   f"{args.reference} ({data['diagnosis_s']:.1f} s); effort: {data['conversion']}")
     for c in data["changes"]:
