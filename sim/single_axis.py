@@ -101,6 +101,8 @@ class SingleAxisReplay:
         if ok.shape != (n,) or not ok.any():
             raise InputError(f"valid must be a bool array of shape ({n},) with a sample compared; got {ok.shape}")
         self.valid = {"force": ok}
+        #: the loader's record of the samples masked and why (blf.axis_reference.EffortMask), or None
+        self.effort_mask = None
         full = (Param("mass_kg", 50.0, 10.0, 0.0, 1e5), Param("viscous_N_s_per_m", 100.0, 50.0, 0.0, 1e6),
                 Param("coulomb_N", 20.0, 5.0, 0.0, 1e4), Param("offset_N", 0.0, 5.0, -1e4, 1e4))
         self.qc = self.q - np.median(self.q)

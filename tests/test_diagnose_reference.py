@@ -205,6 +205,19 @@ def test_bad_reference_or_effort_exits_3_and_writes_nothing(tmp_path, case):
     assert not out.exists()
 
 
+def test_without_a_reference_a_stated_current_gain_is_used_and_the_masks_reported(tmp_path):
+    new = write_csv(tmp_path / "new.csv")
+    out = tmp_path / "o"
+    assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--current-per-force",
+                 str(K_A_PER_N), "--out", str(out), "--quiet", "--no-report"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    jsonschema.validate(data, _schema())
+    assert data["mask"]["dwell_masked"] > 0 and data["mask"]["transient_masked"] > 0
+    assert data["band"]["cutoff_hz"] == pytest.approx(10.0)  # 80 % of the 12.5 Hz Nyquist frequency
+    assert {n["name"] for n in data["identifiability"]["not_candidates"]} == {"stribeck_friction",
+                                                                             "asymmetric_friction"}
+
+
 def test_a_current_without_a_stated_gain_or_reference_exits_3(tmp_path):
     new = write_csv(tmp_path / "new.csv")
     assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--out",

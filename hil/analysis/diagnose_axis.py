@@ -223,7 +223,10 @@ def identifiability_dict(model) -> dict | None:
     ident = getattr(model, "identifiability", None)
     if ident is None:
         return None
-    return _ident_dict(ident) | {"not_candidates": [{"name": n, "why": w} for n, w in model.not_candidates]}
+    out = _ident_dict(ident) | {"not_candidates": [{"name": n, "why": w} for n, w in model.not_candidates]}
+    if getattr(model, "effort_mask", None) is not None:
+        out["mask"] = _mask_dict(model.effort_mask)
+    return out
 
 
 def _ident_dict(ident) -> dict:
@@ -325,4 +328,5 @@ def single_axis_model(path: Path, opts: AxisOptions):
     if rec.load is not None:
         force = force + rec.load
     model = SingleAxisReplay(rec.t, rec.q, rec.q_ref, force, 1.0 / rec.sample_rate_hz, valid=m.used)
+    model.effort_mask = m
     return model, 1.0 / rec.sample_rate_hz

@@ -32,7 +32,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from hil.analysis.diagnose_axis import identifiability_dict
     ident = identifiability_dict(model)
     if ident is not None:
+        mask = ident.pop("mask", None)
         data["identifiability"] = ident
+        if mask is not None:
+            data["mask"] = mask
     write_json_atomic(outputs.path("diagnosis.json"), data)
     if not args.no_report:
         write_report(outputs.path("diagnosis_report.html"), model, d, data,
@@ -49,6 +52,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
     for m in (ident or {}).get("not_candidates", []):
         console.print(f"  not a candidate: {m['name']}: {m['why']}")
+    if "mask" in data:
+        console.print(f"  masked: {data['mask']['words']}")
     for loc in data["locations"][:6]:
         console.print(f"  where: {loc['channel']} {loc['t_start_s']}-{loc['t_end_s']} s ({loc['test']} test), "
                       f"{loc['regime']}")
