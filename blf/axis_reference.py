@@ -58,11 +58,13 @@ from blf.validate import as_1d_finite, one_of, positive_scalar, same_shape, scal
 
 __all__ = ["EffortMask", "Identifiability", "AxisFit", "ParameterChange", "CurrentGain",
            "effort_mask", "axis_kinematics", "identifiability", "fit_axis", "compare_fits",
-           "effort_to_force", "identify_current_per_force", "design_columns", "separable", "NOMINAL_UNITS", "LAWS"]
+           "effort_to_force", "identify_current_per_force", "design_columns", "separable", "stroke_terms",
+           "STROKE_TERMS", "NOMINAL_UNITS", "LAWS"]
 
 #: the nominal parameters and their units
 NOMINAL_UNITS = {"mass_kg": "kg", "viscous_N_s_per_m": "N s/m", "coulomb_N": "N", "friction_N": "N",
-                 "offset_N": "N"}
+                 "offset_N": "N", "position_dependent_friction_N_per_m": "N/m",
+                 "position_dependent_force_N_per_m": "N/m", "position_dependent_force_N_per_m2": "N/m^2"}
 LAWS = ("torque", "power")
 _MOVING = 0.05  #: |set-point velocity| above this fraction of its largest value: moving
 _MIN_SHARE = 0.05  #: a speed level or a direction needs this share of the kept samples
@@ -338,6 +340,26 @@ def identifiability(v_m_per_s, a_m_per_s2, v_ref_m_per_s, used, accel_noise_m_pe
     return Identifiability(tuple(cols), fixed, tuple(merged), levels, dirs, a_rms, noise, vif)
 
 
+#: terms along the stroke screened against a reference (name -> words)
+STROKE_TERMS = {"position_dependent_friction_N_per_m": "friction that varies along the stroke",
+                "position_dependent_force_N_per_m": "a force that varies linearly along the stroke",
+                "position_dependent_force_N_per_m2": "a force that varies quadratically along the stroke"}
+
+
+def stroke_terms(q_m, v_m_per_s, origin_m: float) -> dict:
+    """Columns of the terms along the stroke (:data:`STROKE_TERMS`), about ``origin_m``.
+
+    .. math:: \\tilde q\\,\\mathrm{sign}(\\dot q),\\quad \\tilde q,\\quad \\tilde q^2,
+              \\qquad \\tilde q = q - q_0
+
+    (N per m, N per m, N per m^2 once fitted). Both recordings of a comparison use the same origin.
+    """
+    q = as_1d_finite(q_m, "q_m", "m")
+    qc = q - scalar(origin_m, "origin_m", "m")
+    s = np.sign(as_1d_finite(v_m_per_s, "v_m_per_s", "m/s"))
+    return dict(zip(STROKE_TERMS, (qc * s, qc, qc * qc), strict=True))
+
+
 def design_columns(cols, v_m_per_s, a_m_per_s2) -> np.ndarray:
     """The nominal model's regressor columns ``cols`` (names of :data:`NOMINAL_UNITS`), shape (n, len(cols))."""
     return _design(tuple(cols), np.asarray(v_m_per_s, float), np.asarray(a_m_per_s2, float))
@@ -372,7 +394,7 @@ def _design(cols, v, a) -> np.ndarray:
     return np.column_stack([col[c] for c in cols]) if cols else np.zeros((v.size, 0))
 
 
-def fit_axis(force_N, v_m_per_s, a_m_per_s2, used, ident: Identifiability, load_N=None) -> AxisFit:
+def fit_axis(force_N, v_m_per_s, a_m_per_s2, used, ident: Identifiability, load_N=None, extra=None) -> AxisFit:
     """Least-squares fit of the identifiable nominal parameters, cluster-robust uncertainties.
 
     Parameters
@@ -384,6 +406,9 @@ def fit_axis(force_N, v_m_per_s, a_m_per_s2, used, ident: Identifiability, load_
     ident : Identifiability
     load_N : array_like, shape (n,), optional
         Known external force on the axis, N (positive along +q); added to the force.
+    extra : dict, optional
+        Further terms fitted beside the nominal ones: name -> column, shape (n,) (e.g.
+        :func:`stroke_terms`).
 
     Returns
     -------
@@ -401,10 +426,13 @@ def fit_axis(force_N, v_m_per_s, a_m_per_s2, used, ident: Identifiability, load_
     u = np.asarray(used, bool)
     same_shape((F, "force_N", "N"), (v, "v", "m/s"), (a, "a", "m/s^2"), (u, "used", ""))
     y = F + (0.0 if load_N is None else as_1d_finite(load_N, "load_N", "N"))
-    cols = list(ident.columns)
-    if not cols or u.sum() < 3 * len(cols) + 10:
+    extra = dict(extra or {})
+    cols = list(ident.columns) + list(extra)
+    if not ident.columns or u.sum() < 3 * len(cols) + 10:
         raise AnalysisError(f"{int(u.sum())} samples compared: too few to identify the nominal model")
-    X = _design(cols, v, a)
+    X = _design(ident.columns, v, a)
+    if extra:
+        X = np.column_stack([X] + [as_1d_finite(c, n, "1") for n, c in extra.items()])
     idx = np.flatnonzero(u)
     Xu, yu = X[idx], y[idx]
     theta, *_ = np.linalg.lstsq(Xu, yu, rcond=None)
@@ -428,6 +456,9 @@ _CHANGE_WORDS = {
     "friction_N": "friction at the running speed (both directions alike; from a supply current, the drive's own "
                   "loss at that speed reads as friction too)",
     "coulomb_N": "Coulomb friction", "viscous_N_s_per_m": "viscous friction", "mass_kg": "moving mass",
+    "position_dependent_friction_N_per_m": "friction varying along the stroke (slope)",
+    "position_dependent_force_N_per_m": "a force varying linearly along the stroke (slope)",
+    "position_dependent_force_N_per_m2": "a force varying quadratically along the stroke (curvature)",
     "offset_N": "a force in one direction: an offset, a friction that differs with direction or a load other "
                 "than the one stated (this recording cannot tell them apart)",
 }

@@ -54,17 +54,20 @@ def trapezoid(cycles: int, speeds=(0.024,), rng=None, lag_s: float = 0.25):
     return t, qr, q, d
 
 
-def power_current(qr, q, d, friction_N, load_N, rng, offset_N=0.0):
-    """Supply current: 0.35 A holding; moving k (F_f + (F_0 - load) d) plus 0.3 A while catching up."""
-    i = np.where(d != 0, K_A_PER_N * (friction_N + (offset_N - load_N) * d), 0.35)
+def power_current(qr, q, d, friction_N, load_N, rng, offset_N=0.0, slope_N_per_m=0.0):
+    """Supply current: 0.35 A holding; moving k (F_f + (F_0 - load) d) plus 0.3 A while catching up; the
+    friction F_f may rise along the stroke by ``slope_N_per_m`` about its middle (0.08 m)."""
+    ff = friction_N + slope_N_per_m * (q - 0.08)
+    i = np.where(d != 0, K_A_PER_N * (ff + (offset_N - load_N) * d), 0.35)
     i = i + 0.3 * np.clip(np.abs(qr - q) / 4e-3, 0, 1) * (d != 0)
     return i + rng.normal(0, 0.04, q.size)
 
 
-def write_csv(path, cycles=10, friction_N=1600.0, load_N=196.0, seed=1, fs=FS, effort="current", offset_N=0.0):
+def write_csv(path, cycles=10, friction_N=1600.0, load_N=196.0, seed=1, fs=FS, effort="current", offset_N=0.0,
+              slope_N_per_m=0.0):
     rng = np.random.default_rng(seed)
     t, qr, q, d = trapezoid(cycles, rng=rng)
-    e = power_current(qr, q, d, friction_N, load_N, rng, offset_N)
+    e = power_current(qr, q, d, friction_N, load_N, rng, offset_N, slope_N_per_m)
     cols = {"t": t * FS / fs, "q": q, "q_ref": qr, effort: e, "load": np.full(t.size, load_N)}
     np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="")
     return path
@@ -176,6 +179,22 @@ def test_reference_mode_reports_a_real_change_under_its_floor_without_naming_it(
     assert main(["diagnose", str(new), "--model", "single-axis", "--reference", str(ref), "--current-law", "power",
                  "--force-floor-N", "20", "--out", str(tmp_path / "o2"), "--quiet"]) == 0
     assert json.loads((tmp_path / "o2" / "diagnosis.json").read_text())["effects"][0]["floor"] == {"friction_N": 20.0}
+
+
+def test_a_friction_rising_along_the_stroke_is_named_there_not_as_friction(tmp_path):
+    """2000 N/m about the middle: 120 N at the ends of the 0.12 m stroke, above the 75 N floor; the friction at
+    the running speed (the mean along the stroke) does not change."""
+    ref = write_csv(tmp_path / "ref.csv", seed=1)
+    new = write_csv(tmp_path / "new.csv", seed=2, slope_N_per_m=2000.0)
+    out = tmp_path / "o"
+    assert main(["diagnose", str(new), "--model", "single-axis", "--reference", str(ref), "--current-law", "power",
+                 "--out", str(out), "--quiet", "--no-report"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    jsonschema.validate(data, _schema())
+    assert [e["name"] for e in data["effects"]] == ["position_dependent_friction_change"]
+    assert data["effects"][0]["change"]["position_dependent_friction_N_per_m"] == pytest.approx(2000.0, rel=0.15)
+    (f,) = [c for c in data["changes"] if c["parameter"] == "friction_N"]
+    assert abs(f["change"]) < 20.0 and not f["named"]
 
 
 def _dual_csv(path):

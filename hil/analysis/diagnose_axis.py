@@ -24,11 +24,14 @@ from hil.errors import RecordingError
 
 #: default relevance floor of a force parameter (friction, offset), N: 3 x the RMS of the
 #: session-to-session changes of the healthy Cranfield actuator (``normal`` runs 1-5 against 6-10 at
-#: +20 and +40 kgf: friction +15.0 and -44.2 N, offset -7.2 and +5.8 N; RMS 23.8 N, x 3 = 71.4 N),
+#: +20 and +40 kgf: friction +15.8 and -43.2 N, offset -8.7 and +8.4 N; RMS 23.8 N, x 3 = 71.3 N),
 #: rounded up to 75 N (docs/diagnose.md, "Floors"; tests/bench/bench_diagnose_cranfield.py --repeatability)
 FORCE_FLOOR_N = 75.0
 EFFORTS = ("force", "torque", "current")
-_EFFECT = {"friction_N": "friction_change", "coulomb_N": "coulomb_friction_change",
+_EFFECT = {"position_dependent_friction_N_per_m": "position_dependent_friction_change",
+           "position_dependent_force_N_per_m": "position_dependent_force_change",
+           "position_dependent_force_N_per_m2": "position_dependent_force_change",
+           "friction_N": "friction_change", "coulomb_N": "coulomb_friction_change",
            "viscous_N_s_per_m": "viscous_friction_change", "offset_N": "direction_dependent_force_change",
            "mass_kg": "mass_change"}
 
@@ -210,12 +213,34 @@ def _common(ref, new, ref_path: Path):
     return dataclasses.replace(new, columns=cols, fixed=fixed, merged=tuple(merged))
 
 
-def _floors(opts: AxisOptions, speed: float) -> dict:
+def _floors(opts: AxisOptions, speed: float, half_stroke: float) -> dict:
+    """Floors in each parameter's unit: the force floor at the running speed, or at the end of the stroke."""
     f = opts.force_floor_N
     out = {"friction_N": f, "coulomb_N": f, "offset_N": f}
     if speed > 0:
         out["viscous_N_s_per_m"] = f / speed
+    if half_stroke > 0:
+        out |= {"position_dependent_friction_N_per_m": f / half_stroke,
+                "position_dependent_force_N_per_m": f / half_stroke,
+                "position_dependent_force_N_per_m2": f / half_stroke ** 2}
     return out
+
+
+def _stroke_candidates(pr: _Prepared, pn: _Prepared, ref: AxisRecording, new: AxisRecording, ident) -> tuple:
+    """The terms along the stroke both recordings can separate from the nominal ones: (origin, half stroke,
+    columns of the reference, columns of the new recording, not separable [(name, why)])."""
+    from blf.axis_reference import design_columns, separable, stroke_terms
+    q_used = ref.q[pr.mask.used]
+    origin, half = float(np.median(q_used)), float(np.ptp(q_used)) / 2
+    tr, tn = stroke_terms(ref.q, pr.v, origin), stroke_terms(new.q, pn.v, origin)
+    keep, drop = [], []
+    for name in tr:
+        ok = all(separable(design_columns(ident.columns, p.v, p.a)[p.mask.used], t[name][p.mask.used])
+                 for p, t in ((pr, tr), (pn, tn)))
+        (keep if ok else drop).append(name)
+    # the two force terms are one candidate: both or neither
+    return (origin, half, {k: tr[k] for k in keep}, {k: tn[k] for k in keep},
+            [(n, "not separable from the nominal terms in both recordings") for n in drop])
 
 
 def identifiability_dict(model) -> dict | None:
@@ -262,15 +287,16 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     k, conv_words = conversion(new, opts, ref)
     pn, pr = _prepare(new, opts, k), _prepare(ref, opts, k)
     ident = _common(pr.ident, pn.ident, ref.path)
+    origin, half, xr, xn, not_cand = _stroke_candidates(pr, pn, ref, new, ident)
     try:
-        fr = fit_axis(pr.force, pr.v, pr.a, pr.mask.used, ident, ref.load)
+        fr = fit_axis(pr.force, pr.v, pr.a, pr.mask.used, ident, ref.load, extra=xr)
     except AnalysisError as exc:
         raise RecordingError(f"{ref.path}: reference too short to identify the nominal model ({exc})") from None
     try:
-        fn = fit_axis(pn.force, pn.v, pn.a, pn.mask.used, ident, new.load)
+        fn = fit_axis(pn.force, pn.v, pn.a, pn.mask.used, ident, new.load, extra=xn)
     except AnalysisError as exc:
         raise RecordingError(f"{new.path}: {exc}") from None
-    floors = _floors(opts, fr.running_speed_m_per_s)
+    floors = _floors(opts, fr.running_speed_m_per_s, half)
     changes = compare_fits(fn, fr, floors, opts.z_min)
     effects = [_effect(c) for c in changes if c.named]
     return {
@@ -289,7 +315,10 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
                                                             "actuator's session-to-session changes)"
                                                             if opts.force_floor_N == FORCE_FLOOR_N else
                                                             " (stated)"))},
-        "identifiability": _ident_dict(ident),
+        "identifiability": _ident_dict(ident) | {"not_candidates": [{"name": n, "why": w} for n, w in not_cand]},
+        "stroke": {"origin_m": _r(origin), "half_stroke_m": _r(half), "words": (
+            "terms along the stroke screened against the reference (fitted beside the nominal ones on both); "
+            "their floors: the force floor at the end of the stroke, half_stroke_m from the origin")},
         "conversion": conv_words, "sample_rate_hz": _r(new.sample_rate_hz),
         "running_speed_m_per_s": _r(fn.running_speed_m_per_s),
     }

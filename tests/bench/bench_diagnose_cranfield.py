@@ -5,7 +5,8 @@ Each development condition at +20 and +40 kgf against ``normal`` at the same loa
 are printed too, marked: the README says their current was re-levelled segment by segment.
 
 Per row: the verdict, the effects named, the change of the friction at the running speed with its
-uncertainty and the floor, the change of the direction-dependent force, and what the raw current
+uncertainty and the floor, the change of the direction-dependent force, the largest change of the
+terms along the stroke (as a force at the end of the stroke, N), and what the raw current
 says (:func:`raw_friction_change`: the direction-mean current of the steady part of each stroke,
 samples 40-119 and 220-299 of every cycle, against the reference's, divided by the current per
 newton from the reference's half-difference and its load; no mask, no fit).
@@ -13,7 +14,8 @@ newton from the reference's half-difference and its load; no mask, no fit).
     python tests/bench/bench_diagnose_cranfield.py /tmp/cranfield.json [--repeatability]
 
 ``--repeatability`` prints how the default floor (``hil.analysis.diagnose_axis.FORCE_FLOOR_N``) was
-measured: the changes of ``normal`` runs 6-10 against runs 1-5 at +20 and +40 kgf, their RMS, x 3.
+measured: the changes of the force parameters (friction, direction-dependent force) of ``normal``
+runs 6-10 against runs 1-5 at +20 and +40 kgf, their RMS, x 3.
 """
 
 from __future__ import annotations
@@ -58,10 +60,14 @@ def diagnose_pair(folder: Path, name: str, load_kgf: float, runs, ref_runs, **op
 def _row(name, load, data, raw) -> dict:
     ch = {c["parameter"]: c for c in data["changes"]}
     f, o = ch.get("friction_N", {}), ch.get("offset_N", {})
+    half = data["stroke"]["half_stroke_m"]
+    along = [abs(c["change"]) * (half ** 2 if c["parameter"].endswith("per_m2") else half)
+             for c in data["changes"] if c["parameter"].startswith("position_dependent")]
     return {"condition": name, "load_kgf": load, "verdict": data["verdict"],
             "named": [f"{e['name']} {e['change'][next(iter(e['change']))]:+.0f} N" for e in data["effects"]],
             "friction_change_N": f.get("change"), "friction_u_N": f.get("uncertainty"),
             "offset_change_N": o.get("change"), "offset_u_N": o.get("uncertainty"),
+            "along_stroke_change_N": max(along, default=None),
             "floor_N": data["floor"]["force_N"], "raw_current_friction_change_N": raw,
             "samples_used": data["mask"]["samples_used"], "conversion": data["conversion"]}
 
@@ -82,7 +88,7 @@ def repeatability(folder: Path) -> dict:
     diffs = {}
     for load in (20, 40):
         d = diagnose_pair(folder, "normal", load, range(6, 11), range(1, 6))
-        diffs[load] = {c["parameter"]: c["change"] for c in d["changes"]}
+        diffs[load] = {c["parameter"]: c["change"] for c in d["changes"] if c["parameter"].endswith("_N")}
     allv = [v for d in diffs.values() for v in d.values()]
     rms = float(np.sqrt(np.mean(np.square(allv))))
     return {"changes_N": diffs, "rms_N": rms, "floor_3rms_N": 3 * rms}
@@ -105,13 +111,14 @@ def main(argv: list[str]) -> int:
         rows = table(Path(tmp), loads=(20, 40, -40))
     result["rows"] = rows
     print("| condition | load kgf | verdict | named | friction change N (± u) | direction-dependent change N (± u) "
-          "| floor N | raw current says N |")
-    print("|---|---|---|---|---|---|---|---|")
+          "| largest change along the stroke N | floor N | raw current says N |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         mark = " (current re-levelled, README)" if r["load_kgf"] < 0 else ""
         print(f"| {r['condition']}{' 6-10 vs 1-5' if r['condition'] == 'normal' else ''} | {r['load_kgf']:+d}{mark} "
               f"| {r['verdict']} | {', '.join(r['named']) or '-'} | {r['friction_change_N']:+.1f} ± "
-              f"{r['friction_u_N']:.1f} | {r['offset_change_N']:+.1f} ± {r['offset_u_N']:.1f} | {r['floor_N']:g} "
+              f"{r['friction_u_N']:.1f} | {r['offset_change_N']:+.1f} ± {r['offset_u_N']:.1f} "
+              f"| {r['along_stroke_change_N']:.1f} | {r['floor_N']:g} "
               f"| {r['raw_current_friction_change_N']:+.1f} |")
     out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"written {out}")
