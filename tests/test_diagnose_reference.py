@@ -264,3 +264,27 @@ def test_a_term_the_recording_cannot_separate_is_no_candidate(tmp_path, speeds, 
     assert ("viscous_N_s_per_m" in model.names) is asym
     assert "mass_kg" not in model.names
     assert not model.valid["force"].all()  # dwells and catch-ups not compared
+
+
+@pytest.mark.parametrize("sizes, verdict, named", [
+    ({"a": 30.0, "b": 100.0}, "explained", ["b"]), ({"a": 75.0, "b": 75.1}, "explained", ["b"]),
+    ({"a": 30.0, "b": 75.0}, "no_mismatch", [])])
+def test_without_a_reference_a_stated_floor_keeps_an_effect_under_it_from_being_named(sizes, verdict, named):
+    from hil.analysis.diagnose_axis import apply_force_floor
+    data = {"verdict": "explained", "effects": [{"name": "a"}, {"name": "b"}]}
+    out = apply_force_floor(data, sizes, 75.0)
+    assert out["verdict"] == verdict and [e["name"] for e in out["effects"]] == named
+    assert {e["name"] for e in out["below_floor"]} == {"a", "b"} - set(named)
+    assert out["floor"]["force_N"] == 75.0
+
+
+def test_without_a_reference_the_floor_is_stated_in_diagnosis_json(tmp_path):
+    new = write_csv(tmp_path / "new.csv", slope_N_per_m=2000.0)
+    out = tmp_path / "o"
+    assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--current-per-force",
+                 str(K_A_PER_N), "--force-floor-N", "75", "--out", str(out), "--quiet", "--no-report"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    jsonschema.validate(data, _schema())
+    assert data["floor"]["force_N"] == 75.0
+    assert all(e["size_N"] > 75.0 for e in data["effects"])
+    assert all(e["size_N"] <= 75.0 for e in data["below_floor"])

@@ -31,6 +31,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     data = diagnosis_dict(d, args.model, secs)
     from hil.analysis.diagnose_axis import identifiability_dict
     ident = identifiability_dict(model)
+    if args.model == "single-axis" and args.force_floor_N is not None:
+        from hil.analysis.diagnose_axis import apply_force_floor, effect_sizes_N
+        data = apply_force_floor(data, effect_sizes_N(model, d), args.force_floor_N)
     if ident is not None:
         mask = ident.pop("mask", None)
         data["identifiability"] = ident
@@ -46,6 +49,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for e in data["effects"]:
         console.print(f"  {e['words']} ({e['name']} at {e['where']}): " + ", ".join(
             f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
+    for e in data.get("below_floor", []):
+        console.print(f"  under the floor of {args.force_floor_N:g} N, not named: {e['name']} ({e['size_N']} N)")
     if data["where"]:
         console.print("  the rest lies at: " + ", ".join(data["where"]))
     for m in (ident or {}).get("cannot_tell_apart", []):
@@ -139,5 +144,6 @@ def register(sub) -> None:
     p.add_argument("--screw-lead-m", type=float, metavar="M",
                    help="single axis with a torque column: the screw lead, m per revolution")
     p.add_argument("--force-floor-N", dest="force_floor_N", type=float, metavar="N",
-                   help="relevance floor of a force change (friction, offset), N (default 75: docs/diagnose.md)")
+                   help="relevance floor of a force change (friction, offset), N (with --reference default 75: "
+                        "docs/diagnose.md; without, single axis: no floor unless stated)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
