@@ -178,7 +178,8 @@ def effort_mask(t_s, q_m, q_ref_m, sample_rate_hz: float, *, dwell_says_nothing:
     sample_rate_hz : float
         Hz.
     dwell_says_nothing : bool
-        Mask the set point's dwells (a supply current at standstill is the holding current).
+        Mask the set point's dwells (a supply current at standstill is the holding current; standing
+        still, a friction force is anywhere in its static band).
     mask_transients : bool
         Mask the catch-up after each step of the set point's velocity.
     hold_s : float
@@ -210,7 +211,7 @@ def effort_mask(t_s, q_m, q_ref_m, sample_rate_hz: float, *, dwell_says_nothing:
     if mask_transients:
         transient = _transients(q, qr, vr, vmax, moving, max(2, int(round(hold_s * fs)))) & ~dwell
     used = ~dwell & ~transient
-    words = (f"{int(dwell.sum())} samples of dwell at holding current and {int(transient.sum())} of catch-up "
+    words = (f"{int(dwell.sum())} samples of dwell (standing still) and {int(transient.sum())} of catch-up "
              f"after a set-point step masked; {int(used.sum())} of {t.size} compared")
     return EffortMask(used, moving, int(dwell.sum()), int(transient.sum()), _spans(dwell, t),
                       _spans(transient, t), words)

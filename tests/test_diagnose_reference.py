@@ -288,3 +288,25 @@ def test_without_a_reference_the_floor_is_stated_in_diagnosis_json(tmp_path):
     assert data["floor"]["force_N"] == 75.0
     assert all(e["size_N"] > 75.0 for e in data["effects"])
     assert all(e["size_N"] <= 75.0 for e in data["below_floor"])
+
+
+def test_a_torque_column_is_a_force_through_the_screw_lead(tmp_path):
+    """The same recording as force (N) and as torque (N m) with a 5 mm lead gives the same nominal fit."""
+    from hil.analysis.diagnose_axis import AxisOptions, reference_diagnosis
+    rng = np.random.default_rng(9)
+    t, qr, q, d = trapezoid(6, rng=rng)
+    force = 400.0 * d - 196.0 + rng.normal(0, 20.0, t.size)
+    lead = 0.005
+    paths = {}
+    for kind, col in (("force", force), ("torque", force * lead / (2 * np.pi))):
+        paths[kind] = tmp_path / f"{kind}.csv"
+        np.savetxt(paths[kind], np.column_stack([t, q, qr, col, np.full(t.size, 196.0)]), delimiter=",",
+                   header=f"t,q,q_ref,{kind},load", comments="")
+    a = reference_diagnosis(paths["force"], paths["force"], AxisOptions())
+    b = reference_diagnosis(paths["torque"], paths["torque"], AxisOptions(screw_lead_m=lead))
+    assert b["nominal"] == pytest.approx(a["nominal"], rel=1e-5, abs=1e-6)
+    # the synthetic force switches with the set point, the nut a catch-up later: a few samples disagree
+    assert a["nominal"]["friction_N"] == pytest.approx(400.0, rel=0.03)
+    assert main(["diagnose", str(paths["torque"]), "--model", "single-axis", "--reference", str(paths["torque"]),
+                 "--out", str(tmp_path / "o"), "--quiet"]) == 3  # no lead: bad input
+    assert not (tmp_path / "o").exists()

@@ -114,10 +114,13 @@ def _direction(rec: AxisRecording, moving: np.ndarray) -> np.ndarray:
     return np.where(moving, np.sign(vr), 0.0)
 
 
-def _mask(rec: AxisRecording, opts: AxisOptions):
+def _mask(rec: AxisRecording, opts: AxisOptions, *, reference_mode: bool = False):
+    """Dwells masked with a supply current (the holding current), and in the reference mode with any effort
+    (standing still, the friction force is anywhere in its static band: the linear model's sign(v) is not
+    defined there); catch-ups masked with a current."""
     from blf.axis_reference import effort_mask
     power = rec.kind == "current" and opts.current_law == "power"
-    return effort_mask(rec.t, rec.q, rec.q_ref, rec.sample_rate_hz, dwell_says_nothing=power,
+    return effort_mask(rec.t, rec.q, rec.q_ref, rec.sample_rate_hz, dwell_says_nothing=power or reference_mode,
                        mask_transients=rec.kind == "current")
 
 
@@ -175,7 +178,7 @@ class _Prepared:
 
 def _prepare(rec: AxisRecording, opts: AxisOptions, k: float | None) -> _Prepared:
     from blf.axis_reference import axis_kinematics, identifiability
-    m = _mask(rec, opts)
+    m = _mask(rec, opts, reference_mode=True)
     v, a = axis_kinematics(rec.q, rec.sample_rate_hz)
     vr = np.gradient(rec.q_ref, rec.t)
     ident = identifiability(v, a, vr, m.used, _accel_noise(rec.q, rec.sample_rate_hz))
