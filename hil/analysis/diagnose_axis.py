@@ -140,11 +140,11 @@ def conversion(rec: AxisRecording, opts: AxisOptions, reference: AxisRecording |
                              "mechanical power)")
     if opts.current_a_per_N is not None:
         return opts.current_a_per_N, f"{opts.current_law} law, k = {opts.current_a_per_N:g} A/N (stated)"
-    src = reference if reference is not None else None
+    src = reference
     if src is None or src.load is None:
         raise RecordingError(f"{rec.path}: a current (A) with no way to convert it: state --current-per-force, or "
                              "give a --reference with a known load (a load column in N)")
-    m = _mask(src, opts)
+    m = _mask(src, opts, reference_mode=True)
     try:
         gain = identify_current_per_force(src.effort, src.load, _direction(src, m.moving), m.used, opts.current_law)
     except AnalysisError as exc:
