@@ -495,9 +495,10 @@ def compare_fits(new: AxisFit, ref: AxisFit, floors: dict, z_min: float = 3.0) -
         unit = NOMINAL_UNITS.get(name, "")
         verb = "increased" if ch > 0 else "decreased"
         if sup and rel:
-            how = f"named: above its floor of {fl:g} {unit}"
+            how = f"named: above its floor of {fl:.4g} {unit}"
         elif sup:
-            how = f"real (z = {z:.1f}) but under its floor of {fl} {unit}: not named"
+            how = (f"real (z = {z:.1f}) but under its floor of {fl:.4g} {unit}: not named" if fl is not None else
+                   f"real (z = {z:.1f}); no floor for it: not named")
         else:
             how = f"not statistically supported (z = {z:.1f})"
         words = f"{_CHANGE_WORDS.get(name, name)} {verb} by {abs(ch):.4g} ± {u:.2g} {unit}; {how}"
