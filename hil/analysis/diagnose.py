@@ -13,8 +13,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from hil.errors import RecordingError
 
 
@@ -63,44 +61,15 @@ def load_dual(path: Path, profile: Path | None):
     return model, period
 
 
-def _load_single(path: Path):
-    from sim.single_axis import SingleAxisReplay
-    if path.suffix.lower() == ".mat":
-        from scipy.io import loadmat
-        try:
-            d = loadmat(path)
-        except (OSError, ValueError) as exc:
-            raise RecordingError(f"{path}: not a readable .mat file ({exc})") from None
-        missing = [k for k in ("t", "qm", "qg", "vir", "gtau") if k not in d]
-        if missing:
-            raise RecordingError(f"{path}: missing key(s) {', '.join(missing)}; expected t, qm, qg, vir, gtau")
-        t = d["t"].ravel()
-        force = float(np.ravel(d["gtau"])[0]) * d["vir"].ravel()
-        q, qref = d["qm"].ravel(), d["qg"].ravel()
-    else:
-        import io
-
-        from hil.runfolder import read_text
-        text = read_text(path, "a text CSV file (columns t,q,q_ref,force)")
-        try:
-            arr = np.genfromtxt(io.StringIO(text), delimiter=",", names=True)
-        except ValueError as exc:
-            raise RecordingError(f"{path}: not a readable CSV ({exc})") from None
-        need = ("t", "q", "q_ref", "force")
-        if arr.dtype.names is None or any(c not in arr.dtype.names for c in need):
-            raise RecordingError(f"{path}: line 1: need columns t,q,q_ref,force (s, m, m, N)")
-        t, q, qref, force = (np.asarray(arr[c], dtype=float) for c in need)
-        if not all(np.all(np.isfinite(x)) for x in (t, q, qref, force)) or np.any(np.diff(t) <= 0):
-            raise RecordingError(f"{path}: NaN, empty cells or non-increasing time in t,q,q_ref,force")
-    period = float(np.median(np.diff(t)))
-    return SingleAxisReplay(t, q, qref, force, period), period
-
-
-def load_model(path: Path, model: str, profile: Path | None):
-    """Replay model and sample period of a recording (run folder, CSV, CAN log, .mat)."""
+def load_model(path: Path, model: str, profile: Path | None, axis_options=None):
+    """Replay model and sample period of a recording (run folder, CSV, CAN log, .mat); a single axis is
+    read with ``axis_options`` (:class:`hil.analysis.diagnose_axis.AxisOptions`, how to read its effort)."""
+    from hil.analysis.diagnose_axis import AxisOptions, single_axis_model
     if not Path(path).exists():
         raise RecordingError(f"{path}: no such file or folder")
-    return _load_single(Path(path)) if model == "single-axis" else load_dual(Path(path), profile)
+    if model == "single-axis":
+        return single_axis_model(Path(path), axis_options or AxisOptions())
+    return load_dual(Path(path), profile)
 
 
 def _r(x, nd=6):

@@ -17,7 +17,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from hil.report.diagnose import write_report
     console = make_console()
     path = Path(args.recording)
-    model, period = load_model(path, args.model, args.profile)
+    opts = _axis_options(args)
+    if args.reference is not None:
+        return _cmd_reference(args, path, opts, console)
+    model, period = load_model(path, args.model, args.profile, opts)
     outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
                           ("diagnosis.json", "diagnosis_report.html"))
     t0 = time.perf_counter()
@@ -28,6 +31,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         raise
     secs = time.perf_counter() - t0
     data = diagnosis_dict(d, args.model, secs)
+    from hil.analysis.diagnose_axis import identifiability_dict
+    ident = identifiability_dict(model)
+    if args.model == "single-axis" and args.force_floor_N is not None:
+        from hil.analysis.diagnose_axis import apply_force_floor, effect_sizes_N
+        data = apply_force_floor(data, effect_sizes_N(model, d), args.force_floor_N)
+    if ident is not None:
+        mask = ident.pop("mask", None)
+        data["identifiability"] = ident
+        if mask is not None:
+            data["mask"] = mask
     outputs.write_json("diagnosis.json", data)
     if not args.no_report:
         outputs.write_with("diagnosis_report.html", lambda p: write_report(
@@ -38,8 +51,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for e in data["effects"]:
         console.print(f"  {e['words']} ({e['name']} at {e['where']}): " + ", ".join(
             f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
+    for e in data.get("below_floor", []):
+        console.print(f"  under the floor of {args.force_floor_N:g} N, not named: {e['name']} ({e['size_N']} N)")
     if data["where"]:
         console.print("  the rest lies at: " + ", ".join(data["where"]))
+    for m in (ident or {}).get("cannot_tell_apart", []):
+        console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
+    for m in (ident or {}).get("not_candidates", []):
+        console.print(f"  not a candidate: {m['name']}: {m['why']}")
+    if "mask" in data:
+        console.print(f"  masked: {data['mask']['words']}")
     for loc in data["locations"][:6]:
         console.print(f"  where: {loc['channel']} {loc['t_start_s']}-{loc['t_end_s']} s ({loc['test']} test), "
                       f"{loc['regime']}")
@@ -57,6 +78,46 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def _axis_options(args: argparse.Namespace):
+    from hil.analysis.diagnose_axis import FORCE_FLOOR_N, AxisOptions
+    from hil.errors import RecordingError
+    for name in ("current_per_force", "screw_lead_m", "force_floor_N"):
+        val = getattr(args, name)
+        if val is not None and not val > 0:
+            raise RecordingError(f"--{name.replace('_', '-')}: must be > 0; got {val}")
+    return AxisOptions(current_law=args.current_law, current_a_per_N=args.current_per_force,
+                       screw_lead_m=args.screw_lead_m,
+                       force_floor_N=FORCE_FLOOR_N if args.force_floor_N is None else args.force_floor_N)
+
+
+def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
+    """``--reference``: single axis against a healthy recording; everything checked before anything is written."""
+    from hil.analysis.diagnose_axis import reference_diagnosis
+    from hil.errors import RecordingError
+    if args.model != "single-axis":
+        raise RecordingError("--reference: only with --model single-axis so far (the dual-EMA model: a later issue)")
+    if not Path(args.reference).exists():
+        raise RecordingError(f"--reference {args.reference}: no such file")
+    t0 = time.perf_counter()
+    data = reference_diagnosis(path, Path(args.reference), opts)
+    data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
+    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json", "diagnosis_report.html"))
+    outputs.write_json("diagnosis.json", data)
+    if not args.no_report:
+        from hil.report.diagnose import write_reference_report
+        outputs.write_with("diagnosis_report.html", lambda p: write_reference_report(
+            p, data, json_name=outputs.path("diagnosis.json").name))
+    console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
+                  f"{args.reference} ({data['diagnosis_s']:.1f} s); effort: {data['conversion']}")
+    for c in data["changes"]:
+        console.print(f"  {c['parameter']}: {c['words']}")
+    for m in data["identifiability"]["cannot_tell_apart"]:
+        console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
+    console.print(f"  masked: {data['mask']['words']}")
+    console.print(f"  written {outputs.path('diagnosis.json')}")
+    return 0
+
+
 def register(sub) -> None:
     p = add_parser(sub, "diagnose", handler=cmd_diagnose,
                    help="simulation versus recording: locate the mismatch, name the missing physics",
@@ -67,8 +128,22 @@ def register(sub) -> None:
                                "diagnosis_report.html.")
     add_recording_args(p, "diagnosis.json and diagnosis_report.html",
                        recording_help="run folder, signals CSV (t,phi1,phi2,s1,s2,F1,F2), CAN log; single-axis: "
-                                      ".mat or CSV t,q,q_ref,force")
+                                      ".mat or CSV t,q,q_ref + force|torque|current [+ load]")
     p.add_argument("--model", choices=("dual-ema", "single-axis"), default="dual-ema",
                    help="dual-EMA rig (default) or a single positioning axis (e.g. EMPS)")
     p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")
+    p.add_argument("--reference", metavar="HEALTHY", type=Path,
+                   help="single axis: compare with this healthy recording (same columns and sample rate): the "
+                        "nominal model identified on both, each parameter's change with its uncertainty, named "
+                        "only above its floor")
+    p.add_argument("--current-law", choices=("torque", "power"),
+                   help="single axis with a current column: torque (a phase current following the torque) or "
+                        "power (a supply current following mechanical power at the running speed)")
+    p.add_argument("--current-per-force", type=float, metavar="A_PER_N",
+                   help="current per newton along the motion (default: identified on --reference's load column)")
+    p.add_argument("--screw-lead-m", type=float, metavar="M",
+                   help="single axis with a torque column: the screw lead, m per revolution")
+    p.add_argument("--force-floor-N", dest="force_floor_N", type=float, metavar="N",
+                   help="relevance floor of a force change (friction, offset), N (with --reference default 75: "
+                        "docs/diagnose.md; without, single axis: no floor unless stated)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

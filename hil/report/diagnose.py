@@ -150,3 +150,32 @@ def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosi
                      + "".join(img(figure_regime(d, c)) for c in flagged))
     parts.append(file_link(json_name))
     write_page(path, "emacheck diagnose", parts)
+
+
+def write_reference_report(path: Path, data: dict, *, json_name: str = "diagnosis.json") -> None:
+    """The report of ``diagnose --reference`` (single axis): each nominal parameter against its reference
+    value, the floors, what this recording cannot tell apart, the masked samples."""
+    from blf.axis_reference import NOMINAL_UNITS
+    verdict = "changes named" if data["effects"] else "no change above its floor"
+    g = lambda x: "—" if x is None else f"{x:.4g}"  # noqa: E731
+    rows = [(c["parameter"], NOMINAL_UNITS.get(c["parameter"], ""), g(c["reference"]), g(c["value"]),
+             f"{g(c['change'])} ± {g(c['uncertainty'])}", g(c["z"]), g(c["floor"]),
+             "named" if c["named"] else ("under its floor" if c["supported"] else "not supported"))
+            for c in data["changes"]]
+    ident = data["identifiability"]
+    parts = [
+        "<h1>Single axis against a reference</h1>",
+        f"<p><b>{esc(verdict)}</b> ({esc(data['verdict'])}); reference {esc(data['reference']['recording'])}</p>",
+        f"<p>Effort: {esc(data['conversion'])}</p>",
+        f"<p>{esc(data['floor']['words'])}</p>",
+        "<h2>Nominal parameters against the reference</h2>",
+        table(["parameter", "unit", "reference", "this recording", "change ± u", "z", "floor", "status"], rows),
+        "<h2>What this recording cannot tell apart</h2>",
+        table(["terms", "why", "what motion would separate them"],
+              [(", ".join(m["terms"]), m["why"], m["would_separate"]) for m in ident["cannot_tell_apart"]]),
+        "<h2>Samples not compared</h2>",
+        f"<p>This recording: {esc(data['mask']['words'])}.<br>"
+        f"Reference: {esc(data['reference']['mask']['words'])}.</p>",
+        file_link(json_name),
+    ]
+    write_page(path, "diagnosis against a reference", parts)
