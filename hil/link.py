@@ -106,12 +106,14 @@ class CanopenLink:
     def _send(self, frames: list[Frame]) -> None:
         if not frames:
             return
-        msgs = self.tr.send(frames, self.tr.now())
-        if self.log is not None:
-            for m in msgs:
-                self.log.write_msg(m)
+        t = self.tr.now()
+        self.tr.send(frames, t)
+        log = self.log
+        if log is not None:
+            for f in frames:
+                log.write(f, t, False)
 
-    def _feed(self, got: list[tuple[Frame, float, can.Message]]) -> None:
+    def _feed(self, got: list[tuple[Frame, float, can.Message | None]]) -> None:
         log = self.log
         on_frame = self.m.on_frame
         now = self.tr.now
@@ -121,9 +123,12 @@ class CanopenLink:
             if sync and timing is not None:
                 timing.sync(t)
             if log is not None:
-                if msg.timestamp != t:
-                    msg.timestamp = t  # log the time the master saw it
-                log.write_msg(msg)
+                if msg is None:
+                    log.write(f, t, True)
+                else:
+                    if msg.timestamp != t:
+                        msg.timestamp = t  # log the time the master saw it
+                    log.write_msg(msg)
             # a SYNC at its own time (the slot of the loop-timed SYNC, else when it arrived), so that
             # the sample answering it carries that time however late the master takes it
             out = on_frame(f, self._sync_time(t) if sync else now())
