@@ -40,7 +40,7 @@ _ERROR_FRAME_ID = 0x20000000 | 0x00000080
 @dataclass(frozen=True)
 class FrameKind:
     """What a logged frame is when it is not a classic data frame with an 11-bit identifier on the
-    log's own channel (the messages of a real bus: :meth:`CanLogWriter.write_msg`)."""
+    log's own channel (the messages of a real bus: :meth:`CanLogWriter.write_received`)."""
 
     extended: bool = False
     remote: bool = False
@@ -152,13 +152,20 @@ class CanLogWriter:
             self.flush()
             self._flushed_t = t
 
-    def write_msg(self, msg: can.Message) -> None:
-        """Log a python-can message (its timestamp in the transport's time, direction flag ``is_rx``)."""
-        t = msg.timestamp
-        self._records.append((t + self.time_offset_s if self.time_offset_s else t, msg.arbitration_id,
-                              bytes(msg.data), msg.is_rx, FrameKind.of(msg)))
-        self.frames += 1
-        if len(self._records) >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
+    def write_received(self, got: list[tuple[Frame, float, can.Message | None]]) -> None:
+        """Log frames received, in order: ``(frame, time [s], python-can message or None)`` as a
+        transport delivers them (with a message, its channel and direction flag, at that time)."""
+        records = self._records
+        off = self.time_offset_s
+        t = self._flushed_t
+        for f, t, msg in got:
+            if msg is None:
+                records.append((t + off if off else t, f.arbitration_id, f.data, True, None))
+            else:
+                records.append((t + off if off else t, msg.arbitration_id, bytes(msg.data), msg.is_rx,
+                                FrameKind.of(msg)))
+        self.frames += len(got)
+        if len(records) >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
             self.flush()
             self._flushed_t = t
 
