@@ -121,34 +121,42 @@ class CanLogWriter:
     Flushed every ``flush_frames`` frames and whenever the frame time moved
     ``flush_period_s`` past the last flush, so a killed master loses at most
     that much of the log (the last line may be cut short: readers drop it).
-    Frames are kept as records until a flush formats them in one batch
-    (:func:`candump_lines`: python-can's :class:`can.io.CanutilsLogWriter` lines)
-    into a :class:`hil.runfolder.LoopFile`: with ``disk`` (a background
-    :class:`~hil.runfolder.DiskSync`, ``emacheck run``) a flush hands them to its
-    thread and no write to the file lands on the loop's; without, written at once.
-    ``time_offset_s`` is added to every stamp: ``emacheck run`` logs wall-clock
-    (UNIX) time as candump does; a dry-run logs its simulated time from 0.
+    Frames are kept as records and formatted in batches of ``format_frames``
+    (:func:`candump_lines`: python-can's :class:`can.io.CanutilsLogWriter` lines;
+    a small batch, so that no SYNC cycle of ``emacheck run`` formats a whole
+    flush's worth, about 1 750 lines in 0.5 s) into a :class:`hil.runfolder.LoopFile`:
+    with ``disk`` (a background :class:`~hil.runfolder.DiskSync`, ``emacheck run``)
+    a flush hands them to its thread and no write to the file lands on the loop's;
+    without, written at once. ``time_offset_s`` is added to every stamp:
+    ``emacheck run`` logs wall-clock (UNIX) time as candump does; a dry-run logs
+    its simulated time from 0.
     """
 
     def __init__(self, path: Path, channel: str = "can0", flush_frames: int = 2000,
-                 flush_period_s: float = 0.5, time_offset_s: float = 0.0, disk: DiskSync | None = None) -> None:
+                 flush_period_s: float = 0.5, time_offset_s: float = 0.0, disk: DiskSync | None = None,
+                 format_frames: int = 64) -> None:
         self.path = path
         self._file = LoopFile(path, disk)
         self.channel = channel
         self._records: list[LogRecord] = []
         self._first_t: float | None = None
+        self._format_frames = format_frames
         self._flush_frames = flush_frames
         self._flush_period_s = flush_period_s
         self._flushed_t = 0.0
+        self._flushed_frames = 0  #: :attr:`frames` at the last flush
         self.frames = 0
         self.time_offset_s = float(time_offset_s)
 
     def write(self, frame: Frame, t: float, rx: bool) -> None:
         """Log a frame seen (``rx``) or sent at ``t`` [s, the transport's time]."""
-        self._records.append((t + self.time_offset_s if self.time_offset_s else t, frame.arbitration_id,
-                              frame.data, rx, None))
+        records = self._records
+        records.append((t + self.time_offset_s if self.time_offset_s else t, frame.arbitration_id,
+                        frame.data, rx, None))
         self.frames += 1
-        if len(self._records) >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
+        if len(records) >= self._format_frames:
+            self._format()
+        if self.frames - self._flushed_frames >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
             self.flush()
             self._flushed_t = t
 
@@ -165,17 +173,24 @@ class CanLogWriter:
                 records.append((t + off if off else t, msg.arbitration_id, bytes(msg.data), msg.is_rx,
                                 FrameKind.of(msg)))
         self.frames += len(got)
-        if len(records) >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
+        if len(records) >= self._format_frames:
+            self._format()
+        if self.frames - self._flushed_frames >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
             self.flush()
             self._flushed_t = t
 
-    def flush(self) -> None:
-        """Format the frames logged since the last flush and hand them to the file."""
+    def _format(self) -> None:
+        """The records so far as lines into the file (in memory until the next flush)."""
         if self._records:
             text, self._first_t = candump_lines(self._records, self.channel, self._first_t)
             self._records.clear()
             self._file.write(text)
+
+    def flush(self) -> None:
+        """Format the frames logged since the last batch and hand everything to the file."""
+        self._format()
         self._file.flush()
+        self._flushed_frames = self.frames
 
     def close(self) -> None:
         self.flush()

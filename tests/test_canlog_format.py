@@ -71,10 +71,10 @@ def test_batch_lines_are_python_cans_lines(msgs, channel, batch):
 @given(st.lists(st.tuples(st.integers(0, 0x7FF), st.binary(max_size=8), times, st.booleans()), max_size=60),
        st.floats(min_value=0.0, max_value=2e9, allow_nan=False))
 def test_writer_file_is_python_cans_file(tmp_path_factory, frames, offset):
-    """The log writer (frames of the stack, an offset added to each time, flushes every 7 frames)
-    writes the file python-can's writer writes from the equivalent messages."""
+    """The log writer (frames of the stack, an offset added to each time, formatted every 5 frames,
+    flushed every 7) writes the file python-can's writer writes from the equivalent messages."""
     path = tmp_path_factory.mktemp("log") / "can.log"
-    w = CanLogWriter(path, channel="can0", flush_frames=7, time_offset_s=offset)
+    w = CanLogWriter(path, channel="can0", flush_frames=7, time_offset_s=offset, format_frames=5)
     msgs = []
     for cid, data, t, rx in frames:
         w.write(Frame(cid, data), t, rx)
@@ -99,3 +99,34 @@ def test_a_dry_run_like_batch():
                                     is_rx=rx, check=False))
     text, _ = candump_lines([_record(m) for m in msgs], "vcan-dry-run")
     assert text == _python_can(msgs, "vcan-dry-run")
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(messages(), st.booleans(), st.integers(1, 4)), max_size=40))
+def test_received_runs_with_and_without_messages(tmp_path_factory, items):
+    """Frames received in runs (:meth:`CanLogWriter.write_received`): without a python-can message (in
+    process, the SocketCAN fast path: received, the log's channel) or with the bus's message (its
+    channel, direction and kind kept), mixed with frames sent: python-can's file from the same messages."""
+    path = tmp_path_factory.mktemp("log") / "can.log"
+    w = CanLogWriter(path, channel="vcan0", flush_frames=9, format_frames=4)
+    want, run = [], []
+    for msg, bare, n in items:
+        for _ in range(n):
+            if bare:
+                f = Frame(msg.arbitration_id & 0x7FF, bytes(msg.data))
+                run.append((f, msg.timestamp, None))
+                want.append(can.Message(timestamp=msg.timestamp, arbitration_id=f.arbitration_id, data=f.data,
+                                        is_extended_id=False, is_rx=True, check=False))
+            else:
+                run.append((Frame(0, b""), msg.timestamp, msg))
+                want.append(msg)
+        if len(run) > 3 or bare:
+            w.write_received(run)
+            run = []
+            sent = Frame(0x201, b"\x0f\x00")
+            w.write(sent, msg.timestamp, False)
+            want.append(can.Message(timestamp=msg.timestamp, arbitration_id=0x201, data=sent.data,
+                                    is_extended_id=False, is_rx=False, check=False))
+    w.write_received(run)
+    w.close()
+    assert path.read_text() == _python_can(want, "vcan0")
