@@ -1,9 +1,10 @@
 """Raw CAN traffic log (candump -L format) and its decoding back into signals.
 
-The master logs every frame it sends and receives, as it happens, with
-python-can's :class:`can.io.CanutilsLogWriter` (one line per frame,
+The master logs every frame it sends and receives, as it happens, in the
+lines of python-can's :class:`can.io.CanutilsLogWriter` (one line per frame,
 ``(timestamp) channel ID#DATA``; can-utils' ``canplayer`` and python-can's
-``can.LogReader`` replay it, and a crash loses at most the unflushed lines).
+``can.LogReader`` replay it, and a crash loses at most the unflushed lines),
+formatted in batches at each flush (:func:`candump_lines`).
 
 :func:`decode_can_log` turns such a log back into the signals of the run
 folder with the one codec of a SYNC cycle the master uses
@@ -32,6 +33,87 @@ from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import DiskSync, LoopFile, Signals
 from hil.runrecord import RunRecord
 
+#: CAN_ERR_FLAG | CAN_ERR_BUSERROR (linux/can/error.h): the identifier candump writes for an error frame
+_ERROR_FRAME_ID = 0x20000000 | 0x00000080
+
+
+@dataclass(frozen=True)
+class FrameKind:
+    """What a logged frame is when it is not a classic data frame with an 11-bit identifier on the
+    log's own channel (the messages of a real bus: :meth:`CanLogWriter.write_received`)."""
+
+    extended: bool = False
+    remote: bool = False
+    error: bool = False
+    fd: bool = False
+    bitrate_switch: bool = False
+    error_state_indicator: bool = False
+    channel: str | int | None = None  #: None: the log's channel
+
+    @classmethod
+    def of(cls, msg: can.Message) -> FrameKind | None:
+        """A python-can message's kind, None for a classic 11-bit data frame without a channel."""
+        if not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd
+                or msg.channel is not None):
+            return None
+        return cls(msg.is_extended_id, msg.is_remote_frame, msg.is_error_frame, msg.is_fd, msg.bitrate_switch,
+                   msg.error_state_indicator, msg.channel)
+
+
+def _channel_name(channel) -> str:
+    if isinstance(channel, int) or (isinstance(channel, str) and channel.isdigit()):
+        return f"can{channel}"
+    return channel
+
+
+def _other_line(t: float, cid: int, data: bytes, rx: bool, kind: FrameKind, channel: str) -> str:
+    ch = _channel_name(kind.channel) if kind.channel is not None else channel
+    if kind.error:
+        head, eol = f"({t:f}) {ch} {_ERROR_FRAME_ID:08X}#", "\n"
+    else:
+        head, eol = f"({t:f}) {ch} {cid:08X}#" if kind.extended else f"({t:f}) {ch} {cid:03X}#", \
+            " R\n" if rx else " T\n"
+    if kind.remote:
+        return f"{head}R{eol}"
+    flags = ""
+    if kind.fd:
+        flags = f"#{(0x01 if kind.bitrate_switch else 0) | (0x02 if kind.error_state_indicator else 0):X}"
+    return f"{head}{flags}{data.hex().upper()}{eol}"
+
+
+#: one frame of the CAN log: (time [s] or None, identifier, data, received, kind: None for a classic
+#: data frame with an 11-bit identifier on the log's channel)
+LogRecord = tuple[float | None, int, bytes, bool, FrameKind | None]
+
+
+def candump_lines(records: list[LogRecord], channel: str | int, first_t: float | None = None
+                  ) -> tuple[str, float | None]:
+    """The candump ``-L`` lines of ``records``, exactly as python-can's :class:`can.io.CanutilsLogWriter`
+    writes them (``(time) channel ID#DATA R|T``, the time with 6 decimals, the identifier in 3 hex
+    digits or 8 for an extended one, ``R`` for a remote frame, an error frame as ``20000080#``, a CAN FD
+    frame's flags after ``##``), formatted in one batch.
+
+    As python-can's writer, a time before the first frame's (or None) is written as the first frame's:
+    ``first_t`` is that time from the batches before (None before the first); returns the text and it.
+    """
+    if not records:
+        return "", first_t
+    if first_t is None:
+        first_t = records[0][0] or 0.0
+    channel = _channel_name(channel)
+    fmt = "(%f) " + channel.replace("%", "%%") + " %03X#%s%s"
+    eols = (" T\n", " R\n")
+    lines = []
+    append = lines.append
+    for t, cid, data, rx, kind in records:
+        if t is None or t < first_t:
+            t = first_t
+        if kind is None:
+            append(fmt % (t, cid, data.hex().upper(), eols[rx]))
+        else:
+            append(_other_line(t, cid, data, rx, kind, channel))
+    return "".join(lines), first_t
+
 
 class CanLogWriter:
     """Append frames to a candump ``.log`` file as they happen.
@@ -39,49 +121,80 @@ class CanLogWriter:
     Flushed every ``flush_frames`` frames and whenever the frame time moved
     ``flush_period_s`` past the last flush, so a killed master loses at most
     that much of the log (the last line may be cut short: readers drop it).
-    The lines are formatted by python-can's :class:`can.io.CanutilsLogWriter`
-    into a :class:`hil.runfolder.LoopFile`: with ``disk`` (a background
-    :class:`~hil.runfolder.DiskSync`, ``emacheck run``) a flush hands them to its
-    thread and no write to the file lands on the loop's; without, written at once.
-    ``time_offset_s`` is added to every stamp: ``emacheck run`` logs wall-clock
-    (UNIX) time as candump does; a dry-run logs its simulated time from 0.
+    Frames are kept as records and formatted in batches of ``format_frames``
+    (:func:`candump_lines`: python-can's :class:`can.io.CanutilsLogWriter` lines;
+    a small batch, so that no SYNC cycle of ``emacheck run`` formats a whole
+    flush's worth, about 1 750 lines in 0.5 s) into a :class:`hil.runfolder.LoopFile`:
+    with ``disk`` (a background :class:`~hil.runfolder.DiskSync`, ``emacheck run``)
+    a flush hands them to its thread and no write to the file lands on the loop's;
+    without, written at once. ``time_offset_s`` is added to every stamp:
+    ``emacheck run`` logs wall-clock (UNIX) time as candump does; a dry-run logs
+    its simulated time from 0.
     """
 
     def __init__(self, path: Path, channel: str = "can0", flush_frames: int = 2000,
-                 flush_period_s: float = 0.5, time_offset_s: float = 0.0, disk: DiskSync | None = None) -> None:
+                 flush_period_s: float = 0.5, time_offset_s: float = 0.0, disk: DiskSync | None = None,
+                 format_frames: int = 64) -> None:
         self.path = path
-        self._w = can.io.CanutilsLogWriter(LoopFile(path, disk), channel=channel)
-        self._n = 0
+        self._file = LoopFile(path, disk)
+        self.channel = channel
+        self._records: list[LogRecord] = []
+        self._first_t: float | None = None
+        self._format_frames = format_frames
         self._flush_frames = flush_frames
         self._flush_period_s = flush_period_s
         self._flushed_t = 0.0
+        self._flushed_frames = 0  #: :attr:`frames` at the last flush
         self.frames = 0
         self.time_offset_s = float(time_offset_s)
 
     def write(self, frame: Frame, t: float, rx: bool) -> None:
-        msg = can.Message(timestamp=t, arbitration_id=frame.arbitration_id, data=frame.data,
-                          is_extended_id=False, is_rx=rx)
-        self.write_msg(msg)
-
-    def write_msg(self, msg: can.Message) -> None:
-        """Log a python-can message (its timestamp in the transport's time, direction flag ``is_rx``)."""
-        t = msg.timestamp
-        if self.time_offset_s:
-            msg = can.Message(timestamp=t + self.time_offset_s, arbitration_id=msg.arbitration_id, data=msg.data,
-                              is_extended_id=False, is_rx=msg.is_rx, check=False)
-        self._w.on_message_received(msg)
+        """Log a frame seen (``rx``) or sent at ``t`` [s, the transport's time]."""
+        records = self._records
+        records.append((t + self.time_offset_s if self.time_offset_s else t, frame.arbitration_id,
+                        frame.data, rx, None))
         self.frames += 1
-        self._n += 1
-        if self._n >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
+        if len(records) >= self._format_frames:
+            self._format()
+        if self.frames - self._flushed_frames >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
             self.flush()
             self._flushed_t = t
 
+    def write_received(self, got: list[tuple[Frame, float, can.Message | None]]) -> None:
+        """Log frames received, in order: ``(frame, time [s], python-can message or None)`` as a
+        transport delivers them (with a message, its channel and direction flag, at that time)."""
+        records = self._records
+        off = self.time_offset_s
+        t = self._flushed_t
+        for f, t, msg in got:
+            if msg is None:
+                records.append((t + off if off else t, f.arbitration_id, f.data, True, None))
+            else:
+                records.append((t + off if off else t, msg.arbitration_id, bytes(msg.data), msg.is_rx,
+                                FrameKind.of(msg)))
+        self.frames += len(got)
+        if len(records) >= self._format_frames:
+            self._format()
+        if self.frames - self._flushed_frames >= self._flush_frames or t - self._flushed_t >= self._flush_period_s:
+            self.flush()
+            self._flushed_t = t
+
+    def _format(self) -> None:
+        """The records so far as lines into the file (in memory until the next flush)."""
+        if self._records:
+            text, self._first_t = candump_lines(self._records, self.channel, self._first_t)
+            self._records.clear()
+            self._file.write(text)
+
     def flush(self) -> None:
-        self._w.file.flush()
-        self._n = 0
+        """Format the frames logged since the last batch and hand everything to the file."""
+        self._format()
+        self._file.flush()
+        self._flushed_frames = self.frames
 
     def close(self) -> None:
-        self._w.stop()
+        self.flush()
+        self._file.close()
 
 
 @dataclass(frozen=True)

@@ -106,29 +106,37 @@ class CanopenLink:
     def _send(self, frames: list[Frame]) -> None:
         if not frames:
             return
-        msgs = self.tr.send(frames, self.tr.now())
-        if self.log is not None:
-            for m in msgs:
-                self.log.write_msg(m)
+        t = self.tr.now()
+        self.tr.send(frames, t)
+        log = self.log
+        if log is not None:
+            for f in frames:
+                log.write(f, t, False)
 
-    def _feed(self, got: list[tuple[Frame, float, can.Message]]) -> None:
+    def _feed(self, got: list[tuple[Frame, float, can.Message | None]]) -> None:
         log = self.log
         on_frame = self.m.on_frame
         now = self.tr.now
         timing = self.timing
-        for f, t, msg in got:
-            sync = f.arbitration_id == SYNC_COB_ID
-            if sync and timing is not None:
-                timing.sync(t)
-            if log is not None:
-                if msg.timestamp != t:
-                    msg.timestamp = t  # log the time the master saw it
-                log.write_msg(msg)
-            # a SYNC at its own time (the slot of the loop-timed SYNC, else when it arrived), so that
-            # the sample answering it carries that time however late the master takes it
-            out = on_frame(f, self._sync_time(t) if sync else now())
-            if out:
-                self._send(out)
+        logged = seen = 0  # got[:logged] is in the log; got[:seen] reached the master
+        try:
+            for f, t, _msg in got:
+                sync = f.arbitration_id == SYNC_COB_ID
+                if sync and timing is not None:
+                    timing.sync(t)
+                seen += 1
+                # a SYNC at its own time (the slot of the loop-timed SYNC, else when it arrived), so that
+                # the sample answering it carries that time however late the master takes it
+                out = on_frame(f, self._sync_time(t) if sync else now())
+                if out:
+                    if log is not None:  # what came in before the answer to it, as on the bus
+                        log.write_received(got[logged:seen])
+                        logged = seen
+                    self._send(out)
+        finally:
+            # every frame the master saw is logged, also when it raised on one
+            if log is not None and logged < seen:
+                log.write_received(got[logged:seen])
         events = self.m.drain_events()  # drained always: the master's list must not grow in the loop
         if self.on_event is not None:
             for ev in events:

@@ -191,6 +191,8 @@ class CheckSequence:
         self._ff_period = 4.0 * self._ff_amp / c.force_fight.force_rate_N_per_s
         self._sweep_T = 4.0 * c.calibration.sweep_amplitude_mm / c.calibration.sweep_speed_mm_per_s
         self._planned = self._plan()
+        #: (step, planned s before it, its planned s, the check's planned s): :meth:`progress`'s sums
+        self._progress_base: tuple[Step, float, float, float] | None = None
 
     # ------------------------------------------------------------ public API
 
@@ -208,14 +210,18 @@ class CheckSequence:
 
     def progress(self, t_s: float) -> Progress:
         """Where the check stands at time ``t_s``."""
-        done = 0.0
-        for s in _ORDER:
-            if s == self._step:
-                break
-            done += self._planned.get(s, 0.0)
-        dur = self._planned.get(self._step, 0.0)
+        base = self._progress_base
+        if base is None or base[0] is not self._step:
+            # the planned durations before this step, its own and the whole check's: once per step
+            done = 0.0
+            for s in _ORDER:
+                if s == self._step:
+                    break
+                done += self._planned.get(s, 0.0)
+            base = self._progress_base = (self._step, done, self._planned.get(self._step, 0.0),
+                                          self.planned_duration_s())
+        _, done, dur, total = base
         frac = min(1.0, (t_s - self._t0) / dur) if dur > 0 else (1.0 if self._step in TERMINAL else 0.0)
-        total = self.planned_duration_s()
         tot = 1.0 if self._step == Step.DONE else min(1.0, (done + frac * dur) / total)
         return Progress(self._step, frac, tot, self._demand)
 

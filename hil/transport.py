@@ -2,8 +2,9 @@
 
 Two transports move the frames of :class:`hil.link.CanopenLink`:
 
-* :class:`InProcessTransport` (``emacheck dry-run``): the master's bus and the
-  simulated drive pair's bus are python-can ``virtual`` buses on one channel;
+* :class:`InProcessTransport` (``emacheck dry-run``): the master and the
+  simulated drive pair on an in-process bus of the project's own
+  :class:`~hil.canopen.frame.Frame` objects (two FIFO queues, no python-can);
   frames are pumped synchronously in this thread and the SYNC is sent once per
   cycle on simulated time, so a dry-run is deterministic for a seed and runs as
   fast as the CPU allows (``realtime=True`` paces SYNC at the SYNC period on
@@ -16,18 +17,21 @@ Two transports move the frames of :class:`hil.link.CanopenLink`:
   on SocketCAN, the kernel's receive stamp of each frame (event time).
 
 Both implement :class:`Transport`, the one seam between the link and a bus.
+python-can messages exist only at a real bus (:class:`BusTransport`): a
+received frame comes as ``(frame, time, message)``, the message None where
+there is none (in process, the SocketCAN fast path), else python-can's (the
+CAN log keeps its channel and direction).
 """
 
 from __future__ import annotations
 
-import queue
 import socket
 import struct
 import time
+from collections import deque
 from typing import Protocol
 
 import can
-from can.interfaces.virtual import VirtualBus
 
 from hil.canopen.frame import SYNC_COB_ID, Frame, sync_frame
 
@@ -37,7 +41,7 @@ class Transport(Protocol):
 
     def send(self, frames: list[Frame], t: float) -> None: ...
 
-    def receive(self, deadline: float) -> list[tuple[Frame, float]]: ...
+    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message | None]]: ...
 
     def start_sync(self) -> None: ...
 
@@ -48,42 +52,22 @@ class Transport(Protocol):
     def close(self) -> None: ...
 
 
-class SharedVirtualBus(VirtualBus):
-    """python-can's in-process virtual bus, minus the deep copy of every message per recipient.
-
-    The stock ``VirtualBus.send`` deep-copies each message for each receiver
-    (about half of a dry-run's time). The link never mutates a message after
-    sending it, so the receivers may share it. Everything else (channels,
-    queues, ``recv``) is python-can's.
-    """
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        self._check_if_open()
-        for bus_queue in self.channel:
-            if bus_queue is self.queue and not self.receive_own_messages:
-                continue
-            bus_queue.put_nowait(msg)
-
-    def recv_nowait(self) -> can.Message | None:
-        """The next queued message or None, straight from this bus's queue: the synchronous
-        frame pump of a dry-run never waits, so python-can's ``recv`` (clock, filters, timed
-        wait) is skipped; no filters are set on these buses."""
-        try:
-            return self.queue.get_nowait()
-        except queue.Empty:
-            return None
-
-
 def _to_msg(f: Frame, t: float, rx: bool = False) -> can.Message:
+    """A frame as a python-can message (the boundary to a real bus)."""
     return can.Message(timestamp=t, arbitration_id=f.arbitration_id, data=f.data, is_extended_id=False,
                        is_rx=rx, check=False)
 
 
 class InProcessTransport:
-    """Master bus and simulated drive pair on an in-process python-can virtual bus.
+    """Master and simulated drive pair on an in-process bus of :class:`Frame` objects.
 
+    The bus is two FIFO queues of ``(frame, time)`` in this thread: what the
+    master sends goes to the drives, what the drives send to the master (no
+    python-can messages, thread queues or locks: nothing else is on this bus).
     ``pair`` is a :class:`sim.drives.SimDrivePair`; its frames are produced in
-    this thread as soon as the master's frames reach its bus.
+    this thread as soon as the master's frames reach it, stamped with the
+    simulated time. ``channel`` names the bus (messages only; it is private to
+    this transport).
     """
 
     def __init__(self, pair, sync_period_s: float, channel: str = "emacheck-dry-run",
@@ -92,51 +76,56 @@ class InProcessTransport:
         self.T = sync_period_s
         self.t = 0.0
         self.realtime = realtime
-        self.master_bus = SharedVirtualBus(channel=channel, preserve_timestamps=True)
-        self.slave_bus = SharedVirtualBus(channel=channel, preserve_timestamps=True)
+        self.channel = channel
+        #: frames on their way to the drives, in order (the master's)
+        self._to_slaves: deque[Frame] = deque()
+        #: frames on their way to the master, in order, with the time they were sent [s]
+        self._to_master: deque[tuple[Frame, float]] = deque()
         self._sync_on = False
         self._t0_wall: float | None = None
-        self._pending: list[tuple[Frame, float]] = []
-        for f in pair.power_on(self.t):
-            self.slave_bus.send(_to_msg(f, self.t, rx=True))
+        t = self.t
+        self._to_master.extend([(f, t) for f in pair.power_on(t)])
 
     def now(self) -> float:
         return self.t
 
-    def send(self, frames: list[Frame], t: float) -> list[can.Message]:
-        msgs = [_to_msg(f, t) for f in frames]
-        for m in msgs:
-            self.master_bus.send(m)
-        return msgs
+    def send(self, frames: list[Frame], t: float) -> None:
+        """The master's frames onto the bus (the drives take them at the next :meth:`receive`)."""
+        self._to_slaves.extend(frames)
+
+    def inject(self, frame: Frame, t: float) -> None:
+        """A frame from another node on the bus at time ``t`` [s]: the master sees it (tests)."""
+        self._to_master.append((frame, t))
 
     def _pump_slaves(self) -> None:
-        bus = self.slave_bus
-        pair = self.pair
-        while True:
-            msg = bus.recv_nowait()
-            if msg is None:
-                return
-            out = pair.on_frame(Frame.trusted(msg.arbitration_id, bytes(msg.data)), self.t)
-            for f in out:
-                bus.send(_to_msg(f, self.t, rx=True))
+        todo = self._to_slaves
+        if not todo:
+            return
+        out = self._to_master
+        on_frame = self.pair.on_frame
+        t = self.t
+        pop = todo.popleft
+        while todo:
+            answer = on_frame(pop(), t)
+            if answer:
+                out.extend([(f, t) for f in answer])
 
-    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
-        """Deliver everything in flight; simulated time advances to ``deadline`` if idle."""
+    def receive(self, deadline: float) -> list[tuple[Frame, float, None]]:
+        """Deliver everything in flight; simulated time advances to ``deadline`` if idle.
+
+        Each frame comes with the time it was sent [s] and None (no python-can message)."""
         self._pump_slaves()
-        got = []
-        bus = self.master_bus
-        while True:
-            msg = bus.recv_nowait()
-            if msg is None:
-                break
-            got.append((Frame.trusted(msg.arbitration_id, bytes(msg.data)), msg.timestamp, msg))
-        if not got and deadline > self.t:
+        inbox = self._to_master
+        if inbox:
+            got = [(f, t, None) for f, t in inbox]
+            inbox.clear()
+            return got
+        if deadline > self.t:
             # nothing in flight: let simulated time pass (heartbeats, boot-up)
-            self.t = min(deadline, self.t + self.T)
-            for f in self.pair.tick(self.t):
-                self.slave_bus.send(_to_msg(f, self.t, rx=True))
+            t = self.t = min(deadline, self.t + self.T)
+            inbox.extend([(f, t) for f in self.pair.tick(t)])
             self._pump_slaves()
-        return got
+        return []
 
     def start_sync(self) -> None:
         self._sync_on = True
@@ -151,17 +140,17 @@ class InProcessTransport:
             delay = self._t0_wall + self.t - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-        for f in self.pair.tick(self.t):
-            self.slave_bus.send(_to_msg(f, self.t, rx=True))
-        self.master_bus.send(_to_msg(sync_frame(), self.t))
-        return self.t
+        t = self.t
+        self._to_master.extend([(f, t) for f in self.pair.tick(t)])
+        self._to_slaves.append(sync_frame())
+        return t
 
     def stop_sync(self) -> None:
         self._sync_on = False
 
     def close(self) -> None:
-        self.master_bus.shutdown()
-        self.slave_bus.shutdown()
+        self._to_slaves.clear()
+        self._to_master.clear()
 
 
 _CAN_FRAME = struct.Struct("<IB3x8s")  # struct can_frame: id, dlc, pad, data[8]
@@ -316,17 +305,15 @@ class BusTransport:
         t = msg.timestamp - self._rt_minus_mono - self._t0
         return t if now - 1.0 < t <= now else now
 
-    def send(self, frames: list[Frame], t: float) -> list[can.Message]:
-        msgs = [_to_msg(f, t) for f in frames]
+    def send(self, frames: list[Frame], t: float) -> None:
         if self._raw is not None:
             for f in frames:
                 self._raw.send(f)
-            return msgs
-        for m in msgs:
-            self.bus.send(m)
-        return msgs
+            return
+        for f in frames:
+            self.bus.send(_to_msg(f, t))
 
-    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message]]:
+    def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message | None]]:
         if self._raw is not None:
             while True:
                 # one system call per frame, queued or waited for; the clock is read only when
@@ -350,7 +337,7 @@ class BusTransport:
                         self.max_lag_s = self.lag_s
             if f is None:
                 return []
-            return [(f, t, _to_msg(f, t, rx=True))]
+            return [(f, t, None)]
         timeout = max(0.0, deadline - self.now())
         msg = self.bus.recv(timeout)
         out = []

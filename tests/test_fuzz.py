@@ -25,7 +25,7 @@ from hil.canopen.process import DriveMode, Setpoint
 from hil.errors import KNOWN_ERRORS, ProfileError
 from hil.link import CanopenLink
 from hil.profiles import load_actuation, load_check, load_simrig
-from hil.transport import InProcessTransport, _to_msg
+from hil.transport import InProcessTransport
 from sim.plant import RigPlant
 from support.canopen_rig import cyclic_master, make_master, make_pair
 from support.profiles import load_profile_data, write_profile_variant
@@ -86,7 +86,7 @@ def test_garbage_bursts_on_foreign_cob_ids_do_not_stall_the_cycle(cyclic, burst)
     link, smp = cyclic["link"], cyclic["smp"]
     before = link.m.unknown_frames
     for f in burst:  # a burst of garbage lands on the master's bus in the middle of a cycle
-        link.tr.slave_bus.send(_to_msg(f, link.tr.now(), rx=True))
+        link.tr.inject(f, link.tr.now())
     hold = Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad)
     t0 = smp.t_s
     link.exchange(*hold)

@@ -192,7 +192,7 @@ def controlword(cmd: Command) -> int:
     0x0080 (the drive acts on the rising edge of bit 7, so the word before
     must have bit 7 clear).
     """
-    return _CONTROLWORD[Command(cmd)]
+    return _CONTROLWORD[cmd if cmd.__class__ is Command else Command(cmd)]
 
 
 def decode_command(cw: int, previous_cw: int | None = None) -> Command | None:
@@ -541,7 +541,9 @@ def master_command(goal: Goal, state: State, *, stopped: bool = False) -> Comman
     """
     if state is _QSA:
         return Command.DISABLE_VOLTAGE if stopped else Command.QUICK_STOP
-    return MASTER_COMMANDS[(Goal(goal), State(state))]
+    # (the members themselves as they are, anything else through its Enum: the master's hot path)
+    return MASTER_COMMANDS[(goal if goal.__class__ is Goal else Goal(goal),
+                            state if state.__class__ is State else State(state))]
 
 
 def enables_operation(cw: int) -> bool:

@@ -76,9 +76,13 @@ class Frame:
         return f
 
 
+_SYNC_FRAME = Frame(SYNC_COB_ID, b"")
+
+
 def sync_frame() -> Frame:
-    """The SYNC frame (COB-ID 0x080, no data: the SYNC counter is not used)."""
-    return Frame(SYNC_COB_ID, b"")
+    """The SYNC frame (COB-ID 0x080, no data: the SYNC counter is not used); one shared instance (a
+    frame is immutable), not a new one per SYNC cycle."""
+    return _SYNC_FRAME
 
 
 def split_cob_id(cob_id: int) -> tuple[int, int]:
