@@ -53,16 +53,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _internal_error(exc: BaseException) -> int:
-    """One line for an unexpected exception; its traceback goes to a file that line names."""
+    """One line for an unexpected exception; its traceback goes to a file that line names.
+
+    The file is new for every error (``emacheck-internal-error-<local time>-<random>.txt``, created
+    exclusively by :func:`tempfile.mkstemp`): two errors within one second keep both tracebacks.
+    """
     import datetime as _dt
+    import os
     import tempfile
     import traceback
-    from pathlib import Path
 
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    where = Path(tempfile.gettempdir()) / f"emacheck-internal-error-{stamp}.txt"
     try:
-        where.write_text("".join(traceback.format_exception(exc)))
+        fd, where = tempfile.mkstemp(prefix=f"emacheck-internal-error-{stamp}-", suffix=".txt")
+        with os.fdopen(fd, "w") as fh:
+            fh.write("".join(traceback.format_exception(exc)))
         saved = f"; traceback in {where}"
     except OSError:
         saved = ""
