@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.errors import IncompleteRecordingError, RecordingError
+from hil.errors import IncompleteRecordingError, RecordingError, UnusableRecordingError
 
 #: lines parsed at a time (about 7 MB of text for the 7-column CSV)
 CHUNK_LINES = 100_000
@@ -202,3 +202,67 @@ def _read(fh, path: Path, allow_truncated_last_line: bool):
         raise IncompleteRecordingError(f"{path}: no data rows")
     arrays = store.trimmed()
     return arrays, (np.asarray(steps) if step_col is not None else None), notes
+
+
+#: the position channels of a recording and their units (the jump rule's channels)
+POSITION_UNITS = {"phi1": "rad", "phi2": "rad", "s1": "mm", "s2": "mm"}
+#: every measured channel a recording must not hold constant for the check (BLFmaint and diagnose)
+CHECK_CHANNELS = ("phi1", "phi2", "s1", "s2", "F1", "F2")
+#: ... and for BLFserv (no force sensors needed: constant forces are fine)
+SERV_CHANNELS = ("phi1", "phi2", "s1", "s2")
+#: the largest plausible ram speed over the hard cap no check may exceed (hil.config
+#: HARD_MAX_VELOCITY_MM_PER_S): a recording from elsewhere (a flight) may move faster than a check
+PLAUSIBLE_SPEED_FACTOR = 2.0
+
+
+def where(path: Path, index: int, t_s: float, lines: bool) -> str:
+    """``path: line N`` for sample ``index`` of a CSV (the header is line 1), else its sample and time."""
+    return f"{path}: line {index + 2}" if lines else f"{path}: sample {index + 1} (t = {t_s:.4f} s)"
+
+
+def refuse_unusable(sig, *, channels: tuple[str, ...], min_rows: int, what: str) -> None:
+    """Refuse a recording with fewer than ``min_rows`` rows (:class:`hil.errors.IncompleteRecordingError`)
+    or with one of ``channels`` constant (:class:`hil.errors.UnusableRecordingError`); the message names
+    the signal, the caller the file."""
+    if sig.n < min_rows:
+        raise IncompleteRecordingError(f"recording too short for {what}: {sig.n} samples (need >= {min_rows})")
+    from hil.runfolder import COLUMN_UNITS
+
+    flat = [c for c in channels if np.ptp(getattr(sig, c)) == 0.0]
+    if flat:
+        c = flat[0]
+        raise UnusableRecordingError(
+            f"constant signal {', '.join(flat)} (all {sig.n} samples of {c} are {float(getattr(sig, c)[0]):g} "
+            f"{COLUMN_UNITS[c]}): nothing moved, or the sensor is not connected; {what} needs it to change")
+
+
+def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool) -> None:
+    """Refuse a recording with a jump in time or position (:func:`blf.continuity.find_jumps`), naming
+    its line (a CSV: ``lines``) or sample and time; the largest plausible speed is
+    :data:`PLAUSIBLE_SPEED_FACTOR` times the ram-speed hard cap, in rad/s for the motor angles."""
+    if sig.n < 2:
+        return
+    from blf.continuity import GAP_PERIODS, NOISE_K, find_jumps
+    from hil.config import HARD_MAX_VELOCITY_MM_PER_S
+
+    v_mm = PLAUSIBLE_SPEED_FACTOR * HARD_MAX_VELOCITY_MM_PER_S
+    speed = {c: v_mm * (i_total_rad_per_mm if u == "rad" else 1.0) for c, u in POSITION_UNITS.items()}
+    found = find_jumps(sig.t, {c: getattr(sig, c) for c in POSITION_UNITS}, speed)
+    j = found.first
+    if j is None:
+        return
+    at = where(path, j.index, float(sig.t[j.index]), lines)
+    more = f" ({found.count} such steps in all)" if found.count > 1 else ""
+    if j.kind == "time_backwards":
+        raise RecordingError(f"{at}: time not increasing (t = {j.after} s after {j.before} s){more}")
+    if j.kind == "time_gap":
+        raise RecordingError(
+            f"{at}: a jump in time: {j.after - j.before:.6g} s since the last sample (t = {j.before} s), more than "
+            f"{GAP_PERIODS:g} sample periods ({j.limit:.6g} s){more}: samples missing or recordings joined; "
+            f"analyse each continuous part on its own")
+    unit = POSITION_UNITS[j.channel]
+    raise RecordingError(
+        f"{at}: a jump in position: column '{j.channel}' [{unit}] steps {j.after - j.before:+.6g} {unit} in one "
+        f"sample ({j.before:.6g} -> {j.after:.6g}), more than the {j.limit:.6g} {unit} possible (twice the ram-speed "
+        f"cap {HARD_MAX_VELOCITY_MM_PER_S:g} mm/s plus {NOISE_K:g} noise sigmas){more}: recordings joined, or "
+        f"a sensor fault; analyse each continuous part on its own")

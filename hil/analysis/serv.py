@@ -156,10 +156,14 @@ class ServAnalysis:
     act: Actuation
 
 
+#: the fewest samples a recording must hold for BLFserv
+MIN_SAMPLES_SERV = 100
+
+
 def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: str) -> ServAnalysis:
     """Position differences from the corrected strokes, BLFserv on each, and the error budget."""
-    if sig.n < 100:
-        raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= 100)")
+    if sig.n < MIN_SAMPLES_SERV:
+        raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= {MIN_SAMPLES_SERV})")
     i = act.mechanics.i_total_rad_per_mm
     s1, s2 = correction.s1_mm, correction.s2_mm
     if sig.step is not None:

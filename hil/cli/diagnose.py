@@ -13,18 +13,23 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     """``emacheck diagnose RECORDING [--profile] [--out] [--model]``."""
 
     from blf.diagnose import diagnose
+    from blf.errors import AnalysisError, InputError
     from hil.analysis.diagnose import diagnosis_dict, load_model
+    from hil.errors import RecordingError
     from hil.report.diagnose import write_report
     from hil.runfolder import write_json_atomic
     console = make_console()
     path = Path(args.recording)
     model, period = load_model(path, args.model, args.profile)
-    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose")
-    out = outputs.folder
-    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    try:
+        d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
+    except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input
+        raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
     secs = time.perf_counter() - t0
+    # the folder only once there is something to write into it (a refused recording leaves none)
+    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose")
+    outputs.folder.mkdir(parents=True, exist_ok=True)
     data = diagnosis_dict(d, args.model, secs)
     write_json_atomic(outputs.path("diagnosis.json"), data)
     if not args.no_report:

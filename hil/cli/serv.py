@@ -25,7 +25,7 @@ from hil.cli.common import (
     outputs_for,
     record_history,
 )
-from hil.errors import RecordingError
+from hil.errors import IncompleteRecordingError, RecordingError
 from hil.runfolder import read_record, resolve_recording, write_json_atomic
 
 
@@ -69,8 +69,9 @@ def cmd_serv(args: argparse.Namespace) -> int:
     # imported here: python-control, numba and scipy.signal cost seconds (not for other commands)
     from blf.errors import AnalysisError, InputError
     from blf.serv import METHODS
-    from hil.analysis.serv import analyse, choose_calibration, serv_dict
+    from hil.analysis.serv import MIN_SAMPLES_SERV, analyse, choose_calibration, serv_dict
     from hil.report.serv import write_serv_report
+    from hil.signals_csv import SERV_CHANNELS
 
     console = make_console()
     t0 = time.perf_counter()
@@ -81,10 +82,12 @@ def cmd_serv(args: argparse.Namespace) -> int:
     meta = read_record(run_dir)
     act = actuation_for(args.profile, meta)
     try:
-        sig = load_recording(sig_path, act, meta)
+        sig = load_recording(sig_path, act, meta, channels=SERV_CHANNELS, min_rows=MIN_SAMPLES_SERV, what="BLFserv")
         corr = choose_calibration(sig, act, run_dir, getattr(args, "calibration", None))
         an = analyse(sig, act, corr, method)
-    except (InputError, AnalysisError) as exc:
+    except (InputError, AnalysisError, IncompleteRecordingError) as exc:
+        if str(exc).startswith(str(sig_path)):
+            raise
         raise RecordingError(f"{sig_path}: {exc}") from None
     truth = meta.truth if meta is not None else None
     outputs = outputs_for(args.out, sig_path, run_dir, "serv")
