@@ -59,6 +59,8 @@ def load_eds(path: str | Path | None = None, *, node_id: int | None = None) -> c
         The file is missing or is not a readable EDS; the message names it.
     """
     p = default_eds_path() if path is None else Path(path)
+    if p.is_dir():
+        raise EdsError(f"{p}: a folder, not an EDS file")
     if not p.is_file():
         raise EdsError(f"{p}: EDS not found")
     if p.suffix.lower() not in (".eds", ".dcf"):
