@@ -215,11 +215,24 @@ def read_record(run_dir: Path | None) -> RunRecord | None:
     if run_dir is None or not has_record(run_dir):
         return None
     path = Path(run_dir) / META_NAME
+    return RunRecord.from_json(read_json(path), str(path))
+
+
+def read_json(path: Path) -> Any:
+    """A JSON file (UTF-8, a byte-order mark skipped), or a RecordingError naming it and the cause
+    (missing, a folder, unreadable, not UTF-8, not JSON)."""
     try:
-        obj = json.loads(path.read_text())
+        return json.loads(Path(path).read_bytes())  # (bytes: json detects a BOM and UTF-16/32 itself)
+    except FileNotFoundError:
+        raise RecordingError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise RecordingError(f"{path}: a folder, not a JSON file") from None
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"{path}: not a JSON text file (byte {exc.start} is not UTF-8)") from None
     except json.JSONDecodeError as exc:
         raise RecordingError(f"{path}: not valid JSON: {exc}") from None
-    return RunRecord.from_json(obj, str(path))
 
 
 class MetaWriter:

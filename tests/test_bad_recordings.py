@@ -317,3 +317,28 @@ def test_two_internal_errors_in_one_second_leave_two_traceback_files(monkeypatch
     texts = {p.read_text().strip().splitlines()[-1] for p in saved}
     assert texts == {"ZeroDivisionError: boom first", "ZeroDivisionError: boom second"}
     assert all(str(p) in "\n".join(err) for p in saved)
+
+
+# --------------------------------------------------------------------------------------- JSON inputs
+
+
+def test_a_binary_meta_json_or_calibration_file_is_exit_3_naming_it_and_one_with_a_bom_is_read(tmp_path, capsys):
+    run = _run_folder(tmp_path, smooth())
+    (run / "meta.json").write_bytes(b"\xff\xfe{\x00}\x00\x80")
+    assert main(["serv", str(run), "--no-history"]) == ExitCode.INPUT
+    assert f"{run / 'meta.json'}: not " in _err(capsys)
+    (run / "meta.json").unlink()
+    cal = tmp_path / "result.json"
+    cal.write_bytes(b"\x80\x81 binary")
+    p = run / "signals.csv"
+    assert main(["serv", str(p), "--calibration", str(cal), "--out", str(tmp_path / "o")]) == ExitCode.INPUT
+    assert f"{cal}: not a JSON text file (byte 0 is not UTF-8)" in _err(capsys)
+    assert not (tmp_path / "o").exists()
+    doc = {"status": "pass", "calibration": {"ema1": {"pitch": 1.0, "offset_mm": 0.0},
+                                             "ema2": {"pitch": 1.0, "offset_mm": 0.0}}}
+    cal.write_bytes(codecs.BOM_UTF8 + json.dumps(doc).encode())
+    rc = main(["serv", str(p), "--calibration", str(cal), "--out", str(tmp_path / "o"), "--no-report",
+               "--no-history"])
+    assert rc in (ExitCode.PASS, ExitCode.INCONCLUSIVE), _err(capsys)
+    got = json.loads((tmp_path / "o" / "serv.json").read_text())["calibration"]
+    assert got["source"].startswith("--calibration") and got["ema1"]["pitch"] == 1.0

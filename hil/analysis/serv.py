@@ -25,7 +25,6 @@ status 0, or 3 for bad input.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -61,12 +60,9 @@ class LvdtCorrection:
 
 
 def _from_result_json(path: Path) -> dict:
-    try:
-        res = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise RecordingError(f"{path}: no such file") from None
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
+    from hil.runfolder import read_json
+
+    res = read_json(path)
     cal = res.get("calibration") if isinstance(res, dict) else None
     if not isinstance(cal, dict):
         raise RecordingError(f"{path}: no 'calibration' object (expected a maintenance check's result.json)")
