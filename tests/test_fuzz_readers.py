@@ -4,7 +4,8 @@ cut short, bytes inserted or deleted), fed to the command that reads it, in-proc
 The outcome must be a normal result (0 pass, 1 fail, 5 inconclusive) or bad input (3, with one line that
 names the file; ``profile check`` lists the problems, naming the file), never an internal error (4), never a
 traceback. Readers: an actuation profile (``profile check FILE``), a signals CSV and its ``.gz``
-(``serv``), a CAN log (``analyze FILE.log``), an EDS (``profile check actuation.toml --eds FILE``).
+(``serv``), a CAN log (``analyze FILE.log``), an EDS (``profile check actuation.toml --eds FILE``), a
+single-axis recording as ``.mat`` and as CSV (``diagnose --model single-axis``).
 """
 
 from __future__ import annotations
@@ -48,12 +49,33 @@ def _can_log_bytes(rows: int = 20) -> bytes:
     return ("\n".join(out) + "\n").encode()
 
 
+def _mat_bytes(rows: int = 400) -> bytes:
+    """A small single-axis recording as MATLAB saves it (compressed: zlib inside), too short to diagnose."""
+    import io
+
+    from scipy.io import savemat
+
+    t = np.arange(rows) * 0.001
+    buf = io.BytesIO()
+    savemat(buf, {"t": t[:, None], "qm": np.sin(t)[:, None], "qg": 1.01 * np.sin(t)[:, None],
+                  "vir": np.cos(t)[:, None], "gtau": np.array([[35.15]])}, do_compression=True)
+    return buf.getvalue()
+
+
+def _single_csv_bytes(rows: int = 400) -> bytes:
+    t = np.arange(rows) * 0.001
+    lines = ["t,q,q_ref,force"] + [f"{x:.4f},{np.sin(x):.6f},{1.01 * np.sin(x):.6f},{np.cos(x):.3f}" for x in t]
+    return ("\n".join(lines) + "\n").encode()
+
+
 VALID = {
     "profile": ACTUATION.read_bytes(),
     "csv": _csv_bytes(),
     "csv.gz": gzip.compress(_csv_bytes(), mtime=0),
     "log": _can_log_bytes(),
     "eds": default_eds_path().read_bytes(),
+    "mat": _mat_bytes(),
+    "single.csv": _single_csv_bytes(),
 }
 
 
@@ -80,7 +102,7 @@ def mutated(draw, kind: str) -> bytes:
 def _run(kind: str, data: bytes, capsys) -> None:
     with tempfile.TemporaryDirectory(prefix="emacheck-fuzz-") as tmp:
         name = {"profile": "actuation.toml", "csv": "flight.csv", "csv.gz": "flight.csv.gz", "log": "can.log",
-                "eds": "drive.eds"}[kind]
+                "eds": "drive.eds", "mat": "DATA.mat", "single.csv": "axis.csv"}[kind]
         f = Path(tmp) / name
         f.write_bytes(data)
         out = Path(tmp) / "out"
@@ -88,7 +110,10 @@ def _run(kind: str, data: bytes, capsys) -> None:
                 "csv": ["serv", str(f), "--out", str(out), "--no-report", "--no-history"],
                 "csv.gz": ["serv", str(f), "--out", str(out), "--no-report", "--no-history"],
                 "log": ["analyze", str(f), "--out", str(out), "--no-history"],
-                "eds": ["profile", "check", str(ACTUATION), "--eds", str(f)]}[kind]
+                "eds": ["profile", "check", str(ACTUATION), "--eds", str(f)],
+                "mat": ["diagnose", str(f), "--model", "single-axis", "--out", str(out), "--quiet", "--no-report"],
+                "single.csv": ["diagnose", str(f), "--model", "single-axis", "--out", str(out), "--quiet",
+                               "--no-report"]}[kind]
         rc = main(argv)
         got = capsys.readouterr()
     text = got.out + got.err
@@ -99,15 +124,18 @@ def _run(kind: str, data: bytes, capsys) -> None:
 
 
 def test_the_valid_files_are_read(capsys):
-    """The seeds of the mutations are valid: each reader's normal outcome (the CAN log and the 150-row CSV
-    are too short for their analyses, a refusal naming the file)."""
-    for kind, want in (("profile", 0), ("eds", 0), ("csv", 5), ("csv.gz", 5), ("log", 3)):
+    """The seeds of the mutations are valid: each reader's normal outcome (the CAN log and the single-axis
+    recordings are too short for their analyses: a refusal naming the file)."""
+    for kind, want in (("profile", 0), ("eds", 0), ("csv", 5), ("csv.gz", 5), ("log", 3), ("mat", 3),
+                       ("single.csv", 3)):
         with tempfile.TemporaryDirectory() as tmp:
             f = Path(tmp) / ("x." + kind if kind != "profile" else "actuation.toml")
+            single = ["diagnose", str(f), "--model", "single-axis", "--out", str(Path(tmp) / "o"), "--quiet"]
             f.write_bytes(VALID[kind])
             argv = {"profile": ["profile", "check", str(f)],
                     "eds": ["profile", "check", str(ACTUATION), "--eds", str(f)],
-                    "log": ["analyze", str(f), "--out", str(Path(tmp) / "o"), "--no-history"]}.get(
+                    "log": ["analyze", str(f), "--out", str(Path(tmp) / "o"), "--no-history"],
+                    "mat": single, "single.csv": single}.get(
                 kind, ["serv", str(f), "--out", str(Path(tmp) / "o"), "--no-report", "--no-history"])
             assert main(argv) == want, (kind, capsys.readouterr())
             capsys.readouterr()

@@ -72,30 +72,47 @@ def load_dual(path: Path, profile: Path | None):
 def _load_single(path: Path):
     from sim.single_axis import SingleAxisReplay
     if path.suffix.lower() == ".mat":
+        import struct
+        import zlib
+
         from scipy.io import loadmat
+        from scipy.io.matlab import MatReadError
         try:
             d = loadmat(path)
-        except (OSError, ValueError) as exc:
-            raise RecordingError(f"{path}: not a readable .mat file ({exc})") from None
+        except (OSError, ValueError, EOFError, zlib.error, struct.error, TypeError, IndexError, KeyError,
+                NotImplementedError, MatReadError) as exc:  # a corrupt or truncated file, whatever scipy met
+            raise RecordingError(f"{path}: not a readable .mat file ({type(exc).__name__}: {exc})") from None
         missing = [k for k in ("t", "qm", "qg", "vir", "gtau") if k not in d]
         if missing:
             raise RecordingError(f"{path}: missing key(s) {', '.join(missing)}; expected t, qm, qg, vir, gtau")
-        t = d["t"].ravel()
-        force = float(np.ravel(d["gtau"])[0]) * d["vir"].ravel()
-        q, qref = d["qm"].ravel(), d["qg"].ravel()
+        try:
+            t = np.asarray(d["t"], dtype=float).ravel()
+            force = float(np.ravel(d["gtau"])[0]) * np.asarray(d["vir"], dtype=float).ravel()
+            q, qref = np.asarray(d["qm"], dtype=float).ravel(), np.asarray(d["qg"], dtype=float).ravel()
+        except (TypeError, ValueError, IndexError) as exc:
+            raise RecordingError(f"{path}: t, qm, qg, vir, gtau must be numeric arrays ({exc})") from None
+        if not t.size == q.size == qref.size == force.size or t.size < 2:
+            raise RecordingError(f"{path}: t, qm, qg and vir must be equally long arrays of 2 or more samples "
+                                 f"(got {t.size}, {q.size}, {qref.size}, {force.size})")
+        if not all(np.all(np.isfinite(x)) for x in (t, q, qref, force)) or np.any(np.diff(t) <= 0):
+            raise RecordingError(f"{path}: NaN or non-increasing time in t, qm, qg, vir")
     else:
         import io
 
         from hil.runfolder import read_text
         text = read_text(path, "a text CSV file (columns t,q,q_ref,force)")
+        if not text.strip():
+            raise RecordingError(f"{path}: empty file; need columns t,q,q_ref,force (s, m, m, N)")
         try:
             arr = np.genfromtxt(io.StringIO(text), delimiter=",", names=True)
-        except ValueError as exc:
-            raise RecordingError(f"{path}: not a readable CSV ({exc})") from None
+        except (ValueError, IndexError, TypeError) as exc:
+            raise RecordingError(f"{path}: not a readable CSV ({type(exc).__name__}: {exc})") from None
         need = ("t", "q", "q_ref", "force")
         if arr.dtype.names is None or any(c not in arr.dtype.names for c in need):
             raise RecordingError(f"{path}: line 1: need columns t,q,q_ref,force (s, m, m, N)")
-        t, q, qref, force = (np.asarray(arr[c], dtype=float) for c in need)
+        t, q, qref, force = (np.atleast_1d(np.asarray(arr[c], dtype=float)) for c in need)
+        if t.size < 2:
+            raise RecordingError(f"{path}: {t.size} row(s); need 2 or more")
         if not all(np.all(np.isfinite(x)) for x in (t, q, qref, force)) or np.any(np.diff(t) <= 0):
             raise RecordingError(f"{path}: NaN, empty cells or non-increasing time in t,q,q_ref,force")
     period = float(np.median(np.diff(t)))

@@ -20,9 +20,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from hil.runfolder import write_json_atomic
     console = make_console()
     path = Path(args.recording)
-    model, period = load_model(path, args.model, args.profile)
     t0 = time.perf_counter()
     try:
+        model, period = load_model(path, args.model, args.profile)
         d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
     except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input
         raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
