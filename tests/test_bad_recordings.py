@@ -342,3 +342,28 @@ def test_a_binary_meta_json_or_calibration_file_is_exit_3_naming_it_and_one_with
     assert rc in (ExitCode.PASS, ExitCode.INCONCLUSIVE), _err(capsys)
     got = json.loads((tmp_path / "o" / "serv.json").read_text())["calibration"]
     assert got["source"].startswith("--calibration") and got["ema1"]["pitch"] == 1.0
+
+
+@pytest.mark.parametrize("which,code", [("recording", ExitCode.INPUT), ("signals", ExitCode.INPUT),
+                                        ("output", ExitCode.INTERNAL)])
+def test_an_os_error_escaping_a_reader_is_exit_3_only_for_an_input_file(monkeypatch, capsys, tmp_path, which, code):
+    """The readers name their errors themselves; main()'s net takes an OSError about a file the command
+    was given (or a run folder's file in it) as bad input, any other (an output's) as internal."""
+    import errno
+
+    import hil.cli.analyze as cmd
+
+    run = tmp_path / "run"
+    failed = {"recording": run, "signals": run / "signals.csv", "output": run / "analysis-x" / "result.json"}[which]
+
+    def unreadable(args):
+        raise PermissionError(errno.EACCES, "Permission denied", str(failed))
+
+    monkeypatch.setattr(cmd, "cmd_analyze", unreadable)
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
+    assert main(["analyze", str(run)]) == code
+    err = _err(capsys)
+    if code == ExitCode.INPUT:
+        assert err == f"emacheck: error: {failed}: cannot be read: Permission denied\n"
+    else:
+        assert err.startswith("emacheck: internal error: PermissionError:")

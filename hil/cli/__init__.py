@@ -98,8 +98,39 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("emacheck: interrupted", file=sys.stderr)
         return ExitCode.ABORTED
+    except OSError as exc:
+        if not _about_an_input(exc, args):
+            return _internal_error(exc)
+        # a reader let it through (each should say it itself): the file is one the command was given
+        print(f"emacheck: error: {exc.filename}: cannot be read: {exc.strerror or exc}", file=sys.stderr)
+        return ExitCode.INPUT
     except Exception as exc:  # noqa: BLE001 - the catch-all: one line and exit 4, never a traceback
         return _internal_error(exc)
+
+
+#: the arguments that name files a command reads (never one it writes: --out, --timing-json)
+INPUT_ARGS = ("recording", "profile", "check", "sim", "eds", "calibration", "folders", "sync_profile")
+#: the files of a run folder a command reads
+RUN_FOLDER_FILES = ("signals.csv", "can.log", "meta.json", "result.json")
+
+
+def _about_an_input(exc: OSError, args: argparse.Namespace) -> bool:
+    """Whether ``exc`` is about a file the command reads: one of its input arguments, or a run folder's
+    file read from an input folder (not an output's, which lie deeper)."""
+    from pathlib import Path
+
+    if not exc.filename:
+        return False
+    failed = Path(exc.filename).absolute()
+    for name in INPUT_ARGS:
+        given = getattr(args, name, None)
+        for p in given if isinstance(given, list) else [given]:
+            if p is None:
+                continue
+            p = Path(p).absolute()
+            if failed == p or (failed.parent == p and failed.name in RUN_FOLDER_FILES):
+                return True
+    return False
 
 
 if __name__ == "__main__":  # pragma: no cover
