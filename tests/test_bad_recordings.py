@@ -367,3 +367,18 @@ def test_an_os_error_escaping_a_reader_is_exit_3_only_for_an_input_file(monkeypa
         assert err == f"emacheck: error: {failed}: cannot be read: Permission denied\n"
     else:
         assert err.startswith("emacheck: internal error: PermissionError:")
+
+
+def test_a_noise_free_d_is_exit_3_in_words_a_user_can_act_on(tmp_path, capsys):
+    """s1 written as phi1 / i exactly: D_int1 has no noise, which BLFserv's thresholds need; the message
+    says which D and why, not the API's "pass noise_std_mm explicitly" (an option no command has)."""
+    a = smooth()
+    a[:, 3] = a[:, 1] / 5.0265
+    p = tmp_path / "computed.csv"
+    np.savetxt(p, a, delimiter=",", header=HEADER, comments="", fmt=["%.4f"] + ["%.9f"] * 4 + ["%.3f"] * 2)
+    assert main(["serv", str(p), "--out", str(tmp_path / "o"), "--no-history"]) == ExitCode.INPUT
+    err = _err(capsys)
+    assert err == (f"emacheck: error: {p}: D_int1 = s1 - phi1 / i holds no measurement noise (below 1e-6 mm): the "
+                   "LVDT or motor angle is not a raw measurement (computed from the other, or smoothed); BLFserv "
+                   "needs the recorded signals\n")
+    assert not (tmp_path / "o").exists()

@@ -25,7 +25,7 @@ from hil.cli.common import (
     outputs_for,
     record_history,
 )
-from hil.errors import IncompleteRecordingError, RecordingError
+from hil.errors import RecordingError
 from hil.runfolder import read_record, resolve_recording, write_json_atomic
 
 
@@ -85,8 +85,10 @@ def cmd_serv(args: argparse.Namespace) -> int:
         sig = load_recording(sig_path, act, meta, channels=SERV_CHANNELS, min_rows=MIN_SAMPLES_SERV, what="BLFserv")
         corr = choose_calibration(sig, act, run_dir, getattr(args, "calibration", None))
         an = analyse(sig, act, corr, method)
-    except (InputError, AnalysisError, IncompleteRecordingError) as exc:
-        if str(exc).startswith(str(sig_path)):
+    except (InputError, AnalysisError, RecordingError) as exc:
+        # each message names the file it is about: the recording's, unless it names a file itself
+        named = [str(p) for p in (sig_path, getattr(args, "calibration", None)) if p is not None]
+        if any(n in str(exc) for n in named):
             raise
         raise RecordingError(f"{sig_path}: {exc}") from None
     truth = meta.truth if meta is not None else None
