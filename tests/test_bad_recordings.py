@@ -382,3 +382,18 @@ def test_a_noise_free_d_is_exit_3_in_words_a_user_can_act_on(tmp_path, capsys):
                    "LVDT or motor angle is not a raw measurement (computed from the other, or smoothed); BLFserv "
                    "needs the recorded signals\n")
     assert not (tmp_path / "o").exists()
+
+
+def test_an_aborted_runs_jump_is_what_stopped_it_not_bad_input(tmp_path, capsys):
+    """An LVDT spike stops a check (the supervisor): the aborted run's folder holds that jump and is analysed
+    as aborted (exit 2, what it holds), not refused; the same recording on its own is refused."""
+    a = smooth()
+    a[1500:, 3] += 0.5
+    run = _run_folder(tmp_path, a)
+    (run / "meta.json").write_text(json.dumps({"status": "aborted", "reason": "LVDT 1 spike"}))
+    assert main(["analyze", str(run), "--out", str(tmp_path / "o"), "--no-history"]) == ExitCode.ABORTED
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["status"] == "aborted" and res["reason"] == "LVDT 1 spike" and "jump" not in res["analysis_error"]
+    (run / "meta.json").unlink()
+    assert main(["analyze", str(run), "--out", str(tmp_path / "o2"), "--no-history"]) == ExitCode.INPUT
+    assert f"{run / 'signals.csv'}: line 1502: a jump in position" in _err(capsys)

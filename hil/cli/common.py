@@ -449,16 +449,19 @@ def out_dir(args: argparse.Namespace, kind: str) -> Path:
 
 
 def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None, *,
-                   channels: tuple[str, ...] = (), min_rows: int = 2, what: str = "the analysis"):
+                   channels: tuple[str, ...] = (), min_rows: int = 2, what: str = "the analysis",
+                   jumps: bool = True):
     """Signals from a CSV, or decoded from a raw CAN log (``*.log``, ``*.log.gz``), step labels from
     the run record's step times. Refused with a jump in time or position (a RecordingError naming the
     file and the line or sample), with fewer than ``min_rows`` rows or a constant signal among
-    ``channels`` (an IncompleteRecordingError naming the signal; :mod:`hil.signals_csv`)."""
+    ``channels`` (an IncompleteRecordingError naming the signal; :mod:`hil.signals_csv`). ``jumps``
+    False: not checked for jumps (a run that aborted: the sensor fault that stopped it may be one)."""
     from hil.signals_csv import refuse_jumps, refuse_unusable
 
     sig = read_signals(sig_path) if not is_can_log(sig_path) else _decoded(sig_path, act, meta)
     refuse_unusable(sig, channels=channels, min_rows=min_rows, what=what)
-    refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path))
+    if jumps:
+        refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path))
     return sig
 
 
