@@ -150,16 +150,22 @@ def _header(path: Path, first: str):
     return header
 
 
+#: a gzip'd CSV's text is taken as at most this many times the file (numbers compress 3-5 times): a
+#: corrupt trailer cannot make the reader allocate for gigabytes
+GZIP_RATIO_MAX = 20
+
+
 def _text_size(path: Path) -> int:
     """The size of ``path``'s text [bytes]: a gzip file's from its trailer (ISIZE: exact below 4 GiB, a
-    lower bound above, where the arrays then grow), else the file's; 0 when unknown."""
+    lower bound above, where the arrays then grow; at most :data:`GZIP_RATIO_MAX` times the file), else
+    the file's; 0 when unknown."""
     try:
         size = path.stat().st_size
         if path.suffix.lower() != ".gz":
             return size
         with open(path, "rb") as fh:
             fh.seek(max(size - 4, 0))
-            return int.from_bytes(fh.read(4), "little")
+            return min(int.from_bytes(fh.read(4), "little"), GZIP_RATIO_MAX * size)
     except OSError:
         return 0
 
