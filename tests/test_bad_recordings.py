@@ -397,3 +397,21 @@ def test_an_aborted_runs_jump_is_what_stopped_it_not_bad_input(tmp_path, capsys)
     (run / "meta.json").unlink()
     assert main(["analyze", str(run), "--out", str(tmp_path / "o2"), "--no-history"]) == ExitCode.INPUT
     assert f"{run / 'signals.csv'}: line 1502: a jump in position" in _err(capsys)
+
+
+def test_an_eds_whose_pdo_mapping_count_is_absurd_is_checked_at_once(tmp_path, capsys):
+    """A mapping record's sub-index 0 default of 0x80000181 (found by test_plan_fuzz): the planner reads at
+    most the 64 entries CiA 301 allows instead of looping two billion times; profile check answers."""
+    import time
+
+    text = default_eds_path().read_text()
+    head = "[1A00sub0]"
+    i = text.index(head)
+    j = text.index("DefaultValue=", i)
+    k = text.index("\n", j)
+    e = tmp_path / "drive.eds"
+    e.write_text(text[:j] + "DefaultValue=0x80000181" + text[k:])
+    t0 = time.perf_counter()
+    rc = main(["profile", "check", str(default_profile_path("actuation.toml")), "--eds", str(e)])
+    assert rc in (ExitCode.PASS, ExitCode.INPUT) and time.perf_counter() - t0 < 30
+    assert "Traceback" not in capsys.readouterr().err
