@@ -110,14 +110,16 @@ def main(argv: list[str] | None = None) -> int:
 
 #: the arguments that name files a command reads (never one it writes: --out, --timing-json)
 INPUT_ARGS = ("recording", "profile", "check", "sim", "eds", "calibration", "folders", "sync_profile")
-#: the files of a run folder a command reads
-RUN_FOLDER_FILES = ("signals.csv", "can.log", "meta.json", "result.json")
+#: the files of a run folder a command reads (and the run record, hil.runrecord.META_NAME)
+RUN_FOLDER_FILES = ("signals.csv", "can.log", "result.json")
 
 
 def _about_an_input(exc: OSError, args: argparse.Namespace) -> bool:
     """Whether ``exc`` is about a file the command reads: one of its input arguments, or a run folder's
     file read from an input folder (not an output's, which lie deeper)."""
     from pathlib import Path
+
+    from hil.runrecord import META_NAME
 
     if not exc.filename:
         return False
@@ -128,7 +130,7 @@ def _about_an_input(exc: OSError, args: argparse.Namespace) -> bool:
             if p is None:
                 continue
             p = Path(p).absolute()
-            if failed == p or (failed.parent == p and failed.name in RUN_FOLDER_FILES):
+            if failed == p or (failed.parent == p and failed.name in (*RUN_FOLDER_FILES, META_NAME)):
                 return True
     return False
 
