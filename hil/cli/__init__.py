@@ -110,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
 
 #: the arguments that name files a command reads (never one it writes: --out, --timing-json)
 INPUT_ARGS = ("recording", "profile", "check", "sim", "eds", "calibration", "folders", "sync_profile")
-#: the files of a run folder a command reads (and the run record, hil.runrecord.META_NAME)
+#: the files of a run folder a command reads (its run record is read by hil.runfolder.read_record, which
+#: names its own errors)
 RUN_FOLDER_FILES = ("signals.csv", "can.log", "result.json")
 
 
@@ -118,8 +119,6 @@ def _about_an_input(exc: OSError, args: argparse.Namespace) -> bool:
     """Whether ``exc`` is about a file the command reads: one of its input arguments, or a run folder's
     file read from an input folder (not an output's, which lie deeper)."""
     from pathlib import Path
-
-    from hil.runrecord import META_NAME
 
     if not exc.filename:
         return False
@@ -130,7 +129,7 @@ def _about_an_input(exc: OSError, args: argparse.Namespace) -> bool:
             if p is None:
                 continue
             p = Path(p).absolute()
-            if failed == p or (failed.parent == p and failed.name in (*RUN_FOLDER_FILES, META_NAME)):
+            if failed == p or (failed.parent == p and failed.name in RUN_FOLDER_FILES):
                 return True
     return False
 
