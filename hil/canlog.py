@@ -13,9 +13,11 @@ folder with the one codec of a SYNC cycle the master uses
 
 from __future__ import annotations
 
+import codecs
 import dataclasses
 import gzip
 import re
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -217,8 +219,12 @@ def _check_lines(path: Path) -> bool:
     """
     try:
         data = gzip.decompress(path.read_bytes()) if path.name.lower().endswith(".gz") else path.read_bytes()
-    except (OSError, EOFError) as exc:
-        raise RecordingError(f"{path}: cannot read CAN log: {exc}") from None
+    except IsADirectoryError:
+        raise RecordingError(f"{path}: a folder, not a CAN log") from None
+    except (OSError, EOFError, zlib.error) as exc:
+        what = "a corrupt or truncated gzip file" if path.name.lower().endswith(".gz") else "cannot read it"
+        raise RecordingError(f"{path}: {what}, not a CAN log ({type(exc).__name__}: {exc})") from None
+    data = data.removeprefix(codecs.BOM_UTF8)
     lines = data.split(b"\n")
     cut_short = bool(lines) and lines[-1] != b""
     body = lines[:-1]
@@ -272,7 +278,8 @@ def _frames(path: Path, counts: dict):
     parse (counted)."""
     opener = gzip.open if path.name.lower().endswith(".gz") else open
     try:
-        with opener(path, "rt") as fh:  # closed however the reading ends (python-can closes only at the end)
+        # closed however the reading ends (python-can closes only at the end)
+        with opener(path, "rt", encoding="utf-8-sig") as fh:
             it = iter(can.io.CanutilsLogReader(fh))
             while True:
                 try:

@@ -37,6 +37,11 @@ class IncompleteRecordingError(RecordingError):
     """A recording that is well-formed but ends too early or holds no data (e.g. a killed run)."""
 
 
+class UnusableRecordingError(IncompleteRecordingError):
+    """A well-formed recording with nothing to analyse: too few rows, or a signal that never changes
+    (exit 3 for a recording on its own; an aborted or killed run's folder reports it as incomplete)."""
+
+
 class RunRecordError(RecordingError):
     """A run folder's meta.json holds a field of the wrong type or value; ``field`` names it
     (dotted: ``steps.cal1_sweep``, ``drives_final.ema2.safe``)."""

@@ -23,11 +23,30 @@ __all__ = ["build_dataclass", "check_keys", "check_range", "convert_scalar", "re
 
 
 def read_toml(path: Path) -> dict:
+    """A profile's TOML as a dict: UTF-8, with or without a byte-order mark (an editor's "UTF-8 with BOM").
+
+    Raises
+    ------
+    ProfileError
+        Naming the file and what is wrong: not found, a folder, unreadable, not UTF-8 text (binary,
+        UTF-16: the byte offset of the first bad byte), or not valid TOML (line and column).
+    """
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
+        data = Path(path).read_bytes()
     except FileNotFoundError:
         raise ProfileError(f"{path}: profile not found") from None
+    except IsADirectoryError:
+        raise ProfileError(f"{path}: a folder, not a profile (a TOML file)") from None
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read the profile: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        kind = "UTF-16 text" if data[:2] in (b"\xff\xfe", b"\xfe\xff") else "binary or not UTF-8"
+        raise ProfileError(f"{path}: not a TOML text file ({kind}: byte {exc.start} is not UTF-8); "
+                           f"save it as UTF-8") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ProfileError(f"{path}: not valid TOML: {exc}") from None
 

@@ -109,6 +109,8 @@ def resolve_eds(name: str, profile_path: str | Path | None, key: str = "canopen.
     profile, else an absolute path, else a shipped one; ProfileError naming ``key`` if none exists."""
     if override is not None:
         p = Path(override)
+        if p.is_dir():
+            raise ProfileError(f"--eds {override}: a folder, not an EDS file")
         if not p.is_file():
             raise ProfileError(f"--eds {override}: no such file")
         return p

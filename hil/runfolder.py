@@ -17,10 +17,7 @@ needs only the first seven columns.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -309,11 +306,24 @@ def read_record(run_dir: Path | None) -> RunRecord | None:
     if run_dir is None or not has_record(run_dir):
         return None
     path = Path(run_dir) / META_NAME
+    return RunRecord.from_json(read_json(path), str(path))
+
+
+def read_json(path: Path) -> Any:
+    """A JSON file (UTF-8, a byte-order mark skipped), or a RecordingError naming it and the cause
+    (missing, a folder, unreadable, not UTF-8, not JSON)."""
     try:
-        obj = json.loads(path.read_text())
+        return json.loads(Path(path).read_bytes())  # (bytes: json detects a BOM and UTF-16/32 itself)
+    except FileNotFoundError:
+        raise RecordingError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise RecordingError(f"{path}: a folder, not a JSON file") from None
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"{path}: not a JSON text file (byte {exc.start} is not UTF-8)") from None
     except json.JSONDecodeError as exc:
         raise RecordingError(f"{path}: not valid JSON: {exc}") from None
-    return RunRecord.from_json(obj, str(path))
 
 
 class MetaWriter:
@@ -456,74 +466,32 @@ class Signals:
 
 
 def read_text(path: Path, what: str) -> str:
-    """A recording's text (gzip'd when the name ends in ``.gz``), or a RecordingError saying what it
-    is instead of ``what`` (a MATLAB file, binary data, nothing)."""
-    import gzip
+    """A recording's text (gzip'd when the name ends in ``.gz``; UTF-8, a byte-order mark skipped), or a
+    RecordingError naming the file and saying what it is instead of ``what`` (a MATLAB file, binary
+    data, a corrupt gzip file, a folder, nothing)."""
+    from hil.signals_csv import READ_ERRORS, open_text, read_error
 
     try:
-        if path.suffix.lower() == ".gz":
-            with gzip.open(path, "rt") as fh:
-                return fh.read()
-        return path.read_text()
-    except FileNotFoundError:
-        raise IncompleteRecordingError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise RecordingError(f"{path}: a folder without signals.csv or can.log, not a recording") from None
-    except (UnicodeDecodeError, gzip.BadGzipFile, EOFError) as exc:
-        if path.suffix.lower() == ".mat":
-            raise RecordingError(f"{path}: a MATLAB file, not {what}; a single-axis recording such as EMPS's is "
-                                 f"read by `emacheck diagnose {path.name} --model single-axis`") from None
-        raise RecordingError(f"{path}: not {what} ({type(exc).__name__})") from None
+        with open_text(path) as fh:
+            return fh.read()
+    except READ_ERRORS as exc:
+        raise read_error(path, exc, what) from None
 
 
 def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) -> Signals:
-    """Read a signals CSV (a run folder's or one recorded elsewhere).
+    """Read a signals CSV (a run folder's or one recorded elsewhere), in bounded memory
+    (:mod:`hil.signals_csv`, which has the rules).
 
     Requires the columns ``t,phi1,phi2,s1,s2,F1,F2``; uses ``mode1,sp1,mode2,sp2,step``
     when present. Refuses NaN, non-numeric cells and non-increasing time with
     the line number. A last line cut short by a crash is dropped and noted. A ``.gz`` file is read
     through gzip.
     """
+    from hil.signals_csv import read_columns
+
     path = Path(path)
-    text = read_text(path, "a text CSV file (columns t,phi1,phi2,s1,s2,F1,F2)")
-    lines = text.splitlines()
-    if not lines:
-        raise IncompleteRecordingError(f"{path}: empty file")
-    header = [h.strip() for h in next(csv.reader(io.StringIO(lines[0])))]
-    missing = [c for c in SIGNAL_COLUMNS if c not in header]
-    if missing:
-        raise RecordingError(
-            f"{path}: line 1: missing column(s) {', '.join(missing)}; expected at least "
-            + ",".join(f"{c} [{COLUMN_UNITS[c]}]" for c in SIGNAL_COLUMNS))
-    notes: list[str] = []
-    body = lines[1:]
-    ncol = len(header)
-    if body and allow_truncated_last_line and not text.endswith("\n"):
-        body = body[:-1]
-        notes.append("last line incomplete (recording cut short), dropped")
-    if not body:
-        raise IncompleteRecordingError(f"{path}: no data rows")
-    idx = {c: header.index(c) for c in header}
-    numeric = [c for c in SIGNAL_COLUMNS + ("mode1", "sp1", "mode2", "sp2") if c in idx]
-    cols: dict[str, list] = {c: [] for c in numeric}
-    steps: list[str] = []
-    has_step = "step" in idx
-    for ln, line in enumerate(body, start=2):
-        cells = line.split(",")
-        if len(cells) != ncol:
-            raise RecordingError(f"{path}: line {ln}: {len(cells)} fields, header has {ncol}")
-        for c in numeric:
-            cell = cells[idx[c]]
-            try:
-                v = float(cell)
-            except ValueError:
-                raise RecordingError(f"{path}: line {ln}: column '{c}': not a number: {cell!r}") from None
-            if not math.isfinite(v):
-                raise RecordingError(f"{path}: line {ln}: column '{c}' [{COLUMN_UNITS.get(c, '-')}] is {cell}")
-            cols[c].append(v)
-        if has_step:
-            steps.append(cells[idx["step"]].strip())
-    arrays = {c: np.asarray(v, dtype=float) for c, v in cols.items()}
+    arrays, steps, notes = read_columns(path, "a text CSV file (columns t,phi1,phi2,s1,s2,F1,F2)",
+                                        allow_truncated_last_line=allow_truncated_last_line)
     t = arrays["t"]
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
@@ -534,12 +502,12 @@ def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) ->
         dt = np.diff(t)
         med = float(np.median(dt))
         gaps = np.flatnonzero(dt > 1.5 * med)
+        del dt
         if gaps.size:
             notes.append(f"{gaps.size} gap(s) in time, first at t = {t[gaps[0]]:.4f} s")
     return Signals(
         t=t, phi1=arrays["phi1"], phi2=arrays["phi2"], s1=arrays["s1"], s2=arrays["s2"],
-        F1=arrays["F1"], F2=arrays["F2"],
-        step=np.asarray(steps) if has_step else None,
+        F1=arrays["F1"], F2=arrays["F2"], step=steps,
         mode1=arrays.get("mode1"), sp1=arrays.get("sp1"), mode2=arrays.get("mode2"), sp2=arrays.get("sp2"),
         notes=tuple(notes))
 

@@ -112,8 +112,12 @@ def test_explicit_calibration_file_and_paper_method(run_folder, tmp_path):
 def test_calibration_sweeps_found_in_the_recording(sim_data, tmp_path):
     sw1, sw2 = sim_data["sweeps"]
     cols = []
+    # the two sweeps joined by the rig's move between them (20 ms in a straight line): joined end to start
+    # they would jump 2 rad in one sample, and a recording with a jump is refused (test_bad_recordings.py)
+    w = np.arange(1, 11) / 11
     for name in ("phi1_rad", "phi2_rad", "s1_mm", "s2_mm", "F1_N", "F2_N"):
-        cols.append(np.concatenate([getattr(sw1, name), getattr(sw2, name)]))
+        a, b = getattr(sw1, name), getattr(sw2, name)
+        cols.append(np.concatenate([a, a[-1] + w * (b[0] - a[-1]), b]))
     t = np.arange(cols[0].size) * 0.002 + 0.002
     path = tmp_path / "sweeps.csv"
     _write_csv(path, t, *cols)

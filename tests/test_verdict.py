@@ -229,7 +229,9 @@ def test_the_eds_device_info_must_agree_with_its_identity_object(tmp_path, capsy
 
 def test_recordings_that_cannot_be_analysed_name_the_file_and_exit_3(tmp_path, capsys):
     short = tmp_path / "short.csv"
-    rows = ["t,phi1,phi2,s1,s2,F1,F2,step"] + [f"{0.002 * (k + 1):.4f},0,0,0,0,0,0,approach" for k in range(1200)]
+    # (moving slowly: a recording whose signals are constant is refused as such, test_bad_recordings.py)
+    rows = ["t,phi1,phi2,s1,s2,F1,F2,step"] + [f"{0.002 * (k + 1):.4f}" + f",{1e-4 * k:.4f}" * 6 + ",approach"
+                                               for k in range(1200)]
     short.write_text("\n".join(rows) + "\n")
     assert main(["analyze", str(short)]) == ExitCode.INPUT
     err = capsys.readouterr().err

@@ -38,6 +38,7 @@ def load_dual(path: Path, profile: Path | None):
     from hil.canlog import decode_can_log
     from hil.cli.common import actuation_for
     from hil.runfolder import is_can_log, read_record, read_signals, resolve_recording
+    from hil.signals_csv import CHECK_CHANNELS, refuse_jumps, refuse_unusable
     from sim.replay_model import DualEmaReplay
 
     sig_path, run_dir = resolve_recording(path)
@@ -46,6 +47,11 @@ def load_dual(path: Path, profile: Path | None):
     sig = decode_can_log(sig_path, act).signals if is_can_log(sig_path) else read_signals(sig_path)
     if sig.n < 1000:
         raise RecordingError(f"{sig_path}: recording too short to diagnose: {sig.n} samples (need >= 1000)")
+    try:
+        refuse_unusable(sig, channels=CHECK_CHANNELS, min_rows=1000, what="the diagnosis")
+    except RecordingError as exc:
+        raise RecordingError(f"{sig_path}: {exc}") from None
+    refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path))
     check_units(sig, act)
     check = _check_for(meta, act)
     try:

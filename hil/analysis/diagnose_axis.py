@@ -70,10 +70,12 @@ def read_axis(path: Path) -> AxisRecording:
         return _read_mat(path)
     from hil.runfolder import read_text
     text = read_text(path, "a text CSV file (columns t,q,q_ref and force, torque or current)")
+    if not text.strip():
+        raise RecordingError(f"{path}: empty file; need columns t,q,q_ref (s, m, m) and force, torque or current")
     try:
         arr = np.genfromtxt(io.StringIO(text), delimiter=",", names=True)
-    except ValueError as exc:
-        raise RecordingError(f"{path}: not a readable CSV ({exc})") from None
+    except (ValueError, IndexError, TypeError) as exc:
+        raise RecordingError(f"{path}: not a readable CSV ({type(exc).__name__}: {exc})") from None
     names = arr.dtype.names or ()
     efforts = [c for c in EFFORTS if c in names]
     if any(c not in names for c in ("t", "q", "q_ref")) or len(efforts) != 1:
@@ -87,16 +89,31 @@ def read_axis(path: Path) -> AxisRecording:
 
 
 def _read_mat(path: Path) -> AxisRecording:
+    import struct
+    import zlib
+
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
     try:
         d = loadmat(path)
-    except (OSError, ValueError) as exc:
-        raise RecordingError(f"{path}: not a readable .mat file ({exc})") from None
+    except (OSError, ValueError, EOFError, zlib.error, struct.error, TypeError, IndexError, KeyError,
+            NotImplementedError, MatReadError) as exc:  # a corrupt or truncated file, whatever scipy met
+        raise RecordingError(f"{path}: not a readable .mat file ({type(exc).__name__}: {exc})") from None
     missing = [k for k in ("t", "qm", "qg", "vir", "gtau") if k not in d]
     if missing:
         raise RecordingError(f"{path}: missing key(s) {', '.join(missing)}; expected t, qm, qg, vir, gtau")
-    force = float(np.ravel(d["gtau"])[0]) * d["vir"].ravel()
-    return _recording(path, d["t"].ravel(), d["qm"].ravel(), d["qg"].ravel(), force, "force", None)
+    try:
+        t = np.asarray(d["t"], dtype=float).ravel()
+        force = float(np.ravel(d["gtau"])[0]) * np.asarray(d["vir"], dtype=float).ravel()
+        q, qref = np.asarray(d["qm"], dtype=float).ravel(), np.asarray(d["qg"], dtype=float).ravel()
+    except (TypeError, ValueError, IndexError) as exc:
+        raise RecordingError(f"{path}: t, qm, qg, vir, gtau must be numeric arrays ({exc})") from None
+    if not t.size == q.size == qref.size == force.size:
+        raise RecordingError(f"{path}: t, qm, qg and vir must be equally long arrays "
+                             f"(got {t.size}, {q.size}, {qref.size}, {force.size})")
+    if not all(np.all(np.isfinite(x)) for x in (t, q, qref, force)) or np.any(np.diff(t) <= 0):
+        raise RecordingError(f"{path}: NaN or non-increasing time in t, qm, qg, vir")
+    return _recording(path, t, q, qref, force, "force", None)
 
 
 def _recording(path, t, q, q_ref, effort, kind, load) -> AxisRecording:

@@ -86,10 +86,15 @@ def check_units(sig: Signals, act: Actuation) -> None:
                                  f"{act.mechanics.limit_load_N:g} N (force in another unit?)")
 
 
+#: the fewest samples a recording of the check must hold to be analysed
+MIN_SAMPLES_CHECK = 1000
+
+
 def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
     """Calibrate the LVDTs, form the D signals and run BLFmaint on all three channels."""
-    if sig.n < 1000:
-        raise IncompleteRecordingError(f"recording too short for the check: {sig.n} samples (need >= 1000)")
+    if sig.n < MIN_SAMPLES_CHECK:
+        raise IncompleteRecordingError(f"recording too short for the check: {sig.n} samples "
+                                       f"(need >= {MIN_SAMPLES_CHECK})")
     check_units(sig, act)
     seg = find_segments(sig, act)
     i = act.mechanics.i_total_rad_per_mm

@@ -25,7 +25,6 @@ status 0, or 3 for bad input.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -36,7 +35,7 @@ from blf.accuracy import AccuracyBudget, backlash_error_budget
 from blf.calibration import correct_linear, fit_lvdt_calibration
 from blf.errors import AnalysisError, InputError
 from blf.segments import find_sweep, runs
-from blf.serv import blf_serv
+from blf.serv import blf_serv, estimate_noise_std_mm
 from blf.signals import CHANNELS, position_differences
 from blf.verdict import decide, overall, serv_uncertainty
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
@@ -61,12 +60,9 @@ class LvdtCorrection:
 
 
 def _from_result_json(path: Path) -> dict:
-    try:
-        res = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise RecordingError(f"{path}: no such file") from None
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
+    from hil.runfolder import read_json
+
+    res = read_json(path)
     cal = res.get("calibration") if isinstance(res, dict) else None
     if not isinstance(cal, dict):
         raise RecordingError(f"{path}: no 'calibration' object (expected a maintenance check's result.json)")
@@ -156,10 +152,14 @@ class ServAnalysis:
     act: Actuation
 
 
+#: the fewest samples a recording must hold for BLFserv
+MIN_SAMPLES_SERV = 100
+
+
 def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: str) -> ServAnalysis:
     """Position differences from the corrected strokes, BLFserv on each, and the error budget."""
-    if sig.n < 100:
-        raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= 100)")
+    if sig.n < MIN_SAMPLES_SERV:
+        raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= {MIN_SAMPLES_SERV})")
     i = act.mechanics.i_total_rad_per_mm
     s1, s2 = correction.s1_mm, correction.s2_mm
     if sig.step is not None:
@@ -181,6 +181,8 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
     pd = position_differences(sig.phi1, sig.phi2, s1, s2, i)
     d = {"int1": pd.d_int1_mm, "int2": pd.d_int2_mm, "ext": pd.d_ext_mm}
     rate = 1.0 / sig.sample_period_s
+    for ch in CHANNELS:
+        _noisy(d[ch], ch)
     results = {ch: blf_serv(d[ch], rate, method=method, t0_s=float(sig.t[0])) for ch in CHANNELS}
     pitches = [abs(p - 1.0) for p in correction.pitch.values() if p is not None]
     pitch_err = max(pitches) if pitches else PAPER_PITCH_ERROR
@@ -189,6 +191,21 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
         backlash_mm=act.mechanics.backlash_spec_int_mm,
         residual_pitch_error=correction.residual_pitch_error if correction.residual_pitch_error is not None else 1e-3)
     return ServAnalysis(sig, correction, d, results, budget, method, act)
+
+
+#: each channel's D in words, for messages
+D_WORDS = {"int1": "s1 - phi1 / i", "int2": "s2 - phi2 / i", "ext": "s2 - s1"}
+
+
+def _noisy(d_mm: np.ndarray, ch: str) -> None:
+    """Refuse a D without noise (BLFserv's thresholds are multiples of it) in words a user can act on."""
+    try:
+        estimate_noise_std_mm(d_mm)
+    except AnalysisError:
+        raise RecordingError(
+            f"D_{ch} = {D_WORDS[ch]} holds no measurement noise (below 1e-6 mm): the LVDT or motor angle is not "
+            f"a raw measurement (computed from the other, or smoothed); BLFserv needs the recorded signals"
+        ) from None
 
 
 def _f(x):

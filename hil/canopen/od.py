@@ -11,6 +11,7 @@ Nothing here talks to a bus.
 from __future__ import annotations
 
 import configparser
+import io
 import struct
 from dataclasses import dataclass
 from enum import IntEnum
@@ -58,12 +59,22 @@ def load_eds(path: str | Path | None = None, *, node_id: int | None = None) -> c
         The file is missing or is not a readable EDS; the message names it.
     """
     p = default_eds_path() if path is None else Path(path)
+    if p.is_dir():
+        raise EdsError(f"{p}: a folder, not an EDS file")
     if not p.is_file():
         raise EdsError(f"{p}: EDS not found")
     if p.suffix.lower() not in (".eds", ".dcf"):
         raise EdsError(f"{p}: not an EDS/DCF file (suffix {p.suffix!r})")
     try:
-        return cod.import_od(str(p), node_id)
+        text = p.read_bytes().decode("utf-8-sig")  # a byte-order mark is read, not taken as a key
+    except OSError as exc:
+        raise EdsError(f"{p}: cannot read the EDS: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise EdsError(f"{p}: not a valid EDS: not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
+    fh = io.StringIO(text)
+    fh.name = str(p)  # canopen picks the format by the name's suffix
+    try:
+        return cod.import_od(fh, node_id)
     except (configparser.Error, KeyError, ValueError, TypeError, IndexError, UnicodeDecodeError,
             cod.ObjectDictionaryError) as exc:
         raise EdsError(f"{p}: not a valid EDS: {type(exc).__name__}: {exc}") from None

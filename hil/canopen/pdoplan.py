@@ -43,6 +43,10 @@ RESTRICTED_CAN_IDS = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x
 _PREFIX = {Direction.RX: "R", Direction.TX: "T"}
 
 
+#: the most objects one PDO maps (CiA 301: sub-indices 1-64 of the mapping record, 64 one-bit objects)
+MAX_MAPPED_OBJECTS = 64
+
+
 class EdsView:
     """What the planner asks of one node's object dictionary."""
 
@@ -97,7 +101,7 @@ def records(eds: EdsView, direction: Direction) -> list[_Record]:
         fixed = sub0 is None or not sub0.writable or any(not eds.writable(mapping, s) for s in subs)
         entries = []
         count = eds.default(mapping, 0) or 0
-        for s in range(1, int(count) + 1):
+        for s in range(1, min(int(count), MAX_MAPPED_OBJECTS) + 1):  # (an EDS's 0x80000181 is no count)
             word = eds.default(mapping, s)
             if isinstance(word, int) and word:
                 entries.append((word >> 16, (word >> 8) & 0xFF, word & 0xFF))

@@ -53,16 +53,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _internal_error(exc: BaseException) -> int:
-    """One line for an unexpected exception; its traceback goes to a file that line names."""
+    """One line for an unexpected exception; its traceback goes to a file that line names.
+
+    The file is new for every error (``emacheck-internal-error-<local time>-<random>.txt``, created
+    exclusively by :func:`tempfile.mkstemp`): two errors within one second keep both tracebacks.
+    """
     import datetime as _dt
+    import os
     import tempfile
     import traceback
-    from pathlib import Path
 
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    where = Path(tempfile.gettempdir()) / f"emacheck-internal-error-{stamp}.txt"
     try:
-        where.write_text("".join(traceback.format_exception(exc)))
+        fd, where = tempfile.mkstemp(prefix=f"emacheck-internal-error-{stamp}-", suffix=".txt")
+        with os.fdopen(fd, "w") as fh:
+            fh.write("".join(traceback.format_exception(exc)))
         saved = f"; traceback in {where}"
     except OSError:
         saved = ""
@@ -93,8 +98,40 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("emacheck: interrupted", file=sys.stderr)
         return ExitCode.ABORTED
+    except OSError as exc:
+        if not _about_an_input(exc, args):
+            return _internal_error(exc)
+        # a reader let it through (each should say it itself): the file is one the command was given
+        print(f"emacheck: error: {exc.filename}: cannot be read: {exc.strerror or exc}", file=sys.stderr)
+        return ExitCode.INPUT
     except Exception as exc:  # noqa: BLE001 - the catch-all: one line and exit 4, never a traceback
         return _internal_error(exc)
+
+
+#: the arguments that name files a command reads (never one it writes: --out, --timing-json)
+INPUT_ARGS = ("recording", "profile", "check", "sim", "eds", "calibration", "folders", "sync_profile")
+#: the files of a run folder a command reads (its run record is read by hil.runfolder.read_record, which
+#: names its own errors)
+RUN_FOLDER_FILES = ("signals.csv", "can.log", "result.json")
+
+
+def _about_an_input(exc: OSError, args: argparse.Namespace) -> bool:
+    """Whether ``exc`` is about a file the command reads: one of its input arguments, or a run folder's
+    file read from an input folder (not an output's, which lie deeper)."""
+    from pathlib import Path
+
+    if not exc.filename:
+        return False
+    failed = Path(exc.filename).absolute()
+    for name in INPUT_ARGS:
+        given = getattr(args, name, None)
+        for p in given if isinstance(given, list) else [given]:
+            if p is None:
+                continue
+            p = Path(p).absolute()
+            if failed == p or (failed.parent == p and failed.name in RUN_FOLDER_FILES):
+                return True
+    return False
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -167,10 +167,16 @@ def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: 
                        meta: RunRecord | None, console: Console, trace_extra: dict | None = None) -> dict:
     """Read the signals back, analyse, write result.json and report.html into ``outputs``."""
     # imported here, not at the top: `emacheck run` loads the analysis only after the cyclic loop
-    from hil.analysis.maint import analyze_signals, result_dict
+    from hil.analysis.maint import MIN_SAMPLES_CHECK, analyze_signals, result_dict
     from hil.report.maint import write_report
+    from hil.signals_csv import CHECK_CHANNELS
+
     t0 = time.perf_counter()
-    sig = load_recording(sig_path, act, meta)
+    # a run that stopped early may have held still (its analysis says what is missing, not "constant"),
+    # and the sensor fault that stopped it may be a jump (an LVDT spike): analysed as before, what it holds
+    cut_short = meta is not None and meta.status in (RunStatus.ABORTED, RunStatus.RUNNING)
+    sig = load_recording(sig_path, act, meta, channels=() if cut_short else CHECK_CHANNELS,
+                         min_rows=MIN_SAMPLES_CHECK, what="the check", jumps=not cut_short)
     an = analyze_signals(sig, act)
     result = result_dict(an, act, truth)
     status = meta.status if meta is not None else None

@@ -61,8 +61,13 @@ def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: boo
     if sim:
         p.add_argument("--sim", metavar="SIMRIG.toml", type=Path,
                        help="simulated-rig profile (physical parameters, sensor errors, seed)")
-        p.add_argument("--seed", type=_seed, help="noise seed, an integer >= 0 (default: the simulated-rig "
-                                                  "profile's); recorded in meta.json")
+        add_seed_arg(p)
+
+
+def add_seed_arg(p: argparse.ArgumentParser) -> None:
+    """``--seed``: the simulated rig's noise seed, 0 to 2^63 - 1."""
+    p.add_argument("--seed", type=_seed, help="noise seed, an integer 0 to 2^63-1 (default: the simulated-rig "
+                                              "profile's); recorded in meta.json")
 
 
 def add_eds_arg(p: argparse.ArgumentParser) -> None:
@@ -87,7 +92,8 @@ def add_bus_args(p: argparse.ArgumentParser, interfaces: str) -> None:
     """``--interface``, ``--channel``, ``--bitrate``: a python-can bus."""
     p.add_argument("--interface", required=True, help=f"python-can interface, e.g. {interfaces}")
     p.add_argument("--channel", required=True, help="channel, e.g. can0 or vcan0")
-    p.add_argument("--bitrate", type=int, metavar="BPS", help="bit rate (default: the actuation profile's)")
+    p.add_argument("--bitrate", type=_bitrate, metavar="BPS",
+                   help="bit rate in bit/s, 10000-1000000 (default: the actuation profile's)")
     p.add_argument("--multicast-hops", type=_multicast_hops, default=None, metavar="N",
                    help="udp_multicast only: the datagrams' IP hop limit (TTL), 0-255. Default 0: the frames "
                         "stay on this host (both processes on one machine) and never reach a network card; "
@@ -195,7 +201,7 @@ def _cpu_latency(text: str) -> int | None:
     """argparse type of ``--cpu-latency-us``: a whole number of microseconds >= 0, or ``off``."""
     if text.strip().lower() == "off":
         return None
-    return _count("CPU wake-up latency [us]")(text)
+    return _count("CPU wake-up latency [us]", CPU_LATENCY_MAX_US)(text)
 
 
 _cpu_latency.__name__ = "CPU wake-up latency"
@@ -212,8 +218,11 @@ def add_cpu_latency_arg(p) -> None:
                         "limit within seconds)")
 
 
-def _count(what: str):
-    """argparse type of a whole number >= 0, named ``what`` in its error (a seed, flight cycles)."""
+def _count(what: str, hi: int | None = None):
+    """argparse type of a whole number from 0 to ``hi`` (None: no upper bound), named ``what`` in its
+    error (a seed, flight cycles); argparse names the option: ``argument --rt-priority: 100 is over 99;
+    a SCHED_FIFO priority is 0-99``."""
+    span = ">= 0" if hi is None else f"0-{hi}"
 
     def parse(text: str) -> int:
         try:
@@ -221,14 +230,52 @@ def _count(what: str):
         except ValueError:
             raise argparse.ArgumentTypeError(f"not an integer ({what}): {text!r}") from None
         if v < 0:
-            raise argparse.ArgumentTypeError(f"{v} is negative; {what} is a whole number >= 0")
+            raise argparse.ArgumentTypeError(f"{v} is negative; {what} is a whole number {span}")
+        if hi is not None and v > hi:
+            raise argparse.ArgumentTypeError(f"{v} is over {hi}; {what} is a whole number {span}")
         return v
 
     parse.__name__ = what  # argparse names the type in "invalid <name> value"
     return parse
 
 
-_seed = _count("a seed")
+#: the largest seed: a signed 64-bit integer (meta.json and the history are read by other tools too)
+SEED_MAX = 2**63 - 1
+#: CAN bit rates [bit/s]: CiA 301's lowest (10 kbit/s) to classic CAN's highest (1 Mbit/s); rates between the
+#: standard ones (83.3 kbit/s, ...) are the adapter's business
+BITRATE_MIN, BITRATE_MAX = 10_000, 1_000_000
+#: the largest SCHED_FIFO priority on Linux (0: normal scheduling)
+RT_PRIORITY_MAX = 99
+#: the largest CPU wake-up latency [us] Linux's PM QoS takes (its default, "no constraint": 2e9 us)
+CPU_LATENCY_MAX_US = 2_000_000_000
+#: the most flight hours and flight cycles an airframe can have (5 times the longest design lives, ~2e5)
+FLIGHT_HOURS_MAX = FLIGHT_CYCLES_MAX = 1_000_000
+
+_rt_priority = _count("a SCHED_FIFO priority (0: normal scheduling)", RT_PRIORITY_MAX)
+
+
+def rt_priority_arg(p: argparse.ArgumentParser, help: str) -> None:
+    """``--rt-priority N``: SCHED_FIFO priority 1-99 of the cyclic loop, 0 (the default) normal scheduling."""
+    p.add_argument("--rt-priority", type=_rt_priority, default=0, metavar="N", help=help)
+
+
+def _bitrate(text: str) -> int:
+    """argparse type of ``--bitrate``: a whole number of bit/s from 10 000 to 1 000 000."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer (a CAN bit rate in bit/s): {text!r}") from None
+    if not BITRATE_MIN <= v <= BITRATE_MAX:
+        raise argparse.ArgumentTypeError(
+            f"{v} bit/s is outside {BITRATE_MIN}-{BITRATE_MAX}; a CAN bit rate is 10 kbit/s to 1 Mbit/s "
+            f"(CiA 301: 10000, 20000, 50000, 125000, 250000, 500000, 800000, 1000000)")
+    return v
+
+
+_bitrate.__name__ = "CAN bit rate"
+
+
+_seed = _count("a seed", SEED_MAX)
 
 
 def utc_stamp() -> str:
@@ -421,13 +468,12 @@ def _flight_hours(text: str) -> float:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number of flight hours: {text!r}") from None
-    if not math.isfinite(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"{text} flight hours: must be a finite number >= 0")
+    if not math.isfinite(v) or not 0 <= v <= FLIGHT_HOURS_MAX:
+        raise argparse.ArgumentTypeError(f"{text} flight hours: must be a finite number from 0 to {FLIGHT_HOURS_MAX}")
     return v
 
 
-_flight_cycles = _count("flight cycles")
-
+_flight_cycles = _count("flight cycles", FLIGHT_CYCLES_MAX)
 
 
 def add_history_args(p: argparse.ArgumentParser, *, simulated: bool) -> None:
@@ -569,11 +615,24 @@ def out_dir(args: argparse.Namespace, kind: str) -> Path:
     return default_out(kind)
 
 
-def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None):
+def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None, *,
+                   channels: tuple[str, ...] = (), min_rows: int = 2, what: str = "the analysis",
+                   jumps: bool = True):
     """Signals from a CSV, or decoded from a raw CAN log (``*.log``, ``*.log.gz``), step labels from
-    the run record's step times."""
-    if not is_can_log(sig_path):
-        return read_signals(sig_path)
+    the run record's step times. Refused with a jump in time or position (a RecordingError naming the
+    file and the line or sample), with fewer than ``min_rows`` rows or a constant signal among
+    ``channels`` (an IncompleteRecordingError naming the signal; :mod:`hil.signals_csv`). ``jumps``
+    False: not checked for jumps (a run that aborted: the sensor fault that stopped it may be one)."""
+    from hil.signals_csv import refuse_jumps, refuse_unusable
+
+    sig = read_signals(sig_path) if not is_can_log(sig_path) else _decoded(sig_path, act, meta)
+    refuse_unusable(sig, channels=channels, min_rows=min_rows, what=what)
+    if jumps:
+        refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path))
+    return sig
+
+
+def _decoded(sig_path: Path, act: Actuation, meta: RunRecord | None):
     import dataclasses
 
     import numpy as np

@@ -13,23 +13,25 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     """``emacheck diagnose RECORDING [--profile] [--out] [--model]``."""
 
     from blf.diagnose import diagnose
+    from blf.errors import AnalysisError, InputError
     from hil.analysis.diagnose import diagnosis_dict, load_model
+    from hil.errors import RecordingError
     from hil.report.diagnose import write_report
     console = make_console()
     path = Path(args.recording)
     opts = _axis_options(args)
     if args.reference is not None:
         return _cmd_reference(args, path, opts, console)
-    model, period = load_model(path, args.model, args.profile, opts)
-    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
-                          ("diagnosis.json", "diagnosis_report.html"))
     t0 = time.perf_counter()
     try:
+        model, period = load_model(path, args.model, args.profile, opts)
         d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
-    except BaseException:
-        outputs.discard_if_empty()
-        raise
+    except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input
+        raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
     secs = time.perf_counter() - t0
+    # the folder only once there is something to write into it (a refused recording leaves none)
+    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
+                          ("diagnosis.json", "diagnosis_report.html"))
     data = diagnosis_dict(d, args.model, secs)
     from hil.analysis.diagnose_axis import identifiability_dict
     ident = identifiability_dict(model)

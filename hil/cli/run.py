@@ -32,6 +32,7 @@ from hil.cli.common import (
     out_dir,
     record_history,
     refuse_foreign_history,
+    rt_priority_arg,
 )
 from hil.profiles import load_actuation, load_check
 
@@ -114,8 +115,7 @@ def register(sub) -> None:
     add_trace_args(p)
     add_history_args(p, simulated=False)
     p.add_argument("--quiet", action="store_true", help="no progress display")
-    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
-                   help="run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "
+    rt_priority_arg(p, "run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "
                         "default 0: normal scheduling); analysis and report run at normal priority "
                         "after it. Memory is locked either way (best effort).")
     add_cpu_latency_arg(p)

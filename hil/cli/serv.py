@@ -70,8 +70,9 @@ def cmd_serv(args: argparse.Namespace) -> int:
     # imported here: python-control, numba and scipy.signal cost seconds (not for other commands)
     from blf.errors import AnalysisError, InputError
     from blf.serv import METHODS
-    from hil.analysis.serv import analyse, choose_calibration, serv_dict
+    from hil.analysis.serv import MIN_SAMPLES_SERV, analyse, choose_calibration, serv_dict
     from hil.report.serv import write_serv_report
+    from hil.signals_csv import SERV_CHANNELS
 
     console = make_console()
     t0 = time.perf_counter()
@@ -83,10 +84,14 @@ def cmd_serv(args: argparse.Namespace) -> int:
     act = actuation_for(args.profile, meta)
     refuse_foreign_history(args, act)
     try:
-        sig = load_recording(sig_path, act, meta)
+        sig = load_recording(sig_path, act, meta, channels=SERV_CHANNELS, min_rows=MIN_SAMPLES_SERV, what="BLFserv")
         corr = choose_calibration(sig, act, run_dir, getattr(args, "calibration", None))
         an = analyse(sig, act, corr, method)
-    except (InputError, AnalysisError) as exc:
+    except (InputError, AnalysisError, RecordingError) as exc:
+        # each message names the file it is about: the recording's, unless it names a file itself
+        named = [str(p) for p in (sig_path, getattr(args, "calibration", None)) if p is not None]
+        if any(n in str(exc) for n in named):
+            raise
         raise RecordingError(f"{sig_path}: {exc}") from None
     truth = meta.truth if meta is not None else None
     report = not getattr(args, "no_report", False)

@@ -7,7 +7,15 @@ import signal
 from pathlib import Path
 
 from hil.cli.check import rig_nodes_text
-from hil.cli.common import add_bus_args, add_cpu_latency_arg, add_eds_arg, add_parser, open_bus
+from hil.cli.common import (
+    add_bus_args,
+    add_cpu_latency_arg,
+    add_eds_arg,
+    add_parser,
+    add_seed_arg,
+    open_bus,
+    rt_priority_arg,
+)
 from hil.cli.realtime import prepare_realtime
 from hil.runfolder import write_json_atomic
 
@@ -81,9 +89,8 @@ def register(sub) -> None:
                    help="actuation profile (the drives, sensor nodes and signal map the master uses)")
     add_eds_arg(p)
     p.add_argument("--sim", metavar="SIMRIG.toml", type=Path, help="simulated-rig profile")
-    p.add_argument("--seed", type=int, help="noise seed (default: the simulated-rig profile's)")
-    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
-                   help="run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")
+    add_seed_arg(p)
+    rt_priority_arg(p, "run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")
     add_cpu_latency_arg(p)
     p.add_argument("--timing-json", metavar="FILE", type=Path,
                    help="at the end, write the counters and the loop's timing per SYNC cycle (reaction: "

@@ -191,9 +191,11 @@ def load_result(path: Path) -> dict:
     from hil.errors import RecordingError
 
     try:
-        data = json.loads(Path(path).read_text())
+        data = json.loads(Path(path).read_bytes())  # (bytes: json detects a byte-order mark itself)
     except OSError as exc:
         raise RecordingError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"{path}: not a JSON text file (byte {exc.start} is not UTF-8)") from None
     except json.JSONDecodeError as exc:
         raise RecordingError(f"{path}: not valid JSON: {exc}") from None
     if not isinstance(data, dict) or "status" not in data:
