@@ -109,7 +109,7 @@ def noise_std(x: np.ndarray) -> float:
 
 
 def find_jumps(t_s, positions: Mapping[str, np.ndarray], max_speed: Mapping[str, float], *,
-               gap_periods: float = GAP_PERIODS, noise_k: float = NOISE_K) -> Continuity:
+               gap_periods: float = GAP_PERIODS, noise_k: float = NOISE_K, part_starts=()) -> Continuity:
     """Find the steps in time and position that a continuous recording cannot make (module docstring).
 
     Parameters
@@ -124,6 +124,11 @@ def find_jumps(t_s, positions: Mapping[str, np.ndarray], max_speed: Mapping[str,
         :math:`G`: a time step above this many median periods is a gap.
     noise_k : float
         :math:`K`: noise standard deviations of a two-sample difference allowed beyond the motion.
+    part_starts : sequence of int, optional
+        Samples that begin a part its recording declares separately made (a simulated recording whose
+        calibration sweeps and scenario were simulated one after the other, each from its own start):
+        the position step into such a sample is not judged (each part is checked on its own; time is
+        judged everywhere). Default: none, the whole recording is one motion.
 
     Returns
     -------
@@ -162,6 +167,8 @@ def find_jumps(t_s, positions: Mapping[str, np.ndarray], max_speed: Mapping[str,
         np.abs(step, out=step)
         bad = np.flatnonzero(step > limit)
         del step
+        if len(part_starts):
+            bad = np.setdiff1d(bad, np.asarray(part_starts, dtype=np.int64) - 1, assume_unique=True)
         count += bad.size
         if bad.size:
             k = int(bad[0])

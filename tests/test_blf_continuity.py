@@ -101,3 +101,17 @@ def test_bad_arrays_are_refused_naming_them():
         find_jumps([0.0, 1.0, 2.0], {"s1": [0.0, 1.0, 2.0, 3.0]}, {"s1": 1.0})
     with pytest.raises(InputError, match="max_speed"):
         find_jumps([0.0, 1.0], {"s1": [0.0, 1.0]}, {"s1": 0.0})
+
+
+@pytest.mark.parametrize("starts,found", [((25,), None), ((24,), 25), ((26,), 25), ((), 25)])
+def test_a_position_step_into_a_declared_part_start_only_is_not_judged(starts, found):
+    """A step of 2 (limit 1) into sample 25: not judged where 25 starts a part made apart, judged one
+    sample either side; the time rule does not look at parts (a gap into a part start is still one)."""
+    t = np.arange(40) * T
+    x = np.where(np.arange(40) >= 25, 2.0, 0.0)
+    c = find_jumps(t, {"s1": x}, {"s1": 4.0}, part_starts=starts)
+    assert (c.first.index if c.first else None) == found and c.count == (0 if found is None else 1)
+    t_gap = t.copy()
+    t_gap[25:] += 11 * T
+    g = find_jumps(t_gap, {"s1": np.zeros(40)}, {"s1": 4.0}, part_starts=(25,))
+    assert (g.first.kind, g.first.index) == ("time_gap", 25)
