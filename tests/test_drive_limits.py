@@ -312,6 +312,9 @@ def test_speed_limit_boundary():
     assert d.speed_limited(66, 0) == 65 and d.speed_limited(-66, 0) == -65
     assert d.speed_limited(66, None) == 65  # from the position actual value (0) when CSP begins
     assert _Stub({}).speed_limited(10**6, 0) == 10**6
+    whole = _Stub({(0x6080, 0): 1875})  # 1875 / 60 * 4096 * 0.002 = 256 increments exactly
+    assert whole.speed_limited(256, 0) == 256 and whole.speed_limited(257, 0) == 256
+    assert whole.speed_limited(-1000, -100) == -356
 
 
 # ------------------------------------------------------------------ the preflight writes and reads back
