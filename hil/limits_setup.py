@@ -4,16 +4,14 @@
 caps it) into the SI targets of :class:`hil.canopen.drivelimits.LimitTargets`; the preflight converts
 them to each drive's units (:func:`hil.canopen.drivelimits.drive_limits`), writes what the drive's EDS
 offers and reads each back (:func:`readback_problem`). What a drive does not offer is kept by the
-master only; the run record says which (:func:`limits_json`).
+master only; the run record says which (``drives_final.emaN.drive_limits``).
 """
 
 from __future__ import annotations
 
 from hil.canopen.drivelimits import (
-    KEPT_BY_DRIVE,
     KEPT_BY_MASTER,
     DriveLimit,
-    LimitKind,
     LimitTargets,
     drive_limits,
     offered,
@@ -26,7 +24,7 @@ from hil.config import (
     Safety,
 )
 
-__all__ = ["FOLLOWING_ERROR_TIME_CYCLES", "QUICK_STOP_CYCLES", "limit_targets", "limits_for", "limits_json",
+__all__ = ["FOLLOWING_ERROR_TIME_CYCLES", "QUICK_STOP_CYCLES", "limit_targets", "limits_for",
            "readback_problem"]
 
 #: The drive faults on a following error beyond its window for longer than this many SYNC periods: the
@@ -81,16 +79,3 @@ def readback_problem(label: str, lim: DriveLimit, read) -> str | None:
     return (f"{label}: {lim.kind.value} {lim.obj.name} reads back {read!r} after {lim.value} "
             f"({lim.unit}) was written; the drive would not keep the limit the check relies on")
 
-
-def limits_json(limits: tuple[DriveLimit, ...]) -> list[dict]:
-    """The run record's list (meta.json ``drives_final.emaN.drive_limits``)."""
-    return [lim.as_json() for lim in limits]
-
-
-def keeps_any(limits: tuple[DriveLimit, ...]) -> bool:
-    """The drive keeps at least one limit itself."""
-    return any(lim.kept_by == KEPT_BY_DRIVE for lim in limits)
-
-
-def keeps(limits: tuple[DriveLimit, ...], kind: LimitKind) -> bool:
-    return any(lim.kind is kind and lim.kept_by == KEPT_BY_DRIVE for lim in limits)
