@@ -144,7 +144,11 @@ HARD_MAX_VELOCITY_MM_PER_S = 50.0
 HARD_MAX_FOLLOWING_ERROR_MM = 2.0
 HARD_MAX_D_INT_MM = 2.0
 HARD_LVDT_GAIN_TOLERANCE = 0.10  #: D plausibility allows this LVDT pitch error (the paper's is 7.5 %)
-HARD_MAX_STALE_CYCLES = 5  #: SYNC cycles a sample may be missing before it is stale
+HARD_MAX_STALE_CYCLES = 5  #: SYNC cycles a sample may be missing before it is stale (drives keeping no limits)
+#: the freshness limit where the drives keep their limits themselves [ms] (docs/safety.md, *A stall of the
+#: master*): the time in which a ram at the fastest speed any profile allows (HARD_MAX_VELOCITY_MM_PER_S) moves
+#: by the largest following error any profile accepts (HARD_MAX_FOLLOWING_ERROR_MM): 2 mm / 50 mm/s = 40 ms
+HARD_MAX_STALE_MS = 1000.0 * HARD_MAX_FOLLOWING_ERROR_MM / HARD_MAX_VELOCITY_MM_PER_S
 HARD_MAX_FROZEN_CYCLES = 100  #: cycles a noisy sensor may repeat the same value
 HARD_MAX_LAG_S = 0.5  #: longest a received frame may wait before the master takes it [s]
 
@@ -188,10 +192,15 @@ class Safety:
     max_force_fight_N: float = field(default=7000.0, metadata=_rng(0.0, 1e6, lo_open=True))
     #: load-cell plausibility |F1 + F2| (hard cap HARD_MAX_FORCE_IMBALANCE_FRACTION of F_limit)
     max_force_imbalance_N: float = field(default=2500.0, metadata=_rng(0.0, 1e6, lo_open=True))
-    #: sensor freshness: SYNC cycles in a row without a complete sample
+    #: sensor freshness where a drive keeps its limits only partly or not at all (hil/staleness.py): SYNC
+    #: cycles in a row without a complete sample
     max_stale_cycles: int = field(default=2, metadata=_rng(1, 1000, hard_max=HARD_MAX_STALE_CYCLES))
     #: sensor freshness: cycles a noisy LVDT or load cell may repeat exactly the same value
     max_frozen_cycles: int = field(default=25, metadata=_rng(3, 10_000, hard_max=HARD_MAX_FROZEN_CYCLES))
+    #: sensor freshness where both drives keep their stroke, torque and speed limits themselves [ms] (the
+    #: master's stall budget, hil/staleness.py; at run time also at most the drives' consumer heartbeat time
+    #: minus one master heartbeat period and 2 SYNC periods, and the following error over the speed limit)
+    max_stale_ms: float = field(default=40.0, metadata=_rng(0.0, 10_000.0, lo_open=True, hard_max=HARD_MAX_STALE_MS))
     #: master lag: the longest a SYNC may wait in the master's socket before it is taken [s]
     #: (the master fell behind the bus, or the computer stalled); real bus only
     max_lag_s: float = field(default=0.02, metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_LAG_S))

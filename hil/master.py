@@ -132,6 +132,7 @@ class DriveView(NodeView):
     still: deque = field(default_factory=lambda: deque(maxlen=_STILL_CYCLES))  #: angles in QUICK STOP ACTIVE
     #: how this drive is protected against the master's death (set by the preflight)
     master_loss: MasterLossRecord | None = None
+    limits: tuple = ()  #: the limits it keeps itself or the master only (hil.canopen.drivelimits.DriveLimit)
 
 
 #: QUICK STOP ACTIVE: the drive stands still when its motor angle moved less than this over the last
@@ -153,10 +154,12 @@ class MasterCore:
         The signal map checked against every node's EDS (:func:`hil.rig.plan_for`).
     forces : (float, float), optional
         The check's opposing force and the supervisor's force limit [N]: a drive holding forces in CST
-        gets its max torque 0x6072 checked and set by the preflight (:class:`hil.preflight.Preflight`).
+        gets its max torque 0x6072 checked and set by the preflight (:class:`hil.preflight.Preflight`);
+        ``safety`` (the check's): the limits the drives keep themselves (:mod:`hil.limits_setup`).
     """
 
-    def __init__(self, actuation: Actuation, plan: RigPlan, forces: tuple[float, float] | None = None) -> None:
+    def __init__(self, actuation: Actuation, plan: RigPlan, forces: tuple[float, float] | None = None,
+                 safety=None) -> None:
         self.act = actuation
         self.plan = plan
         c = actuation.canopen
@@ -194,7 +197,7 @@ class MasterCore:
         self.fault_cycle: int | None = None  #: the cyclic-phase SYNC count when the fault latched
         self.later_faults: list[str] = []  #: errors after the first one (recorded, not raised again)
         self._sdo = {n: SdoClient(n, timeout_s=c.sdo_timeout_s) for n in self.nodes}
-        self.preflight = Preflight(actuation, plan, self.emcy_codes_since, self._sdo_status, forces)
+        self.preflight = Preflight(actuation, plan, self.emcy_codes_since, self._sdo_status, forces, safety)
         self._gen: Generator | None = None
         self._pending: object | None = None
         self._boot_deadline = 0.0
@@ -247,7 +250,7 @@ class MasterCore:
         for setup in self.preflight.drives:
             d = self.drives[self.order[setup.ema - 1]]
             d.rated_torque_Nm = setup.rated_torque_Nm
-            d.master_loss = setup.master_loss
+            d.master_loss, d.limits = setup.master_loss, setup.limits
             if not setup.plan.mode_by_pdo:
                 d.mode_sent = d.mode_display = int(OperationMode.CSP)  # set once by SDO, confirmed
         for n, v in self.nodes.items():
@@ -675,7 +678,8 @@ class MasterCore:
             ok = self._confirmed(d, t)
             out[f"ema{k}"] = {"node": n, "state": d.state.name, "reachable": not d.lost, "confirmed": ok,
                               "safe": ok and d.state in SAFE_STATES,
-                              "master_loss": d.master_loss.as_json() if d.master_loss is not None else {}}
+                              "master_loss": d.master_loss.as_json() if d.master_loss is not None else {},
+                              "drive_limits": [lim.as_json() for lim in d.limits]}
         return out
 
     def sensor_nodes_report(self) -> dict:

@@ -15,8 +15,9 @@ Sequence (CiA 302-style, per node as the rig's :class:`~hil.canopen.plan.RigPlan
    disabled); and for a drive: supported modes 0x6502 (CSP; CST where it holds forces in
    CST), the gear ratio object and 0x608F against the profile where they
    exist, the scalings it reports (0x608F, 0x6091/0x6092, rated torque
-   0x6076), interpolation period 0x60C2, software position limits 0x607D,
-   quick stop option 0x605A = 2 and 0x1006 where writable, the modes of
+   0x6076), the limits it keeps itself where its EDS offers them (0x607D,
+   0x6072, 0x6080, 0x6065/0x6066, 0x6085; written and read back: hil/limits_setup.py),
+   interpolation period 0x60C2, quick stop option 0x605A = 2 and 0x1006 where writable, the modes of
    operation (CSP, set once by SDO for a drive without CST), the reaction to
    the master's death (0x1016:01, 0x6007 = 3, written and read back).
 3. The drill (unless ``canopen.skip_master_loss_drill`` says why not): every
@@ -45,6 +46,7 @@ from enum import Enum
 from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
+from hil.canopen.drivelimits import KEPT_BY_DRIVE, DriveLimit, LimitKind
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import QUICK_STOP_OPTION, AbortConnectionOption, master_loss_steps
 from hil.canopen.pdo import TYPE_BITS
@@ -59,8 +61,9 @@ from hil.canopen.signalmap import (
     object_name,
     torque_scale,
 )
-from hil.config import Actuation
+from hil.config import Actuation, Safety
 from hil.errors import EmacheckError
+from hil.limits_setup import limit_targets, limits_for, readback_problem
 
 __all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
            "MasterLossReactionError", "ReactionConfig", "SameSerialError"]
@@ -218,7 +221,9 @@ class MasterLossRecord:
 _STD_TYPES = {(0x1006, 0): dt.UNSIGNED32, (0x1016, 1): dt.UNSIGNED32, (0x1017, 0): dt.UNSIGNED16,
               (0x6007, 0): dt.INTEGER16, (0x6040, 0): dt.UNSIGNED16, (0x605A, 0): dt.INTEGER16,
               (0x6060, 0): dt.INTEGER8, (0x607A, 0): dt.INTEGER32, (0x607D, 1): dt.INTEGER32,
-              (0x607D, 2): dt.INTEGER32, (0x60C2, 1): dt.UNSIGNED8, (0x60C2, 2): dt.INTEGER8}
+              (0x607D, 2): dt.INTEGER32, (0x60C2, 1): dt.UNSIGNED8, (0x60C2, 2): dt.INTEGER8,
+              (0x6065, 0): dt.UNSIGNED32, (0x6066, 0): dt.UNSIGNED16, (0x6072, 0): dt.UNSIGNED16,
+              (0x6080, 0): dt.UNSIGNED32, (0x6085, 0): dt.UNSIGNED32}
 
 
 def _code(node: NodePlan, index: int, sub: int) -> str:
@@ -260,6 +265,7 @@ class DriveSetup:
     scales: dict = field(default_factory=dict)  #: Signal -> Scale read from the drive
     master_loss: MasterLossRecord | None = None
     modes: int | None = None  #: 0x6502 as read
+    limits: tuple[DriveLimit, ...] = ()  #: the limits it keeps itself, or the master only (kept_by)
 
 
 class Preflight:
@@ -277,17 +283,18 @@ class Preflight:
         view of the drive's state before the cyclic phase).
     forces : (float, float), optional
         The check's opposing force and the supervisor's force limit [N] (``check.calibration.opposing_force_N``,
-        ``check.safety.max_force_N``): a drive holding forces in CST gets its max torque 0x6072 set to the
-        limit's torque (where writable) and must allow the opposing force.
+        ``check.safety.max_force_N``): a drive holding forces in CST must allow the opposing force.
+    safety : Safety, optional
+        The check's safety profile: the limits each drive keeps itself (:mod:`hil.limits_setup`); None:
+        only the actuation's stroke limit and the force limit of ``forces``.
     """
 
     def __init__(self, actuation: Actuation, plan: RigPlan, emcy_since, on_status=None,
-                 forces: tuple[float, float] | None = None) -> None:
+                 forces: tuple[float, float] | None = None, safety: Safety | None = None) -> None:
         self.act = actuation
         self.plan = plan
-        #: (the calibration's opposing force, the supervisor's force limit) [N]: a drive holding forces in CST
-        #: gets its max torque 0x6072 set to the limit and must allow the opposing force (None: not checked)
-        self.forces = forces
+        self.forces = forces  #: (opposing force, force limit) [N], or None
+        self.safety = safety
         self.c = actuation.canopen
         self.T = actuation.timing.sync_period_s
         self.consumer_ms = round(self.c.master_consumer_time_s * 1000)
@@ -391,16 +398,10 @@ class Preflight:
                 raise PreflightError(f"{spec.label}: gear ratio {object_name(gi, gs)} = {ratio:.6f} rad/mm, profile "
                                      f"mechanics.i_total_rad_per_mm = {want:.6f}")
         yield from self._scales(d)
-        yield from self._max_torque(d)
+        yield from self._limits(d)
         if node.can_write(0x60C2, 1) and node.can_write(0x60C2, 2):
             yield from self._write(node, 0x60C2, 1, int(round(self.T * 1000)), "interpolation period value")
             yield from self._write(node, 0x60C2, 2, -3, "interpolation period index")
-        angle = d.scales.get(Signal.MOTOR_ANGLE) or self.plan.channel(d.ema, Signal.MOTOR_ANGLE).scale
-        if node.can_write(0x607D, 1) and node.can_write(0x607D, 2) and angle is not None:
-            lim = round(self.act.mechanics.stroke_limit_mm * self.act.mechanics.i_total_rad_per_mm
-                        * abs(angle.units_per_si))
-            yield from self._write(node, 0x607D, 1, -lim, "software position limit min")
-            yield from self._write(node, 0x607D, 2, lim, "software position limit max")
         if node.can_write(0x605A, 0):
             r = yield from self._write(node, 0x605A, 0, QUICK_STOP_OPTION, "quick stop option code", soft=True)
             if isinstance(r, SdoAbortError):
@@ -455,24 +456,34 @@ class Preflight:
         elif torque is not None:
             d.rated_torque_Nm = 1.0 / (torque.scale.units_per_si * self.act.mechanics.i_total_rad_per_mm)
 
-    def _max_torque(self, d: DriveSetup) -> Generator:
-        """0x6072 (max torque, per mille of the rated torque) of a drive holding forces in CST: set to the
-        supervisor's force limit where writable (the drive then limits the force itself too), and never
-        below the opposing force the calibration commands."""
+    def _limits(self, d: DriveSetup) -> Generator:
+        """The limits the drive keeps itself (:mod:`hil.limits_setup`): each one its EDS offers written and
+        read back (another value refuses the preflight), the others kept by the master only; then a drive
+        holding forces in CST must allow the calibration's opposing force under its max torque 0x6072."""
         node, spec = d.plan.node, d.plan.node.spec
-        if self.forces is None or d.plan.force_control is not ForceControl.CST or not node.can_read(0x6072, 0):
+        angle = d.scales.get(Signal.MOTOR_ANGLE) or self.plan.channel(d.ema, Signal.MOTOR_ANGLE).scale
+        ch = self.plan.channel(d.ema, Signal.TARGET_TORQUE)
+        torque = d.scales.get(Signal.TARGET_TORQUE) or (ch.scale if ch is not None else None)
+        d.limits = limits_for(limit_targets(self.act, self.safety, self.forces, angle and angle.units_per_si,
+                                            torque and torque.units_per_si), node.can_write)
+        max_torque = None
+        for lim in d.limits:
+            if lim.kept_by == KEPT_BY_DRIVE:
+                o = lim.obj
+                yield from self._write(node, o.index, o.sub, lim.value, lim.kind.value)
+                got = yield from self._read(node, o.index, o.sub, lim.kind.value, soft=True)
+                if problem := readback_problem(spec.label, lim, got):
+                    raise PreflightError(problem)
+                max_torque = got if lim.kind is LimitKind.MAX_TORQUE else max_torque
+        if self.forces is None or d.plan.force_control is not ForceControl.CST or torque is None:
             return
-        k = (d.scales.get(Signal.TARGET_TORQUE) or self.plan.channel(d.ema, Signal.TARGET_TORQUE).scale).units_per_si
-        opposing_N, limit_N = self.forces
-        if node.can_write(0x6072, 0):
-            yield from self._write(node, 0x6072, 0, min(round(limit_N * k), 0xFFFF), "max torque")
-        value = yield from self._read(node, 0x6072, 0, "max torque", soft=True)
-        if isinstance(value, (SdoAbortError, SdoTimeout)):
-            return
-        if value < opposing_N * k:
+        if max_torque is None and node.can_read(0x6072, 0):
+            max_torque = yield from self._read(node, 0x6072, 0, "max torque", soft=True)
+        k, opposing_N = torque.units_per_si, self.forces[0]
+        if isinstance(max_torque, (int, float)) and max_torque < opposing_N * k:
             raise PreflightError(
-                f"{spec.label}: max torque 0x6072 = {int(value)} per mille of the rated torque allows "
-                f"{value / k:.0f} N at the ram; the calibration's opposing force needs {opposing_N:g} N "
+                f"{spec.label}: max torque 0x6072 = {int(max_torque)} per mille of the rated torque allows "
+                f"{max_torque / k:.0f} N at the ram; the calibration's opposing force needs {opposing_N:g} N "
                 f"(check profile calibration.opposing_force_N): set 0x6072 in the drive, or hold forces in CSP "
                 f"(canopen.force_control = \"csp\")")
 

@@ -338,6 +338,25 @@ class SafetyViolation(_Part):
 
 
 @dataclass(frozen=True)
+class KeptLimit(_Part):
+    """A limit of one drive (:class:`hil.canopen.drivelimits.DriveLimit`): its value in the drive's unit,
+    the profile's limit it stands for, and who keeps it: ``drive`` (written to ``object`` and read back)
+    or ``master`` (the drive's EDS has no such object: only the master's supervisor keeps it)."""
+
+    limit: str = _req("text")
+    object: str = _req("text")
+    value: int = _req("int")
+    unit: str = _req("text")
+    si_value: float = _req("number")
+    si_unit: str = _req("text")
+    kept_by: str = _req("text")
+
+    def __post_init__(self) -> None:
+        if self.kept_by not in ("drive", "master"):
+            raise RunRecordError("kept_by", f"{_show(self.kept_by)} is not one of drive, master", META_NAME)
+
+
+@dataclass(frozen=True)
 class DriveFinal(_Part):
     """A drive's last known CiA 402 state after the check (:meth:`hil.master.MasterCore.safe_state_report`):
     reachable (heartbeat), confirmed by a fresh statusword, safe (Switch on disabled, confirmed), and
@@ -349,16 +368,22 @@ class DriveFinal(_Part):
     confirmed: bool
     safe: bool
     master_loss: dict = dataclasses.field(default_factory=dict)
+    #: the limits the drive keeps itself, and those only the master keeps (the preflight's; () if none)
+    drive_limits: tuple[KeptLimit, ...] = ()
 
     def as_json(self) -> dict:
         return {"node": self.node, "state": self.state, "reachable": self.reachable, "confirmed": self.confirmed,
-                "safe": self.safe, "master_loss": self.master_loss}
+                "safe": self.safe, "master_loss": self.master_loss,
+                "drive_limits": [lim.as_json() for lim in self.drive_limits]}
 
     @classmethod
     def read(cls, f: _Fields) -> DriveFinal:
+        lims = f.get("drive_limits", "list") or []
         return cls(f.get("node", "int", required=True), f.get("state", "text", required=True),
                    *(f.get(k, "bool", required=True) for k in ("reachable", "confirmed", "safe")),
-                   master_loss=f.get("master_loss", "object") or {})
+                   master_loss=f.get("master_loss", "object") or {},
+                   drive_limits=tuple(KeptLimit.from_json(v, f.name(f"drive_limits[{j}]"), f.source)
+                                      for j, v in enumerate(lims)))
 
     def unsafe_note(self, ema: str) -> str:
         """``EMA 2 (node 2) unreachable (heartbeat lost), last known state FAULT``: for the abort reason."""

@@ -18,7 +18,8 @@ Limits (``check.safety``, each capped again here by the constants of
 ``max_velocity_mm_per_s`` :math:`|\\Delta\\varphi_k| / (i\\,\\Delta t)`
 ``max_following_error_mm`` CSP target versus motor angle, :math:`|\\varphi^* - \\varphi| / i`
 ``max_d_int_mm``          D plausibility (LVDT versus motor angle), below
-``max_stale_cycles``      sensor freshness: SYNC cycles between two samples - 1
+``max_stale_cycles``      sensor freshness: SYNC cycles between two samples - 1 (today's short limit;
+                          ``max_stale_ms`` where both drives keep their limits: hil/staleness.py)
 ``max_frozen_cycles``     sensor freshness: a noisy LVDT or load cell repeating
                           exactly the same value for more cycles than this
 ========================  ====================================================
@@ -37,8 +38,10 @@ LVDT pitch error the calibration is there to measure (7.5 % in the paper).
 
 from __future__ import annotations
 
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
+from hil.canopen.drivelimits import LimitKind
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.config import (
     HARD_LVDT_GAIN_TOLERANCE,
@@ -48,11 +51,11 @@ from hil.config import (
     HARD_MAX_FORCE_FRACTION,
     HARD_MAX_FORCE_IMBALANCE_FRACTION,
     HARD_MAX_FROZEN_CYCLES,
-    HARD_MAX_STALE_CYCLES,
     HARD_MAX_VELOCITY_MM_PER_S,
     Actuation,
     Check,
 )
+from hil.staleness import stale_limit
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,10 +80,15 @@ class Limits:
     max_d_int_mm: float
     max_stale_cycles: int
     max_frozen_cycles: int
+    stale_name: str = "max_stale_cycles"  #: the freshness limit in force (hil.staleness.StaleLimit.name)
+    stale_why: str = ""
 
     @classmethod
-    def of(cls, actuation: Actuation, check: Check) -> Limits:
+    def of(cls, actuation: Actuation, check: Check, kept: Sequence[Collection[LimitKind]] | None = None) -> Limits:
+        """``kept``: per EMA the limits its drive keeps itself (None: not known): which freshness limit
+        applies (:func:`hil.staleness.stale_limit`)."""
         s = check.safety
+        stale = stale_limit(actuation, s, kept)
         f_lim = actuation.mechanics.limit_load_N
         return cls(
             max_force_N=min(s.max_force_N, HARD_MAX_FORCE_FRACTION * f_lim),
@@ -90,8 +98,9 @@ class Limits:
             max_velocity_mm_per_s=min(s.max_velocity_mm_per_s, HARD_MAX_VELOCITY_MM_PER_S),
             max_following_error_mm=min(s.max_following_error_mm, HARD_MAX_FOLLOWING_ERROR_MM),
             max_d_int_mm=min(s.max_d_int_mm, HARD_MAX_D_INT_MM),
-            max_stale_cycles=min(s.max_stale_cycles, HARD_MAX_STALE_CYCLES),
+            max_stale_cycles=stale.cycles,
             max_frozen_cycles=min(s.max_frozen_cycles, HARD_MAX_FROZEN_CYCLES),
+            stale_name=stale.name, stale_why=stale.why,
         )
 
 
@@ -104,14 +113,21 @@ class Supervisor:
         capped by the hard constants (:class:`Limits`).
     """
 
-    def __init__(self, actuation: Actuation, check: Check) -> None:
+    def __init__(self, actuation: Actuation, check: Check,
+                 kept: Sequence[Collection[LimitKind]] | None = None) -> None:
         self.i = actuation.mechanics.i_total_rad_per_mm
         self.T = actuation.timing.sync_period_s
-        self.lim = Limits.of(actuation, check)
+        self._profiles = (actuation, check)
+        self.lim = Limits.of(actuation, check, kept)
         self._prev: Sample | None = None
         self._ref: Sample | None = None
         self._same = [0, 0, 0, 0]  # consecutive repeats of s1, s2, F1, F2
         self.latched: Violation | None = None
+
+    def drives_keep(self, kept: Sequence[Collection[LimitKind]] | None) -> None:
+        """The limits each drive keeps itself, once the preflight has written and read them back: the
+        freshness limit that applies from now on (:func:`hil.staleness.stale_limit`)."""
+        self.lim = Limits.of(*self._profiles, kept)
 
     def check(self, smp: Sample, sp1: Setpoint, sp2: Setpoint) -> Violation | None:
         """Check one sample; ``sp1/sp2`` are the setpoints the drives were following."""
@@ -172,8 +188,9 @@ class Supervisor:
             dt = t - prev.t_s
             missed = int(round(dt / self.T)) - 1
             if missed > lim.max_stale_cycles:
-                return Violation(t, "max_stale_cycles", f"sensor data stale: {missed} SYNC cycles without a "
-                                 f"sample > {lim.max_stale_cycles}", missed, lim.max_stale_cycles)
+                why = f" ({lim.stale_why})" if lim.stale_name == "max_stale_ms" else ""
+                return Violation(t, lim.stale_name, f"sensor data stale: {missed} SYNC cycles without a "
+                                 f"sample > {lim.max_stale_cycles}{why}", missed, lim.max_stale_cycles)
             if dt > 0:
                 for k, (a, b) in enumerate(((smp.phi1_rad, prev.phi1_rad), (smp.phi2_rad, prev.phi2_rad)), start=1):
                     v = abs(a - b) / self.i / dt

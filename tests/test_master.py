@@ -161,11 +161,12 @@ def test_preflight_against_simulated_drives_golden_sequence(actuation, pair):
     assert m.preflight_done
     writes = p.sdo_writes(1)
     # node 1, in order: its heartbeat, the PDO mapping procedure of CiA 301 (4 PDOs: 29 writes), then
-    # the drive's interpolation period, position limits, quick stop option, cycle period, and its own
+    # the limits it keeps itself (a master without a safety profile: the actuation's stroke only), each
+    # written and read back, the drive's interpolation period, quick stop option, cycle period, and its own
     # reaction to the master's death (consumer heartbeat on the master, abort connection option)
     assert writes[:4] == [(0x1017, 0), (0x1400, 1), (0x1600, 0), (0x1600, 1)]
     assert writes[1:30][-1] == (0x1801, 1)  # TPDO2 enabled: the last of the 29 mapping writes
-    assert writes[30:38] == [(0x60C2, 1), (0x60C2, 2), (0x607D, 1), (0x607D, 2), (0x605A, 0), (0x1006, 0),
+    assert writes[30:38] == [(0x607D, 1), (0x607D, 2), (0x60C2, 1), (0x60C2, 2), (0x605A, 0), (0x1006, 0),
                              (0x1016, 1), (0x6007, 0)]
     # then the drill: hold the position, CSP, shutdown / switch on / enable operation by SDO, then
     # disable voltage out of the drive's reaction

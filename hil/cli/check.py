@@ -155,6 +155,9 @@ def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) 
         # external watchdog stated instead)
         "master_loss": rec.master_loss or {k: d.master_loss for k, d in (rec.drives_final or {}).items()
                                            if d.master_loss},
+        # the limits each drive keeps itself (written and read back) and those only the master keeps
+        "drive_limits": {k: [lim.as_json() for lim in d.drive_limits] for k, d in (rec.drives_final or {}).items()
+                         if d.drive_limits},
         # how each EMA held a force: its drive's CST, or the master's force loop in CSP
         "force_control": rec.force_control or {},
         # where and when in the aircraft's life (the wear history's keys): aircraft, position, rig,

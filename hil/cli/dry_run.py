@@ -98,7 +98,8 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     # a channel of its own: python-can's virtual channels are process-global by name
     transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
                                    realtime=realtime)
-    master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
+    master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N),
+                        safety=check.safety)
     log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)

@@ -65,7 +65,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = out_dir(args, "run")
     out.mkdir(parents=True, exist_ok=True)
     transport = BusTransport(bus, act.timing.sync_period_s)
-    master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
+    master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N),
+                        safety=check.safety)
     # the run folder's writer thread (the CAN log, signals.csv, meta.json) is made before the memory
     # is locked and the loop's page faults are counted (locked, each page of a new thread's stack
     # faults at once); wall-clock stamps in the CAN log, as candump writes them

@@ -227,6 +227,9 @@ def trace_lines(trace: dict | None) -> str:
                          f"revision 0x{ident.get('revision', 0):08X}, serial {fmt_serial(ident.get('serial'))}"])
     for k, ml in (trace.get("master_loss") or {}).items():
         rows.append([f"{k} reaction to losing the master", master_loss_text(ml)])
+    for k, lims in (trace.get("drive_limits") or {}).items():
+        rows.append([f"{k} limits it keeps itself", drive_limits_text(lims, "drive")])
+        rows.append([f"{k} limits only the master keeps", drive_limits_text(lims, "master")])
     for k, fc in (trace.get("force_control") or {}).items():
         rows.append([f"{k} holds forces by", "its CST mode (target torque)" if fc == "cst" else
                      "the master's force loop on the measured force in CSP (its drive has no CST)"])
@@ -242,6 +245,14 @@ def identity_warning(identity: dict | None) -> str:
 
     clash = shared_serial(identity)
     return "" if clash is None else f"<p class='fail'><b>Identity:</b> {esc(clash)}.</p>"
+
+
+def drive_limits_text(lims: list[dict], kept_by: str) -> str:
+    """The limits of one drive kept by ``kept_by`` ("drive": written and read back; "master": the drive's EDS
+    has no such object), each with its object and value in the drive's unit and the profile's."""
+    got = [f"{x['limit']} {x['object']} = {x['value']} {x['unit']} ({x['si_value']:g} {x['si_unit']})"
+           for x in lims if x.get("kept_by") == kept_by]
+    return "; ".join(got) or "none"
 
 
 def master_loss_text(ml: dict) -> str:

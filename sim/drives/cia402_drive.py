@@ -40,7 +40,9 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   (``stats.illegal_commands``), no EMCY. A repeated controlword is a no-op.
   Bit 8 (halt) is not implemented.
 * Software position limits 0x607D: a write that makes max < min is aborted
-  (0x06090036). Rated torque 0x6076 and 0x608F must be > 0 (0x06090032).
+  (0x06090036). In CSP the target is clipped to them (CiA 402), in CST the target torque to the max
+  torque 0x6072; the max motor speed 0x6080 and the following error window and time out 0x6065/0x6066
+  (fault 0x8611) are :mod:`sim.drives.limits`. Rated torque 0x6076 and 0x608F must be > 0 (0x06090032).
 * Fault hooks (set by :mod:`sim.faults`, off by default): ``boot_fault``
   (an error code: the drive enters FAULT at every boot, power-on or reset
   node, with an EMCY after its boot-up frame, until a fault reset clears
@@ -51,7 +53,7 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   ``mode_frozen`` (0x6061 does not follow 0x6060: the drive keeps running in
   the mode it shows).
 * Statusword: bit 12 (drive follows the command) in OPERATION_ENABLED with a
-  supported mode, bit 11 when the last target was clipped (0x607D in CSP,
+  supported mode, bit 11 when the last target was clipped (0x607D or 0x6080 in CSP,
   0x6072 in CST), bit 10 in CSP when the effective target is within
   :data:`TARGET_WINDOW_INC` of the position.
 """
@@ -553,6 +555,7 @@ class Cia402Drive:
         also kept as :attr:`setpoint`.
         """
         sm = self.state_machine
+        prev_demand = self._target_eff_inc  # the last cycle's CSP demand (None: it was not in CSP)
         if sm.state is _FRA:
             sm.fault_reaction_done()
         if sm.state is _QSA:
@@ -575,6 +578,8 @@ class Cia402Drive:
                 mode = self.int_value(0x6060)
             if self.mode_frozen:
                 mode = self._mode_display
+            if mode == _CSP and _CSP in self._modes and self.following_error_exceeded(prev_demand):
+                mode = None  # faulted (0x8611): FAULT REACTION ACTIVE, the drive function disabled
             if mode == _CSP and _CSP in self._modes:  # (a supported mode, so the effective one)
                 target = ic.get(_K_TARGET_POS)
                 if target is None:
@@ -585,7 +590,7 @@ class Cia402Drive:
                 hi = ic.get(_K_POS_MAX)
                 if hi is None:
                     hi = self.store.int_or(0x607D, 2, 2**31 - 1)
-                eff = min(max(target, lo), hi)
+                eff = self.speed_limited(min(max(target, lo), hi), prev_demand)  # (sim.drives.limits)
                 self._limit_active = eff != target
                 self._target_eff_inc = eff
                 try:

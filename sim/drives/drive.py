@@ -4,7 +4,7 @@
 store, SDO server, NMT slave, PDO engine, the SDO guard) with the CiA 402
 application :class:`~sim.drives.cia402_drive.Cia402Drive` (mixin): state
 machine, plant command, live values, and the validation of writes to its
-objects.
+objects; and the limits it keeps itself (:class:`~sim.drives.limits.DriveLimits`).
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import canopen.objectdictionary as cod
 from hil.canopen.frame import Frame
 from hil.canopen.signalmap import Signal
 from sim.drives.cia402_drive import Cia402Drive
+from sim.drives.limits import DriveLimits
 from sim.drives.node import LiveInput, SimNode
 
 if TYPE_CHECKING:
@@ -24,7 +25,7 @@ if TYPE_CHECKING:
 __all__ = ["LiveInput", "SimDrive"]
 
 
-class SimDrive(Cia402Drive, SimNode):
+class SimDrive(Cia402Drive, DriveLimits, SimNode):
     """One simulated EMA drive: a CANopen slave (CiA 301) with a CiA 402 drive core.
 
     Created by :class:`sim.drives.SimDrivePair`; not meant to be built alone
@@ -103,4 +104,5 @@ class SimDrive(Cia402Drive, SimNode):
                          own_data=own_data)
         self.init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s,
                          angle_units_per_rad=angle_k, rated_torque_Nm=rated_torque_Nm)
+        self.init_limits(sample_period_s)
         self.init_comm()

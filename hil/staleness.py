@@ -1,0 +1,102 @@
+"""Which freshness limit applies: the master's stall budget (pure; the derivation is docs/safety.md,
+*A stall of the master*).
+
+A stall of the master is no hazard while both drives hold their last setpoint and keep the hard limits
+themselves: the stroke by their software position limits 0x607D, the force by their max torque 0x6072,
+the speed by their max motor speed 0x6080 (:mod:`hil.canopen.drivelimits`, written and read back by the
+preflight). What the stall costs is the master's picture of the rig: a ram may move at the kept speed
+``v`` for the stall's length, so the position the master saw last is off by ``v t``. The stall the master
+accepts is therefore the time in which a ram at the kept speed moves by the following error the check
+accepts, and never so long that the drives' consumer heartbeat would stop them first:
+
+.. math::
+
+    t_{stale} = \\min\\Big(\\texttt{max\\_stale\\_ms},\\ \\texttt{HARD\\_MAX\\_STALE\\_MS},\\
+                \\frac{e_{max}}{v_{max}},\\ C - P_{hb} - 2T\\Big)
+
+with ``e_max`` / ``v_max`` the check's following error and speed limits (each capped), ``C`` the drives'
+consumer heartbeat time on the master (0x1016), ``P_hb`` the master's heartbeat period (the consumer counts
+from its last heartbeat, up to one period before the stall began) and ``2 T`` the master's own reaction.
+A drive that does not keep all three of 0x607D, 0x6072 and 0x6080 (a drive that keeps none of its limits
+among them) keeps today's short limit, ``safety.max_stale_cycles`` SYNC cycles (hard cap 5).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass
+
+from hil.canopen.drivelimits import LimitKind
+from hil.config import (
+    HARD_MAX_FOLLOWING_ERROR_MM,
+    HARD_MAX_STALE_CYCLES,
+    HARD_MAX_STALE_MS,
+    HARD_MAX_VELOCITY_MM_PER_S,
+    Actuation,
+    Safety,
+)
+
+__all__ = ["NEEDED", "StaleLimit", "stale_limit"]
+
+#: The limits each drive must keep itself for the derived (longer) freshness limit to apply.
+NEEDED = frozenset((LimitKind.POSITION_MIN, LimitKind.POSITION_MAX, LimitKind.MAX_TORQUE, LimitKind.MAX_MOTOR_SPEED))
+
+
+@dataclass(frozen=True, slots=True)
+class StaleLimit:
+    """The freshness limit in force: SYNC cycles without a complete sample that are still fresh.
+
+    Attributes
+    ----------
+    cycles : int
+        A gap of more missed SYNC cycles than this is stale.
+    ms : float
+        The same as a time [ms] (``cycles`` is ``floor(ms / T)``).
+    derived : bool
+        True: the drives keep their limits, the stall budget applies; False: today's short limit.
+    why : str
+        Which term set it (for the record and the violation's text).
+    """
+
+    cycles: int
+    ms: float
+    derived: bool
+    why: str
+
+    @property
+    def name(self) -> str:
+        """The profile key of the limit in force (the supervisor's violation names it)."""
+        return "max_stale_ms" if self.derived else "max_stale_cycles"
+
+
+def _short(act: Actuation, safety: Safety, why: str) -> StaleLimit:
+    n = min(safety.max_stale_cycles, HARD_MAX_STALE_CYCLES)
+    return StaleLimit(n, n * act.timing.sync_period_s * 1000.0, False, why)
+
+
+def stale_limit(act: Actuation, safety: Safety, kept: Sequence[Collection[LimitKind]] | None) -> StaleLimit:
+    """The freshness limit for drives that keep ``kept`` themselves (per EMA the limits written to the drive
+    and read back; None: not known, e.g. before the preflight), see the module docstring."""
+    if kept is None:
+        return _short(act, safety, "the limits the drives keep are not known")
+    for ema, limits in enumerate(kept, start=1):
+        missing = NEEDED - set(limits)
+        if missing:
+            names = ", ".join(sorted(k.value for k in missing))
+            return _short(act, safety, f"EMA {ema} does not keep {names} itself")
+    T_ms = act.timing.sync_period_s * 1000.0
+    c = act.canopen
+    e = min(safety.max_following_error_mm, HARD_MAX_FOLLOWING_ERROR_MM)
+    v = min(safety.max_velocity_mm_per_s, HARD_MAX_VELOCITY_MM_PER_S)
+    terms = {
+        "safety.max_stale_ms": safety.max_stale_ms,
+        "HARD_MAX_STALE_MS": HARD_MAX_STALE_MS,
+        "max_following_error_mm / max_velocity_mm_per_s": 1000.0 * e / v,
+        "consumer heartbeat - master heartbeat period - 2 SYNC periods":
+            c.master_consumer_time_s * 1000.0 - c.master_heartbeat_period_s * 1000.0 - 2.0 * T_ms,
+    }
+    why = min(terms, key=terms.__getitem__)
+    ms = terms[why]
+    cycles = max(0, math.floor(ms / T_ms + 1e-9))
+    return StaleLimit(cycles, cycles * T_ms, True, f"{why} = {ms:g} ms")
