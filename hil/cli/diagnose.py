@@ -107,15 +107,19 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
         from hil.report.diagnose import write_reference_report
         outputs.write_with("diagnosis_report.html", lambda p: write_reference_report(
             p, data, json_name=outputs.path("diagnosis.json").name))
-    console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
-                  f"{args.reference} ({data['diagnosis_s']:.1f} s); effort: {data['conversion']}")
+    untrusted = data["verdict"] == "untrusted_effort"
+    head = ("effort not trusted, not diagnosed" if untrusted else
+            "changes named" if data["effects"] else "no change above its floor")
+    console.print(f"[bold]{head}[/bold] against {args.reference} ({data['diagnosis_s']:.1f} s); effort: "
+                  f"{data['conversion']}")
+    console.print(f"  effort against the known load: {data['effort']['words']}")
     for c in data["changes"]:
         console.print(f"  {c['parameter']}: {c['words']}")
     for m in data["identifiability"]["cannot_tell_apart"]:
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
     console.print(f"  masked: {data['mask']['words']}")
     console.print(f"  written {outputs.path('diagnosis.json')}")
-    return 0
+    return 5 if untrusted else 0  # inconclusive: the reason is in diagnosis.json (README, Exit status)
 
 
 def register(sub) -> None:
