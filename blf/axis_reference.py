@@ -637,14 +637,16 @@ def effort_load_check(fit: AxisFit, load_N, used, allowance_N: float, z_min: flo
     -----
     The effort implies the load :math:`L_{seen} = \\bar L - F_0` (N) with standard uncertainty
     :math:`u = \\sqrt{u_{F_0}^2 + (L_{seen}\\,u_k/k)^2}`. The check is made when the load is large
-    enough to be seen beyond what an unnamed change may hide,
-    :math:`|\\bar L| > z_{min} u + F_{allow}`, and with both directions of motion (else :math:`F_0`
-    is one force with the friction). The effort is **not trusted** when it does not see the load
-    with its sign: :math:`L_{seen}\\,\\mathrm{sign}(\\bar L) \\le z_{min} u`, i.e. it shows no
-    load, or the opposite one, where the known load is larger than the floor. Then the missing force
-    is at least :math:`|\\bar L| - F_{allow}`, a whole load: the effort's force content, not the
-    rig, is contradicted. A seen load of the right sign but another size is left to the comparison
-    (a direction-dependent force change: an offset, a direction-dependent friction, another load).
+    enough to be seen beyond what an unnamed change may hide and the two answers below are apart by
+    more than the statistics, :math:`|\\bar L| > \\max(z_{min} u + F_{allow},\\ 2 z_{min} u)`, and with
+    both directions of motion (else :math:`F_0` is one force with the friction). Two answers, the
+    nearer wins: the effort sees the load (:math:`L_{seen} = \\bar L` plus a change) or it does not
+    (:math:`L_{seen} = 0`: a re-levelled, unloaded or unrelated signal). The effort is **not
+    trusted** when it is nearer to seeing no load, or sees the opposite one:
+    :math:`L_{seen}\\,\\mathrm{sign}(\\bar L) \\le |\\bar L|/2`. Then at least half the known load,
+    more than the floor, is missing: the effort's force content, not the rig, is contradicted. A seen
+    load of the right sign nearer the known one is left to the comparison (a direction-dependent force
+    change: an offset, a direction-dependent friction, another load).
     """
     allow = scalar(allowance_N, "allowance_N", "N", lo=0)
     z_min = positive_scalar(z_min, "z_min", "1")
@@ -662,12 +664,13 @@ def effort_load_check(fit: AxisFit, load_N, used, allowance_N: float, z_min: flo
     lbar = float(np.mean(L[u]))
     seen = lbar - float(fit.parameters["offset_N"])
     unc = float(np.hypot(fit.uncertainty["offset_N"], seen * rel))
-    tol = z_min * unc + allow
+    tol = max(z_min * unc + allow, 2 * z_min * unc)
     if abs(lbar) <= tol:
         return EffortCheck(False, None, lbar, seen, unc, f"the known load ({lbar:.4g} N) is within {tol:.4g} N "
                            f"({z_min:g} u + the floor of {allow:g} N): too small to check the effort against")
-    ok = bool(seen * np.sign(lbar) > z_min * unc)
-    how = ("sees it" if ok else "does not see it" if abs(seen) <= z_min * unc else "sees the opposite load")
+    ok = bool(seen * np.sign(lbar) > abs(lbar) / 2)
+    how = ("sees it" if ok else "sees the opposite load" if seen * np.sign(lbar) < -z_min * unc else
+           "does not see it (nearer to no load than to the known one)")
     words = (f"known load {lbar:.4g} N; the effort implies {seen:.4g} ± {unc:.2g} N: it {how}"
              + ("" if ok else ": its force content is contradicted by the known load; not diagnosed"))
     return EffortCheck(True, ok, lbar, seen, unc, words)

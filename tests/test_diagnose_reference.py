@@ -345,7 +345,7 @@ def test_a_relevelled_current_is_untrusted_with_the_reason_and_nothing_named(tmp
     eff = data["effort"]
     assert eff["trusted"] is False and eff["recording"]["checked"] and eff["recording"]["trusted"] is False
     assert eff["reference"]["trusted"] is True
-    assert abs(eff["recording"]["seen_N"]) < 3 * eff["recording"]["uncertainty_N"]  # sees no load
+    assert abs(eff["recording"]["seen_N"]) < 196.0 / 2  # nearer to no load than to the known one
     assert "does not see it" in eff["words"] and "new.csv" in eff["words"]
     assert not any(c["named"] for c in data["changes"])
     assert "not trusted" in (tmp_path / "o" / "diagnosis_report.html").read_text()
@@ -384,7 +384,8 @@ def test_without_a_load_column_the_effort_check_is_not_made_and_said_so(tmp_path
     (400.0, 400.0, True, False, "does not see it"),  # the effort shows no load
     (800.0, 400.0, True, False, "sees the opposite load"),
     (-800.0, -400.0, True, False, "sees the opposite load"),
-    (100.0, 400.0, True, True, "sees it"),  # another size, right sign: left to the comparison
+    (100.0, 400.0, True, True, "sees it"),  # another size, right sign, nearer the known load: left to the comparison
+    (250.0, 400.0, True, False, "does not see it"),  # 150 N of 400 N seen: nearer to no load
     (0.0, 50.0, False, None, "too small"),  # within 3 u + the 75 N floor
 ])
 def test_the_effort_must_see_the_known_load_with_its_sign(offset, load, made, trusted, says):
@@ -395,3 +396,18 @@ def test_the_effort_must_see_the_known_load_with_its_sign(offset, load, made, tr
     assert (c.made, c.trusted) == (made, trusted) and says in c.words
     one_way = AxisFit({"friction_N": 1600.0}, {"friction_N": 5.0}, 1.0, 100, 10, 0.024)
     assert not effort_load_check(one_way, np.full(50, load), np.ones(50, bool), 75.0).made
+
+
+@pytest.mark.parametrize("relevelled, code", [(True, 5), (False, 0)])
+def test_without_a_reference_a_recording_whose_current_does_not_see_its_load_is_not_diagnosed(tmp_path, relevelled,
+                                                                                            code):
+    new = write_csv(tmp_path / "new.csv", relevelled=relevelled)
+    out = tmp_path / "o"
+    assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--current-per-force",
+                 str(K_A_PER_N), "--out", str(out), "--quiet", "--no-report"]) == code
+    data = json.loads((out / "diagnosis.json").read_text())
+    jsonschema.validate(data, _schema())
+    assert data["effort"]["trusted"] is not relevelled and data["effort"]["recording"]["checked"]
+    assert (data["verdict"] == "untrusted_effort") is relevelled
+    if relevelled:
+        assert data["effects"] == [] and "does not see it" in data["effort"]["words"]

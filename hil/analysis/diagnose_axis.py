@@ -374,6 +374,33 @@ def _rd(d: dict) -> dict:
     return {k: _r(v) for k, v in d.items()}
 
 
+def model_effort_check(path: Path, opts: AxisOptions) -> dict | None:
+    """Without a reference: diagnosis.json's ``effort`` of a single-axis recording with a known load (the
+    nominal model fitted on it alone, :func:`blf.axis_reference.effort_load_check`); None without a load."""
+    from blf.axis_reference import effort_load_check, fit_axis
+    from blf.errors import AnalysisError
+    rec = read_axis(path)
+    if rec.load is None:
+        return None
+    k, _, rel = conversion(rec, opts)
+    p = _prepare(rec, opts, k)
+    try:
+        fit = fit_axis(p.force, p.v, p.a, p.mask.used, p.ident, rec.load)
+    except AnalysisError as exc:
+        return {"trusted": True, "words": f"the effort could not be checked against the load ({exc})"}
+    c = effort_load_check(fit, rec.load, p.mask.used, opts.force_floor_N, opts.z_min, rel)
+    entry = {"path": str(rec.path), "checked": c.made, "trusted": c.trusted, "load_N": _r(c.load_N),
+             "seen_N": _r(c.seen_N), "uncertainty_N": _r(c.uncertainty_N), "words": c.words}
+    return {"trusted": not (c.made and not c.trusted), "words": c.words, "recording": entry}
+
+
+def untrusted_dict(effort: dict) -> dict:
+    """diagnosis.json of a recording whose effort is not trusted: the reason, nothing diagnosed."""
+    return {"verdict": "untrusted_effort", "model": "single-axis", "mode": "model", "effects": [], "where": [],
+            "locations": [], "effort": effort,
+            "band": {"cutoff_hz": None, "step": 1, "words": "nothing compared: the effort is not trusted"}}
+
+
 def single_axis_model(path: Path, opts: AxisOptions):
     """The replay model of :func:`blf.diagnose.diagnose` (no reference) and its sample period (s).
 

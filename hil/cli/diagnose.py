@@ -20,9 +20,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     opts = _axis_options(args)
     if args.reference is not None:
         return _cmd_reference(args, path, opts, console)
+    effort = _model_effort(args, path, opts)
     model, period = load_model(path, args.model, args.profile, opts)
     outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
                           ("diagnosis.json", "diagnosis_report.html"))
+    if effort is not None and not effort["trusted"]:
+        from hil.analysis.diagnose_axis import untrusted_dict
+        outputs.write_json("diagnosis.json", untrusted_dict(effort))
+        console.print(f"[bold]effort not trusted, not diagnosed[/bold]: {effort['words']}; written "
+                      f"{outputs.path('diagnosis.json')}")
+        return 5  # inconclusive: the reason is in diagnosis.json (README, Exit status)
     t0 = time.perf_counter()
     try:
         d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
@@ -41,6 +48,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         data["identifiability"] = ident
         if mask is not None:
             data["mask"] = mask
+    if effort is not None:
+        data["effort"] = effort
     outputs.write_json("diagnosis.json", data)
     if not args.no_report:
         outputs.write_with("diagnosis_report.html", lambda p: write_report(
@@ -76,6 +85,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         for c in d.measured if d.valid[c].any()))
     console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {outputs.path('diagnosis.json')}")
     return 0
+
+
+def _model_effort(args: argparse.Namespace, path: Path, opts):
+    """Single axis with a load column, no reference: whether its effort sees the load (None otherwise)."""
+    if args.model != "single-axis" or path.is_dir() or path.suffix.lower() == ".mat":
+        return None
+    from hil.analysis.diagnose_axis import AxisOptions, model_effort_check
+    floor = args.force_floor_N if args.force_floor_N is not None else AxisOptions().force_floor_N
+    import dataclasses
+    return model_effort_check(path, dataclasses.replace(opts, force_floor_N=floor))
 
 
 def _axis_options(args: argparse.Namespace):
