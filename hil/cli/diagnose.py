@@ -113,10 +113,10 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
     """``--reference``: single axis against a healthy recording; everything checked before anything is written."""
     from hil.analysis.diagnose_axis import reference_diagnosis
     from hil.errors import RecordingError
-    if args.model != "single-axis":
-        raise RecordingError("--reference: only with --model single-axis so far (the dual-EMA model: a later issue)")
     if not Path(args.reference).exists():
         raise RecordingError(f"--reference {args.reference}: no such file")
+    if args.model != "single-axis":
+        return _cmd_dual_reference(args, path, console)
     t0 = time.perf_counter()
     data = reference_diagnosis(path, Path(args.reference), opts)
     data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
@@ -141,6 +141,22 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
     return 5 if untrusted else 0  # inconclusive: the reason is in diagnosis.json (README, Exit status)
 
 
+def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
+    """``--reference`` with the dual-EMA model: each nominal parameter against the reference's."""
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    t0 = time.perf_counter()
+    data = dual_reference_diagnosis(path, Path(args.reference), args.profile)
+    data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
+    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json",))
+    outputs.write_json("diagnosis.json", data)
+    console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
+                  f"{args.reference} ({data['diagnosis_s']:.1f} s)")
+    for c in data["changes"]:
+        console.print(f"  {c['parameter']} ({c['where']}): {c['words']}")
+    console.print(f"  written {outputs.path('diagnosis.json')}")
+    return 0
+
+
 def register(sub) -> None:
     p = add_parser(sub, "diagnose", handler=cmd_diagnose,
                    help="simulation versus recording: locate the mismatch, name the missing physics",
@@ -156,7 +172,8 @@ def register(sub) -> None:
                    help="dual-EMA rig (default) or a single positioning axis (e.g. EMPS)")
     p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")
     p.add_argument("--reference", metavar="HEALTHY", type=Path,
-                   help="single axis: compare with this healthy recording (same columns and sample rate): the "
+                   help="compare with this healthy recording of the same rig (single axis: same columns and sample "
+                        "rate; dual-EMA: a run folder or recording): the "
                         "nominal model identified on both, each parameter's change with its uncertainty, named "
                         "only above its floor")
     p.add_argument("--current-law", choices=("torque", "power"),
