@@ -9,14 +9,16 @@ the floors' data in each parameter's unit (play in um, stiffness and LVDT pitch 
   standard deviation sigma over recordings and EMAs (the mean, a bias every check of one rig shares,
   cancels in a change) gives the floor of a change between two checks, ``3 sqrt(2) sigma`` (two
   independent errors, the same factor 3 as the statistical test);
-* **own simulator**: two healthy checks of the shipped simulated rig (``emacheck simulate``) with
-  different noise seeds: the change of every nominal parameter between them, which a floor must
-  exceed (one pair: a lower bound of the spread, not a floor by itself).
+* **own simulator**: three healthy checks of the shipped simulated rig (``emacheck simulate``) with
+  noise seeds 11, 12, 13: the change of every nominal parameter between each pair, and per kind
+  3 x their RMS (the pairs share checks: three checks, not three independent pairs).
 
-    python tests/bench/bench_diagnose_floors.py /tmp/floors.json [--sim RUN_A RUN_B | --no-sim]
+The default floor of a kind is the larger of the two, rounded up.
 
-``--sim`` takes two run folders already simulated (``emacheck simulate --seed 11 --out RUN_A``, and
-``--seed 12``); without it they are simulated here (about 20 s). About 1 min on one core.
+    python tests/bench/bench_diagnose_floors.py /tmp/floors.json [--sim RUN_A RUN_B RUN_C | --no-sim]
+
+``--sim`` takes three run folders already simulated (``emacheck simulate --seed 11 --out RUN_A``, and
+``--seed 12``, ``--seed 13``); without it they are simulated here (about 30 s). About 2 min on one core.
 """
 
 from __future__ import annotations
@@ -35,10 +37,12 @@ sys.path[:0] = [str(TESTS.parent), str(TESTS)]
 
 from support.independent_rig import DATA, KEYS, diagnose_file  # noqa: E402
 
-#: nominal parameter -> (kind, unit printed, how a change is expressed)
-KINDS = {"backlash_int": ("play", "um"), "backlash_bearing": ("play", "um"), "stiffness_int": ("stiffness", "%"),
-         "compliance_ext": ("stiffness", "%"), "lvdt_pitch": ("sensor_gain", "%"), "lvdt_offset": ("offset", "um"),
-         "hinge_coulomb_N": ("friction", "N"), "drive_coulomb_N": ("friction", "N")}
+#: nominal parameter prefix -> (floor key of hil.analysis.diagnose_floors.DUAL_FLOORS, unit)
+KINDS = {"backlash_int": ("play_um", "um"), "backlash_bearing": ("play_um", "um"),
+         "stiffness_int": ("stiffness_pct", "%"), "compliance_ext": ("stiffness_pct", "%"),
+         "lvdt_pitch": ("sensor_gain_pct", "%"), "lvdt_offset": ("play_um", "um"),
+         "hinge_coulomb_N": ("friction_N", "N"), "drive_coulomb_N": ("friction_N", "N")}
+SEEDS = (11, 12, 13)
 
 
 def _kind(name: str):
@@ -86,21 +90,31 @@ def independent() -> dict:
     return out
 
 
-def simulated(run_a: Path, run_b: Path) -> dict:
-    """The change of every nominal parameter between two healthy simulated checks (b against a)."""
+def simulated(runs) -> dict:
+    """The change of every nominal parameter between each pair of healthy simulated checks, and per floor
+    kind 3 x the RMS of those changes."""
+    from itertools import combinations
+
     from blf.diagnose import diagnose
     from hil.analysis.diagnose import load_model
     nom = []
-    for run in (run_a, run_b):
+    for run in runs:
         model, period = load_model(run, "dual-ema", None)
         nom.append(diagnose(model, period).nominal)
-    return {n: {"a": nom[0][n], "b": nom[1][n], "change": change_in_unit(n, nom[1][n], nom[0][n]),
-                "unit": (_kind(n) or ("", ""))[1]} for n in nom[0]}
+    pairs = {}
+    for i, j in combinations(range(len(runs)), 2):
+        pairs[f"{SEEDS[j]} vs {SEEDS[i]}"] = {n: change_in_unit(n, nom[j][n], nom[i][n]) for n in nom[0] if _kind(n)}
+    kinds = {}
+    for ch in pairs.values():
+        for n, v in ch.items():
+            kinds.setdefault(_kind(n)[0], []).append(v)
+    return {"pairs": pairs, "floor_3rms": {k: 3 * float(np.sqrt(np.mean(np.square(v)))) for k, v in kinds.items()},
+            "n": {k: len(v) for k, v in kinds.items()}}
 
 
 def _simulate(folder: Path) -> tuple:
     runs = []
-    for seed in (11, 12):
+    for seed in SEEDS:
         out = folder / f"sim{seed}"
         subprocess.run([sys.executable, "-m", "hil", "simulate", "--seed", str(seed), "--out", str(out), "--quiet"],
                        check=True, cwd=TESTS.parent, capture_output=True)
@@ -132,17 +146,19 @@ def main(argv: list[str]) -> int:
         out.write_text(json.dumps(result, indent=1) + "\n")
         return 0
     with tempfile.TemporaryDirectory() as tmp:
-        runs = (Path(argv[argv.index("--sim") + 1]), Path(argv[argv.index("--sim") + 2])) if "--sim" in argv \
-            else _simulate(Path(tmp))
-        sim = simulated(*runs)
+        runs = tuple(Path(a) for a in argv[argv.index("--sim") + 1:argv.index("--sim") + 1 + len(SEEDS)]) \
+            if "--sim" in argv else _simulate(Path(tmp))
+        sim = simulated(runs)
     result["simulated"] = sim
-    fr = [v["change"] for n, v in sim.items() if v["unit"] == "N"]
-    result["simulated_friction_3rms_N"] = 3 * float(np.sqrt(np.mean(np.square(fr))))
-    print("| nominal parameter | seed 11 | seed 12 | change | unit |")
-    print("|---|---|---|---|---|")
-    for n, v in sim.items():
-        print(f"| {n} | {v['a']:.6g} | {v['b']:.6g} | {v['change']:+.3g} | {v['unit']} |")
-    print(f"frictions (hinge, drive Coulomb): 3 x RMS of the changes = {result['simulated_friction_3rms_N']:.3g} N")
+    names = list(next(iter(sim["pairs"].values())))
+    print("| nominal parameter | unit | " + " | ".join(sim["pairs"]) + " |")
+    print("|---|---|" + "---|" * len(sim["pairs"]))
+    for n in names:
+        print(f"| {n} | {_kind(n)[1]} | " + " | ".join(f"{ch[n]:+.3g}" for ch in sim["pairs"].values()) + " |")
+    for k, v in sim["floor_3rms"].items():
+        ind = result.get("independent", {}).get(k.replace("_N", "_N"), {}).get("floor_3sqrt2_sd")
+        print(f"{k}: simulated pairs 3 x RMS = {v:.3g} over {sim['n'][k]}"
+              + (f"; independent rig 3 sqrt(2) sd = {ind:.3g}" if ind is not None else ""))
     out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"written {out}")
     return 0
