@@ -56,8 +56,8 @@ import numpy as np
 from blf.errors import AnalysisError, InputError
 from blf.validate import as_1d_finite, one_of, positive_scalar, same_shape, scalar
 
-__all__ = ["EffortMask", "Identifiability", "AxisFit", "ParameterChange", "CurrentGain",
-           "effort_mask", "axis_kinematics", "identifiability", "fit_axis", "compare_fits",
+__all__ = ["EffortMask", "Identifiability", "AxisFit", "ParameterChange", "CurrentGain", "EffortCheck",
+           "effort_mask", "effort_load_check", "axis_kinematics", "identifiability", "fit_axis", "compare_fits",
            "effort_to_force", "identify_current_per_force", "design_columns", "separable", "stroke_terms",
            "STROKE_TERMS", "NOMINAL_UNITS", "LAWS"]
 
@@ -135,6 +135,18 @@ class CurrentGain:
     law: str
     a_per_N: float
     uncertainty_a_per_N: float
+    words: str
+
+
+@dataclass(frozen=True)
+class EffortCheck:
+    """Whether the effort sees the recording's known load (:func:`effort_load_check`); forces in N."""
+
+    made: bool  #: False: the check could not be made (``words`` says why)
+    trusted: bool | None  #: None when not made
+    load_N: float | None  #: the known load, mean over the samples compared
+    seen_N: float | None  #: the load the effort implies: mean known load minus the fitted offset F_0
+    uncertainty_N: float | None  #: standard uncertainty of ``seen_N``
     words: str
 
 
@@ -594,3 +606,71 @@ def identify_current_per_force(current_A, load_N, v_dir, used, law: str) -> Curr
               + " is the load's)")
     return CurrentGain(law, k, uk, f"{law} law, k = {k:.4g} A/N from {int(u.sum())} samples at "
                        f"{levels.size} load level(s); the direction-dependent force offset {assume}")
+
+
+def effort_load_check(fit: AxisFit, load_N, used, allowance_N: float, z_min: float = 3.0,
+                      gain_rel_u: float = 0.0) -> EffortCheck:
+    """Whether the effort sees the recording's known external load with the sign the conversion predicts.
+
+    Parameters
+    ----------
+    fit : AxisFit
+        The nominal model fitted on the recording with its load (:func:`fit_axis`); its ``offset_N``
+        :math:`F_0` is the force along the motion's direction-dependent (``power`` law) or constant
+        (force, torque, ``torque`` law) part of the effort that the stated load does not explain.
+    load_N : array_like, shape (n,), or None
+        The known external force on the axis, N (positive along +q); None: no load column.
+    used : array_like of bool, shape (n,)
+        The samples compared.
+    allowance_N : float
+        The largest direction-dependent force change that is not named (the force floor), N.
+    z_min : float
+        Statistical support, as in :func:`compare_fits`.
+    gain_rel_u : float
+        Relative standard uncertainty of the conversion (e.g. of the current per newton), 1.
+
+    Returns
+    -------
+    EffortCheck
+
+    Notes
+    -----
+    The effort implies the load :math:`L_{seen} = \\bar L - F_0` (N) with standard uncertainty
+    :math:`u = \\sqrt{u_{F_0}^2 + (L_{seen}\\,u_k/k)^2}`. The check is made when the load is large
+    enough to be seen beyond what an unnamed change may hide and the two answers below are apart by
+    more than the statistics, :math:`|\\bar L| > \\max(z_{min} u + F_{allow},\\ 2 z_{min} u)`, and with
+    both directions of motion (else :math:`F_0` is one force with the friction). Two answers, the
+    nearer wins: the effort sees the load (:math:`L_{seen} = \\bar L` plus a change) or it does not
+    (:math:`L_{seen} = 0`: a re-levelled, unloaded or unrelated signal). The effort is **not
+    trusted** when it is nearer to seeing no load, or sees the opposite one:
+    :math:`L_{seen}\\,\\mathrm{sign}(\\bar L) \\le |\\bar L|/2`. Then at least half the known load,
+    more than the floor, is missing: the effort's force content, not the rig, is contradicted. A seen
+    load of the right sign nearer the known one is left to the comparison (a direction-dependent force
+    change: an offset, a direction-dependent friction, another load).
+    """
+    allow = scalar(allowance_N, "allowance_N", "N", lo=0)
+    z_min = positive_scalar(z_min, "z_min", "1")
+    rel = scalar(gain_rel_u, "gain_rel_u", "1", lo=0)
+    if load_N is None:
+        return EffortCheck(False, None, None, None, None, "no load column: the effort could not be checked "
+                           "against a known load")
+    u = np.asarray(used, bool)
+    L = as_1d_finite(load_N, "load_N", "N")
+    if L.shape != u.shape:
+        raise InputError(f"load_N has {L.size} samples, used {u.size}")
+    if "offset_N" not in fit.parameters or fit.uncertainty.get("offset_N", 0.0) == 0.0 or not u.any():
+        return EffortCheck(False, None, None, None, None, "one direction of motion: the direction-dependent "
+                           "force cannot be told from the friction; the effort could not be checked against the load")
+    lbar = float(np.mean(L[u]))
+    seen = lbar - float(fit.parameters["offset_N"])
+    unc = float(np.hypot(fit.uncertainty["offset_N"], seen * rel))
+    tol = max(z_min * unc + allow, 2 * z_min * unc)
+    if abs(lbar) <= tol:
+        return EffortCheck(False, None, lbar, seen, unc, f"the known load ({lbar:.4g} N) is within {tol:.4g} N "
+                           f"({z_min:g} u + the floor of {allow:g} N): too small to check the effort against")
+    ok = bool(seen * np.sign(lbar) > abs(lbar) / 2)
+    how = ("sees it" if ok else "sees the opposite load" if seen * np.sign(lbar) < -z_min * unc else
+           "does not see it (nearer to no load than to the known one)")
+    words = (f"known load {lbar:.4g} N; the effort implies {seen:.4g} ± {unc:.2g} N: it {how}"
+             + ("" if ok else ": its force content is contradicted by the known load; not diagnosed"))
+    return EffortCheck(True, ok, lbar, seen, unc, words)

@@ -53,3 +53,12 @@ def test_the_default_floor_is_three_times_the_rms_of_the_healthy_session_changes
     from hil.analysis.diagnose_axis import FORCE_FLOOR_N
     rep = repeatability(tmp_path)
     assert rep["floor_3rms_N"] <= FORCE_FLOOR_N <= rep["floor_3rms_N"] + 5.0  # rounded up to 5 N
+
+
+@pytest.mark.parametrize("load", [20, 40])
+def test_every_current_at_plus_20_and_40_kgf_sees_its_known_load(rows, load):
+    """The effort check (the effort must see the known load with its sign) passes on the usable rows."""
+    for name in cranfield.DEVELOPMENT:
+        r = rows[(name, load)]
+        assert r["effort_trusted"] and r["verdict"] != "untrusted_effort"
+        assert r["effort_sees_N"] > 0 and r["load_N"] > 0

@@ -63,12 +63,25 @@ def power_current(qr, q, d, friction_N, load_N, rng, offset_N=0.0, slope_N_per_m
     return i + rng.normal(0, 0.04, q.size)
 
 
+def relevel(i, d):
+    """The current re-levelled segment by segment: each stretch of one direction (and each dwell) shifted
+    so that its mean is the recording's mean over that kind of stretch (moving or standing)."""
+    i = i.copy()
+    edges = np.flatnonzero(np.diff(np.r_[np.nan, d, np.nan]) != 0)
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        level = np.mean(i[(d != 0) == (d[a] != 0)])
+        i[a:b] += level - np.mean(i[a:b])
+    return i
+
+
 def write_csv(path, cycles=10, friction_N=1600.0, load_N=196.0, seed=1, fs=FS, effort="current", offset_N=0.0,
-              slope_N_per_m=0.0):
+              slope_N_per_m=0.0, relevelled=False, load_column=True):
     rng = np.random.default_rng(seed)
     t, qr, q, d = trapezoid(cycles, rng=rng)
     e = power_current(qr, q, d, friction_N, load_N, rng, offset_N, slope_N_per_m)
-    cols = {"t": t * FS / fs, "q": q, "q_ref": qr, effort: e, "load": np.full(t.size, load_N)}
+    e = relevel(e, d) if relevelled else e
+    cols = {"t": t * FS / fs, "q": q, "q_ref": qr, effort: e} | ({"load": np.full(t.size, load_N)} if load_column
+                                                                 else {})
     np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="")
     return path
 
@@ -310,3 +323,91 @@ def test_a_torque_column_is_a_force_through_the_screw_lead(tmp_path):
     assert main(["diagnose", str(paths["torque"]), "--model", "single-axis", "--reference", str(paths["torque"]),
                  "--out", str(tmp_path / "o"), "--quiet"]) == 3  # no lead: bad input
     assert not (tmp_path / "o").exists()
+
+
+def _reference(tmp_path, new, ref, *extra):
+    out = tmp_path / "o"
+    code = main(["diagnose", str(new), "--model", "single-axis", "--reference", str(ref), "--current-law", "power",
+                 *extra, "--out", str(out), "--quiet"])
+    data = json.loads((out / "diagnosis.json").read_text())
+    jsonschema.validate(data, _schema())
+    return code, data
+
+
+def test_a_relevelled_current_is_untrusted_with_the_reason_and_nothing_named(tmp_path):
+    """The new recording's current re-levelled segment by segment (extension and retraction means equal): it
+    no longer sees the 196 N load; its friction change (+150 N, named when honest) is not diagnosed: exit 5."""
+    ref = write_csv(tmp_path / "ref.csv", seed=1)
+    new = write_csv(tmp_path / "new.csv", seed=2, friction_N=1750.0, relevelled=True)
+    code, data = _reference(tmp_path, new, ref)
+    assert code == 5
+    assert data["verdict"] == "untrusted_effort" and data["effects"] == []
+    eff = data["effort"]
+    assert eff["trusted"] is False and eff["recording"]["checked"] and eff["recording"]["trusted"] is False
+    assert eff["reference"]["trusted"] is True
+    assert abs(eff["recording"]["seen_N"]) < 196.0 / 2  # nearer to no load than to the known one
+    assert "does not see it" in eff["words"] and "new.csv" in eff["words"]
+    assert not any(c["named"] for c in data["changes"])
+    assert "not trusted" in (tmp_path / "o" / "diagnosis_report.html").read_text()
+
+
+def test_an_honest_current_sees_its_load_and_is_diagnosed(tmp_path):
+    ref = write_csv(tmp_path / "ref.csv", seed=1)
+    new = write_csv(tmp_path / "new.csv", seed=2, friction_N=1750.0)
+    code, data = _reference(tmp_path, new, ref, "--no-report")
+    assert code == 0 and data["verdict"] == "explained"
+    rec = data["effort"]["recording"]
+    assert data["effort"]["trusted"] and rec["checked"] and rec["trusted"]
+    assert rec["seen_N"] == pytest.approx(196.0, abs=3 * rec["uncertainty_N"] + 5.0)
+    assert "identified on this load" in data["effort"]["reference"]["words"]
+
+
+def test_with_a_stated_gain_a_relevelled_reference_is_untrusted(tmp_path):
+    ref = write_csv(tmp_path / "ref.csv", seed=1, relevelled=True)
+    new = write_csv(tmp_path / "new.csv", seed=2)
+    code, data = _reference(tmp_path, new, ref, "--current-per-force", str(K_A_PER_N), "--no-report")
+    assert code == 5 and data["verdict"] == "untrusted_effort"
+    assert data["effort"]["recording"]["trusted"] and data["effort"]["reference"]["trusted"] is False
+
+
+def test_without_a_load_column_the_effort_check_is_not_made_and_said_so(tmp_path):
+    ref = write_csv(tmp_path / "ref.csv", seed=1, load_column=False)
+    new = write_csv(tmp_path / "new.csv", seed=2, load_column=False)
+    code, data = _reference(tmp_path, new, ref, "--current-per-force", str(K_A_PER_N), "--no-report")
+    assert code == 0 and data["verdict"] != "untrusted_effort"
+    assert data["effort"]["trusted"] and not data["effort"]["recording"]["checked"]
+    assert "no load column" in data["effort"]["recording"]["words"]
+
+
+@pytest.mark.parametrize("offset, load, made, trusted, says", [
+    (0.0, 400.0, True, True, "sees it"),
+    (400.0, 400.0, True, False, "does not see it"),  # the effort shows no load
+    (800.0, 400.0, True, False, "sees the opposite load"),
+    (-800.0, -400.0, True, False, "sees the opposite load"),
+    (100.0, 400.0, True, True, "sees it"),  # another size, right sign, nearer the known load: left to the comparison
+    (250.0, 400.0, True, False, "does not see it"),  # 150 N of 400 N seen: nearer to no load
+    (0.0, 50.0, False, None, "too small"),  # within 3 u + the 75 N floor
+])
+def test_the_effort_must_see_the_known_load_with_its_sign(offset, load, made, trusted, says):
+    from blf.axis_reference import effort_load_check
+    fit = AxisFit({"friction_N": 1600.0, "offset_N": offset}, {"friction_N": 5.0, "offset_N": 5.0}, 1.0, 100, 10,
+                  0.024)
+    c = effort_load_check(fit, np.full(50, load), np.ones(50, bool), 75.0)
+    assert (c.made, c.trusted) == (made, trusted) and says in c.words
+    one_way = AxisFit({"friction_N": 1600.0}, {"friction_N": 5.0}, 1.0, 100, 10, 0.024)
+    assert not effort_load_check(one_way, np.full(50, load), np.ones(50, bool), 75.0).made
+
+
+@pytest.mark.parametrize("relevelled, code", [(True, 5), (False, 0)])
+def test_without_a_reference_a_recording_whose_current_does_not_see_its_load_is_not_diagnosed(tmp_path, relevelled,
+                                                                                            code):
+    new = write_csv(tmp_path / "new.csv", relevelled=relevelled)
+    out = tmp_path / "o"
+    assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--current-per-force",
+                 str(K_A_PER_N), "--out", str(out), "--quiet", "--no-report"]) == code
+    data = json.loads((out / "diagnosis.json").read_text())
+    jsonschema.validate(data, _schema())
+    assert data["effort"]["trusted"] is not relevelled and data["effort"]["recording"]["checked"]
+    assert (data["verdict"] == "untrusted_effort") is relevelled
+    if relevelled:
+        assert data["effects"] == [] and "does not see it" in data["effort"]["words"]

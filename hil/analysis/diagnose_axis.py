@@ -142,21 +142,22 @@ def _mask(rec: AxisRecording, opts: AxisOptions, *, reference_mode: bool = False
 
 
 def conversion(rec: AxisRecording, opts: AxisOptions, reference: AxisRecording | None = None) -> tuple:
-    """(A per N or None, words): how the effort becomes a force; :class:`RecordingError` where it cannot."""
+    """(A per N or None, words, relative standard uncertainty of the gain): how the effort becomes a force;
+    :class:`RecordingError` where it cannot (a stated gain or a force, torque: uncertainty 0)."""
     from blf.axis_reference import identify_current_per_force
     from blf.errors import AnalysisError
     if rec.kind == "force":
-        return None, "force column (N) as recorded"
+        return None, "force column (N) as recorded", 0.0
     if rec.kind == "torque":
         if opts.screw_lead_m is None:
             raise RecordingError(f"{rec.path}: a torque (N m) needs the screw lead (--screw-lead-m) to become a force")
-        return None, f"torque x 2 pi / lead ({opts.screw_lead_m:g} m per revolution)"
+        return None, f"torque x 2 pi / lead ({opts.screw_lead_m:g} m per revolution)", 0.0
     if opts.current_law is None:
         raise RecordingError(f"{rec.path}: a current (A) with no way to convert it: state --current-law (torque: "
                              "a phase current that follows the torque; power: a supply current that follows "
                              "mechanical power)")
     if opts.current_a_per_N is not None:
-        return opts.current_a_per_N, f"{opts.current_law} law, k = {opts.current_a_per_N:g} A/N (stated)"
+        return opts.current_a_per_N, f"{opts.current_law} law, k = {opts.current_a_per_N:g} A/N (stated)", 0.0
     src = reference
     if src is None or src.load is None:
         raise RecordingError(f"{rec.path}: a current (A) with no way to convert it: state --current-per-force, or "
@@ -166,7 +167,8 @@ def conversion(rec: AxisRecording, opts: AxisOptions, reference: AxisRecording |
         gain = identify_current_per_force(src.effort, src.load, _direction(src, m.moving), m.used, opts.current_law)
     except AnalysisError as exc:
         raise RecordingError(f"{src.path}: {exc}") from None
-    return gain.a_per_N, gain.words + f" (identified on the reference {src.path.name})"
+    return (gain.a_per_N, gain.words + f" (identified on the reference {src.path.name})",
+            gain.uncertainty_a_per_N / gain.a_per_N)
 
 
 def axis_force(rec: AxisRecording, opts: AxisOptions, k: float | None, moving: np.ndarray) -> np.ndarray:
@@ -304,7 +306,7 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     except RecordingError as exc:
         raise RecordingError(f"--reference: {exc} (a single-axis recording is needed)") from None
     _check_pair(new, ref)
-    k, conv_words = conversion(new, opts, ref)
+    k, conv_words, k_rel_u = conversion(new, opts, ref)
     pn, pr = _prepare(new, opts, k), _prepare(ref, opts, k)
     ident = _common(pr.ident, pn.ident, ref.path)
     origin, half, xr, xn, not_cand = _stroke_candidates(pr, pn, ref, new, ident)
@@ -318,9 +320,11 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
         raise RecordingError(f"{new.path}: {exc}") from None
     floors = _floors(opts, fr.running_speed_m_per_s, half)
     changes = compare_fits(fn, fr, floors, opts.z_min)
-    effects = [_effect(c) for c in changes if c.named]
+    effort = effort_checks(fn, fr, new, ref, pn, pr, opts, k_rel_u)
+    effects = [_effect(c) for c in changes if c.named] if effort["trusted"] else []
+    verdict = "untrusted_effort" if not effort["trusted"] else "explained" if effects else "no_mismatch"
     return {
-        "verdict": "explained" if effects else "no_mismatch", "model": "single-axis", "mode": "reference",
+        "verdict": verdict, "model": "single-axis", "mode": "reference", "effort": effort,
         "effects": effects, "where": [], "locations": [],
         "band": {"cutoff_hz": None, "step": 1, "words": "every sample kept (a least-squares fit of a model linear "
                  "in its parameters, uncertainties robust to correlation along a stroke)"},
@@ -328,7 +332,7 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
                       "residual_rms_N": _r(fr.residual_rms_N), "mask": _mask_dict(pr.mask)},
         "nominal": _rd(fn.parameters), "nominal_uncertainty": _rd(fn.uncertainty),
         "residual_rms_N": _r(fn.residual_rms_N), "mask": _mask_dict(pn.mask),
-        "changes": [_change(c) for c in changes],
+        "changes": [_change(c, effort["trusted"]) for c in changes],
         "floor": {"force_N": opts.force_floor_N, "z_min": opts.z_min, "words": (
             "a change is named only when |change| > z_min combined standard uncertainties and > its floor; "
             f"force parameters {opts.force_floor_N:g} N" + (" (default: 3 x RMS of the healthy Cranfield "
@@ -344,10 +348,32 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     }
 
 
-def _change(c) -> dict:
+def effort_checks(fn, fr, new: AxisRecording, ref: AxisRecording, pn, pr, opts: AxisOptions, k_rel_u: float) -> dict:
+    """diagnosis.json's ``effort``: does each recording's effort see its known load
+    (:func:`blf.axis_reference.effort_load_check`, allowance the force floor)? ``trusted`` is False when
+    either does not: its force content is contradicted by the load, nothing is diagnosed from it."""
+    from blf.axis_reference import effort_load_check
+    out, bad = {}, []
+    identified_on_ref = opts.current_a_per_N is None and new.kind == "current"
+    for key, fit, rec, p in (("recording", fn, new, pn), ("reference", fr, ref, pr)):
+        c = effort_load_check(fit, rec.load, p.mask.used, opts.force_floor_N, opts.z_min, k_rel_u)
+        words = c.words + ("; the conversion was identified on this load (consistent by construction)"
+                           if key == "reference" and identified_on_ref and c.made else "")
+        out[key] = {"path": str(rec.path), "checked": c.made, "trusted": c.trusted, "load_N": _r(c.load_N),
+                    "seen_N": _r(c.seen_N), "uncertainty_N": _r(c.uncertainty_N), "words": words}
+        if c.made and not c.trusted:
+            bad.append(f"{rec.path.name}: {c.words}")
+    out["trusted"] = not bad
+    out["words"] = ("; ".join(bad) if bad else "each effort that could be checked sees its known load with the "
+                    "sign the conversion predicts")
+    return out
+
+
+def _change(c, trusted: bool = True) -> dict:
+    words = c.words if trusted else c.words.split("; ")[0] + "; not diagnosed: the effort is not trusted"
     return {"parameter": c.name, "value": _r(c.value), "reference": _r(c.reference), "change": _r(c.change),
             "uncertainty": _r(c.uncertainty), "z": _r(c.z, 4), "floor": _r(c.floor),
-            "supported": c.supported, "above_floor": c.relevant, "named": c.named, "words": c.words}
+            "supported": c.supported, "above_floor": c.relevant, "named": c.named and trusted, "words": words}
 
 
 def _effect(c) -> dict:
@@ -365,13 +391,40 @@ def _rd(d: dict) -> dict:
     return {k: _r(v) for k, v in d.items()}
 
 
+def model_effort_check(path: Path, opts: AxisOptions) -> dict | None:
+    """Without a reference: diagnosis.json's ``effort`` of a single-axis recording with a known load (the
+    nominal model fitted on it alone, :func:`blf.axis_reference.effort_load_check`); None without a load."""
+    from blf.axis_reference import effort_load_check, fit_axis
+    from blf.errors import AnalysisError
+    rec = read_axis(path)
+    if rec.load is None:
+        return None
+    k, _, rel = conversion(rec, opts)
+    p = _prepare(rec, opts, k)
+    try:
+        fit = fit_axis(p.force, p.v, p.a, p.mask.used, p.ident, rec.load)
+    except AnalysisError as exc:
+        return {"trusted": True, "words": f"the effort could not be checked against the load ({exc})"}
+    c = effort_load_check(fit, rec.load, p.mask.used, opts.force_floor_N, opts.z_min, rel)
+    entry = {"path": str(rec.path), "checked": c.made, "trusted": c.trusted, "load_N": _r(c.load_N),
+             "seen_N": _r(c.seen_N), "uncertainty_N": _r(c.uncertainty_N), "words": c.words}
+    return {"trusted": not (c.made and not c.trusted), "words": c.words, "recording": entry}
+
+
+def untrusted_dict(effort: dict) -> dict:
+    """diagnosis.json of a recording whose effort is not trusted: the reason, nothing diagnosed."""
+    return {"verdict": "untrusted_effort", "model": "single-axis", "mode": "model", "effects": [], "where": [],
+            "locations": [], "effort": effort,
+            "band": {"cutoff_hz": None, "step": 1, "words": "nothing compared: the effort is not trusted"}}
+
+
 def single_axis_model(path: Path, opts: AxisOptions):
     """The replay model of :func:`blf.diagnose.diagnose` (no reference) and its sample period (s).
 
     A current needs its conversion stated (law and gain); the masked samples are not compared."""
     from sim.single_axis import SingleAxisReplay
     rec = read_axis(path)
-    k, _ = conversion(rec, opts)
+    k, _, _ = conversion(rec, opts)
     m = _mask(rec, opts)
     force = axis_force(rec, opts, k, m.moving)
     if rec.load is not None:

@@ -22,6 +22,15 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     opts = _axis_options(args)
     if args.reference is not None:
         return _cmd_reference(args, path, opts, console)
+    effort = _model_effort(args, path, opts)
+    if effort is not None and not effort["trusted"]:
+        from hil.analysis.diagnose_axis import untrusted_dict
+        outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
+                              ("diagnosis.json", "diagnosis_report.html"))
+        outputs.write_json("diagnosis.json", untrusted_dict(effort))
+        console.print(f"[bold]effort not trusted, not diagnosed[/bold]: {effort['words']}; written "
+                      f"{outputs.path('diagnosis.json')}")
+        return 5  # inconclusive: the reason is in diagnosis.json (README, Exit status)
     t0 = time.perf_counter()
     try:
         model, period = load_model(path, args.model, args.profile, opts)
@@ -43,6 +52,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         data["identifiability"] = ident
         if mask is not None:
             data["mask"] = mask
+    if effort is not None:
+        data["effort"] = effort
     outputs.write_json("diagnosis.json", data)
     if not args.no_report:
         outputs.write_with("diagnosis_report.html", lambda p: write_report(
@@ -80,6 +91,16 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def _model_effort(args: argparse.Namespace, path: Path, opts):
+    """Single axis with a load column, no reference: whether its effort sees the load (None otherwise)."""
+    if args.model != "single-axis" or path.is_dir() or path.suffix.lower() == ".mat":
+        return None
+    from hil.analysis.diagnose_axis import AxisOptions, model_effort_check
+    floor = args.force_floor_N if args.force_floor_N is not None else AxisOptions().force_floor_N
+    import dataclasses
+    return model_effort_check(path, dataclasses.replace(opts, force_floor_N=floor))
+
+
 def _axis_options(args: argparse.Namespace):
     from hil.analysis.diagnose_axis import FORCE_FLOOR_N, AxisOptions
     from hil.errors import RecordingError
@@ -96,10 +117,10 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
     """``--reference``: single axis against a healthy recording; everything checked before anything is written."""
     from hil.analysis.diagnose_axis import reference_diagnosis
     from hil.errors import RecordingError
-    if args.model != "single-axis":
-        raise RecordingError("--reference: only with --model single-axis so far (the dual-EMA model: a later issue)")
     if not Path(args.reference).exists():
         raise RecordingError(f"--reference {args.reference}: no such file")
+    if args.model != "single-axis":
+        return _cmd_dual_reference(args, path, console)
     t0 = time.perf_counter()
     data = reference_diagnosis(path, Path(args.reference), opts)
     data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
@@ -109,13 +130,33 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
         from hil.report.diagnose import write_reference_report
         outputs.write_with("diagnosis_report.html", lambda p: write_reference_report(
             p, data, json_name=outputs.path("diagnosis.json").name))
-    console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
-                  f"{args.reference} ({data['diagnosis_s']:.1f} s); effort: {data['conversion']}")
+    untrusted = data["verdict"] == "untrusted_effort"
+    head = ("effort not trusted, not diagnosed" if untrusted else
+            "changes named" if data["effects"] else "no change above its floor")
+    console.print(f"[bold]{head}[/bold] against {args.reference} ({data['diagnosis_s']:.1f} s); effort: "
+                  f"{data['conversion']}")
+    console.print(f"  effort against the known load: {data['effort']['words']}")
     for c in data["changes"]:
         console.print(f"  {c['parameter']}: {c['words']}")
     for m in data["identifiability"]["cannot_tell_apart"]:
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
     console.print(f"  masked: {data['mask']['words']}")
+    console.print(f"  written {outputs.path('diagnosis.json')}")
+    return 5 if untrusted else 0  # inconclusive: the reason is in diagnosis.json (README, Exit status)
+
+
+def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
+    """``--reference`` with the dual-EMA model: each nominal parameter against the reference's."""
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    t0 = time.perf_counter()
+    data = dual_reference_diagnosis(path, Path(args.reference), args.profile)
+    data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
+    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json",))
+    outputs.write_json("diagnosis.json", data)
+    console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
+                  f"{args.reference} ({data['diagnosis_s']:.1f} s)")
+    for c in data["changes"]:
+        console.print(f"  {c['parameter']} ({c['where']}): {c['words']}")
     console.print(f"  written {outputs.path('diagnosis.json')}")
     return 0
 
@@ -135,7 +176,8 @@ def register(sub) -> None:
                    help="dual-EMA rig (default) or a single positioning axis (e.g. EMPS)")
     p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")
     p.add_argument("--reference", metavar="HEALTHY", type=Path,
-                   help="single axis: compare with this healthy recording (same columns and sample rate): the "
+                   help="compare with this healthy recording of the same rig (single axis: same columns and sample "
+                        "rate; dual-EMA: a run folder or recording): the "
                         "nominal model identified on both, each parameter's change with its uncertainty, named "
                         "only above its floor")
     p.add_argument("--current-law", choices=("torque", "power"),

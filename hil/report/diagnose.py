@@ -156,7 +156,8 @@ def write_reference_report(path: Path, data: dict, *, json_name: str = "diagnosi
     """The report of ``diagnose --reference`` (single axis): each nominal parameter against its reference
     value, the floors, what this recording cannot tell apart, the masked samples."""
     from blf.axis_reference import NOMINAL_UNITS
-    verdict = "changes named" if data["effects"] else "no change above its floor"
+    verdict = ("effort not trusted: not diagnosed" if data["verdict"] == "untrusted_effort" else
+               "changes named" if data["effects"] else "no change above its floor")
     g = lambda x: "—" if x is None else f"{x:.4g}"  # noqa: E731
     rows = [(c["parameter"], NOMINAL_UNITS.get(c["parameter"], ""), g(c["reference"]), g(c["value"]),
              f"{g(c['change'])} ± {g(c['uncertainty'])}", g(c["z"]), g(c["floor"]),
@@ -167,6 +168,7 @@ def write_reference_report(path: Path, data: dict, *, json_name: str = "diagnosi
         "<h1>Single axis against a reference</h1>",
         f"<p><b>{esc(verdict)}</b> ({esc(data['verdict'])}); reference {esc(data['reference']['recording'])}</p>",
         f"<p>Effort: {esc(data['conversion'])}</p>",
+        f"<p>Effort against the known load: {esc(data['effort']['words'])}</p>",
         f"<p>{esc(data['floor']['words'])}</p>",
         "<h2>Nominal parameters against the reference</h2>",
         table(["parameter", "unit", "reference", "this recording", "change ± u", "z", "floor", "status"], rows),

@@ -4,12 +4,13 @@ Each development condition at +20 and +40 kgf against ``normal`` at the same loa
 ``normal`` runs 6-10 against runs 1-5 (two test sessions of the healthy actuator); the -40 kgf rows
 are printed too, marked: the README says their current was re-levelled segment by segment.
 
-Per row: the verdict, the effects named, the change of the friction at the running speed with its
-uncertainty and the floor, the change of the direction-dependent force, the largest change of the
-terms along the stroke (as a force at the end of the stroke, N), and what the raw current
-says (:func:`raw_friction_change`: the direction-mean current of the steady part of each stroke,
-samples 40-119 and 220-299 of every cycle, against the reference's, divided by the current per
-newton from the reference's half-difference and its load; no mask, no fit).
+Per row: the verdict, the effects named, the load the new recording's effort sees against the known one
+(``effort`` in diagnosis.json: a recording whose effort does not see its load is ``untrusted_effort``),
+the change of the friction at the running speed with its uncertainty and the floor, the change of the
+direction-dependent force, the largest change of the terms along the stroke (as a force at the end of
+the stroke, N), and what the raw current says (:func:`raw_friction_change`: the direction-mean current
+of the steady part of each stroke, samples 40-119 and 220-299 of every cycle, against the reference's,
+divided by the current per newton from the reference's half-difference and its load; no mask, no fit).
 
     python tests/bench/bench_diagnose_cranfield.py /tmp/cranfield.json [--repeatability]
 
@@ -69,7 +70,10 @@ def _row(name, load, data, raw) -> dict:
             "offset_change_N": o.get("change"), "offset_u_N": o.get("uncertainty"),
             "along_stroke_change_N": max(along, default=None),
             "floor_N": data["floor"]["force_N"], "raw_current_friction_change_N": raw,
-            "samples_used": data["mask"]["samples_used"], "conversion": data["conversion"]}
+            "samples_used": data["mask"]["samples_used"], "conversion": data["conversion"],
+            "effort_trusted": data["effort"]["trusted"], "load_N": data["effort"]["recording"]["load_N"],
+            "effort_sees_N": data["effort"]["recording"]["seen_N"],
+            "effort_sees_u_N": data["effort"]["recording"]["uncertainty_N"]}
 
 
 def table(folder: Path, loads=(20, 40), conditions=DEVELOPMENT, **opts) -> list:
@@ -111,15 +115,16 @@ def main(argv: list[str]) -> int:
         rows = table(Path(tmp), loads=(20, 40, -40))
     result["rows"] = rows
     print("| condition | load kgf | verdict | named | friction change N (± u) | direction-dependent change N (± u) "
-          "| largest change along the stroke N | floor N | raw current says N |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| largest change along the stroke N | floor N | raw current says N | effort sees load N (± u) of |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         mark = " (current re-levelled, README)" if r["load_kgf"] < 0 else ""
         print(f"| {r['condition']}{' 6-10 vs 1-5' if r['condition'] == 'normal' else ''} | {r['load_kgf']:+d}{mark} "
               f"| {r['verdict']} | {', '.join(r['named']) or '-'} | {r['friction_change_N']:+.1f} ± "
               f"{r['friction_u_N']:.1f} | {r['offset_change_N']:+.1f} ± {r['offset_u_N']:.1f} "
               f"| {r['along_stroke_change_N']:.1f} | {r['floor_N']:g} "
-              f"| {r['raw_current_friction_change_N']:+.1f} |")
+              f"| {r['raw_current_friction_change_N']:+.1f} | {r['effort_sees_N']:+.0f} ± {r['effort_sees_u_N']:.0f} "
+              f"of {r['load_N']:+.0f}{'' if r['effort_trusted'] else ' untrusted'} |")
     out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"written {out}")
     return 0

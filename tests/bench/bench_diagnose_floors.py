@@ -1,0 +1,168 @@
+"""Benchmark: how repeatable the dual-EMA model's nominal parameters are (the floors of issue 35, part 2).
+
+A change between two checks of one rig is named only above its relevance floor; this script measures
+the floors' data in each parameter's unit (play in um, stiffness and LVDT pitch in %, frictions in N):
+
+* **independent rig** (../shared/data/independent-rig, the effect-free recordings ``null-*`` and
+  ``pitch-*``, whose keys give the true internal play and contact stiffness of each EMA): the
+  identification error of ``emacheck diagnose``'s nominal fit, fitted minus true, per EMA. Its
+  standard deviation sigma over recordings and EMAs (the mean, a bias every check of one rig shares,
+  cancels in a change) gives the floor of a change between two checks, ``3 sqrt(2) sigma`` (two
+  independent errors, the same factor 3 as the statistical test);
+* **own simulator**: three healthy checks of the shipped simulated rig (``emacheck simulate``) with
+  noise seeds 11, 12, 13: the change of every nominal parameter between each pair, and per kind
+  3 x their RMS (the pairs share checks: three checks, not three independent pairs).
+
+The default floor of a kind is the larger of the two, rounded up.
+
+    python tests/bench/bench_diagnose_floors.py /tmp/floors.json [--sim RUN_A RUN_B RUN_C | --no-sim]
+
+``--sim`` takes three run folders already simulated (``emacheck simulate --seed 11 --out RUN_A``, and
+``--seed 12``, ``--seed 13``); without it they are simulated here (about 30 s). About 2 min on one core.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+TESTS = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(TESTS.parent), str(TESTS)]
+
+from support.independent_rig import DATA, KEYS, diagnose_file  # noqa: E402
+
+#: nominal parameter prefix -> (floor key of hil.analysis.diagnose_floors.DUAL_FLOORS, unit)
+KINDS = {"backlash_int": ("play_um", "um"), "backlash_bearing": ("play_um", "um"),
+         "stiffness_int": ("stiffness_pct", "%"), "compliance_ext": ("stiffness_pct", "%"),
+         "lvdt_pitch": ("sensor_gain_pct", "%"), "lvdt_offset": ("play_um", "um"),
+         "hinge_coulomb_N": ("friction_N", "N"), "drive_coulomb_N": ("friction_N", "N")}
+SEEDS = (11, 12, 13)
+
+
+def _kind(name: str):
+    return next((v for k, v in KINDS.items() if name.startswith(k)), None)
+
+
+def change_in_unit(name: str, new: float, ref: float) -> float:
+    """A nominal parameter's change in its floor's unit: um for a play or an offset (values in mm), % of
+    the reference for a stiffness, a compliance or a pitch, N for a friction."""
+    kind = _kind(name)
+    if kind is None:
+        return float("nan")
+    if kind[1] == "um":
+        return 1000.0 * (new - ref)
+    if kind[1] == "%":
+        return 100.0 * (new / ref - 1.0)
+    return new - ref
+
+
+def independent() -> dict:
+    """Fitted minus true internal play (um) and contact stiffness (%), per effect-free recording and EMA."""
+    rows = []
+    for name in sorted(n for n, k in KEYS.items() if not k["expect"]):
+        d, secs = diagnose_file(DATA / f"{name}.csv.gz")
+        truth = KEYS[name]["truth"]
+        for e in (1, 2):
+            play = d.nominal[f"backlash_int{e}_mm"]
+            k = d.nominal[f"stiffness_int{e}_N_per_mm"]
+            rows.append({"recording": name, "ema": e, "play_fit_um": 1000 * play,
+                         "play_true_um": 1000 * truth["backlash_mm"][f"int{e}"],
+                         "stiffness_fit_N_per_mm": k,
+                         "stiffness_true_N_per_mm": truth["stiffness_N_per_mm"][f"int{e}"]["compression"],
+                         "pitch_fit": d.nominal[f"lvdt_pitch{e}"], "pitch_true": KEYS[name]["lvdt_pitch"][e - 1],
+                         "cpu_s": secs})
+    for r in rows:
+        r["play_error_um"] = r["play_fit_um"] - r["play_true_um"]
+        r["stiffness_error_pct"] = 100 * (r["stiffness_fit_N_per_mm"] / r["stiffness_true_N_per_mm"] - 1)
+        r["pitch_error_pct"] = 100 * (r["pitch_fit"] / r["pitch_true"] - 1)
+    out = {"rows": rows}
+    for key, kind in (("play_error_um", "play_um"), ("stiffness_error_pct", "stiffness_pct"),
+                      ("pitch_error_pct", "sensor_gain_pct")):
+        x = np.array([r[key] for r in rows])
+        sd = float(np.std(x, ddof=1))
+        out[kind] = {"mean": float(x.mean()), "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd, "n": int(x.size)}
+    return out
+
+
+def simulated(runs) -> dict:
+    """The change of every nominal parameter between each pair of healthy simulated checks, and per floor
+    kind 3 x the RMS of those changes."""
+    from itertools import combinations
+
+    from blf.diagnose import diagnose
+    from hil.analysis.diagnose import load_model
+    nom = []
+    for run in runs:
+        model, period = load_model(run, "dual-ema", None)
+        nom.append(diagnose(model, period).nominal)
+    pairs = {}
+    for i, j in combinations(range(len(runs)), 2):
+        pairs[f"{SEEDS[j]} vs {SEEDS[i]}"] = {n: change_in_unit(n, nom[j][n], nom[i][n]) for n in nom[0] if _kind(n)}
+    kinds = {}
+    for ch in pairs.values():
+        for n, v in ch.items():
+            kinds.setdefault(_kind(n)[0], []).append(v)
+    return {"pairs": pairs, "floor_3rms": {k: 3 * float(np.sqrt(np.mean(np.square(v)))) for k, v in kinds.items()},
+            "n": {k: len(v) for k, v in kinds.items()}}
+
+
+def _simulate(folder: Path) -> tuple:
+    runs = []
+    for seed in SEEDS:
+        out = folder / f"sim{seed}"
+        subprocess.run([sys.executable, "-m", "hil", "simulate", "--seed", str(seed), "--out", str(out), "--quiet"],
+                       check=True, cwd=TESTS.parent, capture_output=True)
+        runs.append(out)
+    return tuple(runs)
+
+
+def main(argv: list[str]) -> int:
+    out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_floors.json"))
+    result = {}
+    if (DATA / "keys.json").exists():
+        ind = independent()
+        result["independent"] = ind
+        print("| recording | EMA | play fit um | play true um | error um | stiffness fit N/mm | true N/mm | error % "
+              "| LVDT pitch error % |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        for r in ind["rows"]:
+            print(f"| {r['recording']} | {r['ema']} | {r['play_fit_um']:.2f} | {r['play_true_um']:.2f} "
+                  f"| {r['play_error_um']:+.2f} | {r['stiffness_fit_N_per_mm']:.0f} "
+                  f"| {r['stiffness_true_N_per_mm']:.0f} | {r['stiffness_error_pct']:+.2f} "
+                  f"| {r['pitch_error_pct']:+.4f} |")
+        for kind in ("play_um", "stiffness_pct", "sensor_gain_pct"):
+            s = ind[kind]
+            print(f"{kind}: error mean {s['mean']:+.3g}, sd {s['sd']:.3g} over {s['n']}; "
+                  f"floor 3 sqrt(2) sd = {s['floor_3sqrt2_sd']:.3g}")
+    else:
+        print(f"independent-rig recordings not present at {DATA}")
+    if "--no-sim" in argv:
+        out.write_text(json.dumps(result, indent=1) + "\n")
+        return 0
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = tuple(Path(a) for a in argv[argv.index("--sim") + 1:argv.index("--sim") + 1 + len(SEEDS)]) \
+            if "--sim" in argv else _simulate(Path(tmp))
+        sim = simulated(runs)
+    result["simulated"] = sim
+    names = list(next(iter(sim["pairs"].values())))
+    print("| nominal parameter | unit | " + " | ".join(sim["pairs"]) + " |")
+    print("|---|---|" + "---|" * len(sim["pairs"]))
+    for n in names:
+        print(f"| {n} | {_kind(n)[1]} | " + " | ".join(f"{ch[n]:+.3g}" for ch in sim["pairs"].values()) + " |")
+    for k, v in sim["floor_3rms"].items():
+        ind = result.get("independent", {}).get(k.replace("_N", "_N"), {}).get("floor_3sqrt2_sd")
+        print(f"{k}: simulated pairs 3 x RMS = {v:.3g} over {sim['n'][k]}"
+              + (f"; independent rig 3 sqrt(2) sd = {ind:.3g}" if ind is not None else ""))
+    out.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"written {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,101 @@
+"""Benchmark: ``emacheck diagnose NEW --reference HEALTHY`` on pairs of dual-EMA checks of one rig (issue 35).
+
+Simulated checks (``emacheck simulate``) of the shipped rig, healthy with noise seeds 11, 12 and 13, and
+changed rigs with seed 13 (a copy of profiles/simrig.toml with one key changed): the contact stiffness of
+EMA 1 down 20 %, the internal play of EMA 2 up 30 um. Each changed check against the seed-11 one, and the
+healthy checks against each other. Prints a table (verdict, what is named, the target parameter's change
+and whether it is within 30 % of the truth; for healthy pairs whether nothing is named) and writes JSON.
+
+    python tests/bench/bench_diagnose_reference_pairs.py /tmp/pairs.json
+
+About 3 min on one core (five simulations, five pairs, each pair fits both checks).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+TESTS = Path(__file__).resolve().parents[1]
+ROOT = TESTS.parent
+SIMRIG = ROOT / "profiles" / "simrig.toml"
+
+#: name -> (simrig section, {key: value}, seed, truth in words, target parameter, true change in its unit)
+CHECKS = {
+    "healthy11": (None, {}, 11, "healthy", None, None),
+    "healthy12": (None, {}, 12, "healthy", None, None),
+    "healthy13": (None, {}, 13, "healthy", None, None),
+    "stiffness1": ("ema1", {"stiffness_compression_N_per_mm": 64000.0, "stiffness_tension_N_per_mm": 64000.0}, 13,
+                   "EMA 1 contact stiffness 80000 -> 64000 N/mm (-20 %)", "stiffness_int1_N_per_mm", -20.0),
+    "play2": ("ema2", {"backlash_int_mm": 0.15}, 13, "EMA 2 internal play 0.12 -> 0.15 mm (+30 um)",
+              "backlash_int2_mm", 30.0),
+}
+PAIRS = (("stiffness1", "healthy11"), ("play2", "healthy11"), ("healthy12", "healthy11"),
+         ("healthy13", "healthy11"), ("healthy13", "healthy12"))
+
+
+def rig(path: Path, section: str, values: dict) -> Path:
+    """A copy of the shipped simulated rig with ``values`` set in ``[section]``."""
+    text = SIMRIG.read_text()
+    i = text.index(f"[{section}]")
+    j = text.find("\n[", i + 1)
+    sec = text[i:j]
+    for key, val in values.items():
+        sec, n = re.subn(rf"(?m)^{key}\s*=.*$", f"{key} = {val!r}", sec)
+        if n != 1:
+            raise KeyError(f"{section}.{key} not in {SIMRIG}")
+    path.write_text(text[:i] + sec + text[j:])
+    return path
+
+
+def simulate(folder: Path, name: str) -> Path:
+    section, values, seed, *_ = CHECKS[name]
+    out = folder / name
+    cmd = [sys.executable, "-m", "hil", "simulate", "--seed", str(seed), "--out", str(out), "--quiet"]
+    if section is not None:
+        cmd += ["--sim", str(rig(folder / f"{name}.toml", section, values))]
+    subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True)
+    return out
+
+
+def row(new: str, ref: str, data: dict) -> dict:
+    truth, param, true = CHECKS[new][3], CHECKS[new][4], CHECKS[new][5]
+    unit = {c["parameter"]: c["unit"] for c in data["changes"]}
+    named = [f"{e['name']} at {e['where']} {v:+.3g} {unit[p]}" for e in data["effects"] for p, v in e["change"].items()]
+    out = {"pair": f"{new} vs {ref}", "truth": truth, "verdict": data["verdict"], "named": named}
+    if param is None:
+        out["right"] = not data["effects"]
+        out["target"] = "-"
+    else:
+        c = next(c for c in data["changes"] if c["parameter"] == param)
+        e = [e for e in data["effects"] if param in e["change"]]
+        out["right"] = bool(e and e[0]["where"] == c["where"] and abs(c["change"] / true - 1) <= 0.3)
+        out["target"] = f"{param} {c['change']:+.3g} {c['unit']} (true {true:+g}, floor {c['floor']:g})"
+    return out
+
+
+def main(argv: list[str]) -> int:
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_reference_pairs.json"))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = {name: simulate(Path(tmp), name) for name in CHECKS}
+        for new, ref in PAIRS:
+            rows.append(row(new, ref, dual_reference_diagnosis(runs[new], runs[ref], None)))
+    print("| pair | truth | verdict | named (change) | target parameter: change | right |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['pair']} | {r['truth']} | {r['verdict']} | {', '.join(r['named']) or '-'} | {r['target']} "
+              f"| {'yes' if r['right'] else 'no'} |")
+    out.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
+    print(f"written {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path[:0] = [str(ROOT), str(TESTS)]
+    sys.exit(main(sys.argv[1:]))
