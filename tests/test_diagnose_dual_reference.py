@@ -9,28 +9,14 @@ Each change is named at the right EMA with the right sign and a size within 30 %
 from __future__ import annotations
 
 import json
-import re
-from pathlib import Path
 
 import jsonschema
 import pytest
 
 from hil.cli import main
+from support.profiles import write_profile_variant
 
 pytestmark = pytest.mark.slow
-SIMRIG = Path(__file__).resolve().parents[1] / "profiles" / "simrig.toml"
-
-
-def _rig(path: Path, section: str, values: dict) -> Path:
-    text = SIMRIG.read_text()
-    i = text.index(f"[{section}]")
-    j = text.find("\n[", i + 1)
-    sec = text[i:j]
-    for key, val in values.items():
-        sec, n = re.subn(rf"(?m)^{key}\s*=.*$", f"{key} = {val!r}", sec)
-        assert n == 1, key
-    path.write_text(text[:i] + sec + text[j:])
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +34,7 @@ def healthy(tmp_path_factory):
 def test_a_changed_rig_is_named_at_the_right_ema_with_sign_and_size(healthy, tmp_path, section, values, param,
                                                                      where, change):
     run = tmp_path / "changed"
-    rig = _rig(tmp_path / "rig.toml", section, values)
+    rig = write_profile_variant("simrig.toml", tmp_path / "rig.toml", {section: values})
     assert main(["simulate", "--sim", str(rig), "--seed", "13", "--out", str(run), "--quiet"]) == 0
     out = tmp_path / "o"
     assert main(["diagnose", str(run), "--reference", str(healthy), "--out", str(out), "--quiet"]) == 0

@@ -14,7 +14,6 @@ About 3 min on one core (five simulations, five pairs, each pair fits both check
 from __future__ import annotations
 
 import json
-import re
 import subprocess
 import sys
 import tempfile
@@ -22,7 +21,6 @@ from pathlib import Path
 
 TESTS = Path(__file__).resolve().parents[1]
 ROOT = TESTS.parent
-SIMRIG = ROOT / "profiles" / "simrig.toml"
 
 #: name -> (simrig section, {key: value}, seed, truth in words, target parameter, true change in its unit)
 CHECKS = {
@@ -40,16 +38,9 @@ PAIRS = (("stiffness1", "healthy11"), ("play2", "healthy11"), ("healthy12", "hea
 
 def rig(path: Path, section: str, values: dict) -> Path:
     """A copy of the shipped simulated rig with ``values`` set in ``[section]``."""
-    text = SIMRIG.read_text()
-    i = text.index(f"[{section}]")
-    j = text.find("\n[", i + 1)
-    sec = text[i:j]
-    for key, val in values.items():
-        sec, n = re.subn(rf"(?m)^{key}\s*=.*$", f"{key} = {val!r}", sec)
-        if n != 1:
-            raise KeyError(f"{section}.{key} not in {SIMRIG}")
-    path.write_text(text[:i] + sec + text[j:])
-    return path
+    from support.profiles import write_profile_variant
+
+    return write_profile_variant("simrig.toml", path, {section: values})
 
 
 def simulate(folder: Path, name: str) -> Path:
