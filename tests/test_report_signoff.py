@@ -17,6 +17,7 @@ import pytest
 
 from blf import blf_maint
 from blf.verdict import decide, maint_uncertainty, overall
+from hil.analysis.maint import verdict_entry
 from hil.report import shell
 from hil.report.maint import figure_dfdd, figure_lines, head_parts, reading_text, uncertainty_section
 from support.blfmaint_data import FS_HZ, make_force_fight
@@ -47,12 +48,7 @@ def make_result(*, backlash=None, limits=None, mode="run", operator="A. Inspecto
             u = maint_uncertainty(b, SIGMA[ch], 1e-5)
             v = decide(b, u.expanded_mm, limits[ch])
         decided[ch] = v
-        verdict[ch] = {"status": v.status, "backlash_mm": v.backlash_mm, "uncertainty_mm": v.uncertainty_mm,
-                       "limit_mm": v.limit_mm, "margin_mm": v.margin_mm, "reason": v.reason,
-                       "uncertainty_budget_mm": None if u is None else {
-                           "statistical": u.statistical_mm, "pitch": u.pitch_mm, "temperature": u.temperature_mm,
-                           "method": u.method_mm, "combined": u.combined_mm, "expanded": u.expanded_mm,
-                           "coverage_factor": u.coverage_factor}}
+        verdict[ch] = verdict_entry(v, u)
     result = {
         "status": overall(decided), "verdict": verdict, "decision_rule": RULE,
         "backlash_mm": dict(backlash),

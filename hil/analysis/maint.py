@@ -162,6 +162,17 @@ def _f(x: float) -> float:
     return float(x)
 
 
+def verdict_entry(v, u) -> dict:
+    """result.json's ``verdict`` entry of one channel: its decision ``v`` (:class:`blf.verdict.Verdict`) and
+    the uncertainty budget ``u`` behind it (None where the channel was not measured)."""
+    return {"status": v.status, "backlash_mm": v.backlash_mm, "uncertainty_mm": v.uncertainty_mm,
+            "limit_mm": v.limit_mm, "margin_mm": v.margin_mm, "reason": v.reason,
+            "uncertainty_budget_mm": None if u is None else {
+                "statistical": u.statistical_mm, "pitch": u.pitch_mm, "temperature": u.temperature_mm,
+                "method": u.method_mm, "combined": u.combined_mm, "expanded": u.expanded_mm,
+                "coverage_factor": u.coverage_factor}}
+
+
 def result_dict(an: Analysis, act: Actuation, truth: dict | None = None) -> dict:
     """result.json content (names and units as in the README)."""
     bl, bls, st, stsig, extra = {}, {}, {}, {}, {}
@@ -185,13 +196,7 @@ def result_dict(an: Analysis, act: Actuation, truth: dict | None = None) -> dict
             "rmse_mm": _f(c.rmse_mm)}
     verdict = {}
     for ch in CHANNELS:
-        v, u = an.verdicts[ch], an.uncertainty[ch]
-        verdict[ch] = {"status": v.status, "backlash_mm": v.backlash_mm, "uncertainty_mm": v.uncertainty_mm,
-                       "limit_mm": v.limit_mm, "margin_mm": v.margin_mm, "reason": v.reason,
-                       "uncertainty_budget_mm": None if u is None else {
-                           "statistical": u.statistical_mm, "pitch": u.pitch_mm, "temperature": u.temperature_mm,
-                           "method": u.method_mm, "combined": u.combined_mm, "expanded": u.expanded_mm,
-                           "coverage_factor": u.coverage_factor}}
+        verdict[ch] = verdict_entry(an.verdicts[ch], an.uncertainty[ch])
     out = {
         "status": an.status,
         "verdict": verdict,
