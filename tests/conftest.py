@@ -8,10 +8,17 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
-import pytest
+# One OpenBLAS thread for the tests and every command they start (subprocesses inherit it); set
+# before numpy is first imported, which loads OpenBLAS. The tests' matrices are small, and on a
+# shared machine OpenBLAS's second thread waits for a busy core: test_blf_maint.py took 15-31 s with
+# the default threads and 4-5 s with one, back to back at load average 3.5-3.9 (docs/performance.md,
+# "Test suite cost"). An explicit setting wins. The product is unchanged (results agree within an ulp).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from hil.profiles import load_actuation, load_check, load_simrig
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from hil.profiles import load_actuation, load_check, load_simrig  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 

@@ -105,9 +105,11 @@ def test_analyze_from_can_log_alone(dry_run, tmp_path):
     assert any("decoded from CAN log" in n for n in res["notes"])
 
 
+@pytest.mark.slow
 def test_analyze_reads_a_gzipped_can_log_directly(dry_run, tmp_path):
     """A bare can.log.gz (no run folder, no meta.json): decoded as it is, the segments found from the
-    data, the same backlash as the check's own result."""
+    data, the same backlash as the check's own result. (A whole dry-run and a whole analysis: slow. The
+    fast loop decodes a short run's gzipped log against its plain one, test_faults_bad_input.py.)"""
     import gzip
 
     out, _ = dry_run

@@ -212,6 +212,30 @@ def test_the_can_log_reader_closes_its_file_however_the_reading_ends(tmp_path, m
     assert opened[0].closed and counts == {"frames": 1, "bad": 0}
 
 
+def test_a_gzipped_can_log_decodes_as_the_plain_one(tmp_path, short_run, actuation):
+    """``can.log.gz`` is read through gzip (the line check and the frame reader): the same signals and
+    counts as the plain log. (The whole analysis of a bare can.log.gz against the check's own result is
+    test_dry_run.py's, slow.)"""
+    import gzip
+
+    from hil.canlog import decode_can_log
+    from hil.runfolder import EXTRA_COLUMNS, SIGNAL_COLUMNS, is_can_log
+
+    gz = tmp_path / "can.log.gz"
+    with gzip.open(gz, "wb") as fh:
+        fh.write((short_run / "can.log").read_bytes())
+    assert is_can_log(gz)
+    plain, packed = decode_can_log(short_run / "can.log", actuation), decode_can_log(gz, actuation)
+    assert packed.signals.n == plain.signals.n > 1000
+    assert (packed.frames, packed.syncs, packed.incomplete_cycles, packed.bad_lines) == \
+        (plain.frames, plain.syncs, plain.incomplete_cycles, plain.bad_lines)
+    assert packed.signals.notes == tuple(n.replace("CAN log can.log:", "CAN log can.log.gz:")
+                                         for n in plain.signals.notes)
+    assert packed.signals.notes[0].startswith("decoded from CAN log can.log.gz: ")
+    for name in SIGNAL_COLUMNS + EXTRA_COLUMNS:
+        np.testing.assert_array_equal(getattr(packed.signals, name), getattr(plain.signals, name), err_msg=name)
+
+
 def test_the_can_log_reader_times_a_sample_by_its_sync_period_not_by_count_or_stamp(tmp_path, short_run, actuation):
     """A SYNC period with no SYNC in the log (the loop-timed SYNC skipped one) leaves its slot empty:
     the samples after it keep their own times (counted, they would all be one period early). A SYNC

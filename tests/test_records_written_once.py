@@ -22,6 +22,7 @@ from hil.cli.common import ExitCode, Outputs, default_out, out_dir, outputs_for
 from hil.errors import OutputError
 from hil.runfolder import create_json, create_with
 from support.diagnose_cases import base_params, record, short_check
+from support.figures import figures_unrendered
 
 
 def tree(folder: Path) -> dict[str, str]:
@@ -33,7 +34,7 @@ def tree(folder: Path) -> dict[str, str]:
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     """A run folder of a short simulated check (~1 s) with its own result.json and report.html, as the
-    check writes them at its end."""
+    check writes them at its end (its figures not drawn: support/figures.py)."""
     from hil.cli.check import analyze_and_report
     from hil.cli.common import make_console
     from hil.profiles import load_actuation
@@ -42,8 +43,9 @@ def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("once") / "run"
     record(base_params(), 1, out, short_check())
     act = load_actuation(None)
-    result = analyze_and_report(out / "signals.csv", act, Outputs(out, own=True), None, read_record(out),
-                                make_console(quiet=True))
+    with figures_unrendered():
+        result = analyze_and_report(out / "signals.csv", act, Outputs(out, own=True), None, read_record(out),
+                                    make_console(quiet=True))
     assert result["status"] == "pass"
     return out
 
@@ -171,7 +173,8 @@ def test_analyze_out_the_run_folder_keeps_the_checks_own_files(run_copy, tmp_pat
     before = tree(run_copy)
     assert {"result.json", "report.html", "meta.json", "signals.csv"} <= set(before)
     url = f"sqlite:///{tmp_path / 'h.sqlite'}"
-    assert main(["analyze", str(run_copy), "--out", str(run_copy), "--history", url]) == ExitCode.PASS
+    with figures_unrendered():  # which files are written, not what they show
+        assert main(["analyze", str(run_copy), "--out", str(run_copy), "--history", url]) == ExitCode.PASS
     after = tree(run_copy)
     assert {k: after[k] for k in before} == before
     new = sorted(set(after) - set(before))
@@ -206,6 +209,13 @@ def test_a_derived_out_folder_is_used_while_empty_and_gets_a_sub_folder_with_one
 
 
 def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run_copy, tmp_path, capsys):
+    """(The reports' figures are not drawn here: which files are written, not what they show. The
+    bare CSV's report is drawn in test_analyze_out_a_folder_with_files_writes_a_new_sub_folder.)"""
+    with figures_unrendered():
+        _bare_csv_analysed_twice(run_copy, tmp_path, capsys)
+
+
+def _bare_csv_analysed_twice(run_copy: Path, tmp_path: Path, capsys) -> None:
     folder = tmp_path / "bare"
     folder.mkdir()
     csv = folder / "f.csv"

@@ -15,6 +15,7 @@ from blf.verdict import COVERAGE_FACTOR, combine, decide, maint_uncertainty, ove
 from hil.cli import main
 from hil.cli.common import ExitCode
 from hil.runfolder import read_record
+from support.figures import figures_unrendered
 from support.profiles import write_profile_variant
 
 
@@ -139,6 +140,13 @@ def test_inconclusive_and_fail_against_a_tighter_spec(checked, tmp_path, spec_mm
 
 @pytest.mark.slow
 def test_analyze_never_overwrites_and_bare_files_get_their_own_names(checked, tmp_path):
+    """(Which files are written, not what the reports show: their figures are built but not drawn,
+    support/figures.py; the check's own report, drawn, is tested above.)"""
+    with figures_unrendered():
+        _analyze_never_overwrites(checked, tmp_path)
+
+
+def _analyze_never_overwrites(checked, tmp_path) -> None:
     out, _ = checked
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
     assert main(["analyze", str(out)]) == ExitCode.PASS
