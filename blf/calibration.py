@@ -316,11 +316,15 @@ def correct_linear(s_mm, pitch: float, offset_mm: float) -> np.ndarray:
 # --------------------------------------------------------------------------
 
 
-def _polyval(coeffs, x: np.ndarray) -> np.ndarray:
-    """Horner evaluation of ``sum_k coeffs[k] * x**k``."""
-    out = np.full_like(x, coeffs[-1], dtype=np.float64)
+def _polyval(coeffs, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Horner evaluation of ``sum_k coeffs[k] * x**k`` (into ``out`` when given: no temporaries)."""
+    if out is None:
+        out = np.full_like(x, coeffs[-1], dtype=np.float64)
+    else:
+        out.fill(coeffs[-1])
     for c in coeffs[-2::-1]:
-        out = out * x + c
+        out *= x
+        out += c
     return out
 
 
@@ -367,33 +371,59 @@ def _invert_monotone(coeffs, s: np.ndarray, x_min: float, x_max: float) -> np.nd
     if np.any(above):
         slope = float(_polyval(dcoef, np.array(x_max)))
         x[above] = x_max + (s_flat[above] - p_hi) / slope
+    del below, above
     if np.any(inside):
         ti = t[inside]
-        lo = np.full(ti.shape, x_min)
-        hi = np.full(ti.shape, x_max)
-        xi = x_min + (ti - t_lo) / (t_hi - t_lo) * (x_max - x_min)
-        scale = max(abs(x_min), abs(x_max), 1.0)
-        s_scale = max(abs(p_lo), abs(p_hi), 1.0)
-        tol_f = 1e-14 * s_scale
-        for _ in range(200):
-            f = direction * _polyval(coeffs, xi) - ti
-            # an element whose residual is already small is final: stepping it again
-            # could move it (Newton step below the bracket's resolution -> bisection)
-            done = np.abs(f) <= tol_f
-            if np.all(done):
-                break
-            pos = f > 0.0
-            hi = np.where(pos, xi, hi)
-            lo = np.where(pos, lo, xi)
-            dfx = direction * _polyval(dcoef, xi)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                xn = xi - f / dfx
-            bad = ~np.isfinite(xn) | (xn < lo) | (xn > hi)
-            xn = np.where(bad, 0.5 * (lo + hi), xn)
-            xn = np.where(done, xi, xn)
-            step = np.abs(xn - xi)
-            xi = xn
-            if np.all(step <= 1e-14 * scale):
-                break
-        x[inside] = xi
+        del t
+        x[inside] = _newton(coeffs, dcoef, direction, ti, x_min, x_max, t_lo, t_hi, max(abs(p_lo), abs(p_hi), 1.0))
+    return x.reshape(s.shape)
+
+
+def _newton(coeffs, dcoef, direction: float, ti: np.ndarray, x_min: float, x_max: float, t_lo: float, t_hi: float,
+            s_scale: float) -> np.ndarray:
+    """The bracketed Newton iteration of :func:`_invert_monotone` on the readings inside the range (the
+    same operations as a plain vectorised loop, written into preallocated buffers: six arrays the
+    length of ``ti`` at most, not a dozen)."""
+    lo = np.full(ti.shape, x_min)
+    hi = np.full(ti.shape, x_max)
+    xi = x_min + (ti - t_lo) / (t_hi - t_lo) * (x_max - x_min)
+    scale = max(abs(x_min), abs(x_max), 1.0)
+    tol_f = 1e-14 * s_scale
+    f = np.empty_like(ti)
+    xn = np.empty_like(ti)
+    for _ in range(200):
+        _polyval(coeffs, xi, out=f)
+        f *= direction
+        f -= ti
+        # an element whose residual is already small is final: stepping it again
+        # could move it (Newton step below the bracket's resolution -> bisection)
+        done = np.abs(f) <= tol_f
+        if np.all(done):
+            break
+        pos = f > 0.0
+        np.copyto(hi, xi, where=pos)
+        np.invert(pos, out=pos)
+        np.copyto(lo, xi, where=pos)
+        del pos
+        _polyval(dcoef, xi, out=xn)
+        xn *= direction
+        with np.errstate(divide="ignore", invalid="ignore"):
+            np.divide(f, xn, out=xn)
+        np.subtract(xi, xn, out=xn)  # xi - f / P'(xi)
+        bad = ~np.isfinite(xn)
+        bad |= xn < lo
+        bad |= xn > hi
+        np.add(lo, hi, out=f)
+        f *= 0.5
+        np.copyto(xn, f, where=bad)
+        del bad
+        np.copyto(xn, xi, where=done)
+        np.subtract(xn, xi, out=f)
+        np.abs(f, out=f)
+        xi, xn = xn, xi
+        if np.all(f <= 1e-14 * scale):
+            break
+    return xi
+
+
     return x.reshape(s.shape)
