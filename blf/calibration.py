@@ -316,11 +316,15 @@ def correct_linear(s_mm, pitch: float, offset_mm: float) -> np.ndarray:
 # --------------------------------------------------------------------------
 
 
-def _polyval(coeffs, x: np.ndarray) -> np.ndarray:
-    """Horner evaluation of ``sum_k coeffs[k] * x**k``."""
-    out = np.full_like(x, coeffs[-1], dtype=np.float64)
+def _polyval(coeffs, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Horner evaluation of ``sum_k coeffs[k] * x**k`` (into ``out`` when given: no temporaries)."""
+    if out is None:
+        out = np.full_like(x, coeffs[-1], dtype=np.float64)
+    else:
+        out.fill(coeffs[-1])
     for c in coeffs[-2::-1]:
-        out = out * x + c
+        out *= x
+        out += c
     return out
 
 
@@ -354,7 +358,7 @@ def _invert_monotone(coeffs, s: np.ndarray, x_min: float, x_max: float) -> np.nd
     p_hi = float(_polyval(coeffs, np.array(x_max)))
     direction = 1.0 if p_hi > p_lo else -1.0
     # work on the increasing polynomial direction*P
-    t = direction * s_flat
+    t = s_flat if direction > 0 else -s_flat  # 1.0 * s is s: no copy
     t_lo, t_hi = direction * p_lo, direction * p_hi
     x = np.empty_like(s_flat)
 
@@ -367,33 +371,101 @@ def _invert_monotone(coeffs, s: np.ndarray, x_min: float, x_max: float) -> np.nd
     if np.any(above):
         slope = float(_polyval(dcoef, np.array(x_max)))
         x[above] = x_max + (s_flat[above] - p_hi) / slope
+    del below, above
     if np.any(inside):
-        ti = t[inside]
-        lo = np.full(ti.shape, x_min)
-        hi = np.full(ti.shape, x_max)
-        xi = x_min + (ti - t_lo) / (t_hi - t_lo) * (x_max - x_min)
-        scale = max(abs(x_min), abs(x_max), 1.0)
-        s_scale = max(abs(p_lo), abs(p_hi), 1.0)
-        tol_f = 1e-14 * s_scale
-        for _ in range(200):
-            f = direction * _polyval(coeffs, xi) - ti
-            # an element whose residual is already small is final: stepping it again
-            # could move it (Newton step below the bracket's resolution -> bisection)
-            done = np.abs(f) <= tol_f
-            if np.all(done):
-                break
-            pos = f > 0.0
-            hi = np.where(pos, xi, hi)
-            lo = np.where(pos, lo, xi)
-            dfx = direction * _polyval(dcoef, xi)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                xn = xi - f / dfx
-            bad = ~np.isfinite(xn) | (xn < lo) | (xn > hi)
-            xn = np.where(bad, 0.5 * (lo + hi), xn)
-            xn = np.where(done, xi, xn)
-            step = np.abs(xn - xi)
-            xi = xn
-            if np.all(step <= 1e-14 * scale):
-                break
-        x[inside] = xi
+        rng = (x_min, x_max, t_lo, t_hi, max(abs(p_lo), abs(p_hi), 1.0))
+        _solve_inside(coeffs, dcoef, direction, t, inside, x, rng)
     return x.reshape(s.shape)
+
+
+#: readings solved at a time by :func:`_solve_inside` (the iteration's buffers are this long, not the recording)
+_CHUNK = 1 << 18
+_MAX_ITER = 200
+
+
+def _solve_inside(coeffs, dcoef, direction: float, t: np.ndarray, inside: np.ndarray, x: np.ndarray,
+                  rng: tuple) -> None:
+    """``x[inside]`` from the bracketed Newton iteration, chunk by chunk, bit-identical to one iteration
+    over all of them (issue 34: that one held a dozen arrays the length of the recording).
+
+    Each reading's iterates depend on that reading alone; only the number of steps is common: the
+    iteration stops at the first step k where every reading is final (|P(x) - s| at round-off), or
+    after the first step where no reading moved more than the tolerance. A chunk whose readings are
+    all final stays as it is. So: each chunk is iterated until all its readings are final (recording,
+    per step, whether all were final and whether none moved); the common number of steps follows from
+    those records; a chunk that took more steps than that (rare) is iterated again for exactly that many.
+    """
+    bounds = [(a, min(a + _CHUNK, t.size)) for a in range(0, t.size, _CHUNK)]
+    records = []
+    for a, b in bounds:
+        m = inside[a:b]
+        if not m.any():
+            records.append(None)
+            continue
+        xi, final_at, small = _newton(coeffs, dcoef, direction, t[a:b][m], *rng, _MAX_ITER)
+        x[a:b][m] = xi
+        records.append((final_at, small))
+    steps = _common_steps([r for r in records if r is not None])
+    for (a, b), rec in zip(bounds, records, strict=True):
+        if rec is not None and len(rec[1]) > steps:
+            m = inside[a:b]
+            x[a:b][m] = _newton(coeffs, dcoef, direction, t[a:b][m], *rng, steps)[0]
+
+
+def _common_steps(records: list) -> int:
+    """The number of steps one iteration over all the chunks would take (see :func:`_solve_inside`):
+    ``records`` per chunk (final_at, small), ``final_at`` the step at which all its readings were final
+    (None: not within the steps it ran), ``small[k]`` whether no reading moved beyond tolerance in step k."""
+    for k in range(_MAX_ITER):
+        if all(fa is not None and fa <= k for fa, _ in records):
+            return k
+        if all((fa is not None and fa <= k) or sm[k] for fa, sm in records):
+            return k + 1
+    return _MAX_ITER
+
+
+def _newton(coeffs, dcoef, direction: float, ti: np.ndarray, x_min: float, x_max: float, t_lo: float, t_hi: float,
+            s_scale: float, max_iter: int) -> tuple[np.ndarray, int | None, list]:
+    """The bracketed Newton iteration of :func:`_invert_monotone` on readings inside the range, for at most
+    ``max_iter`` steps or until all are final (written into preallocated buffers). Returns x, the step at
+    which all were final (None if not) and, per step taken, whether no reading moved beyond tolerance."""
+    xi = x_min + (ti - t_lo) / (t_hi - t_lo) * (x_max - x_min)
+    lo = np.full(ti.shape, x_min)
+    hi = np.full(ti.shape, x_max)
+    scale = max(abs(x_min), abs(x_max), 1.0)
+    tol_f = 1e-14 * s_scale
+    f = np.empty_like(ti)
+    xn = np.empty_like(ti)
+    small = []
+    for k in range(max_iter):
+        _polyval(coeffs, xi, out=f)
+        f *= direction
+        f -= ti
+        # an element whose residual is already small is final: stepping it again
+        # could move it (Newton step below the bracket's resolution -> bisection)
+        done = np.abs(f) <= tol_f
+        if np.all(done):
+            return xi, k, small
+        pos = f > 0.0
+        np.copyto(hi, xi, where=pos)
+        np.invert(pos, out=pos)
+        np.copyto(lo, xi, where=pos)
+        del pos
+        _polyval(dcoef, xi, out=xn)
+        xn *= direction
+        with np.errstate(divide="ignore", invalid="ignore"):
+            np.divide(f, xn, out=xn)
+        np.subtract(xi, xn, out=xn)  # xi - f / P'(xi)
+        bad = ~np.isfinite(xn)
+        bad |= xn < lo
+        bad |= xn > hi
+        np.add(lo, hi, out=f)
+        f *= 0.5
+        np.copyto(xn, f, where=bad)
+        del bad
+        np.copyto(xn, xi, where=done)
+        np.subtract(xn, xi, out=f)
+        np.abs(f, out=f)
+        xi, xn = xn, xi
+        small.append(bool(np.all(f <= 1e-14 * scale)))
+    return xi, None, small

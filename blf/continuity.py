@@ -99,12 +99,34 @@ class Continuity:
     noise: dict[str, float]
 
 
+#: samples handled at a time where a whole-length temporary is not needed (issue 34)
+_BLOCK = 1 << 18
+
+
+def _over_limit(x: np.ndarray, dt: np.ndarray, v: float, allowance: float) -> np.ndarray:
+    """Indices k where ``|x[k+1] - x[k]| > |dt[k]| v + allowance``, formed block by block (the same
+    operations per element as on whole arrays: no temporary the length of the recording)."""
+    bad = []
+    for a in range(0, dt.size, _BLOCK):
+        b = min(a + _BLOCK, dt.size)
+        limit = np.abs(dt[a:b])
+        limit *= v
+        limit += allowance
+        step = np.diff(x[a:b + 1])
+        np.abs(step, out=step)
+        bad.append(np.flatnonzero(step > limit) + a)
+    return np.concatenate(bad) if bad else np.zeros(0, np.int64)
+
+
 def noise_std(x: np.ndarray) -> float:
     """The sample noise :math:`\\hat\\sigma` of ``x`` from its second differences (module docstring)."""
     if x.size < 3:
         return 0.0
-    d2 = np.diff(x, 2)
-    np.abs(d2, out=d2)  # (in place: one temporary the length of x, for 10-million-sample recordings)
+    d2 = np.empty(x.size - 2)
+    for a in range(0, d2.size, _BLOCK):  # block by block: one array the length of x, for 10-million-sample recordings
+        b = min(a + _BLOCK, d2.size)
+        d2[a:b] = np.diff(x[a:b + 2], 2)
+    np.abs(d2, out=d2)
     return float(MAD_TO_SIGMA * np.median(d2, overwrite_input=True) / math.sqrt(6.0))
 
 
@@ -160,18 +182,13 @@ def find_jumps(t_s, positions: Mapping[str, np.ndarray], max_speed: Mapping[str,
         v = positive_scalar(max_speed[name], f"max_speed[{name!r}]", "unit/s")
         sigma = noise_std(x)
         noise[name] = sigma
-        limit = np.abs(dt)
-        limit *= v
-        limit += noise_k * math.sqrt(2.0) * sigma
-        step = np.diff(x)
-        np.abs(step, out=step)
-        bad = np.flatnonzero(step > limit)
-        del step
+        bad = _over_limit(x, dt, v, noise_k * math.sqrt(2.0) * sigma)
         if len(part_starts):
             bad = np.setdiff1d(bad, np.asarray(part_starts, dtype=np.int64) - 1, assume_unique=True)
         count += bad.size
         if bad.size:
             k = int(bad[0])
-            found.append(Jump("position_step", k + 1, name, float(x[k]), float(x[k + 1]), float(limit[k])))
+            limit_k = abs(dt[k:k + 1]) * v + noise_k * math.sqrt(2.0) * sigma  # as _over_limit formed it
+            found.append(Jump("position_step", k + 1, name, float(x[k]), float(x[k + 1]), float(limit_k[0])))
     first = min(found, key=lambda j: j.index) if found else None
     return Continuity(first, int(count), period, gap, noise)

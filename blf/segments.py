@@ -110,7 +110,8 @@ def smooth_speed(x_mm, sample_period_s: float, window_s: float = 0.2) -> np.ndar
     x = as_1d_finite(x_mm, "x_mm", "mm", min_len=2)
     T = positive_scalar(sample_period_s, "sample_period_s", "s")
     n = max(1, int(round(positive_scalar(window_s, "window_s", "s") / T)))
-    return ndimage.uniform_filter1d(np.gradient(x, T), n, mode="nearest")
+    v = np.gradient(x, T)
+    return ndimage.uniform_filter1d(v, n, mode="nearest", output=v)  # in place: scipy filters a copy of the line
 
 
 def _trimmed(a: int, b: int, frac: float) -> tuple[int, int]:
@@ -194,7 +195,8 @@ def find_segments(x1_mm, x2_mm, f1_N, f2_N, sample_period_s: float, stroke_limit
     lim = positive_scalar(stroke_limit_mm, "stroke_limit_mm", "mm")
     if step is not None:
         return _from_step_column(np.asarray(step), x1.shape)
-    moving = (np.abs(smooth_speed(x1, T)) > _MOVING_MM_S) | (np.abs(smooth_speed(x2, T)) > _MOVING_MM_S)
+    moving = _moving(x1, T)
+    moving |= _moving(x2, T)
     gap = int(round(_BRIDGE_S / T))
     moving = ndimage.binary_closing(moving, structure=np.ones(gap, bool)) | moving
     sweeps = [(a, b) for a, b in runs(moving)
@@ -209,7 +211,9 @@ def find_segments(x1_mm, x2_mm, f1_N, f2_N, sample_period_s: float, stroke_limit
     start = sweeps[-1][1] if sweeps else 0
     still = ~moving
     still[:start] = False
-    fff = np.abs(0.5 * (f1 - f2))
+    fff = np.subtract(f1, f2)  # |F1 - F2|/2 in one array (the same operations as abs(0.5 * (f1 - f2)))
+    fff *= 0.5
+    np.abs(fff, out=fff)
     if not still.any():
         raise AnalysisError("no stationary stretch for the force fight found in the recording")
     idx = np.flatnonzero(still & (fff > _FIGHT_FRACTION * fff[still].max()))
@@ -219,6 +223,13 @@ def find_segments(x1_mm, x2_mm, f1_N, f2_N, sample_period_s: float, stroke_limit
     ff[idx[0]:idx[-1] + 1] = True
     ff &= still
     return Segments(cal1, cal2, ff, "detected")
+
+
+def _moving(x: np.ndarray, T: float) -> np.ndarray:
+    """Where the smoothed speed of ``x`` exceeds the moving threshold (one temporary the length of x)."""
+    v = smooth_speed(x, T)
+    np.abs(v, out=v)
+    return v > _MOVING_MM_S
 
 
 def _from_step_column(step: np.ndarray, shape: tuple) -> Segments:

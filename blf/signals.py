@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blf.validate import as_1d_finite, positive_scalar, readonly, same_shape
+from blf.validate import as_1d_finite, positive_scalar, same_shape
 
 __all__ = ["CHANNELS", "PositionDifferences", "position_differences"]
 
@@ -100,8 +100,14 @@ def position_differences(
         (s2, "s2_mm", "mm"),
     )
     i_total = positive_scalar(i_total_rad_per_mm, "i_total_rad_per_mm", "rad/mm")
-    return PositionDifferences(
-        d_int1_mm=readonly(s1 - phi1 / i_total),
-        d_int2_mm=readonly(s2 - phi2 / i_total),
-        d_ext_mm=readonly(s2 - s1),
-    )
+    # s - phi / i written into the quotient's array (the same operations, one temporary less); a caller
+    # that holds no other reference to s1, s2 has them freed here, as soon as they are used
+    d_ext = s2 - s1
+    d_int1 = np.divide(phi1, i_total)
+    np.subtract(s1, d_int1, out=d_int1)
+    del s1, s1_mm
+    d_int2 = np.divide(phi2, i_total)
+    np.subtract(s2, d_int2, out=d_int2)
+    for arr in (d_int1, d_int2, d_ext):  # fresh arrays owned here: made read-only in place, not copied
+        arr.flags.writeable = False
+    return PositionDifferences(d_int1_mm=d_int1, d_int2_mm=d_int2, d_ext_mm=d_ext)

@@ -185,3 +185,18 @@ def test_linear_correction_inverts_pitch_and_offset():
         correct_linear(s, GAIN, float("nan"))
     with pytest.raises(InputError, match=r"s_mm must be finite \(in mm\)"):
         correct_linear(np.array([np.nan]), GAIN, OFFSET_MM)
+
+
+def test_correct_chunked_equals_one_pass(monkeypatch):
+    """Issue 34: the inversion solved chunk by chunk gives the same bits as over all readings at once
+    (chunks of 1 and 7 readings: the common step count reconstructed from the chunks' records)."""
+    import blf.calibration as cal_mod
+
+    rng = np.random.default_rng(34)
+    x = np.linspace(-40.0, 40.0, 2001)
+    cal = fit_lvdt_calibration(x, 0.3 + 1.05 * x + 2e-4 * x**2 - 3e-6 * x**3 + rng.normal(0.0, 1e-3, x.size))
+    s = np.concatenate([rng.uniform(-60.0, 60.0, 3000), [0.0, cal.evaluate(np.array(40.0))]])
+    whole = cal.correct(s)
+    for chunk in (1, 7):
+        monkeypatch.setattr(cal_mod, "_CHUNK", chunk)
+        assert np.array_equal(cal.correct(s), whole)

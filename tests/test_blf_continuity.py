@@ -115,3 +115,18 @@ def test_a_position_step_into_a_declared_part_start_only_is_not_judged(starts, f
     t_gap[25:] += 11 * T
     g = find_jumps(t_gap, {"s1": np.zeros(40)}, {"s1": 4.0}, part_starts=(25,))
     assert (g.first.kind, g.first.index) == ("time_gap", 25)
+
+
+def test_block_wise_checks_equal_whole_arrays(monkeypatch):
+    """Issue 34: the position-step test and the noise estimate formed block by block find the same."""
+    import blf.continuity as cont
+
+    rng = np.random.default_rng(34)
+    t = np.arange(3000) * 1e-3
+    x = np.cumsum(rng.normal(0.0, 1e-3, t.size))
+    x[[700, 2100]] += 2.0
+    whole = cont.find_jumps(t, {"s1": x}, {"s1": 1.0})
+    assert whole.first is not None
+    for block in (1, 64):
+        monkeypatch.setattr(cont, "_BLOCK", block)
+        assert cont.find_jumps(t, {"s1": x}, {"s1": 1.0}) == whole

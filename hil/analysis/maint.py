@@ -34,8 +34,6 @@ UNCALIBRATED_PITCH_UNCERTAINTY = HARD_LVDT_GAIN_TOLERANCE / 3.0 ** 0.5
 class Analysis:
     segments: Segments
     calibration: dict  #: "ema1"/"ema2" -> LvdtCalibration or None
-    s1_corr: np.ndarray
-    s2_corr: np.ndarray
     d_int1: np.ndarray
     d_int2: np.ndarray
     d_ext: np.ndarray
@@ -111,7 +109,8 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
         c = fit_lvdt_calibration(phi[m] / i, s[m])
         cal[f"ema{k}"] = c
         s_corr[k] = c.correct(s)
-    d = position_differences(sig.phi1, sig.phi2, s_corr[1], s_corr[2], i)
+    # the corrected strokes are needed only for D: handed over, freed as soon as used (issue 34)
+    d = position_differences(sig.phi1, sig.phi2, s_corr.pop(1), s_corr.pop(2), i)
     ff = seg.force_fight
     if int(np.count_nonzero(ff)) < MIN_SAMPLES:
         # e.g. a run killed or aborted just after the force fight began
@@ -121,12 +120,14 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
     pairs = {
         "int1": (d.d_int1_mm, sig.F1),
         "int2": (d.d_int2_mm, sig.F2),
-        "ext": (d.d_ext_mm, sig.F2 - sig.F1),
+        "ext": (d.d_ext_mm, None),
     }
     maint: dict[str, BlfMaintResult | str] = {}
     for ch, (dd, ff_force) in pairs.items():
         try:
-            maint[ch] = blf_maint(dd[ff], ff_force[ff], rate)
+            # F2 - F1 formed on the force fight only (elementwise: the same values as masking the difference)
+            f_ff = sig.F2[ff] - sig.F1[ff] if ff_force is None else ff_force[ff]
+            maint[ch] = blf_maint(dd[ff], f_ff, rate)
         except AnalysisError as exc:  # the channel's verdict says why (its reason), once
             maint[ch] = str(exc)
     p_rel = {k: (UNCALIBRATED_PITCH_UNCERTAINTY if c is None else abs(c.coefficient_sigmas[1] / c.pitch))
@@ -148,7 +149,7 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
         act.mechanics.stroke_limit_mm, max(pitches) if pitches else PAPER_PITCH_ERROR,
         act.sensors.lvdt_noise_pp_mm / 6.0, rate, backlash_mm=act.mechanics.backlash_spec_int_mm,
         residual_pitch_error=max(max(p_rel.values()), 1e-6), temperature_error=0.0)
-    return Analysis(seg, cal, s_corr[1], s_corr[2], d.d_int1_mm, d.d_int2_mm, d.d_ext_mm, maint, unc, verdicts,
+    return Analysis(seg, cal, d.d_int1_mm, d.d_int2_mm, d.d_ext_mm, maint, unc, verdicts,
                     budget, overall(verdicts), tuple(notes))
 
 

@@ -46,7 +46,7 @@ def _channel_data(sig: Signals, an: Analysis, ch: str) -> tuple[np.ndarray, np.n
         return an.d_int1[ff], sig.F1[ff]
     if ch == "int2":
         return an.d_int2[ff], sig.F2[ff]
-    return an.d_ext[ff], (sig.F2 - sig.F1)[ff]
+    return an.d_ext[ff], sig.F2[ff] - sig.F1[ff]
 
 
 def figure_time(sig: Signals, an: Analysis, act: Actuation):

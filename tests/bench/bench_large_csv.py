@@ -10,7 +10,8 @@ joined to the next by a one-second straight line back to its start, the time run
 joined end to start would jump in position, and ``analyze`` refuses jumps). Then runs
 ``emacheck analyze FILE --out DIR`` in a subprocess and reports its peak resident memory (``ru_maxrss``
 of the children, resource.getrusage) and wall time, the size of the file and of the decoded arrays
-(7 float64 columns), and the exit status. Prints a table and writes JSON.
+(7 float64 columns), and the exit status, and whether the peak is within issue 34's target of
+1.2 GB (``TARGET_MB``; stated for 10 million rows). Prints a table and writes JSON.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[2]
 FORMATS = ("%.4f", "%.7f", "%.7f", "%.6f", "%.6f", "%.3f", "%.3f")
 BLOCK = 200_000
 JOIN_S = 1.0  #: the straight line from one lap's end back to the next lap's start [s]
+TARGET_MB = 1200.0  #: issue 34's target for the peak of analyze on 10 million rows [MB]
 
 
 def _emacheck(*args: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -101,6 +103,8 @@ def main() -> None:
             "arrays_MB": round(rows * 7 * 8 / 1e6, 1),
             "peak_rss_MB": round(peak_kib * 1024 / 1e6, 1),
             "peak_over_arrays": round(peak_kib * 1024 / (rows * 7 * 8), 2),
+            "target_MB": TARGET_MB,
+            "within_target": peak_kib * 1024 / 1e6 <= TARGET_MB,
             "analyze_wall_s": round(wall, 1),
             "make_csv_s": round(made_s, 1),
             "exit_status": measured["exit_status"],
