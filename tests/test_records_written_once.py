@@ -13,6 +13,7 @@ import hashlib
 import json
 import os
 import shutil
+import types
 from pathlib import Path
 
 import pytest
@@ -208,11 +209,40 @@ def test_a_derived_out_folder_is_used_while_empty_and_gets_a_sub_folder_with_one
                                                                                                  "result.json"]
 
 
-def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run_copy, tmp_path, capsys):
+def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run_copy, tmp_path, capsys,
+                                                                             monkeypatch):
     """(The reports' figures are not drawn here: which files are written, not what they show. The
-    bare CSV's report is drawn in test_analyze_out_a_folder_with_files_writes_a_new_sub_folder.)"""
+    bare CSV's report is drawn in test_analyze_out_a_folder_with_files_writes_a_new_sub_folder.)
+
+    The two analyses are given analysis times a minute apart: the history keeps a result once by its
+    content, and two analyses within one second give the same content (test_the_same_result_twice_...)."""
+    import hil.cli.check
+
+    stamps = iter(["2026-11-26T10:00:00+00:00", "2026-11-26T10:01:00+00:00", "2026-11-26T10:02:00+00:00"])
+    monkeypatch.setattr(hil.cli.check, "utc_iso", lambda: next(stamps))
     with figures_unrendered():
         _bare_csv_analysed_twice(run_copy, tmp_path, capsys)
+
+
+def test_the_same_result_twice_is_one_history_record_and_both_files_stay(run_copy, tmp_path, capsys, monkeypatch):
+    """Two analyses within one second that took as long (to the ms) write byte-identical results: both
+    files stay (the second under its new name), the history holds that content once and says the second
+    was already recorded."""
+    import hil.cli.check
+
+    monkeypatch.setattr(hil.cli.check, "utc_iso", lambda: "2026-11-26T10:00:00+00:00")
+    monkeypatch.setattr(hil.cli.check, "time", types.SimpleNamespace(perf_counter=lambda: 0.0))  # analysis_s 0
+    csv = tmp_path / "f.csv"
+    csv.write_bytes((run_copy / "signals.csv").read_bytes())
+    url = f"sqlite:///{tmp_path / 'h.sqlite'}"
+    with figures_unrendered():
+        assert main(["analyze", str(csv), "--history", url]) == ExitCode.PASS
+        assert main(["analyze", str(csv), "--history", url]) == ExitCode.PASS
+    assert (tmp_path / "f.result.json").read_bytes() == (tmp_path / "f.2.result.json").read_bytes()
+    assert "already recorded" in capsys.readouterr().out
+    assert main(["history", "--history", url, "--json"]) == ExitCode.PASS
+    checks = json.loads(capsys.readouterr().out)["checks"]
+    assert [Path(c["result_path"]).name for c in checks] == ["f.result.json"] and checks[0]["current"]
 
 
 def _bare_csv_analysed_twice(run_copy: Path, tmp_path: Path, capsys) -> None:
