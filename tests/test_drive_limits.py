@@ -406,8 +406,8 @@ def test_dry_run_without_0x6065_runs_and_records_who_keeps_each_limit(tmp_path, 
                                               "0x6085:00")] == ["drive"] * 6
         assert (lims["0x607D:02"]["value"], lims["0x6080:00"]["value"]) == (63897, 480)
     report = (tmp_path / "run" / "report.html").read_text()
-    assert ("ema1 limits only the master keeps</td><td>following error window 0x6065:00 = 1638 position units "
-            "(0.5 mm)</td>") in report
+    assert ("ema1 limits not written (no writable object in its EDS)</td><td>following error window 0x6065:00 = 1638 "
+            "position units (0.5 mm)</td>") in report
     result = json.loads((tmp_path / "run" / "result.json").read_text())
     assert result["trace"]["drive_limits"]["ema2"] == meta["drives_final"]["ema2"]["drive_limits"]
 
@@ -418,7 +418,7 @@ def test_report_traceability_says_who_keeps_each_limit():
     lims = [DriveLimit(LimitKind.MAX_TORQUE, 1591, 8000.0).as_json(),
             DriveLimit(LimitKind.FOLLOWING_ERROR_WINDOW, 1638, 0.5, KEPT_BY_MASTER).as_json()]
     html = trace_lines({"drive_limits": {"ema1": lims}})
-    assert ("<td>ema1 limits it keeps itself</td><td>max torque 0x6072:00 = 1591 per mille of rated torque "
-            "(8000 N)</td>") in html
-    assert ("<td>ema1 limits only the master keeps</td><td>following error window 0x6065:00 = 1638 position "
-            "units (0.5 mm)</td>") in html
+    assert ("<td>ema1 limits written to the drive and read back</td><td>max torque 0x6072:00 = 1591 per mille of "
+            "rated torque (8000 N)</td>") in html
+    assert ("<td>ema1 limits not written (no writable object in its EDS)</td><td>following error window 0x6065:00 = "
+            "1638 position units (0.5 mm)</td>") in html

@@ -345,3 +345,14 @@ def test_a_read_only_file_system_is_one_line_naming_the_output(tmp_path, monkeyp
     assert str(err.value) == (f"{tmp_path / 'flight.result.json'}: cannot be written (Read-only file system); "
                               f"give --out a folder you can write to")
     assert os.listdir(tmp_path) == []
+
+
+def test_sim_serve_refuses_an_existing_timing_json_before_it_serves(tmp_path, capsys):
+    """sim-serve writes --timing-json at its end: an existing file is refused at the start (exit 3, named,
+    unchanged), before any bus is opened."""
+    existing = tmp_path / "timing.json"
+    existing.write_text('{"earlier": true}\n')
+    before = existing.read_bytes()
+    assert main(["sim-serve", "--interface", "virtual", "--channel", "x", "--timing-json", str(existing)]) == 3
+    assert f"--timing-json {existing}: exists; never overwritten" in capsys.readouterr().err
+    assert existing.read_bytes() == before

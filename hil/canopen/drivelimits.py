@@ -37,8 +37,9 @@ from hil.canopen.errors import CanopenInputError
 __all__ = ["KEPT_BY_DRIVE", "KEPT_BY_MASTER", "LIMIT_OBJECTS", "DriveLimit", "LimitKind", "LimitObject",
            "LimitTargets", "drive_limits", "offered", "rpm_to_rad_per_s", "rad_per_s_to_rpm"]
 
-KEPT_BY_DRIVE = "drive"  #: written to the drive and read back: the drive keeps it itself
-KEPT_BY_MASTER = "master"  #: the drive's EDS has no such object (or it is not writable): only the master keeps it
+KEPT_BY_DRIVE = "drive"  #: written to the drive and read back (that it enforces it is the drive's, not observed here)
+KEPT_BY_MASTER = "master"  #: not written: the drive's EDS has no such object, or not writable (the master's supervisor
+#: keeps the stroke, force, speed and following-error limits; the quick-stop deceleration and the time out it has not)
 
 _U16 = 0xFFFF
 _U32 = 0xFFFF_FFFF

@@ -17,7 +17,7 @@ from hil.cli.common import (
     rt_priority_arg,
 )
 from hil.cli.realtime import prepare_realtime
-from hil.runfolder import write_json_atomic
+from hil.runfolder import create_json
 
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:
@@ -31,6 +31,9 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     from sim.drives import SimDrivePair
     from sim.plant import RigPlant
 
+    if args.timing_json is not None and Path(args.timing_json).exists():  # written at the end: refused now
+        from hil.errors import OutputError
+        raise OutputError(f"--timing-json {args.timing_json}: exists; never overwritten (name a new file)")
     act = load_actuation(args.profile)
     simrig = load_simrig(args.sim)
     rig = plan_for(act, args.profile, args.eds)  # the same profile, map and EDS files as the master's
@@ -60,7 +63,7 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
             signal.signal(s, h)
     print("\n".join(stats.lines()), flush=True)
     if args.timing_json is not None:
-        write_json_atomic(args.timing_json, stats.as_json())
+        create_json(args.timing_json, stats.as_json())
     return 0
 
 

@@ -228,8 +228,8 @@ def trace_lines(trace: dict | None) -> str:
     for k, ml in (trace.get("master_loss") or {}).items():
         rows.append([f"{k} reaction to losing the master", master_loss_text(ml)])
     for k, lims in (trace.get("drive_limits") or {}).items():
-        rows.append([f"{k} limits it keeps itself", drive_limits_text(lims, "drive")])
-        rows.append([f"{k} limits only the master keeps", drive_limits_text(lims, "master")])
+        rows.append([f"{k} limits written to the drive and read back", drive_limits_text(lims, "drive")])
+        rows.append([f"{k} limits not written (no writable object in its EDS)", drive_limits_text(lims, "master")])
     for k, fc in (trace.get("force_control") or {}).items():
         rows.append([f"{k} holds forces by", "its CST mode (target torque)" if fc == "cst" else
                      "the master's force loop on the measured force in CSP (its drive has no CST)"])
