@@ -54,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from blf.errors import AnalysisError, InputError
+from blf.segments import runs
 from blf.validate import as_1d_finite, one_of, positive_scalar, same_shape, scalar
 
 __all__ = ["EffortMask", "Identifiability", "AxisFit", "ParameterChange", "CurrentGain", "EffortCheck",
@@ -175,8 +176,7 @@ def axis_kinematics(q_m, sample_rate_hz: float, window_s: float = 0.4):
 
 
 def _spans(mask: np.ndarray, t: np.ndarray) -> tuple:
-    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
-    return tuple((float(t[a]), float(t[b - 1])) for a, b in zip(edges[::2], edges[1::2], strict=True))
+    return tuple((float(t[a]), float(t[b - 1])) for a, b in runs(mask))
 
 
 def effort_mask(t_s, q_m, q_ref_m, sample_rate_hz: float, *, dwell_says_nothing: bool,

@@ -267,14 +267,20 @@ def part_starts(sig) -> np.ndarray:
     return np.flatnonzero(sig.step[1:] != sig.step[:-1]) + 1
 
 
-def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool, parts_made_apart: bool = False) -> None:
+def _parts_made_apart(meta) -> bool:
+    from hil.runrecord import RunMode
+
+    return meta is not None and meta.mode == RunMode.SIMULATE_SCENARIO
+
+
+def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool, meta=None) -> None:
     """Refuse a recording with a jump in time or position (:func:`blf.continuity.find_jumps`), naming
     its line (a CSV: ``lines``) or sample and time; the largest plausible speed is
     :data:`PLAUSIBLE_SPEED_FACTOR` times the ram-speed hard cap, in rad/s for the motor angles.
 
-    ``parts_made_apart``: the run record declares the recording's steps simulated one after the other, each
-    from its own start (``simulate --scenario``): a position step into the first sample of a step is not
-    judged (:func:`part_starts`); time is judged everywhere."""
+    ``meta``: the recording's run record (:class:`hil.runrecord.RunRecord`), if any. Where it declares the
+    steps simulated one after the other, each from its own start (mode ``simulate-scenario``), a position
+    step into the first sample of a step is not judged (:func:`part_starts`); time is judged everywhere."""
     if sig.n < 2:
         return
     from blf.continuity import GAP_PERIODS, NOISE_K, find_jumps
@@ -283,7 +289,7 @@ def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool, par
     v_mm = PLAUSIBLE_SPEED_FACTOR * HARD_MAX_VELOCITY_MM_PER_S
     speed = {c: v_mm * (i_total_rad_per_mm if u == "rad" else 1.0) for c, u in POSITION_UNITS.items()}
     found = find_jumps(sig.t, {c: getattr(sig, c) for c in POSITION_UNITS}, speed,
-                       part_starts=part_starts(sig) if parts_made_apart else ())
+                       part_starts=part_starts(sig) if _parts_made_apart(meta) else ())
     j = found.first
     if j is None:
         return

@@ -190,7 +190,6 @@ class _Prepared:
     force: np.ndarray
     v: np.ndarray
     a: np.ndarray
-    vr: np.ndarray
     mask: object
     ident: object
 
@@ -201,7 +200,7 @@ def _prepare(rec: AxisRecording, opts: AxisOptions, k: float | None) -> _Prepare
     v, a = axis_kinematics(rec.q, rec.sample_rate_hz)
     vr = np.gradient(rec.q_ref, rec.t)
     ident = identifiability(v, a, vr, m.used, _accel_noise(rec.q, rec.sample_rate_hz))
-    return _Prepared(axis_force(rec, opts, k, m.moving), v, a, vr, m, ident)
+    return _Prepared(axis_force(rec, opts, k, m.moving), v, a, m, ident)
 
 
 def _check_pair(new: AxisRecording, ref: AxisRecording) -> None:

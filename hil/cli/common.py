@@ -628,11 +628,7 @@ def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None, *,
     sig = read_signals(sig_path) if not is_can_log(sig_path) else _decoded(sig_path, act, meta)
     refuse_unusable(sig, channels=channels, min_rows=min_rows, what=what)
     if jumps:
-        from hil.runrecord import RunMode
-
-        apart = meta is not None and meta.mode == RunMode.SIMULATE_SCENARIO
-        refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path),
-                     parts_made_apart=apart)
+        refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta)
     return sig
 
 

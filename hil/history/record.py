@@ -189,15 +189,9 @@ def record_from_result(result: dict, *, result_path: Path | None = None, run_fol
 def load_result(path: Path) -> dict:
     """A result.json / serv.json, or :class:`hil.errors.RecordingError` naming the file."""
     from hil.errors import RecordingError
+    from hil.runfolder import read_json
 
-    try:
-        data = json.loads(Path(path).read_bytes())  # (bytes: json detects a byte-order mark itself)
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot be read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise RecordingError(f"{path}: not a JSON text file (byte {exc.start} is not UTF-8)") from None
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{path}: not valid JSON: {exc}") from None
+    data = read_json(path)
     if not isinstance(data, dict) or "status" not in data:
         raise RecordingError(f"{path}: not an emacheck result (no status)")
     return data
