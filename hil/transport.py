@@ -66,17 +66,14 @@ class InProcessTransport:
     python-can messages, thread queues or locks: nothing else is on this bus).
     ``pair`` is a :class:`sim.drives.SimDrivePair`; its frames are produced in
     this thread as soon as the master's frames reach it, stamped with the
-    simulated time. ``channel`` names the bus (messages only; it is private to
-    this transport).
+    simulated time.
     """
 
-    def __init__(self, pair, sync_period_s: float, channel: str = "emacheck-dry-run",
-                 realtime: bool = False) -> None:
+    def __init__(self, pair, sync_period_s: float, realtime: bool = False) -> None:
         self.pair = pair
         self.T = sync_period_s
         self.t = 0.0
         self.realtime = realtime
-        self.channel = channel
         #: frames on their way to the drives, in order (the master's)
         self._to_slaves: deque[Frame] = deque()
         #: frames on their way to the master, in order, with the time they were sent [s]

@@ -460,7 +460,7 @@ def test_drive_fault_handled_by_the_master_up_to_operation_enabled(fault):
     act = load_actuation()
     inj = FaultInjector(make_pair(RigPlant(load_simrig().params, np.random.default_rng(2))), [fault],
                         record_truth=False)
-    tr = InProcessTransport(inj, act.timing.sync_period_s, channel=f"emacheck-test-{fault.kind}-{fault.value:g}")
+    tr = InProcessTransport(inj, act.timing.sync_period_s)
     try:
         link = CanopenLink(make_master(), tr)
         link.first_sample()

@@ -43,7 +43,7 @@ def cyclic():
     """A link in the cyclic phase on its own virtual channel (python-can virtual channels are
     process-global by name: a shared name would let other tests' traffic in)."""
     pair = make_pair(RigPlant(SIM.params, np.random.default_rng(1)))
-    tr = InProcessTransport(pair, ACT.timing.sync_period_s, channel="emacheck-fuzz-test")
+    tr = InProcessTransport(pair, ACT.timing.sync_period_s)
     link = CanopenLink(make_master(), tr)
     state = {"link": link, "smp": link.first_sample()}
     yield state

@@ -33,7 +33,7 @@ CYCLES = 600
 
 def _golden_log(tmp_path, actuation, check_profile, simrig):
     pair = make_pair(RigPlant(simrig.params, np.random.default_rng(38)))
-    tr = InProcessTransport(pair, actuation.timing.sync_period_s, channel="emacheck-golden-sequence")
+    tr = InProcessTransport(pair, actuation.timing.sync_period_s)
     m = MasterCore(actuation, shipped_rig().plan,
                    forces=(check_profile.calibration.opposing_force_N, check_profile.safety.max_force_N))
     log = CanLogWriter(tmp_path / "can.log", channel="vcan-dry-run")

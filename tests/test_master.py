@@ -571,7 +571,7 @@ def test_a_drive_that_falls_silent_while_drilled_leaves_the_other_disabled(actua
         return serve(frame, t)
 
     deaf.on_sdo = until_enabled
-    tr = InProcessTransport(pair, T, channel="emacheck-test-deaf-drill")
+    tr = InProcessTransport(pair, T)
     link = CanopenLink(_master(actuation), tr)
     try:
         with pytest.raises(SdoTimeout, match=r"node 2: SDO timeout"):

@@ -248,7 +248,7 @@ def test_the_master_configures_and_reads_the_sensor_node_on_the_same_sync(tmp_pa
 
     act, rig = sensor_rig(tmp_path / "actuation.toml")
     rec = _Recorder(_pair(rig, seed=5))
-    tr = InProcessTransport(rec, act.timing.sync_period_s, channel="emacheck-test-sensor-node")
+    tr = InProcessTransport(rec, act.timing.sync_period_s)
     try:
         smp = CanopenLink(MasterCore(act, rig.plan), tr).first_sample()
     finally:

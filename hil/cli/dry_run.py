@@ -95,9 +95,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     meta = MetaWriter(out, dataclasses.replace(record, files_sha256={**(record.files_sha256 or {}),
                                                                      **rig_hashes(rig)}), new=True)
     meta.write()  # the run folder says "running" from the start
-    # a channel of its own: python-can's virtual channels are process-global by name
-    transport = InProcessTransport(injector, act.timing.sync_period_s, channel=f"emacheck-dry-run-{id(injector):x}",
-                                   realtime=realtime)
+    transport = InProcessTransport(injector, act.timing.sync_period_s, realtime=realtime)
     master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N),
                         safety=check.safety)
     log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
