@@ -29,8 +29,8 @@ STALL_AT = 1400  #: the SYNC (counted from the first) that comes late: 0.28 s in
 class LateSyncTransport(InProcessTransport):
     """The dry-run's transport whose SYNC number ``stall_at`` comes ``extra`` periods late."""
 
-    def __init__(self, pair, T: float, channel: str, stall_at: int, extra: int) -> None:
-        super().__init__(pair, T, channel=channel)
+    def __init__(self, pair, T: float, stall_at: int, extra: int) -> None:
+        super().__init__(pair, T)
         self.n, self.stall_at, self.extra = 0, stall_at, extra
 
     def next_sync(self) -> float | None:
@@ -43,7 +43,7 @@ class LateSyncTransport(InProcessTransport):
 
 def _run(actuation, check, simrig, extra: int, cycles: int = STALL_AT + 60):
     pair = make_pair(RigPlant(simrig.params, np.random.default_rng(1)))
-    tr = LateSyncTransport(pair, actuation.timing.sync_period_s, f"emacheck-late-sync-{extra}", STALL_AT, extra)
+    tr = LateSyncTransport(pair, actuation.timing.sync_period_s, STALL_AT, extra)
     m = MasterCore(actuation, shipped_rig().plan,
                    forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
     link = CanopenLink(m, tr, max_missing_cycles=check.safety.max_stale_cycles, max_lag_s=check.safety.max_lag_s)
