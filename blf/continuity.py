@@ -9,7 +9,7 @@ motion itself.
 **Time.** Let :math:`T` be the median sample period. A sample ``i`` whose time step
 :math:`t_i - t_{i-1} > G \\cdot T` with :math:`G` = :data:`GAP_PERIODS` (= 10) is a gap: samples are
 missing for longer than any source of emacheck's recordings leaves out (the master's supervisor stops a
-check after :data:`hil.config.HARD_MAX_STALE_CYCLES` = 5 missing cycles, so a run never holds a gap of
+check after :data:`hil.profile.config.HARD_MAX_STALE_CYCLES` = 5 missing cycles, so a run never holds a gap of
 more than 6 periods; 10 leaves a recording from elsewhere up to 9 lost samples in a row). A time step
 :math:`\\le 0` (time that stands or goes back) is a jump too.
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import can
 
 from hil.canopen.frame import SYNC_COB_ID, Frame
-from hil.cycletiming import CycleTiming, TimingSummary
+from hil.record.cycletiming import CycleTiming, TimingSummary
 from hil.transport import SocketcanFrames
 
 #: Longest wait for a frame [s] (fixed, so SocketCAN needs no timeout change per frame):
@@ -178,7 +178,7 @@ def serve(bus: can.BusABC, pair, *, stop: threading.Event | None = None,
         Called once after power-on (boot-up frames sent), before the first receive.
     period_s : float, optional
         The SYNC period [s]: given, the loop measures its timing per SYNC
-        (:class:`hil.cycletiming.CycleTiming`: SYNC arrival to the TPDOs sent,
+        (:class:`hil.record.cycletiming.CycleTiming`: SYNC arrival to the TPDOs sent,
         the SYNC's handling, SYNC to SYNC) into :attr:`ServeStats.timing`.
 
     Returns

@@ -1,6 +1,6 @@
 """Transports: how frames get between the master and the drives (the thin IO shell, python-can).
 
-Two transports move the frames of :class:`hil.link.CanopenLink`:
+Two transports move the frames of :class:`hil.master.link.CanopenLink`:
 
 * :class:`InProcessTransport` (``emacheck dry-run``): the master and the
   simulated drive pair on an in-process bus of the project's own

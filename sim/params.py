@@ -1,7 +1,7 @@
 """Parameters of the simulated dual-EMA rig, as validated frozen dataclasses.
 
 All fields carry their unit in the name. Loading from TOML and validation of
-ranges live in :mod:`hil.profiles`; these classes only hold values.
+ranges live in :mod:`hil.profile.load`; these classes only hold values.
 """
 
 from __future__ import annotations

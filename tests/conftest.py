@@ -18,7 +18,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from hil.profiles import load_actuation, load_check, load_simrig  # noqa: E402
+from hil.profile.load import load_actuation, load_check, load_simrig  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 
@@ -46,10 +46,10 @@ def simrig():
 
 def simulate_run(out: Path, act, check, simrig_profile, seed: int):
     """The check on the plant, as `emacheck simulate` runs it, without the terminal."""
+    from hil.check.runner import PlantLink, run_check
     from hil.cli.check import truth_dict
-    from hil.runfolder import MetaWriter
-    from hil.runner import PlantLink, run_check
-    from hil.runrecord import RunMode, start_record
+    from hil.record.runfolder import MetaWriter
+    from hil.record.runrecord import RunMode, start_record
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 

@@ -18,15 +18,15 @@ import warnings
 import numpy as np
 import pytest
 
-from hil.canlog import CanLogWriter, decode_can_log
 from hil.canopen.errors import EdsError
 from hil.canopen.frame import sync_frame
 from hil.canopen.od import default_eds_path, load_eds
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main
 from hil.cli.common import ExitCode
-from hil.profiles import default_profile_path, load_actuation
-from hil.runfolder import read_signals
+from hil.profile.load import default_profile_path, load_actuation
+from hil.record.canlog import CanLogWriter, decode_can_log
+from hil.record.runfolder import read_signals
 from support.canopen_rig import shipped_rig
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2"

@@ -437,8 +437,8 @@ def test_small_external_backlash_on_the_simulated_rig(tmp_path, actuation, beari
     """bearing_backlash_mm 0.01 / 0.015 at both EMAs (ext 0.02 / 0.03 mm in a +-0.66 mm D range): pass, ext
     within 5 um (it said FAIL: no flat part of the binned slope)."""
     from hil.analysis.maint import analyze_signals, result_dict
-    from hil.profiles import load_check, load_simrig
-    from hil.runfolder import read_signals
+    from hil.profile.load import load_check, load_simrig
+    from hil.record.runfolder import read_signals
 
     chk = load_check(write_profile_variant("check.toml", tmp_path / "check.toml", SHORT_CHECK), actuation)
     sim = load_simrig(write_profile_variant("simrig.toml", tmp_path / "simrig.toml", {

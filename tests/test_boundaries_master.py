@@ -3,13 +3,13 @@
 Each rule on its limit and one float step either side (tests/support/boundary.py), asserting which
 side trips:
 
-* boot-up after NMT reset (hil/master.py: ``t > start + canopen.boot_timeout_s`` fails the preflight);
+* boot-up after NMT reset (hil/master/core.py: ``t > start + canopen.boot_timeout_s`` fails the preflight);
 * the SDO response (hil/canopen/sdo.py: ``t - sent >= canopen.sdo_timeout_s`` is a timeout: the limit
   itself trips);
 * the heartbeat consumer in the cyclic phase (``t - last > timeout - T/2``: polled once per SYNC, it
   reacts no later than the timeout on the SYNC grid);
 * the master's own heartbeat producer (due at its period, within 1 ns);
-* the link (hil/link.py): CiA 402 power-up within ``canopen.enable_timeout_s``, the master's lag
+* the link (hil/master/link.py): CiA 402 power-up within ``canopen.enable_timeout_s``, the master's lag
   behind the bus (``lag > safety.max_lag_s``, capped at 0.5 s) and its count of cycles without a
   complete sample (``missing > max_stale_cycles``).
 
@@ -29,8 +29,8 @@ import pytest
 
 from hil.canopen.frame import Frame
 from hil.canopen.sdo import SdoTimeout
-from hil.link import CanopenLink, StaleData
-from hil.master import HeartbeatLost, MasterCore, Phase, PreflightError
+from hil.master.core import HeartbeatLost, MasterCore, Phase, PreflightError
+from hil.master.link import CanopenLink, StaleData
 from sim.plant import RigPlant
 from support.boundary import around
 from support.canopen_rig import cyclic_master, make_master

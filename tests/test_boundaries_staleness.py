@@ -1,4 +1,4 @@
-"""Which freshness limit applies (hil/staleness.py, docs/safety.md *A stall of the master*), each rule at
+"""Which freshness limit applies (hil/check/staleness.py, docs/safety.md *A stall of the master*), each rule at
 its boundary.
 
 * drives whose limits are not known, or a drive that does not keep 0x607D, 0x6072 and 0x6080 itself:
@@ -16,11 +16,11 @@ import pytest
 
 from hil.canopen.drivelimits import LimitKind
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.config import HARD_MAX_FOLLOWING_ERROR_MM, HARD_MAX_STALE_MS, HARD_MAX_VELOCITY_MM_PER_S
+from hil.check.staleness import NEEDED, stale_limit
+from hil.check.supervisor import Limits, Supervisor
 from hil.errors import ProfileError
-from hil.profiles import load_check
-from hil.staleness import NEEDED, stale_limit
-from hil.supervisor import Limits, Supervisor
+from hil.profile.config import HARD_MAX_FOLLOWING_ERROR_MM, HARD_MAX_STALE_MS, HARD_MAX_VELOCITY_MM_PER_S
+from hil.profile.load import load_check
 from support.profiles import write_profile_variant
 
 ALL = frozenset(LimitKind)

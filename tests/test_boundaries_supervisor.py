@@ -1,6 +1,6 @@
 """Every supervisor limit pinned at its boundary: on the limit, one float step below and above.
 
-hil/supervisor.py trips when a measured quantity is *beyond* its limit (``>``). Each test here feeds
+hil/check/supervisor.py trips when a measured quantity is *beyond* its limit (``>``). Each test here feeds
 the shipped profiles' limits (and the hard caps, for a check whose profile asks for more) exactly, in
 floats (tests/support/boundary.py walks the input by nextafter until the quantity, computed with the
 supervisor's own float operations, is the limit), and asserts: on the limit and below, no violation;
@@ -17,8 +17,8 @@ import math
 import pytest
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.config import HARD_LVDT_GAIN_TOLERANCE
-from hil.supervisor import Limits, Supervisor, Violation
+from hil.check.supervisor import Limits, Supervisor, Violation
+from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
 from support.boundary import around
 
 HOLD = Setpoint(DriveMode.DISABLED, 0.0)

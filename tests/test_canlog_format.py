@@ -1,6 +1,6 @@
 """The CAN log's batch formatter (issue 38): byte for byte the lines of python-can's candump writer.
 
-:func:`hil.canlog.candump_lines` formats a batch of frames at each flush; python-can's
+:func:`hil.record.canlog.candump_lines` formats a batch of frames at each flush; python-can's
 :class:`can.io.CanutilsLogWriter` is the reference it must match on any frame a bus can deliver
 (standard and extended identifiers, remote and error frames, CAN FD flags, 0-8 bytes, any time,
 times before the first frame's, any channel), across batch boundaries too.
@@ -14,8 +14,8 @@ import can
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hil.canlog import CanLogWriter, FrameKind, candump_lines
 from hil.canopen.frame import Frame
+from hil.record.canlog import CanLogWriter, FrameKind, candump_lines
 
 times = st.one_of(st.floats(min_value=0.0, max_value=2e9, allow_nan=False),
                   st.floats(min_value=0.0, max_value=200.0, allow_nan=False),

@@ -13,7 +13,7 @@ from conftest import simulate_run
 
 from blf.signals import CHANNELS
 from hil.analysis.maint import analyze_signals, result_dict
-from hil.runfolder import read_signals
+from hil.record.runfolder import read_signals
 
 #: every test here runs or reads a whole simulated check: not in the fast loop (-m "not slow")
 pytestmark = pytest.mark.slow

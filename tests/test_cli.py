@@ -8,7 +8,7 @@ import json
 import pytest
 
 from hil.cli import main
-from hil.runfolder import MetaWriter, read_record
+from hil.record.runfolder import MetaWriter, read_record
 from support.profiles import write_profile_variant
 
 

@@ -9,7 +9,7 @@ import pytest
 from hil.canopen.process import MEASURED_CHANNELS, Sample
 from hil.cli import COMMANDS, build_parser, main
 from hil.cli.common import ExitCode
-from hil.runfolder import COLUMN_UNITS, SIGNAL_COLUMNS, Signals
+from hil.record.runfolder import COLUMN_UNITS, SIGNAL_COLUMNS, Signals
 
 
 def test_every_command_registers_a_handler():

@@ -1,10 +1,10 @@
-"""Unit tests of the loop-timing statistics (hil/cycletiming.py): known answers, fixed memory."""
+"""Unit tests of the loop-timing statistics (hil/record/cycletiming.py): known answers, fixed memory."""
 
 from __future__ import annotations
 
 import pytest
 
-from hil.cycletiming import CycleTiming, Histogram
+from hil.record.cycletiming import CycleTiming, Histogram
 
 
 def test_percentiles_are_nearest_rank_bin_upper_edges():
@@ -75,8 +75,8 @@ def test_bad_arguments_are_refused_with_their_values():
 
 
 def test_the_reports_timing_section_shows_the_measured_percentiles():
+    from hil.record.runrecord import Timing
     from hil.report.maint import timing_section
-    from hil.runrecord import Timing
 
     ct = CycleTiming(2e-3)
     for k in range(1000):  # reaction 0.105 ms, one cycle 1.505 ms

@@ -47,7 +47,7 @@ def test_the_rig_profile_is_the_shipped_one_with_the_readme_ratio():
     # the README states the rig's motor-to-ram ratio; the diagnoses above use it and nothing else new
     import dataclasses
 
-    from hil.profiles import load_actuation
+    from hil.profile.load import load_actuation
     from support.independent_rig import SHIPPED_ACTUATION, rig_i_total, rig_profile
 
     shipped, rig = load_actuation(SHIPPED_ACTUATION), load_actuation(rig_profile())

@@ -21,7 +21,7 @@ import pytest
 from test_verdict import validate
 
 from hil.cli import main
-from hil.runfolder import read_signals
+from hil.record.runfolder import read_signals
 
 CALIBRATED = {"lvdt_pitch", "lvdt_offset"}
 ROOT = Path(__file__).resolve().parents[1]

@@ -30,9 +30,9 @@ from hil.canopen.plan import PlanError
 from hil.canopen.process import DriveMode
 from hil.canopen.sdo import SdoAbortCode, SdoAbortError
 from hil.canopen.signalmap import DeviceProfile, ForceControl, NodeRole, NodeSpec
-from hil.profiles import default_profile_path, load_actuation, load_check, load_simrig
-from hil.rig import plan_for
-from hil.runfolder import read_record
+from hil.profile.load import default_profile_path, load_actuation, load_check, load_simrig
+from hil.profile.rig import plan_for
+from hil.record.runfolder import read_record
 from sim.drives import SimDrive
 from sim.drives.served import own_data
 from sim.drives.stats import PairCounters

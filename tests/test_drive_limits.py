@@ -35,10 +35,10 @@ from hil.canopen.drivelimits import (
 )
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame, sync_frame
-from hil.limits_setup import limit_targets, limits_for, readback_problem
-from hil.master import MasterCore, PreflightError
-from hil.profiles import default_profile_path, load_actuation
-from hil.rig import plan_for
+from hil.master.core import MasterCore, PreflightError
+from hil.master.limits_setup import limit_targets, limits_for, readback_problem
+from hil.profile.load import default_profile_path, load_actuation
+from hil.profile.rig import plan_for
 from sim.drives.limits import DriveLimits
 from sim.plant import RigPlant
 from support.canopen_rig import make_pair

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from hil.cli.dry_run import dry_run
-from hil.profiles import load_actuation, load_check
+from hil.profile.load import load_actuation, load_check
+from hil.record.runfolder import read_record, read_signals
 from hil.report.shell import master_loss_text
-from hil.runfolder import read_record, read_signals
 from support.eds import write_eds_variant
 from support.profiles import write_profile_variant
 

@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 
 from blf.signals import CHANNELS
-from hil.canlog import decode_can_log
 from hil.cli import main
-from hil.runfolder import read_record, read_signals
-from hil.runrecord import RunMode, RunStatus
+from hil.record.canlog import decode_can_log
+from hil.record.runfolder import read_record, read_signals
+from hil.record.runrecord import RunMode, RunStatus
 from support.profiles import write_profile_variant
 
 

@@ -25,8 +25,8 @@ from hil.canopen.od import (
     type_name,
 )
 from hil.canopen.plan import PlanError
-from hil.profiles import default_profile_path, load_actuation
-from hil.rig import plan_for
+from hil.profile.load import default_profile_path, load_actuation
+from hil.profile.rig import plan_for
 from support.canopen_rig import shipped_rig
 from support.ci import skip_or_fail
 from support.profiles import write_profile_variant

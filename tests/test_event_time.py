@@ -15,8 +15,8 @@ import can
 import pytest
 
 from hil.canopen.frame import Frame
-from hil.link import CanopenLink, StaleData
-from hil.master import HeartbeatLost
+from hil.master.core import HeartbeatLost
+from hil.master.link import CanopenLink, StaleData
 from hil.transport import BusTransport
 from support.canopen_rig import make_master
 
@@ -80,7 +80,7 @@ def test_heartbeat_in_the_backlog_is_not_judged_lost(transport, actuation):
     tr = transport
     m = make_master(actuation)
     hb = actuation.canopen.heartbeat_period_s
-    from hil.master import Phase
+    from hil.master.core import Phase
     m.phase = Phase.CYCLIC
     now = time.monotonic() - tr._t0
     start = now - 4 * hb  # the consumer started 4 periods ago; heartbeats came every period

@@ -35,16 +35,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.canlog import decode_can_log
 from hil.canopen.cia402 import State, decode_state
 from hil.canopen.frame import Frame
 from hil.canopen.process import DriveMode
+from hil.check.supervisor import Limits
 from hil.cli.dry_run import dry_run
-from hil.config import HARD_MAX_FORCE_FRACTION
-from hil.link import SDO_FALLBACK_CYCLES
-from hil.profiles import load_actuation, load_check, load_simrig
-from hil.runfolder import read_record, read_signals
-from hil.supervisor import Limits
+from hil.master.link import SDO_FALLBACK_CYCLES
+from hil.profile.config import HARD_MAX_FORCE_FRACTION
+from hil.profile.load import load_actuation, load_check, load_simrig
+from hil.record.canlog import decode_can_log
+from hil.record.runfolder import read_record, read_signals
 from sim.faults import Fault, FaultInjector, FaultKind
 from sim.plant import RigPlant
 from support.canopen_rig import make_pair
@@ -453,7 +453,7 @@ def test_a_refused_drive_fault_leaves_every_drive_disabled(tmp_path, profiles, f
 @pytest.mark.parametrize("fault", _HANDLED, ids=[f"{f.kind}-{f.value:g}" for f in _HANDLED])
 def test_drive_fault_handled_by_the_master_up_to_operation_enabled(fault):
     """The master's preflight and drill with the faulty drive, up to both drives enabled for the check."""
-    from hil.link import CanopenLink
+    from hil.master.link import CanopenLink
     from hil.transport import InProcessTransport
     from support.canopen_rig import make_master
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
+from hil.check.supervisor import Limits, Supervisor
 from hil.cli import main
-from hil.config import HARD_MAX_FORCE_FRACTION, HARD_MAX_STALE_CYCLES
 from hil.errors import ProfileError
-from hil.profiles import default_profile_path, load_check
-from hil.supervisor import Limits, Supervisor
+from hil.profile.config import HARD_MAX_FORCE_FRACTION, HARD_MAX_STALE_CYCLES
+from hil.profile.load import default_profile_path, load_check
 from support.profiles import write_profile_variant
 
 T = 0.002
@@ -166,7 +166,7 @@ def test_bad_recordings_are_refused_with_line_and_unit(tmp_path, capsys, short_r
 
 
 def test_can_log_with_garbage_lines_is_refused_but_a_cut_last_line_is_not(tmp_path, capsys, short_run, actuation):
-    from hil.canlog import decode_can_log
+    from hil.record.canlog import decode_can_log
     run = tmp_path / "run"
     shutil.copytree(short_run, run)
     (run / "signals.csv").unlink()
@@ -184,7 +184,7 @@ def test_the_can_log_reader_closes_its_file_however_the_reading_ends(tmp_path, m
     plain or gzipped (python-can's reader closes it only at the end of the file)."""
     import gzip
 
-    from hil import canlog
+    from hil.record import canlog
 
     text = "(0.000000) can0 080#\n(0.001000) can0 181#0102\n(0.002000) can0 080#\n"
     path = tmp_path / name
@@ -218,8 +218,8 @@ def test_a_gzipped_can_log_decodes_as_the_plain_one(tmp_path, short_run, actuati
     test_dry_run.py's, slow.)"""
     import gzip
 
-    from hil.canlog import decode_can_log
-    from hil.runfolder import EXTRA_COLUMNS, SIGNAL_COLUMNS, is_can_log
+    from hil.record.canlog import decode_can_log
+    from hil.record.runfolder import EXTRA_COLUMNS, SIGNAL_COLUMNS, is_can_log
 
     gz = tmp_path / "can.log.gz"
     with gzip.open(gz, "wb") as fh:
@@ -242,7 +242,7 @@ def test_the_can_log_reader_times_a_sample_by_its_sync_period_not_by_count_or_st
     logged 0.4 T late, its answers with it, still gives its sample the time of its period (by its
     stamp it would be 0.4 T late; more than T/2 late, it is taken for the next period), as the
     master timed it in the run (hil.canopen.cycle.SyncSchedule)."""
-    from hil.canlog import decode_can_log
+    from hil.record.canlog import decode_can_log
 
     T = actuation.timing.sync_period_s
     lines = (short_run / "can.log").read_text().splitlines()

@@ -23,8 +23,8 @@ from hypothesis import strategies as st
 from hil.canopen.frame import Frame
 from hil.canopen.process import DriveMode, Setpoint
 from hil.errors import KNOWN_ERRORS, ProfileError
-from hil.link import CanopenLink
-from hil.profiles import load_actuation, load_check, load_simrig
+from hil.master.link import CanopenLink
+from hil.profile.load import load_actuation, load_check, load_simrig
 from hil.transport import InProcessTransport
 from sim.plant import RigPlant
 from support.canopen_rig import cyclic_master, make_master, make_pair

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from hil.canopen.od import default_eds_path
 from hil.cli import main
-from hil.profiles import default_profile_path
+from hil.profile.load import default_profile_path
 
 ACTUATION = default_profile_path("actuation.toml")
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow],

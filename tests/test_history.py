@@ -19,10 +19,10 @@ import jsonschema
 import pytest
 
 from hil.cli import main
-from hil.config import Actuation
 from hil.history.record import record_from_result
 from hil.history.store import HistoryStore
-from hil.profiles import load_actuation
+from hil.profile.config import Actuation
+from hil.profile.load import load_actuation
 from support import postgres
 from support.ci import skip_or_fail
 from support.wear import SERIALS, true_crossing_fh, wear_results

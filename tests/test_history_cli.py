@@ -12,7 +12,7 @@ import pytest
 
 from hil.cli import main
 from hil.history.store import HistoryStore
-from hil.runfolder import read_record
+from hil.record.runfolder import read_record
 from support.profiles import write_profile_variant
 
 ROOT = Path(__file__).resolve().parents[1]

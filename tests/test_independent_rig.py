@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from hil.analysis.maint import analyze_signals, result_dict
-from hil.profiles import load_actuation
-from hil.runfolder import read_signals
+from hil.profile.load import load_actuation
+from hil.record.runfolder import read_signals
 from support.ci import skip_or_fail
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "independent-rig"

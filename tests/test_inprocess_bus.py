@@ -13,11 +13,11 @@ import hashlib
 
 import numpy as np
 
-from hil.canlog import CanLogWriter
 from hil.canopen.frame import Frame
-from hil.link import CanopenLink
-from hil.master import MasterCore
-from hil.sequence import CheckSequence
+from hil.check.sequence import CheckSequence
+from hil.master.core import MasterCore
+from hil.master.link import CanopenLink
+from hil.record.canlog import CanLogWriter
 from hil.transport import InProcessTransport
 from sim.plant import RigPlant
 from support.canopen_rig import make_pair, shipped_rig

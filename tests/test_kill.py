@@ -37,8 +37,8 @@ import pytest
 
 import hil.report.maint
 from hil.cli import main
-from hil.runfolder import read_record, read_signals, resolve_recording
-from hil.runrecord import RunRecord
+from hil.record.runfolder import read_record, read_signals, resolve_recording
+from hil.record.runrecord import RunRecord
 
 #: twenty dry-runs killed and analysed: not in the fast loop (-m "not slow")
 pytestmark = pytest.mark.slow

@@ -83,14 +83,14 @@ def test_the_walk_sees_every_kind_of_import(tmp_path):
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
     mod = pkg / "x.py"
-    mod.write_text("import numpy\nfrom . import y\ndef f():\n    from hil.runfolder import read_signals\n"
+    mod.write_text("import numpy\nfrom . import y\ndef f():\n    from hil.record.runfolder import read_signals\n"
                    "    import sim.plant\nfrom hil import canopen\n")
     names = [m for _, m in _imports_at(mod, tmp_path)]
-    assert "hil.runfolder" in names and "sim.plant" in names and "blf.y" in names and "hil.canopen" in names
-    assert _violation("blf.x", "hil.runfolder") and _violation("blf.x", "sim.plant")
-    assert _violation("sim.plant", "hil.master") and not _violation("sim.plant", "hil.canopen.frame")
+    assert "hil.record.runfolder" in names and "sim.plant" in names and "blf.y" in names and "hil.canopen" in names
+    assert _violation("blf.x", "hil.record.runfolder") and _violation("blf.x", "sim.plant")
+    assert _violation("sim.plant", "hil.master.core") and not _violation("sim.plant", "hil.canopen.frame")
     assert _violation("hil.canopen.pdo", "hil.errors") and _violation("hil.canopen.pdo", "blf.errors")
-    assert not _violation("hil.canopen.pdo", "hil.canopen.frame") and not _violation("hil.master", "sim.plant")
+    assert not _violation("hil.canopen.pdo", "hil.canopen.frame") and not _violation("hil.master.core", "sim.plant")
 
 
 def _imports_at(path: Path, root: Path) -> list[tuple[int, str]]:

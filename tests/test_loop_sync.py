@@ -43,7 +43,7 @@ def test_sim_serve_discards_tpdos_past_their_syncs_window():
 
     import numpy as np
 
-    from hil.profiles import load_simrig
+    from hil.profile.load import load_simrig
     from hil.sim_server import serve
     from sim.plant import RigPlant
     from support.canopen_rig import make_pair

@@ -12,7 +12,6 @@ import struct
 import numpy as np
 import pytest
 
-from hil import master_events as event
 from hil.canopen.cia402 import State
 from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
@@ -20,10 +19,11 @@ from hil.canopen.plan import PlanError
 from hil.canopen.process import DriveMode, Setpoint
 from hil.canopen.sdo import SdoAbortError
 from hil.canopen.signalmap import ForceControl
-from hil.master import DriveFault, HeartbeatLost, MasterCore, MasterLossReactionError, PreflightError
-from hil.preflight import DrillOutcome
-from hil.profiles import load_actuation
-from hil.rig import plan_for
+from hil.master import events as event
+from hil.master.core import DriveFault, HeartbeatLost, MasterCore, MasterLossReactionError, PreflightError
+from hil.master.preflight import DrillOutcome
+from hil.profile.load import load_actuation
+from hil.profile.rig import plan_for
 from sim.faults import Fault, FaultInjector
 from sim.plant import RigPlant
 from support.canopen_rig import make_pair, shipped_rig
@@ -558,7 +558,7 @@ def test_a_drive_that_falls_silent_while_drilled_leaves_the_other_disabled(actua
     """An SDO timeout in the drill (not a soft read) ends the preflight outside its generator: the link's close
     still disables, by SDO, every drive the drill powered up."""
     from hil.canopen.sdo import SdoTimeout
-    from hil.link import CanopenLink
+    from hil.master.link import CanopenLink
     from hil.transport import InProcessTransport
 
     pair = make_pair(_plant(simrig, 9))

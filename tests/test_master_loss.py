@@ -1,6 +1,6 @@
 """The master's death (issue 17): the drives stop by themselves.
 
-The master is a heartbeat producer from its own loop (hil/master.py); the
+The master is a heartbeat producer from its own loop (hil/master/core.py); the
 preflight configures and reads back each drive's consumer heartbeat 0x1016 on
 it and the abort connection option 0x6007 = 3 (quick stop, then switch on
 disabled); the simulated drives (sim/drives) consume the heartbeat, send EMCY
@@ -35,12 +35,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.canlog import decode_can_log
 from hil.canopen.cia402 import State
+from hil.check.supervisor import Limits
 from hil.errors import ProfileError
-from hil.profiles import load_actuation, load_check, load_simrig
-from hil.runfolder import read_record, read_signals
-from hil.supervisor import Limits
+from hil.profile.load import load_actuation, load_check, load_simrig
+from hil.record.canlog import decode_can_log
+from hil.record.runfolder import read_record, read_signals
 from sim.drives import QUICK_STOP_HOLD_S
 from sim.faults import Fault
 from support.ci import skip_or_fail

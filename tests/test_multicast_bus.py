@@ -98,7 +98,7 @@ def test_run_records_the_hop_limit_it_opened_the_bus_with(interface, channel, fl
                                                           tmp_path):
     """meta.json's bus part says which hop limit the frames had (udp_multicast only; another interface has
     no such key). A spy takes the record's bus part and ends the run there (exit 3)."""
-    import hil.runrecord
+    import hil.record.runrecord
 
     seen = []
 
@@ -106,7 +106,7 @@ def test_run_records_the_hop_limit_it_opened_the_bus_with(interface, channel, fl
         seen.append(bus)
         raise InterfaceError("spy: stop after the record's bus part")
 
-    monkeypatch.setattr(hil.runrecord, "start_record", spy)
+    monkeypatch.setattr(hil.record.runrecord, "start_record", spy)
     rc = main(["run", "--arm", "--interface", interface, "--channel", channel, "--out", str(tmp_path / "r"), *flag])
     capsys.readouterr()
     assert rc == 3 and len(seen) == 1

@@ -16,8 +16,8 @@ from hil.canopen.plan import PlanError
 from hil.canopen.signalmap import ForceControl, Scale, ScaleSource, Signal, parse_object
 from hil.cli import main
 from hil.errors import ProfileError
-from hil.profiles import actuation_from_snapshot, actuation_tables, load_actuation
-from hil.rig import plan_for
+from hil.profile.load import actuation_from_snapshot, actuation_tables, load_actuation
+from hil.profile.rig import plan_for
 from support.canopen_rig import shipped_rig
 from support.profiles import write_profile_variant
 
@@ -157,7 +157,7 @@ def test_every_problem_is_reported_not_only_the_first(tmp_path):
 
 
 def test_profile_check_of_the_shipped_profile(capsys):
-    from hil.profiles import default_profile_path
+    from hil.profile.load import default_profile_path
 
     assert main(["profile", "check", str(default_profile_path("actuation.toml"))]) == 0
     out = capsys.readouterr().out
@@ -195,7 +195,7 @@ def test_run_and_dry_run_refuse_a_bad_map_before_any_frame(tmp_path, capsys, com
 
 
 def test_eds_given_on_the_command_line_replaces_the_profiles(tmp_path, capsys):
-    from hil.profiles import default_profile_path
+    from hil.profile.load import default_profile_path
 
     prof = _profile(tmp_path, overrides={"canopen": {"eds": "vendor_drive.eds"}})
     assert main(["profile", "check", str(prof)]) == 3

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from hil.canopen.errors import EdsError
 from hil.canopen.plan import PlanError
 from hil.errors import ProfileError
-from hil.profiles import default_profile_path, load_actuation
-from hil.rig import plan_for
+from hil.profile.load import default_profile_path, load_actuation
+from hil.profile.rig import plan_for
 from support.profiles import write_profile_variant
 
 SECTIONS = None

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from hil.errors import ProfileError
-from hil.profiles import load_actuation, load_check, load_simrig
+from hil.profile.load import load_actuation, load_check, load_simrig
 from support.profiles import write_profile_variant
 
 

@@ -21,7 +21,7 @@ import pytest
 from hil.cli import main
 from hil.cli.common import ExitCode, Outputs, default_out, out_dir, outputs_for
 from hil.errors import OutputError
-from hil.runfolder import create_json, create_with
+from hil.record.runfolder import create_json, create_with
 from support.diagnose_cases import base_params, record, short_check
 from support.figures import figures_unrendered
 
@@ -38,8 +38,8 @@ def short_run(tmp_path_factory):
     check writes them at its end (its figures not drawn: support/figures.py)."""
     from hil.cli.check import analyze_and_report
     from hil.cli.common import make_console
-    from hil.profiles import load_actuation
-    from hil.runfolder import read_record
+    from hil.profile.load import load_actuation
+    from hil.record.runfolder import read_record
 
     out = tmp_path_factory.mktemp("once") / "run"
     record(base_params(), 1, out, short_check())
@@ -107,9 +107,9 @@ def test_the_default_run_folder_is_new_even_twice_in_one_second(tmp_path, monkey
 
 
 def test_a_runs_can_log_and_meta_json_are_never_opened_over_existing_ones(tmp_path):
-    from hil.canlog import CanLogWriter
-    from hil.runfolder import MetaWriter
-    from hil.runrecord import RunRecord
+    from hil.record.canlog import CanLogWriter
+    from hil.record.runfolder import MetaWriter
+    from hil.record.runrecord import RunRecord
 
     (tmp_path / "can.log").write_bytes(b"(1.0) can0 080#\n")
     with pytest.raises(OutputError, match="can.log: exists"):

@@ -7,7 +7,7 @@ import pytest
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.errors import RecordingError
-from hil.runfolder import SignalsWriter, read_signals
+from hil.record.runfolder import SignalsWriter, read_signals
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2\n"
 
@@ -62,7 +62,7 @@ def test_gap_is_noted(tmp_path):
 def test_disk_sync_writes_json_in_order_off_the_thread_and_raises_its_errors(tmp_path):
     import json
 
-    from hil.runfolder import DiskSync, SignalsWriter
+    from hil.record.runfolder import DiskSync, SignalsWriter
 
     disk = DiskSync()
     w = SignalsWriter(tmp_path / "signals.csv")
@@ -103,9 +103,9 @@ def test_signals_and_can_log_on_a_real_bus_make_no_system_call_on_the_loop_threa
     the files read back whole."""
     import can
 
-    from hil.canlog import CanLogWriter
     from hil.canopen.frame import Frame
-    from hil.runfolder import DiskSync
+    from hil.record.canlog import CanLogWriter
+    from hil.record.runfolder import DiskSync
 
     disk = DiskSync(background=True)
     w = SignalsWriter(tmp_path / "signals.csv", flush_rows=7, disk=disk)
@@ -132,7 +132,7 @@ def test_signals_and_can_log_on_a_real_bus_make_no_system_call_on_the_loop_threa
 def test_without_a_background_disk_sync_each_flush_is_on_disk_at_once(tmp_path):
     """A dry-run (no thread): what was flushed is in the file when flush returns, what was not is not
     (a killed process loses only what it had not flushed); after a DiskSync closes, its jobs run at once."""
-    from hil.runfolder import DiskSync, LoopFile
+    from hil.record.runfolder import DiskSync, LoopFile
 
     f = LoopFile(tmp_path / "a.txt")
     f.write("one\n")

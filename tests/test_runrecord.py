@@ -1,9 +1,9 @@
-"""The run record (hil/runrecord.py): meta.json as frozen dataclasses, its JSON both ways, its one
-writer (hil/runfolder.py: MetaWriter).
+"""The run record (hil/record/runrecord.py): meta.json as frozen dataclasses, its JSON both ways, its one
+writer (hil/record/runfolder.py: MetaWriter).
 
 Unit tests of the record (round trip, the layout the format has had, a killed run's partial record,
 malformed fields named, illegal statuses refused), and a source check that no module of the product
-but hil/runfolder.py writes meta.json and none but hil/runrecord.py names the file (an AST walk, as
+but hil/record/runfolder.py writes meta.json and none but hil/record/runrecord.py names the file (an AST walk, as
 tests/test_layers.py walks the imports).
 """
 
@@ -17,10 +17,10 @@ from pathlib import Path
 import pytest
 
 from hil.cli import main
-from hil.cycletiming import CycleTiming
 from hil.errors import KNOWN_ERRORS, RecordingError, RunRecordError
-from hil.runfolder import MetaWriter, read_record
-from hil.runrecord import (
+from hil.record.cycletiming import CycleTiming
+from hil.record.runfolder import MetaWriter, read_record
+from hil.record.runrecord import (
     Attribution,
     Bus,
     BusLoad,
@@ -131,7 +131,7 @@ def test_identity_without_0x1018_sub_4_has_no_serial_key():
 
 
 def test_timing_is_the_cycle_timing_summary_as_its_producer_writes_it():
-    """Timing's JSON is hil.cycletiming's summary JSON plus the SYNC's own keys, read back whole (the
+    """Timing's JSON is hil.record.cycletiming's summary JSON plus the SYNC's own keys, read back whole (the
     CPU time's histogram, which that JSON leaves out, is not kept)."""
     t = _timing()
     summary = t.summary
@@ -251,7 +251,7 @@ def test_start_record_and_the_end_of_the_loop(actuation, check_profile):
 
 
 def test_the_writer_posts_through_its_disk_sync_and_then_writes_at_once(tmp_path):
-    from hil.runfolder import DiskSync
+    from hil.record.runfolder import DiskSync
 
     meta = MetaWriter(tmp_path, RunRecord(run_id="a", status="running", steps=()))
     meta.open_disk(background=True)
@@ -288,7 +288,7 @@ WRITERS = {"write_json_atomic", "write_json", "write_text", "write_bytes", "dump
 
 def _meta_json_writes(path: Path) -> list[tuple[int, str, str]]:
     """(line, kind, what) of each place a module names the file meta.json (kind "name": the string, or
-    ``hil.runrecord.META_NAME``) or hands something named meta to a file writer (kind "write":
+    ``hil.record.runrecord.META_NAME``) or hands something named meta to a file writer (kind "write":
     ``write_json_atomic``, ``DiskSync.write_json``, ``write_text``, ``json.dump``, ``open(..., "w")``)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     out = []
@@ -320,18 +320,19 @@ def test_the_meta_json_check_sees_what_it_is_meant_to(tmp_path):
                  "def c(run, meta):\n    with open(run.meta_file, 'w') as fh:\n        json.dump(meta, fh)\n"
                  "def d(out, result):\n    write_json_atomic(out / 'result.json', result)\n"
                  "def e(run):\n    return open(run.meta_file).read()\n"
-                 "from hil.runrecord import META_NAME\n"
+                 "from hil.record.runrecord import META_NAME\n"
                  "def f(run, rec):\n    p = run / META_NAME\n    write_json_atomic(p, rec)\n")
     assert sorted({(ln, kind) for ln, kind, _ in _meta_json_writes(p)}) == \
         [(3, "name"), (3, "write"), (5, "write"), (7, "write"), (8, "write"), (13, "name"), (15, "name")]
 
 
 def test_no_module_but_the_writer_writes_meta_json():
-    """meta.json is written by hil/runfolder.py (MetaWriter, read_record) and named there and in
-    hil/runrecord.py (META_NAME) only."""
-    writer, record = ROOT / "hil" / "runfolder.py", ROOT / "hil" / "runrecord.py"
+    """meta.json is written by hil/record/runfolder.py (MetaWriter, read_record) and named there and in
+    hil/record/runrecord.py (META_NAME) only."""
+    writer, record = ROOT / "hil" / "record" / "runfolder.py", ROOT / "hil" / "record" / "runrecord.py"
     allowed = {"write": {writer}, "name": {writer, record}}
     found = [f"{p.relative_to(ROOT)}:{ln}: {what}"
              for p in sorted(q for pkg in ("hil", "blf", "sim") for q in (ROOT / pkg).rglob("*.py"))
              for ln, kind, what in _meta_json_writes(p) if p not in allowed[kind]]
-    assert not found, "meta.json outside hil.runfolder.MetaWriter / hil.runrecord.META_NAME:\n" + "\n".join(found)
+    assert not found, ("meta.json outside hil.record.runfolder.MetaWriter / hil.record.runrecord.META_NAME:\n"
+                       + "\n".join(found))

@@ -9,8 +9,8 @@ import pytest
 
 from hil.cli import main
 from hil.cli.common import ExitCode
+from hil.record.runrecord import shared_serial
 from hil.report.shell import trace_lines
-from hil.runrecord import shared_serial
 from support.profiles import write_profile_variant
 
 SERIAL = 0x5E000101

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from hil.canopen.frame import Frame
-from hil.link import CanopenLink
-from hil.master import MasterCore
-from hil.sequence import CheckSequence, Step
-from hil.supervisor import Supervisor
+from hil.check.sequence import CheckSequence, Step
+from hil.check.supervisor import Supervisor
+from hil.master.core import MasterCore
+from hil.master.link import CanopenLink
 from hil.transport import InProcessTransport
 from sim.plant import RigPlant
 from support.canopen_rig import make_pair, shipped_rig

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from hil.canopen.process import DriveMode, Sample
+from hil.check.sequence import TRANSITIONS, CheckSequence, Step, _triangle
 from hil.errors import SequenceError
-from hil.sequence import TRANSITIONS, CheckSequence, Step, _triangle
 
 
 def _smp(t, phi1=0.0, phi2=0.0, s1=0.0, s2=0.0, F1=0.0, F2=0.0):
@@ -84,8 +84,8 @@ def test_force_fight_demand_triangle():
 
 @pytest.mark.slow  # the session's whole simulated check
 def test_run_goes_through_all_steps_in_order(default_run):
-    from hil.runfolder import read_record
-    from hil.runrecord import RunStatus
+    from hil.record.runfolder import read_record
+    from hil.record.runrecord import RunStatus
 
     run_dir, _ = default_run
     meta = read_record(run_dir)

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from blf.calibration import fit_lvdt_calibration
-from hil.canlog import CanLogWriter
 from hil.canopen.frame import sync_frame
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main
 from hil.cli.common import ExitCode
+from hil.record.canlog import CanLogWriter
 from sim import operation as op
 from sim import scenarios as sc
 from support.canopen_rig import shipped_rig

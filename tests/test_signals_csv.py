@@ -1,4 +1,4 @@
-"""hil/signals_csv.py: the chunked CSV reader gives exactly what Python's float gives, across chunk
+"""hil/record/signals_csv.py: the chunked CSV reader gives exactly what Python's float gives, across chunk
 boundaries and when its arrays grow, and names the bad line wherever it is."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import gzip
 import numpy as np
 import pytest
 
-import hil.signals_csv as reader
+import hil.record.signals_csv as reader
 from hil.errors import RecordingError
-from hil.runfolder import read_signals
+from hil.record.runfolder import read_signals
 
 HEADER = "t,phi1,phi2,s1,s2,F1,F2,mode1,sp1,mode2,sp2,step"
 

@@ -18,8 +18,8 @@ import tomli_w
 
 from hil.canopen.frame import Frame
 from hil.canopen.sdo import SdoAbortCode, SdoAbortError, SdoClient
-from hil.profiles import default_profile_path, load_actuation
-from hil.rig import plan_for
+from hil.profile.load import default_profile_path, load_actuation
+from hil.profile.rig import plan_for
 from sim.drives import NmtState, SimSensorNode
 from sim.faults import Fault, FaultInjector
 from sim.plant import RigPlant
@@ -242,8 +242,8 @@ class _Recorder:
 def test_the_master_configures_and_reads_the_sensor_node_on_the_same_sync(tmp_path):
     """The master (preflight with the drill, cyclic) with the sensor node: it identifies and configures
     node 3, and its sample holds the I/O module's last TPDO scaled back to mm and N."""
-    from hil.link import CanopenLink
-    from hil.master import MasterCore
+    from hil.master.core import MasterCore
+    from hil.master.link import CanopenLink
     from hil.transport import InProcessTransport
 
     act, rig = sensor_rig(tmp_path / "actuation.toml")

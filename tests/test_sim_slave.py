@@ -26,8 +26,8 @@ from hil.canopen.frame import Frame, sync_frame
 from hil.canopen.process import DriveMode
 from hil.canopen.sdo import SdoAbortCode, SdoAbortError
 from hil.canopen.units import permille_to_force_N
-from hil.profiles import load_actuation
-from hil.rig import plan_for
+from hil.profile.load import load_actuation
+from hil.profile.rig import plan_for
 from sim.drives import QUICK_STOP_HOLD_S, TARGET_WINDOW_INC, NmtState, SimDrivePair, error_register_bits
 from sim.params import RigParams
 from sim.plant import RigPlant

@@ -95,7 +95,7 @@ def test_serve_answers_sync_and_stops_on_event():
     import can
     import numpy as np
 
-    from hil.profiles import load_simrig
+    from hil.profile.load import load_simrig
     from hil.sim_server import serve
     from sim.plant import RigPlant
     from support.canopen_rig import make_pair
@@ -152,7 +152,7 @@ def test_serve_with_a_sensor_node_boots_and_answers_it(tmp_path):
 
     from hil.canopen.frame import Frame
     from hil.canopen.sdo import SdoClient, SdoEvent
-    from hil.profiles import load_simrig
+    from hil.profile.load import load_simrig
     from hil.sim_server import serve
     from sim.plant import RigPlant
     from support.canopen_rig import make_pair

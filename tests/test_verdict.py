@@ -14,7 +14,7 @@ import pytest
 from blf.verdict import COVERAGE_FACTOR, combine, decide, maint_uncertainty, overall, serv_uncertainty
 from hil.cli import main
 from hil.cli.common import ExitCode
-from hil.runfolder import read_record
+from hil.record.runfolder import read_record
 from support.figures import figures_unrendered
 from support.profiles import write_profile_variant
 
@@ -224,7 +224,7 @@ def test_ctrl_c_writes_an_aborted_result_and_names_each_drives_final_state(tmp_p
 
 
 def test_the_eds_device_info_must_agree_with_its_identity_object(tmp_path, capsys):
-    from hil.profiles import default_profile_path
+    from hil.profile.load import default_profile_path
 
     text = default_profile_path("ema_drive.eds").read_text()
     assert "ProductNumber=0x00000402" in text

@@ -133,7 +133,7 @@ def test_bad_inputs_name_the_argument(args, words):
 
 
 def test_simulated_rig_wear_option_grows_the_truth_on_its_line():
-    from hil.profiles import load_simrig
+    from hil.profile.load import load_simrig
     from sim.params import WearParams
     from sim.truth import apply_wear, rig_truth, wear_line_mm
 

@@ -18,9 +18,9 @@ from hil.errors import RecordingError
 
 def _check_for(meta, act):
     """The check profile a recording was made with (meta.json's snapshot), else the shipped one."""
-    from hil.config import Check
-    from hil.profile_tables import build_dataclass
-    from hil.profiles import load_check
+    from hil.profile.config import Check
+    from hil.profile.load import load_check
+    from hil.profile.tables import build_dataclass
     snap = meta.profiles.check if meta is not None and meta.profiles is not None else None
     if snap is not None:
         try:
@@ -35,10 +35,10 @@ def load_dual(path: Path, profile: Path | None):
     (``.log``, ``.log.gz``), and its sample period (s)."""
     from blf.errors import AnalysisError
     from hil.analysis.maint import check_units, find_segments
-    from hil.canlog import decode_can_log
     from hil.cli.common import actuation_for
-    from hil.runfolder import is_can_log, read_record, read_signals, resolve_recording
-    from hil.signals_csv import CHECK_CHANNELS, refuse_jumps, refuse_unusable
+    from hil.record.canlog import decode_can_log
+    from hil.record.runfolder import is_can_log, read_record, read_signals, resolve_recording
+    from hil.record.signals_csv import CHECK_CHANNELS, refuse_jumps, refuse_unusable
     from sim.replay_model import DualEmaReplay
 
     sig_path, run_dir = resolve_recording(path)

@@ -68,7 +68,7 @@ def read_axis(path: Path) -> AxisRecording:
         raise RecordingError(f"{path}: no such file")
     if path.suffix.lower() == ".mat":
         return _read_mat(path)
-    from hil.runfolder import read_text
+    from hil.record.runfolder import read_text
     text = read_text(path, "a text CSV file (columns t,q,q_ref and force, torque or current)")
     if not text.strip():
         raise RecordingError(f"{path}: empty file; need columns t,q,q_ref (s, m, m) and force, torque or current")

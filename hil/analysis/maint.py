@@ -21,9 +21,9 @@ from blf.segments import find_segments as blf_find_segments
 from blf.signals import CHANNELS, position_differences
 from blf.verdict import ChannelVerdict, UncertaintyBudget, decide, maint_uncertainty, overall
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
-from hil.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.runfolder import Signals
+from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
+from hil.record.runfolder import Signals
 
 #: Relative pitch uncertainty of an LVDT used uncalibrated: the pitch error the supervisor tolerates,
 #: as a rectangular bound (the analysis then says so in its notes).

@@ -2,7 +2,7 @@
 
 Input: a run folder (``signals.csv``, or ``can.log`` alone), a bare signals
 CSV (columns ``t,phi1,phi2,s1,s2,F1,F2``) or a raw CAN log (``*.log``,
-candump ``-L`` format, decoded by :func:`hil.canlog.decode_can_log`).
+candump ``-L`` format, decoded by :func:`hil.record.canlog.decode_can_log`).
 
 LVDT calibration, first that applies:
 
@@ -40,9 +40,9 @@ from blf.signals import CHANNELS, position_differences
 from blf.verdict import decide, overall, serv_uncertainty
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.analysis.maint import spec_mm
-from hil.config import Actuation
 from hil.errors import RecordingError
-from hil.runfolder import Signals
+from hil.profile.config import Actuation
+from hil.record.runfolder import Signals
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ class LvdtCorrection:
 
 
 def _from_result_json(path: Path) -> dict:
-    from hil.runfolder import read_json
+    from hil.record.runfolder import read_json
 
     res = read_json(path)
     cal = res.get("calibration") if isinstance(res, dict) else None

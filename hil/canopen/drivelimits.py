@@ -1,6 +1,6 @@
 """The limits a CiA 402 drive can keep by itself: which object holds which, and their scaling (pure).
 
-The master writes them in the preflight (:mod:`hil.preflight`) from the check's safety profile and
+The master writes them in the preflight (:mod:`hil.master.preflight`) from the check's safety profile and
 reads each back; the simulated drive (:mod:`sim.drives.cia402_drive`) enforces exactly the objects it
 was written. Both ends take the objects and the conversions from here.
 

@@ -1,6 +1,6 @@
 """CiA 301 NMT: node states (the heartbeat state byte), command specifiers and their frames.
 
-One definition shared by the master (:mod:`hil.master`) and the simulated
+One definition shared by the master (:mod:`hil.master.core`) and the simulated
 drives (:mod:`sim.drives`). Sans-IO: no bus, no clock.
 """
 

@@ -113,7 +113,7 @@ def master_loss_steps(master_node_id: int, consumer_ms: int) -> tuple[ConfigStep
     0x1016:01 = ``master_node_id << 16 | consumer_ms`` (consumer heartbeat on
     the master) and 0x6007 = 3 (quick stop on the loss), each written and read
     back. That is what the drive was *told*; whether it reacts is what the
-    master's drill observes (:mod:`hil.master`).
+    master's drill observes (:mod:`hil.master.core`).
 
     Raises
     ------

@@ -22,7 +22,7 @@ signal              direction  default object (the drive's)   scaling
 ``mode``            out        0x6060:00                      (mode number)
 ==================  =========  =============================  ======================================
 
-The profile (:mod:`hil.profiles`) builds these frozen dataclasses; the PDO
+The profile (:mod:`hil.profile.load`) builds these frozen dataclasses; the PDO
 layout is planned from them and each node's EDS (:mod:`hil.canopen.plan`);
 the master, the CAN-log reader and the simulated nodes all convert with the
 same :class:`Scale`. No IO, no clock.

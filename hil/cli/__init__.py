@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
 
 #: the arguments that name files a command reads (never one it writes: --out, --timing-json)
 INPUT_ARGS = ("recording", "profile", "check", "sim", "eds", "calibration", "folders", "sync_profile")
-#: the files of a run folder a command reads (its run record is read by hil.runfolder.read_record, which
+#: the files of a run folder a command reads (its run record is read by hil.record.runfolder.read_record, which
 #: names its own errors)
 RUN_FOLDER_FILES = ("signals.csv", "can.log", "result.json")
 

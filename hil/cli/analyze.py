@@ -21,8 +21,8 @@ from hil.cli.common import (
     refuse_foreign_history,
 )
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.runfolder import has_record, read_record, resolve_recording
-from hil.runrecord import RunStatus
+from hil.record.runfolder import has_record, read_record, resolve_recording
+from hil.record.runrecord import RunStatus
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:

@@ -18,10 +18,10 @@ from rich.table import Table
 
 from blf.signals import CHANNELS
 from hil.cli.common import ExitCode, Outputs, load_recording, utc_iso
-from hil.config import Actuation
 from hil.errors import KNOWN_ERRORS
-from hil.runfolder import MetaWriter, write_json_atomic
-from hil.runrecord import (
+from hil.profile.config import Actuation
+from hil.record.runfolder import MetaWriter, write_json_atomic
+from hil.record.runrecord import (
     INSTALLATION_KEYS,
     CanStats,
     Identity,
@@ -171,8 +171,8 @@ def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: 
     """Read the signals back, analyse, write result.json and report.html into ``outputs``."""
     # imported here, not at the top: `emacheck run` loads the analysis only after the cyclic loop
     from hil.analysis.maint import MIN_SAMPLES_CHECK, analyze_signals, result_dict
+    from hil.record.signals_csv import CHECK_CHANNELS
     from hil.report.maint import write_report
-    from hil.signals_csv import CHECK_CHANNELS
 
     t0 = time.perf_counter()
     # a run that stopped early may have held still (its analysis says what is missing, not "constant"),
@@ -220,7 +220,7 @@ def worn_simrig(simrig, flight_hours: float | None, seed: int):
 
     import numpy as np
 
-    from hil.profiles import snapshot
+    from hil.profile.load import snapshot
     from sim.truth import apply_wear, wear_line_mm
 
     params = apply_wear(simrig.params, simrig.wear, flight_hours, np.random.default_rng([seed, 0x16]))
@@ -243,7 +243,7 @@ def refuse_shared_serial(act, simrig, sim_path) -> None:
     ``[identity]`` gives both EMAs one serial is refused here instead (:class:`hil.errors.ProfileError`,
     exit status 3), as the preflight of a dry-run or run refuses two such drives."""
     from hil.errors import ProfileError
-    from hil.runrecord import shared_serial
+    from hil.record.runrecord import shared_serial
 
     ident = simulated_identity(act, simrig) or {}
     clash = shared_serial({k: v.as_json() for k, v in ident.items()})
@@ -261,8 +261,8 @@ def truth_dict(truth) -> dict:
 
 def master_setup(act, profile_path, eds=None):
     """Checks before anything touches a bus: every node's EDS against the signal map, the PDO layout,
-    the bus load (:func:`hil.rig.plan_for`); returns the planned :class:`hil.rig.Rig`."""
-    from hil.rig import plan_for
+    the bus load (:func:`hil.profile.rig.plan_for`); returns the planned :class:`hil.profile.rig.Rig`."""
+    from hil.profile.rig import plan_for
 
     return plan_for(act, profile_path, eds)
 
@@ -273,7 +273,7 @@ def rig_nodes_text(rig) -> str:
 
 
 def rig_meta(rig) -> dict:
-    """What the run record holds of the planned rig (:class:`~hil.runrecord.RunRecord` fields): the
+    """What the run record holds of the planned rig (:class:`~hil.record.runrecord.RunRecord` fields): the
     drives' EDS, every node's EDS, the notes of the plan, how each EMA holds a force."""
     return {"eds": str(rig.eds_paths["ema1"]), "eds_nodes": {k: str(v) for k, v in rig.eds_paths.items()},
             "plan_notes": tuple(rig.plan.notes),
@@ -292,7 +292,7 @@ def canopen_check(console: Console, act, check, link, meta: MetaWriter, quiet: b
     """The check loop over CANopen. An error inside (heartbeat lost, drive fault, SDO abort,
     ...) or Ctrl-C has already stopped the drives and closed the log when it arrives here: it
     becomes an aborted outcome with the reason, and result.json says so."""
-    from hil.runner import INTERRUPTED, LoopOutcome, run_check
+    from hil.check.runner import INTERRUPTED, LoopOutcome, run_check
 
     t0 = time.perf_counter()
     try:
@@ -318,13 +318,13 @@ def page_faults() -> int:
 def record_can_stats(meta: MetaWriter, wall: float, log, master, transport=None,
                      page_faults: int | None = None, timing=None) -> None:
     """Into the run record after the loop: its wall time, the CAN statistics, the master's loop timing
-    (``timing``, a :class:`hil.cycletiming.CycleTiming`) and each EMA's identity."""
+    (``timing``, a :class:`hil.record.cycletiming.CycleTiming`) and each EMA's identity."""
     # how far the master fell behind the bus at worst (a frame waiting in its socket) [ms]
     lag = round(transport.max_lag_s * 1e3, 2) if transport is not None and hasattr(transport, "max_lag_s") else None
     can = CanStats(log.frames, master.missing_cycles, master.bad_frames, master.unknown_frames,
                    max_lag_ms=lag, page_faults=page_faults)  # page faults: during the check (each costs time)
     loop = None
-    if timing is not None:  # the master's loop per SYNC cycle (hil.cycletiming)
+    if timing is not None:  # the master's loop per SYNC cycle (hil.record.cycletiming)
         loop = Timing(timing.summary(), t0_unix_s=round(getattr(transport, "wall_clock_offset_s", 0.0), 6),
                       sync="loop-timed" if getattr(transport, "loop_sync", False) else "periodic task",
                       sync_skipped=getattr(transport, "sync_skipped", 0),

@@ -13,10 +13,10 @@ from dataclasses import dataclass
 from enum import IntEnum
 from pathlib import Path
 
-from hil.config import Actuation
-from hil.profiles import actuation_from_snapshot, load_actuation
-from hil.runfolder import is_can_log, read_signals
-from hil.runrecord import INSTALLATION_KEYS, Installation, RunRecord
+from hil.profile.config import Actuation
+from hil.profile.load import actuation_from_snapshot, load_actuation
+from hil.record.runfolder import is_can_log, read_signals
+from hil.record.runrecord import INSTALLATION_KEYS, Installation, RunRecord
 
 
 class ExitCode(IntEnum):
@@ -316,7 +316,7 @@ class Outputs:
     def write_json(self, name: str, obj) -> Path:
         """Output ``name`` as JSON: created (:class:`hil.errors.OutputError` if it exists), or for ``own``
         replaced atomically."""
-        from hil.runfolder import create_json, write_json_atomic
+        from hil.record.runfolder import create_json, write_json_atomic
 
         path = self.path(name)
         if self.own:
@@ -327,7 +327,7 @@ class Outputs:
     def write_with(self, name: str, write) -> Path:
         """Output ``name`` written by ``write(path)`` (a report writer): created under a temporary name and
         linked to its own only if that does not exist; for ``own`` written in place."""
-        from hil.runfolder import create_with
+        from hil.record.runfolder import create_with
 
         path = self.path(name)
         if self.own:
@@ -348,7 +348,7 @@ def output_stem(path: Path) -> str:
 def make_folder(folder: Path) -> Path:
     """Make ``folder`` (and its parents); :class:`hil.errors.OutputError` naming it if it cannot be made."""
     from hil.errors import OutputError
-    from hil.runfolder import output_error
+    from hil.record.runfolder import output_error
 
     folder = Path(folder)
     try:
@@ -365,7 +365,7 @@ def make_folder(folder: Path) -> Path:
 def new_folder(parent: Path, name: str) -> Path:
     """A new folder ``parent/name`` (``name-2``, ``name-3`` ... where it exists), made here and now (mkdir
     is exclusive: two commands in the same second get two folders)."""
-    from hil.runfolder import output_error
+    from hil.record.runfolder import output_error
 
     make_folder(parent)
     k = 1
@@ -427,7 +427,7 @@ def file_hashes(**paths: Path | None) -> dict[str, str]:
     """SHA-256 of each named file (a profile given as None: the shipped one), for traceability."""
     import hashlib
 
-    from hil.profiles import default_profile_path
+    from hil.profile.load import default_profile_path
 
     defaults = {"actuation": "actuation.toml", "check": "check.toml", "simrig": "simrig.toml"}
     out = {}
@@ -621,9 +621,9 @@ def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None, *,
     """Signals from a CSV, or decoded from a raw CAN log (``*.log``, ``*.log.gz``), step labels from
     the run record's step times. Refused with a jump in time or position (a RecordingError naming the
     file and the line or sample), with fewer than ``min_rows`` rows or a constant signal among
-    ``channels`` (an IncompleteRecordingError naming the signal; :mod:`hil.signals_csv`). ``jumps``
+    ``channels`` (an IncompleteRecordingError naming the signal; :mod:`hil.record.signals_csv`). ``jumps``
     False: not checked for jumps (a run that aborted: the sensor fault that stopped it may be one)."""
-    from hil.signals_csv import refuse_jumps, refuse_unusable
+    from hil.record.signals_csv import refuse_jumps, refuse_unusable
 
     sig = read_signals(sig_path) if not is_can_log(sig_path) else _decoded(sig_path, act, meta)
     refuse_unusable(sig, channels=channels, min_rows=min_rows, what=what)
@@ -637,7 +637,7 @@ def _decoded(sig_path: Path, act: Actuation, meta: RunRecord | None):
 
     import numpy as np
 
-    from hil.canlog import decode_can_log
+    from hil.record.canlog import decode_can_log
 
     dec = decode_can_log(sig_path, act, meta)
     sig = dec.signals

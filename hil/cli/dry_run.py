@@ -34,9 +34,9 @@ from hil.cli.common import (
     record_history,
     refuse_foreign_history,
 )
-from hil.profiles import load_actuation, load_check, load_simrig, snapshot
-from hil.runfolder import MetaWriter
-from hil.runrecord import Attribution, BusLoad, RunMode, start_record
+from hil.profile.load import load_actuation, load_check, load_simrig, snapshot
+from hil.record.runfolder import MetaWriter
+from hil.record.runrecord import Attribution, BusLoad, RunMode, start_record
 
 
 @dataclass
@@ -67,10 +67,10 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     """
     import numpy as np
 
-    from hil.canlog import CanLogWriter
     from hil.canopen.od import load_eds
-    from hil.link import CanopenLink
-    from hil.master import MasterCore
+    from hil.master.core import MasterCore
+    from hil.master.link import CanopenLink
+    from hil.record.canlog import CanLogWriter
     from hil.transport import InProcessTransport
     from sim.drives import SimDrivePair
     from sim.faults import FaultInjector

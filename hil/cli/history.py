@@ -33,7 +33,7 @@ def history_url_for(url: str | None, profile: Path | None) -> str:
     """``--history``, else the actuation profile's ``history.url``, else the user's SQLite file."""
     if url:
         return url  # no profile to read
-    from hil.profiles import load_actuation
+    from hil.profile.load import load_actuation
 
     return history_url(None, load_actuation(profile))
 

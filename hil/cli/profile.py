@@ -1,7 +1,7 @@
 """``emacheck profile check``: an actuation profile, its signal map and every node's EDS checked together, offline.
 
 Nothing is sent on any bus: the profile is loaded, every node's EDS is read
-and the rig is planned (:func:`hil.rig.plan_for`, the same check ``run`` and
+and the rig is planned (:func:`hil.profile.rig.plan_for`, the same check ``run`` and
 ``dry-run`` make before their first frame). It prints the nodes, how each EMA
 holds a force, the PDO layout (COB-IDs, transmission types, the objects in
 each PDO), the bus load and the notes; or every problem with its profile key
@@ -52,8 +52,8 @@ def cmd_profile_check(args: argparse.Namespace) -> int:
     """``emacheck profile check PROFILE.toml [--eds PATH]``."""
     from hil.canopen.plan import PlanError
     from hil.errors import ProfileError
-    from hil.profiles import load_actuation
-    from hil.rig import plan_for
+    from hil.profile.load import load_actuation
+    from hil.profile.rig import plan_for
 
     console = make_console()
     try:

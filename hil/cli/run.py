@@ -34,16 +34,16 @@ from hil.cli.common import (
     refuse_foreign_history,
     rt_priority_arg,
 )
-from hil.profiles import load_actuation, load_check
+from hil.profile.load import load_actuation, load_check
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``emacheck run``: the check on real drives (same code path as dry-run, wall-clock SYNC)."""
-    from hil.canlog import CanLogWriter
-    from hil.link import CanopenLink
-    from hil.master import MasterCore
-    from hil.runfolder import DiskSync, MetaWriter
-    from hil.runrecord import Attribution, Bus, BusLoad, RunMode, start_record
+    from hil.master.core import MasterCore
+    from hil.master.link import CanopenLink
+    from hil.record.canlog import CanLogWriter
+    from hil.record.runfolder import DiskSync, MetaWriter
+    from hil.record.runrecord import Attribution, Bus, BusLoad, RunMode, start_record
     from hil.transport import BusTransport
 
     console = make_console()

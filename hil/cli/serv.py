@@ -27,7 +27,7 @@ from hil.cli.common import (
     refuse_foreign_history,
 )
 from hil.errors import RecordingError
-from hil.runfolder import read_record, resolve_recording
+from hil.record.runfolder import read_record, resolve_recording
 
 
 def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) -> None:
@@ -71,8 +71,8 @@ def cmd_serv(args: argparse.Namespace) -> int:
     from blf.errors import AnalysisError, InputError
     from blf.serv import METHODS
     from hil.analysis.serv import MIN_SAMPLES_SERV, analyse, choose_calibration, serv_dict
+    from hil.record.signals_csv import SERV_CHANNELS
     from hil.report.serv import write_serv_report
-    from hil.signals_csv import SERV_CHANNELS
 
     console = make_console()
     t0 = time.perf_counter()

@@ -17,7 +17,7 @@ from hil.cli.common import (
     rt_priority_arg,
 )
 from hil.cli.realtime import prepare_realtime
-from hil.runfolder import create_json
+from hil.record.runfolder import create_json
 
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:
@@ -25,8 +25,8 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     import numpy as np
 
     from hil.canopen.od import load_eds
-    from hil.profiles import load_actuation, load_simrig
-    from hil.rig import plan_for
+    from hil.profile.load import load_actuation, load_simrig
+    from hil.profile.rig import plan_for
     from hil.sim_server import serve
     from sim.drives import SimDrivePair
     from sim.plant import RigPlant

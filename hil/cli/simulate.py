@@ -26,9 +26,9 @@ from hil.cli.common import (
     record_history,
     refuse_foreign_history,
 )
-from hil.profiles import load_actuation, load_check, load_simrig, snapshot
-from hil.runfolder import MetaWriter, open_new
-from hil.runrecord import Attribution, RunMode, RunStatus, start_record
+from hil.profile.load import load_actuation, load_check, load_simrig, snapshot
+from hil.record.runfolder import MetaWriter, open_new
+from hil.record.runrecord import Attribution, RunMode, RunStatus, start_record
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -38,7 +38,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         return simulate_scenario(args)
     import numpy as np
 
-    from hil.runner import PlantLink, run_check
+    from hil.check.runner import PlantLink, run_check
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hil.runrecord import shared_serial
+from hil.record.runrecord import shared_serial
 
 #: modes of simulated checks (meta.json ``mode``): never mixed into a real actuator's trend
 SIMULATED_MODES = ("dry-run", "simulate", "simulate-scenario")
@@ -43,7 +43,7 @@ def rank(analysed_utc: _dt.datetime | None, check_id: int) -> tuple:
 
 def result_sha256(result: dict) -> str:
     """SHA-256 of a result's canonical JSON (sorted keys, no blanks): the same result, the same key."""
-    from hil.runfolder import json_default
+    from hil.record.runfolder import json_default
 
     text = json.dumps(result, sort_keys=True, separators=(",", ":"), default=json_default, allow_nan=True)
     return hashlib.sha256(text.encode()).hexdigest()
@@ -189,7 +189,7 @@ def record_from_result(result: dict, *, result_path: Path | None = None, run_fol
 def load_result(path: Path) -> dict:
     """A result.json / serv.json, or :class:`hil.errors.RecordingError` naming the file."""
     from hil.errors import RecordingError
-    from hil.runfolder import read_json
+    from hil.record.runfolder import read_json
 
     data = read_json(path)
     if not isinstance(data, dict) or "status" not in data:
@@ -213,7 +213,7 @@ def results_in(path: Path) -> list[tuple[Path, Path | None]]:
     ``--out`` its result.json / serv.json; a file itself.
     """
     from hil.errors import RecordingError
-    from hil.runfolder import has_record
+    from hil.record.runfolder import has_record
 
     path = Path(path)
     if path.is_file():

@@ -15,7 +15,9 @@ import numpy as np
 from blf.maint import BlfMaintResult
 from blf.signals import CHANNELS
 from hil.analysis.maint import Analysis
-from hil.config import Actuation
+from hil.profile.config import Actuation
+from hil.record.runfolder import Signals
+from hil.record.runrecord import RunRecord, Timing
 from hil.report.shell import (
     column,
     esc,
@@ -34,8 +36,6 @@ from hil.report.shell import (
     trace_lines,
     write_page,
 )
-from hil.runfolder import Signals
-from hil.runrecord import RunRecord, Timing
 
 _LABEL = {"int1": ("F_1", "D_{int,1}"), "int2": ("F_2", "D_{int,2}"), "ext": ("F_2 - F_1", "D_{ext}")}
 
@@ -272,7 +272,7 @@ def uncertainty_section(result: dict) -> str:
 
 def figure_timing(timing: Timing):
     """Histogram of the master's reaction (SYNC in to RPDOs out) [ms] per SYNC cycle, log counts,
-    with its p99.9, maximum and the SYNC period (meta.json ``timing``, :mod:`hil.cycletiming`)."""
+    with its p99.9, maximum and the SYNC period (meta.json ``timing``, :mod:`hil.record.cycletiming`)."""
     plt = pyplot()
     r = timing.summary.reaction
     bins = np.asarray(r.histogram, dtype=float).reshape(-1, 2)

@@ -9,7 +9,7 @@ import numpy as np
 from blf.serv import BlfServResult
 from blf.signals import CHANNELS
 from hil.analysis.serv import ServAnalysis
-from hil.config import Actuation
+from hil.profile.config import Actuation
 from hil.report.shell import (
     column,
     esc,

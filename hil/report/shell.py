@@ -239,9 +239,9 @@ def trace_lines(trace: dict | None) -> str:
 
 
 def identity_warning(identity: dict | None) -> str:
-    """A line saying so where EMA 1 and EMA 2 report one serial number (hil.runrecord.shared_serial);
+    """A line saying so where EMA 1 and EMA 2 report one serial number (hil.record.runrecord.shared_serial);
     empty otherwise."""
-    from hil.runrecord import shared_serial
+    from hil.record.runrecord import shared_serial
 
     clash = shared_serial(identity)
     return "" if clash is None else f"<p class='fail'><b>Identity:</b> {esc(clash)}.</p>"

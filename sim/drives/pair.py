@@ -148,7 +148,7 @@ class SimDrivePair:
         The rig; the drive of EMA 1 (``plan.drives[0]``) moves its EMA 1, that of EMA 2 its EMA 2.
         The pair steps it once per SYNC (and once at the first power-on).
     plan : hil.canopen.plan.RigPlan
-        The rig's plan (:func:`hil.rig.plan_for`): node ids, roles, EDS files, the signal map.
+        The rig's plan (:func:`hil.profile.rig.plan_for`): node ids, roles, EDS files, the signal map.
     od_factory : callable
         ``od_factory(name, node_id)`` returns a fresh ``canopen.ObjectDictionary`` of the node
         named ``name`` in the plan (``"ema1"``, ``"ema2"``, a sensor node's name), ``$NODEID``

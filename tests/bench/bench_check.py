@@ -35,9 +35,9 @@ def main() -> int:
 
     from hil.analysis.maint import analyze_signals, result_dict
     from hil.canopen.process import DriveMode, Setpoint
-    from hil.profiles import load_actuation, load_check, load_simrig
+    from hil.profile.load import load_actuation, load_check, load_simrig
+    from hil.record.runfolder import read_signals
     from hil.report.maint import write_report
-    from hil.runfolder import read_signals
     from sim.plant import RigPlant
 
     act = load_actuation()

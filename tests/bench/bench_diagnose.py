@@ -18,7 +18,7 @@ same cases on development seeds (20001..), for tuning; the reported run uses
 sets; with ``--dev`` or ``--first-seed`` one unless given): one set's 25
 effect cases move a percentage by 4 points per case.
 
-Every case is a full simulated maintenance check (``hil.runner.run_check`` on
+Every case is a full simulated maintenance check (``hil.check.runner.run_check`` on
 ``sim.plant.RigPlant``, ~111 s, 55 758 samples) of a base rig with ideal
 sensors (LVDT pitch 1, no offset or non-linearity) and one, two or no
 switchable physics terms on. Magnitudes are drawn from the case's own
@@ -64,7 +64,7 @@ import numpy as np
 TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (support)
 
-from hil.runfolder import read_signals  # noqa: E402
+from hil.record.runfolder import read_signals  # noqa: E402
 from support.diagnose_cases import (  # noqa: E402
     NOISE,
     case_list,

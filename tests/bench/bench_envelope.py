@@ -18,7 +18,7 @@ with its nuisances drawn from the seed (slope sign and internal/external
 noise, stiffness asymmetry up to 1.4, D offset, gap speed 0.1-1 mm/s, gap
 friction 0-100 N, ramp time).
 
-Part 2, the simulator (sim.plant.RigPlant through hil.runner.run_check, as
+Part 2, the simulator (sim.plant.RigPlant through hil.check.runner.run_check, as
 ``emacheck simulate``): simulated-rig variants of profiles/simrig.toml
 (small external backlash, large and small internal backlash, soft and stiff
 contacts, 0.5x and 3x sensor noise), ``--sim-seeds`` seeds each, all three
@@ -168,8 +168,8 @@ def run_sim(job: tuple) -> dict:
     from conftest import simulate_run
 
     import hil.analysis.maint as hmaint
-    from hil.profiles import load_actuation, load_check, load_simrig
-    from hil.runfolder import read_signals
+    from hil.profile.load import load_actuation, load_check, load_simrig
+    from hil.record.runfolder import read_signals
     from support.profiles import write_profile_variant
 
     if impl_path is not None or kwargs:

@@ -34,8 +34,8 @@ from test_faults import CASES, T, _t_detect, _t_safe_command  # noqa: E402
 from test_master_loss import silent_figures  # noqa: E402
 
 from hil.cli.dry_run import dry_run  # noqa: E402
-from hil.profiles import load_actuation, load_check, load_simrig  # noqa: E402
-from hil.runfolder import read_signals  # noqa: E402
+from hil.profile.load import load_actuation, load_check, load_simrig  # noqa: E402
+from hil.record.runfolder import read_signals  # noqa: E402
 from sim.faults import Fault  # noqa: E402
 from support.profiles import write_profile_variant  # noqa: E402
 

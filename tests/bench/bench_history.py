@@ -159,14 +159,14 @@ def speed(url: str, pairs: int, checks: int) -> dict:
 def e2e_seed(seed: int) -> dict:
     """12 checks of one pair over 3000 FH through the plant and BLFmaint, recorded; the trends' coverage."""
     from hil.analysis.maint import analyze_signals, result_dict
+    from hil.check.runner import PlantLink, run_check
     from hil.cli.check import simulated_identity, trace_of, truth_dict
     from hil.history.record import record_from_result
     from hil.history.store import HistoryStore
     from hil.history.trends import build_series, history_document
-    from hil.profiles import load_actuation, load_check, load_simrig
-    from hil.runfolder import MetaWriter, read_signals
-    from hil.runner import PlantLink, run_check
-    from hil.runrecord import Installation, RunMode, start_record
+    from hil.profile.load import load_actuation, load_check, load_simrig
+    from hil.record.runfolder import MetaWriter, read_signals
+    from hil.record.runrecord import Installation, RunMode, start_record
     from sim.plant import RigPlant
     from sim.truth import apply_wear, rig_truth
     from support.wear import WEAR, true_crossing_fh

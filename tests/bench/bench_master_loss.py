@@ -64,7 +64,7 @@ sys.path[:0] = [str(ROOT), str(HERE.parent)]
 from hil.canopen.cia402 import State, decode_state  # noqa: E402
 from hil.canopen.frame import Frame  # noqa: E402
 from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent  # noqa: E402
-from hil.profiles import load_actuation, load_check, load_simrig  # noqa: E402
+from hil.profile.load import load_actuation, load_check, load_simrig  # noqa: E402
 from sim.drives import QUICK_STOP_HOLD_S  # noqa: E402
 
 SEED = 20261123
@@ -277,9 +277,9 @@ def one_kill(k: int, delay_s: float, args, act, work: Path) -> dict:
 
 def check_duration_s(act, chk, sim_path: Path, work: Path) -> float:
     """The check's duration on the plant alone (no CAN, as `emacheck simulate` runs it) [s]."""
-    from hil.runfolder import MetaWriter
-    from hil.runner import PlantLink, run_check
-    from hil.runrecord import RunMode, start_record
+    from hil.check.runner import PlantLink, run_check
+    from hil.record.runfolder import MetaWriter
+    from hil.record.runrecord import RunMode, start_record
     from sim.plant import RigPlant
 
     sim = load_simrig(sim_path)

@@ -44,7 +44,7 @@ EQUIVALENT = Path(__file__).with_name("mutation_equivalent.toml")
 #: tests/test_blf_maint.py (20 s of every mutant's run); tests/test_boundaries_maint.py has the
 #: known answers that stand in for them
 TESTS: dict[str, list[str]] = {
-    "hil/supervisor.py": ["tests/test_boundaries_supervisor.py", "tests/test_faults_bad_input.py"],
+    "hil/check/supervisor.py": ["tests/test_boundaries_supervisor.py", "tests/test_faults_bad_input.py"],
     "blf/verdict.py": ["tests/test_boundaries_verdict.py", "tests/test_verdict.py"],
     "blf/maint.py": ["tests/test_boundaries_maint.py", "tests/test_blf_maint.py",
                      "-k", "not acceptance and not sigmas_match_seed_spread and not slope_sign_corners"],
@@ -53,7 +53,7 @@ TESTS: dict[str, list[str]] = {
     "hil/canopen/od.py": ["tests/test_eds.py", "tests/test_master.py", "tests/test_sim_slave.py"],
     "sim/drives/nmt_slave.py": ["tests/test_boundaries_nmt_slave.py", "tests/test_sim_slave.py"],
 }
-DEFAULT = ["hil/supervisor.py", "blf/verdict.py", "blf/maint.py"]
+DEFAULT = ["hil/check/supervisor.py", "blf/verdict.py", "blf/maint.py"]
 #: statuses of mutmut's mutant runs; DETECTED: the ones the score counts as killed
 KILLED, SURVIVED, TIMEOUT = "killed", "survived", "timeout"
 DETECTED = (KILLED, TIMEOUT)

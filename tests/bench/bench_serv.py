@@ -32,7 +32,7 @@ sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim)
 
 from blf.calibration import fit_lvdt_calibration  # noqa: E402
 from blf.serv import BlfServMonitor, blf_serv, design_serv_filters  # noqa: E402
-from hil.profiles import load_simrig  # noqa: E402
+from hil.profile.load import load_simrig  # noqa: E402
 from sim import operation as op  # noqa: E402
 from sim import scenarios as sc  # noqa: E402
 

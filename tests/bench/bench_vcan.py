@@ -169,7 +169,7 @@ def _wait_line(proc: subprocess.Popen, text: str, timeout: float) -> str:
 
 def bench(minutes: float, check: Path | None, workdir: Path, profile: Path | None = None,
           sim: Path | None = None) -> dict:
-    from hil.profiles import load_actuation
+    from hil.profile.load import load_actuation
 
     act = load_actuation(profile)
     prof = ["--profile", str(profile)] if profile else []

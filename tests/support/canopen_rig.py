@@ -7,9 +7,9 @@ from functools import cache
 from pathlib import Path
 
 from hil.canopen.od import load_eds
-from hil.master import MasterCore
-from hil.profiles import load_actuation
-from hil.rig import Rig, plan_for
+from hil.master.core import MasterCore
+from hil.profile.load import load_actuation
+from hil.profile.rig import Rig, plan_for
 from sim.drives import SimDrivePair
 
 __all__ = ["cyclic_master", "make_master", "make_pair", "od_factory", "shipped_rig"]
@@ -47,7 +47,7 @@ def cyclic_master(act, plant) -> MasterCore:
     which lets time pass, is skipped (test_master.py tests it)."""
     from dataclasses import replace
 
-    from hil.master import Phase
+    from hil.master.core import Phase
 
     act = replace(act, canopen=replace(act.canopen, skip_master_loss_drill="tested elsewhere"))
     pair = make_pair(plant)

@@ -7,7 +7,7 @@ a recording (:func:`record`), the effects and their magnitude draws
 the signature over noise (:func:`twin`, :func:`snr`, :func:`concealed`) and the
 recording of a case at the largest concealed size (:func:`generate`).
 
-Every case is a simulated maintenance check (``hil.runner.run_check`` on
+Every case is a simulated maintenance check (``hil.check.runner.run_check`` on
 ``sim.plant.RigPlant``) of a base rig with ideal sensors (LVDT pitch 1, no offset
 or non-linearity) and one, two or no switchable physics terms on. Magnitudes are
 drawn from the case's own generator and then *concealed*: the recording's drive
@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.profiles import load_actuation, load_check, load_simrig
-from hil.runfolder import MetaWriter, read_signals
-from hil.runner import PlantLink, run_check
-from hil.runrecord import start_record
+from hil.check.runner import PlantLink, run_check
+from hil.profile.load import load_actuation, load_check, load_simrig
+from hil.record.runfolder import MetaWriter, read_signals
+from hil.record.runrecord import start_record
 from sim import effects as fx
 from sim.plant import RigPlant
 

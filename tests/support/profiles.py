@@ -26,7 +26,7 @@ from typing import Any
 
 import tomli_w
 
-from hil.profiles import default_profile_path
+from hil.profile.load import default_profile_path
 
 __all__ = ["apply_overrides", "load_profile_data", "profile_variant", "write_profile_variant"]
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hil.profiles import load_actuation
-from hil.rig import Rig, plan_for
+from hil.profile.load import load_actuation
+from hil.profile.rig import Rig, plan_for
 from support.profiles import write_profile_variant
 
 __all__ = ["FORCE_N_PER_UNIT", "IO_NODE", "LVDT_MM_PER_UNIT", "sensor_profile", "sensor_rig"]

@@ -17,7 +17,7 @@ import uuid
 import numpy as np
 
 from blf.verdict import decide, overall
-from hil.profiles import load_actuation, load_simrig
+from hil.profile.load import load_actuation, load_simrig
 from sim.params import WearParams
 from sim.truth import apply_wear, rig_truth, wear_line_mm
 

@@ -42,12 +42,12 @@ import numpy as np
 import pytest
 
 from blf.signals import CHANNELS
-from hil.canlog import decode_can_log
 from hil.canopen.cia402 import State, decode_state
 from hil.canopen.frame import Frame
 from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent
-from hil.profiles import load_actuation, load_simrig
-from hil.runfolder import read_signals
+from hil.profile.load import load_actuation, load_simrig
+from hil.record.canlog import decode_can_log
+from hil.record.runfolder import read_signals
 from sim.drives import QUICK_STOP_HOLD_S
 from sim.truth import rig_truth
 

@@ -17,9 +17,9 @@ from hil.canopen.errors import EdsError
 from hil.canopen.od import load_eds
 from hil.canopen.plan import PlanError, Problem, RigPlan, plan_rig
 from hil.canopen.signalmap import NodeRole
-from hil.config import Actuation
-from hil.profile_signals import gear_ratio_object
-from hil.profiles import resolve_eds
+from hil.profile.config import Actuation
+from hil.profile.load import resolve_eds
+from hil.profile.signals import gear_ratio_object
 
 __all__ = ["Rig", "plan_for"]
 

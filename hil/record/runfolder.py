@@ -5,7 +5,7 @@ Format (see README, "File formats")::
     RUN/signals.csv   t,phi1,phi2,s1,s2,F1,F2,mode1,sp1,mode2,sp2,step
                       t in s, phi in rad, s in mm, F in N; mode is the CiA 402
                       mode (0 disabled, 8 CSP, 10 CST), sp the setpoint (rad or N)
-    RUN/meta.json     the run record (hil.runrecord): profiles snapshot, software version,
+    RUN/meta.json     the run record (hil.record.runrecord): profiles snapshot, software version,
                       seed, step times, ...; written by MetaWriter only
     RUN/result.json   the analysis result
     RUN/report.html   the report
@@ -27,7 +27,7 @@ import numpy as np
 
 from hil.canopen.process import MEASURED_CHANNELS, Sample, Setpoint
 from hil.errors import IncompleteRecordingError, OutputError, RecordingError
-from hil.runrecord import META_NAME, RunRecord
+from hil.record.runrecord import META_NAME, RunRecord
 
 SIGNAL_COLUMNS = tuple(name for name, _ in MEASURED_CHANNELS)
 EXTRA_COLUMNS = ("mode1", "sp1", "mode2", "sp2", "step")
@@ -300,7 +300,7 @@ def has_record(run_dir: Path) -> bool:
 
 
 def read_record(run_dir: Path | None) -> RunRecord | None:
-    """A run folder's record (:class:`hil.runrecord.RunRecord`), or None (no run folder, or no meta.json
+    """A run folder's record (:class:`hil.record.runrecord.RunRecord`), or None (no run folder, or no meta.json
     in it); not JSON, or a malformed field: a :class:`~hil.errors.RecordingError` naming the file (and
     the field)."""
     if run_dir is None or not has_record(run_dir):
@@ -469,7 +469,7 @@ def read_text(path: Path, what: str) -> str:
     """A recording's text (gzip'd when the name ends in ``.gz``; UTF-8, a byte-order mark skipped), or a
     RecordingError naming the file and saying what it is instead of ``what`` (a MATLAB file, binary
     data, a corrupt gzip file, a folder, nothing)."""
-    from hil.signals_csv import READ_ERRORS, open_text, read_error
+    from hil.record.signals_csv import READ_ERRORS, open_text, read_error
 
     try:
         with open_text(path) as fh:
@@ -480,14 +480,14 @@ def read_text(path: Path, what: str) -> str:
 
 def read_signals(path: str | Path, *, allow_truncated_last_line: bool = True) -> Signals:
     """Read a signals CSV (a run folder's or one recorded elsewhere), in bounded memory
-    (:mod:`hil.signals_csv`, which has the rules).
+    (:mod:`hil.record.signals_csv`, which has the rules).
 
     Requires the columns ``t,phi1,phi2,s1,s2,F1,F2``; uses ``mode1,sp1,mode2,sp2,step``
     when present. Refuses NaN, non-numeric cells and non-increasing time with
     the line number. A last line cut short by a crash is dropped and noted. A ``.gz`` file is read
     through gzip.
     """
-    from hil.signals_csv import read_columns
+    from hil.record.signals_csv import read_columns
 
     path = Path(path)
     arrays, steps, notes = read_columns(path, "a text CSV file (columns t,phi1,phi2,s1,s2,F1,F2)",

@@ -1,7 +1,7 @@
 """Timing of a cyclic loop, measured per SYNC cycle (sans-IO: fed times, reads no clock).
 
 Both ends of a hardware-in-the-loop check keep one :class:`CycleTiming`: the
-master (:class:`hil.link.CanopenLink`, into meta.json ``timing``) and the
+master (:class:`hil.master.link.CanopenLink`, into meta.json ``timing``) and the
 simulated drives (:func:`hil.sim_server.serve`, into sim-serve's summary).
 The IO shell measures the times (the SYNC's arrival, the start and end of the
 cycle's work, when the answer left) and passes them in; this object only

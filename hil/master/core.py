@@ -3,13 +3,13 @@
 :class:`MasterCore` is fed every frame seen on the bus (including the SYNC
 frames, whoever sends them) with a time value, and returns the frames to
 transmit. It never touches a bus, a thread or a clock: the shells in
-:mod:`hil.link` move frames over python-can, pace SYNC and pass time. What it
+:mod:`hil.master.link` move frames over python-can, pace SYNC and pass time. What it
 does with which node comes from the rig's :class:`~hil.canopen.plan.RigPlan`
 (the actuation profile's signal map checked against every node's EDS).
 
 Life cycle::
 
-    PREFLIGHT  :class:`hil.preflight.Preflight`: NMT reset, boot-up of every node,
+    PREFLIGHT  :class:`hil.master.preflight.Preflight`: NMT reset, boot-up of every node,
                identity, device type, heartbeat and PDOs of every node, each drive's
                modes, scalings, limits and reaction to the master's death, the
                master's-death drill, NMT start.
@@ -25,8 +25,8 @@ Heartbeat producer: :meth:`MasterCore.poll` returns the master's heartbeat when 
 :meth:`~MasterCore.start` to the NMT pre-operational at the end (silent only during the drill):
 from the master's own loop (never a kernel-timed task), so that a dead or hung master stops it.
 
-Errors are typed and name the node: :class:`~hil.preflight.PreflightError` (identity, device
-type, ...), :class:`~hil.preflight.MasterLossReactionError`, :class:`~hil.canopen.sdo.SdoAbortError`
+Errors are typed and name the node: :class:`~hil.master.preflight.PreflightError` (identity, device
+type, ...), :class:`~hil.master.preflight.MasterLossReactionError`, :class:`~hil.canopen.sdo.SdoAbortError`
 (code and meaning), :class:`~hil.canopen.sdo.SdoTimeout`, :class:`DriveFault` (EMCY, fault
 state, a mode change not confirmed), :class:`HeartbeatLost`.
 """
@@ -39,7 +39,6 @@ from collections.abc import Generator
 from dataclasses import dataclass, field, replace
 from enum import Enum
 
-from hil import master_events as event
 from hil.canopen.cia402 import (
     SAFE_STATES,
     Command,
@@ -69,10 +68,10 @@ from hil.canopen.plan import Channel, RigPlan
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent, SdoTimeout, expedited_download_frame
 from hil.canopen.signalmap import ForceControl, NodeRole, ScaleSource, Signal
-from hil.config import Actuation
 from hil.errors import EmacheckError
-from hil.master_events import DriveFault, HeartbeatLost, MasterEvent
-from hil.preflight import (
+from hil.master import events as event
+from hil.master.events import DriveFault, HeartbeatLost, MasterEvent
+from hil.master.preflight import (
     Heartbeat,
     LastHeartbeat,
     MasterLossReactionError,
@@ -86,6 +85,7 @@ from hil.preflight import (
     Wait,
     WaitBoot,
 )
+from hil.profile.config import Actuation
 
 __all__ = ["DriveFault", "DriveView", "HeartbeatLost", "MasterCore", "MasterEvent",
            "MasterLossReactionError", "NodeView", "Phase", "PreflightError", "SAFE_STATES"]
@@ -151,11 +151,11 @@ class MasterCore:
     actuation : Actuation
         Bus settings, timeouts, mechanics, the signal map.
     plan : RigPlan
-        The signal map checked against every node's EDS (:func:`hil.rig.plan_for`).
+        The signal map checked against every node's EDS (:func:`hil.profile.rig.plan_for`).
     forces : (float, float), optional
         The check's opposing force and the supervisor's force limit [N]: a drive holding forces in CST
-        gets its max torque 0x6072 checked and set by the preflight (:class:`hil.preflight.Preflight`);
-        ``safety`` (the check's): the limits the drives keep themselves (:mod:`hil.limits_setup`).
+        gets its max torque 0x6072 checked and set by the preflight (:class:`hil.master.preflight.Preflight`);
+        ``safety`` (the check's): the limits the drives keep themselves (:mod:`hil.master.limits_setup`).
     """
 
     def __init__(self, actuation: Actuation, plan: RigPlan, forces: tuple[float, float] | None = None,

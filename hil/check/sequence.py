@@ -50,8 +50,8 @@ from dataclasses import dataclass
 from enum import Enum
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.config import Actuation, Check
 from hil.errors import SequenceError
+from hil.profile.config import Actuation, Check
 
 
 class Step(Enum):

@@ -95,7 +95,7 @@ class _Columns:
 
 def _line_errors(path: Path, lines: list[str], first_line: int, ncol: int, cols: dict[str, int]) -> None:
     """Parse ``lines`` one by one as the numbers of ``cols``; raise naming the first bad line."""
-    from hil.runfolder import COLUMN_UNITS
+    from hil.record.runfolder import COLUMN_UNITS
 
     for ln, line in enumerate(lines, start=first_line):
         cells = line.rstrip("\n").split(",")
@@ -139,7 +139,7 @@ def _parse_chunk(path: Path, lines: list[str], first_line: int, ncol: int, cols:
 
 
 def _header(path: Path, first: str):
-    from hil.runfolder import COLUMN_UNITS, SIGNAL_COLUMNS
+    from hil.record.runfolder import COLUMN_UNITS, SIGNAL_COLUMNS
 
     header = [h.strip() for h in next(csv.reader(io.StringIO(first)))] if first.strip() else []
     missing = [c for c in SIGNAL_COLUMNS if c not in header]
@@ -234,7 +234,7 @@ POSITION_UNITS = {"phi1": "rad", "phi2": "rad", "s1": "mm", "s2": "mm"}
 CHECK_CHANNELS = ("phi1", "phi2", "s1", "s2", "F1", "F2")
 #: ... and for BLFserv (no force sensors needed: constant forces are fine)
 SERV_CHANNELS = ("phi1", "phi2", "s1", "s2")
-#: the largest plausible ram speed over the hard cap no check may exceed (hil.config
+#: the largest plausible ram speed over the hard cap no check may exceed (hil.profile.config
 #: HARD_MAX_VELOCITY_MM_PER_S): a recording from elsewhere (a flight) may move faster than a check
 PLAUSIBLE_SPEED_FACTOR = 2.0
 
@@ -250,7 +250,7 @@ def refuse_unusable(sig, *, channels: tuple[str, ...], min_rows: int, what: str)
     the signal, the caller the file."""
     if sig.n < min_rows:
         raise IncompleteRecordingError(f"recording too short for {what}: {sig.n} samples (need >= {min_rows})")
-    from hil.runfolder import COLUMN_UNITS
+    from hil.record.runfolder import COLUMN_UNITS
 
     flat = [c for c in channels if np.ptp(getattr(sig, c)) == 0.0]
     if flat:
@@ -268,7 +268,7 @@ def part_starts(sig) -> np.ndarray:
 
 
 def _parts_made_apart(meta) -> bool:
-    from hil.runrecord import RunMode
+    from hil.record.runrecord import RunMode
 
     return meta is not None and meta.mode == RunMode.SIMULATE_SCENARIO
 
@@ -278,13 +278,13 @@ def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool, met
     its line (a CSV: ``lines``) or sample and time; the largest plausible speed is
     :data:`PLAUSIBLE_SPEED_FACTOR` times the ram-speed hard cap, in rad/s for the motor angles.
 
-    ``meta``: the recording's run record (:class:`hil.runrecord.RunRecord`), if any. Where it declares the
+    ``meta``: the recording's run record (:class:`hil.record.runrecord.RunRecord`), if any. Where it declares the
     steps simulated one after the other, each from its own start (mode ``simulate-scenario``), a position
     step into the first sample of a step is not judged (:func:`part_starts`); time is judged everywhere."""
     if sig.n < 2:
         return
     from blf.continuity import GAP_PERIODS, NOISE_K, find_jumps
-    from hil.config import HARD_MAX_VELOCITY_MM_PER_S
+    from hil.profile.config import HARD_MAX_VELOCITY_MM_PER_S
 
     v_mm = PLAUSIBLE_SPEED_FACTOR * HARD_MAX_VELOCITY_MM_PER_S
     speed = {c: v_mm * (i_total_rad_per_mm if u == "rad" else 1.0) for c, u in POSITION_UNITS.items()}

@@ -1,10 +1,10 @@
 """Load profiles (TOML) from a given path into validated frozen dataclasses.
 
-Three profiles describe a check: the actuation (:class:`hil.config.Actuation`),
-the check itself (:class:`hil.config.Check`) and, for dry-runs, the simulated
+Three profiles describe a check: the actuation (:class:`hil.profile.config.Actuation`),
+the check itself (:class:`hil.profile.config.Check`) and, for dry-runs, the simulated
 rig (:class:`sim.params.RigParams`). The defaults ship in the ``profiles``
-package. The field checks are :mod:`hil.profile_tables`, the actuation's
-signal map :mod:`hil.profile_signals`. Every error names the file and the
+package. The field checks are :mod:`hil.profile.tables`, the actuation's
+signal map :mod:`hil.profile.signals`. Every error names the file and the
 dotted field, e.g.
 ``check.toml: force_fight.amplitude_fraction_of_limit = 0.2 is above the hard
 cap 0.15``; unknown keys are refused with the closest known name, which catches
@@ -21,7 +21,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from hil.config import (
+from hil.errors import ProfileError
+from hil.profile.config import (
     HARD_FORCE_FIGHT_FRACTION,
     HARD_MAX_FORCE_FIGHT_FRACTION,
     HARD_MAX_FORCE_FRACTION,
@@ -29,9 +30,8 @@ from hil.config import (
     Actuation,
     Check,
 )
-from hil.errors import ProfileError
-from hil.profile_signals import LEGACY_SIGNALS, gear_ratio_object, load_signal_map, signal_tables
-from hil.profile_tables import build_dataclass, check_keys, check_range, convert_scalar, read_toml, snapshot
+from hil.profile.signals import LEGACY_SIGNALS, gear_ratio_object, load_signal_map, signal_tables
+from hil.profile.tables import build_dataclass, check_keys, check_range, convert_scalar, read_toml, snapshot
 from sim import effects as sim_effects
 from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams, WearParams
 

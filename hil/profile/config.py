@@ -3,7 +3,7 @@
 Each field carries its unit in its name and, in its metadata, the range a
 profile may give it. ``hard_max`` bounds are hard caps that no profile can
 raise (they are the envelope the check must never leave); see
-:mod:`hil.profiles` for loading from TOML.
+:mod:`hil.profile.load` for loading from TOML.
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ class Actuation:
     canopen: Canopen
     history: HistorySettings = field(default_factory=HistorySettings)
     #: where each signal of the check lives (``[signals.ema1]``, ``[signals.ema2]``, ``[nodes.NAME]``);
-    #: set by :func:`hil.profiles.load_actuation`
+    #: set by :func:`hil.profile.load.load_actuation`
     signals: SignalMap | None = None
 
     @property
@@ -192,13 +192,13 @@ class Safety:
     max_force_fight_N: float = field(default=7000.0, metadata=_rng(0.0, 1e6, lo_open=True))
     #: load-cell plausibility |F1 + F2| (hard cap HARD_MAX_FORCE_IMBALANCE_FRACTION of F_limit)
     max_force_imbalance_N: float = field(default=2500.0, metadata=_rng(0.0, 1e6, lo_open=True))
-    #: sensor freshness where a drive keeps its limits only partly or not at all (hil/staleness.py): SYNC
+    #: sensor freshness where a drive keeps its limits only partly or not at all (hil/check/staleness.py): SYNC
     #: cycles in a row without a complete sample
     max_stale_cycles: int = field(default=2, metadata=_rng(1, 1000, hard_max=HARD_MAX_STALE_CYCLES))
     #: sensor freshness: cycles a noisy LVDT or load cell may repeat exactly the same value
     max_frozen_cycles: int = field(default=25, metadata=_rng(3, 10_000, hard_max=HARD_MAX_FROZEN_CYCLES))
     #: sensor freshness where both drives keep their stroke, torque and speed limits themselves [ms] (the
-    #: master's stall budget, hil/staleness.py; at run time also at most the drives' consumer heartbeat time
+    #: master's stall budget, hil/check/staleness.py; at run time also at most the drives' consumer heartbeat time
     #: minus one master heartbeat period and 2 SYNC periods, and the following error over the speed limit)
     max_stale_ms: float = field(default=40.0, metadata=_rng(0.0, 10_000.0, lo_open=True, hard_max=HARD_MAX_STALE_MS))
     #: master lag: the longest a SYNC may wait in the master's socket before it is taken [s]

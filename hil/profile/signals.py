@@ -31,9 +31,9 @@ from hil.canopen.signalmap import (
     parse_object,
     torque_scale,
 )
-from hil.config import Actuation
 from hil.errors import ProfileError
-from hil.profile_tables import check_keys, check_range, convert_scalar
+from hil.profile.config import Actuation
+from hil.profile.tables import check_keys, check_range, convert_scalar
 
 __all__ = ["LEGACY_SIGNALS", "gear_ratio_object", "load_signal_map", "signal_tables"]
 

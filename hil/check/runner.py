@@ -13,11 +13,11 @@ from dataclasses import dataclass, replace
 from typing import Protocol
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.config import Actuation, Check
-from hil.runfolder import MetaWriter, SignalsWriter
-from hil.runrecord import RunRecord, RunStatus, SafetyViolation, StepTime
-from hil.sequence import CheckSequence, CycleOutput, Progress, Step
-from hil.supervisor import Supervisor
+from hil.check.sequence import CheckSequence, CycleOutput, Progress, Step
+from hil.check.supervisor import Supervisor
+from hil.profile.config import Actuation, Check
+from hil.record.runfolder import MetaWriter, SignalsWriter
+from hil.record.runrecord import RunRecord, RunStatus, SafetyViolation, StepTime
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
 #: The reason recorded when the operator stops the check (Ctrl-C, SIGINT).

@@ -1,22 +1,22 @@
-"""The CANopen link: the master core over a transport, as the check loop's :class:`hil.runner.Link`.
+"""The CANopen link: the master core over a transport, as the check loop's :class:`hil.check.runner.Link`.
 
-:class:`CanopenLink` implements the :class:`hil.runner.Link` protocol, so the
+:class:`CanopenLink` implements the :class:`hil.check.runner.Link` protocol, so the
 check loop and the sequence core run unchanged whether the drives are
 simulated or real; the transports of :mod:`hil.transport` move the frames.
-It feeds every frame to the sans-IO :class:`hil.master.MasterCore`, logs it,
+It feeds every frame to the sans-IO :class:`hil.master.core.MasterCore`, logs it,
 runs the SYNC cycle, watches sensor freshness and the master's lag, and
 brings the drives to the safe state on close.
 
 The master's heartbeat (what the drives' consumers watch to stop by
 themselves if the master dies) is whatever :meth:`MasterCore.poll
-<hil.master.MasterCore.poll>` returns: this loop polls after every frame it
+<hil.master.core.MasterCore.poll>` returns: this loop polls after every frame it
 takes, in the preflight, the cycles and the safe-state cycles of
 :meth:`CanopenLink.close`, and its NMT pre-operational ends it. SYNC is
 kernel-timed where the transport can (it would outlive a hung loop), else
 sent by this loop on its monotonic schedule; the heartbeat never is.
 
 On a real bus the link measures its own timing per SYNC cycle
-(:attr:`CanopenLink.timing`, a :class:`hil.cycletiming.CycleTiming`): SYNC
+(:attr:`CanopenLink.timing`, a :class:`hil.record.cycletiming.CycleTiming`): SYNC
 arrival to the RPDOs sent, sample complete to RPDOs sent (the loop's work),
 SYNC to SYNC; ``emacheck run`` writes it into meta.json ``timing``.
 """
@@ -28,17 +28,17 @@ from collections.abc import Callable
 
 import can
 
-from hil.canlog import CanLogWriter
 from hil.canopen.cia402 import State
 from hil.canopen.frame import SYNC_COB_ID, Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.canopen.signalmap import ForceControl
-from hil.config import HARD_MAX_LAG_S
-from hil.cycletiming import CycleTiming
 from hil.errors import KNOWN_ERRORS, EmacheckError
-from hil.master import MasterCore, PreflightError
+from hil.master.core import MasterCore, PreflightError
+from hil.profile.config import HARD_MAX_LAG_S
+from hil.record.canlog import CanLogWriter
+from hil.record.cycletiming import CycleTiming
 from hil.transport import InProcessTransport
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
@@ -58,7 +58,7 @@ class StaleData(LinkError):
 
 
 class CanopenLink:
-    """The drives over CANopen, as a :class:`hil.runner.Link`.
+    """The drives over CANopen, as a :class:`hil.check.runner.Link`.
 
     Parameters
     ----------

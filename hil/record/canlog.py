@@ -30,10 +30,10 @@ from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import SYNC_COB_ID, Frame
 from hil.canopen.pdo import Direction, PdoError
 from hil.canopen.signalmap import Signal, torque_scale
-from hil.config import Actuation
 from hil.errors import IncompleteRecordingError, RecordingError
-from hil.runfolder import DiskSync, LoopFile, Signals
-from hil.runrecord import RunRecord
+from hil.profile.config import Actuation
+from hil.record.runfolder import DiskSync, LoopFile, Signals
+from hil.record.runrecord import RunRecord
 
 #: CAN_ERR_FLAG | CAN_ERR_BUSERROR (linux/can/error.h): the identifier candump writes for an error frame
 _ERROR_FRAME_ID = 0x20000000 | 0x00000080
@@ -126,8 +126,8 @@ class CanLogWriter:
     Frames are kept as records and formatted in batches of ``format_frames``
     (:func:`candump_lines`: python-can's :class:`can.io.CanutilsLogWriter` lines;
     a small batch, so that no SYNC cycle of ``emacheck run`` formats a whole
-    flush's worth, about 1 750 lines in 0.5 s) into a :class:`hil.runfolder.LoopFile`:
-    with ``disk`` (a background :class:`~hil.runfolder.DiskSync`, ``emacheck run``)
+    flush's worth, about 1 750 lines in 0.5 s) into a :class:`hil.record.runfolder.LoopFile`:
+    with ``disk`` (a background :class:`~hil.record.runfolder.DiskSync`, ``emacheck run``)
     a flush hands them to its thread and no write to the file lands on the loop's;
     without, written at once. ``time_offset_s`` is added to every stamp:
     ``emacheck run`` logs wall-clock (UNIX) time as candump does; a dry-run logs
@@ -249,7 +249,7 @@ def _codec(act: Actuation, meta, rig=None):
             raise RecordingError(f"meta.json: {exc}") from None
     else:
         if rig is None:
-            from hil.rig import plan_for
+            from hil.profile.rig import plan_for
 
             rig = plan_for(act)
         plan = rig.plan

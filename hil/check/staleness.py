@@ -28,7 +28,7 @@ from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 from hil.canopen.drivelimits import LimitKind
-from hil.config import (
+from hil.profile.config import (
     HARD_MAX_FOLLOWING_ERROR_MM,
     HARD_MAX_STALE_CYCLES,
     HARD_MAX_STALE_MS,

@@ -8,7 +8,7 @@ violated it keeps returning the first violation; an exception inside is a
 violation too (fail closed).
 
 Limits (``check.safety``, each capped again here by the constants of
-:mod:`hil.config` that no profile can raise):
+:mod:`hil.profile.config` that no profile can raise):
 
 ========================  ====================================================
 ``max_force_N``           :math:`|F_k|`, cap 25 % of F_limit
@@ -19,7 +19,7 @@ Limits (``check.safety``, each capped again here by the constants of
 ``max_following_error_mm`` CSP target versus motor angle, :math:`|\\varphi^* - \\varphi| / i`
 ``max_d_int_mm``          D plausibility (LVDT versus motor angle), below
 ``max_stale_cycles``      sensor freshness: SYNC cycles between two samples - 1 (today's short limit;
-                          ``max_stale_ms`` where both drives keep their limits: hil/staleness.py)
+                          ``max_stale_ms`` where both drives keep their limits: hil/check/staleness.py)
 ``max_frozen_cycles``     sensor freshness: a noisy LVDT or load cell repeating
                           exactly the same value for more cycles than this
 ========================  ====================================================
@@ -32,7 +32,7 @@ check as reference (index 0),
     \\big|(s_k - s_{k,0}) - (x_k - x_{k,0})\\big|
     \\le D_{max} + g_{tol}\\,|x_k - x_{k,0}|
 
-where :math:`g_{tol}` = :data:`hil.config.HARD_LVDT_GAIN_TOLERANCE` admits the
+where :math:`g_{tol}` = :data:`hil.profile.config.HARD_LVDT_GAIN_TOLERANCE` admits the
 LVDT pitch error the calibration is there to measure (7.5 % in the paper).
 """
 
@@ -43,7 +43,8 @@ from dataclasses import dataclass
 
 from hil.canopen.drivelimits import LimitKind
 from hil.canopen.process import DriveMode, Sample, Setpoint
-from hil.config import (
+from hil.check.staleness import stale_limit
+from hil.profile.config import (
     HARD_LVDT_GAIN_TOLERANCE,
     HARD_MAX_D_INT_MM,
     HARD_MAX_FOLLOWING_ERROR_MM,
@@ -55,7 +56,6 @@ from hil.config import (
     Actuation,
     Check,
 )
-from hil.staleness import stale_limit
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,13 +80,13 @@ class Limits:
     max_d_int_mm: float
     max_stale_cycles: int
     max_frozen_cycles: int
-    stale_name: str = "max_stale_cycles"  #: the freshness limit in force (hil.staleness.StaleLimit.name)
+    stale_name: str = "max_stale_cycles"  #: the freshness limit in force (hil.check.staleness.StaleLimit.name)
     stale_why: str = ""
 
     @classmethod
     def of(cls, actuation: Actuation, check: Check, kept: Sequence[Collection[LimitKind]] | None = None) -> Limits:
         """``kept``: per EMA the limits its drive keeps itself (None: not known): which freshness limit
-        applies (:func:`hil.staleness.stale_limit`)."""
+        applies (:func:`hil.check.staleness.stale_limit`)."""
         s = check.safety
         stale = stale_limit(actuation, s, kept)
         f_lim = actuation.mechanics.limit_load_N
@@ -126,7 +126,7 @@ class Supervisor:
 
     def drives_keep(self, kept: Sequence[Collection[LimitKind]] | None) -> None:
         """The limits each drive keeps itself, once the preflight has written and read them back: the
-        freshness limit that applies from now on (:func:`hil.staleness.stale_limit`)."""
+        freshness limit that applies from now on (:func:`hil.check.staleness.stale_limit`)."""
         self.lim = Limits.of(*self._profiles, kept)
 
     def check(self, smp: Sample, sp1: Setpoint, sp2: Setpoint) -> Violation | None:

@@ -1,6 +1,6 @@
 """The master's preflight as a sans-IO generator: boot, identify, configure, the master's-death drill.
 
-:class:`Preflight` is driven by :class:`hil.master.MasterCore`: it yields
+:class:`Preflight` is driven by :class:`hil.master.core.MasterCore`: it yields
 requests (an NMT command, wait for boot-up, an SDO read or write, let time
 pass, the master's own heartbeat off or on) and receives their results; it
 never touches a bus or a clock. What it learns goes into the master's views
@@ -16,7 +16,7 @@ Sequence (CiA 302-style, per node as the rig's :class:`~hil.canopen.plan.RigPlan
    CST), the gear ratio object and 0x608F against the profile where they
    exist, the scalings it reports (0x608F, 0x6091/0x6092, rated torque
    0x6076), the limits it keeps itself where its EDS offers them (0x607D,
-   0x6072, 0x6080, 0x6065/0x6066, 0x6085; written and read back: hil/limits_setup.py),
+   0x6072, 0x6080, 0x6065/0x6066, 0x6085; written and read back: hil/master/limits_setup.py),
    interpolation period 0x60C2, quick stop option 0x605A = 2 and 0x1006 where writable, the modes of
    operation (CSP, set once by SDO for a drive without CST), the reaction to
    the master's death (0x1016:01, 0x6007 = 3, written and read back).
@@ -29,7 +29,7 @@ Sequence (CiA 302-style, per node as the rig's :class:`~hil.canopen.plan.RigPlan
    heartbeat is its reaction time). Then the heartbeat resumes, NMT
    pre-operational restores SDO on a drive whose error behaviour stopped it,
    and each drive is brought to SWITCH_ON_DISABLED. A drive that did not
-   react stops the preflight (:class:`~hil.master.MasterLossReactionError`)
+   react stops the preflight (:class:`~hil.master.core.MasterLossReactionError`)
    unless ``canopen.external_watchdog`` states the rig's protection.
 4. NMT start (all).
 """
@@ -61,9 +61,9 @@ from hil.canopen.signalmap import (
     object_name,
     torque_scale,
 )
-from hil.config import Actuation, Safety
 from hil.errors import EmacheckError
-from hil.limits_setup import limit_targets, limits_for, readback_problem
+from hil.master.limits_setup import limit_targets, limits_for, readback_problem
+from hil.profile.config import Actuation, Safety
 
 __all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
            "MasterLossReactionError", "ReactionConfig", "SameSerialError"]
@@ -285,7 +285,7 @@ class Preflight:
         The check's opposing force and the supervisor's force limit [N] (``check.calibration.opposing_force_N``,
         ``check.safety.max_force_N``): a drive holding forces in CST must allow the opposing force.
     safety : Safety, optional
-        The check's safety profile: the limits each drive keeps itself (:mod:`hil.limits_setup`); None:
+        The check's safety profile: the limits each drive keeps itself (:mod:`hil.master.limits_setup`); None:
         only the actuation's stroke limit and the force limit of ``forces``.
     """
 
@@ -457,7 +457,7 @@ class Preflight:
             d.rated_torque_Nm = 1.0 / (torque.scale.units_per_si * self.act.mechanics.i_total_rad_per_mm)
 
     def _limits(self, d: DriveSetup) -> Generator:
-        """The limits the drive keeps itself (:mod:`hil.limits_setup`): each one its EDS offers written and
+        """The limits the drive keeps itself (:mod:`hil.master.limits_setup`): each one its EDS offers written and
         read back (another value refuses the preflight), the others kept by the master only; then a drive
         holding forces in CST must allow the calibration's opposing force under its max torque 0x6072."""
         node, spec = d.plan.node, d.plan.node.spec

@@ -2,9 +2,9 @@
 
 A run's record is built once (:func:`start_record`: a new run id, this software, the start time,
 status ``running``, the profiles' snapshot), changed only by :func:`dataclasses.replace` or the
-record's named methods (each returns a new record), written only by :class:`hil.runfolder.MetaWriter`
-(the one owner of ``meta.json`` and of the run folder's :class:`~hil.runfolder.DiskSync`) and read
-back only by :func:`hil.runfolder.read_record` / :meth:`RunRecord.from_json` (``analyze``, ``serv``,
+record's named methods (each returns a new record), written only by :class:`hil.record.runfolder.MetaWriter`
+(the one owner of ``meta.json`` and of the run folder's :class:`~hil.record.runfolder.DiskSync`) and read
+back only by :func:`hil.record.runfolder.read_record` / :meth:`RunRecord.from_json` (``analyze``, ``serv``,
 ``diagnose``, the report, the result's trace). This module does no IO.
 
 JSON: :meth:`RunRecord.as_json` gives the keys in the order of :class:`RunRecord`'s fields, a field
@@ -31,10 +31,10 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from hil.cycletiming import Distribution, TimingSummary, Worst
 from hil.errors import RunRecordError
+from hil.record.cycletiming import Distribution, TimingSummary, Worst
 
-#: the record's file in a run folder (written by :class:`hil.runfolder.MetaWriter` only)
+#: the record's file in a run folder (written by :class:`hil.record.runfolder.MetaWriter` only)
 META_NAME = "meta.json"
 
 
@@ -124,7 +124,7 @@ def _only(obj: Mapping, known, where: str, source: str) -> None:
     extra = [k for k in obj if k not in known]
     if extra:
         name = f"{where}.{extra[0]}" if where else extra[0]
-        raise RunRecordError(name, "no field of the run record holds it (hil/runrecord.py)", source)
+        raise RunRecordError(name, "no field of the run record holds it (hil/record/runrecord.py)", source)
 
 
 def _member(cls: type[StrEnum], v: Any, field: str, source: str) -> Any:
@@ -178,7 +178,7 @@ class Software(_Part):
 
 @dataclass(frozen=True)
 class Profiles(_Part):
-    """The snapshots of the profiles the run used (:func:`hil.profiles.actuation_tables`, ``snapshot``)."""
+    """The snapshots of the profiles the run used (:func:`hil.profile.load.actuation_tables`, ``snapshot``)."""
 
     actuation: dict | None = None
     check: dict | None = None
@@ -310,7 +310,8 @@ class Identity(_Part):
 
     @classmethod
     def of(cls, node: int, read: Mapping) -> Identity | None:
-        """From what the preflight read of 0x1018 (:attr:`hil.preflight.Preflight.identities`); None if nothing."""
+        """From what the preflight read of 0x1018 (:attr:`hil.master.preflight.Preflight.identities`); None
+        if nothing."""
         if not read:
             return None
         _only(read, IDENTITY_KEYS, f"identity (node {node})", "preflight")
@@ -323,7 +324,7 @@ IDENTITY_KEYS = ("node", "vendor_id", "product_code", "revision", "serial")
 
 @dataclass(frozen=True)
 class SafetyViolation(_Part):
-    """The supervisor's latched violation (:class:`hil.supervisor.Violation`): the limit, its value in
+    """The supervisor's latched violation (:class:`hil.check.supervisor.Violation`): the limit, its value in
     force, the measured value (the limit's unit) and when [s, check time]."""
 
     limit: str = _req("text")
@@ -358,7 +359,7 @@ class KeptLimit(_Part):
 
 @dataclass(frozen=True)
 class DriveFinal(_Part):
-    """A drive's last known CiA 402 state after the check (:meth:`hil.master.MasterCore.safe_state_report`):
+    """A drive's last known CiA 402 state after the check (:meth:`hil.master.core.MasterCore.safe_state_report`):
     reachable (heartbeat), confirmed by a fresh statusword, safe (Switch on disabled, confirmed), and
     its protection against the master's death (the preflight's record, JSON; ``{}`` if none)."""
 
@@ -422,7 +423,7 @@ class CanStats(_Part):
 
 
 def _read_distribution(f: _Fields, histogram: bool) -> Distribution:
-    """A :class:`hil.cycletiming.Distribution` from its JSON (``histogram`` False: none was recorded)."""
+    """A :class:`hil.record.cycletiming.Distribution` from its JSON (``histogram`` False: none was recorded)."""
     nums = [f.get(k, "number", required=True) for k in ("p50_ms", "p90_ms", "p99_ms", "p99.9_ms", "max_ms", "mean_ms")]
     worst = tuple(Worst(g.get("ms", "number", required=True), g.get("t_s", "number", required=True),
                         g.get("cycle", "int", required=True))
@@ -442,9 +443,9 @@ def _read_distribution(f: _Fields, histogram: bool) -> Distribution:
 
 @dataclass(frozen=True)
 class Timing(_Part):
-    """The master's loop per SYNC cycle on a real bus (:class:`hil.cycletiming.TimingSummary`), with the
+    """The master's loop per SYNC cycle on a real bus (:class:`hil.record.cycletiming.TimingSummary`), with the
     SYNC's source and its lateness. The CPU time's histogram is not recorded (as
-    :meth:`~hil.cycletiming.TimingSummary.as_json` leaves it out): ``summary.work_cpu`` holds none."""
+    :meth:`~hil.record.cycletiming.TimingSummary.as_json` leaves it out): ``summary.work_cpu`` holds none."""
 
     summary: TimingSummary
     t0_unix_s: float  #: the wall clock at the check's time 0 [s since the epoch]
@@ -523,7 +524,7 @@ class RunRecord:
     files_sha256: dict[str, str] | None = None  #: file name -> SHA-256
     wear: Wear | None = None
     process_image: dict | None = None  #: :func:`hil.canopen.cycle.image_of`
-    master_loss: dict[str, dict] | None = None  #: EMA -> :meth:`hil.preflight.MasterLossRecord.as_json`
+    master_loss: dict[str, dict] | None = None  #: EMA -> :meth:`hil.master.preflight.MasterLossRecord.as_json`
     identity: dict[str, Identity | None] | None = None  #: EMA -> identity (None: not read)
     safety: SafetyViolation | None = None
     drives_final: dict[str, DriveFinal] | None = None  #: EMA -> its final state
@@ -554,7 +555,7 @@ class RunRecord:
 
     def with_preflight(self, preflight: Mapping) -> RunRecord:
         """``process_image``, ``master_loss`` and ``identity`` from the link's preflight record (JSON,
-        :meth:`hil.link.CanopenLink.preflight_record`), read and checked as meta.json is."""
+        :meth:`hil.master.link.CanopenLink.preflight_record`), read and checked as meta.json is."""
         _only(preflight, ("process_image", "master_loss", "identity"), "", "preflight record")
         for k, v in (preflight.get("identity") or {}).items():
             _only(v or {}, IDENTITY_KEYS, f"identity.{k}", "preflight record")
@@ -564,7 +565,7 @@ class RunRecord:
 
     def with_final_states(self, final: Mapping, errors: list[str] | None) -> RunRecord:
         """``drives_final`` from the link's report after it closed (JSON,
-        :meth:`hil.master.MasterCore.safe_state_report`) and the first 10 ``errors`` met while stopping."""
+        :meth:`hil.master.core.MasterCore.safe_state_report`) and the first 10 ``errors`` met while stopping."""
         for k, v in final.items():
             _only(v, part_keys(DriveFinal), f"drives_final.{k}", "final states")
         got = RunRecord.from_json({"drives_final": final}, "final states")
@@ -656,7 +657,7 @@ def start_record(act, check, **fields) -> RunRecord:
     of ``act`` and ``check``, no steps yet; ``fields``: the other :class:`RunRecord` fields (``status``
     too: a recording made whole at once is ``done``)."""
     from hil import __version__
-    from hil.profiles import actuation_tables, snapshot
+    from hil.profile.load import actuation_tables, snapshot
 
     base = {"run_id": uuid.uuid4().hex, "software": Software("emacheck", __version__),
             "started_utc": utc_now_iso(), "status": RunStatus.RUNNING,

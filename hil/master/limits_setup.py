@@ -16,7 +16,7 @@ from hil.canopen.drivelimits import (
     drive_limits,
     offered,
 )
-from hil.config import (
+from hil.profile.config import (
     HARD_MAX_FOLLOWING_ERROR_MM,
     HARD_MAX_FORCE_FRACTION,
     HARD_MAX_VELOCITY_MM_PER_S,
@@ -38,7 +38,7 @@ def limit_targets(act: Actuation, safety: Safety | None, forces: tuple[float, fl
                   position_units_per_rad: float | None, torque_permille_per_N: float | None) -> LimitTargets:
     """The SI limits a drive of ``act`` should keep under the check's ``safety`` profile.
 
-    Each limit is ``min(profile value, hard cap)`` as :class:`hil.supervisor.Limits` applies it: the
+    Each limit is ``min(profile value, hard cap)`` as :class:`hil.check.supervisor.Limits` applies it: the
     stroke ``min(safety.max_stroke_mm, mechanics.stroke_limit_mm)``, the force ``safety.max_force_N``
     (25 % of F_limit at most), the ram speed ``safety.max_velocity_mm_per_s`` (50 mm/s), the following
     error ``safety.max_following_error_mm`` (2 mm) for :data:`FOLLOWING_ERROR_TIME_CYCLES` SYNC periods,

@@ -1,0 +1,9 @@
+"""The check: its sequence of steps, the safety supervisor, the freshness limit and the loop.
+
+==================  ===========================================================================
+``sequence``        the check sequence core (sans-IO): steps as an Enum, transitions a table
+``supervisor``      the safety supervisor core (sans-IO): first violation latched
+``staleness``       the sensor-freshness limit, derived from the physics and the drives' own limits
+``runner``          the check loop: sequence + supervisor + run-folder logging over a link (IO)
+==================  ===========================================================================
+"""
