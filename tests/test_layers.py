@@ -4,6 +4,10 @@
 * ``sim`` (physics and simulated drives) imports from ``hil`` only ``hil.canopen``;
 * ``hil.canopen`` (the CANopen vocabulary both ends speak) imports nothing from the
   rest of ``hil``, nor from ``sim`` or ``blf``;
+* the sans-IO cores (``SANS_IO``: the master core, its preflight, events and drive-limit set-up; the
+  check sequence, the supervisor, the freshness limit) import no IO module (a bus, a thread, a clock,
+  a file, a process) and of ``hil`` only the vocabulary, the errors, the profiles' dataclasses and
+  one another;
 * no module of the product is longer than 700 lines;
 * no function or method of the product is longer than 100 lines, counted as the source lines of
   its body without its docstring: from the first statement after the docstring to the function's
@@ -64,6 +68,16 @@ def _imports(path: Path) -> list[tuple[int, str]]:
     return out
 
 
+#: The sans-IO cores: fed frames, samples and a time value; they return frames, setpoints and events.
+SANS_IO = ("hil.master.core", "hil.master.preflight", "hil.master.events", "hil.master.limits_setup",
+           "hil.check.sequence", "hil.check.supervisor", "hil.check.staleness")
+#: What a sans-IO core may import of hil: the vocabulary, the errors, the profiles' dataclasses, one another.
+SANS_IO_MAY = ("hil.canopen", "hil.errors", "hil.profile.config", *SANS_IO)
+#: Modules that touch a bus, a thread, a clock, a file or a process.
+IO_MODULES = ("can", "threading", "time", "os", "io", "pathlib", "socket", "select", "queue", "subprocess",
+              "asyncio", "signal", "shutil", "tempfile", "sqlite3")
+
+
 def _violation(importer: str, imported: str) -> str | None:
     top = imported.split(".")[0]
     inside = lambda pkg: imported == pkg or imported.startswith(pkg + ".")  # noqa: E731
@@ -74,6 +88,12 @@ def _violation(importer: str, imported: str) -> str | None:
     if importer.startswith("hil.canopen") and (top in ("sim", "blf") or (top == "hil" and not inside("hil.canopen")
                                                                        and imported != "hil")):
         return "hil.canopen imports nothing from the rest of hil, nor from sim or blf"
+    if importer in SANS_IO:
+        if top in IO_MODULES:
+            return f"a sans-IO core imports no IO module ({top})"
+        if top in ("sim", "blf") or (top == "hil" and imported not in ("hil", "hil.master", "hil.check", "hil.profile")
+                                     and not any(inside(m) for m in SANS_IO_MAY)):
+            return "a sans-IO core imports of hil only " + ", ".join(SANS_IO_MAY[:3]) + " and the other cores"
     return None
 
 
@@ -90,7 +110,14 @@ def test_the_walk_sees_every_kind_of_import(tmp_path):
     assert _violation("blf.x", "hil.record.runfolder") and _violation("blf.x", "sim.plant")
     assert _violation("sim.plant", "hil.master.core") and not _violation("sim.plant", "hil.canopen.frame")
     assert _violation("hil.canopen.pdo", "hil.errors") and _violation("hil.canopen.pdo", "blf.errors")
-    assert not _violation("hil.canopen.pdo", "hil.canopen.frame") and not _violation("hil.master.core", "sim.plant")
+    assert not _violation("hil.canopen.pdo", "hil.canopen.frame") and not _violation("hil.master.link", "sim.plant")
+    assert _violation("hil.master.core", "sim.plant") and _violation("hil.check.supervisor", "hil.record.runfolder")
+    assert _violation("hil.master.preflight", "time") and _violation("hil.check.sequence", "can.interfaces")
+    assert _violation("hil.master.core", "hil.transport") and _violation("hil.check.staleness", "threading")
+    assert not _violation("hil.master.core", "hil.master.events") and not _violation("hil.check.supervisor",
+                                                                                      "hil.check.staleness")
+    assert not _violation("hil.check.sequence", "hil.profile.config")
+    assert not _violation("hil.master.core", "hil.master")
 
 
 def _imports_at(path: Path, root: Path) -> list[tuple[int, str]]:
