@@ -26,7 +26,24 @@ class EmacheckError(Exception):
 
 
 class ProfileError(EmacheckError, ValueError):
-    """A profile (TOML) is malformed, incomplete or outside the hard limits."""
+    """A profile (TOML) is malformed, incomplete or outside the hard limits.
+
+    ``problems`` holds every problem found, each a message naming file and field: a loader collects
+    them (:class:`hil.profile.tables.Problems`) so that one run names them all; the message of several
+    is a count and one line each.
+    """
+
+    def __init__(self, message: str, problems: tuple[str, ...] = ()) -> None:
+        super().__init__(message)
+        self.problems: tuple[str, ...] = tuple(problems) or (message,)
+
+    @classmethod
+    def of(cls, problems: list[str] | tuple[str, ...]) -> ProfileError:
+        """One error for every problem: the problem itself if there is one, else a count and a line each."""
+        if len(problems) == 1:
+            return cls(problems[0])
+        return cls(f"{len(problems)} problems in the profiles (all of them; fix each before the next run):\n  "
+                   + "\n  ".join(problems), tuple(problems))
 
 
 class RecordingError(EmacheckError, ValueError):

@@ -72,8 +72,8 @@ def cmd_profile_check(args: argparse.Namespace) -> int:
         return ExitCode.INPUT
     except ProfileError as exc:
         if args.json:
-            print(json.dumps({"ok": False, "problems": [{"key": None, "object": None, "message": str(exc)}]},
-                             indent=1))
+            print(json.dumps({"ok": False, "problems": [{"key": _field_of(p), "object": None, "message": p}
+                                                        for p in exc.problems]}, indent=1))
             return ExitCode.INPUT
         raise
     if args.json:
@@ -81,6 +81,14 @@ def cmd_profile_check(args: argparse.Namespace) -> int:
         return ExitCode.PASS
     _print_plan(console, act, rig, args.profile_file)
     return ExitCode.PASS
+
+
+def _field_of(message: str) -> str | None:
+    """The profile key a loader's problem names (``field 'safety.max_force_N'``), if it names one."""
+    import re
+
+    m = re.search(r"fields? '([^']+)'", message)
+    return m.group(1) if m else None
 
 
 def _print_plan(console, act, rig, path: Path) -> None:

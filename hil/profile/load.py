@@ -30,8 +30,16 @@ from hil.profile.config import (
     Actuation,
     Check,
 )
-from hil.profile.signals import LEGACY_SIGNALS, gear_ratio_object, load_signal_map, signal_tables
-from hil.profile.tables import build_dataclass, check_keys, check_range, convert_scalar, read_toml, snapshot
+from hil.profile.signals import LEGACY_SIGNALS, NO_SIGNALS, gear_ratio_object, load_signal_map, signal_tables
+from hil.profile.tables import (
+    Problems,
+    build_dataclass,
+    check_keys,
+    check_range,
+    convert_scalar,
+    read_toml,
+    snapshot,
+)
 from sim import effects as sim_effects
 from sim.params import DriveParams, EmaMechanics, RigParams, SensorParams, SurfaceParams, WearParams
 
@@ -51,19 +59,41 @@ def default_profile_path(name: str) -> Path:
 def load_actuation(path: str | Path | None = None) -> Actuation:
     """Load and validate an actuation profile (default: the shipped one), its signal map included."""
     path = Path(path) if path is not None else default_profile_path("actuation.toml")
-    data = read_toml(path)
-    _refuse_moved(data, path.name)
-    return actuation_from_tables(data, path.name)
+    return actuation_from_tables(read_toml(path), path.name)
 
 
 def actuation_from_tables(data: dict, fname: str) -> Actuation:
-    """An actuation profile from its parsed tables (a TOML file, or meta.json's snapshot of one)."""
+    """An actuation profile from its parsed tables (a TOML file, or meta.json's snapshot of one).
+
+    Every problem is named at once (:class:`hil.profile.tables.Problems`): the fields, the cross-field
+    rules and the signal map; the map is checked only when the rest gave an actuation to check it against.
+    """
+    problems = Problems()
     data = copy.deepcopy(data)
+    with problems.collect():
+        _refuse_moved(data, fname)
     signals = data.pop("signals", None)
     nodes = data.pop("nodes", {})
     co = data.get("canopen")
     cob_ids = co.pop("cob_ids", {}) if isinstance(co, dict) else {}
-    act = build_dataclass(Actuation, data, fname)
+    act = None
+    with problems.collect():
+        act = build_dataclass(Actuation, data, fname)
+    if act is None:
+        if signals is None:
+            problems.add(NO_SIGNALS.format(fname=fname))
+        problems.raise_any()
+    for rule in (_distinct_node_ids, _consumer_time, _history_url, _one_line_texts):
+        with problems.collect():
+            rule(act, fname)
+    smap = None
+    with problems.collect():
+        smap = load_signal_map(signals, nodes, cob_ids, act, fname)
+    problems.raise_any()
+    return dataclasses.replace(act, signals=smap)
+
+
+def _distinct_node_ids(act: Actuation, fname: str) -> None:
     c = act.canopen
     if c.node_id_ema1 == c.node_id_ema2:
         raise ProfileError(f"{fname}: fields 'canopen.node_id_ema1' and 'canopen.node_id_ema2' "
@@ -72,11 +102,17 @@ def actuation_from_tables(data: dict, fname: str) -> Actuation:
         if getattr(c, name) == c.master_node_id:
             raise ProfileError(f"{fname}: fields 'canopen.master_node_id' and 'canopen.{name}' are both "
                                f"{c.master_node_id}; the master's heartbeat needs a node id of its own")
-    consumer_ms = c.master_consumer_time_s * 1000.0
+
+
+def _consumer_time(act: Actuation, fname: str) -> None:
+    consumer_ms = act.canopen.master_consumer_time_s * 1000.0
     if not 1.0 <= consumer_ms <= 0xFFFF:
         raise ProfileError(f"{fname}: fields 'canopen.master_heartbeat_consumer_factor' * "
                            f"'canopen.master_heartbeat_period_s' give a consumer heartbeat time of "
                            f"{consumer_ms:g} ms; 0x1016 holds 1..65535 ms")
+
+
+def _history_url(act: Actuation, fname: str) -> None:
     if act.history.url:
         from hil.history.errors import HistoryInputError
         from hil.history.url import check_url
@@ -85,12 +121,16 @@ def actuation_from_tables(data: dict, fname: str) -> Actuation:
             check_url(act.history.url)
         except HistoryInputError as exc:
             raise ProfileError(f"{fname}: field 'history.url': {exc}") from None
+
+
+def _one_line_texts(act: Actuation, fname: str) -> None:
+    problems = Problems()
     for name in ("external_watchdog", "skip_master_loss_drill"):
-        text = getattr(c, name)
+        text = getattr(act.canopen, name)
         if text != text.strip() or "\n" in text:
-            raise ProfileError(f"{fname}: field 'canopen.{name}' must be one line without "
-                               f"leading or trailing blanks (it is quoted in the run folder)")
-    return dataclasses.replace(act, signals=load_signal_map(signals, nodes, cob_ids, act, fname))
+            problems.add(f"{fname}: field 'canopen.{name}' must be one line without "
+                         f"leading or trailing blanks (it is quoted in the run folder)")
+    problems.raise_any()
 
 
 #: Keys of earlier actuation profiles and where they went.
@@ -98,9 +138,14 @@ _MOVED = {("sensors", "resolver_counts_per_rev"): "signals.ema1.motor_angle.coun
 
 
 def _refuse_moved(data: dict, fname: str) -> None:
+    """Keys of earlier profiles refused, each saying where it went (and taken out of ``data``, so that
+    the rest of the profile is still checked: every problem at once)."""
+    problems = Problems()
     for (table, key), where in _MOVED.items():
         if isinstance(data.get(table), dict) and key in data[table]:
-            raise ProfileError(f"{fname}: field '{table}.{key}' has moved to '{where}' (docs/drives.md)")
+            del data[table][key]
+            problems.add(f"{fname}: field '{table}.{key}' has moved to '{where}' (docs/drives.md)")
+    problems.raise_any()
 
 
 def resolve_eds(name: str, profile_path: str | Path | None, key: str = "canopen.eds",
@@ -162,48 +207,50 @@ def load_check(path: str | Path | None = None, actuation: Actuation | None = Non
 
 
 def validate_check(check: Check, act: Actuation, fname: str = "check.toml") -> None:
-    """Cross-field checks between a check profile and the actuation it runs on."""
+    """Cross-field checks between a check profile and the actuation it runs on: every problem at once."""
+    problems = Problems()
     f_limit = act.mechanics.limit_load_N
     cap = HARD_MAX_FORCE_FRACTION * f_limit
     s = check.safety
     if s.max_force_N > cap:
-        raise ProfileError(
+        problems.add(
             f"{fname}: field 'safety.max_force_N' = {s.max_force_N} is above the hard cap "
             f"{cap:g} N ({HARD_MAX_FORCE_FRACTION:.0%} of limit_load_N)")
     for name, value, frac in (("safety.max_force_fight_N", s.max_force_fight_N, HARD_MAX_FORCE_FIGHT_FRACTION),
                               ("safety.max_force_imbalance_N", s.max_force_imbalance_N,
                                HARD_MAX_FORCE_IMBALANCE_FRACTION)):
         if value > frac * f_limit:
-            raise ProfileError(f"{fname}: field '{name}' = {value} is above the hard cap "
+            problems.add(f"{fname}: field '{name}' = {value} is above the hard cap "
                                f"{frac * f_limit:g} N ({frac:.0%} of limit_load_N)")
     ff = check.force_fight.amplitude_fraction_of_limit * f_limit
     if ff >= s.max_force_fight_N:
-        raise ProfileError(
+        problems.add(
             f"{fname}: field 'force_fight.amplitude_fraction_of_limit' gives {ff:g} N, "
             f"not below safety.max_force_fight_N = {s.max_force_fight_N:g} N")
     if ff >= s.max_force_N:
-        raise ProfileError(
+        problems.add(
             f"{fname}: field 'force_fight.amplitude_fraction_of_limit' gives {ff:g} N, "
             f"not below safety.max_force_N = {s.max_force_N:g} N")
     if check.force_fight.amplitude_fraction_of_limit > HARD_FORCE_FIGHT_FRACTION:  # pragma: no cover
-        raise ProfileError(f"{fname}: force fight above the hard cap")  # (metadata catches it first)
+        problems.add(f"{fname}: force fight above the hard cap")  # (metadata catches it first)
     if check.calibration.opposing_force_N >= s.max_force_N:
-        raise ProfileError(
+        problems.add(
             f"{fname}: field 'calibration.opposing_force_N' = {check.calibration.opposing_force_N:g} N "
             f"is not below safety.max_force_N = {s.max_force_N:g} N")
     if s.max_stroke_mm > act.mechanics.stroke_limit_mm:
-        raise ProfileError(
+        problems.add(
             f"{fname}: field 'safety.max_stroke_mm' = {s.max_stroke_mm} is above the hard cap "
             f"{act.mechanics.stroke_limit_mm} mm (the actuation's stroke_limit_mm)")
     if check.calibration.sweep_amplitude_mm >= s.max_stroke_mm:
-        raise ProfileError(
+        problems.add(
             f"{fname}: field 'calibration.sweep_amplitude_mm' = {check.calibration.sweep_amplitude_mm} "
             f"must stay below safety.max_stroke_mm = {s.max_stroke_mm}")
     for name, v in (("approach.speed_mm_per_s", check.approach.speed_mm_per_s),
                     ("calibration.sweep_speed_mm_per_s", check.calibration.sweep_speed_mm_per_s)):
         if v >= s.max_velocity_mm_per_s:
-            raise ProfileError(f"{fname}: field '{name}' = {v} must stay below "
+            problems.add(f"{fname}: field '{name}' = {v} must stay below "
                                f"safety.max_velocity_mm_per_s = {s.max_velocity_mm_per_s}")
+    problems.raise_any()
 
 
 #: Ranges of the simulated-rig parameters (sim/params.py holds only values).
@@ -261,49 +308,74 @@ class SimIdentity:
 
 
 def load_simrig(path: str | Path | None = None) -> SimRigProfile:
-    """Load and validate a simulated-rig profile (default: the shipped one)."""
+    """Load and validate a simulated-rig profile (default: the shipped one): every problem at once."""
     path = Path(path) if path is not None else default_profile_path("simrig.toml")
     fname = path.name
     data = read_toml(path)
     required = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2"]
-    known = required + ["effects", "faults", "identity", "wear"]
-    check_keys(data, known, "", fname)
+    problems = Problems()
+    with problems.collect():
+        check_keys(data, required + ["effects", "faults", "identity", "wear"], "", fname)
     for key in required:
         if key not in data:
-            raise ProfileError(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
-    seed = data["seed"]
+            problems.add(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
+    seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ProfileError(f"{fname}: field 'seed' must be a non-negative integer, got {seed!r}")
-    rig = data["rig"]
+        problems.add(f"{fname}: field 'seed' must be a non-negative integer, got {seed!r}")
+    rig = parts = effects = faults = ident = wear = None
+    with problems.collect():
+        rig = _sim_rig_table(data.get("rig", {}), fname)
+    with problems.collect():
+        parts = _sim_parts(data, fname)
+    with problems.collect():
+        effects = tuple(_load_effect(tbl, i, fname) for i, tbl in enumerate(data.get("effects", [])))
+    with problems.collect():
+        faults = _load_faults(data.get("faults", []), fname)
+    with problems.collect():
+        if "identity" in data:
+            ident = build_dataclass(SimIdentity, data["identity"], fname, "identity.")
+    with problems.collect():
+        if "wear" in data:
+            wear = build_dataclass(WearParams, data["wear"], fname, "wear.", _SIM_RANGES)
+    problems.raise_any()
+    params = RigParams(**rig, effects=effects, **parts)
+    serials = (ident.serial_ema1, ident.serial_ema2) if ident is not None else None
+    return SimRigProfile(params=params, seed=seed, faults=faults, serials=serials, wear=wear)
+
+
+def _sim_rig_table(rig: Any, fname: str) -> dict:
+    """``[rig]`` of a simulated-rig profile: RigParams' scalars, each checked."""
     if not isinstance(rig, dict):
         raise ProfileError(f"{fname}: 'rig' must be a table")
-    rig_known = ["i_total_rad_per_mm", "stroke_limit_mm", "sample_period_s", "substeps"]
-    check_keys(rig, rig_known, "rig.", fname)
-    for k in rig_known:
-        if k not in rig:
-            raise ProfileError(f"{fname}: missing field 'rig.{k}'")
-    i_total = convert_scalar(rig["i_total_rad_per_mm"], float, "rig.i_total_rad_per_mm", fname)
-    stroke = convert_scalar(rig["stroke_limit_mm"], float, "rig.stroke_limit_mm", fname)
-    period = convert_scalar(rig["sample_period_s"], float, "rig.sample_period_s", fname)
-    substeps = convert_scalar(rig["substeps"], int, "rig.substeps", fname)
-    check_range(i_total, {"lo": 0.0, "lo_open": True, "hi": 1e4}, "rig.i_total_rad_per_mm", fname)
-    check_range(stroke, {"lo": 0.0, "lo_open": True, "hi": 500.0}, "rig.stroke_limit_mm", fname)
-    check_range(period, {"lo": 1e-4, "hi": 0.1}, "rig.sample_period_s", fname)
-    check_range(substeps, {"lo": 1, "hi": 1000}, "rig.substeps", fname)
+    fields = {"i_total_rad_per_mm": (float, {"lo": 0.0, "lo_open": True, "hi": 1e4}),
+              "stroke_limit_mm": (float, {"lo": 0.0, "lo_open": True, "hi": 500.0}),
+              "sample_period_s": (float, {"lo": 1e-4, "hi": 0.1}),
+              "substeps": (int, {"lo": 1, "hi": 1000})}
+    problems = Problems()
+    with problems.collect():
+        check_keys(rig, list(fields), "rig.", fname)
+    out = {}
+    for k, (typ, rng) in fields.items():
+        with problems.collect():
+            if k not in rig:
+                raise ProfileError(f"{fname}: missing field 'rig.{k}'")
+            out[k] = convert_scalar(rig[k], typ, f"rig.{k}", fname)
+            check_range(out[k], rng, f"rig.{k}", fname)
+    problems.raise_any()
+    return out
+
+
+def _sim_parts(data: dict, fname: str) -> dict:
+    """The EMAs, drive, surface and sensors tables of a simulated-rig profile; every problem at once."""
+    problems = Problems()
     parts = {}
     for key, cls in (("ema1", EmaMechanics), ("ema2", EmaMechanics), ("drive", DriveParams),
                      ("surface", SurfaceParams), ("sensors1", SensorParams), ("sensors2", SensorParams)):
-        parts[key] = build_dataclass(cls, data[key], fname, key + ".", _SIM_RANGES)
-    effects = tuple(_load_effect(tbl, i, fname) for i, tbl in enumerate(data.get("effects", [])))
-    params = RigParams(i_total_rad_per_mm=i_total, stroke_limit_mm=stroke, sample_period_s=period,
-                       substeps=substeps, effects=effects, **parts)
-    faults = _load_faults(data.get("faults", []), fname)
-    serials = None
-    if "identity" in data:
-        ident = build_dataclass(SimIdentity, data["identity"], fname, "identity.")
-        serials = (ident.serial_ema1, ident.serial_ema2)
-    wear = build_dataclass(WearParams, data["wear"], fname, "wear.", _SIM_RANGES) if "wear" in data else None
-    return SimRigProfile(params=params, seed=seed, faults=faults, serials=serials, wear=wear)
+        if key in data:
+            with problems.collect():
+                parts[key] = build_dataclass(cls, data[key], fname, key + ".", _SIM_RANGES)
+    problems.raise_any()
+    return parts
 
 
 def _load_faults(tables: Any, fname: str) -> tuple:

@@ -33,9 +33,9 @@ from hil.canopen.signalmap import (
 )
 from hil.errors import ProfileError
 from hil.profile.config import Actuation
-from hil.profile.tables import check_keys, check_range, convert_scalar
+from hil.profile.tables import Problems, check_keys, check_range, convert_scalar
 
-__all__ = ["LEGACY_SIGNALS", "gear_ratio_object", "load_signal_map", "signal_tables"]
+__all__ = ["LEGACY_SIGNALS", "NO_SIGNALS", "gear_ratio_object", "load_signal_map", "signal_tables"]
 
 
 #: Keys of a signal's table besides ``object``, ``node`` and ``type``, per signal.
@@ -161,69 +161,111 @@ def _node_spec(name: str, tbl: Any, act: Actuation, fname: str) -> NodeSpec:
     return NodeSpec(name, NodeRole.SENSORS, nid, eds, *ident, profile, hb, where)
 
 
+#: The message for a profile without a signal map (``fname`` to fill in).
+NO_SIGNALS = ("{fname}: missing tables '[signals.ema1]' and '[signals.ema2]': where each signal of the check "
+              "lives (docs/drives.md)")
+
+
 def load_signal_map(signals: Any, nodes: Any, cob_ids: Any, act: Actuation, fname: str) -> SignalMap:
     """``[signals.ema1]``, ``[signals.ema2]``, ``[nodes.NAME]`` and ``canopen.cob_ids`` -> :class:`SignalMap`.
 
-    Every error names the profile field (docs/drives.md describes the tables)."""
+    Every error names the profile field (docs/drives.md describes the tables); every problem is named
+    at once (one :class:`~hil.errors.ProfileError` holding them all)."""
     if signals is None:
-        raise ProfileError(f"{fname}: missing tables '[signals.ema1]' and '[signals.ema2]': where each signal "
-                           f"of the check lives (docs/drives.md)")
+        raise ProfileError(NO_SIGNALS.format(fname=fname))
+    problems = Problems()
     signals = _table(signals, "signals", fname)
-    check_keys(signals, ["ema1", "ema2"], "signals.", fname)
+    with problems.collect():
+        check_keys(signals, ["ema1", "ema2"], "signals.", fname)
     c = act.canopen
     drives = tuple(NodeSpec(f"ema{k}", NodeRole.DRIVE, nid, c.eds, c.vendor_id, c.product_code, c.revision_min,
                             DeviceProfile.DRIVE, c.heartbeat_period_s, "canopen")
                    for k, nid in ((1, c.node_id_ema1), (2, c.node_id_ema2)))
-    extra = tuple(_node_spec(str(n), t, act, fname) for n, t in _table(nodes, "nodes", fname).items())
-    seen = {c.master_node_id: "canopen.master_node_id", c.node_id_ema1: "canopen.node_id_ema1",
-            c.node_id_ema2: "canopen.node_id_ema2"}
-    for n in extra:
-        if n.node_id in seen:
-            raise ProfileError(f"{fname}: fields '{n.key}.node_id' and '{seen[n.node_id]}' are both {n.node_id}; "
-                               f"every node needs a node id of its own")
-        seen[n.node_id] = f"{n.key}.node_id"
+    extra = _sensor_nodes(nodes, act, fname, problems)
     names = {n.name for n in drives + extra}
     entries = []
     for ema in (1, 2):
-        key = f"ema{ema}"
-        if key not in signals:
-            raise ProfileError(f"{fname}: missing table '[signals.{key}]'")
-        tbl = _table(signals[key], f"signals.{key}", fname)
-        check_keys(tbl, [x.value for x in Signal], f"signals.{key}.", fname)
-        for sig in _REQUIRED_SIGNALS:
-            if sig.value not in tbl:
-                raise ProfileError(f"{fname}: missing field 'signals.{key}.{sig.value}' (where the check reads "
-                                   f"EMA {ema}'s {sig.value.replace('_', ' ')}; docs/drives.md)")
-        for sig in Signal:
-            e = _signal_entry(sig, ema, tbl.get(sig.value, {}), act, fname)
-            if e.node not in names:
-                raise ProfileError(f"{fname}: field '{e.key}.node' = {e.node!r} is not a node of the rig "
-                                   f"(ema1, ema2{''.join(', ' + n.name for n in extra)})")
-            entries.append(e)
-        # the target position is in the units of the drive's position actual value: the motor angle's scaling
-        angle = next(e for e in entries if e.ema == ema and e.signal is Signal.MOTOR_ANGLE)
-        k = next(i for i, e in enumerate(entries) if e.ema == ema and e.signal is Signal.TARGET_POSITION)
-        entries[k] = dataclasses.replace(entries[k], scale=angle.scale, source=angle.source)
+        with problems.collect():
+            entries += _ema_entries(signals, ema, act, fname, names, problems)
     try:
         fc = ForceControl(c.force_control)
     except ValueError:
-        raise ProfileError(f"{fname}: field 'canopen.force_control' = {c.force_control!r}: \"auto\", \"cst\" "
-                           f"or \"csp\"") from None
+        fc = None
+        problems.add(f"{fname}: field 'canopen.force_control' = {c.force_control!r}: \"auto\", \"cst\" or \"csp\"")
     if c.gear_ratio_object:
         try:
             parse_object(c.gear_ratio_object, "canopen.gear_ratio_object")
         except CanopenInputError as exc:
-            raise ProfileError(f"{fname}: field {exc}") from None
+            problems.add(f"{fname}: field {exc}")
+    cobs = []
+    with problems.collect():
+        cobs = _cob_ids(cob_ids, names, fname, problems)
+    problems.raise_any()
+    return SignalMap(drives + extra, tuple(entries), fc, tuple(cobs))
+
+
+def _sensor_nodes(nodes: Any, act: Actuation, fname: str, problems: Problems) -> tuple[NodeSpec, ...]:
+    """The ``[nodes.NAME]`` tables, each with a node id of its own; problems collected."""
+    c = act.canopen
+    extra = []
+    with problems.collect():
+        for n, t in _table(nodes, "nodes", fname).items():
+            with problems.collect():
+                extra.append(_node_spec(str(n), t, act, fname))
+    seen = {c.master_node_id: "canopen.master_node_id", c.node_id_ema1: "canopen.node_id_ema1",
+            c.node_id_ema2: "canopen.node_id_ema2"}
+    for n in extra:
+        if n.node_id in seen:
+            problems.add(f"{fname}: fields '{n.key}.node_id' and '{seen[n.node_id]}' are both {n.node_id}; "
+                         f"every node needs a node id of its own")
+        seen[n.node_id] = f"{n.key}.node_id"
+    return tuple(extra)
+
+
+def _ema_entries(signals: dict, ema: int, act: Actuation, fname: str, names: set[str],
+                 problems: Problems) -> list[SignalEntry]:
+    """One EMA's signal entries (the target position in the motor angle's scaling); problems collected."""
+    key = f"ema{ema}"
+    if key not in signals:
+        raise ProfileError(f"{fname}: missing table '[signals.{key}]'")
+    tbl = _table(signals[key], f"signals.{key}", fname)
+    with problems.collect():
+        check_keys(tbl, [x.value for x in Signal], f"signals.{key}.", fname)
+    for sig in _REQUIRED_SIGNALS:
+        if sig.value not in tbl:
+            problems.add(f"{fname}: missing field 'signals.{key}.{sig.value}' (where the check reads "
+                         f"EMA {ema}'s {sig.value.replace('_', ' ')}; docs/drives.md)")
+    entries = []
+    for sig in Signal:
+        if sig in _REQUIRED_SIGNALS and sig.value not in tbl:
+            continue
+        with problems.collect():
+            e = _signal_entry(sig, ema, tbl.get(sig.value, {}), act, fname)
+            if e.node not in names:
+                raise ProfileError(f"{fname}: field '{e.key}.node' = {e.node!r} is not a node of the rig "
+                                   f"(ema1, ema2{''.join(', ' + n for n in sorted(names - set(DRIVE_ROLE)))})")
+            entries.append(e)
+    # the target position is in the units of the drive's position actual value: the motor angle's scaling
+    angle = next((e for e in entries if e.signal is Signal.MOTOR_ANGLE), None)
+    k = next((i for i, e in enumerate(entries) if e.signal is Signal.TARGET_POSITION), None)
+    if angle is not None and k is not None:
+        entries[k] = dataclasses.replace(entries[k], scale=angle.scale, source=angle.source)
+    return entries
+
+
+def _cob_ids(cob_ids: Any, names: set[str], fname: str, problems: Problems) -> list[tuple[str, str, int]]:
+    """``canopen.cob_ids``: NODE.TPDOn / NODE.RPDOn -> COB-ID; problems collected."""
     cobs = []
     for k, v in _table(cob_ids, "canopen.cob_ids", fname).items():
-        m = re.fullmatch(r"([a-z][a-z0-9_]*)\.([TR]PDO)([1-9]\d{0,2})", str(k))
-        if m is None or m.group(1) not in names:
-            raise ProfileError(f"{fname}: field 'canopen.cob_ids.{k}': a key is NODE.TPDOn or NODE.RPDOn with "
-                               f"NODE one of {', '.join(sorted(names))}")
-        cob = convert_scalar(v, int, f"canopen.cob_ids.{k}", fname)
-        check_range(cob, {"lo": 1, "hi": 0x7FF}, f"canopen.cob_ids.{k}", fname)
-        cobs.append((m.group(1), m.group(2) + m.group(3), cob))
-    return SignalMap(drives + extra, tuple(entries), fc, tuple(cobs))
+        with problems.collect():
+            m = re.fullmatch(r"([a-z][a-z0-9_]*)\.([TR]PDO)([1-9]\d{0,2})", str(k))
+            if m is None or m.group(1) not in names:
+                raise ProfileError(f"{fname}: field 'canopen.cob_ids.{k}': a key is NODE.TPDOn or NODE.RPDOn with "
+                                   f"NODE one of {', '.join(sorted(names))}")
+            cob = convert_scalar(v, int, f"canopen.cob_ids.{k}", fname)
+            check_range(cob, {"lo": 1, "hi": 0x7FF}, f"canopen.cob_ids.{k}", fname)
+            cobs.append((m.group(1), m.group(2) + m.group(3), cob))
+    return cobs
 
 
 #: The signal tables of an actuation snapshot written before the signal map existed: the one drive

@@ -8,6 +8,7 @@ units (``sweep_speed_mm_per_min`` is not ``sweep_speed_mm_per_s``).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import difflib
 import math
@@ -19,7 +20,33 @@ from typing import Any
 
 from hil.errors import ProfileError
 
-__all__ = ["build_dataclass", "check_keys", "check_range", "convert_scalar", "read_toml", "snapshot"]
+__all__ = ["Problems", "build_dataclass", "check_keys", "check_range", "convert_scalar", "read_toml", "snapshot"]
+
+
+class Problems:
+    """Every problem of a profile, collected so that one run names them all.
+
+    Each check runs inside :meth:`collect`; a :class:`~hil.errors.ProfileError` it raises is kept (all its
+    problems, if it carries several) and the loader goes on with the next field. :meth:`raise_any` raises one
+    ProfileError holding every problem, in the order found, if there was any.
+    """
+
+    def __init__(self) -> None:
+        self.items: list[str] = []
+
+    @contextlib.contextmanager
+    def collect(self):
+        try:
+            yield
+        except ProfileError as exc:
+            self.items.extend(exc.problems)
+
+    def add(self, message: str) -> None:
+        self.items.append(message)
+
+    def raise_any(self) -> None:
+        if self.items:
+            raise ProfileError.of(self.items)
 
 
 def read_toml(path: Path) -> dict:
@@ -52,11 +79,14 @@ def read_toml(path: Path) -> dict:
 
 
 def check_keys(table: dict, known: list[str], where: str, fname: str) -> None:
+    """Every unknown key of ``table`` refused at once, each with the closest known name."""
+    problems = Problems()
     for key in table:
         if key not in known:
             close = difflib.get_close_matches(key, known, n=1, cutoff=0.5)
             hint = f" (did you mean '{close[0]}'? units are part of the name)" if close else ""
-            raise ProfileError(f"{fname}: unknown field '{where}{key}'{hint}")
+            problems.add(f"{fname}: unknown field '{where}{key}'{hint}")
+    problems.raise_any()
 
 
 def convert_scalar(value: Any, typ: Any, name: str, fname: str) -> Any:
@@ -111,29 +141,34 @@ def build_dataclass(cls: type, table: Any, fname: str, where: str = "",
         raise ProfileError(f"{fname}: '{where.rstrip('.') or 'profile'}' must be a table")
     hints = typing.get_type_hints(cls)
     fields = [f for f in dataclasses.fields(cls) if f.init]
-    names = [f.name for f in fields]
-    check_keys(table, names, where, fname)
+    problems = Problems()
+    with problems.collect():
+        check_keys(table, [f.name for f in fields], where, fname)
     kwargs = {}
     for f in fields:
-        name = f"{where}{f.name}"
-        if f.name not in table:
-            if f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING:
-                continue
-            raise ProfileError(f"{fname}: missing field '{name}'")
-        typ = hints[f.name]
-        value = table[f.name]
-        if dataclasses.is_dataclass(typ):
-            kwargs[f.name] = build_dataclass(typ, value, fname, name + ".", ranges)
-            continue
-        value = convert_scalar(value, typ, name, fname)
-        meta = dict(f.metadata)
-        if ranges and f"{cls.__name__}.{f.name}" in ranges:
-            lo, hi = ranges[f"{cls.__name__}.{f.name}"]
-            meta.update(lo=lo, hi=hi, lo_open=False)
-        if meta:
-            check_range(value, meta, name, fname)
-        kwargs[f.name] = value
+        with problems.collect():
+            if f.name in table:
+                kwargs[f.name] = _field(cls, f, hints[f.name], table[f.name], fname, where, ranges)
+            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ProfileError(f"{fname}: missing field '{where}{f.name}'")
+    problems.raise_any()
     return cls(**kwargs)
+
+
+def _field(cls: type, f: dataclasses.Field, typ: Any, value: Any, fname: str, where: str,
+           ranges: typing.Mapping[str, tuple] | None) -> Any:
+    """One field of :func:`build_dataclass`: a nested table built, a scalar converted and range-checked."""
+    name = f"{where}{f.name}"
+    if dataclasses.is_dataclass(typ):
+        return build_dataclass(typ, value, fname, name + ".", ranges)
+    value = convert_scalar(value, typ, name, fname)
+    meta = dict(f.metadata)
+    if ranges and f"{cls.__name__}.{f.name}" in ranges:
+        lo, hi = ranges[f"{cls.__name__}.{f.name}"]
+        meta.update(lo=lo, hi=hi, lo_open=False)
+    if meta:
+        check_range(value, meta, name, fname)
+    return value
 
 
 def snapshot(obj: Any) -> Any:
