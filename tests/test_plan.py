@@ -124,9 +124,6 @@ def _problems(tmp_path, **variant) -> list[str]:
 @pytest.mark.parametrize("variant,problem", [
     (dict(overrides={"signals": {"ema1": {"lvdt": {"object": "0x2199:00"}}}}),
      "signals.ema1.lvdt: 0x2199:00 at ema1: no such object in ema_drive.eds"),
-    (dict(add={"signals": {"ema2": {"force": {"type": "INTEGER16"}}}}),
-     "signals.ema2.force: 0x2101:00 at ema2: the profile says type 0x0003 (INTEGER16), ema_drive.eds says "
-     "0x0004 (INTEGER32)"),
     (dict(overrides={"signals": {"ema1": {"force": {"object": "0x1017:00"}}}}),
      "signals.ema1.force: 0x1017:00 at ema1: is not PDO-mappable in ema_drive.eds"),
     (dict(add={"canopen": {"cob_ids": {"ema1.TPDO2": 0x282}}}),
@@ -144,6 +141,24 @@ def _problems(tmp_path, **variant) -> list[str]:
 def test_a_map_that_does_not_fit_its_eds_names_key_and_object(tmp_path, variant, problem):
     got = _problems(tmp_path, **variant)
     assert any(p.startswith(problem) for p in got), got
+
+
+def test_a_stated_type_overrides_the_eds_and_says_so(tmp_path):
+    """docs/drives.md: ``type`` states what the drive sends where its EDS is wrong; the PDO mapping and
+    the SDO codec follow the profile, and the plan's notes say that the EDS was overridden."""
+    prof = _profile(tmp_path, add={"signals": {"ema2": {"force": {"type": "INTEGER16"}}}})
+    rig = plan_for(load_actuation(prof), prof)
+    ch = rig.plan.channel(2, Signal.FORCE)
+    assert ch.data_type == 0x0003 and rig.plan.channel(1, Signal.FORCE).data_type == 0x0004
+    assert rig.plan.node("ema2").types[(0x2101, 0)] == 0x0003 and rig.plan.node("ema1").types[(0x2101, 0)] == 0x0004
+    mapped = [o for p in rig.plan.node("ema2").layout.pdos for o in p.entries if (o.index, o.subindex) == (0x2101, 0)]
+    assert [o.data_type for o in mapped] == [0x0003]
+    assert ("signals.ema2.force.type = 0x0003 (INTEGER16) overrides ema_drive.eds's 0x0004 (INTEGER32) for "
+            "0x2101:00 at ema2: the drive is taken to send what the profile states") in rig.plan.notes
+    # stating the EDS's own type changes nothing and notes nothing
+    prof = _profile(tmp_path, add={"signals": {"ema2": {"force": {"type": "INTEGER32"}}}})
+    rig = plan_for(load_actuation(prof), prof)
+    assert rig.plan.channel(2, Signal.FORCE).data_type == 0x0004 and not any("overrides" in n for n in rig.plan.notes)
 
 
 def test_every_problem_is_reported_not_only_the_first(tmp_path):

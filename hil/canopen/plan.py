@@ -284,18 +284,18 @@ class _Planner:
             self.problem(e.key, where, f"no such object in {eds.name}")
             return None
         ok = True
-        if e.data_type is not None and e.data_type != var.data_type:
-            self.problem(e.key, where, f"the profile says type {type_name(e.data_type)}, {eds.name} says "
-                                       f"{type_name(var.data_type)}")
-            ok = False
+        dtype = var.data_type if e.data_type is None else e.data_type  # a stated type overrides the EDS's
+        if dtype != var.data_type:
+            self.notes.append(f"{e.key}.type = {type_name(dtype)} overrides {eds.name}'s {type_name(var.data_type)} "
+                              f"for {where}: the drive is taken to send what the profile states")
         std = CIA402_TYPES.get(e.object)
         if e.data_type is None and std is not None and var.data_type != std and e.node.startswith("ema"):
             self.problem(e.key, where, f"data type {type_name(var.data_type)} in {eds.name}, CiA 402 says "
-                                       f"{type_name(std)}: state the type the drive sends ({e.key}.type) if the "
-                                       f"EDS is right")
+                                       f"{type_name(std)}: state the type the drive sends ({e.key}.type): the "
+                                       f"EDS's if it is right, else the one that overrides it")
             ok = False
-        if pdo and var.data_type not in TYPE_BITS:
-            self.problem(e.key, where, f"data type {type_name(var.data_type)} cannot be carried in a PDO "
+        if pdo and dtype not in TYPE_BITS:
+            self.problem(e.key, where, f"data type {type_name(dtype)} cannot be carried in a PDO "
                                        f"(integers of 8..64 bits and REAL32 only)")
             ok = False
         if e.signal.direction is Direction.RX and not var.writable:
@@ -310,7 +310,7 @@ class _Planner:
         if e.scale is None and e.source is ScaleSource.PROFILE and e.signal in _PHYSICAL:
             self.problem(e.key, where, "has no scaling")
             ok = False
-        return replace(e, data_type=var.data_type) if ok else None
+        return replace(e, data_type=dtype) if ok else None
 
     def _require(self, node: NodeSpec, index: int, subindex: int, what: str, key: str, *,
                  write: bool = False, read: bool = True, why: str = "") -> bool:
@@ -350,7 +350,8 @@ class _Planner:
                 if not any(x.ema == ema and x.signal is sig for x in self.smap.entries):
                     self.problem(f"signals.ema{ema}.{sig.value}", None, "missing: where does the check read it?")
         layouts, channels = self._layouts(entries, drive_info)
-        nodes = tuple(self._node_plan(n, layouts[n.name]) for n in self.smap.nodes)
+        stated = {(e.node, e.index, e.subindex): e.data_type for e in entries if e.data_type is not None}
+        nodes = tuple(self._node_plan(n, layouts[n.name], stated) for n in self.smap.nodes)
         drives = tuple(DrivePlan(ema, nodes[ema - 1], fc, fc is ForceControl.CST, angle_src, torque_src, reaction)
                        for ema, (fc, angle_src, torque_src, reaction) in zip((1, 2), drive_info, strict=True))
         load = self._load(layouts)
@@ -574,14 +575,16 @@ class _Planner:
         packer.check_cob_ids(layouts)
         return layouts, channels
 
-    def _node_plan(self, node: NodeSpec, layout: PdoLayout) -> NodePlan:
+    def _node_plan(self, node: NodeSpec, layout: PdoLayout, stated: Mapping[tuple, int]) -> NodePlan:
+        """The node's readable and writable objects and their data types: the EDS's, where the profile
+        states a type (``signals.emaN.SIGNAL.type``) that one."""
         od = self.eds[node.name].od
         readable, writable, types = set(), set(), {}
         for index in od:
             obj = od[index]
             vars_ = [(0, obj)] if isinstance(obj, cod.ODVariable) else list(obj.subindices.items())
             for sub, v in vars_:
-                types[(index, sub)] = v.data_type
+                types[(index, sub)] = stated.get((node.name, index, sub), v.data_type)
                 if v.readable:
                     readable.add((index, sub))
                 if v.writable:
