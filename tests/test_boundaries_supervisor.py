@@ -367,15 +367,16 @@ def _noisy(j: int, T: float) -> dict:
     return dict(t_s=j * T, s1_mm=w * 1e-3, s2_mm=-w * 1e-3, F1_N=w, F2_N=w)
 
 
-@pytest.mark.parametrize("field, name", [("s1_mm", "LVDT 1"), ("s2_mm", "LVDT 2"), ("F1_N", "load cell 1"),
-                                         ("F2_N", "load cell 2")])
-def test_frozen_limit_counts_exact_repeats(actuation, check_profile, field, name):
+@pytest.mark.parametrize("field, name, unit", [("s1_mm", "LVDT 1", "mm"), ("s2_mm", "LVDT 2", "mm"),
+                                               ("F1_N", "load cell 1", "N"), ("F2_N", "load cell 2", "N")])
+def test_frozen_limit_counts_exact_repeats(actuation, check_profile, field, name, unit):
     """A noisy sensor repeating exactly the same value: max_frozen_cycles (25) repeats pass, the 26th
     trips; a changed value restarts the count."""
     T = actuation.timing.sync_period_s
     lim = Limits.of(actuation, check_profile).max_frozen_cycles
     assert lim == 25
-    frozen = 0.004 if field.startswith("s") else 3.0
+    # a value as a scaled raw integer gives it (the issue's LVDT 2): printed at 6 significant digits, not as the float
+    frozen = -0.1999999999999993 if field.startswith("s") else 3.0
     for repeats in (lim - 1, lim, lim + 1):
         sup = Supervisor(actuation, check_profile)
         vs = [_check(sup, Sample(phi1_rad=0.0, phi2_rad=0.0, **(_noisy(j, T) | {field: frozen})))
@@ -383,7 +384,9 @@ def test_frozen_limit_counts_exact_repeats(actuation, check_profile, field, name
         if repeats > lim:
             assert vs[:-1] == [None] * repeats
             _assert_trips(vs[-1], "max_frozen_cycles", repeats, lim, repeats * T)
-            assert vs[-1].detail == f"{name} frozen: the same value {frozen} for {repeats} cycles > {lim}"
+            shown = "-0.2" if field.startswith("s") else "3"
+            assert vs[-1].detail == f"{name} frozen: the same value {shown} {unit} for {repeats} cycles > {lim}"
+            assert vs[-1].key == "safety.max_frozen_cycles"
         else:
             assert vs == [None] * (repeats + 1)
     # 25 repeats, one other value, 25 repeats again: the count restarted
@@ -453,3 +456,13 @@ def test_the_previous_sample_is_the_last_one_checked(actuation, check_profile):
     assert _check(sup, _smp(99 * T + 3 * T, F1_N=1.0)) is None
     assert _check(sup, _smp(102 * T + 4 * T, F1_N=-1.0)).limit == "max_stale_cycles"
     assert i > 0
+
+
+@pytest.mark.parametrize("limit, key", [("max_force_N", "safety.max_force_N"),
+                                        ("max_frozen_cycles", "safety.max_frozen_cycles"),
+                                        ("max_stale_ms", "safety.max_stale_ms"),
+                                        ("sensor_invalid", "sensor_invalid"), ("supervisor_error", "supervisor_error")])
+def test_a_violation_names_the_profile_key_that_sets_its_limit(limit, key):
+    from hil.check.supervisor import Violation
+
+    assert Violation(0.0, limit, "").key == key

@@ -106,7 +106,7 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
             if viol is not None:
                 if rec.safety is None:
                     rec = replace(rec, safety=SafetyViolation.of(viol))
-                out: CycleOutput = seq.abort(smp.t_s, f"safety limit {viol.limit}: {viol.detail}")
+                out: CycleOutput = seq.abort(smp.t_s, f"safety limit {viol.key}: {viol.detail}")
             elif smp.t_s - t_start > limit:
                 out = seq.abort(smp.t_s, f"check exceeded {limit:.0f} s")
             else:

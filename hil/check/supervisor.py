@@ -39,7 +39,7 @@ LVDT pitch error the calibration is there to measure (7.5 % in the paper).
 from __future__ import annotations
 
 from collections.abc import Collection, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from hil.canopen.drivelimits import LimitKind
 from hil.canopen.process import DriveMode, Sample, Setpoint
@@ -55,7 +55,11 @@ from hil.profile.config import (
     HARD_MAX_VELOCITY_MM_PER_S,
     Actuation,
     Check,
+    Safety,
 )
+
+#: The limits a check profile sets (``[safety]``).
+_SAFETY_KEYS = frozenset(f.name for f in fields(Safety))
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +69,12 @@ class Violation:
     detail: str  #: human-readable, with the measured value and the limit
     value: float = float("nan")  #: the measured value (unit of the limit)
     threshold: float = float("nan")  #: the limit in force
+
+    @property
+    def key(self) -> str:
+        """The check profile's key that sets the limit (``safety.max_force_N``); the limit's name where none
+        does (``sensor_invalid``, ``supervisor_error``)."""
+        return f"safety.{self.limit}" if self.limit in _SAFETY_KEYS else self.limit
 
 
 @dataclass(frozen=True)
@@ -199,11 +209,12 @@ class Supervisor:
                                          f"EMA {k} speed {v:.2f} mm/s > {lim.max_velocity_mm_per_s} mm/s",
                                          v, lim.max_velocity_mm_per_s)
             same = self._same
-            for j, (a, b, name) in enumerate(((smp.s1_mm, prev.s1_mm, "LVDT 1"), (smp.s2_mm, prev.s2_mm, "LVDT 2"),
-                                              (smp.F1_N, prev.F1_N, "load cell 1"),
-                                              (smp.F2_N, prev.F2_N, "load cell 2"))):
+            for j, (a, b, name, unit) in enumerate(((smp.s1_mm, prev.s1_mm, "LVDT 1", "mm"),
+                                                    (smp.s2_mm, prev.s2_mm, "LVDT 2", "mm"),
+                                                    (smp.F1_N, prev.F1_N, "load cell 1", "N"),
+                                                    (smp.F2_N, prev.F2_N, "load cell 2", "N"))):
                 same[j] = same[j] + 1 if a == b else 0
                 if same[j] > lim.max_frozen_cycles:
-                    return Violation(t, "max_frozen_cycles", f"{name} frozen: the same value {a} for "
+                    return Violation(t, "max_frozen_cycles", f"{name} frozen: the same value {a:.6g} {unit} for "
                                      f"{same[j]} cycles > {lim.max_frozen_cycles}", same[j], lim.max_frozen_cycles)
         return None

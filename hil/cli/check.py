@@ -259,12 +259,18 @@ def truth_dict(truth) -> dict:
             "calibration": {k: dict(v) for k, v in truth.calibration.items()}}
 
 
-def master_setup(act, profile_path, eds=None):
+def master_setup(act, profile_path, eds=None, check=None):
     """Checks before anything touches a bus: every node's EDS against the signal map, the PDO layout,
-    the bus load (:func:`hil.profile.rig.plan_for`); returns the planned :class:`hil.profile.rig.Rig`."""
+    the bus load (:func:`hil.profile.rig.plan_for`); with the check profile, each quantised LVDT and
+    load cell against its noise (:func:`hil.check.resolution.refuse_coarse_sensors`); returns the
+    planned :class:`hil.profile.rig.Rig`."""
+    from hil.check.resolution import refuse_coarse_sensors
     from hil.profile.rig import plan_for
 
-    return plan_for(act, profile_path, eds)
+    rig = plan_for(act, profile_path, eds)
+    if check is not None:
+        refuse_coarse_sensors(rig.plan, act, check, Path(profile_path).name if profile_path else "actuation.toml")
+    return rig
 
 
 def rig_nodes_text(rig) -> str:

@@ -78,7 +78,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     from sim.truth import rig_truth
 
     console = console or make_console(quiet=quiet)
-    rig = rig if rig is not None else master_setup(act, profile_path, eds)
+    rig = rig if rig is not None else master_setup(act, profile_path, eds, check)
     load = rig.plan.load
     seed = simrig.seed if seed is None else seed
     faults = tuple(simrig.faults if faults is None else faults)
@@ -128,7 +128,7 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     simrig = load_simrig(args.sim)
     refuse_foreign_history(args, act, simulated=True)
     check_new_run_folder(args.out)
-    rig = master_setup(act, args.profile, args.eds)  # a bad EDS or map: refused before a run folder is made
+    rig = master_setup(act, args.profile, args.eds, check)  # a bad EDS, map or sensor: refused before a run folder
     out = out_dir(args, "dry-run")
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
     trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),

@@ -49,16 +49,21 @@ def plan_json(rig) -> dict:
 
 
 def cmd_profile_check(args: argparse.Namespace) -> int:
-    """``emacheck profile check PROFILE.toml [--eds PATH]``."""
+    """``emacheck profile check PROFILE.toml [--eds PATH] [--check CHECK.toml]``."""
     from hil.canopen.plan import PlanError
+    from hil.check.resolution import sensor_steps, step_problems
     from hil.errors import ProfileError
-    from hil.profile.load import load_actuation
+    from hil.profile.load import load_actuation, load_check
     from hil.profile.rig import plan_for
 
     console = make_console()
     try:
         act = load_actuation(args.profile_file)
+        check = load_check(args.check, act)
         rig = plan_for(act, args.profile_file, args.eds)
+        steps = sensor_steps(rig.plan, act, check)
+        if bad := step_problems(rig.plan, act, check):
+            raise PlanError(bad)
     except PlanError as exc:
         if args.json:
             print(json.dumps({"ok": False, "problems": [{"key": p.key, "object": p.obj, "message": p.message}
@@ -77,10 +82,28 @@ def cmd_profile_check(args: argparse.Namespace) -> int:
             return ExitCode.INPUT
         raise
     if args.json:
-        print(json.dumps(plan_json(rig), indent=1))
+        print(json.dumps(plan_json(rig) | {"sensor_steps": [_step_json(s) for s in steps]}, indent=1))
         return ExitCode.PASS
     _print_plan(console, act, rig, args.profile_file)
+    _print_steps(console, steps, check)
+    console.print("[green]profile OK[/green]: `emacheck run` and `emacheck dry-run` make the same check before their "
+                  "first frame")
     return ExitCode.PASS
+
+
+def _step_json(s) -> dict:
+    return {"key": s.key, "sensor": s.what, "unit": s.unit, "step": s.step, "noise_sigma": s.sigma,
+            "noise_key": s.noise_key, "largest_step": s.largest, "ok": s.ok}
+
+
+def _print_steps(console, steps, check) -> None:
+    tab = Table(title=f"sensor steps against their noise (frozen after safety.max_frozen_cycles = "
+                      f"{check.safety.max_frozen_cycles} repeats)", box=box.SIMPLE_HEAD, pad_edge=False)
+    for col in ("sensor", "key", "step", "noise sigma", "largest step that works"):
+        tab.add_column(col)
+    for s in steps:
+        tab.add_row(s.what, s.key, f"{s.step:.3g} {s.unit}", f"{s.sigma:.3g} {s.unit}", f"{s.largest:.3g} {s.unit}")
+    console.print(tab)
 
 
 def _field_of(message: str) -> str | None:
@@ -130,8 +153,6 @@ def _print_plan(console, act, rig, path: Path) -> None:
                   f"{ld.load_nominal:.1%} nominal, {ld.load_worst:.1%} worst case (limit 50 %)")
     for note in plan.notes:
         console.print(f"[yellow]note:[/yellow] {escape(note)}", soft_wrap=True)
-    console.print("[green]profile OK[/green]: `emacheck run` and `emacheck dry-run` make the same check before their "
-                  "first frame")
 
 
 def register(sub) -> None:
@@ -148,5 +169,8 @@ def register(sub) -> None:
                                   "any problem (docs/drives.md).")
     c.add_argument("profile_file", metavar="PROFILE.toml", type=Path, help="the actuation profile")
     add_eds_arg(c)
+    c.add_argument("--check", type=Path, default=None, metavar="CHECK.toml",
+                   help="the check profile whose limits the sensors are judged against (default: the shipped one); "
+                        "a quantised LVDT or load cell the check would stop on as frozen is a problem")
     c.add_argument("--json", action="store_true", help="print the layout (or the problems) as JSON")
     c.set_defaults(handler=cmd_profile_check)

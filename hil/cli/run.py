@@ -49,7 +49,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     console = make_console()
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
-    rig = master_setup(act, args.profile, args.eds)
+    rig = master_setup(act, args.profile, args.eds, check)
     load = rig.plan.load
     if not args.arm:
         console.print("[red]refusing to move anything:[/red] `emacheck run` drives real actuators; "
