@@ -30,7 +30,7 @@ class ProfileError(EmacheckError, ValueError):
 
     ``problems`` holds every problem found, each a message naming file and field: a loader collects
     them (:class:`hil.profile.tables.Problems`) so that one run names them all; the message of several
-    is a count and one line each.
+    is the file (where they share one), a count and one line each.
     """
 
     def __init__(self, message: str, problems: tuple[str, ...] = ()) -> None:
@@ -42,7 +42,9 @@ class ProfileError(EmacheckError, ValueError):
         """One error for every problem: the problem itself if there is one, else a count and a line each."""
         if len(problems) == 1:
             return cls(problems[0])
-        return cls(f"{len(problems)} problems in the profiles (all of them; fix each before the next run):\n  "
+        files = {p.split(": ", 1)[0] for p in problems}
+        where = f"{files.pop()}: " if len(files) == 1 else ""
+        return cls(f"{where}{len(problems)} problems (all of them; fix each before the next run):\n  "
                    + "\n  ".join(problems), tuple(problems))
 
 

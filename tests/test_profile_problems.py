@@ -114,4 +114,4 @@ def test_profile_check_lists_every_problem_with_its_key(tmp_path, capsys):
     assert {"sensors.resolver_counts_per_rev", "mechanics.limit_load_N", "timing.sync_periode"} <= set(keys)
     assert main(["profile", "check", str(p)]) == 3
     err = capsys.readouterr().err
-    assert f"{len(keys)} problems in the profiles" in err and "Traceback" not in err
+    assert f"old.toml: {len(keys)} problems (all of them" in err and "Traceback" not in err
