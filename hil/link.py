@@ -103,6 +103,8 @@ class CanopenLink:
         self.safety = safety
         #: the freshness limit in force once the preflight said what the drives keep (None: not known)
         self.stale: StaleLimit | None = None
+        #: frames received but not yet fed: a stall's backlog from the first SYNC after a sample not yet taken
+        self.held: list[tuple[Frame, float, can.Message | None]] = []
         #: the setpoints the drives followed when the last sample returned was taken (None: the first)
         self.in_force: tuple[Setpoint, Setpoint] | None = None
         self.stall_watch = StallWatch(transport.T)  #: the master's stalls, as it saw them
@@ -130,7 +132,11 @@ class CanopenLink:
             for f in frames:
                 log.write(f, t, False)
 
-    def _feed(self, got: list[tuple[Frame, float, can.Message | None]]) -> None:
+    def _feed(self, got: list[tuple[Frame, float, can.Message | None]], in_order: bool = False) -> None:
+        """Feed frames received to the master (and the log). ``in_order``: a SYNC that finds a complete
+        sample not yet taken waits, with the frames after it (:attr:`held`), until that sample is taken:
+        the frames of a stall's backlog reach the master cycle by cycle, each sample judged before the
+        frames of the next cycle are (a drive's fault in a later cycle is seen after an earlier violation)."""
         log = self.log
         on_frame = self.m.on_frame
         now = self.tr.now
@@ -139,6 +145,9 @@ class CanopenLink:
         try:
             for f, t, _msg in got:
                 sync = f.arbitration_id == SYNC_COB_ID
+                if sync and in_order and self.m.samples:
+                    self.held = got[seen:]
+                    break
                 if sync and timing is not None:
                     timing.sync(t)
                 seen += 1
@@ -216,6 +225,11 @@ class CanopenLink:
         """Run one SYNC cycle and return its sample (SYNC, TPDOs of both drives); after a stall, the next
         sample of its backlog (taken already, judged in order)."""
         waiting = self.m.take_sample()
+        if waiting is None and self.held:  # the backlog's next cycle (its lag was judged when it came)
+            got, self.held = self.held, []
+            self._feed(got, in_order=True)
+            self._send(self.m.poll(self.tr.now()))
+            waiting = self.m.take_sample()
         if waiting is not None:
             self._last = waiting
             return waiting
@@ -254,8 +268,9 @@ class CanopenLink:
 
     @property
     def behind(self) -> bool:
-        """A stall's backlog: samples newer than the last one returned are here already."""
-        return bool(self.m.samples)
+        """A stall's backlog: a sample newer than the last one returned is here already (complete, or the
+        frames of a later SYNC cycle wait to be fed)."""
+        return bool(self.m.samples) or bool(self.held)
 
     def stall_record(self) -> dict:
         """The master's stalls (:class:`hil.stalls.StallWatch`) and the limit they were held to (meta.json
@@ -302,7 +317,7 @@ class CanopenLink:
             # stopping after a fault: one safe-state cycle, no complete sample required
             self._safe_cycle()
             return self._last
-        if self.m.samples:
+        if self.behind:
             # a stall's backlog: the next sample is here already; the setpoints of a past SYNC are not
             # sent (the drives take the latest at the next SYNC), a stop is, at once
             if stop:
@@ -340,6 +355,9 @@ class CanopenLink:
         bus: wait for frames until the cycle would end (or, with ``stop_at_sample``, until the
         sample is complete).
         """
+        if self.held:  # (a backlog left when the check stopped: the master sees every frame, in order)
+            got, self.held = self.held, []
+            self._feed(got)
         self._sync()
         inproc = isinstance(self.tr, InProcessTransport)
         due = self.tr.sync_due() if self.timing is not None else None
@@ -348,7 +366,7 @@ class CanopenLink:
         found = None
         while True:
             got = self.tr.receive(self.tr.now() if inproc else cycle_end)
-            self._take(got)
+            self._take(got, in_order=stop_at_sample)
             sample = self.m.take_sample()
             while not stop_at_sample and self.m.samples:  # (the safe-state sequence keeps the latest)
                 sample = self.m.take_sample()
@@ -362,7 +380,7 @@ class CanopenLink:
             if not got or (not inproc and self.tr.now() >= cycle_end):
                 return found
 
-    def _take(self, got: list) -> None:
+    def _take(self, got: list, in_order: bool = False) -> None:
         """Frames received: the master falling behind the bus stops the check; else feed them, then poll."""
         if got:
             lag = getattr(self.tr, "lag_s", 0.0)
@@ -371,9 +389,10 @@ class CanopenLink:
                 # the master has fallen behind the bus: whatever it computes now is stale
                 err = StaleData(f"sensor data stale: the master is {lag * 1e3:.3g} ms behind the bus "
                                 f"(frames waited for it; {self._lag_limit_text()})")
+                self._observe_sync(lag, ahead=1)  # the stall that stops the check is recorded too
                 self.m.latch(err)
                 raise err
-            self._feed(got)
+            self._feed(got, in_order)
         self._send(self.m.poll(self.tr.now()))
 
     def _lag_limit_text(self) -> str:

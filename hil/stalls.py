@@ -111,7 +111,7 @@ class StallWatch:
 
     def observe(self, t_s: float, late_s: float) -> None:
         """The SYNC of time ``t_s`` [s] was taken ``late_s`` [s] after it arrived (or was due)."""
-        if late_s <= self.T + 1e-9:
+        if late_s <= self.T:
             if self._open is not None:
                 self._close()
             return

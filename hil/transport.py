@@ -131,6 +131,7 @@ class InProcessTransport:
             inbox.clear()
             self.lag_s, self._stall_lag = self._stall_lag, 0.0
             return got
+        self.lag_s = 0.0
         if deadline > self.t:
             # nothing in flight: let simulated time pass (heartbeats, boot-up)
             t = self.t = min(deadline, self.t + self.T)

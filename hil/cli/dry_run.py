@@ -91,7 +91,8 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     plant = RigPlant(simrig.params, rng)
     pair = SimDrivePair(plant, rig.plan, lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id),
                         serials=simrig.serials)
-    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=bool(faults))
+    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]),
+                             record_truth=bool(faults) or stall is not None)
     truth = truth_dict(rig_truth(simrig.params))
     record = start_record(act, check, mode=RunMode.DRY_RUN, seed=seed, realtime=bool(realtime),
                           simrig=snapshot(simrig.params), truth=truth, faults=tuple(snapshot(f) for f in faults),
