@@ -224,3 +224,47 @@ def test_the_same_seed_gives_the_same_stalls(check_runs, tmp_path):
     again = dry_run(act, load_check(None, act), sim, tmp_path / "again", stall=(40.0, 5.0))
     assert read_record(again.out).stalls.at == read_record(stalled.out).stalls.at
     assert (again.out / "signals.csv").read_bytes() == (stalled.out / "signals.csv").read_bytes()
+
+
+# ------------------------------------------------------------------ the dry-run's options
+
+@pytest.mark.parametrize("argv, got", [
+    (["--master-stall-ms", "45"], (45.0, 5.0)),  # the mean interval's default: 5 s
+    (["--master-stall-ms", "1e-300", "--master-stall-every-s", "0.1"], (1e-300, 0.1)),
+    (["--master-stall-ms", "1000", "--master-stall-every-s", "3600"], (1000.0, 3600.0)),
+    ([], (None, 5.0)),
+])
+def test_dry_run_stall_options_in_range(argv, got):
+    from hil.cli import build_parser
+
+    a = build_parser().parse_args(["dry-run", *argv])
+    assert (a.master_stall_ms, a.master_stall_every_s) == got
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--master-stall-ms", "0"], "argument --master-stall-ms: 0: a stall of the master [ms] is a number above 0 "
+                                 "to 1000"),
+    (["--master-stall-ms", "1000.0000000000001"], "is a number above 0 to 1000"),
+    (["--master-stall-ms", "nan"], "is a number above 0 to 1000"),
+    (["--master-stall-ms", "x"], "not a number (a stall of the master [ms]): 'x'"),
+    (["--master-stall-ms", "4", "--master-stall-every-s", "0.09999999999999999"],
+     "argument --master-stall-every-s: 0.09999999999999999: the mean interval between stalls [s] is a number "
+     "from 0.1 to 3600"),
+    (["--master-stall-ms", "4", "--master-stall-every-s", "3600.0000000000005"], "from 0.1 to 3600"),
+])
+def test_dry_run_stall_options_out_of_range_exit_3_naming_the_option(argv, words, capsys):
+    from hil.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["dry-run", *argv])
+    assert e.value.code == 3 and words in capsys.readouterr().err
+
+
+def test_dry_run_stall_of_half_the_interval_is_refused_before_the_run_folder(tmp_path, capsys):
+    """Exactly half the mean interval (the shortest drawn one) is refused, exit 3, nothing made; a float step
+    shorter is accepted (:func:`test_master_stalls_ranges_on_their_boundaries`, the same rule)."""
+    from hil.cli import main
+
+    rc = main(["dry-run", "--master-stall-ms", "600", "--master-stall-every-s", "1.2", "--out", str(tmp_path / "r")])
+    assert rc == 3 and not (tmp_path / "r").exists()
+    assert "--master-stall-ms 600 is not shorter than half of --master-stall-every-s 1.2 s" in capsys.readouterr().err
