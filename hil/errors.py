@@ -82,6 +82,12 @@ class OutputError(EmacheckError, OSError):
     bad_input = True
 
 
+class ArgumentsError(EmacheckError, ValueError):
+    """Command-line options each in range but not together; the message names them (exit status 3)."""
+
+    bad_input = True
+
+
 class SequenceError(EmacheckError, RuntimeError):
     """The check sequence reached a state it cannot continue from."""
 

@@ -25,6 +25,7 @@ CAN log keeps its channel and direction).
 
 from __future__ import annotations
 
+import math
 import socket
 import struct
 import time
@@ -67,13 +68,25 @@ class InProcessTransport:
     ``pair`` is a :class:`sim.drives.SimDrivePair`; its frames are produced in
     this thread as soon as the master's frames reach it, stamped with the
     simulated time.
+
+    ``stalls`` (a :class:`hil.master.stalls.MasterStalls`) makes the master stall on the simulated time axis:
+    at a stall's SYNC, :meth:`next_sync` runs the bus on for the stall's length (SYNC every period, the
+    drives answering, every frame queued for the master with the time it was sent, the SYNC frames too)
+    and returns None; the master then takes the whole backlog, :attr:`lag_s` saying how late (the
+    stall's length), as from a real bus's socket.
     """
 
-    def __init__(self, pair, sync_period_s: float, realtime: bool = False) -> None:
+    def __init__(self, pair, sync_period_s: float, realtime: bool = False, stalls=None) -> None:
         self.pair = pair
         self.T = sync_period_s
         self.t = 0.0
         self.realtime = realtime
+        self.stalls = stalls
+        #: how late the master takes the frames :meth:`receive` delivers [s]: an injected stall's length
+        #: for its backlog, else 0 (the in-process bus has no socket to wait in)
+        self.lag_s = 0.0
+        self.max_lag_s = 0.0  #: the largest lag [s]
+        self._stall_lag = 0.0  #: the lag of the backlog still in flight [s]
         #: frames on their way to the drives, in order (the master's)
         self._to_slaves: deque[Frame] = deque()
         #: frames on their way to the master, in order, with the time they were sent [s]
@@ -116,7 +129,9 @@ class InProcessTransport:
         if inbox:
             got = [(f, t, None) for f, t in inbox]
             inbox.clear()
+            self.lag_s, self._stall_lag = self._stall_lag, 0.0
             return got
+        self.lag_s = 0.0
         if deadline > self.t:
             # nothing in flight: let simulated time pass (heartbeats, boot-up)
             t = self.t = min(deadline, self.t + self.T)
@@ -127,11 +142,19 @@ class InProcessTransport:
     def start_sync(self) -> None:
         self._sync_on = True
         self._t0_wall = time.monotonic()
+        if self.stalls is not None:
+            self.stalls.start(self.t)
 
     def next_sync(self) -> float | None:
-        """Advance one SYNC period and send SYNC (the pair steps its plant on it)."""
+        """Advance one SYNC period and send SYNC (the pair steps its plant on it); None where the master
+        stalls instead (``stalls``): the SYNCs of the stall wait for it on the bus."""
         if not self._sync_on:
             return None
+        if self.stalls is not None:
+            stall = self.stalls.due(self.t + self.T)
+            if stall is not None:
+                self._stall(stall)
+                return None
         self.t += self.T
         if self.realtime and self._t0_wall is not None:
             delay = self._t0_wall + self.t - time.monotonic()
@@ -141,6 +164,22 @@ class InProcessTransport:
         self._to_master.extend([(f, t) for f in self.pair.tick(t)])
         self._to_slaves.append(sync_frame())
         return t
+
+    def _stall(self, stall_s: float) -> None:
+        """The master stalls for ``stall_s`` [s] from the next SYNC: every SYNC period within it (its end
+        included) SYNC goes to the drives and to the master's queue, the drives answer; simulated time
+        ends at the stall's last SYNC, the master taking the backlog ``stall_s`` late."""
+        n = math.floor(stall_s / self.T + 1e-9)
+        inbox = self._to_master
+        for _ in range(n + 1):
+            self.t += self.T
+            t = self.t
+            inbox.extend([(f, t) for f in self.pair.tick(t)])
+            inbox.append((sync_frame(), t))
+            self._to_slaves.append(sync_frame())
+            self._pump_slaves()
+        self._stall_lag = stall_s
+        self.max_lag_s = max(self.max_lag_s, stall_s)
 
     def stop_sync(self) -> None:
         self._sync_on = False

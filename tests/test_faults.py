@@ -167,6 +167,57 @@ def test_fault_reaction_safe_state_and_run_folder(tmp_path, profiles, fault, wor
     _assert_run_folder(r, meta, t_det, act)
 
 
+#: the master's stalls (``dry-run --master-stall-ms MS --master-stall-every-s S``, hil/master/stalls.py): stall [ms],
+#: mean interval [s], a runaway drive (15 mm/s, over the 10 mm/s limit) from the first stall's second SYNC,
+#: words in the reason (None: the check passes). The derived freshness limit is 40 ms (docs/safety.md).
+STALL_CASES = [
+    (40.0, 5.0, False, None),
+    (41.0, 5.0, False, "safety.max_stale_ms"),
+    (45.0, 5.0, False, "safety.max_stale_ms"),
+    (40.0, 5.0, True, "safety limit max_velocity_mm_per_s: EMA 1 speed"),
+]
+
+
+def _first_stall_s(seed: int, every_s: float) -> float:
+    """The check time of the first injected stall (:class:`hil.master.stalls.MasterStalls`: one interval drawn from
+    ``[seed, 37]`` after the first SYNC, at the first SYNC at or after it)."""
+    gap = float(np.random.default_rng([seed, 37]).uniform(0.5, 1.5)) * every_s
+    return math.ceil(gap / T - 1e-9) * T
+
+
+@pytest.mark.parametrize("stall_ms,every_s,runaway,words", STALL_CASES,
+                         ids=["40ms-passes", "41ms-stops", "45ms-stops", "overspeed-in-a-stall"])
+@pytest.mark.slow
+def test_master_stalls_tolerated_up_to_the_limit_and_judged_sample_by_sample(tmp_path, profiles, stall_ms,
+                                                                              every_s, runaway, words):
+    act, chk, sim = profiles
+    t_stall, end = _first_stall_s(sim.seed, every_s), _first_stall_s(sim.seed, every_s) + stall_ms / 1000.0
+    faults = [Fault("runaway", 1, t_stall + 2 * T, value=15.0)] if runaway else []
+    r = dry_run(act, chk, sim, tmp_path / "run", faults=faults, stall=(stall_ms, every_s))
+    meta = read_record(r.out)
+    st = meta.stalls
+    assert st.at[0] == [pytest.approx(t_stall, abs=1e-9), stall_ms]  # every stall in the record
+    assert st.count == len(r.link.tr.stalls.injected) == len(st.at) and st.longest_ms == stall_ms
+    assert st.limit == "safety.max_stale_ms" and st.limit_ms == 40.0
+    if words is None:
+        assert r.exit_code == 0 and meta.status == "done" and st.count >= 20
+        return
+    assert r.exit_code == 2 and words in meta.reason, meta.reason
+    tr = r.injector.truth
+    if not runaway:  # one stall over the limit: stopped when it ends, naming the limit and its profile key
+        assert st.count == 1 and meta.safety is None
+        assert f"the master is {stall_ms:g} ms behind the bus (frames waited for it; safety.max_stale_ms: " \
+               "the stall the master tolerates is 40 ms" in meta.reason
+        assert r.master.fault_cycle * T == pytest.approx(t_stall - T, abs=1e-9)  # (the cycle before the stall)
+        assert end - 1e-9 <= _t_safe_command(tr, end) <= end + 2 * T + 1e-9
+    else:  # the overspeed inside the stall: judged at its own SYNC's time, caught late, the stop names it
+        assert st.count == 1 and t_stall + 2 * T <= meta.safety.t_s <= end
+        assert meta.safety.value > 10.0 and meta.safety.threshold == 10.0
+        assert end - 1e-9 <= _t_safe_command(tr, meta.safety.t_s, reachable=(1,)) <= end + 2 * T + 1e-9
+    assert set(r.injector.final_states()) <= SAFE
+    assert all(v.safe for v in meta.drives_final.values()), meta.drives_final
+
+
 @pytest.mark.slow
 def test_unreachable_drive_other_goes_safe_and_reason_names_it(tmp_path, profiles):
     act, chk, _ = profiles

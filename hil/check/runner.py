@@ -17,7 +17,7 @@ from hil.check.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.check.supervisor import Supervisor
 from hil.profile.config import Actuation, Check
 from hil.record.runfolder import MetaWriter, SignalsWriter
-from hil.record.runrecord import RunRecord, RunStatus, SafetyViolation, StepTime
+from hil.record.runrecord import RunRecord, RunStatus, SafetyViolation, Stalls, StepTime
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
 #: The reason recorded when the operator stops the check (Ctrl-C, SIGINT).
@@ -97,18 +97,28 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
     try:
         smp = link.first_sample()
         t_start = smp.t_s
+        # the freshness limit from what the drives were confirmed to keep (hil.check.staleness)
+        sup.drives_keep(getattr(link, "kept_limits", None))
         record = getattr(link, "preflight_record", None)
         if record is not None:  # the layout, the scalings the drives reported, the drill: on disk now
             rec = meta.post(rec.with_preflight(record()))
         faults0 = _page_faults()
         while True:
-            viol = sup.check(smp, sp1, sp2)
+            # each sample judged at its own SYNC's time against the setpoints its drives followed (after a
+            # stall of the master, the last ones sent before it)
+            in_force = getattr(link, "in_force", None) or (sp1, sp2)
+            viol = sup.check(smp, *in_force)
             if viol is not None:
                 if rec.safety is None:
                     rec = replace(rec, safety=SafetyViolation.of(viol))
                 out: CycleOutput = seq.abort(smp.t_s, f"safety limit {viol.key}: {viol.detail}")
             elif smp.t_s - t_start > limit:
                 out = seq.abort(smp.t_s, f"check exceeded {limit:.0f} s")
+            elif getattr(link, "behind", False):
+                # a stall's backlog: a newer sample is here already, this one's setpoints would never reach
+                # the drives; the sequence steps on the newest, its profile holding over the stall as the
+                # drives held (no step in the setpoints), and this row records what they followed
+                out = CycleOutput(*in_force, seq.step_now, ())
             else:
                 out = seq.step(smp)
             writer.write(smp, out.sp1, out.sp2, out.step.value)
@@ -154,7 +164,7 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
                 secondary += f"; while writing the run folder: {type(exc4).__name__}: {exc4}"
             writer.close()
             meta.write(rec.ended(RunStatus.ABORTED, reason + secondary, writer.rows,
-                                 (smp.t_s - t_start) if smp is not None else 0.0))
+                                 (smp.t_s - t_start) if smp is not None else 0.0, stalls=_stalls(link)))
         raise
     # the cyclic loop touches no new memory (a page fault costs ~0.9 ms in user-mode-linux)
     loop_page_faults = _page_faults() - faults0
@@ -162,8 +172,16 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
     writer.close()
     status = RunStatus.DONE if seq.step_now == Step.DONE else RunStatus.ABORTED
     reason = (seq.abort_reason + stop_note) if seq.abort_reason else stop_note.lstrip("; ")
-    rec = meta.write(rec.ended(status, reason, writer.rows, smp.t_s - t_start, loop_page_faults=loop_page_faults))
+    rec = meta.write(rec.ended(status, reason, writer.rows, smp.t_s - t_start, loop_page_faults=loop_page_faults,
+                               stalls=_stalls(link)))
     return LoopOutcome(status, reason, writer.rows, smp.t_s - t_start, rec.steps)
+
+
+def _stalls(link) -> Stalls | None:
+    """The master's stalls as the link saw them (:meth:`hil.master.link.CanopenLink.stall_record`); None for a
+    link without (the plant)."""
+    record = getattr(link, "stall_record", None)
+    return None if record is None else Stalls.from_json(record(), "stalls")
 
 
 def _page_faults() -> int:

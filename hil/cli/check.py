@@ -160,6 +160,8 @@ def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) 
                          if d.drive_limits},
         # how each EMA held a force: its drive's CST, or the master's force loop in CSP
         "force_control": rec.force_control or {},
+        # the master's stalls (a CANopen check): how many, the longest, when, the limit they were held to
+        **({"master_stalls": rec.stalls.as_json()} if rec.stalls is not None else {}),
         # where and when in the aircraft's life (the wear history's keys): aircraft, position, rig,
         # flight hours and cycles
         **place,

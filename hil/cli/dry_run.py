@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import gc
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +35,7 @@ from hil.cli.common import (
     record_history,
     refuse_foreign_history,
 )
+from hil.master.stalls import EVERY_S_MAX, EVERY_S_MIN, STALL_MS_MAX
 from hil.profile.load import load_actuation, load_check, load_simrig, snapshot
 from hil.record.runfolder import MetaWriter
 from hil.record.runrecord import Attribution, BusLoad, RunMode, start_record
@@ -55,7 +57,7 @@ class DryRun:
 
 def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=None, realtime: bool = False,
             quiet: bool = True, console: Console | None = None, profile_path=None,
-            trace: dict | None = None, eds=None, rig=None) -> DryRun:
+            trace: dict | None = None, eds=None, rig=None, stall: tuple[float, float] | None = None) -> DryRun:
     """The check over CANopen against two simulated drives on an in-process virtual bus.
 
     ``faults`` (a :class:`sim.faults.Fault` sequence) replaces the simulated-rig profile's
@@ -63,13 +65,15 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     the EDS and the bus load are checked here. ``trace`` (run record fields: ``attribution``,
     ``installation``, ``files_sha256``, ``wear``) goes into meta.json and from there into result.json.
     ``rig``: the planned rig (:func:`hil.cli.check.master_setup` of the profile and ``eds``) if the caller
-    has planned it already.
+    has planned it already. ``stall``: (ms, mean interval s) of the master's injected stalls
+    (:class:`hil.master.stalls.MasterStalls`, drawn from ``[seed, 37]``; meta.json ``stalls.injected``).
     """
     import numpy as np
 
     from hil.canopen.od import load_eds
     from hil.master.core import MasterCore
     from hil.master.link import CanopenLink
+    from hil.master.stalls import MasterStalls
     from hil.record.canlog import CanLogWriter
     from hil.transport import InProcessTransport
     from sim.drives import SimDrivePair
@@ -87,7 +91,8 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     plant = RigPlant(simrig.params, rng)
     pair = SimDrivePair(plant, rig.plan, lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id),
                         serials=simrig.serials)
-    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=bool(faults))
+    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]),
+                             record_truth=bool(faults) or stall is not None)
     truth = truth_dict(rig_truth(simrig.params))
     record = start_record(act, check, mode=RunMode.DRY_RUN, seed=seed, realtime=bool(realtime),
                           simrig=snapshot(simrig.params), truth=truth, faults=tuple(snapshot(f) for f in faults),
@@ -95,15 +100,18 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     meta = MetaWriter(out, dataclasses.replace(record, files_sha256={**(record.files_sha256 or {}),
                                                                      **rig_hashes(rig)}), new=True)
     meta.write()  # the run folder says "running" from the start
-    transport = InProcessTransport(injector, act.timing.sync_period_s, realtime=realtime)
+    stalls = MasterStalls(*stall, rng=np.random.default_rng([seed, 37])) if stall is not None else None
+    transport = InProcessTransport(injector, act.timing.sync_period_s, realtime=realtime, stalls=stalls)
     master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N),
                         safety=check.safety)
     log = CanLogWriter(out / "can.log", channel="vcan-dry-run")
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
-                       max_lag_s=check.safety.max_lag_s)
+                       max_lag_s=check.safety.max_lag_s, safety=check.safety)
     console.print(f"emacheck dry-run: simulated {rig_nodes_text(rig)} on an "
                   f"in-process virtual CAN bus, seed {seed}, bus load {load.load_worst:.1%} worst case"
-                  + (f", {len(faults)} injected fault(s)" if faults else "") + f"; run folder {out}")
+                  + (f", {len(faults)} injected fault(s)" if faults else "")
+                  + (f", the master stalling {stall[0]:g} ms every {stall[1]:g} s on average" if stall else "")
+                  + f"; run folder {out}")
     gc_was_on = gc.isenabled()
     gc.disable()  # as run's loop: reference counting frees the loop's objects, no collector passes over the heap
     try:
@@ -113,6 +121,13 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
             gc.enable()
         transport.close()
     record_can_stats(meta, wall, log, master)
+    if stalls is not None and meta.record.stalls is not None:  # the injection beside what the master saw
+        meta.write(dataclasses.replace(meta.record, stalls=dataclasses.replace(meta.record.stalls,
+                                                                               injected=stalls.as_json())))
+    st = meta.record.stalls
+    if st is not None and st.count:
+        console.print(f"master stalls: {st.count}, the longest {st.longest_ms:g} ms (limit {st.limit_ms:g} ms, "
+                      f"{st.limit})")
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated in {wall:.2f} s wall "
                   f"({outcome.duration_s / max(wall, 1e-9):.1f}x real time); {log.frames} CAN frames logged")
     rc = result_after(out, act, truth, meta, outcome, console)
@@ -122,6 +137,11 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
 def cmd_dry_run(args: argparse.Namespace) -> int:
     """``emacheck dry-run``: the check over CANopen against two simulated drives (virtual bus)."""
     console = make_console()
+    if args.master_stall_ms is not None and args.master_stall_ms / 1000.0 >= args.master_stall_every_s / 2.0:
+        from hil.errors import ArgumentsError
+        raise ArgumentsError(f"--master-stall-ms {args.master_stall_ms:g} is not shorter than half of "
+                             f"--master-stall-every-s {args.master_stall_every_s:g} s: two stalls would run "
+                             "into each other")
     # every profile is validated before anything is sent on the bus
     act = load_actuation(args.profile)
     check = load_check(args.check, act)
@@ -133,8 +153,10 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
     trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),
              "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim), "wear": wear}
+    stall = (args.master_stall_ms, args.master_stall_every_s) if args.master_stall_ms is not None else None
     rc = dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
-                 console=console, profile_path=args.profile, trace=trace, eds=args.eds, rig=rig).exit_code
+                 console=console, profile_path=args.profile, trace=trace, eds=args.eds, rig=rig,
+                 stall=stall).exit_code
     record_history(console, args, act, out / "result.json", run_folder=out)
     return rc
 
@@ -152,3 +174,33 @@ def register(sub) -> None:
     p.add_argument("--realtime", action="store_true",
                    help="pace SYNC at the SYNC period (default: as fast as possible)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--master-stall-ms", type=_stall_ms, metavar="MS",
+                   help=f"make the master stall for MS ms (above 0, at most {STALL_MS_MAX:g}) now and then, in "
+                        "simulated time: the simulated drives run on, SYNC keeps its period, their frames wait "
+                        "for the master, stamped; a stall within the freshness limit (safety.max_stale_ms where "
+                        "both drives keep their limits) is tolerated and recorded (meta.json stalls), a longer "
+                        "one stops the check; deterministic for --seed")
+    p.add_argument("--master-stall-every-s", type=_stall_every_s, metavar="S", default=5.0,
+                   help=f"the mean interval between two stalls [s] ({EVERY_S_MIN:g} to {EVERY_S_MAX:g}, more than "
+                        "twice the stall; each interval drawn uniformly from S/2 to 3S/2; default 5)")
+
+
+def _number_in(what: str, lo: float, hi: float, lo_open: bool):
+    """argparse type of a finite number from ``lo`` (excluded where ``lo_open``) to ``hi``, named ``what``."""
+    span = f"{'above' if lo_open else 'from'} {lo:g} to {hi:g}"
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number ({what}): {text!r}") from None
+        if not math.isfinite(v) or v > hi or v < lo or (lo_open and v == lo):
+            raise argparse.ArgumentTypeError(f"{text}: {what} is a number {span}")
+        return v
+
+    parse.__name__ = what
+    return parse
+
+
+_stall_ms = _number_in("a stall of the master [ms]", 0.0, STALL_MS_MAX, lo_open=True)
+_stall_every_s = _number_in("the mean interval between stalls [s]", EVERY_S_MIN, EVERY_S_MAX, lo_open=False)

@@ -74,7 +74,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     log = CanLogWriter(out / "can.log", channel=args.channel, time_offset_s=transport.wall_clock_offset_s,
                        disk=disk)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
-                       max_lag_s=check.safety.max_lag_s)
+                       max_lag_s=check.safety.max_lag_s, safety=check.safety)
     bus_rec = Bus(args.interface, args.channel, bitrate, multicast_hops_for(args.interface, args.multicast_hops))
     record = start_record(act, check, mode=RunMode.RUN, bus=bus_rec,
                           bus_load=BusLoad(load.load_nominal, load.load_worst), **rig_meta(rig),

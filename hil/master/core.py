@@ -202,7 +202,7 @@ class MasterCore:
         self._pending: object | None = None
         self._boot_deadline = 0.0
         self._complete = False
-        self._sample: Sample | None = None
+        self.samples: deque[Sample] = deque()  #: complete samples not yet taken (several after a stall)
         self.decoder: CycleDecoder | None = None
         self.encoder: SetpointEncoder | None = None
         self.channels: tuple[Channel, ...] = plan.channels  #: with the scalings read from the drives
@@ -375,7 +375,7 @@ class MasterCore:
                             self._on_status(self.drives[self.order[ema - 1]], t)
                         if not self._complete and dec.complete:
                             self._complete = True
-                            self._sample = dec.sample(self.sync_schedule.t_s)  # (not the SYNC count)
+                            self.samples.append(dec.sample(self.sync_schedule.t_s))  # (not the SYNC count)
                     return []
             base, node = split_cob_id(cid)
             if node in self.nodes:
@@ -503,8 +503,7 @@ class MasterCore:
         if skipped:
             self.events.append(event.SyncPeriodsSkipped(t, 0, self.sync_schedule.slot - skipped - 1,
                                                         self.sync_schedule.slot))
-        self._complete = False
-        self._sample = None
+        self._complete = False  # (a sample not yet taken stays: the master takes a stall's backlog in order)
         self.decoder.reset()
         for d in self.drives.values():
             p = d.mode_pending
@@ -538,9 +537,8 @@ class MasterCore:
             self._fail(DriveFault(f"{d.label}: drive in {new.name} (statusword 0x{sw:04X})"), t, d.node_id)
 
     def take_sample(self) -> Sample | None:
-        """The sample of the current cycle once every TPDO with an input arrived (else None)."""
-        s, self._sample = self._sample, None
-        return s
+        """The oldest complete sample not yet taken (each SYNC's once every TPDO with an input arrived), else None."""
+        return self.samples.popleft() if self.samples else None
 
     def state_of(self, ema: int) -> State:
         return self.drives[self.order[ema - 1]].state

@@ -29,13 +29,16 @@ from collections.abc import Callable
 import can
 
 from hil.canopen.cia402 import State
+from hil.canopen.drivelimits import KEPT_BY_DRIVE, LimitKind
 from hil.canopen.frame import SYNC_COB_ID, Frame, sync_frame
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.canopen.signalmap import ForceControl
+from hil.check.staleness import StaleLimit, stale_limit
 from hil.errors import KNOWN_ERRORS, EmacheckError
 from hil.master.core import MasterCore, PreflightError
+from hil.master.stalls import StallWatch
 from hil.profile.config import HARD_MAX_LAG_S
 from hil.record.canlog import CanLogWriter
 from hil.record.cycletiming import CycleTiming
@@ -54,7 +57,9 @@ class LinkError(EmacheckError, RuntimeError):
 
 
 class StaleData(LinkError):
-    """Sensor freshness: no complete sample for more SYNC cycles than ``safety.max_stale_cycles``."""
+    """Sensor freshness: no complete sample for more SYNC cycles than ``safety.max_stale_cycles``, or the
+    master took a SYNC later than the freshness limit in force (``safety.max_stale_ms`` where both drives
+    keep their limits, else ``safety.max_lag_s``)."""
 
 
 class CanopenLink:
@@ -72,15 +77,21 @@ class CanopenLink:
         Sensor freshness: SYNC cycles in a row without a complete sample before
         :class:`StaleData` is raised (the check's ``safety.max_stale_cycles``).
     max_lag_s : float, optional
-        On a real bus, the longest a SYNC may wait in the master's socket before
-        the master takes it [s] (``safety.max_lag_s``); beyond it the master has
-        fallen behind the bus (or the computer stalled) and stops with
-        :class:`StaleData`. Default: ``max_missing_cycles`` SYNC periods.
+        The longest a SYNC may wait in the master's socket before the master takes
+        it [s] (``safety.max_lag_s``; in the dry-run, an injected stall); beyond it
+        the master has fallen behind the bus (or the computer stalled) and stops
+        with :class:`StaleData`. Default: ``max_missing_cycles`` SYNC periods.
+    safety : Safety, optional
+        The check's safety profile: once the preflight has written and read back the limits the drives
+        keep, the freshness limit in force (:func:`hil.check.staleness.stale_limit`, :attr:`stale`); where it is
+        the derived stall budget (both drives keep their limits), it replaces ``max_lag_s``: a stall of
+        the master up to ``safety.max_stale_ms`` is tolerated, its frames taken in order, each sample at
+        its own SYNC's time. Missing TPDOs (frames that never come: not a stall) stay ``max_missing_cycles``.
     """
 
     def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
                  on_event: Callable | None = None, max_missing_cycles: int = 5,
-                 max_lag_s: float | None = None) -> None:
+                 max_lag_s: float | None = None, safety=None) -> None:
         self.m = master
         self.tr = transport
         self.log = log
@@ -89,6 +100,14 @@ class CanopenLink:
         #: the longest a SYNC may have waited in the socket before the master took it [s]
         lag = max_lag_s if max_lag_s is not None else max_missing_cycles * getattr(transport, "T", 0.0)
         self.max_lag_s = min(lag, HARD_MAX_LAG_S)  # applied again here, whatever the caller passed
+        self.safety = safety
+        #: the freshness limit in force once the preflight said what the drives keep (None: not known)
+        self.stale: StaleLimit | None = None
+        #: frames received but not yet fed: a stall's backlog from the first SYNC after a sample not yet taken
+        self.held: list[tuple[Frame, float, can.Message | None]] = []
+        #: the setpoints the drives followed when the last sample returned was taken (None: the first)
+        self.in_force: tuple[Setpoint, Setpoint] | None = None
+        self.stall_watch = StallWatch(transport.T)  #: the master's stalls, as it saw them
         self._last: Sample | None = None
         self._closed = False
         self.sync_times: list[float] = []
@@ -113,7 +132,11 @@ class CanopenLink:
             for f in frames:
                 log.write(f, t, False)
 
-    def _feed(self, got: list[tuple[Frame, float, can.Message | None]]) -> None:
+    def _feed(self, got: list[tuple[Frame, float, can.Message | None]], in_order: bool = False) -> None:
+        """Feed frames received to the master (and the log). ``in_order``: a SYNC that finds a complete
+        sample not yet taken waits, with the frames after it (:attr:`held`), until that sample is taken:
+        the frames of a stall's backlog reach the master cycle by cycle, each sample judged before the
+        frames of the next cycle are (a drive's fault in a later cycle is seen after an earlier violation)."""
         log = self.log
         on_frame = self.m.on_frame
         now = self.tr.now
@@ -122,12 +145,17 @@ class CanopenLink:
         try:
             for f, t, _msg in got:
                 sync = f.arbitration_id == SYNC_COB_ID
+                if sync and in_order and self.m.samples:
+                    self.held = got[seen:]
+                    break
                 if sync and timing is not None:
                     timing.sync(t)
                 seen += 1
                 # a SYNC at its own time (the slot of the loop-timed SYNC, else when it arrived), so that
                 # the sample answering it carries that time however late the master takes it
                 out = on_frame(f, self._sync_time(t) if sync else now())
+                if sync:
+                    self._observe_sync(getattr(self.tr, "lag_s", 0.0))
                 if out:
                     if log is not None:  # what came in before the answer to it, as on the bus
                         log.write_received(got[logged:seen])
@@ -154,7 +182,8 @@ class CanopenLink:
             # the loop's own SYNC: frames until it is due, then SYNC; the master takes it from the bus
             while self.tr.now() < due:
                 self._take(self.tr.receive(due))
-            self.tr.send_sync()
+            # (a SYNC sent late: the loop stalled; at the period it was due in)
+            self._observe_sync(self.tr.send_sync() - due, ahead=1)
             return
         t = self.tr.next_sync()
         if t is not None:
@@ -163,6 +192,14 @@ class CanopenLink:
             if self.log is not None:
                 self.log.write(sync_frame(), t, rx=False)
             self.m.on_frame(sync_frame(), t)
+            self._observe_sync(0.0)
+
+    def _observe_sync(self, late_s: float, ahead: int = 0) -> None:
+        """The stall watch told how late the master took (or sent) a SYNC [s], at its period's time on the
+        check's time axis (the master's SYNC schedule; ``ahead`` periods after the last one it saw)."""
+        sched = getattr(self.m, "sync_schedule", None)
+        if sched is not None:
+            self.stall_watch.observe(sched.t_s + ahead * sched.T, late_s)
 
     # --------------------------------------------------------------- phases
 
@@ -185,7 +222,17 @@ class CanopenLink:
             raise
 
     def _next_sample(self) -> Sample:
-        """Run one SYNC cycle and return its sample (SYNC, TPDOs of both drives)."""
+        """Run one SYNC cycle and return its sample (SYNC, TPDOs of both drives); after a stall, the next
+        sample of its backlog (taken already, judged in order)."""
+        waiting = self.m.take_sample()
+        if waiting is None and self.held:  # the backlog's next cycle (its lag was judged when it came)
+            got, self.held = self.held, []
+            self._feed(got, in_order=True)
+            self._send(self.m.poll(self.tr.now()))
+            waiting = self.m.take_sample()
+        if waiting is not None:
+            self._last = waiting
+            return waiting
         missing = 0
         while True:
             sample = self._cycle(stop_at_sample=True)
@@ -201,9 +248,41 @@ class CanopenLink:
                 self.m.latch(err)
                 raise err
 
+    @property
+    def kept_limits(self) -> tuple[frozenset[LimitKind], ...] | None:
+        """Per EMA the limits its drive keeps itself (written and read back by the preflight); None
+        before the preflight is done."""
+        if not self.m.preflight_done:
+            return None
+        return tuple(frozenset(lim.kind for lim in self.m.drives[n].limits if lim.kept_by == KEPT_BY_DRIVE)
+                     for n in self.m.order)
+
+    def _apply_stale_limit(self) -> None:
+        """The freshness limit in force from what the drives were confirmed to keep: the derived stall
+        budget replaces the lag limit; a drive that keeps none keeps today's short limits."""
+        if self.safety is None:
+            return
+        self.stale = stale_limit(self.m.act, self.safety, self.kept_limits)
+        if self.stale.derived:
+            self.max_lag_s = min(self.stale.ms / 1000.0, HARD_MAX_LAG_S)
+
+    @property
+    def behind(self) -> bool:
+        """A stall's backlog: a sample newer than the last one returned is here already (complete, or the
+        frames of a later SYNC cycle wait to be fed)."""
+        return bool(self.m.samples) or bool(self.held)
+
+    def stall_record(self) -> dict:
+        """The master's stalls (:class:`hil.master.stalls.StallWatch`) and the limit they were held to (meta.json
+        ``stalls``)."""
+        st = self.stale
+        key = f"safety.{st.name}" if st is not None and st.derived else "safety.max_lag_s"
+        return {**self.stall_watch.as_json(), "limit_ms": round(self.max_lag_s * 1000.0, 6), "limit": key}
+
     def first_sample(self) -> Sample:
         """Preflight, start SYNC, enable both drives in CSP holding their position."""
         self.preflight()
+        self._apply_stale_limit()
         self.tr.start_sync()
         smp = self._next_sample()
         deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
@@ -233,10 +312,19 @@ class CanopenLink:
                              for d in m.drives.values()}}
 
     def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
-        if self.m.fault is not None and sp1.mode is DriveMode.DISABLED and sp2.mode is DriveMode.DISABLED:
+        stop = sp1.mode is DriveMode.DISABLED and sp2.mode is DriveMode.DISABLED
+        if self.m.fault is not None and stop:
             # stopping after a fault: one safe-state cycle, no complete sample required
             self._safe_cycle()
             return self._last
+        if self.behind:
+            # a stall's backlog: the next sample is here already; the setpoints of a past SYNC are not
+            # sent (the drives take the latest at the next SYNC), a stop is, at once
+            if stop:
+                self._send(self.m.setpoint_frames(sp1, sp2, self._last))
+                self.in_force = (sp1, sp2)
+            return self._next_sample()
+        self.in_force = (sp1, sp2)
         self._send(self.m.setpoint_frames(sp1, sp2, self._last))
         if self.timing is not None:
             t = self.clock()
@@ -267,6 +355,9 @@ class CanopenLink:
         bus: wait for frames until the cycle would end (or, with ``stop_at_sample``, until the
         sample is complete).
         """
+        if self.held:  # (a backlog left when the check stopped: the master sees every frame, in order)
+            got, self.held = self.held, []
+            self._feed(got)
         self._sync()
         inproc = isinstance(self.tr, InProcessTransport)
         due = self.tr.sync_due() if self.timing is not None else None
@@ -275,8 +366,10 @@ class CanopenLink:
         found = None
         while True:
             got = self.tr.receive(self.tr.now() if inproc else cycle_end)
-            self._take(got)
+            self._take(got, in_order=stop_at_sample)
             sample = self.m.take_sample()
+            while not stop_at_sample and self.m.samples:  # (the safe-state sequence keeps the latest)
+                sample = self.m.take_sample()
             if sample is not None:
                 found = sample
                 if self.clock is not None:
@@ -287,19 +380,26 @@ class CanopenLink:
             if not got or (not inproc and self.tr.now() >= cycle_end):
                 return found
 
-    def _take(self, got: list) -> None:
+    def _take(self, got: list, in_order: bool = False) -> None:
         """Frames received: the master falling behind the bus stops the check; else feed them, then poll."""
         if got:
             lag = getattr(self.tr, "lag_s", 0.0)
             # (once stopping after a fault, the safe-state sequence goes on whatever the lag)
             if lag > self.max_lag_s and self.m.fault is None:
                 # the master has fallen behind the bus: whatever it computes now is stale
-                err = StaleData(f"sensor data stale: the master is {lag * 1e3:.0f} ms behind the bus "
-                                f"(frames wait in its socket; safety.max_lag_s = {self.max_lag_s * 1e3:.0f} ms)")
+                err = StaleData(f"sensor data stale: the master is {lag * 1e3:.3g} ms behind the bus "
+                                f"(frames waited for it; {self._lag_limit_text()})")
+                self._observe_sync(lag, ahead=1)  # the stall that stops the check is recorded too
                 self.m.latch(err)
                 raise err
-            self._feed(got)
+            self._feed(got, in_order)
         self._send(self.m.poll(self.tr.now()))
+
+    def _lag_limit_text(self) -> str:
+        st = self.stale
+        if st is not None and st.derived:
+            return f"safety.max_stale_ms: the stall the master tolerates is {self.max_lag_s * 1e3:g} ms ({st.why})"
+        return f"safety.max_lag_s = {self.max_lag_s * 1e3:g} ms"
 
     def close(self) -> None:
         """Bring both drives down to the safe state, stop SYNC, NMT pre-operational, close the log.

@@ -422,6 +422,24 @@ class CanStats(_Part):
                    max_lag_ms=f.get("max_lag_ms", "number"), page_faults=f.get("page_faults", "int"))
 
 
+@dataclass(frozen=True)
+class Stalls(_Part):
+    """The master's stalls in a CANopen check (:class:`hil.master.stalls.StallWatch`): how many, the longest [ms],
+    each one's begin [s, check time] and length [ms]; the limit they were held to [ms] and its profile key;
+    in a dry-run with ``--master-stall-ms``, the injection (``stall_ms``, ``every_s``, ``count``)."""
+
+    count: int = _req("int")
+    longest_ms: float = _req("number")
+    at: list = _req("list")
+    limit_ms: float = _req("number")
+    limit: str = _req("text")
+    injected: dict | None = _opt("object")
+
+    def as_json(self) -> dict:
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return out if self.injected is not None else {k: v for k, v in out.items() if k != "injected"}
+
+
 def _read_distribution(f: _Fields, histogram: bool) -> Distribution:
     """A :class:`hil.record.cycletiming.Distribution` from its JSON (``histogram`` False: none was recorded)."""
     nums = [f.get(k, "number", required=True) for k in ("p50_ms", "p90_ms", "p99_ms", "p99.9_ms", "max_ms", "mean_ms")]
@@ -496,7 +514,7 @@ class RunRecord:
 
     Built by :func:`start_record`; the fields after ``wear`` are added as the run goes: the preflight
     (``process_image``, ``master_loss``, ``identity``), the loop (``steps``, ``safety``, ``drives_final``,
-    ``stop_errors``, ``loop_page_faults``, ``reason`` ... ``duration_s``), the command after it
+    ``stop_errors``, ``loop_page_faults``, ``stalls``, ``reason`` ... ``duration_s``), the command after it
     (``wall_s``, ``can``, ``timing``).
     """
 
@@ -530,6 +548,7 @@ class RunRecord:
     drives_final: dict[str, DriveFinal] | None = None  #: EMA -> its final state
     stop_errors: tuple[str, ...] | None = None  #: errors met while stopping the drives (at most 10)
     loop_page_faults: int | None = None  #: page faults of this process inside the cyclic loop
+    stalls: Stalls | None = None  #: the master's stalls (a CANopen check)
     reason: str | None = None  #: why it stopped ("" when it ran to the end)
     ended_utc: str | None = None
     samples: int | None = None
@@ -629,7 +648,7 @@ def _tuple(v: list | None) -> tuple | None:
 
 #: parts under a key of their own / spread flat / plain fields (JSON types as they are)
 _PARTS = {"software": Software, "profiles": Profiles, "bus_load": BusLoad, "wear": Wear,
-          "safety": SafetyViolation, "can": CanStats, "timing": Timing}
+          "safety": SafetyViolation, "can": CanStats, "timing": Timing, "stalls": Stalls}
 _FLAT_PARTS = {"bus": Bus, "attribution": Attribution, "installation": Installation}
 _PLAIN = {"run_id": "text", "started_utc": "text", "scenario": "text", "seed": "int", "realtime": "bool",
           "simrig": "object", "truth": "object", "eds": "text", "eds_nodes": "text map", "force_control": "text map",

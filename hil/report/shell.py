@@ -230,6 +230,8 @@ def trace_lines(trace: dict | None) -> str:
     for k, lims in (trace.get("drive_limits") or {}).items():
         rows.append([f"{k} limits written to the drive and read back", drive_limits_text(lims, "drive")])
         rows.append([f"{k} limits not written (no writable object in its EDS)", drive_limits_text(lims, "master")])
+    if trace.get("master_stalls") is not None:
+        rows.append(["stalls of the master", master_stalls_text(trace["master_stalls"])])
     for k, fc in (trace.get("force_control") or {}).items():
         rows.append([f"{k} holds forces by", "its CST mode (target torque)" if fc == "cst" else
                      "the master's force loop on the measured force in CSP (its drive has no CST)"])
@@ -245,6 +247,18 @@ def identity_warning(identity: dict | None) -> str:
 
     clash = shared_serial(identity)
     return "" if clash is None else f"<p class='fail'><b>Identity:</b> {esc(clash)}.</p>"
+
+
+def master_stalls_text(st: dict) -> str:
+    """One line of the master's stalls (meta.json ``stalls``): how many, the longest, the first, the limit."""
+    limit = f"limit {st['limit_ms']:g} ms, {st['limit']}"
+    injected = st.get("injected")
+    how = (f"; injected: {injected['stall_ms']:g} ms every {injected['every_s']:g} s on average (dry-run)"
+           if injected else "")
+    if not st["count"]:
+        return f"none ({limit}){how}"
+    first = f", the first at {st['at'][0][0]:.3f} s" if st["at"] else ""
+    return f"{st['count']}, the longest {st['longest_ms']:g} ms{first} ({limit}){how}"
 
 
 def drive_limits_text(lims: list[dict], kept_by: str) -> str:

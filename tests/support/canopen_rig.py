@@ -32,26 +32,27 @@ def make_pair(plant, rig: Rig | None = None, **kw) -> SimDrivePair:
     return SimDrivePair(plant, rig.plan, od_factory(rig), **kw)
 
 
-def make_master(act=None, *, profile_path: str | Path | None = None, eds=None) -> MasterCore:
-    """A master core for ``act`` (default the shipped profile), planned against its EDS."""
+def make_master(act=None, *, profile_path: str | Path | None = None, eds=None, safety=None) -> MasterCore:
+    """A master core for ``act`` (default the shipped profile), planned against its EDS; ``safety``: the
+    check's safety profile (the limits the preflight writes to the drives)."""
     if act is None and profile_path is None:
-        return MasterCore(load_actuation(), shipped_rig().plan)
+        return MasterCore(load_actuation(), shipped_rig().plan, safety=safety)
     if act is None:
         act = load_actuation(profile_path)
-    return MasterCore(act, plan_for(act, profile_path, eds).plan)
+    return MasterCore(act, plan_for(act, profile_path, eds).plan, safety=safety)
 
 
-def cyclic_master(act, plant) -> MasterCore:
+def cyclic_master(act, plant, safety=None) -> MasterCore:
     """A master for ``act`` through its preflight against a simulated pair around ``plant``, every frame
     at t = 0 (its heartbeat consumers start then), in the cyclic phase. The drill of the master's death,
-    which lets time pass, is skipped (test_master.py tests it)."""
+    which lets time pass, is skipped (test_master.py tests it). ``safety``: as :func:`make_master`."""
     from dataclasses import replace
 
     from hil.master.core import Phase
 
     act = replace(act, canopen=replace(act.canopen, skip_master_loss_drill="tested elsewhere"))
     pair = make_pair(plant)
-    m = make_master(act)
+    m = make_master(act, safety=safety)
     to_slaves, to_master = list(m.start(0.0)), list(pair.power_on(0.0))
     while to_slaves or to_master:
         while to_slaves:

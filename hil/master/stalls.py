@@ -1,0 +1,136 @@
+"""Stalls of the master's computer: injected in the dry-run, observed in every check (pure, sans-IO).
+
+A stall is a time in which the master's process does not run (the host took its CPU, a page fault, a
+timer that fired late) while the bus goes on: on a real bus SYNC keeps its kernel- or hardware-timed
+period (or, where the loop sends SYNC itself, the next one leaves late), the drives hold their last
+setpoint and keep answering, and their frames wait, stamped, in the master's socket. What the master
+tolerates is the freshness limit in force (:func:`hil.check.staleness.stale_limit`, docs/safety.md, *A stall of
+the master*); a stall within it costs nothing but the master's reaction time, and it is recorded.
+
+:class:`StallWatch` is what every check keeps (the link feeds it each SYNC with how late the master took
+it): how many stalls, the longest, and when each began; meta.json ``stalls``.
+
+:class:`MasterStalls` is the dry-run's injection (``emacheck dry-run --master-stall-ms MS
+--master-stall-every-s S``): the master stalls for ``MS`` at intervals drawn uniformly from
+``[S/2, 3S/2]`` (mean ``S``) on the simulated time axis, from the first SYNC; deterministic for a seed.
+:class:`hil.transport.InProcessTransport` applies it: during a stall the simulated drives run on, SYNC
+keeps its period and every frame waits for the master with the time it was sent.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["EVERY_S_MAX", "EVERY_S_MIN", "MasterStalls", "STALL_MS_MAX", "StallWatch"]
+
+#: ``--master-stall-ms``: above 0, at most this [ms] (far beyond any freshness limit: the drives' consumer
+#: heartbeat stops them first)
+STALL_MS_MAX = 1000.0
+#: ``--master-stall-every-s``: the mean interval between stalls [s], from this ...
+EVERY_S_MIN = 0.1
+#: ... to this [s]
+EVERY_S_MAX = 3600.0
+#: The most stalls :class:`StallWatch` lists one by one (the count and the longest go on beyond it).
+MAX_LISTED = 1000
+
+
+class MasterStalls:
+    """When the dry-run's master stalls, and for how long (see the module docstring).
+
+    Parameters
+    ----------
+    stall_ms : float
+        Length of each stall [ms], ``0 < stall_ms <= STALL_MS_MAX``.
+    every_s : float
+        Mean interval between the starts of two stalls [s], ``EVERY_S_MIN <= every_s <= EVERY_S_MAX``
+        and more than twice the stall (two stalls never run into each other).
+    rng : numpy.random.Generator
+        Draws the intervals.
+    """
+
+    def __init__(self, stall_ms: float, every_s: float, rng: np.random.Generator) -> None:
+        if not (math.isfinite(stall_ms) and 0.0 < stall_ms <= STALL_MS_MAX):
+            raise ValueError(f"stall_ms = {stall_ms!r}: a stall is longer than 0 and at most {STALL_MS_MAX:g} ms")
+        if not (math.isfinite(every_s) and EVERY_S_MIN <= every_s <= EVERY_S_MAX):
+            raise ValueError(f"every_s = {every_s!r}: the mean interval is {EVERY_S_MIN:g} to {EVERY_S_MAX:g} s")
+        if stall_ms / 1000.0 >= every_s / 2.0:
+            raise ValueError(f"stall_ms = {stall_ms:g} ms is not shorter than half the mean interval "
+                             f"every_s = {every_s:g} s: two stalls would run into each other")
+        self.stall_s = stall_ms / 1000.0
+        self.every_s = every_s
+        self._rng = rng
+        self._next: float | None = None  #: when the next stall begins [s, transport time]
+        self.injected: list[tuple[float, float]] = []  #: (begin [s, transport time], length [s]) of each
+
+    def _gap(self) -> float:
+        return float(self._rng.uniform(0.5, 1.5)) * self.every_s
+
+    def start(self, t: float) -> None:
+        """SYNC starts at ``t`` [s]: the first stall is one drawn interval after it."""
+        self._next = t + self._gap()
+
+    def due(self, t: float) -> float | None:
+        """The stall's length [s] if the master stalls at the SYNC of time ``t`` [s] (the first SYNC at or
+        after a stall's drawn begin; the next is drawn from there), else None."""
+        nxt = self._next
+        if nxt is None or t < nxt - 1e-9:
+            return None
+        self._next = t + self.stall_s + self._gap()
+        self.injected.append((t, self.stall_s))
+        return self.stall_s
+
+    def as_json(self) -> dict:
+        """The injection as meta.json records it (``stalls.injected``)."""
+        return {"stall_ms": self.stall_s * 1000.0, "every_s": self.every_s, "count": len(self.injected)}
+
+
+@dataclass
+class _Open:
+    at_s: float
+    late_s: float
+
+
+class StallWatch:
+    """The stalls of the master in one check, as it observed them.
+
+    Fed once per SYNC (:meth:`observe`) with the SYNC's time and how late the master took it (on a
+    real bus: how long the SYNC waited in its socket, or how late the loop sent its own SYNC; in the
+    dry-run: how long the injected stall kept it). A SYNC taken more than one SYNC period late belongs
+    to a stall; consecutive late SYNCs are one stall, as long as the latest of them.
+    """
+
+    def __init__(self, sync_period_s: float) -> None:
+        self.T = sync_period_s
+        self.count = 0
+        self.longest_s = 0.0
+        self.listed: list[tuple[float, float]] = []  #: (begin [s, SYNC time], length [s]), the first MAX_LISTED
+        self._open: _Open | None = None
+
+    def observe(self, t_s: float, late_s: float) -> None:
+        """The SYNC of time ``t_s`` [s] was taken ``late_s`` [s] after it arrived (or was due)."""
+        if late_s <= self.T:
+            if self._open is not None:
+                self._close()
+            return
+        o = self._open
+        if o is None:
+            self._open = _Open(t_s, late_s)
+        elif late_s > o.late_s:
+            o.late_s = late_s
+
+    def _close(self) -> None:
+        o, self._open = self._open, None
+        self.count += 1
+        self.longest_s = max(self.longest_s, o.late_s)
+        if len(self.listed) < MAX_LISTED:
+            self.listed.append((o.at_s, o.late_s))
+
+    def as_json(self) -> dict:
+        """count, longest [ms] and each stall's begin [s] and length [ms] (a stall still open counted)."""
+        if self._open is not None:
+            self._close()
+        return {"count": self.count, "longest_ms": round(self.longest_s * 1000.0, 3),
+                "at": [[round(t, 6), round(d * 1000.0, 3)] for t, d in self.listed]}

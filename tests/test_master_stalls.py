@@ -1,0 +1,270 @@
+"""Stalls of the master (issue 37 parts 3 and 4): injected on the dry-run's simulated time axis, observed and
+recorded by every check, tolerated up to the derived freshness limit (docs/safety.md, *A stall of the master*).
+
+The sans-IO parts are pinned at their boundaries here (the injection's option ranges, a SYNC taken one SYNC
+period late versus later, the link's stall limit exactly versus one float step beyond); the whole check with
+stalls against the stall-free one is ``slow``. The fault table's stall rows are in tests/test_faults.py.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from test_boundaries_master import T_EXACT, ScriptedBus
+
+from hil.canopen.frame import SYNC_COB_ID
+from hil.cli.dry_run import dry_run
+from hil.master.link import CanopenLink, StaleData
+from hil.master.stalls import EVERY_S_MAX, EVERY_S_MIN, STALL_MS_MAX, MasterStalls, StallWatch
+from hil.profile.load import load_actuation, load_check, load_simrig
+from hil.record.runfolder import read_record, read_signals
+from hil.transport import InProcessTransport
+from sim.plant import RigPlant
+from support.canopen_rig import cyclic_master, make_pair
+from support.rigs import brief_rig, quiet
+
+T = 0.002
+UP = math.inf
+
+
+# ------------------------------------------------------------------ the injection's ranges
+
+@pytest.mark.parametrize("stall_ms, every_s, ok", [
+    (math.nextafter(0.0, UP), 5.0, True), (0.0, 5.0, False), (-1.0, 5.0, False),
+    (STALL_MS_MAX, 5.0, True), (math.nextafter(STALL_MS_MAX, UP), 5.0, False),
+    (40.0, EVERY_S_MIN, True), (40.0, math.nextafter(EVERY_S_MIN, 0.0), False),
+    (40.0, EVERY_S_MAX, True), (40.0, math.nextafter(EVERY_S_MAX, UP), False),
+    # a stall must be shorter than half the mean interval (the shortest drawn interval)
+    (math.nextafter(50.0, 0.0), 0.1, True), (50.0, 0.1, False),
+    (math.nan, 5.0, False), (40.0, math.inf, False),
+])
+def test_master_stalls_ranges_on_their_boundaries(stall_ms, every_s, ok):
+    rng = np.random.default_rng(0)
+    if ok:
+        s = MasterStalls(stall_ms, every_s, rng)
+        assert s.stall_s == stall_ms / 1000.0 and s.every_s == every_s
+    else:
+        with pytest.raises(ValueError, match=r"^(stall_ms|every_s) = "):
+            MasterStalls(stall_ms, every_s, rng)
+
+
+def _schedule(seed: int, n: int, stall_ms=45.0, every_s=5.0) -> list[tuple[float, float]]:
+    s = MasterStalls(stall_ms, every_s, np.random.default_rng([seed, 37]))
+    s.start(1.0)
+    k = 0
+    while len(s.injected) < n:
+        k += 1
+        s.due(1.0 + k * T)
+    return s.injected
+
+
+def test_master_stalls_are_deterministic_for_a_seed_and_keep_their_mean_interval():
+    a, b, c = _schedule(42, 400), _schedule(42, 400), _schedule(43, 400)
+    assert a == b and a != c
+    begins = np.array([t for t, _ in a])
+    gaps = np.diff(begins) - 0.045  # from the end of one stall to the begin of the next
+    assert begins[0] - 1.0 >= 2.5 - T and begins[0] - 1.0 <= 7.5 + T
+    assert gaps.min() >= 2.5 - 1e-9 and gaps.max() <= 7.5 + T + 1e-9
+    # uniform on [2.5, 7.5] s: the mean of 399 draws within 4 standard errors (1.44 s / sqrt(399))
+    assert abs(gaps.mean() - 5.0) < 4 * (5.0 / math.sqrt(12.0)) / math.sqrt(len(gaps))
+    assert all(d == 0.045 for _, d in a)
+
+
+def test_master_stalls_begin_at_the_first_sync_at_or_after_their_drawn_time():
+    s = MasterStalls(40.0, 5.0, np.random.default_rng(1))
+    s.start(0.0)
+    first = s._next  # (the drawn begin, to test the SYNC it falls on)
+    assert s.due(first - 1e-6) is None
+    assert s.due(first) == 0.04 and s.injected == [(first, 0.04)]
+    assert s.due(first + T) is None  # the next is drawn from there
+
+
+# ------------------------------------------------------------------ the watch
+
+def test_stall_watch_one_sync_period_late_is_no_stall_a_float_step_more_is():
+    w = StallWatch(T)
+    w.observe(0.100, T)
+    w.observe(0.102, 0.0)
+    assert w.as_json() == {"count": 0, "longest_ms": 0.0, "at": []}
+    w.observe(0.104, math.nextafter(T, UP))
+    w.observe(0.106, 0.0)
+    assert w.count == 1 and w.listed == [(0.104, math.nextafter(T, UP))]
+
+
+def test_stall_watch_merges_consecutive_late_syncs_into_one_stall_as_long_as_the_latest():
+    w = StallWatch(T)
+    for k, late in enumerate((0.0, 0.045, 0.043, 0.041, 0.0, 0.0, 0.010, 0.0)):
+        w.observe(k * T, late)
+    assert w.as_json() == {"count": 2, "longest_ms": 45.0, "at": [[0.002, 45.0], [0.012, 10.0]]}
+    w.observe(0.1, 0.02)  # still open at the end: counted
+    assert w.as_json()["count"] == 3
+
+
+# ------------------------------------------------------------------ the in-process bus stalls
+
+class _At:
+    """A stall schedule of one stall of ``stall_s`` at the SYNC of time ``t`` [s]."""
+
+    def __init__(self, t: float, stall_s: float) -> None:
+        self.t, self.stall_s = t, stall_s
+
+    def start(self, t: float) -> None:
+        pass
+
+    def due(self, t: float) -> float | None:
+        return self.stall_s if abs(t - self.t) < 1e-9 else None
+
+
+@pytest.mark.parametrize("stall_s, syncs", [(0.040, 21), (0.041, 21), (0.0399, 20)])
+def test_in_process_stall_queues_every_sync_of_the_stall_for_the_master_lag_the_stall(stall_s, syncs):
+    pair = make_pair(RigPlant(quiet(brief_rig()), np.random.default_rng(0)))
+    tr = InProcessTransport(pair, T, stalls=_At(3 * T, stall_s))
+    tr.receive(0.0)
+    tr.start_sync()
+    assert tr.next_sync() == pytest.approx(T) and tr.next_sync() == pytest.approx(2 * T)
+    tr.receive(tr.now())
+    assert tr.next_sync() is None  # the master stalls at the third SYNC
+    got = tr.receive(tr.now())
+    stamps = [t for f, t, _ in got if f.arbitration_id == SYNC_COB_ID]
+    assert len(stamps) == syncs and stamps[0] == pytest.approx(3 * T) and np.allclose(np.diff(stamps), T)
+    assert tr.lag_s == stall_s and tr.max_lag_s == stall_s  # the first SYNC waited the whole stall
+    assert tr.now() == stamps[-1] <= 3 * T + stall_s + 1e-12
+    assert tr.receive(tr.now()) == [] and tr.lag_s == 0.0
+    assert tr.next_sync() == pytest.approx(stamps[-1] + T)  # the SYNC grid goes on
+
+
+# ------------------------------------------------------------------ the link's limit
+
+@pytest.fixture(scope="module")
+def check():
+    return load_check(None, load_actuation())
+
+
+def _stalling_link(safety, lag: float, with_safety_master: bool = True) -> CanopenLink:
+    act, sim = load_actuation(), load_simrig()
+    m = cyclic_master(act, RigPlant(sim.params, np.random.default_rng(1)),
+                      safety=safety if with_safety_master else None)
+    link = CanopenLink(m, ScriptedBus(T_EXACT, lag=lambda k: lag), max_missing_cycles=2, max_lag_s=0.02,
+                       safety=safety)
+    link.preflight = lambda: None
+    link._apply_stale_limit()  # (what first_sample does after the preflight)
+    return link
+
+
+def test_link_tolerates_a_stall_exactly_at_the_derived_limit_and_stops_one_step_beyond(check):
+    ok = _stalling_link(check.safety, 0.040)
+    assert ok.stale.derived and ok.stale.ms == 40.0 and ok.max_lag_s == 0.040
+    assert ok._next_sample().t_s == ok.m.T and ok.m.fault is None
+    assert ok.stall_record()["limit"] == "safety.max_stale_ms" and ok.stall_record()["limit_ms"] == 40.0
+    over = _stalling_link(check.safety, math.nextafter(0.040, UP))
+    with pytest.raises(StaleData, match=r"^sensor data stale: the master is 40 ms behind the bus \(frames waited "
+                                        r"for it; safety.max_stale_ms: the stall the master tolerates is 40 ms "):
+        over._next_sample()
+    assert isinstance(over.m.fault, StaleData) and over.m.quick_stop
+
+
+def test_link_of_drives_that_keep_not_all_limits_keeps_the_short_lag_limit(check):
+    """A master without the check's safety profile writes no speed limit (0x6080): the derived budget does
+    not apply, the lag limit stays ``safety.max_lag_s`` (20 ms), and a 21 ms stall stops naming it."""
+    link = _stalling_link(check.safety, 0.021, with_safety_master=False)
+    assert not link.stale.derived and "does not keep max motor speed" in link.stale.why
+    assert link.max_lag_s == 0.02 and link.stall_record()["limit"] == "safety.max_lag_s"
+    with pytest.raises(StaleData, match=r"safety.max_lag_s = 20 ms\)$"):
+        link._next_sample()
+
+
+# ------------------------------------------------------------------ the whole check (slow)
+
+@pytest.fixture(scope="module")
+def check_runs(tmp_path_factory):
+    """The shipped check stall-free and with the master stalling 40 ms (the derived limit) every 5 s, one
+    seed. (Not the short check of support.diagnose_cases: made for the plant without drives, over CANopen
+    its 4 mm/s sweep start trips the 10 mm/s speed limit stall-free.)"""
+    act, sim = load_actuation(), load_simrig()
+    chk = load_check(None, act)
+    tmp = tmp_path_factory.mktemp("stalls")
+    free = dry_run(act, chk, sim, tmp / "free")
+    stalled = dry_run(act, chk, sim, tmp / "stalled", stall=(40.0, 5.0))
+    return free, stalled
+
+
+@pytest.mark.slow
+def test_a_check_with_stalls_at_the_limit_passes_with_the_backlash_of_the_stall_free_one(check_runs):
+    free, stalled = check_runs
+    assert free.exit_code == 0 and stalled.exit_code == 0
+    a, b = (json.loads((r.out / "result.json").read_text()) for r in (free, stalled))
+    for ch in ("int1", "int2", "ext"):
+        assert abs(a["backlash_mm"][ch] - b["backlash_mm"][ch]) <= 1e-3, ch  # within 1 um
+    assert read_record(free.out).stalls.count == 0
+    # every stall in the record: as many as injected, each as long, as far apart
+    st = read_record(stalled.out).stalls
+    injected = stalled.link.tr.stalls.injected
+    assert st.count == len(injected) == len(st.at) >= 20 and st.longest_ms == 40.0
+    assert st.limit == "safety.max_stale_ms" and st.limit_ms == 40.0
+    assert st.injected == {"stall_ms": 40.0, "every_s": 5.0, "count": len(injected)}
+    assert all(ms == 40.0 for _, ms in st.at)
+    assert np.allclose(np.diff([t for t, _ in st.at]), np.diff([t for t, _ in injected]), atol=1e-9)
+    # every sample of the stalls judged and recorded: no SYNC period missing in signals.csv
+    sig = read_signals(stalled.out / "signals.csv")
+    assert np.allclose(np.diff(sig.t), T) and len(sig.t) > len(read_signals(free.out / "signals.csv").t)
+    # during a stall the rows carry the setpoints the drives held (the last ones sent before it)
+    for t0, _ in st.at:
+        k = int(np.searchsorted(sig.t, t0 - 1e-9))
+        held = sig.sp1[k - 1:k + 20]  # the row before the stall's first sample, then 20 more
+        assert np.all(held == held[0]), t0
+
+
+@pytest.mark.slow
+def test_the_same_seed_gives_the_same_stalls(check_runs, tmp_path):
+    _, stalled = check_runs
+    act, sim = load_actuation(), load_simrig()
+    again = dry_run(act, load_check(None, act), sim, tmp_path / "again", stall=(40.0, 5.0))
+    assert read_record(again.out).stalls.at == read_record(stalled.out).stalls.at
+    assert (again.out / "signals.csv").read_bytes() == (stalled.out / "signals.csv").read_bytes()
+
+
+# ------------------------------------------------------------------ the dry-run's options
+
+@pytest.mark.parametrize("argv, got", [
+    (["--master-stall-ms", "45"], (45.0, 5.0)),  # the mean interval's default: 5 s
+    (["--master-stall-ms", "1e-300", "--master-stall-every-s", "0.1"], (1e-300, 0.1)),
+    (["--master-stall-ms", "1000", "--master-stall-every-s", "3600"], (1000.0, 3600.0)),
+    ([], (None, 5.0)),
+])
+def test_dry_run_stall_options_in_range(argv, got):
+    from hil.cli import build_parser
+
+    a = build_parser().parse_args(["dry-run", *argv])
+    assert (a.master_stall_ms, a.master_stall_every_s) == got
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--master-stall-ms", "0"], "argument --master-stall-ms: 0: a stall of the master [ms] is a number above 0 "
+                                 "to 1000"),
+    (["--master-stall-ms", "1000.0000000000001"], "is a number above 0 to 1000"),
+    (["--master-stall-ms", "nan"], "is a number above 0 to 1000"),
+    (["--master-stall-ms", "x"], "not a number (a stall of the master [ms]): 'x'"),
+    (["--master-stall-ms", "4", "--master-stall-every-s", "0.09999999999999999"],
+     "argument --master-stall-every-s: 0.09999999999999999: the mean interval between stalls [s] is a number "
+     "from 0.1 to 3600"),
+    (["--master-stall-ms", "4", "--master-stall-every-s", "3600.0000000000005"], "from 0.1 to 3600"),
+])
+def test_dry_run_stall_options_out_of_range_exit_3_naming_the_option(argv, words, capsys):
+    from hil.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["dry-run", *argv])
+    assert e.value.code == 3 and words in capsys.readouterr().err
+
+
+def test_dry_run_stall_of_half_the_interval_is_refused_before_the_run_folder(tmp_path, capsys):
+    """Exactly half the mean interval (the shortest drawn one) is refused, exit 3, nothing made; a float step
+    shorter is accepted (:func:`test_master_stalls_ranges_on_their_boundaries`, the same rule)."""
+    from hil.cli import main
+
+    rc = main(["dry-run", "--master-stall-ms", "600", "--master-stall-every-s", "1.2", "--out", str(tmp_path / "r")])
+    assert rc == 3 and not (tmp_path / "r").exists()
+    assert "--master-stall-ms 600 is not shorter than half of --master-stall-every-s 1.2 s" in capsys.readouterr().err
