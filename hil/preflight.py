@@ -45,7 +45,7 @@ from enum import Enum
 
 from canopen.objectdictionary import datatypes as dt
 
-from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
+from hil.canopen.cia402 import Goal, OperationMode, State, decode_state
 from hil.canopen.drivelimits import KEPT_BY_DRIVE, DriveLimit, LimitKind
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import QUICK_STOP_OPTION, AbortConnectionOption, master_loss_steps
@@ -64,6 +64,7 @@ from hil.canopen.signalmap import (
 from hil.config import Actuation, Safety
 from hil.errors import EmacheckError
 from hil.limits_setup import limit_targets, limits_for, readback_problem
+from hil.powerup import PowerWalk
 
 __all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
            "MasterLossReactionError", "ReactionConfig", "SameSerialError"]
@@ -635,52 +636,36 @@ class Preflight:
         return sw
 
     def _power_up_by_sdo(self, d: DriveSetup) -> Generator:
-        """CSP, target = actual position, then shutdown, switch on, enable operation by SDO (pre-operational)."""
+        """CSP, target = actual position, then the walk to OPERATION_ENABLED by SDO (pre-operational)."""
         node = d.plan.node
         pos = yield from self._read(node, 0x6064, 0, "position actual value")
         yield from self._write(node, 0x607A, 0, int(pos), "target position (hold)")
         if d.plan.mode_by_pdo:
             yield from self._set_mode_by_sdo(d, OperationMode.CSP)
-        yield from self._walk(d, State.OPERATION_ENABLED)
+        yield from self._walk(d, Goal.ENABLED)
 
     def _power_down_by_sdo(self, d: DriveSetup) -> Generator:
-        yield from self._walk(d, State.SWITCH_ON_DISABLED)
+        yield from self._walk(d, Goal.DISABLED)
 
-    def _walk(self, d: DriveSetup, target: State) -> Generator:
-        """Controlwords by SDO until the statusword shows ``target`` (bounded fault resets, the enable timeout)."""
-        node, spec = d.plan.node, d.plan.node.spec
-        deadline = (yield Now()) + self.c.enable_timeout_s
-        resets = 0
-        previous_cw = None
+    def _walk(self, d: DriveSetup, goal: Goal) -> Generator:
+        """Controlwords by SDO as :class:`hil.powerup.PowerWalk` says, each statusword read by SDO after
+        the last command, until the drive is there (bounded: fault resets, ``canopen.enable_timeout_s``)."""
+        node = d.plan.node
+        walk = PowerWalk(node.spec.label, goal, (yield Now()), self.c.enable_timeout_s, self.c.fault_reset_attempts)
         while True:
             sw = yield from self._statusword(d)
-            state = decode_state(sw)
-            if state is target:
+            step = walk.on_statusword(sw, (yield Now()))
+            if step.done:
                 return
-            t = yield Now()
-            if t > deadline:
-                raise PreflightError(f"{spec.label}: not in {target.name} within canopen.enable_timeout_s = "
-                                     f"{self.c.enable_timeout_s} s (statusword 0x{sw:04X}, {state.name})")
-            if state is State.FAULT:
-                if resets >= self.c.fault_reset_attempts:
-                    err = ""
-                    if node.can_read(0x603F, 0):
-                        code = yield from self._read(node, 0x603F, 0, "error code", soft=True)
-                        if not isinstance(code, SdoAbortError):
-                            err = f", error code 0x603F = 0x{int(code):04X}"
-                    raise PreflightError(f"{spec.label}: still in FAULT after {resets} fault resets"
-                                         f" (canopen.fault_reset_attempts){err}")
-                if previous_cw is not None and previous_cw & 0x80:
-                    yield from self._write(node, 0x6040, 0, 0, "controlword (fault reset edge)")
-                yield from self._write(node, 0x6040, 0, controlword(Command.FAULT_RESET), "controlword fault reset")
-                previous_cw = controlword(Command.FAULT_RESET)
-                resets += 1
-            elif state not in (State.NOT_READY_TO_SWITCH_ON, State.FAULT_REACTION_ACTIVE):  # (those: wait)
-                # to switch on disabled from any state: transitions 7, 9, 10, 12
-                cmd = (Command.DISABLE_VOLTAGE if target is State.SWITCH_ON_DISABLED
-                       else next_command(state, target))
-                if cmd is not None:
-                    cw = controlword(cmd)
-                    yield from self._write(node, 0x6040, 0, cw, f"controlword ({cmd.value})")
-                    previous_cw = cw
+            if step.failed:
+                err = ""
+                if step.in_fault and node.can_read(0x603F, 0):
+                    code = yield from self._read(node, 0x603F, 0, "error code", soft=True)
+                    if not isinstance(code, (SdoAbortError, SdoTimeout)):
+                        err = f", error code 0x603F = 0x{int(code):04X}"
+                raise PreflightError(step.failed + err)
+            for cw in step.controlwords:
+                yield from self._write(node, 0x6040, 0, cw, f"controlword ({step.what})")
+            if step.controlwords:
+                walk.sent((yield Now()))
             yield Wait((yield Now()) + self.T)
