@@ -301,13 +301,25 @@ class CanopenLink:
             self._feed(got)
         self._send(self.m.poll(self.tr.now()))
 
+    def _confirm_stop(self) -> None:
+        """After the last command of the safe stop: each drive's statusword read again by SDO
+        (:meth:`MasterCore.confirm_frames <hil.master.MasterCore.confirm_frames>`), until every read
+        ended (answered, aborted, or timed out after ``canopen.sdo_timeout_s``; bounded here once more)."""
+        t0 = self.tr.now()
+        self._send(self.m.confirm_frames(t0))
+        limit = t0 + 2.0 * self.m.act.canopen.sdo_timeout_s + 0.05
+        while not self.m.confirmation.done and self.tr.now() < limit:
+            self._feed(self.tr.receive(self.tr.now() + 0.01))
+            self._send(self.m.poll(self.tr.now()))
+
     def close(self) -> None:
         """Bring both drives down to the safe state, stop SYNC, NMT pre-operational, close the log.
 
         Orderly (disable operation, shutdown, disable voltage) after a finished check, quick stop
         then disable after an abort. A drive that cannot be reached (heartbeat lost, no statusword)
         does not hold up the other. Every step runs even if an earlier one fails; the first error
-        is re-raised at the end. :attr:`final_states` then holds each drive's last known state.
+        is re-raised at the end. Then each drive's state is read again by SDO (:meth:`_confirm_stop`):
+        :attr:`final_states` holds what was seen, confirmed only by that read.
         """
         if self._closed:
             return
@@ -331,6 +343,10 @@ class CanopenLink:
                 self._feed(self.tr.receive(self.tr.now()))
             except BaseException as exc:
                 errors.append(exc)
+        try:
+            self._confirm_stop()
+        except BaseException as exc:
+            errors.append(exc)
         self.final_states = self.m.safe_state_report(self.tr.now())
         self.close_errors = [f"{type(e).__name__}: {e}" for e in errors]
         for step in (self.tr.stop_sync,

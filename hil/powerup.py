@@ -23,15 +23,33 @@ The rules (the commands themselves come from the one master table,
   (no SYNC runs; the drill's drive holds its position), so the master does not wait for the ramp
   as the cyclic phase does; transition 16 is never used.
 * **Bounded**: past ``t0 + timeout_s`` the walk gives up, naming what it saw last and when.
+
+:class:`StopConfirmation` is the end of a safe stop: after the last command, each drive's statusword
+is read again by SDO (0x6041, bounded by the SDO timeout), so that "confirmed safe" means a state
+observed after that command; a read that times out or is aborted leaves the drive not confirmed and
+says why. :func:`final_state` words what the master saw of a drive ("stale since t = ...", "never
+read"), for the run record and the abort reason.
 """
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 
-from hil.canopen.cia402 import Command, Controlword, Goal, State, controlword, decode_state, master_command
+from hil.canopen.cia402 import (
+    SAFE_STATES,
+    Command,
+    Controlword,
+    Goal,
+    State,
+    controlword,
+    decode_state,
+    master_command,
+)
+from hil.canopen.frame import Frame
+from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent, SdoTimeout, describe
 
-__all__ = ["PowerWalk", "WalkStep"]
+__all__ = ["Confirmed", "PowerWalk", "StopConfirmation", "WalkStep", "final_state"]
 
 #: the state each goal a walk may have ends in
 _TARGET = {Goal.ENABLED: State.OPERATION_ENABLED, Goal.DISABLED: State.SWITCH_ON_DISABLED}
@@ -154,3 +172,121 @@ class PowerWalk:
         return WalkStep(failed=f"{self.label}: not in {self.target.name} within canopen.enable_timeout_s = "
                                f"{self.timeout_s} s ({seen})", in_fault=self.seen is not None
                         and decode_state(self.seen[0]) is State.FAULT)
+
+
+# --------------------------------------------------------------------------- the end of a safe stop
+
+
+@dataclass(frozen=True, slots=True)
+class Confirmed:
+    """What the read of one drive's statusword after the safe stop gave: the word and when it was
+    received, or why there is none (``problem``)."""
+
+    statusword: int | None = None
+    t_s: float | None = None
+    problem: str = ""
+
+
+#: initiate-upload response and abort: the server command specifiers a statusword read is answered with
+_SCS_UPLOAD, _SCS_ABORT = 2, 4
+
+
+class StopConfirmation:
+    """Each drive's statusword read by SDO once after the last command of a safe stop (sans-IO).
+
+    Parameters
+    ----------
+    objects : dict
+        Node id -> (index, subindex) of its statusword (the signal map's 0x6041).
+    timeout_s : float
+        The SDO response timeout (``canopen.sdo_timeout_s``).
+
+    Its own SDO clients (a transfer of the preflight's left busy does not hold it up); an answer
+    that is not the upload of that object (the response to a controlword written by SDO without
+    waiting for it, before) is passed over.
+    """
+
+    def __init__(self, objects: dict[int, tuple[int, int]], timeout_s: float) -> None:
+        self.objects = dict(objects)
+        self.timeout_s = timeout_s
+        self._clients = {n: SdoClient(n, timeout_s=timeout_s) for n in self.objects}
+        self.results: dict[int, Confirmed] = {}
+
+    def start(self, t_s: float) -> list[Frame]:
+        """The read requests, one per drive."""
+        return [c.start_upload(*self.objects[n], t_s) for n, c in self._clients.items()]
+
+    @property
+    def done(self) -> bool:
+        return len(self.results) == len(self.objects)
+
+    def on_frame(self, node: int, frame: Frame, t_s: float) -> Confirmed | None:
+        """An SDO response of ``node``: the result once its read ended (None: not yet, or not its answer)."""
+        c = self._clients.get(node)
+        if c is None or node in self.results or len(frame.data) != 8:
+            return None
+        d = frame.data
+        index, sub = self.objects[node]
+        if d[0] >> 5 not in (_SCS_UPLOAD, _SCS_ABORT) or d[1:4] != struct.pack("<HB", index, sub):
+            return None
+        try:
+            got = c.on_frame(frame, t_s)
+        except SdoAbortError as exc:
+            return self._end(node, Confirmed(problem=f"SDO abort 0x{int(exc.code):08X} ({describe(exc.code)})"))
+        if isinstance(got, SdoEvent):
+            return self._end(node, Confirmed(int.from_bytes(bytes(got.data[:2]).ljust(2, b"\0"), "little"), t_s))
+        return None
+
+    def poll(self, t_s: float) -> list[Frame]:
+        """Timeouts at ``t_s``: the abort frames to send (the drive's read ends unanswered)."""
+        out = []
+        for n, c in self._clients.items():
+            if n in self.results:
+                continue
+            try:
+                c.poll(t_s)
+            except SdoTimeout as exc:
+                out.append(exc.abort_frame)
+                self._end(n, Confirmed(problem=f"0x6041 not answered by SDO within canopen.sdo_timeout_s = "
+                                               f"{self.timeout_s} s"))
+        return out
+
+    def _end(self, node: int, res: Confirmed) -> Confirmed:
+        self.results[node] = res
+        return res
+
+
+def final_state(statusword: int | None, seen_t_s: float | None, confirmed: Confirmed | None, fresh: bool) -> dict:
+    """A drive's final state as the record holds it, in words of what was seen.
+
+    Parameters
+    ----------
+    statusword, seen_t_s
+        The last statusword the master received (by PDO or SDO) and when [s]; None: never one.
+    confirmed
+        The read after the safe stop (None: none was made).
+    fresh
+        Without that read: the last statusword is fresh (within the heartbeat timeout).
+
+    Returns
+    -------
+    dict
+        ``state`` (the last state seen, None if never read), ``seen_t_s``, ``confirmed`` (observed
+        after the last command), ``safe`` (confirmed and in Switch on disabled), ``seen`` (the words).
+    """
+    state = None if statusword is None else decode_state(statusword)
+    if confirmed is not None:
+        ok = confirmed.statusword is not None
+        if ok:
+            words = f"read after the stop at t = {confirmed.t_s:.3f} s"
+        elif seen_t_s is None:
+            words = f"statusword never read ({confirmed.problem})"
+        else:
+            words = f"statusword stale since t = {seen_t_s:.3f} s ({confirmed.problem})"
+    else:
+        ok = fresh and statusword is not None
+        words = ("statusword never read" if statusword is None else
+                 f"statusword fresh at t = {seen_t_s:.3f} s" if ok else f"statusword stale since t = {seen_t_s:.3f} s")
+    return {"state": None if state is None else state.name,
+            "seen_t_s": None if seen_t_s is None else round(seen_t_s, 6),
+            "confirmed": ok, "safe": ok and state in SAFE_STATES, "seen": words}

@@ -132,3 +132,68 @@ def test_the_drills_power_up_by_sdo_golden_controlwords(actuation, simrig, waits
         assert _controlwords_by_sdo(p.traffic, node) == up + [0x0006, 0x0007, 0x000F, 0x0000]
         assert m.drives[node].master_loss.drill.outcome.value == "reacted"
     assert {n.state_machine.state for n in inj.pair.nodes} == {State.SWITCH_ON_DISABLED}
+
+
+# --------------------------------------------------------------------------- the end of a safe stop
+
+
+def _check_and_stop(pair, cycles: int = 30, deaf_after_enable: int | None = None):
+    """Preflight, enable, hold ``cycles`` SYNC cycles, close (the safe stop and its confirming reads)."""
+    from hil.canopen.process import DriveMode, Setpoint
+    from hil.link import CanopenLink
+    from hil.transport import InProcessTransport
+    from support.canopen_rig import make_master
+
+    tr = InProcessTransport(pair, T)
+    link = CanopenLink(make_master(), tr)
+    try:
+        smp = link.first_sample()
+        if deaf_after_enable is not None:  # that drive's SDO server stops answering (its PDOs go on)
+            pair.nodes[deaf_after_enable - 1].on_sdo = lambda frame, t: None
+        for _ in range(cycles):
+            smp = link.exchange(Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
+        t_stop = tr.now()
+        link.close()
+    finally:
+        tr.close()
+    return link, t_stop
+
+
+def test_a_safe_stop_is_confirmed_by_reading_each_statusword_after_the_last_command(simrig):
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(11)))
+    link, t_stop = _check_and_stop(pair)
+    for k in (1, 2):
+        fin = link.final_states[f"ema{k}"]
+        assert (fin["state"], fin["confirmed"], fin["safe"]) == ("SWITCH_ON_DISABLED", True, True)
+        assert fin["seen_t_s"] > t_stop  # the read came after the stop's last command
+        assert fin["seen"] == f"read after the stop at t = {fin['seen_t_s']:.3f} s"
+    assert {n.state_machine.state for n in pair.nodes} == {State.SWITCH_ON_DISABLED}
+
+
+def test_a_confirming_read_that_times_out_leaves_the_drive_not_confirmed(simrig, actuation):
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(12)))
+    link, t_stop = _check_and_stop(pair, deaf_after_enable=2)
+    assert link.final_states["ema1"]["safe"] is True
+    fin = link.final_states["ema2"]
+    # the drive went down (its TPDO said so) but no read after the last command answered: not confirmed
+    assert pair.nodes[1].state_machine.state is State.SWITCH_ON_DISABLED
+    assert (fin["state"], fin["confirmed"], fin["safe"]) == ("SWITCH_ON_DISABLED", False, False)
+    assert fin["seen"] == (f"statusword stale since t = {fin['seen_t_s']:.3f} s (0x6041 not answered by SDO "
+                           f"within canopen.sdo_timeout_s = {actuation.canopen.sdo_timeout_s} s)")
+    from hil.runrecord import RunRecord
+
+    rec = RunRecord().with_final_states(link.final_states, None)
+    assert rec.drives_final["ema2"].unsafe_note("ema2") == (
+        f"EMA 2 (node 2) {fin['seen']}, last seen SWITCH_ON_DISABLED")
+
+
+def test_final_state_words_for_a_statusword_never_read():
+    from hil.powerup import Confirmed, final_state
+
+    never = final_state(None, None, Confirmed(problem="SDO abort 0x05040000 (SDO protocol timed out)"), False)
+    assert never == {"state": None, "seen_t_s": None, "confirmed": False, "safe": False,
+                     "seen": "statusword never read (SDO abort 0x05040000 (SDO protocol timed out))"}
+    assert final_state(None, None, None, False)["seen"] == "statusword never read"
+    assert final_state(0x0250, 1.5, None, False)["seen"] == "statusword stale since t = 1.500 s"
+    ok = final_state(0x0250, 1.5, None, True)
+    assert (ok["confirmed"], ok["safe"], ok["seen"]) == (True, True, "statusword fresh at t = 1.500 s")

@@ -340,11 +340,12 @@ def record_can_stats(meta: MetaWriter, wall: float, log, master, transport=None,
 
 
 def print_drives_final(console: Console, meta: RunRecord) -> None:
-    """Each drive's last known CiA 402 state after the check (meta.json ``drives_final``)."""
+    """Each drive's CiA 402 state after the check as it was seen (meta.json ``drives_final``)."""
     for ema, d in (meta.drives_final or {}).items():
         safe = "safe" if d.safe else "[red]NOT confirmed safe[/red]"
         how = "" if d.reachable else ", unreachable (heartbeat lost)"
-        console.print(f"EMA {ema[-1]} (node {d.node}): {d.state}, {safe}{how}")
+        state = d.state if d.state is not None else "state never read"
+        console.print(f"EMA {ema[-1]} (node {d.node}): {state}, {safe}{how}" + (f" ({d.seen})" if d.seen else ""))
 
 
 def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Console) -> int:
