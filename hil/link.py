@@ -223,14 +223,19 @@ class CanopenLink:
         return tuple(d.force_control is ForceControl.CSP for d in self.m.plan.drives)
 
     def preflight_record(self) -> dict:
-        """What meta.json records once the drives are up: the process image (PDOs, scalings as the drives
-        reported them) and how each drive is protected against the master's death (configured, drilled)."""
+        """What meta.json records of the preflight, as far as it got (also when it stopped): the process image
+        (PDOs, scalings as the drives reported them) once the drives are up, how each drive is protected against
+        the master's death (configured, drilled: every drive whose reaction was configured or refused, the
+        drill's refusal included), each EMA's identity as read (None: not read)."""
         m = self.m
-        return {"process_image": m.process_image(),
-                "master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in m.drives.values()
-                                if d.master_loss is not None},
-                "identity": {f"ema{d.ema}": ({"node": d.node_id, **d.identity} if d.identity else None)
-                             for d in m.drives.values()}}
+        pf = m.preflight
+        out = {"master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in pf.drives
+                               if d.master_loss is not None},
+               "identity": {f"ema{k}": ({"node": n, **pf.identities[n]} if pf.identities.get(n) else None)
+                            for k, n in enumerate(m.order, start=1)}}
+        if m.preflight_done:
+            out = {"process_image": m.process_image(), **out}
+        return out
 
     def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
         if self.m.fault is not None and sp1.mode is DriveMode.DISABLED and sp2.mode is DriveMode.DISABLED:

@@ -151,6 +151,8 @@ class DrillOutcome(Enum):
     NO_REACTION = "no reaction"  #: still OPERATION_ENABLED at the drill's deadline
     SKIPPED = "skipped"  #: the profile says why (canopen.skip_master_loss_drill)
     NOT_CONFIGURED = "not configured"  #: the drive has no reaction to drill (external watchdog stated)
+    #: configured, but the drill did not get to the master's silence (the preflight stopped first; ``note``: why)
+    NOT_RUN = "not run"
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,11 +184,15 @@ class DrillResult:
 
 @dataclass(frozen=True, slots=True)
 class ReactionConfig:
-    """The reaction to the master's death as written and read back (what the drive was told)."""
+    """The reaction to the master's death as written and read back (what the drive was told).
 
-    consumer_heartbeat_ms: int
-    master_node_id: int
-    abort_connection_option: int
+    ``consumer_heartbeat_ms``, ``master_node_id`` and ``abort_connection_option`` are what was written;
+    None (absent from the JSON) when nothing was written (the drive's EDS lacks the objects: ``problems``
+    names which)."""
+
+    consumer_heartbeat_ms: int | None
+    master_node_id: int | None
+    abort_connection_option: int | None
     configured: bool  #: every object written and read back as intended
     problems: tuple[str, ...] = ()
 
@@ -206,11 +212,11 @@ class MasterLossRecord:
         return bool(self.external_watchdog) or self.drill.outcome in (DrillOutcome.REACTED, DrillOutcome.SKIPPED)
 
     def as_json(self) -> dict:
-        d = self.drill
-        return {"consumer_heartbeat_ms": self.reaction.consumer_heartbeat_ms,
-                "master_node_id": self.reaction.master_node_id,
-                "abort_connection_option": self.reaction.abort_connection_option,
-                "configured": self.reaction.configured, "problems": list(self.reaction.problems),
+        d, r = self.drill, self.reaction
+        written = {k: v for k, v in (("consumer_heartbeat_ms", r.consumer_heartbeat_ms),
+                                     ("master_node_id", r.master_node_id),
+                                     ("abort_connection_option", r.abort_connection_option)) if v is not None}
+        return {**written, "configured": r.configured, "problems": list(r.problems),
                 "drill": {"outcome": d.outcome.value, "reaction_ms": d.reaction_ms, "waited_ms": d.waited_ms,
                           "state_after": d.state_after, "emcy": [f"0x{c:04X}" for c in d.emcy], "note": d.note},
                 "external_watchdog": self.external_watchdog}
@@ -508,11 +514,14 @@ class Preflight:
 
     def _reaction(self, d: DriveSetup) -> Generator:
         """Configure and read back the drive's own reaction to the master's death."""
-        spec = d.plan.node.spec
+        node, spec = d.plan.node, d.plan.node.spec
         watchdog = self.c.external_watchdog
-        if not d.plan.reaction:
-            cfg = ReactionConfig(self.consumer_ms, self.c.master_node_id, int(AbortConnectionOption.QUICK_STOP),
-                                 False, ("the drive has no 0x1016:01 / 0x6007 (its EDS)",))
+        if not d.plan.reaction:  # (the plan allows it only with an external watchdog stated)
+            lacks = [f"{object_name(st.index, st.subindex)} ({st.what})"
+                     for st in master_loss_steps(self.c.master_node_id, self.consumer_ms)
+                     if not node.can_write(st.index, st.subindex)]
+            cfg = ReactionConfig(None, None, None, False, (
+                f"its EDS has no writable {' nor '.join(lacks)}: nothing written",))
             return MasterLossRecord(cfg, DrillResult(DrillOutcome.NOT_CONFIGURED, note="external watchdog stated"),
                                     watchdog)
         problems = []
@@ -534,7 +543,8 @@ class Preflight:
                 + " (it would keep its last command if the master died; canopen.external_watchdog states another"
                 " protection of the rig)")
         drill = DrillResult(DrillOutcome.SKIPPED, note=self.c.skip_master_loss_drill) \
-            if self.c.skip_master_loss_drill else DrillResult(DrillOutcome.NOT_CONFIGURED)
+            if self.c.skip_master_loss_drill else DrillResult(DrillOutcome.NOT_RUN if not problems
+                                                              else DrillOutcome.NOT_CONFIGURED)
         return MasterLossRecord(cfg, drill, watchdog)
 
     # ------------------------------------------------------------ the drill
@@ -548,7 +558,12 @@ class Preflight:
         self.powered = list(drives)  # what a failure must bring down (see MasterCore.abort_preflight_frames)
         try:
             yield from self._drill_of(drives)
-        except PreflightError:
+        except PreflightError as exc:
+            for d in drives:  # the record says the drill did not get to the master's silence, and why
+                if d.master_loss.drill.outcome is DrillOutcome.NOT_RUN and not d.master_loss.drill.note:
+                    d.master_loss = MasterLossRecord(d.master_loss.reaction, DrillResult(
+                        DrillOutcome.NOT_RUN, note=f"stopped before the master fell silent: {exc}"),
+                        d.master_loss.external_watchdog)
             # fail closed: every drive the drill may have powered up goes to switch on disabled before the
             # error is told (a drive that does not follow is stopped by SDO when the master gives up)
             yield Heartbeat(True)
@@ -616,11 +631,12 @@ class Preflight:
             d = bad[0]
             res = d.master_loss.drill
             seen = ", ".join(f"0x{c:04X}" for c in res.emcy) or "none"
+            also = "".join(f"; {o.plan.node.spec.label}: did not react either" for o in bad[1:])
             raise MasterLossReactionError(
                 f"{d.plan.node.spec.label}: did not react to the master's death: the master was silent "
                 f"{res.waited_ms:.0f} ms (its consumer time 0x1016:01 is {self.consumer_ms} ms) and the drive stayed "
-                f"OPERATION ENABLED (EMCY seen: {seen}); the check is not started. State the rig's other protection "
-                f"in canopen.external_watchdog, or repair the drive's reaction (0x6007, 0x1029)")
+                f"OPERATION ENABLED (EMCY seen: {seen}){also}; the check is not started. State the rig's other "
+                f"protection in canopen.external_watchdog, or repair the drive's reaction (0x6007, 0x1029)")
 
     def _statusword(self, d: DriveSetup, soft: bool = False) -> Generator:
         """The drive's statusword by SDO (told to the master's view of it); with ``soft`` a timeout is returned."""

@@ -348,6 +348,17 @@ def print_drives_final(console: Console, meta: RunRecord) -> None:
         console.print(f"EMA {ema[-1]} (node {d.node}): {state}, {safe}{how}" + (f" ({d.seen})" if d.seen else ""))
 
 
+def print_master_loss(console: Console, meta: RunRecord) -> None:
+    """Each drive's reaction to the master's death as configured and as the drill saw it (meta.json
+    ``master_loss``, the refusal's included), and the external watchdog where the profile states one."""
+    from rich.markup import escape
+
+    from hil.report.shell import master_loss_text
+
+    for ema, ml in (meta.master_loss or {}).items():
+        console.print(f"EMA {ema[-1]} reaction to losing the master: {escape(master_loss_text(ml))}")
+
+
 def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Console) -> int:
     """Analyse a finished check; an aborted one gets result.json with the reason (and the
     analysis where enough data was recorded) and the console says where each drive ended."""
@@ -357,6 +368,7 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
         console.print(f"[red]aborted:[/red] {outcome.reason}")
         rec = meta.write(dataclasses.replace(rec, status=RunStatus.ABORTED, reason=rec.reason or outcome.reason))
         print_drives_final(console, rec)
+        print_master_loss(console, rec)
         try:
             result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
         except KNOWN_ERRORS as exc:
@@ -369,6 +381,7 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
             return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
         print_summary(console, result, out)
         return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
+    print_master_loss(console, rec)
     result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
     print_summary(console, result, out)
     return exit_for(result)

@@ -271,10 +271,14 @@ def master_loss_text(ml: dict) -> str:
         text += (f"; drill: reacted {drill.get('reaction_ms')} ms after the master's last heartbeat "
                  f"(to {drill.get('state_after')}, EMCY {emcy})")
     elif outcome == "no reaction":
+        emcy = ", ".join(drill.get("emcy") or []) or "none"
         text += (f"; drill: NO REACTION: still OPERATION ENABLED after {drill.get('waited_ms')} ms of the master's "
-                 f"silence")
+                 f"silence (EMCY {emcy})")
     elif outcome == "skipped":
         text += f"; drill skipped: {drill.get('note')}"
+    elif outcome == "not run":
+        why = drill.get("note") or "the preflight stopped before it"
+        text += f"; drill not run ({why})"
     else:
         text += "; not drilled"
     if ml.get("external_watchdog"):

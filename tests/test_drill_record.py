@@ -1,0 +1,105 @@
+"""The drill's outcome and the identity are always in the record (issue 36 parts 2 and 3).
+
+A dry-run refused by the master's-death drill (both drives ignore it; also the foreign drive logic that
+waits in Not ready to switch on for a controlword) keeps each drive's drill result in meta.json, in
+result.json and on the console, both drives end in Switch on disabled confirmed by a read after the stop,
+and the identity read in the preflight is recorded. A drive whose EDS has 0x1016 but no 0x6007 (an external
+watchdog stated) is told exactly that, with no field of a configuration that was not written.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+
+import pytest
+from rich.console import Console
+
+from hil.cli.check import print_master_loss
+from hil.cli.dry_run import dry_run
+from hil.master import MasterCore
+from hil.runfolder import read_record
+from hil.runrecord import RunRecord
+from sim.faults import Fault
+
+WATCHDOG = "STO of both drives dropped by the rig's watchdog relay 100 ms after the master's last heartbeat"
+
+
+def _refused(tmp_path, actuation, check_profile, simrig, faults):
+    console = Console(record=True, width=400, force_terminal=False)
+    r = dry_run(actuation, check_profile, simrig, tmp_path / "run", faults=faults, console=console)
+    return r, read_record(r.out), json.loads((r.out / "result.json").read_text()), console.export_text()
+
+
+@pytest.mark.parametrize("foreign", [False, True], ids=["ready", "not-ready-until-controlword"])
+def test_a_refused_drill_keeps_both_drives_outcome_in_every_record(tmp_path, actuation, check_profile, simrig,
+                                                                   foreign):
+    faults = [Fault("ignore_abort_connection", 1), Fault("ignore_abort_connection", 2)]
+    if foreign:
+        faults += [Fault("not_ready_until_controlword", 1), Fault("not_ready_until_controlword", 2)]
+    r, meta, res, text = _refused(tmp_path, actuation, check_profile, simrig, faults)
+    assert r.exit_code == 2 and r.injector.syncs == 0  # no check ran
+    assert "node 1 (EMA 1): did not react to the master's death" in meta.reason
+    assert "node 2 (EMA 2): did not react either" in meta.reason
+    for k in (1, 2):
+        ml = meta.master_loss[f"ema{k}"]
+        assert ml["configured"] is True and ml["consumer_heartbeat_ms"] == 125
+        drill = ml["drill"]
+        assert drill["outcome"] == "no reaction" and drill["emcy"] == ["0x8130"]
+        assert drill["waited_ms"] >= 2 * 125
+        assert res["trace"]["master_loss"][f"ema{k}"] == ml  # result.json holds the same
+        line = next(ln for ln in text.splitlines() if ln.startswith(f"EMA {k} reaction to losing the master:"))
+        assert f"NO REACTION: still OPERATION ENABLED after {drill['waited_ms']} ms" in line and "0x8130" in line
+        fin = meta.drives_final[f"ema{k}"]  # down by SDO, and read again after that
+        assert (fin.state, fin.confirmed, fin.safe) == ("SWITCH_ON_DISABLED", True, True)
+        assert re.fullmatch(r"read after the stop at t = \d+\.\d{3} s", fin.seen)
+        ident = meta.identity[f"ema{k}"]  # read in the preflight, recorded in a refused run too
+        assert ident is not None and (ident.node, ident.vendor_id) == (k, actuation.canopen.vendor_id)
+        assert res["trace"]["identity"][f"ema{k}"]["product_code"] == actuation.canopen.product_code
+    assert {n.state_machine.state.name for n in r.injector.pair.nodes} == {"SWITCH_ON_DISABLED"}
+
+
+def test_a_drive_with_0x1016_but_no_0x6007_is_told_exactly_that_and_nothing_unwritten_is_recorded(tmp_path, simrig):
+    import numpy as np
+    from test_master import Pump, _variant
+
+    from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
+
+    act, rig = _variant(tmp_path, eds_remove=[0x6007], canopen={"external_watchdog": WATCHDOG})
+    m = MasterCore(act, rig.plan)
+    p = Pump(m, make_pair(RigPlant(simrig.params, np.random.default_rng(4)), rig))
+    p.preflight()
+    js = m.drives[1].master_loss.as_json()
+    assert js["problems"] == ["its EDS has no writable 0x6007:00 (abort connection option code): nothing written"]
+    assert "0x1016" not in js["problems"][0]
+    for absent in ("consumer_heartbeat_ms", "master_node_id", "abort_connection_option"):
+        assert absent not in js
+    assert js["configured"] is False and js["drill"]["outcome"] == "not configured"
+    assert js["external_watchdog"] == WATCHDOG
+    # the console says the drill was not run and why the rig is protected all the same
+    console = Console(record=True, width=400, force_terminal=False)
+    print_master_loss(console, RunRecord(master_loss={"ema1": js}))
+    assert console.export_text().strip() == (
+        "EMA 1 reaction to losing the master: NOT configured: its EDS has no writable 0x6007:00 (abort connection "
+        f"option code): nothing written; not drilled; external watchdog stated: {WATCHDOG}")
+
+
+def test_with_an_external_watchdog_the_console_and_record_say_the_drill_saw_no_reaction(actuation, simrig):
+    import numpy as np
+    from test_master import Pump, _master
+
+    from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
+
+    act = dataclasses.replace(actuation, canopen=dataclasses.replace(actuation.canopen, external_watchdog=WATCHDOG))
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(4)))
+    pair.nodes[1].connection_lost = lambda: None
+    m = _master(act)
+    Pump(m, pair).preflight()
+    js = m.drives[2].master_loss.as_json()
+    console = Console(record=True, width=400, force_terminal=False)
+    print_master_loss(console, RunRecord(master_loss={"ema2": js}))
+    out = console.export_text()
+    assert "drill: NO REACTION: still OPERATION ENABLED" in out and f"external watchdog stated: {WATCHDOG}" in out
