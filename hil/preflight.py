@@ -222,6 +222,11 @@ class MasterLossRecord:
                 "external_watchdog": self.external_watchdog}
 
 
+def _refusal(r) -> str:
+    """An SDO read's failure in words: the abort's code and meaning, or the timeout."""
+    return f"SDO abort 0x{int(r.code):08X}, {describe(r.code)}" if isinstance(r, SdoAbortError) else "no answer"
+
+
 # ------------------------------------------------------------------ value codec
 
 
@@ -340,20 +345,28 @@ class Preflight:
         yield Nmt(NmtCommand.START)
 
     def _identify(self, node: NodePlan) -> Generator:
+        """Identity 0x1018 against the profile: :01 (mandatory, CiA 301) must answer; :02, :03, :04 are read
+        whether the EDS lists them or not (optional in CiA 301), must answer where it lists :02/:03, and a
+        sub-index the drive refuses is recorded None and not compared (the event log says so)."""
         spec = node.spec
-        ident = {}
+        ident, unread = {}, []
         for sub, key in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial")):
-            if sub == 4 and not node.can_read(0x1018, 4):
-                continue
-            v = yield from self._read(node, 0x1018, sub, key.replace("_", " "), soft=sub == 4)
-            ident[key] = None if isinstance(v, SdoAbortError) else int(v)
-        self.identities[spec.node_id] = ident
-        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] != spec.product_code:
+            soft = sub == 4 or (sub > 1 and not node.can_read(0x1018, sub))
+            v = yield from self._read(node, 0x1018, sub, key.replace("_", " "), soft=soft)
+            ident[key] = None if isinstance(v, (SdoAbortError, SdoTimeout)) else int(v)
+            if ident[key] is None and sub < 4:
+                unread.append(f"0x1018:{sub:02X} ({key.replace('_', ' ')}: {_refusal(v)})")
+            self.identities[spec.node_id] = dict(ident)  # what was read so far, also if the next read fails
+        if unread:
+            self.events.append((spec.node_id, f"identity {'; '.join(unread)} not read: not compared with the "
+                                              f"profile's {spec.key}.product_code / revision_min"))
+        hexed = {k: "not read" if v is None else f"0x{v:08X}" for k, v in ident.items()}
+        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] not in (None, spec.product_code):
             raise PreflightError(
-                f"{spec.label}: identity 0x1018 vendor 0x{ident['vendor_id']:08X} product "
-                f"0x{ident['product_code']:08X} does not match the profile ({spec.key}.vendor_id "
+                f"{spec.label}: identity 0x1018 vendor {hexed['vendor_id']} product "
+                f"{hexed['product_code']} does not match the profile ({spec.key}.vendor_id "
                 f"0x{spec.vendor_id:08X}, {spec.key}.product_code 0x{spec.product_code:08X})")
-        if ident["revision"] < spec.revision_min:
+        if ident["revision"] is not None and ident["revision"] < spec.revision_min:
             raise PreflightError(f"{spec.label}: revision 0x{ident['revision']:08X} below "
                                  f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
         self._distinct_serial(spec)

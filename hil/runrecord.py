@@ -286,13 +286,15 @@ def shared_serial(identity: Mapping | None) -> str | None:
 
 @dataclass(frozen=True)
 class Identity(_Part):
-    """A drive's identity object 0x1018 as it reported it, with its node id. ``serial`` None: the read
-    was refused; ``serial_listed`` False: its EDS has no 0x1018:04 (no ``serial`` key in the JSON)."""
+    """A drive's identity object 0x1018 as it reported it, with its node id. ``product_code``, ``revision``,
+    ``serial`` None: the read was refused or not answered (optional sub-indices, CiA 301); ``serial_listed``
+    False: no serial was asked for (a record from before issue 36 of a drive whose EDS has no 0x1018:04;
+    no ``serial`` key in the JSON)."""
 
     node: int
     vendor_id: int
-    product_code: int
-    revision: int
+    product_code: int | None
+    revision: int | None
     serial: int | None = None
     serial_listed: bool = True
 
@@ -305,7 +307,8 @@ class Identity(_Part):
 
     @classmethod
     def read(cls, f: _Fields) -> Identity:
-        return cls(*(f.get(k, "int", required=True) for k in ("node", "vendor_id", "product_code", "revision")),
+        return cls(*(f.get(k, "int", required=True) for k in ("node", "vendor_id")),
+                   *(f.get(k, "int") for k in ("product_code", "revision")),
                    serial=f.get("serial", "int"), serial_listed=f.has("serial"))
 
     @classmethod

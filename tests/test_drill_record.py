@@ -103,3 +103,85 @@ def test_with_an_external_watchdog_the_console_and_record_say_the_drill_saw_no_r
     print_master_loss(console, RunRecord(master_loss={"ema2": js}))
     out = console.export_text()
     assert "drill: NO REACTION: still OPERATION ENABLED" in out and f"external watchdog stated: {WATCHDOG}" in out
+
+
+# ------------------------------------------------------------------ identity (part 3)
+
+
+def _no_identity_subs(tmp_path, **canopen):
+    """The shipped rig with a drive EDS that lists only 0x1018:01 (CiA 301: :02, :03, :04 optional)."""
+    from hil.profiles import load_actuation
+    from hil.rig import plan_for
+    from support.eds import write_eds_variant
+    from support.profiles import write_profile_variant
+
+    tmp_path.mkdir(exist_ok=True)
+    eds = write_eds_variant(tmp_path / "drive.eds", remove_subs=[(0x1018, 2), (0x1018, 3), (0x1018, 4)])
+    text = eds.read_text()  # and its [DeviceInfo] silent on them too: nothing to compare offline
+    for name in ("ProductNumber", "RevisionNumber"):
+        text = re.sub(rf"^{name}=.*$", f"{name}=0", text, flags=re.M)
+    eds.write_text(text)
+    prof = write_profile_variant("actuation.toml", tmp_path / "actuation.toml",
+                                 {"canopen": {"eds": str(eds), **canopen}})
+    act = load_actuation(prof)
+    return act, plan_for(act, prof)  # no refusal for the optional sub-indices
+
+
+def _preflight(act, plan, pair):
+    from test_master import Pump
+
+    m = MasterCore(act, plan)
+    p = Pump(m, pair)
+    p.preflight()
+    return m, p
+
+
+def test_identity_the_eds_leaves_out_is_read_from_the_drive_and_checked(tmp_path, simrig):
+    import numpy as np
+
+    from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
+
+    act, rig = _no_identity_subs(tmp_path)
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(5)))  # drives that do have :02..:04
+    m, p = _preflight(act, rig.plan, pair)
+    assert p.sdo_reads(1)[:4] == [(0x1018, 1), (0x1018, 2), (0x1018, 3), (0x1018, 4)]
+    ident = m.preflight.identities[1]
+    assert (ident["product_code"], ident["revision"]) == (act.canopen.product_code, pair.nodes[0].read(0x1018, 3))
+    assert ident["serial"] == pair.nodes[0].read(0x1018, 4)
+    # and compared with the profile: another product code is refused, naming it
+    from hil.master import PreflightError
+
+    other, other_rig = _no_identity_subs(tmp_path / "other", product_code=0x403)
+    with pytest.raises(PreflightError, match=r"node 1 \(EMA 1\): identity 0x1018 vendor 0x00000E3A product "
+                                             r"0x00000402 does not match the profile \(canopen.vendor_id 0x00000E3A, "
+                                             r"canopen.product_code 0x00000403\)"):
+        _preflight(other, other_rig.plan, make_pair(RigPlant(simrig.params, np.random.default_rng(5))))
+
+
+def test_identity_a_drive_refuses_is_recorded_not_read_and_not_compared(tmp_path, simrig):
+    import numpy as np
+
+    from hil.runrecord import Identity
+    from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
+
+    act, rig = _no_identity_subs(tmp_path)
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(6)), rig)  # drives without :02..:04
+    m, p = _preflight(act, rig.plan, pair)
+    assert m.preflight_done
+    ident = Identity.of(1, m.preflight.identities[1])
+    assert (ident.vendor_id, ident.product_code, ident.revision, ident.serial) == (0xE3A, None, None, None)
+    assert ident.as_json() == {"node": 1, "vendor_id": 0xE3A, "product_code": None, "revision": None, "serial": None}
+    said = [e.what for e in m.drain_events() if getattr(e, "what", "").startswith("identity 0x1018:02")]
+    assert said[0] == ("identity 0x1018:02 (product code: SDO abort 0x06090011, sub-index does not exist); 0x1018:03 "
+                       "(revision: SDO abort 0x06090011, sub-index does not exist) not read: not compared with the "
+                       "profile's canopen.product_code / revision_min")
+
+
+def test_the_report_says_which_identity_was_not_read():
+    from hil.report.shell import trace_lines
+
+    html = trace_lines({"identity": {"ema1": {"node": 1, "vendor_id": 0xE3A, "product_code": None, "revision": None,
+                                               "serial": None}}})
+    assert "vendor 0x00000E3A, product not read, revision not read, serial" in html
