@@ -209,7 +209,8 @@ class CanopenLink:
         deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
         while not self.m.all_in(State.OPERATION_ENABLED):
             if self.tr.now() > deadline:
-                states = {n: d.state.name for n, d in self.m.drives.items()}
+                states = {n: d.state.name if d.last_tpdo_s is not None else "statusword never read"
+                          for n, d in self.m.drives.items()}
                 raise PreflightError(f"drives not in OPERATION_ENABLED within canopen.enable_timeout_s = "
                                      f"{self.m.act.canopen.enable_timeout_s} s: {states}")
             hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
