@@ -643,8 +643,9 @@ class MasterCore:
             d = self.drives[n]
             seen = None if d.last_tpdo_s is None else d.statusword
             fin = final_state(seen, d.last_tpdo_s, None if reads is None else reads.get(n), self._confirmed(d, t))
+            ml = d.master_loss or self.preflight.drives[k - 1].master_loss  # (as far as a stopped preflight got)
             out[f"ema{k}"] = {"node": n, **fin, "reachable": not d.lost,
-                              "master_loss": d.master_loss.as_json() if d.master_loss is not None else {},
+                              "master_loss": ml.as_json() if ml is not None else {},
                               "drive_limits": [lim.as_json() for lim in d.limits]}
         return out
 

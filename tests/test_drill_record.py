@@ -185,3 +185,26 @@ def test_the_report_says_which_identity_was_not_read():
     html = trace_lines({"identity": {"ema1": {"node": 1, "vendor_id": 0xE3A, "product_code": None, "revision": None,
                                                "serial": None}}})
     assert "vendor 0x00000E3A, product not read, revision not read, serial" in html
+
+
+def test_a_vendor_eds_listing_only_the_vendor_id_is_not_refused_and_the_drive_is_asked(tmp_path, simrig):
+    """maxon's EPOS4 file with 0x1018:02..04 taken out (as other vendors ship theirs), the example profile written
+    from docs/drives.md: planned without a refusal; its drives (simulated from that file) are asked by SDO."""
+    import numpy as np
+    from test_drive_examples import EXAMPLES, _eds
+
+    from hil.profiles import load_actuation
+    from hil.rig import plan_for
+    from sim.plant import RigPlant
+    from support.canopen_rig import make_pair
+    from support.eds import write_eds_variant
+
+    eds = write_eds_variant(tmp_path / "maxon_EPOS4.eds", source=_eds("maxon_EPOS4.eds"),
+                            remove_subs=[(0x1018, 2), (0x1018, 3), (0x1018, 4)])
+    path = EXAMPLES / "maxon_epos4.toml"
+    act = load_actuation(path)
+    rig = plan_for(act, path, eds)
+    assert not rig.plan.node("ema1").can_read(0x1018, 2)
+    m, p = _preflight(act, rig.plan, make_pair(RigPlant(simrig.params, np.random.default_rng(7)), rig))
+    assert m.preflight_done and (0x1018, 2) in p.sdo_reads(1) and (0x1018, 4) in p.sdo_reads(2)
+    assert m.preflight.identities[1]["vendor_id"] == act.canopen.vendor_id == 0xFB
