@@ -197,3 +197,24 @@ def test_final_state_words_for_a_statusword_never_read():
     assert final_state(0x0250, 1.5, None, False)["seen"] == "statusword stale since t = 1.500 s"
     ok = final_state(0x0250, 1.5, None, True)
     assert (ok["confirmed"], ok["safe"], ok["seen"]) == (True, True, "statusword fresh at t = 1.500 s")
+
+
+def test_stop_confirmation_answers_stray_frames_aborts_and_its_timeout_on_the_boundary():
+    from hil.canopen.frame import Frame
+    from hil.powerup import Confirmed, StopConfirmation
+
+    c = StopConfirmation({1: (0x6041, 0), 2: (0x6041, 0)}, timeout_s=0.5)
+    assert c.start(1.0) == [Frame(0x601, bytes.fromhex("4041600000000000")),
+                            Frame(0x602, bytes.fromhex("4041600000000000"))]
+    # the answer to a controlword written by SDO before (fire and forget) is passed over, not an error
+    assert c.on_frame(1, Frame(0x581, bytes.fromhex("6040600000000000")), 1.001) is None
+    got = c.on_frame(1, Frame(0x581, bytes.fromhex("4B41600050020000")), 1.002)
+    assert got == Confirmed(0x0250, 1.002) and not c.done
+    assert c.poll(1.0 + 0.5 - 1e-9) == [] and 2 not in c.results  # just inside the SDO timeout
+    assert c.poll(1.5) == [Frame(0x602, bytes.fromhex("8041600000000405"))]  # abort 0x05040000, timed out
+    assert c.results[2] == Confirmed(problem="0x6041 not answered by SDO within canopen.sdo_timeout_s = 0.5 s")
+    assert c.done and c.poll(9.0) == []
+    aborted = StopConfirmation({1: (0x6041, 0)}, timeout_s=0.5)
+    aborted.start(0.0)
+    res = aborted.on_frame(1, Frame(0x581, bytes.fromhex("8041600000000206")), 0.01)  # 0x06020000
+    assert res.statusword is None and res.problem.startswith("SDO abort 0x06020000 (")
