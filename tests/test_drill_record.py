@@ -208,3 +208,44 @@ def test_a_vendor_eds_listing_only_the_vendor_id_is_not_refused_and_the_drive_is
     m, p = _preflight(act, rig.plan, make_pair(RigPlant(simrig.params, np.random.default_rng(7)), rig))
     assert m.preflight_done and (0x1018, 2) in p.sdo_reads(1) and (0x1018, 4) in p.sdo_reads(2)
     assert m.preflight.identities[1]["vendor_id"] == act.canopen.vendor_id == 0xFB
+
+
+def test_the_identity_read_before_a_failing_read_is_recorded(simrig):
+    """0x1018:02 answered with an SDO abort (the EDS lists it: the preflight stops): what was read before
+    (0x1018:01) is in the preflight record, the rest null."""
+    import numpy as np
+
+    from hil.canopen.frame import Frame
+    from hil.canopen.sdo import SdoAbortError
+    from hil.link import CanopenLink
+    from hil.runrecord import Identity
+    from hil.transport import InProcessTransport
+    from sim.plant import RigPlant
+    from support.canopen_rig import make_master, make_pair
+
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(8)))
+    node = pair.nodes[0]
+    serve = node.on_sdo
+
+    def refuse_product_code(frame, t):
+        if frame.data[0] == 0x40 and bytes(frame.data[1:4]) == b"\x18\x10\x02":
+            node.outbox.append(Frame(0x581, b"\x80\x18\x10\x02" + (0x08000020).to_bytes(4, "little")))
+            return None
+        return serve(frame, t)
+
+    node.on_sdo = refuse_product_code
+    tr = InProcessTransport(pair, 0.002)
+    link = CanopenLink(make_master(), tr)
+    try:
+        with pytest.raises(SdoAbortError, match=r"0x1018:02"):
+            link.first_sample()
+        link.close()
+    finally:
+        tr.close()
+    got = link.preflight_record()["identity"]
+    assert got == {"ema1": {"node": 1, "vendor_id": 0xE3A}, "ema2": None}
+    assert Identity.of(1, {k: v for k, v in got["ema1"].items() if k != "node"}).as_json() == {
+        "node": 1, "vendor_id": 0xE3A, "product_code": None, "revision": None}
+    rec = RunRecord().with_preflight(link.preflight_record())  # as the run's record takes it when it stops
+    assert rec.identity["ema1"].vendor_id == 0xE3A and rec.identity["ema2"] is None
+    assert rec.process_image is None and rec.master_loss == {}
