@@ -58,6 +58,10 @@ def test_a_refused_drill_keeps_both_drives_outcome_in_every_record(tmp_path, act
         assert ident is not None and (ident.node, ident.vendor_id) == (k, actuation.canopen.vendor_id)
         assert res["trace"]["identity"][f"ema{k}"]["product_code"] == actuation.canopen.product_code
     assert {n.state_machine.state.name for n in r.injector.pair.nodes} == {"SWITCH_ON_DISABLED"}
+    report = (r.out / "report.html").read_text()  # nothing to analyse: the report still says what the drill saw
+    for k in (1, 2):
+        assert f"ema{k} reaction to losing the master" in report
+    assert report.count("drill: NO REACTION: still OPERATION ENABLED") == 2
 
 
 def test_a_drive_with_0x1016_but_no_0x6007_is_told_exactly_that_and_nothing_unwritten_is_recorded(tmp_path, simrig):

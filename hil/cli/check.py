@@ -377,6 +377,9 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
             if truth is not None:
                 result["truth"] = truth
             write_json_atomic(out / "result.json", result)
+            from hil.report.maint import write_stopped_report  # (the report holds what the preflight recorded)
+
+            run.write_with("report.html", lambda path: write_stopped_report(path, result))
             console.print(f"no analysis: {exc}")
             return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
         print_summary(console, result, out)
