@@ -80,6 +80,13 @@ rules must catch or handle:
 ``mode_not_confirmed``       the modes of operation display 0x6061 does not
                              follow 0x6060 (by SDO or RPDO): the drive keeps
                              running in the mode it shows
+``not_ready_until_controlword`` after power-on and every NMT reset node the
+                             drive stays in NOT_READY_TO_SWITCH_ON until it
+                             receives a controlword (any value, RPDO or SDO),
+                             then takes transition 1 to SWITCH_ON_DISABLED
+                             (like a CiA 402 slave on lely-core seen in the
+                             field); the master's power-up sends disable
+                             voltage there (hil/master/powerup.py)
 ===========================  ================================================
 
 The injector also records the plant's truth after every SYNC and every step
@@ -138,13 +145,14 @@ class FaultKind(Enum):
     STARTS_IN_FAULT = "starts_in_fault"
     FAULT_RESET_IGNORED = "fault_reset_ignored"
     MODE_NOT_CONFIRMED = "mode_not_confirmed"
+    NOT_READY_UNTIL_CONTROLWORD = "not_ready_until_controlword"
 
 
 #: Drive faults: they act from the drives' power-on, before SYNC starts (``start_s`` is the bus time
 #: since power-on).
 DRIVE_KINDS = frozenset((FaultKind.IGNORE_ABORT_CONNECTION, FaultKind.QUICK_STOP_STAYS,
                          FaultKind.STARTS_IN_FAULT, FaultKind.FAULT_RESET_IGNORED,
-                         FaultKind.MODE_NOT_CONFIRMED))
+                         FaultKind.MODE_NOT_CONFIRMED, FaultKind.NOT_READY_UNTIL_CONTROLWORD))
 #: Error code of a drive that boots into FAULT (``starts_in_fault``, ``fault_reset_ignored``).
 BOOT_FAULT_CODE = 0x5000
 
@@ -455,6 +463,8 @@ class FaultInjector:
                 node.quick_stop_stays = on
             elif kind is FaultKind.MODE_NOT_CONFIRMED:
                 node.mode_frozen = on
+            elif kind is FaultKind.NOT_READY_UNTIL_CONTROLWORD:
+                node.not_ready_until_controlword = on
             elif kind is FaultKind.STARTS_IN_FAULT:
                 node.boot_fault = int(f.param) if on else 0
             elif kind is FaultKind.FAULT_RESET_IGNORED:

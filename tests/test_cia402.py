@@ -35,7 +35,8 @@ from hil.canopen.process import DriveMode
 S = State
 C = Command
 
-# Independent copy of CiA 402 (option code 2, no transition 16): the test's known answer.
+# Independent copy of CiA 402 (IEC 61800-7-201): the test's known answer. Transition 16 (enable
+# operation in quick stop active) only with quick stop option code 5..8 (CONDITIONAL below).
 EXPECTED = {
     (S.SWITCH_ON_DISABLED, C.SHUTDOWN): (S.READY_TO_SWITCH_ON, 2),
     (S.READY_TO_SWITCH_ON, C.SWITCH_ON): (S.SWITCHED_ON, 3),
@@ -51,7 +52,11 @@ EXPECTED = {
     (S.OPERATION_ENABLED, C.QUICK_STOP): (S.QUICK_STOP_ACTIVE, 11),
     (S.QUICK_STOP_ACTIVE, C.DISABLE_VOLTAGE): (S.SWITCH_ON_DISABLED, 12),
     (S.FAULT, C.FAULT_RESET): (S.SWITCH_ON_DISABLED, 15),
+    (S.QUICK_STOP_ACTIVE, C.ENABLE_OPERATION): (S.OPERATION_ENABLED, 16),
 }
+CONDITIONAL = {(S.QUICK_STOP_ACTIVE, C.ENABLE_OPERATION)}  # 0x605A = 5..8 only
+# In not ready to switch on the drive processes no command: every one is ignored there (not refused).
+IGNORED = {(S.NOT_READY_TO_SWITCH_ON, c) for c in C}
 # Repeating the command that leads into a state is a no-op there.
 NO_OP = {
     (S.SWITCH_ON_DISABLED, C.DISABLE_VOLTAGE), (S.SWITCH_ON_DISABLED, C.QUICK_STOP),
@@ -81,11 +86,15 @@ def test_table_is_the_standard_one():
                          ids=lambda v: v.name)
 def test_every_state_and_command(state, cmd):
     m = machine_in(state)
+    if (state, cmd) in CONDITIONAL:
+        with pytest.raises(IllegalTransition, match=f"{cmd.name} not allowed in state {state.name}"):
+            m.apply(cmd)
+        m.quick_stop_stays = True
     if (state, cmd) in EXPECTED:
         new, number = EXPECTED[(state, cmd)]
         assert m.apply(cmd) is new
         assert (m.state, m.last_transition) == (new, number)
-    elif (state, cmd) in NO_OP:
+    elif (state, cmd) in NO_OP or (state, cmd) in IGNORED:
         assert m.apply(cmd) is state
         assert m.last_transition is None
     else:
@@ -220,6 +229,9 @@ def test_quick_stop_path():
     assert drive.on_controlword(0x0002) is S.QUICK_STOP_ACTIVE  # repeated while ramping
     with pytest.raises(IllegalTransition):  # transition 16 needs option code 5..8
         drive.on_controlword(0x000F)
+    staying = machine_in(S.QUICK_STOP_ACTIVE)
+    staying.quick_stop_stays = True  # 0x605A = 5..8: enable operation takes it back (transition 16)
+    assert staying.on_controlword(0x000F) is S.OPERATION_ENABLED and staying.last_transition == 16
     assert drive.quick_stop_done() is S.SWITCH_ON_DISABLED and drive.last_transition == 12
     assert drive.statusword() == 0x0250
     assert drive.on_controlword(0x0002) is S.SWITCH_ON_DISABLED  # still quick stop: no-op
@@ -275,8 +287,9 @@ def test_internal_events_only_from_their_state():
     drive = DriveStateMachine()
     with pytest.raises(IllegalTransition, match="fault reaction done"):
         drive.fault_reaction_done()
-    with pytest.raises(IllegalTransition, match="0x0006"):
-        drive.on_controlword(0x06)  # not ready to switch on accepts no command
+    # not ready to switch on processes no command: ignored (the master's disable voltage there), not refused
+    assert drive.on_controlword(0x06) is S.NOT_READY_TO_SWITCH_ON and drive.last_transition is None
+    assert drive.on_controlword(0x00) is S.NOT_READY_TO_SWITCH_ON and drive.previous_controlword == 0x00
     drive.boot_done()
     with pytest.raises(IllegalTransition, match="boot done"):
         drive.boot_done()
@@ -413,17 +426,26 @@ def test_master_table_commands_are_transitions_or_hold_the_state():
     for (goal, state), cmd in MASTER_COMMANDS.items():
         assert master_command(goal, state) is cmd, (goal, state)
         if cmd is not None:
-            assert (state, cmd) in EXPECTED or (state, cmd) in NO_OP, (goal, state, cmd)
+            assert (state, cmd) in EXPECTED or (state, cmd) in NO_OP or (state, cmd) in IGNORED, (goal, state, cmd)
+            assert (state, cmd) not in CONDITIONAL  # never transition 16
     assert {(g, s) for g in Goal for s in State if s is not S.QUICK_STOP_ACTIVE} == set(MASTER_COMMANDS)
 
 
-@pytest.mark.parametrize("goal", list(Goal), ids=lambda g: g.name)
+@pytest.mark.parametrize("goal", [g for g in Goal if g is not Goal.DISABLED], ids=lambda g: g.name)
 def test_master_in_quick_stop_active_waits_for_standstill(goal):
     """Quick stop while the drive may still move (the default: not known to stand still), disable
-    voltage (transition 12) once it stands still, whatever the goal."""
+    voltage (transition 12) once it stands still, whatever the goal but DISABLED."""
     assert master_command(goal, S.QUICK_STOP_ACTIVE) is C.QUICK_STOP
     assert master_command(goal, S.QUICK_STOP_ACTIVE, stopped=False) is C.QUICK_STOP
     assert master_command(goal, S.QUICK_STOP_ACTIVE, stopped=True) is C.DISABLE_VOLTAGE
+
+
+def test_goal_disabled_is_disable_voltage_at_once_even_in_quick_stop_active():
+    """The drill's drive at standstill (powered up by SDO): disable voltage from every state a command
+    leaves, fault reset in FAULT, nothing in fault reaction active."""
+    for state in S:
+        want = {S.FAULT: C.FAULT_RESET, S.FAULT_REACTION_ACTIVE: None}.get(state, C.DISABLE_VOLTAGE)
+        assert master_command(Goal.DISABLED, state) is want, state
 
 
 @pytest.mark.parametrize("cw,expected", [

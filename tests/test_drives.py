@@ -68,12 +68,16 @@ def test_the_default_dry_run_records_the_drill_and_reports_it(dry_run):
      "drill: reacted 126.0 ms after the master's last heartbeat (to QUICK_STOP_ACTIVE, EMCY 0x8130)"),
     ({"configured": True, "consumer_heartbeat_ms": 125, "master_node_id": 127, "abort_connection_option": 3,
       "drill": {"outcome": "no reaction", "waited_ms": 352.0}, "external_watchdog": "relay drops STO"},
-     "drill: NO REACTION: still OPERATION ENABLED after 352.0 ms of the master's silence; external watchdog stated: "
-     "relay drops STO"),
+     "drill: NO REACTION: still OPERATION ENABLED after 352.0 ms of the master's silence (EMCY none); external "
+     "watchdog stated: relay drops STO"),
     ({"configured": True, "drill": {"outcome": "skipped", "note": "bench without load"}},
      "drill skipped: bench without load"),
     ({"configured": False, "problems": [], "drill": {"outcome": "not configured"}, "external_watchdog": "relay"},
      "NOT configured: the drive has none; not drilled; external watchdog stated: relay"),
+    ({"configured": True, "drill": {"outcome": "not run", "note": "stopped before the master fell silent: x"}},
+     "; drill not run (stopped before the master fell silent: x)"),
+    ({"configured": True, "drill": {"outcome": "not run", "note": ""}},
+     "; drill not run (the preflight stopped before it)"),
 ])
 def test_the_report_says_configured_and_drilled_for_what_each_is(ml, says):
     assert says in master_loss_text(ml)

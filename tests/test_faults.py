@@ -478,6 +478,7 @@ DRIVE_CASES = [
     (Fault("quick_stop_stays", 1), None),
     (Fault("starts_in_fault", 2), None),
     (Fault("fault_reset_ignored", 1, value=3.0), None),
+    (Fault("not_ready_until_controlword", 1), None),
 ]
 _REFUSED = [c for c in DRIVE_CASES if c[1] is not None]
 _HANDLED = [c[0] for c in DRIVE_CASES if c[1] is None]

@@ -25,9 +25,12 @@ from support.canopen_rig import make_pair, shipped_rig
 #: sha256 of the CAN log below. Taken over python-can's virtual bus at ac0fd0d (e4490a08..., 4876 lines);
 #: re-taken when the preflight began to write the limits each drive keeps itself (issue 37): the frames'
 #: ids and data then differed from ac0fd0d's in those SDO exchanges only (0x607D read back, 0x6072 rounded
-#: to the safe side: 1591 per mille, not 1592; 32 lines of `diff` over id#data, the other 4852 identical)
-GOLDEN_SHA256 = "4c1a8b649d5e706eb02f00ee14ac6aab894db5c65cccc752cbc8dc8681f7853c"
-GOLDEN_LINES = 4884
+#: to the safe side: 1591 per mille, not 1592; 32 lines of `diff` over id#data, the other 4852 identical);
+#: re-taken when the safe stop began to end with each drive's statusword read again by SDO (issue 36):
+#: 4 lines added after the last SYNC cycle, at 1.408 s (0x601/0x602 upload 0x6041, both answer 0x0250,
+#: Switch on disabled), the other 4884 identical to 4c1a8b64...
+GOLDEN_SHA256 = "4c783b352cefbec50c59c6d75893cc8ac26dd9505b66a7457ae2bd6a51efce37"
+GOLDEN_LINES = 4888
 CYCLES = 600
 
 

@@ -54,8 +54,10 @@ def test_dry_run_with_two_drives_of_one_serial_stops_in_the_preflight_with_exit_
     assert meta["status"] == "aborted" and result["status"] == "aborted"
     why = "node 1 (EMA 1) and node 2 (EMA 2) both report serial number 0x5E000101"
     assert why in meta["reason"] and why in result["reason"] and why in " ".join(console.split())
-    # nothing moved: the preflight stopped before the drill and the cyclic phase
-    assert meta.get("samples", 0) == 0 and "drill" not in json.dumps(meta.get("master_loss") or {})
+    # nothing moved: the preflight stopped before the drill and the cyclic phase (EMA 1's reaction was configured:
+    # the record says its drill was not run; EMA 2 was stopped at its identity, before its reaction)
+    assert meta.get("samples", 0) == 0
+    assert {k: ml["drill"]["outcome"] for k, ml in meta["master_loss"].items()} == {"ema1": "not run"}
     # the identity read is recorded, both serials
     assert [meta["identity"][k]["serial"] for k in ("ema1", "ema2")] == [SERIAL, SERIAL]
 

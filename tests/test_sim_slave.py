@@ -925,8 +925,11 @@ def test_quick_stop_options_5_to_8_stay_until_disable_voltage(rig, option):
     node = rig.pair.nodes[0]
     held = node.setpoint
     assert held.mode is DriveMode.POSITION  # holding the angle where the quick stop began
-    rig.cycle((0x0F, 0x0F))  # enable operation: transition 16 is not in the table, refused
-    assert node.state_machine.state is State.QUICK_STOP_ACTIVE and rig.pair.stats.illegal_commands == 1
+    rig.cycle((0x0F, 0x0F))  # enable operation: transition 16 (only with these option codes)
+    assert node.state_machine.state is State.OPERATION_ENABLED and node.state_machine.last_transition == 16
+    assert rig.pair.stats.illegal_commands == 0
+    rig.cycle((0x02, 0x0F))  # quick stop again: it stays there
+    assert node.state_machine.state is State.QUICK_STOP_ACTIVE
     rig.cycle((0x00, 0x0F))  # disable voltage: transition 12
     assert status(rig.cycle((0x00, 0x0F)), 1) == SW_SOD
     assert node.setpoint.mode is DriveMode.DISABLED

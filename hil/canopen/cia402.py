@@ -22,11 +22,18 @@ Power drive state machine (transition numbers as in CiA 402)::
     any                 --13 fault-->            FAULT_REACTION_ACTIVE
     FAULT_REACTION_ACTIVE --14 reaction done-->  FAULT
     FAULT               --15 fault reset-->      SWITCH_ON_DISABLED
+    QUICK_STOP_ACTIVE   --16 enable operation--> OPERATION_ENABLED  (quick stop option code 5..8 only)
 
-Transition 16 (QUICK_STOP_ACTIVE --enable operation--> OPERATION_ENABLED)
-exists only for quick stop option codes 5..8; emacheck drives use option
-code 2 (0x605A: slow down on the quick stop ramp, then switch on disabled),
-so it is not in the table.
+Transition 16 is in the table, marked conditional (:data:`CONDITIONAL`): CiA 402 (IEC 61800-7-201)
+allows it only while the quick stop option code 0x605A is 5..8 (the drive stays in QUICK STOP ACTIVE
+after its ramp); a :class:`DriveStateMachine` takes it only with ``quick_stop_stays`` set. The
+master never uses it: :func:`path` leaves it out (after a quick stop a drive is taken down to
+SWITCH_ON_DISABLED and walked up again), and emacheck writes 0x605A = 2.
+
+In NOT_READY_TO_SWITCH_ON the drive initialises and processes no command (:data:`IGNORING`): a
+controlword received there is ignored, not refused. Some drives leave it only once a first
+controlword arrived (a CiA 402 slave on lely-core); the master sends disable voltage (0x0000) there,
+harmless in every state (:data:`MASTER_COMMANDS`).
 """
 
 from __future__ import annotations
@@ -175,7 +182,16 @@ TRANSITIONS: dict[tuple[State, Command], tuple[State, int]] = {
     (State.OPERATION_ENABLED, Command.QUICK_STOP): (State.QUICK_STOP_ACTIVE, 11),
     (State.QUICK_STOP_ACTIVE, Command.DISABLE_VOLTAGE): (State.SWITCH_ON_DISABLED, 12),
     (State.FAULT, Command.FAULT_RESET): (State.SWITCH_ON_DISABLED, 15),
+    (State.QUICK_STOP_ACTIVE, Command.ENABLE_OPERATION): (State.OPERATION_ENABLED, 16),
 }
+
+#: Transitions a drive takes only under a condition of its configuration: 16 only with the quick stop
+#: option code 0x605A = 5..8 (:attr:`DriveStateMachine.quick_stop_stays`); :func:`path` never uses them.
+CONDITIONAL = frozenset((16,))
+
+#: States in which a drive processes no command (CiA 402: initialisation): a controlword there leaves
+#: the state as it is, it is not refused.
+IGNORING = frozenset((State.NOT_READY_TO_SWITCH_ON,))
 
 #: Commands that lead into a state: receiving one of them again in that state
 #: is a no-op (the master repeats the controlword every SYNC cycle).
@@ -284,8 +300,12 @@ def state_word(state: State, *, extra: Statusword | int = 0) -> int:
     return _STATE_WORD[State(state)] | x
 
 
-def _targets(state: State, cmd: Command) -> tuple[State, int] | None:
-    return TRANSITIONS.get((state, cmd))
+def _targets(state: State, cmd: Command, conditional: bool = False) -> tuple[State, int] | None:
+    """The transition of ``cmd`` in ``state``; a :data:`CONDITIONAL` one only with ``conditional``."""
+    hit = TRANSITIONS.get((state, cmd))
+    if hit is not None and hit[1] in CONDITIONAL and not conditional:
+        return None
+    return hit
 
 
 class DriveStateMachine:
@@ -304,6 +324,9 @@ class DriveStateMachine:
         CiA 402 number of the last transition taken.
     error_code : int
         The fault's error code (0x603F), 0 when no fault is latched.
+    quick_stop_stays : bool
+        The quick stop option code keeps the drive in QUICK_STOP_ACTIVE (0x605A = 5..8): enable
+        operation there is transition 16 (else refused).
     """
 
     def __init__(self, *, remote: bool = True) -> None:
@@ -311,6 +334,7 @@ class DriveStateMachine:
         self.last_transition: int | None = None
         self.error_code = 0
         self.remote = bool(remote)
+        self.quick_stop_stays = False
         self._previous_cw = 0
 
     @property
@@ -329,7 +353,8 @@ class DriveStateMachine:
         return IllegalTransition(f"{what} not allowed in state {self.state.name}")
 
     def apply(self, cmd: Command) -> State:
-        """Apply a command; a command leading into the current state is a no-op.
+        """Apply a command; a command leading into the current state is a no-op, and so is any
+        command in a state that processes none (:data:`IGNORING`).
 
         Raises
         ------
@@ -337,7 +362,9 @@ class DriveStateMachine:
             The command is neither a transition nor a no-op in this state.
         """
         cmd = Command(cmd)
-        hit = _targets(self.state, cmd)
+        if self.state in IGNORING:
+            return self.state
+        hit = _targets(self.state, cmd, self.quick_stop_stays)
         if hit is not None:
             return self._go(*hit)
         if cmd in HOLDING_COMMANDS[self.state]:
@@ -354,7 +381,9 @@ class DriveStateMachine:
         but FAULT, like any other command not allowed there. The combined
         "switch on + enable operation" (0x000F in READY_TO_SWITCH_ON,
         transitions 3 + 4) is not accepted: the master sends the steps of
-        :func:`path` one by one.
+        :func:`path` one by one. In NOT_READY_TO_SWITCH_ON every controlword is ignored
+        (:data:`IGNORING`); enable operation in QUICK_STOP_ACTIVE is transition 16 only with
+        :attr:`quick_stop_stays`.
 
         Raises
         ------
@@ -365,13 +394,13 @@ class DriveStateMachine:
         w = _word("cw", cw)
         previous, self._previous_cw = self._previous_cw, w
         cmd = decode_command(w, previous)
-        if cmd is None:
+        if cmd is None or self.state in IGNORING:
             return self.state
         candidates = [cmd]
         if cmd is Command.SWITCH_ON:
             candidates.append(Command.DISABLE_OPERATION)
         for c in candidates:
-            hit = _targets(self.state, c)
+            hit = _targets(self.state, c, self.quick_stop_stays)
             if hit is not None:
                 return self._go(*hit)
         for c in candidates:
@@ -419,8 +448,8 @@ class DriveStateMachine:
 def path(from_state: State, to: State) -> list[Command]:
     """Shortest list of commands that takes a drive from ``from_state`` to ``to``.
 
-    Breadth-first search over :data:`TRANSITIONS`; ties are broken by the
-    order of :class:`Command`. ``path(s, s) == []``.
+    Breadth-first search over :data:`TRANSITIONS` without the :data:`CONDITIONAL` ones (transition 16
+    depends on the drive's 0x605A); ties are broken by the order of :class:`Command`. ``path(s, s) == []``.
 
     Raises
     ------
@@ -437,7 +466,7 @@ def path(from_state: State, to: State) -> list[Command]:
     while queue:
         s = queue.popleft()
         for cmd in Command:
-            hit = TRANSITIONS.get((s, cmd))
+            hit = _targets(s, cmd)
             if hit is None or hit[0] in seen:
                 continue
             nxt = hit[0]
@@ -456,7 +485,7 @@ def path(from_state: State, to: State) -> list[Command]:
 
 _WAIT_STATES = frozenset(
     s for s in State if not any(src is s for (src, _) in TRANSITIONS)
-)  # NOT_READY_TO_SWITCH_ON, FAULT_REACTION_ACTIVE: only an internal event leaves them
+)  # NOT_READY_TO_SWITCH_ON, FAULT_REACTION_ACTIVE: only an internal event leaves them (no command does)
 
 
 def next_command(current: State, target: State) -> Command | None:
@@ -486,6 +515,9 @@ class Goal(Enum):
     ENABLED = "enabled"  #: power up to OPERATION_ENABLED and hold it there
     ORDERLY_DOWN = "orderly down"  #: disable operation, shutdown, disable voltage (a finished check)
     QUICK_STOP = "quick stop"  #: quick stop, then disable voltage (an abort)
+    #: disable voltage from any state at once (transitions 7, 9, 10, 12): a drive at standstill holding
+    #: its position, powered up by SDO for the master's-death drill
+    DISABLED = "disabled"
 
 
 #: The state a drive is confirmed safe in: the power stage off and no command to move accepted
@@ -499,22 +531,29 @@ _QSA = State.QUICK_STOP_ACTIVE
 #: THE master's table: (goal, state) -> the command to send in that state (None: send nothing new,
 #: wait for the drive's own transition). QUICK_STOP_ACTIVE is resolved by :func:`master_command`
 #: (quick stop until the drive stands still, then disable voltage, transition 12); FAULT is a fault
-#: reset (transition 15), which the master repeats a bounded number of times.
+#: reset (transition 15), which the master repeats a bounded number of times. NOT_READY_TO_SWITCH_ON:
+#: disable voltage (0x0000), ignored there by a drive that initialises (:data:`IGNORING`), the first
+#: controlword a drive may wait for before it takes transition 1; the master waits, bounded.
 MASTER_COMMANDS: dict[tuple[Goal, State], Command | None] = {
     **{(Goal.ENABLED, s): c for s, c in (
-        (State.NOT_READY_TO_SWITCH_ON, None), (State.SWITCH_ON_DISABLED, Command.SHUTDOWN),
+        (State.NOT_READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCH_ON_DISABLED, Command.SHUTDOWN),
         (State.READY_TO_SWITCH_ON, Command.SWITCH_ON), (State.SWITCHED_ON, Command.ENABLE_OPERATION),
         (State.OPERATION_ENABLED, Command.ENABLE_OPERATION), (State.FAULT_REACTION_ACTIVE, None),
         (State.FAULT, Command.FAULT_RESET))},
     **{(Goal.ORDERLY_DOWN, s): c for s, c in (
-        (State.NOT_READY_TO_SWITCH_ON, None), (State.SWITCH_ON_DISABLED, Command.DISABLE_VOLTAGE),
+        (State.NOT_READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCH_ON_DISABLED, Command.DISABLE_VOLTAGE),
         (State.READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCHED_ON, Command.SHUTDOWN),
         (State.OPERATION_ENABLED, Command.DISABLE_OPERATION), (State.FAULT_REACTION_ACTIVE, None),
         (State.FAULT, Command.FAULT_RESET))},
     **{(Goal.QUICK_STOP, s): c for s, c in (
-        (State.NOT_READY_TO_SWITCH_ON, None), (State.SWITCH_ON_DISABLED, Command.DISABLE_VOLTAGE),
+        (State.NOT_READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCH_ON_DISABLED, Command.DISABLE_VOLTAGE),
         (State.READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCHED_ON, Command.DISABLE_VOLTAGE),
         (State.OPERATION_ENABLED, Command.QUICK_STOP), (State.FAULT_REACTION_ACTIVE, None),
+        (State.FAULT, Command.FAULT_RESET))},
+    **{(Goal.DISABLED, s): c for s, c in (
+        (State.NOT_READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCH_ON_DISABLED, Command.DISABLE_VOLTAGE),
+        (State.READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE), (State.SWITCHED_ON, Command.DISABLE_VOLTAGE),
+        (State.OPERATION_ENABLED, Command.DISABLE_VOLTAGE), (State.FAULT_REACTION_ACTIVE, None),
         (State.FAULT, Command.FAULT_RESET))},
 }
 
@@ -534,13 +573,14 @@ def master_command(goal: Goal, state: State, *, stopped: bool = False) -> Comman
     -------
     Command or None
         From :data:`MASTER_COMMANDS`; in QUICK_STOP_ACTIVE quick stop while the drive
-        still moves and disable voltage (transition 12) once it stands still, for every goal:
-        a drive whose quick stop option code keeps it there (0x605A = 5..8) is still taken to
-        SWITCH_ON_DISABLED. Every command returned is a transition of :data:`TRANSITIONS` or
-        holds the state (a test checks the table against it).
+        still moves and disable voltage (transition 12) once it stands still, for every goal
+        but DISABLED (disable voltage at once): a drive whose quick stop option code keeps it
+        there (0x605A = 5..8) is still taken to SWITCH_ON_DISABLED (never transition 16).
+        Every command returned is a transition of :data:`TRANSITIONS`, holds the state or is
+        sent in a state that ignores commands (a test checks the table against it).
     """
     if state is _QSA:
-        return Command.DISABLE_VOLTAGE if stopped else Command.QUICK_STOP
+        return Command.DISABLE_VOLTAGE if stopped or goal is Goal.DISABLED else Command.QUICK_STOP
     # (the members themselves as they are, anything else through its Enum: the master's hot path)
     return MASTER_COMMANDS[(goal if goal.__class__ is Goal else Goal(goal),
                             state if state.__class__ is State else State(state))]

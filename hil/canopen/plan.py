@@ -364,8 +364,8 @@ class _Planner:
         eds = self.eds[node.name]
         key = f"{node.key}.eds"
         self._require(node, 0x1000, 0, "device type", key)
-        for sub, what in ((1, "vendor-ID"), (2, "product code"), (3, "revision number")):
-            self._require(node, 0x1018, sub, what, key)
+        # 0x1018:02..04 are optional (CiA 301): the preflight reads them from the node where the EDS is silent
+        self._require(node, 0x1018, 1, "vendor-ID", key)
         self._require(node, 0x1017, 0, "producer heartbeat time", key, write=True,
                       why="the master sets and watches every node's heartbeat")
         devtype = eds.default(0x1000, 0)

@@ -94,12 +94,12 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
     sp1 = sp2 = DISABLED
     smp: Sample | None = None
     t_start = 0.0
+    record = getattr(link, "preflight_record", None)
     try:
         smp = link.first_sample()
         t_start = smp.t_s
         # the freshness limit from what the drives were confirmed to keep (hil.check.staleness)
         sup.drives_keep(getattr(link, "kept_limits", None))
-        record = getattr(link, "preflight_record", None)
         if record is not None:  # the layout, the scalings the drives reported, the drill: on disk now
             rec = meta.post(rec.with_preflight(record()))
         faults0 = _page_faults()
@@ -158,6 +158,11 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
                 secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
             rec, note = _record_safe_state(link, rec)
             secondary += note
+            if record is not None and rec.master_loss is None:  # the preflight stopped: what it got to, the drill's
+                try:                                            # outcome and the identities read included
+                    rec = rec.with_preflight(record())
+                except Exception as exc5:
+                    secondary += f"; while recording the preflight: {type(exc5).__name__}: {exc5}"
             try:
                 meta.close_disk()
             except OSError as exc4:

@@ -348,11 +348,23 @@ def record_can_stats(meta: MetaWriter, wall: float, log, master, transport=None,
 
 
 def print_drives_final(console: Console, meta: RunRecord) -> None:
-    """Each drive's last known CiA 402 state after the check (meta.json ``drives_final``)."""
+    """Each drive's CiA 402 state after the check as it was seen (meta.json ``drives_final``)."""
     for ema, d in (meta.drives_final or {}).items():
         safe = "safe" if d.safe else "[red]NOT confirmed safe[/red]"
         how = "" if d.reachable else ", unreachable (heartbeat lost)"
-        console.print(f"EMA {ema[-1]} (node {d.node}): {d.state}, {safe}{how}")
+        state = d.state if d.state is not None else "state never read"
+        console.print(f"EMA {ema[-1]} (node {d.node}): {state}, {safe}{how}" + (f" ({d.seen})" if d.seen else ""))
+
+
+def print_master_loss(console: Console, meta: RunRecord) -> None:
+    """Each drive's reaction to the master's death as configured and as the drill saw it (meta.json
+    ``master_loss``, the refusal's included), and the external watchdog where the profile states one."""
+    from rich.markup import escape
+
+    from hil.report.shell import master_loss_text
+
+    for ema, ml in (meta.master_loss or {}).items():
+        console.print(f"EMA {ema[-1]} reaction to losing the master: {escape(master_loss_text(ml))}")
 
 
 def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Console) -> int:
@@ -364,6 +376,7 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
         console.print(f"[red]aborted:[/red] {outcome.reason}")
         rec = meta.write(dataclasses.replace(rec, status=RunStatus.ABORTED, reason=rec.reason or outcome.reason))
         print_drives_final(console, rec)
+        print_master_loss(console, rec)
         try:
             result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
         except KNOWN_ERRORS as exc:
@@ -372,10 +385,14 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
             if truth is not None:
                 result["truth"] = truth
             write_json_atomic(out / "result.json", result)
+            from hil.report.maint import write_stopped_report  # (the report holds what the preflight recorded)
+
+            run.write_with("report.html", lambda path: write_stopped_report(path, result))
             console.print(f"no analysis: {exc}")
             return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
         print_summary(console, result, out)
         return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
+    print_master_loss(console, rec)
     result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
     print_summary(console, result, out)
     return exit_for(result)

@@ -36,8 +36,7 @@ from __future__ import annotations
 import struct
 from collections import deque
 from collections.abc import Generator
-from dataclasses import dataclass, field, replace
-from enum import Enum
+from dataclasses import replace
 
 from hil.canopen.cia402 import (
     SAFE_STATES,
@@ -71,11 +70,11 @@ from hil.canopen.signalmap import ForceControl, NodeRole, ScaleSource, Signal
 from hil.errors import EmacheckError
 from hil.master import events as event
 from hil.master.events import DriveFault, HeartbeatLost, MasterEvent
+from hil.master.powerup import StopConfirmation, final_state
 from hil.master.preflight import (
     Heartbeat,
     LastHeartbeat,
     MasterLossReactionError,
-    MasterLossRecord,
     Nmt,
     Now,
     Preflight,
@@ -85,62 +84,11 @@ from hil.master.preflight import (
     Wait,
     WaitBoot,
 )
+from hil.master.views import RESET_WAIT_CYCLES, STILL_MM, DriveView, NodeView, Phase
 from hil.profile.config import Actuation
 
 __all__ = ["DriveFault", "DriveView", "HeartbeatLost", "MasterCore", "MasterEvent",
            "MasterLossReactionError", "NodeView", "Phase", "PreflightError", "SAFE_STATES"]
-
-
-class Phase(Enum):
-    IDLE = "idle"
-    PREFLIGHT = "preflight"
-    CYCLIC = "cyclic"
-    FAILED = "failed"
-
-
-@dataclass
-class NodeView:
-    """What the master knows of one node (mutable, owned by the core)."""
-
-    node_id: int
-    label: str
-    last_heartbeat_s: float | None = None
-    nmt_state: int | None = None
-    booted: bool = False
-    lost: bool = False  #: heartbeat lost (the consumer fired for this node)
-    hb_timeout_s: float = 0.15
-    identity: dict = field(default_factory=dict)
-
-
-@dataclass
-class DriveView(NodeView):
-    """What the master knows of one EMA's drive."""
-
-    ema: int = 0
-    force_control: ForceControl = ForceControl.CST
-    rated_torque_Nm: float | None = None
-    state: State = State.NOT_READY_TO_SWITCH_ON
-    statusword: int = 0
-    mode_display: int = 0
-    mode_sent: int | None = None
-    #: (mode, last cycle by which 0x6061 must show it) of a mode change not yet confirmed
-    mode_pending: tuple[int, int] | None = None
-    last_tpdo_s: float | None = None  #: time of the last statusword seen in the cyclic phase
-    last_cw: int = 0
-    fault_resets: int = 0  #: fault resets sent in a row (bounded by canopen.fault_reset_attempts)
-    reset_wait: int = 0  #: cycles left to wait for the last fault reset to take
-    still: deque = field(default_factory=lambda: deque(maxlen=_STILL_CYCLES))  #: angles in QUICK STOP ACTIVE
-    #: how this drive is protected against the master's death (set by the preflight)
-    master_loss: MasterLossRecord | None = None
-    limits: tuple = ()  #: the limits it keeps itself or the master only (hil.canopen.drivelimits.DriveLimit)
-
-
-#: QUICK STOP ACTIVE: the drive stands still when its motor angle moved less than this over the last
-#: :data:`_STILL_CYCLES` SYNC cycles [mm of ram stroke] (0.5 mm/s at 2 ms)
-_STILL_MM = 0.01
-_STILL_CYCLES = 10
-#: SYNC cycles a fault reset is given to take before the next is tried
-_RESET_WAIT_CYCLES = 10
 
 
 class MasterCore:
@@ -209,7 +157,8 @@ class MasterCore:
         self._own = frozenset([p.cob_id for p in plan.rx_pdos] + [SDO_TX_COB_ID_BASE + n for n in self.nodes])
         self._mode_cycles = max(1, int(c.mode_change_timeout_s / self.T + 0.5))
         self._enabled_once = False  #: both drives were in OPERATION_ENABLED: a FAULT now is a fault of the check
-        self._still_rad = _STILL_MM * self.i_total
+        self._still_rad = STILL_MM * self.i_total
+        self.confirmation: StopConfirmation | None = None  #: the reads after a safe stop (:meth:`confirm_frames`)
 
     # ---------------------------------------------------------------- events
 
@@ -396,6 +345,11 @@ class MasterCore:
             return []
 
     def _on_sdo(self, node: int, frame: Frame, t: float) -> list[Frame]:
+        if self.confirmation is not None:
+            got = self.confirmation.on_frame(node, frame, t)
+            if got is not None and got.statusword is not None:
+                self._sdo_status(node, got.statusword, t)
+            return []
         if self.phase is not Phase.PREFLIGHT:
             return []
         try:
@@ -462,6 +416,8 @@ class MasterCore:
         return out
 
     def _poll(self, t: float) -> list[Frame]:
+        if self.confirmation is not None:
+            return self.confirmation.poll(t)
         if self.phase is Phase.PREFLIGHT:
             if isinstance(self._pending, WaitBoot) and t > self._boot_deadline:
                 missing = [v.label for v in self.nodes.values() if not v.booted]
@@ -544,14 +500,14 @@ class MasterCore:
         return self.drives[self.order[ema - 1]].state
 
     def _stopped(self, d: DriveView, phi: float) -> bool:
-        """The drive stands still (QUICK STOP ACTIVE): its angle moved less than :data:`_STILL_MM` of
-        stroke over the last :data:`_STILL_CYCLES` cycles."""
+        """The drive stands still (QUICK STOP ACTIVE): its angle moved less than :data:`STILL_MM` of
+        stroke over the last :data:`STILL_CYCLES` cycles."""
         d.still.append(phi)
         return len(d.still) == d.still.maxlen and max(d.still) - min(d.still) < self._still_rad
 
     def _command(self, d: DriveView, goal: Goal, phi: float) -> int:
         """The controlword for ``d`` on its way to ``goal`` (:func:`~hil.canopen.cia402.master_command`),
-        with bounded fault resets (a rising edge of bit 7 every :data:`_RESET_WAIT_CYCLES` cycles)."""
+        with bounded fault resets (a rising edge of bit 7 every :data:`RESET_WAIT_CYCLES` cycles)."""
         if d.state is not State.QUICK_STOP_ACTIVE:
             d.still.clear()
         cmd = master_command(goal, d.state, stopped=self._stopped(d, phi) if d.state is State.QUICK_STOP_ACTIVE
@@ -570,7 +526,7 @@ class MasterCore:
                                           f"(canopen.fault_reset_attempts){code}"), 0.0, d.node_id)
                 return 0
             d.fault_resets += 1
-            d.reset_wait = _RESET_WAIT_CYCLES
+            d.reset_wait = RESET_WAIT_CYCLES
         return 0 if cmd is None else controlword(cmd)
 
     def setpoint_frames(self, sp1: Setpoint, sp2: Setpoint, sample: Sample) -> list[Frame]:
@@ -666,17 +622,29 @@ class MasterCore:
         return all(d.state in SAFE_STATES and self._confirmed(d, t)
                    for n, d in self.drives.items() if n not in gone)
 
+    def confirm_frames(self, t: float) -> list[Frame]:
+        """After the last command of a safe stop: each drive's statusword read again by SDO
+        (:class:`hil.master.powerup.StopConfirmation`, bounded by ``canopen.sdo_timeout_s``); from now on the
+        master takes only these answers. :attr:`confirmation` ``.done`` once each ended."""
+        objs = {n: (e.index, e.subindex) for n, d in self.drives.items()
+                for e in (self.plan.map.entry(d.ema, Signal.STATUSWORD),)}
+        self.confirmation = StopConfirmation(objs, self.act.canopen.sdo_timeout_s)
+        return self.confirmation.start(t)
+
     def safe_state_report(self, t: float) -> dict:
-        """Per EMA: the drive's last known state, whether it could be reached (heartbeat), whether
-        that state is confirmed by a fresh statusword, whether it is the safe state, and how it is
-        protected against the master's death."""
+        """Per EMA: the drive's last state seen and when, whether it could be reached (heartbeat), whether
+        that state is confirmed (read after the safe stop's last command, :meth:`confirm_frames`; without
+        that read: a fresh statusword), in words (:func:`hil.master.powerup.final_state`), whether it is the safe
+        state, and how it is protected against the master's death."""
         out = {}
+        reads = self.confirmation.results if self.confirmation is not None else None
         for k, n in enumerate(self.order, start=1):
             d = self.drives[n]
-            ok = self._confirmed(d, t)
-            out[f"ema{k}"] = {"node": n, "state": d.state.name, "reachable": not d.lost, "confirmed": ok,
-                              "safe": ok and d.state in SAFE_STATES,
-                              "master_loss": d.master_loss.as_json() if d.master_loss is not None else {},
+            seen = None if d.last_tpdo_s is None else d.statusword
+            fin = final_state(seen, d.last_tpdo_s, None if reads is None else reads.get(n), self._confirmed(d, t))
+            ml = d.master_loss or self.preflight.drives[k - 1].master_loss  # (as far as a stopped preflight got)
+            out[f"ema{k}"] = {"node": n, **fin, "reachable": not d.lost,
+                              "master_loss": ml.as_json() if ml is not None else {},
                               "drive_limits": [lim.as_json() for lim in d.limits]}
         return out
 

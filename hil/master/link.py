@@ -288,7 +288,8 @@ class CanopenLink:
         deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
         while not self.m.all_in(State.OPERATION_ENABLED):
             if self.tr.now() > deadline:
-                states = {n: d.state.name for n, d in self.m.drives.items()}
+                states = {n: d.state.name if d.last_tpdo_s is not None else "statusword never read"
+                          for n, d in self.m.drives.items()}
                 raise PreflightError(f"drives not in OPERATION_ENABLED within canopen.enable_timeout_s = "
                                      f"{self.m.act.canopen.enable_timeout_s} s: {states}")
             hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
@@ -302,14 +303,19 @@ class CanopenLink:
         return tuple(d.force_control is ForceControl.CSP for d in self.m.plan.drives)
 
     def preflight_record(self) -> dict:
-        """What meta.json records once the drives are up: the process image (PDOs, scalings as the drives
-        reported them) and how each drive is protected against the master's death (configured, drilled)."""
+        """What meta.json records of the preflight, as far as it got (also when it stopped): the process image
+        (PDOs, scalings as the drives reported them) once the drives are up, how each drive is protected against
+        the master's death (configured, drilled: every drive whose reaction was configured or refused, the
+        drill's refusal included), each EMA's identity as read (None: not read)."""
         m = self.m
-        return {"process_image": m.process_image(),
-                "master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in m.drives.values()
-                                if d.master_loss is not None},
-                "identity": {f"ema{d.ema}": ({"node": d.node_id, **d.identity} if d.identity else None)
-                             for d in m.drives.values()}}
+        pf = m.preflight
+        out = {"master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in pf.drives
+                               if d.master_loss is not None},
+               "identity": {f"ema{k}": ({"node": n, **pf.identities[n]} if pf.identities.get(n) else None)
+                            for k, n in enumerate(m.order, start=1)}}
+        if m.preflight_done:
+            out = {"process_image": m.process_image(), **out}
+        return out
 
     def exchange(self, sp1: Setpoint, sp2: Setpoint) -> Sample:
         stop = sp1.mode is DriveMode.DISABLED and sp2.mode is DriveMode.DISABLED
@@ -401,13 +407,25 @@ class CanopenLink:
             return f"safety.max_stale_ms: the stall the master tolerates is {self.max_lag_s * 1e3:g} ms ({st.why})"
         return f"safety.max_lag_s = {self.max_lag_s * 1e3:g} ms"
 
+    def _confirm_stop(self) -> None:
+        """After the last command of the safe stop: each drive's statusword read again by SDO
+        (:meth:`MasterCore.confirm_frames <hil.master.core.MasterCore.confirm_frames>`), until every read
+        ended (answered, aborted, or timed out after ``canopen.sdo_timeout_s``; bounded here once more)."""
+        t0 = self.tr.now()
+        self._send(self.m.confirm_frames(t0))
+        limit = t0 + 2.0 * self.m.act.canopen.sdo_timeout_s + 0.05
+        while not self.m.confirmation.done and self.tr.now() < limit:
+            self._feed(self.tr.receive(self.tr.now() + 0.01))
+            self._send(self.m.poll(self.tr.now()))
+
     def close(self) -> None:
         """Bring both drives down to the safe state, stop SYNC, NMT pre-operational, close the log.
 
         Orderly (disable operation, shutdown, disable voltage) after a finished check, quick stop
         then disable after an abort. A drive that cannot be reached (heartbeat lost, no statusword)
         does not hold up the other. Every step runs even if an earlier one fails; the first error
-        is re-raised at the end. :attr:`final_states` then holds each drive's last known state.
+        is re-raised at the end. Then each drive's state is read again by SDO (:meth:`_confirm_stop`):
+        :attr:`final_states` holds what was seen, confirmed only by that read.
         """
         if self._closed:
             return
@@ -431,6 +449,10 @@ class CanopenLink:
                 self._feed(self.tr.receive(self.tr.now()))
             except BaseException as exc:
                 errors.append(exc)
+        try:
+            self._confirm_stop()
+        except BaseException as exc:
+            errors.append(exc)
         self.final_states = self.m.safe_state_report(self.tr.now())
         self.close_errors = [f"{type(e).__name__}: {e}" for e in errors]
         for step in (self.tr.stop_sync,

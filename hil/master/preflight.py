@@ -45,7 +45,7 @@ from enum import Enum
 
 from canopen.objectdictionary import datatypes as dt
 
-from hil.canopen.cia402 import Command, OperationMode, State, controlword, decode_state, next_command
+from hil.canopen.cia402 import Goal, OperationMode, State, decode_state
 from hil.canopen.drivelimits import KEPT_BY_DRIVE, DriveLimit, LimitKind
 from hil.canopen.nmt import NmtCommand
 from hil.canopen.od import QUICK_STOP_OPTION, AbortConnectionOption, master_loss_steps
@@ -63,6 +63,7 @@ from hil.canopen.signalmap import (
 )
 from hil.errors import EmacheckError
 from hil.master.limits_setup import limit_targets, limits_for, readback_problem
+from hil.master.powerup import PowerWalk
 from hil.profile.config import Actuation, Safety
 
 __all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
@@ -150,6 +151,8 @@ class DrillOutcome(Enum):
     NO_REACTION = "no reaction"  #: still OPERATION_ENABLED at the drill's deadline
     SKIPPED = "skipped"  #: the profile says why (canopen.skip_master_loss_drill)
     NOT_CONFIGURED = "not configured"  #: the drive has no reaction to drill (external watchdog stated)
+    #: configured, but the drill did not get to the master's silence (the preflight stopped first; ``note``: why)
+    NOT_RUN = "not run"
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,11 +184,15 @@ class DrillResult:
 
 @dataclass(frozen=True, slots=True)
 class ReactionConfig:
-    """The reaction to the master's death as written and read back (what the drive was told)."""
+    """The reaction to the master's death as written and read back (what the drive was told).
 
-    consumer_heartbeat_ms: int
-    master_node_id: int
-    abort_connection_option: int
+    ``consumer_heartbeat_ms``, ``master_node_id`` and ``abort_connection_option`` are what was written;
+    None (absent from the JSON) when nothing was written (the drive's EDS lacks the objects: ``problems``
+    names which)."""
+
+    consumer_heartbeat_ms: int | None
+    master_node_id: int | None
+    abort_connection_option: int | None
     configured: bool  #: every object written and read back as intended
     problems: tuple[str, ...] = ()
 
@@ -205,14 +212,19 @@ class MasterLossRecord:
         return bool(self.external_watchdog) or self.drill.outcome in (DrillOutcome.REACTED, DrillOutcome.SKIPPED)
 
     def as_json(self) -> dict:
-        d = self.drill
-        return {"consumer_heartbeat_ms": self.reaction.consumer_heartbeat_ms,
-                "master_node_id": self.reaction.master_node_id,
-                "abort_connection_option": self.reaction.abort_connection_option,
-                "configured": self.reaction.configured, "problems": list(self.reaction.problems),
+        d, r = self.drill, self.reaction
+        written = {k: v for k, v in (("consumer_heartbeat_ms", r.consumer_heartbeat_ms),
+                                     ("master_node_id", r.master_node_id),
+                                     ("abort_connection_option", r.abort_connection_option)) if v is not None}
+        return {**written, "configured": r.configured, "problems": list(r.problems),
                 "drill": {"outcome": d.outcome.value, "reaction_ms": d.reaction_ms, "waited_ms": d.waited_ms,
                           "state_after": d.state_after, "emcy": [f"0x{c:04X}" for c in d.emcy], "note": d.note},
                 "external_watchdog": self.external_watchdog}
+
+
+def _refusal(r) -> str:
+    """An SDO read's failure in words: the abort's code and meaning, or the timeout."""
+    return f"SDO abort 0x{int(r.code):08X}, {describe(r.code)}" if isinstance(r, SdoAbortError) else "no answer"
 
 
 # ------------------------------------------------------------------ value codec
@@ -333,20 +345,28 @@ class Preflight:
         yield Nmt(NmtCommand.START)
 
     def _identify(self, node: NodePlan) -> Generator:
+        """Identity 0x1018 against the profile: :01 (mandatory, CiA 301) must answer; :02, :03, :04 are read
+        whether the EDS lists them or not (optional in CiA 301), must answer where it lists :02/:03, and a
+        sub-index the drive refuses is recorded None and not compared (the event log says so)."""
         spec = node.spec
-        ident = {}
+        ident, unread = {}, []
         for sub, key in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial")):
-            if sub == 4 and not node.can_read(0x1018, 4):
-                continue
-            v = yield from self._read(node, 0x1018, sub, key.replace("_", " "), soft=sub == 4)
-            ident[key] = None if isinstance(v, SdoAbortError) else int(v)
-        self.identities[spec.node_id] = ident
-        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] != spec.product_code:
+            soft = sub == 4 or (sub > 1 and not node.can_read(0x1018, sub))
+            v = yield from self._read(node, 0x1018, sub, key.replace("_", " "), soft=soft)
+            ident[key] = None if isinstance(v, (SdoAbortError, SdoTimeout)) else int(v)
+            if ident[key] is None and sub < 4:
+                unread.append(f"0x1018:{sub:02X} ({key.replace('_', ' ')}: {_refusal(v)})")
+            self.identities[spec.node_id] = dict(ident)  # what was read so far, also if the next read fails
+        if unread:
+            self.events.append((spec.node_id, f"identity {'; '.join(unread)} not read: not compared with the "
+                                              f"profile's {spec.key}.product_code / revision_min"))
+        hexed = {k: "not read" if v is None else f"0x{v:08X}" for k, v in ident.items()}
+        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] not in (None, spec.product_code):
             raise PreflightError(
-                f"{spec.label}: identity 0x1018 vendor 0x{ident['vendor_id']:08X} product "
-                f"0x{ident['product_code']:08X} does not match the profile ({spec.key}.vendor_id "
+                f"{spec.label}: identity 0x1018 vendor {hexed['vendor_id']} product "
+                f"{hexed['product_code']} does not match the profile ({spec.key}.vendor_id "
                 f"0x{spec.vendor_id:08X}, {spec.key}.product_code 0x{spec.product_code:08X})")
-        if ident["revision"] < spec.revision_min:
+        if ident["revision"] is not None and ident["revision"] < spec.revision_min:
             raise PreflightError(f"{spec.label}: revision 0x{ident['revision']:08X} below "
                                  f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
         self._distinct_serial(spec)
@@ -507,11 +527,14 @@ class Preflight:
 
     def _reaction(self, d: DriveSetup) -> Generator:
         """Configure and read back the drive's own reaction to the master's death."""
-        spec = d.plan.node.spec
+        node, spec = d.plan.node, d.plan.node.spec
         watchdog = self.c.external_watchdog
-        if not d.plan.reaction:
-            cfg = ReactionConfig(self.consumer_ms, self.c.master_node_id, int(AbortConnectionOption.QUICK_STOP),
-                                 False, ("the drive has no 0x1016:01 / 0x6007 (its EDS)",))
+        if not d.plan.reaction:  # (the plan allows it only with an external watchdog stated)
+            lacks = [f"{object_name(st.index, st.subindex)} ({st.what})"
+                     for st in master_loss_steps(self.c.master_node_id, self.consumer_ms)
+                     if not node.can_write(st.index, st.subindex)]
+            cfg = ReactionConfig(None, None, None, False, (
+                f"its EDS has no writable {' nor '.join(lacks)}: nothing written",))
             return MasterLossRecord(cfg, DrillResult(DrillOutcome.NOT_CONFIGURED, note="external watchdog stated"),
                                     watchdog)
         problems = []
@@ -533,7 +556,8 @@ class Preflight:
                 + " (it would keep its last command if the master died; canopen.external_watchdog states another"
                 " protection of the rig)")
         drill = DrillResult(DrillOutcome.SKIPPED, note=self.c.skip_master_loss_drill) \
-            if self.c.skip_master_loss_drill else DrillResult(DrillOutcome.NOT_CONFIGURED)
+            if self.c.skip_master_loss_drill else DrillResult(DrillOutcome.NOT_RUN if not problems
+                                                              else DrillOutcome.NOT_CONFIGURED)
         return MasterLossRecord(cfg, drill, watchdog)
 
     # ------------------------------------------------------------ the drill
@@ -547,7 +571,12 @@ class Preflight:
         self.powered = list(drives)  # what a failure must bring down (see MasterCore.abort_preflight_frames)
         try:
             yield from self._drill_of(drives)
-        except PreflightError:
+        except PreflightError as exc:
+            for d in drives:  # the record says the drill did not get to the master's silence, and why
+                if d.master_loss.drill.outcome is DrillOutcome.NOT_RUN and not d.master_loss.drill.note:
+                    d.master_loss = MasterLossRecord(d.master_loss.reaction, DrillResult(
+                        DrillOutcome.NOT_RUN, note=f"stopped before the master fell silent: {exc}"),
+                        d.master_loss.external_watchdog)
             # fail closed: every drive the drill may have powered up goes to switch on disabled before the
             # error is told (a drive that does not follow is stopped by SDO when the master gives up)
             yield Heartbeat(True)
@@ -615,11 +644,12 @@ class Preflight:
             d = bad[0]
             res = d.master_loss.drill
             seen = ", ".join(f"0x{c:04X}" for c in res.emcy) or "none"
+            also = "".join(f"; {o.plan.node.spec.label}: did not react either" for o in bad[1:])
             raise MasterLossReactionError(
                 f"{d.plan.node.spec.label}: did not react to the master's death: the master was silent "
                 f"{res.waited_ms:.0f} ms (its consumer time 0x1016:01 is {self.consumer_ms} ms) and the drive stayed "
-                f"OPERATION ENABLED (EMCY seen: {seen}); the check is not started. State the rig's other protection "
-                f"in canopen.external_watchdog, or repair the drive's reaction (0x6007, 0x1029)")
+                f"OPERATION ENABLED (EMCY seen: {seen}){also}; the check is not started. State the rig's other "
+                f"protection in canopen.external_watchdog, or repair the drive's reaction (0x6007, 0x1029)")
 
     def _statusword(self, d: DriveSetup, soft: bool = False) -> Generator:
         """The drive's statusword by SDO (told to the master's view of it); with ``soft`` a timeout is returned."""
@@ -635,52 +665,36 @@ class Preflight:
         return sw
 
     def _power_up_by_sdo(self, d: DriveSetup) -> Generator:
-        """CSP, target = actual position, then shutdown, switch on, enable operation by SDO (pre-operational)."""
+        """CSP, target = actual position, then the walk to OPERATION_ENABLED by SDO (pre-operational)."""
         node = d.plan.node
         pos = yield from self._read(node, 0x6064, 0, "position actual value")
         yield from self._write(node, 0x607A, 0, int(pos), "target position (hold)")
         if d.plan.mode_by_pdo:
             yield from self._set_mode_by_sdo(d, OperationMode.CSP)
-        yield from self._walk(d, State.OPERATION_ENABLED)
+        yield from self._walk(d, Goal.ENABLED)
 
     def _power_down_by_sdo(self, d: DriveSetup) -> Generator:
-        yield from self._walk(d, State.SWITCH_ON_DISABLED)
+        yield from self._walk(d, Goal.DISABLED)
 
-    def _walk(self, d: DriveSetup, target: State) -> Generator:
-        """Controlwords by SDO until the statusword shows ``target`` (bounded fault resets, the enable timeout)."""
-        node, spec = d.plan.node, d.plan.node.spec
-        deadline = (yield Now()) + self.c.enable_timeout_s
-        resets = 0
-        previous_cw = None
+    def _walk(self, d: DriveSetup, goal: Goal) -> Generator:
+        """Controlwords by SDO as :class:`hil.master.powerup.PowerWalk` says, each statusword read by SDO after
+        the last command, until the drive is there (bounded: fault resets, ``canopen.enable_timeout_s``)."""
+        node = d.plan.node
+        walk = PowerWalk(node.spec.label, goal, (yield Now()), self.c.enable_timeout_s, self.c.fault_reset_attempts)
         while True:
             sw = yield from self._statusword(d)
-            state = decode_state(sw)
-            if state is target:
+            step = walk.on_statusword(sw, (yield Now()))
+            if step.done:
                 return
-            t = yield Now()
-            if t > deadline:
-                raise PreflightError(f"{spec.label}: not in {target.name} within canopen.enable_timeout_s = "
-                                     f"{self.c.enable_timeout_s} s (statusword 0x{sw:04X}, {state.name})")
-            if state is State.FAULT:
-                if resets >= self.c.fault_reset_attempts:
-                    err = ""
-                    if node.can_read(0x603F, 0):
-                        code = yield from self._read(node, 0x603F, 0, "error code", soft=True)
-                        if not isinstance(code, SdoAbortError):
-                            err = f", error code 0x603F = 0x{int(code):04X}"
-                    raise PreflightError(f"{spec.label}: still in FAULT after {resets} fault resets"
-                                         f" (canopen.fault_reset_attempts){err}")
-                if previous_cw is not None and previous_cw & 0x80:
-                    yield from self._write(node, 0x6040, 0, 0, "controlword (fault reset edge)")
-                yield from self._write(node, 0x6040, 0, controlword(Command.FAULT_RESET), "controlword fault reset")
-                previous_cw = controlword(Command.FAULT_RESET)
-                resets += 1
-            elif state not in (State.NOT_READY_TO_SWITCH_ON, State.FAULT_REACTION_ACTIVE):  # (those: wait)
-                # to switch on disabled from any state: transitions 7, 9, 10, 12
-                cmd = (Command.DISABLE_VOLTAGE if target is State.SWITCH_ON_DISABLED
-                       else next_command(state, target))
-                if cmd is not None:
-                    cw = controlword(cmd)
-                    yield from self._write(node, 0x6040, 0, cw, f"controlword ({cmd.value})")
-                    previous_cw = cw
+            if step.failed:
+                err = ""
+                if step.in_fault and node.can_read(0x603F, 0):
+                    code = yield from self._read(node, 0x603F, 0, "error code", soft=True)
+                    if not isinstance(code, (SdoAbortError, SdoTimeout)):
+                        err = f", error code 0x603F = 0x{int(code):04X}"
+                raise PreflightError(step.failed + err)
+            for cw in step.controlwords:
+                yield from self._write(node, 0x6040, 0, cw, f"controlword ({step.what})")
+            if step.controlwords:
+                walk.sent((yield Now()))
             yield Wait((yield Now()) + self.T)

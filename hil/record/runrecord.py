@@ -286,13 +286,15 @@ def shared_serial(identity: Mapping | None) -> str | None:
 
 @dataclass(frozen=True)
 class Identity(_Part):
-    """A drive's identity object 0x1018 as it reported it, with its node id. ``serial`` None: the read
-    was refused; ``serial_listed`` False: its EDS has no 0x1018:04 (no ``serial`` key in the JSON)."""
+    """A drive's identity object 0x1018 as it reported it, with its node id. ``product_code``, ``revision``,
+    ``serial`` None: the read was refused or not answered (optional sub-indices, CiA 301); ``serial_listed``
+    False: no serial was asked for (a record from before issue 36 of a drive whose EDS has no 0x1018:04;
+    no ``serial`` key in the JSON)."""
 
     node: int
     vendor_id: int
-    product_code: int
-    revision: int
+    product_code: int | None
+    revision: int | None
     serial: int | None = None
     serial_listed: bool = True
 
@@ -305,7 +307,8 @@ class Identity(_Part):
 
     @classmethod
     def read(cls, f: _Fields) -> Identity:
-        return cls(*(f.get(k, "int", required=True) for k in ("node", "vendor_id", "product_code", "revision")),
+        return cls(*(f.get(k, "int", required=True) for k in ("node", "vendor_id")),
+                   *(f.get(k, "int") for k in ("product_code", "revision")),
                    serial=f.get("serial", "int"), serial_listed=f.has("serial"))
 
     @classmethod
@@ -359,38 +362,48 @@ class KeptLimit(_Part):
 
 @dataclass(frozen=True)
 class DriveFinal(_Part):
-    """A drive's last known CiA 402 state after the check (:meth:`hil.master.core.MasterCore.safe_state_report`):
-    reachable (heartbeat), confirmed by a fresh statusword, safe (Switch on disabled, confirmed), and
-    its protection against the master's death (the preflight's record, JSON; ``{}`` if none)."""
+    """A drive's final CiA 402 state after the check (:meth:`hil.master.core.MasterCore.safe_state_report`):
+    the last state seen (None: its statusword never read) and when (``seen_t_s``, the master's time),
+    reachable (heartbeat), confirmed (read by SDO after the safe stop's last command), safe (Switch on
+    disabled, confirmed), ``seen`` in words ("read after the stop at t = ...", "statusword stale since
+    t = ... (why)", "statusword never read (why)"), and its protection against the master's death (the
+    preflight's record, JSON; ``{}`` if none). A record from before issue 36 has no ``seen_t_s``/``seen``."""
 
     node: int
-    state: str
+    state: str | None
     reachable: bool
     confirmed: bool
     safe: bool
     master_loss: dict = dataclasses.field(default_factory=dict)
     #: the limits the drive keeps itself, and those only the master keeps (the preflight's; () if none)
     drive_limits: tuple[KeptLimit, ...] = ()
+    seen_t_s: float | None = None
+    seen: str = ""
 
     def as_json(self) -> dict:
-        return {"node": self.node, "state": self.state, "reachable": self.reachable, "confirmed": self.confirmed,
+        return {"node": self.node, "state": self.state, "seen_t_s": self.seen_t_s, "seen": self.seen,
+                "reachable": self.reachable, "confirmed": self.confirmed,
                 "safe": self.safe, "master_loss": self.master_loss,
                 "drive_limits": [lim.as_json() for lim in self.drive_limits]}
 
     @classmethod
     def read(cls, f: _Fields) -> DriveFinal:
         lims = f.get("drive_limits", "list") or []
-        return cls(f.get("node", "int", required=True), f.get("state", "text", required=True),
+        return cls(f.get("node", "int", required=True), f.get("state", "text"),
                    *(f.get(k, "bool", required=True) for k in ("reachable", "confirmed", "safe")),
                    master_loss=f.get("master_loss", "object") or {},
                    drive_limits=tuple(KeptLimit.from_json(v, f.name(f"drive_limits[{j}]"), f.source)
-                                      for j, v in enumerate(lims)))
+                                      for j, v in enumerate(lims)),
+                   seen_t_s=f.get("seen_t_s", "number"), seen=f.get("seen", "text") or "")
 
     def unsafe_note(self, ema: str) -> str:
-        """``EMA 2 (node 2) unreachable (heartbeat lost), last known state FAULT``: for the abort reason."""
-        how = ("unreachable (heartbeat lost), last known state " if not self.reachable else
-               "state not confirmed (no statusword), last known " if not self.confirmed else "in ")
-        return f"EMA {ema[-1]} (node {self.node}) {how}{self.state}"
+        """``EMA 2 (node 2) unreachable (heartbeat lost), statusword stale since t = 1.204 s (...), last seen
+        FAULT``: for the abort reason, in words of what was seen."""
+        head = f"EMA {ema[-1]} (node {self.node}) " + ("unreachable (heartbeat lost), " if not self.reachable else "")
+        if self.confirmed:
+            return head + f"in {self.state}"
+        seen = self.seen or ("state not confirmed" if self.state is not None else "statusword never read")
+        return head + seen + (f", last seen {self.state}" if self.state is not None else "")
 
 
 @dataclass(frozen=True)

@@ -337,3 +337,17 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
         parts.append("<h2>Loop timing (master)</h2>" + timing_section(timing))
     parts.append(file_link(json_name))
     write_page(path, page_title("emacheck maintenance check", result), parts)
+
+
+def write_stopped_report(path: Path, result: dict, *, json_name: str = "result.json") -> None:
+    """The report of a check that stopped with nothing to analyse (a preflight that refused the drives): the
+    heading, why it stopped and why there is no analysis, and the traceability block (identity as read,
+    each drive's reaction to losing the master and its drill, limits), linked to ``json_name``."""
+    parts = [heading("emacheck maintenance check", result), simulated_banner(result), identification(result)]
+    st = str(result.get("status") or "")
+    if result.get("reason"):
+        parts.append(f"<p class='{esc(st)}'>{esc(st.capitalize())}: {esc(result['reason'])}</p>")
+    if result.get("analysis_error"):
+        parts.append(f"<p>No analysis: {esc(result['analysis_error'])}</p>")
+    parts += [trace_lines(result.get("trace")), file_link(json_name)]
+    write_page(path, page_title("emacheck maintenance check", result), parts)

@@ -222,9 +222,10 @@ def trace_lines(trace: dict | None) -> str:
             *installation_rows(trace), ["recording", trace.get("recording") or "—"]]
     for k, ident in (trace.get("identity") or {}).items():
         if ident:
-            rows.append([f"{k} identity (0x1018)",
-                         f"vendor 0x{ident.get('vendor_id', 0):08X}, product 0x{ident.get('product_code', 0):08X}, "
-                         f"revision 0x{ident.get('revision', 0):08X}, serial {fmt_serial(ident.get('serial'))}"])
+            h = {f: "not read" if ident.get(f) is None else f"0x{ident[f]:08X}"
+                 for f in ("vendor_id", "product_code", "revision")}
+            rows.append([f"{k} identity (0x1018)", f"vendor {h['vendor_id']}, product {h['product_code']}, revision "
+                                                   f"{h['revision']}, serial {fmt_serial(ident.get('serial'))}"])
     for k, ml in (trace.get("master_loss") or {}).items():
         rows.append([f"{k} reaction to losing the master", master_loss_text(ml)])
     for k, lims in (trace.get("drive_limits") or {}).items():
@@ -285,10 +286,14 @@ def master_loss_text(ml: dict) -> str:
         text += (f"; drill: reacted {drill.get('reaction_ms')} ms after the master's last heartbeat "
                  f"(to {drill.get('state_after')}, EMCY {emcy})")
     elif outcome == "no reaction":
+        emcy = ", ".join(drill.get("emcy") or []) or "none"
         text += (f"; drill: NO REACTION: still OPERATION ENABLED after {drill.get('waited_ms')} ms of the master's "
-                 f"silence")
+                 f"silence (EMCY {emcy})")
     elif outcome == "skipped":
         text += f"; drill skipped: {drill.get('note')}"
+    elif outcome == "not run":
+        why = drill.get("note") or "the preflight stopped before it"
+        text += f"; drill not run ({why})"
     else:
         text += "; not drilled"
     if ml.get("external_watchdog"):

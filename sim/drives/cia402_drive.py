@@ -22,8 +22,8 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   transition 12 to SWITCH_ON_DISABLED (brake); 0 disables the drive function
   at once (SWITCH_ON_DISABLED at the next drive cycle); 5..8 hold the angle
   and stay in QUICK_STOP_ACTIVE until disable voltage (transition 12 by
-  command; transition 16 back to OPERATION_ENABLED is not in the table of
-  :mod:`hil.canopen.cia402`, so enable operation is refused there). Other
+  command) or enable operation (transition 16 back to OPERATION_ENABLED, taken
+  only by such a drive: :data:`hil.canopen.cia402.CONDITIONAL`). Other
   values of 0x605A are refused (0x06090030).
 * Fault reaction: FAULT_REACTION_ACTIVE lasts until the next SYNC, then FAULT;
   both command DISABLED.
@@ -49,9 +49,12 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   it), ``fault_resets_needed`` (the rising edges of bit 7 a FAULT takes to
   clear: the earlier ones are ignored), ``ignore_abort_connection`` (a
   heartbeat event sends its EMCY but 0x6007 is not applied),
-  ``quick_stop_stays`` (QUICK_STOP_ACTIVE is kept whatever 0x605A says) and
+  ``quick_stop_stays`` (QUICK_STOP_ACTIVE is kept whatever 0x605A says),
   ``mode_frozen`` (0x6061 does not follow 0x6060: the drive keeps running in
-  the mode it shows).
+  the mode it shows) and ``not_ready_until_controlword`` (after power-on and
+  every reset node the drive stays in NOT_READY_TO_SWITCH_ON until it receives
+  a controlword, by RPDO or SDO, whichever: that word is ignored, then it takes
+  transition 1 to SWITCH_ON_DISABLED; a CiA 402 slave on lely-core seen in the field).
 * Statusword: bit 12 (drive follows the command) in OPERATION_ENABLED with a
   supported mode, bit 11 when the last target was clipped (0x607D or 0x6080 in CSP,
   0x6072 in CST), bit 10 in CSP when the effective target is within
@@ -125,6 +128,7 @@ _SW_REACHED = int(Statusword.TARGET_REACHED)
 _OE = State.OPERATION_ENABLED
 _QSA = State.QUICK_STOP_ACTIVE
 _FRA = State.FAULT_REACTION_ACTIVE
+_NRTSO = State.NOT_READY_TO_SWITCH_ON
 _K_CONTROLWORD = (0x6040, 0)
 _K_MODE = (0x6060, 0)
 _K_TARGET_POS = (0x607A, 0)
@@ -163,6 +167,9 @@ class Cia402Drive:
         Fault hook: QUICK_STOP_ACTIVE is kept until disable voltage, whatever 0x605A says.
     mode_frozen : bool
         Fault hook: 0x6061 does not follow 0x6060; the drive runs in the mode it shows.
+    not_ready_until_controlword : bool
+        Fault hook: the drive boots into NOT_READY_TO_SWITCH_ON and leaves it (transition 1) only
+        when a controlword arrives.
     _i_total : float
         The plant's gear ratio [rad/mm] (0x2102).
     _cpr_override : int or None
@@ -219,6 +226,7 @@ class Cia402Drive:
         self.ignore_abort_connection = False
         self.quick_stop_stays = False
         self.mode_frozen = False
+        self.not_ready_until_controlword = False
         self._resets_seen = 0
         self._qs_stay = False
         self._angle_k = angle_units_per_rad  # position units per rad the profile states (a drive without 0x608F)
@@ -269,12 +277,14 @@ class Cia402Drive:
     # ------------------------------------------------------------------ reset and own data
 
     def reset_application(self) -> None:
-        """Power-on / reset node: SWITCH_ON_DISABLED (FAULT with ``boot_fault``), 0x6061 from the EDS,
+        """Power-on / reset node: SWITCH_ON_DISABLED (FAULT with ``boot_fault``; NOT_READY_TO_SWITCH_ON
+        with ``not_ready_until_controlword``), 0x6061 from the EDS,
         plant command DISABLED, the modes it supports from its 0x6502 (CSP bit 7, CST bit 9)."""
         modes = self.store.int_or(0x6502, 0, _CSP_CST_BITS)
         self._modes = frozenset(m for m, bit in ((_CSP, 7), (_CST, 9)) if modes >> bit & 1)
         self.state_machine = DriveStateMachine(remote=True)
-        self.state_machine.boot_done()
+        if not self.not_ready_until_controlword:
+            self.state_machine.boot_done()
         d = self.store.var(0x6061, 0)
         self._mode_display = int(d.default or 0) if d is not None else 0
         self._limit_active = False
@@ -493,6 +503,11 @@ class Cia402Drive:
         cw = self.int_cache.get(_K_CONTROLWORD)
         if cw is None:
             cw = self.int_value(0x6040)
+        if old is _NRTSO:  # processes no command (ignored); (hook) the first controlword ends the wait
+            sm.on_controlword(cw)
+            if self.not_ready_until_controlword:
+                sm.boot_done()
+            return
         # The master repeats the controlword every cycle: the same word as the previous
         # one in a state where that was seen to be a no-op is a no-op again (the outcome
         # of on_controlword depends only on the state, the previous and this word).
@@ -530,6 +545,7 @@ class Cia402Drive:
             self._qs_phi_rad = self._phi_rad
             self._qs_left = 0 if option == 0 else self._qs_cycles
             self._qs_stay = self.quick_stop_stays or option in _QS_STAY
+            self.state_machine.quick_stop_stays = self._qs_stay  # transition 16 only then
 
     def connection_lost(self) -> None:
         """The abort connection option 0x6007 on a connection loss (a heartbeat event), through

@@ -14,10 +14,11 @@ __all__ = ["write_eds_variant"]
 def write_eds_variant(path: Path, *, source: Path | None = None,
                       defaults: Mapping[tuple[int, int], str] | None = None,
                       access: Mapping[tuple[int, int], str] | None = None,
-                      remove: Iterable[int] = ()) -> Path:
+                      remove: Iterable[int] = (), remove_subs: Iterable[tuple[int, int]] = ()) -> Path:
     """Write ``source`` (default the shipped drive EDS) to ``path`` with ``DefaultValue``s set
-    (``{(0x6502, 0): "0x00000080"}``), ``AccessType``s set and whole objects removed; KeyError naming
-    an object that is not in the file (a variant that would silently change nothing is a test bug)."""
+    (``{(0x6502, 0): "0x00000080"}``), ``AccessType``s set, whole objects and single sub-indices
+    (``[(0x1018, 2)]``) removed; KeyError naming an object that is not in the file (a variant that would
+    silently change nothing is a test bug)."""
     ini = configparser.ConfigParser(interpolation=None, strict=False)
     ini.optionxform = str  # keys as written
     ini.read(source or default_eds_path(), encoding="utf-8")
@@ -33,6 +34,8 @@ def write_eds_variant(path: Path, *, source: Path | None = None,
         ini[section(index, sub)]["DefaultValue"] = value
     for (index, sub), value in (access or {}).items():
         ini[section(index, sub)]["AccessType"] = value
+    for index, sub in remove_subs:
+        ini.remove_section(section(index, sub))
     for index in remove:
         names = [s for s in ini.sections() if s.upper() == f"{index:04X}" or s.upper().startswith(f"{index:04X}SUB")]
         if not names:
