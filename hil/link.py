@@ -39,6 +39,7 @@ from hil.config import HARD_MAX_LAG_S
 from hil.cycletiming import CycleTiming
 from hil.errors import KNOWN_ERRORS, EmacheckError
 from hil.master import MasterCore, PreflightError
+from hil.powerup import CONFIRM_READS
 from hil.transport import InProcessTransport
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
@@ -310,10 +311,11 @@ class CanopenLink:
     def _confirm_stop(self) -> None:
         """After the last command of the safe stop: each drive's statusword read again by SDO
         (:meth:`MasterCore.confirm_frames <hil.master.MasterCore.confirm_frames>`), until every read
-        ended (answered, aborted, or timed out after ``canopen.sdo_timeout_s``; bounded here once more)."""
+        ended (answered, aborted, or not answered in :data:`hil.powerup.CONFIRM_READS` reads of
+        ``canopen.sdo_timeout_s`` each; bounded here once more)."""
         t0 = self.tr.now()
         self._send(self.m.confirm_frames(t0))
-        limit = t0 + 2.0 * self.m.act.canopen.sdo_timeout_s + 0.05
+        limit = t0 + (CONFIRM_READS + 1) * self.m.act.canopen.sdo_timeout_s
         while not self.m.confirmation.done and self.tr.now() < limit:
             self._feed(self.tr.receive(self.tr.now() + 0.01))
             self._send(self.m.poll(self.tr.now()))
