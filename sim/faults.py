@@ -11,7 +11,10 @@ EMA's reading in whichever TPDO carries it, a drive's or a sensor node's,
 through the rig's cycle codec (:class:`hil.canopen.cycle.CycleDecoder`).
 
 Time base: a fault's ``start_s`` is on the check's time axis, the SYNC count
-times the SYNC period (``t`` of signals.csv), for every kind but the drive
+times the SYNC period (``t`` of signals.csv; once SYNC has stopped, for more than
+:data:`SYNC_STOPPED_PERIODS` periods, the bus time since SYNC 0, so that a window
+such as a ``bus_errors`` burst ends when it says while the drives free-run and
+the master reads their state after the check), for every kind but the drive
 faults below, which act before SYNC starts (the preflight, the master's-death
 drill) as well as after: their ``start_s`` is the bus time since the drives'
 power-on (:meth:`FaultInjector.power_on`), so the default ``start_s = 0``
@@ -115,8 +118,11 @@ from hil.canopen.pdo import Direction
 from hil.canopen.process import DriveMode
 from hil.canopen.signalmap import Scale, Signal
 
-__all__ = ["BOOT_FAULT_CODE", "DRIVE_KINDS", "FaultKind", "Fault", "FaultInjector", "TruthTrace",
-           "SDO_ABORT_CODE"]
+__all__ = ["BOOT_FAULT_CODE", "DRIVE_KINDS", "FaultKind", "Fault", "FaultInjector", "SYNC_STOPPED_PERIODS",
+           "TruthTrace", "SDO_ABORT_CODE"]
+
+#: SYNC periods without a SYNC after which the check's time axis follows the bus time (SYNC stopped)
+SYNC_STOPPED_PERIODS = 2
 
 #: Abort code the ``sdo_abort`` fault answers with: data cannot be transferred or stored.
 SDO_ABORT_CODE = 0x08000020
@@ -315,6 +321,8 @@ class FaultInjector:
         #: bus time [s] of the last frame that reached the drives (None before the first)
         self.last_inbound_t: float | None = None
         self.t0_bus: float | None = None  #: bus time of SYNC 0 (the first SYNC's time less T) [s]
+        self._t_bus = 0.0  #: the latest bus time seen [s]
+        self._t_sync: float | None = None  #: bus time of the last SYNC [s]
         if record_truth:
             pair.on_free_step = self._free_step
 
@@ -325,7 +333,11 @@ class FaultInjector:
 
     @property
     def t_check(self) -> float:
-        """The check's time axis: SYNCs seen times the SYNC period [s]."""
+        """The check's time axis: SYNCs seen times the SYNC period [s]; once SYNC stopped (none for more
+        than :data:`SYNC_STOPPED_PERIODS` periods of bus time), the bus time since SYNC 0."""
+        t_sync = self._t_sync
+        if t_sync is not None and self._t_bus - t_sync > SYNC_STOPPED_PERIODS * self.T + 1e-9:
+            return max(self.syncs * self.T, self._t_bus - self.t0_bus)
         return self.syncs * self.T
 
     def _active(self, kind: FaultKind, node_id: int | None = None) -> list[Fault]:
@@ -511,7 +523,9 @@ class FaultInjector:
     def on_frame(self, frame: Frame, t: float) -> list[Frame]:
         """As :meth:`sim.drives.SimDrivePair.on_frame`, with the faults applied."""
         is_sync = frame.arbitration_id == 0x080 and len(frame.data) <= 1
+        self._t_bus = max(self._t_bus, t)
         if is_sync:
+            self._t_sync = t
             self.syncs += 1
             if self.t0_bus is None:
                 self.t0_bus = t - self.T
@@ -534,6 +548,7 @@ class FaultInjector:
         return self._outbound(pre + out, at_sync=is_sync)
 
     def tick(self, t: float) -> list[Frame]:
+        self._t_bus = max(self._t_bus, t)
         if not self.faults:
             return self.pair.tick(t)
         if self._drive_faults:

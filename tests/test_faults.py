@@ -533,3 +533,25 @@ def test_every_fault_kind_is_covered():
     covered = ({c[0].kind for c in CASES} | {c[0].kind for c in DRIVE_CASES}
                | {"node_silent", "sdo_abort", "master_silent", "sensor_node_silent"})
     assert covered == {k.value for k in FaultKind}
+
+
+def test_the_check_axis_follows_the_bus_time_once_sync_stopped():
+    """A fault's window on the check's axis (SYNC count x T) ends when it says also after the check: once
+    no SYNC came for more than SYNC_STOPPED_PERIODS periods, the axis is the bus time since SYNC 0."""
+    from hil.canopen.frame import sync_frame
+    from sim.faults import SYNC_STOPPED_PERIODS
+
+    inj = FaultInjector(make_pair(RigPlant(load_simrig().params, np.random.default_rng(2))),
+                        [Fault("bus_errors", 1, 0.004, duration_s=0.006)], rng=np.random.default_rng(3),
+                        record_truth=False)
+    inj.power_on(0.0)
+    for k in range(1, 4):  # SYNC 1..3 at 10.002 .. 10.006 s of bus time: SYNC 0 at 10.000 s
+        inj.on_frame(sync_frame(), 10.0 + k * T)
+    assert inj.t_check == pytest.approx(3 * T) and len(inj._active(FaultKind.BUS_ERRORS)) == 1
+    t_last = 10.0 + 3 * T
+    inj.tick(t_last + SYNC_STOPPED_PERIODS * T)  # on the boundary: still the SYNC count
+    assert inj.t_check == pytest.approx(3 * T)
+    inj.tick(t_last + SYNC_STOPPED_PERIODS * T + 1e-6)  # past it: the bus time since SYNC 0
+    assert inj.t_check == pytest.approx(5 * T + 1e-6)
+    inj.tick(t_last + 5 * T)
+    assert inj.t_check == pytest.approx(8 * T) and inj._active(FaultKind.BUS_ERRORS) == []  # the burst ended

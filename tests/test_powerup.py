@@ -178,8 +178,8 @@ def test_a_confirming_read_that_times_out_leaves_the_drive_not_confirmed(simrig,
     # the drive went down (its TPDO said so) but no read after the last command answered: not confirmed
     assert pair.nodes[1].state_machine.state is State.SWITCH_ON_DISABLED
     assert (fin["state"], fin["confirmed"], fin["safe"]) == ("SWITCH_ON_DISABLED", False, False)
-    assert fin["seen"] == (f"statusword stale since t = {fin['seen_t_s']:.3f} s (0x6041 not answered by SDO "
-                           f"within canopen.sdo_timeout_s = {actuation.canopen.sdo_timeout_s} s)")
+    assert fin["seen"] == (f"statusword stale since t = {fin['seen_t_s']:.3f} s (0x6041 not answered by SDO: 3 "
+                           f"reads of canopen.sdo_timeout_s = {actuation.canopen.sdo_timeout_s} s each)")
     from hil.record.runrecord import RunRecord
 
     rec = RunRecord().with_final_states(link.final_states, None)
@@ -202,6 +202,7 @@ def test_final_state_words_for_a_statusword_never_read():
 def test_stop_confirmation_answers_stray_frames_aborts_and_its_timeout_on_the_boundary():
     from hil.canopen.frame import Frame
     from hil.master.powerup import Confirmed, StopConfirmation
+    from hil.master.powerup import CONFIRM_READS, Confirmed, StopConfirmation
 
     c = StopConfirmation({1: (0x6041, 0), 2: (0x6041, 0)}, timeout_s=0.5)
     assert c.start(1.0) == [Frame(0x601, bytes.fromhex("4041600000000000")),
@@ -210,10 +211,18 @@ def test_stop_confirmation_answers_stray_frames_aborts_and_its_timeout_on_the_bo
     assert c.on_frame(1, Frame(0x581, bytes.fromhex("6040600000000000")), 1.001) is None
     got = c.on_frame(1, Frame(0x581, bytes.fromhex("4B41600050020000")), 1.002)
     assert got == Confirmed(0x0250, 1.002) and not c.done
-    assert c.poll(1.0 + 0.5 - 1e-9) == [] and 2 not in c.results  # just inside the SDO timeout
-    assert c.poll(1.5) == [Frame(0x602, bytes.fromhex("8041600000000405"))]  # abort 0x05040000, timed out
-    assert c.results[2] == Confirmed(problem="0x6041 not answered by SDO within canopen.sdo_timeout_s = 0.5 s")
-    assert c.done and c.poll(9.0) == []
+    abort = Frame(0x602, bytes.fromhex("8041600000000405"))  # 0x05040000, SDO protocol timed out
+    ask = Frame(0x602, bytes.fromhex("4041600000000000"))
+    t = 1.0
+    for k in range(1, CONFIRM_READS):  # each read bounded by the SDO timeout, then asked again
+        assert c.poll(t + 0.5 - 1e-9) == [] and 2 not in c.results  # just inside the SDO timeout
+        t += 0.5
+        assert c.poll(t) == [abort, ask] and 2 not in c.results, k
+    assert c.poll(t + 0.5 - 1e-9) == [] and not c.done
+    assert c.poll(t + 0.5) == [abort]  # the last read: given up after CONFIRM_READS * 0.5 s
+    assert c.results[2] == Confirmed(problem="0x6041 not answered by SDO: 3 reads of canopen.sdo_timeout_s = 0.5 s "
+                                             "each")
+    assert c.done and c.poll(9.0) == [] and CONFIRM_READS == 3
     aborted = StopConfirmation({1: (0x6041, 0)}, timeout_s=0.5)
     aborted.start(0.0)
     res = aborted.on_frame(1, Frame(0x581, bytes.fromhex("8041600000000206")), 0.01)  # 0x06020000

@@ -352,7 +352,7 @@ def print_drives_final(console: Console, meta: RunRecord) -> None:
     for ema, d in (meta.drives_final or {}).items():
         safe = "safe" if d.safe else "[red]NOT confirmed safe[/red]"
         how = "" if d.reachable else ", unreachable (heartbeat lost)"
-        state = d.state if d.state is not None else "state never read"
+        state = d.state if d.state is not None else "state unknown"
         console.print(f"EMA {ema[-1]} (node {d.node}): {state}, {safe}{how}" + (f" ({d.seen})" if d.seen else ""))
 
 

@@ -42,6 +42,7 @@ from hil.master.stalls import StallWatch
 from hil.profile.config import HARD_MAX_LAG_S
 from hil.record.canlog import CanLogWriter
 from hil.record.cycletiming import CycleTiming
+from hil.master.powerup import CONFIRM_READS
 from hil.transport import InProcessTransport
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
@@ -410,10 +411,11 @@ class CanopenLink:
     def _confirm_stop(self) -> None:
         """After the last command of the safe stop: each drive's statusword read again by SDO
         (:meth:`MasterCore.confirm_frames <hil.master.core.MasterCore.confirm_frames>`), until every read
-        ended (answered, aborted, or timed out after ``canopen.sdo_timeout_s``; bounded here once more)."""
+        ended (answered, aborted, or not answered in :data:`hil.master.powerup.CONFIRM_READS` reads of
+        ``canopen.sdo_timeout_s`` each; bounded here once more)."""
         t0 = self.tr.now()
         self._send(self.m.confirm_frames(t0))
-        limit = t0 + 2.0 * self.m.act.canopen.sdo_timeout_s + 0.05
+        limit = t0 + (CONFIRM_READS + 1) * self.m.act.canopen.sdo_timeout_s
         while not self.m.confirmation.done and self.tr.now() < limit:
             self._feed(self.tr.receive(self.tr.now() + 0.01))
             self._send(self.m.poll(self.tr.now()))

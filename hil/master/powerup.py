@@ -49,7 +49,7 @@ from hil.canopen.cia402 import (
 from hil.canopen.frame import Frame
 from hil.canopen.sdo import SdoAbortError, SdoClient, SdoEvent, SdoTimeout, describe
 
-__all__ = ["Confirmed", "PowerWalk", "StopConfirmation", "WalkStep", "final_state"]
+__all__ = ["CONFIRM_READS", "Confirmed", "PowerWalk", "StopConfirmation", "WalkStep", "final_state"]
 
 #: the state each goal a walk may have ends in
 _TARGET = {Goal.ENABLED: State.OPERATION_ENABLED, Goal.DISABLED: State.SWITCH_ON_DISABLED}
@@ -187,6 +187,8 @@ class Confirmed:
     problem: str = ""
 
 
+#: Reads of a drive's statusword after a safe stop before it is given up as not answering
+CONFIRM_READS = 3
 #: initiate-upload response and abort: the server command specifiers a statusword read is answered with
 _SCS_UPLOAD, _SCS_ABORT = 2, 4
 
@@ -200,21 +202,30 @@ class StopConfirmation:
         Node id -> (index, subindex) of its statusword (the signal map's 0x6041).
     timeout_s : float
         The SDO response timeout (``canopen.sdo_timeout_s``).
+    attempts : int
+        Reads per drive before it is given up as not answering (:data:`CONFIRM_READS`): a request or
+        its answer lost on a noisy bus is asked again; bounded by ``attempts * timeout_s``.
 
     Its own SDO clients (a transfer of the preflight's left busy does not hold it up); an answer
     that is not the upload of that object (the response to a controlword written by SDO without
     waiting for it, before) is passed over.
     """
 
-    def __init__(self, objects: dict[int, tuple[int, int]], timeout_s: float) -> None:
+    def __init__(self, objects: dict[int, tuple[int, int]], timeout_s: float, attempts: int = CONFIRM_READS) -> None:
         self.objects = dict(objects)
         self.timeout_s = timeout_s
+        self.attempts = attempts
         self._clients = {n: SdoClient(n, timeout_s=timeout_s) for n in self.objects}
+        self._tries = dict.fromkeys(self.objects, 0)
         self.results: dict[int, Confirmed] = {}
 
     def start(self, t_s: float) -> list[Frame]:
         """The read requests, one per drive."""
-        return [c.start_upload(*self.objects[n], t_s) for n, c in self._clients.items()]
+        return [self._ask(n, t_s) for n in self._clients]
+
+    def _ask(self, node: int, t_s: float) -> Frame:
+        self._tries[node] += 1
+        return self._clients[node].start_upload(*self.objects[node], t_s)
 
     @property
     def done(self) -> bool:
@@ -247,8 +258,11 @@ class StopConfirmation:
                 c.poll(t_s)
             except SdoTimeout as exc:
                 out.append(exc.abort_frame)
-                self._end(n, Confirmed(problem=f"0x6041 not answered by SDO within canopen.sdo_timeout_s = "
-                                               f"{self.timeout_s} s"))
+                if self._tries[n] < self.attempts:
+                    out.append(self._ask(n, t_s))
+                    continue
+                self._end(n, Confirmed(problem=f"0x6041 not answered by SDO: {self._tries[n]} reads of "
+                                               f"canopen.sdo_timeout_s = {self.timeout_s} s each"))
         return out
 
     def _end(self, node: int, res: Confirmed) -> Confirmed:
