@@ -201,7 +201,6 @@ def test_final_state_words_for_a_statusword_never_read():
 
 def test_stop_confirmation_answers_stray_frames_aborts_and_its_timeout_on_the_boundary():
     from hil.canopen.frame import Frame
-    from hil.master.powerup import Confirmed, StopConfirmation
     from hil.master.powerup import CONFIRM_READS, Confirmed, StopConfirmation
 
     c = StopConfirmation({1: (0x6041, 0), 2: (0x6041, 0)}, timeout_s=0.5)

@@ -38,11 +38,11 @@ from hil.canopen.signalmap import ForceControl
 from hil.check.staleness import StaleLimit, stale_limit
 from hil.errors import KNOWN_ERRORS, EmacheckError
 from hil.master.core import MasterCore, PreflightError
+from hil.master.powerup import CONFIRM_READS
 from hil.master.stalls import StallWatch
 from hil.profile.config import HARD_MAX_LAG_S
 from hil.record.canlog import CanLogWriter
 from hil.record.cycletiming import CycleTiming
-from hil.master.powerup import CONFIRM_READS
 from hil.transport import InProcessTransport
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
