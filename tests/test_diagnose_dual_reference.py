@@ -1,9 +1,11 @@
 """``emacheck diagnose NEW --reference HEALTHY`` with the dual-EMA model (issue 35, part 1; first cut).
 
-Slow (about 1 min): simulated checks of the shipped rig (``emacheck simulate``), healthy with noise seed 11
-and changed with seed 13: the contact stiffness of EMA 1 down 20 %, the internal play of EMA 2 up 30 um.
-Each change is named at the right EMA with the right sign and a size within 30 %. Extras are not asserted
-(docs/diagnose.md says which appear).
+Slow (about 2 min): simulated checks of the shipped rig (``emacheck simulate``), healthy with noise seed 11
+and changed with seed 13: the contact stiffness of EMA 1 down 20 %, the internal play of EMA 2 up 30 um,
+a Coulomb friction of 10 N in the drive of EMA 1 (a library effect, fitted on both checks), the load cell
+gain of EMA 2 up 2 %. Each change is named at the right EMA with the right sign and a size within 30 %.
+Extras are not asserted (docs/diagnose.md says which appear). Two healthy checks with different noise
+seeds (14 against 11) name nothing.
 """
 
 from __future__ import annotations
@@ -30,11 +32,15 @@ def healthy(tmp_path_factory):
     ("ema1", {"stiffness_compression_N_per_mm": 64000.0, "stiffness_tension_N_per_mm": 64000.0},
      "stiffness_int1_N_per_mm", "ema1", -20.0),
     ("ema2", {"backlash_int_mm": 0.15}, "backlash_int2_mm", "ema2", 30.0),
+    ("effects", [{"name": "coulomb_friction", "where": "ema1", "force_N": 10.0}], "coulomb_friction.force_N",
+     "ema1", 10.0),
+    ("sensors2", {"loadcell_gain": 1.02}, "loadcell_gain.gain_error", "ema2", 2.0),
 ])
 def test_a_changed_rig_is_named_at_the_right_ema_with_sign_and_size(healthy, tmp_path, section, values, param,
                                                                      where, change):
     run = tmp_path / "changed"
-    rig = write_profile_variant("simrig.toml", tmp_path / "rig.toml", {section: values})
+    rig = write_profile_variant("simrig.toml", tmp_path / "rig.toml", **(
+        {"add": {section: values}} if section == "effects" else {"overrides": {section: values}}))
     assert main(["simulate", "--sim", str(rig), "--seed", "13", "--out", str(run), "--quiet"]) == 0
     out = tmp_path / "o"
     assert main(["diagnose", str(run), "--reference", str(healthy), "--out", str(out), "--quiet"]) == 0
@@ -44,3 +50,25 @@ def test_a_changed_rig_is_named_at_the_right_ema_with_sign_and_size(healthy, tmp
     (e,) = [e for e in data["effects"] if param in e["change"]]
     assert e["where"] == where
     assert e["change"][param] == pytest.approx(change, rel=0.3)
+    assert e["change"][param] * change > 0 and e["floor"][param] < abs(change)
+    (c,) = [c for c in data["changes"] if c["parameter"] == param]
+    assert c["named"] and abs(c["z"]) > 3
+    # the fits before and after: the reference's model with the named changes fits this check better
+    before, after = data["fits"]["before"], data["fits"]["after"]
+    assert max(before[k] / after[k] for k in before) > 1.15
+    assert all(after[k] <= 1.01 * before[k] for k in before)
+    html = (out / "diagnosis_report.html").read_text()
+    assert "change ± U (k=2)" in html and param in html and "Fits before and after" in html
+
+
+def test_two_healthy_checks_with_different_noise_name_nothing(healthy, tmp_path):
+    """Seed 14 against seed 11 of the shipped rig (14 not among the floors' measurements): every change
+    under its floor, nothing named."""
+    run = tmp_path / "healthy14"
+    assert main(["simulate", "--seed", "14", "--out", str(run), "--quiet"]) == 0
+    out = tmp_path / "o"
+    assert main(["diagnose", str(run), "--reference", str(healthy), "--out", str(out), "--quiet"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    assert data["verdict"] == "no_mismatch" and data["effects"] == []
+    assert len(data["changes"]) >= 14 and not any(c["named"] for c in data["changes"])
+    assert all(abs(c["change"]) <= c["floor"] for c in data["changes"] if c["floor"] is not None)

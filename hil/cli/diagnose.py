@@ -146,13 +146,17 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
 
 
 def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
-    """``--reference`` with the dual-EMA model: each nominal parameter against the reference's."""
+    """``--reference`` with the dual-EMA model: each nominal parameter and library effect against the reference's."""
     from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
     t0 = time.perf_counter()
-    data = dual_reference_diagnosis(path, Path(args.reference), args.profile)
+    data, fits = dual_reference_diagnosis(path, Path(args.reference), args.profile)
     data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
-    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json",))
+    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json", "diagnosis_report.html"))
     outputs.write_json("diagnosis.json", data)
+    if not args.no_report:
+        from hil.report.diagnose_ref import write_dual_reference_report
+        outputs.write_with("diagnosis_report.html", lambda p: write_dual_reference_report(
+            p, data, fits, json_name=outputs.path("diagnosis.json").name))
     console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
                   f"{args.reference} ({data['diagnosis_s']:.1f} s)")
     for c in data["changes"]:

@@ -76,7 +76,7 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         runs = {name: simulate(Path(tmp), name) for name in CHECKS}
         for new, ref in PAIRS:
-            rows.append(row(new, ref, dual_reference_diagnosis(runs[new], runs[ref], None)))
+            rows.append(row(new, ref, dual_reference_diagnosis(runs[new], runs[ref], None)[0]))
     print("| pair | truth | verdict | named (change) | target parameter: change | right |")
     print("|---|---|---|---|---|---|")
     for r in rows:
