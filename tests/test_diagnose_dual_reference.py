@@ -72,3 +72,75 @@ def test_two_healthy_checks_with_different_noise_name_nothing(healthy, tmp_path)
     assert data["verdict"] == "no_mismatch" and data["effects"] == []
     assert len(data["changes"]) >= 14 and not any(c["named"] for c in data["changes"])
     assert all(abs(c["change"]) <= c["floor"] for c in data["changes"] if c["floor"] is not None)
+
+
+# --reference history (the wear history's last check of the same actuator serials) and the serial rule
+
+
+@pytest.fixture(scope="module")
+def history_runs(healthy, tmp_path_factory):
+    """After ``healthy`` (seed 11): ``other``, EMA 2 replaced (another serial, seed 12), then ``later``, the
+    healthy actuators with 10 N more Coulomb friction in the drive of EMA 1 (seed 13). ``same.db`` records
+    ``healthy``; ``mixed.db`` records ``healthy`` and ``other``."""
+    root = tmp_path_factory.mktemp("hist")
+    other_rig = write_profile_variant("simrig.toml", root / "other.toml", {"identity": {"serial_ema2": 0x5E000199}})
+    later_rig = write_profile_variant("simrig.toml", root / "later.toml", add={"effects": [
+        {"name": "coulomb_friction", "where": "ema1", "force_N": 10.0}]})
+    other, later = root / "other", root / "later"
+    assert main(["simulate", "--sim", str(other_rig), "--seed", "12", "--out", str(other), "--quiet"]) == 0
+    assert main(["simulate", "--sim", str(later_rig), "--seed", "13", "--out", str(later), "--quiet"]) == 0
+    same, mixed = f"sqlite:///{root / 'same.db'}", f"sqlite:///{root / 'mixed.db'}"
+    assert main(["history", "sync", str(healthy), "--history", same]) == 0
+    assert main(["history", "sync", str(healthy), str(other), "--history", mixed]) == 0
+    return {"healthy": healthy, "other": other, "later": later, "same": same, "mixed": mixed, "root": root}
+
+
+def test_reference_history_takes_the_last_check_of_the_same_serials(history_runs, tmp_path):
+    h = history_runs
+    out = tmp_path / "o"
+    assert main(["diagnose", str(h["later"]), "--reference", "history", "--history", h["same"], "--out", str(out),
+                 "--quiet"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    assert data["reference_history"]["run_folder"] == str(h["healthy"].resolve())
+    assert data["reference_history"]["same_serials"] and data["serials"]["same"]
+    (e,) = [e for e in data["effects"] if "coulomb_friction.force_N" in e["change"]]
+    assert e["where"] == "ema1" and e["change"]["coulomb_friction.force_N"] == pytest.approx(10.0, rel=0.3)
+
+
+def test_other_serials_are_refused_unless_allowed(history_runs, tmp_path, capsys):
+    """The last check sharing an actuator with ``later`` is ``other`` (EMA 2 replaced): refused, exit 3, nothing
+    written; the same for ``other`` given as the reference; taken with --allow-other-serials and said so."""
+    h = history_runs
+    out = tmp_path / "o"
+    for ref in (["--reference", "history", "--history", h["mixed"]], ["--reference", str(h["other"])]):
+        assert main(["diagnose", str(h["later"]), *ref, "--out", str(out), "--quiet"]) == 3
+        assert not out.exists()
+        err = capsys.readouterr().err
+        assert "0x5E000199" in err and "0x5E000102" in err and "--allow-other-serials" in err
+    assert main(["diagnose", str(h["later"]), "--reference", "history", "--history", h["mixed"],
+                 "--allow-other-serials", "--out", str(out), "--quiet"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    assert data["reference_history"]["run_folder"] == str(h["other"].resolve())
+    assert data["reference_history"]["same_serials"] is False and data["serials"]["same"] is False
+
+
+def test_bad_history_reference_exits_3_and_writes_nothing(history_runs, tmp_path, capsys):
+    h = history_runs
+    slow = write_profile_variant("simrig.toml", tmp_path / "slow.toml", {"rig": {"sample_period_s": 0.004}})
+    slow_run = tmp_path / "slow"
+    assert main(["simulate", "--sim", str(slow), "--seed", "14", "--out", str(slow_run), "--quiet"]) == 0
+    axis = tmp_path / "axis.csv"  # a single-axis recording: the other model
+    axis.write_text("t,q,q_ref,force\n" + "".join(f"{k * 0.01},{k * 1e-5},{k * 1e-5},1.0\n" for k in range(2000)))
+    cases = [
+        (["--reference", str(axis)], h["later"], "axis.csv"),
+        (["--reference", "history", "--history", f"sqlite:///{tmp_path / 'none.db'}"], h["later"], "no wear history"),
+        (["--reference", "history", "--history", h["same"]], h["healthy"], "no earlier check"),
+        (["--reference", "history", "--history", h["same"]], h["later"] / "signals.csv", "not a run folder"),
+        (["--reference", "history", "--history", h["same"], "--model", "single-axis"], h["later"], "single axis"),
+        (["--reference", str(slow_run)], h["later"], "another sample rate"),
+    ]
+    for args, rec, words in cases:
+        out = tmp_path / "o"
+        assert main(["diagnose", str(rec), *args, "--out", str(out), "--quiet"]) == 3, words
+        assert not out.exists()
+        assert words in capsys.readouterr().err

@@ -176,10 +176,19 @@ def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | Non
     from hil.analysis.diagnose import load_dual
     from hil.analysis.diagnose_floors import DUAL_FLOORS
     floors = dict(DUAL_FLOORS) | dict(floors or {})
+    from blf.errors import AnalysisError, InputError
+    from hil.errors import RecordingError
+    loaded = [load_dual(Path(path), profile) for path in (ref_path, new_path)]
+    (_, t_ref), (_, t_new) = loaded
+    if abs(t_ref / t_new - 1.0) > 0.01:
+        raise RecordingError(f"--reference {ref_path}: another sample rate: {1 / t_ref:.6g} Hz, this recording "
+                             f"{1 / t_new:.6g} Hz (more than 1 % apart)")
     fits = []
-    for path in (ref_path, new_path):
-        model, period = load_dual(Path(path), profile)
-        fits.append((model, period, diagnose(model, period)))
+    for path, (model, period) in zip((ref_path, new_path), loaded, strict=True):
+        try:
+            fits.append((model, period, diagnose(model, period)))
+        except (InputError, AnalysisError) as exc:
+            raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
     ref, new = fits[0][2], fits[1][2]
     changes = [c for c in (_change(n, float(new.nominal[n]), float(ref.nominal[n]), floors)
                            for n in new.nominal if n in ref.nominal) if c is not None]
