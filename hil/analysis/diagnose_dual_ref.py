@@ -67,7 +67,7 @@ LIBRARY_FLOORS = {("coulomb_friction", "force_N"): ("friction_N", "N", 1.0, "Cou
             ("loadcell_gain", "gain_error"): ("loadcell_gain_pct", "%", 100.0, "load cell gain")}
 
 
-def _library_change(e_new, e_ref, floors: dict) -> list:
+def library_change(e_new, e_ref, floors: dict) -> list:
     """The changes of one library effect's parameters between the reference and the new recording, each
     fitted on both (:func:`blf.diagnose.fit_effect` where not accepted): change = new - reference with
     u = sqrt(u_new^2 + u_ref^2) from the fits; named when |z| > 3 and |change| > its floor; a parameter
@@ -115,7 +115,7 @@ def _library_changes(fits: list, floors: dict) -> tuple:
                 own = fit_effect(model, T, d.nominal, cand, active)
             pair.append(own)
         if None not in pair:
-            out += _library_change(pair[0], pair[1], floors)
+            out += library_change(pair[0], pair[1], floors)
             pairs[key] = tuple(pair)
     return out, pairs
 
@@ -168,8 +168,31 @@ def fits_rms(f: ReferenceFits) -> dict:
     return {"before": {c: rms(f.before, c) for c in f.channels}, "after": {c: rms(f.after, c) for c in f.channels}}
 
 
+def floors_for(new_path: Path, profile: Path | None, check_path: Path | None) -> tuple[dict, str]:
+    """(floors by kind, where they came from): the check profile's ``[diagnosis]`` table (``--check``, else
+    the new recording's run folder's snapshot in meta.json, else the shipped check.toml); a key not given
+    there is the measured default (:data:`hil.analysis.diagnose_floors.DUAL_FLOORS`)."""
+    import dataclasses
+
+    from hil.analysis.diagnose import check_for
+    from hil.cli.common import actuation_for
+    from hil.profiles import load_check
+    from hil.runfolder import read_record, resolve_recording
+    _, run_dir = resolve_recording(new_path)
+    meta = read_record(run_dir)
+    act = actuation_for(profile, meta)
+    if check_path is not None:
+        check, src = load_check(check_path, act), f"check profile {check_path} [diagnosis]"
+    else:
+        snap = meta is not None and meta.profiles is not None and meta.profiles.check is not None
+        check = check_for(meta, act)
+        src = (f"the check profile of {run_dir} (meta.json snapshot) [diagnosis]" if snap
+               else "the shipped check profile [diagnosis]")
+    return dataclasses.asdict(check.diagnosis), src
+
+
 def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | None,
-                             floors: dict | None = None) -> tuple:
+                             floors: dict | None = None, floors_source: str = "the measured defaults") -> tuple:
     """(diagnosis.json, :class:`ReferenceFits` or None) of a dual-EMA recording against a reference
     recording (nothing written here)."""
     from blf.diagnose import diagnose
@@ -209,7 +232,8 @@ def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | Non
                       "words": "no per-fit uncertainty of the nominal parameters: each nominal change's is the "
                                "measured repeatability (changes); a library effect's from its fits"},
         "nominal": dict(new.nominal), "changes": changes,
-        "floor": {"force_N": floors["friction_N"], "z_min": 3.0, "by_kind": floors, "words": (
+        "floor": {"force_N": floors["friction_N"], "z_min": 3.0, "by_kind": floors, "source": floors_source,
+                  "defaults": dict(DUAL_FLOORS), "words": (
             "a change is named only when supported (|z| > 3) and above its floor (play um, stiffness, sensor and "
             "load cell gain %, friction N); a nominal parameter's floor is 3 sqrt(2) x the measured spread of the "
             "nominal fit and its u = floor/3 (hil/analysis/diagnose_floors.py, docs/diagnose.md)")},

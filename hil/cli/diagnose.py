@@ -152,7 +152,7 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
 
 def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
     """``--reference`` with the dual-EMA model: each nominal parameter and library effect against the reference's."""
-    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis, floors_for
     from hil.analysis.diagnose_history import reference_from_history, refuse_other_serials
     t0 = time.perf_counter()
     hist = None
@@ -162,7 +162,8 @@ def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
     else:
         ref = Path(args.reference)
     serials = refuse_other_serials(path, ref, args.allow_other_serials)
-    data, fits = dual_reference_diagnosis(path, ref, args.profile)
+    floors, source = floors_for(path, args.profile, args.check)
+    data, fits = dual_reference_diagnosis(path, ref, args.profile, floors, source)
     data["serials"] = serials
     if hist is not None:
         data["reference_history"] = hist
@@ -201,6 +202,9 @@ def register(sub) -> None:
                         "actuator serials in the wear history): the "
                         "nominal model identified on both, each parameter's change with its uncertainty, named "
                         "only above its floor")
+    p.add_argument("--check", metavar="CHECK.toml", type=Path,
+                   help="dual-EMA --reference: the check profile whose [diagnosis] floors to use (default: the "
+                        "recording's run folder's snapshot, else the shipped check.toml)")
     p.add_argument("--allow-other-serials", action="store_true",
                    help="dual-EMA: compare with a reference of other actuators (serials differ); refused otherwise")
     p.add_argument("--history", metavar="URL", type=history_url_type,
