@@ -155,7 +155,7 @@ def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosi
     css = {"no_mismatch": "pass", "explained": "pass", "unexplained": "fail"}[data["verdict"]]
     where = (f"<p>The rest of the mismatch lies at: <b>{esc(', '.join(data['where']))}</b> (strongest first).</p>"
              if data.get("where") else "")
-    parts = [f"<h1>Simulation versus recording: <span class='{css}'>{esc(data['verdict'])}</span></h1>",
+    parts = [f"<h1>Simulation versus recording: <span class='badge {css}'>{esc(data['verdict'])}</span></h1>",
              f"<p>Model {esc(data['model'])}; compared in the band: {esc(data['band']['words'])}; "
              f"BIC before {_g(data['ic_before'], 7)}, after {_g(data['ic_after'], 7)} (dimensionless); "
              f"diagnosis {_g(data['diagnosis_s'], 3)} s.</p>",

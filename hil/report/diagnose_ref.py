@@ -43,7 +43,7 @@ def write_dual_reference_report(path: Path, data: dict, fits, *, json_name: str 
             column("change ± U (k=2)"), column("unit of change"), column("floor"), column("z", "1"), column("status")]
     fl = data["floor"]
     kinds = ", ".join(f"{esc(k)} {_g(v)}" for k, v in fl["by_kind"].items())
-    parts = [f"<h1>Dual-EMA check against a reference: <span class='pass'>{esc(head)}</span></h1>",
+    parts = [f"<h1>Dual-EMA check against a reference: <span class='badge pass'>{esc(head)}</span></h1>",
              f"<p>Reference {esc(data['reference']['recording'])}; verdict {esc(data['verdict'])}; "
              f"{_g(data.get('diagnosis_s'), 3)} s.</p>",
              "<h2>Parameters against the reference</h2>",
