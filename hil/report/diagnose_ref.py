@@ -16,6 +16,11 @@ from hil.report.diagnose import figure_residuals_pair
 from hil.report.shell import column, esc, file_link, img, table, write_page
 
 
+def _cap(text: str) -> str:
+    """A sentence of diagnosis.json's words, its first letter upper case."""
+    return text[:1].upper() + text[1:]
+
+
 def _g(x, nd: int = 4) -> str:
     return "—" if x is None else f"{x:.{nd}g}"
 
@@ -50,9 +55,9 @@ def write_dual_reference_report(path: Path, data: dict, fits, *, json_name: str 
              "<p>Nominal parameters (fitted on both recordings) and the parameters of every library effect "
              "accepted on either recording (fitted on both). A change is named only when supported (|z| > "
              f"{_g(fl.get('z_min'))}) <b>and</b> above its floor. U = 2 u. "
-             f"{esc(data['reference']['words'])}.</p>", table(cols, rows, raw=True),
+             f"{esc(_cap(data['reference']['words']))}.</p>", table(cols, rows, raw=True),
              f"<h2>Floors</h2><p>{kinds} (play um; stiffness, sensor and load cell gain %; friction N). "
-             f"{esc(fl['words'])}. Source: {esc(fl.get('source', 'the defaults'))}.</p>",
+             f"{esc(_cap(fl['words']))}. Source: {esc(fl.get('source', 'the defaults'))}.</p>",
              "<h2>Library effects each recording's own diagnosis accepted</h2>",
              table([column("recording"), column("effects")],
                    [["this recording", esc(", ".join(f"{e['name']} at {e['where']}" for e in
@@ -61,7 +66,7 @@ def write_dual_reference_report(path: Path, data: dict, fits, *, json_name: str 
                                                 data["effects_reference"]) or "none")]], raw=True)]
     if fits is not None and data.get("fits"):
         rms = data["fits"]
-        parts += ["<h2>Fits before and after</h2>", f"<p>{esc(rms['words'])}.</p>",
+        parts += ["<h2>Fits before and after</h2>", f"<p>{esc(_cap(rms['words']))}.</p>",
                   table([column("channel"), column("unit"), column("RMS before"), column("RMS after")],
                         [[c, "N" if c.startswith("F") else "mm", _g(rms["before"][c]), _g(rms["after"][c])]
                          for c in fits.channels])]
