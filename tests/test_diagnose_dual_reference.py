@@ -1,11 +1,12 @@
-"""``emacheck diagnose NEW --reference HEALTHY`` with the dual-EMA model (issue 35, part 1; first cut).
+"""``emacheck diagnose NEW --reference HEALTHY`` with the dual-EMA model (issue 35, part 1).
 
-Slow (about 2 min): simulated checks of the shipped rig (``emacheck simulate``), healthy with noise seed 11
-and changed with seed 13: the contact stiffness of EMA 1 down 20 %, the internal play of EMA 2 up 30 um,
-a Coulomb friction of 10 N in the drive of EMA 1 (a library effect, fitted on both checks), the load cell
-gain of EMA 2 up 2 %. Each change is named at the right EMA with the right sign and a size within 30 %.
-Extras are not asserted (docs/diagnose.md says which appear). Two healthy checks with different noise
-seeds (14 against 11) name nothing.
+Slow (about 4 min on a loaded machine): simulated checks of the shipped rig (``emacheck simulate``), healthy
+with noise seed 11 and changed with seed 13: the contact stiffness of EMA 1 down 20 %, the internal play of
+EMA 2 up 30 um, a Coulomb friction of 10 N in the drive of EMA 1 (a library effect, fitted on both checks),
+the load cell gain of EMA 2 up 2 %. Each change is named at the right EMA with the right sign and a size
+within 30 %. Extras are not asserted (docs/diagnose.md says which appear). Two healthy checks with different
+noise seeds (14 against 11) name nothing. Then ``--reference history`` and the serial rule, the check
+profile's floors, and the bad inputs (exit 3, nothing written).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A dual-EMA recording against a reference recording of the same rig: which nominal parameter changed.
+"""A dual-EMA recording against a reference recording of the same rig: which parameter changed.
 
 ``emacheck diagnose NEW --reference HEALTHY`` (dual-EMA model): the nominal model
 (:class:`sim.replay_model.DualEmaReplay`, :func:`blf.diagnose.diagnose`) is identified on the
@@ -10,8 +10,14 @@ Uncertainty of a change: the measured repeatability of the nominal fit
 (:mod:`hil.analysis.diagnose_floors`: the floor is :math:`3\\sqrt2\\,\\sigma`, so a change carries
 :math:`u = \\sqrt2\\,\\sigma = \\mathrm{floor}/3`); a change is named when :math:`|\\Delta| >` its floor,
 i.e. :math:`|z| = |\\Delta|/u > 3`: statistically supported against the measured spread, and
-relevant, in one test. The library effects each recording's own diagnosis accepts are listed beside
-(``effects_recording``, ``effects_reference``), not named as changes.
+relevant, in one test (for floors left at their measured defaults; docs/diagnose.md).
+
+Library effects: every candidate accepted on either recording's own diagnosis (``effects_recording``,
+``effects_reference``) is fitted on the other too (:func:`blf.diagnose.fit_effect`) and its parameters
+compared (:func:`library_change`): u from the two fits, named when :math:`|z| > 3` and above the floor of
+its kind (:data:`LIBRARY_FLOORS`: Coulomb friction N, load cell gain %). The report's fits before and after
+(:class:`ReferenceFits`): the new recording replayed by the reference's model, and by it with the named
+changes only.
 """
 
 from __future__ import annotations

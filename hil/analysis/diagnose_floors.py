@@ -3,8 +3,8 @@
 A change of a nominal parameter between two checks of one rig is to be named only when it is
 statistically supported and above its floor (as :data:`hil.analysis.diagnose_axis.FORCE_FLOOR_N` for
 a single axis). These are the defaults of the dual-EMA reference mode
-(:mod:`hil.analysis.diagnose_dual_ref`; diagnosis.json ``floor.by_kind`` states them; a profile key or
-command-line option to set them: not yet).
+(:mod:`hil.analysis.diagnose_dual_ref`; diagnosis.json ``floor.by_kind`` states the floors used); the
+check profile's ``[diagnosis]`` keys set a rig's own (:class:`hil.config.DiagnosisFloors`).
 
 Measured by ``python tests/bench/bench_diagnose_floors.py /tmp/floors.json`` (docs/diagnose.md,
 "Floors of the dual-EMA model"); each default is the larger of two measurements, rounded up:
