@@ -136,7 +136,7 @@ from blf.validate import positive_scalar
 
 #: the model's vocabulary and the result (:mod:`blf.diagnose_model`) are imported from here
 __all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
-           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "diagnose", "place_of"]
+           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "diagnose", "fit_effect", "place_of"]
 
 
 def _band(model: ReplayModel, sample_period_s: float, cfg: DiagnoseConfig) -> Comparison:
@@ -392,7 +392,8 @@ def _library_effect(cfg: DiagnoseConfig, cur: Standing, scr: Screening, refits: 
     return FittedEffect(name=cand.name, where=cand.where, words=cand.words,
                         parameters={q.name: float(v) for q, v in zip(cand.params, a.fit.x, strict=True)},
                         uncertainty={q.name: float(u) for q, u in zip(cand.params, a.fit.uncertainty, strict=True)},
-                        delta_bic=float(a.delta_bic), delta_chi2_holdout=float(a.delta_chi2_holdout), evidence=ev)
+                        delta_bic=float(a.delta_bic), delta_chi2_holdout=float(a.delta_chi2_holdout), evidence=ev,
+                        variant=cand.variant)
 
 
 def _ln_n(p: Problem) -> float:
@@ -646,3 +647,37 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
         screening=sel.screening, predicted_before=before.predicted, predicted_after=after.predicted,
         measured=floor.measured, valid=dict(p.valid_raw), held_out=~p.fit_raw, kept=p.idx, kept_valid=dict(p.valid),
         regime_cells_before=before.regime, regime_cells_after=after.regime, regime_labels=frame.labels)
+
+
+def fit_effect(model: ReplayModel, sample_period_s: float, nominal: dict, candidate: Candidate,
+               active: tuple = (), config: DiagnoseConfig | None = None) -> FittedEffect | None:
+    """One candidate fitted on a recording whether or not it would be accepted there.
+
+    For a comparison of two recordings (:mod:`hil.analysis.diagnose_dual_ref`): the candidate a
+    diagnosis accepted on one recording, fitted on the other from its diagnosis's nominal parameters
+    ``nominal`` ({name: value}) with its accepted effects ``active`` ((Candidate, parameters), ...),
+    nominal and candidate refitted together on the fit half (:func:`blf.diagnose_fit.fit_joint`,
+    standard uncertainties from its Jacobian, scaled by the reduced chi-square where above 1).
+
+    Returns
+    -------
+    FittedEffect or None
+        ``delta_bic``, ``delta_chi2_holdout``: the chi-square change against the nominal model with
+        ``active`` (no penalty); None if the replay fails.
+    """
+    cfg = config or DiagnoseConfig()
+    cmp = _band(model, sample_period_s, cfg)
+    p = cmp.problem
+    theta = np.array([float(nominal[q.name]) for q in model.nominal])
+    pred = safe_predict(model, theta, list(active))
+    if pred is None:
+        return None
+    p.set_floor(model.measured, pred)
+    w0 = p.weighted(pred)
+    joint = fit_joint(p, theta, list(active), candidate, np.array([q.x0 for q in candidate.params]))
+    if joint is None:
+        return None
+    return FittedEffect(candidate.name, candidate.where, candidate.words, _named(candidate.params, joint.x),
+                        _named(candidate.params, joint.uncertainty), joint.chi2_fit - p.chi2(w0, p.fit),
+                        joint.chi2_holdout - p.chi2(w0, ~p.fit), "fitted for a comparison, not screened",
+                        variant=candidate.variant)

@@ -184,6 +184,7 @@ class FittedEffect:
     delta_chi2_holdout: float
     evidence: str
     source: str = "library"  #: "library" (a candidate term) or "nominal" (a nominal parameter off its reference)
+    variant: str = ""  #: the candidate's variant (:class:`Candidate`), e.g. friction in the drive or the load path
 
 
 @dataclass(frozen=True)

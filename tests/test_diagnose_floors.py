@@ -23,6 +23,6 @@ def test_the_play_stiffness_and_gain_floors_cover_three_sqrt2_times_the_identifi
 
     from hil.analysis.diagnose_floors import DUAL_FLOORS
     ind = independent()
-    for kind in ("play_um", "stiffness_pct", "sensor_gain_pct"):
+    for kind in ("play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
         assert ind[kind]["floor_3sqrt2_sd"] <= DUAL_FLOORS[kind], kind
         assert abs(ind[kind]["mean"]) < 3 * ind[kind]["sd"]  # no bias beyond the spread: the fit is right

@@ -16,7 +16,7 @@ from pathlib import Path
 from hil.errors import RecordingError
 
 
-def _check_for(meta, act):
+def check_for(meta, act):
     """The check profile a recording was made with (meta.json's snapshot), else the shipped one."""
     from hil.profile.config import Check
     from hil.profile.load import load_check
@@ -53,7 +53,7 @@ def load_dual(path: Path, profile: Path | None):
         raise RecordingError(f"{sig_path}: {exc}") from None
     refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta)
     check_units(sig, act)
-    check = _check_for(meta, act)
+    check = check_for(meta, act)
     try:
         seg = find_segments(sig, act)
     except AnalysisError:

@@ -1,4 +1,4 @@
-"""A dual-EMA recording against a reference recording of the same rig: which nominal parameter changed.
+"""A dual-EMA recording against a reference recording of the same rig: which parameter changed.
 
 ``emacheck diagnose NEW --reference HEALTHY`` (dual-EMA model): the nominal model
 (:class:`sim.replay_model.DualEmaReplay`, :func:`blf.diagnose.diagnose`) is identified on the
@@ -10,13 +10,22 @@ Uncertainty of a change: the measured repeatability of the nominal fit
 (:mod:`hil.analysis.diagnose_floors`: the floor is :math:`3\\sqrt2\\,\\sigma`, so a change carries
 :math:`u = \\sqrt2\\,\\sigma = \\mathrm{floor}/3`); a change is named when :math:`|\\Delta| >` its floor,
 i.e. :math:`|z| = |\\Delta|/u > 3`: statistically supported against the measured spread, and
-relevant, in one test. The library effects each recording's own diagnosis accepts are listed beside
-(``effects_recording``, ``effects_reference``), not named as changes.
+relevant, in one test (for floors left at their measured defaults; docs/diagnose.md).
+
+Library effects: every candidate accepted on either recording's own diagnosis (``effects_recording``,
+``effects_reference``) is fitted on the other too (:func:`blf.diagnose.fit_effect`) and its parameters
+compared (:func:`library_change`): u from the two fits, named when :math:`|z| > 3` and above the floor of
+its kind (:data:`LIBRARY_FLOORS`: Coulomb friction N, load cell gain %). The report's fits before and after
+(:class:`ReferenceFits`): the new recording replayed by the reference's model, and by it with the named
+changes only.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 #: nominal parameter name prefix -> (floor key of DUAL_FLOORS, unit, words)
 _KINDS = {"backlash_int": ("play_um", "um", "internal play"), "backlash_bearing": ("play_um", "um", "bearing play"),
@@ -56,38 +65,197 @@ def _change(name: str, new: float, ref: float, floors: dict) -> dict | None:
             "words": f"{words} {verb} by {abs(ch):.3g} ± {u:.2g} {unit}; {how}"}
 
 
-def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | None, floors: dict | None = None) -> dict:
-    """diagnosis.json of a dual-EMA recording against a reference recording (nothing written here)."""
+#: library candidate parameter -> (floor key of DUAL_FLOORS, unit, scale to the unit, words); a candidate's
+#: null value is 0 (no such physics). The library effects compared are those accepted on either recording,
+#: fitted on the other too; the candidates measured for the floors (tests/bench/bench_diagnose_floors.py)
+#: are the drives' Coulomb friction and the load cells' gain
+LIBRARY_FLOORS = {("coulomb_friction", "force_N"): ("friction_N", "N", 1.0, "Coulomb friction"),
+            ("loadcell_gain", "gain_error"): ("loadcell_gain_pct", "%", 100.0, "load cell gain")}
+
+
+def library_change(e_new, e_ref, floors: dict) -> list:
+    """The changes of one library effect's parameters between the reference and the new recording, each
+    fitted on both (:func:`blf.diagnose.fit_effect` where not accepted): change = new - reference with
+    u = sqrt(u_new^2 + u_ref^2) from the fits; named when |z| > 3 and |change| > its floor; a parameter
+    with no measured floor is listed, never named."""
+    out = []
+    for k, v in e_new.parameters.items():
+        key, unit, scale, words = LIBRARY_FLOORS.get((e_new.name, k), (None, "", 1.0, e_new.name))
+        ch = scale * (v - e_ref.parameters[k])
+        u = scale * float(np.hypot(e_new.uncertainty[k], e_ref.uncertainty[k]))
+        floor = None if key is None else float(floors[key])
+        z = ch / u if u > 0 else float("inf") * np.sign(ch)
+        sup, above = bool(abs(z) > 3.0), floor is not None and abs(ch) > floor
+        verb = "increased" if ch > 0 else "decreased"
+        how = ("no floor measured for it: not named" if floor is None else
+               f"named: supported and above its floor of {floor:g} {unit}" if sup and above else
+               f"under its floor of {floor:g} {unit}: not named" if sup else "not supported (|z| <= 3): not named")
+        where = f" ({e_new.variant})" if e_new.variant else ""
+        out.append({"parameter": f"{e_new.name}.{k}", "effect": e_new.name, "variant": e_new.variant,
+                    "where": e_new.where, "value": float(v), "reference": float(e_ref.parameters[k]),
+                    "change": ch, "unit": unit or "", "uncertainty": u, "z": z, "floor": floor, "supported": sup,
+                    "above_floor": bool(above), "named": bool(sup and above), "source": "library",
+                    "words": f"{words}{where} at {e_new.where} {verb} by {abs(ch):.3g} ± {u:.2g} {unit}; {how}"})
+    return out
+
+
+def _library_changes(fits: list, floors: dict) -> tuple:
+    """Every library effect accepted on either recording, fitted on both, compared parameter by parameter:
+    (changes, {(name, where, variant): (effect on the new recording, on the reference)})."""
+    from blf.diagnose import fit_effect
+    (m_ref, T_ref, d_ref), (m_new, T_new, d_new) = fits
+    keys = []
+    for d in (d_new, d_ref):
+        keys += [(e.name, e.where, e.variant) for e in d.effects
+                 if e.source == "library" and (e.name, e.where, e.variant) not in keys]
+    out, pairs = [], {}
+    for key in keys:
+        pair = []
+        for model, T, d in ((m_new, T_new, d_new), (m_ref, T_ref, d_ref)):
+            own = next((e for e in d.effects if (e.name, e.where, e.variant) == key), None)
+            if own is None:
+                cand = next(c for c in model.candidates if (c.name, c.where, c.variant) == key)
+                active = tuple((c, np.array([e.parameters[q.name] for q in c.params])) for e in d.effects
+                               if e.source == "library" for c in model.candidates
+                               if (c.name, c.where, c.variant) == (e.name, e.where, e.variant))
+                own = fit_effect(model, T, d.nominal, cand, active)
+            pair.append(own)
+        if None not in pair:
+            out += library_change(pair[0], pair[1], floors)
+            pairs[key] = tuple(pair)
+    return out, pairs
+
+
+@dataclass(frozen=True)
+class ReferenceFits:
+    """The new recording's channels against two models (for the report's figures; arrays, not in JSON).
+
+    ``before``: the reference's model (its nominal parameters and library effects) replayed with the new
+    recording's motor angles; ``after``: the same with the named changes only (the named nominal
+    parameters and library effects at their values on the new recording)."""
+
+    t_s: np.ndarray
+    channels: tuple
+    measured: dict
+    valid: dict
+    before: dict
+    after: dict
+
+
+def _fits(m_new, d_ref, d_new, changes: list, pairs: dict) -> ReferenceFits | None:
+    """Replays of the new recording by the reference's model, and by it with the named changes."""
+    from blf.diagnose_fit import safe_predict
+    named = {c["parameter"] for c in changes if c["named"]}
+    th_ref = np.array([float(d_ref.nominal[q.name]) for q in m_new.nominal])
+    th_after = np.array([float((d_new if q.name in named else d_ref).nominal[q.name]) for q in m_new.nominal])
+    act_ref, act_after = [], []
+    for cand in m_new.candidates:
+        pair = pairs.get((cand.name, cand.where, cand.variant))
+        if pair is None:
+            continue
+        e_new, e_ref = pair
+        x_ref = np.array([e_ref.parameters[q.name] for q in cand.params])
+        x_new = np.array([e_new.parameters[q.name] for q in cand.params])
+        act_ref.append((cand, x_ref))
+        act_after.append((cand, np.where([f"{cand.name}.{q.name}" in named for q in cand.params], x_new, x_ref)))
+    before, after = safe_predict(m_new, th_ref, act_ref), safe_predict(m_new, th_after, act_after)
+    if before is None or after is None:
+        return None
+    ch = tuple(c for c in m_new.channels if c in before and np.asarray(m_new.valid[c]).any())
+    return ReferenceFits(m_new.t_s, ch, {c: m_new.measured[c] for c in ch}, {c: m_new.valid[c] for c in ch},
+                         {c: before[c] for c in ch}, {c: after[c] for c in ch})
+
+
+def fits_rms(f: ReferenceFits) -> dict:
+    """Residual RMS per channel (its unit) of the reference's model and of it with the named changes."""
+    def rms(pred: dict, c: str) -> float:
+        r = (f.measured[c] - pred[c])[f.valid[c]]
+        return float(np.sqrt(np.mean(r ** 2)))
+    return {"before": {c: rms(f.before, c) for c in f.channels}, "after": {c: rms(f.after, c) for c in f.channels}}
+
+
+def floors_for(new_path: Path, profile: Path | None, check_path: Path | None) -> tuple[dict, str]:
+    """(floors by kind, where they came from): the check profile's ``[diagnosis]`` table (``--check``, else
+    the new recording's run folder's snapshot in meta.json, else the shipped check.toml); a key not given
+    there is the measured default (:data:`hil.analysis.diagnose_floors.DUAL_FLOORS`)."""
+    import dataclasses
+
+    from hil.analysis.diagnose import check_for
+    from hil.cli.common import actuation_for
+    from hil.profile.load import load_check
+    from hil.record.runfolder import read_record, resolve_recording
+    _, run_dir = resolve_recording(new_path)
+    meta = read_record(run_dir)
+    act = actuation_for(profile, meta)
+    if check_path is not None:
+        check, src = load_check(check_path, act), f"check profile {check_path} [diagnosis]"
+    else:
+        snap = meta is not None and meta.profiles is not None and meta.profiles.check is not None
+        check = check_for(meta, act)
+        src = (f"the check profile of {run_dir} (meta.json snapshot) [diagnosis]" if snap
+               else "the shipped check profile [diagnosis]")
+    return dataclasses.asdict(check.diagnosis), src
+
+
+def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | None,
+                             floors: dict | None = None, floors_source: str = "the measured defaults") -> tuple:
+    """(diagnosis.json, :class:`ReferenceFits` or None) of a dual-EMA recording against a reference
+    recording (nothing written here)."""
     from blf.diagnose import diagnose
     from hil.analysis.diagnose import load_dual
     from hil.analysis.diagnose_floors import DUAL_FLOORS
     floors = dict(DUAL_FLOORS) | dict(floors or {})
+    from blf.errors import AnalysisError, InputError
+    from hil.errors import RecordingError
+    loaded = [load_dual(Path(path), profile) for path in (ref_path, new_path)]
+    (_, t_ref), (_, t_new) = loaded
+    if abs(t_ref / t_new - 1.0) > 0.01:
+        raise RecordingError(f"--reference {ref_path}: another sample rate: {1 / t_ref:.6g} Hz, this recording "
+                             f"{1 / t_new:.6g} Hz (more than 1 % apart)")
     fits = []
-    for path in (ref_path, new_path):
-        model, period = load_dual(Path(path), profile)
-        fits.append(diagnose(model, period))
-    ref, new = fits
+    for path, (model, period) in zip((ref_path, new_path), loaded, strict=True):
+        try:
+            fits.append((model, period, diagnose(model, period)))
+        except (InputError, AnalysisError) as exc:
+            raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
+    ref, new = fits[0][2], fits[1][2]
     changes = [c for c in (_change(n, float(new.nominal[n]), float(ref.nominal[n]), floors)
                            for n in new.nominal if n in ref.nominal) if c is not None]
-    effects = [{"name": _effect_name(c["parameter"]), "where": c["where"], "words": c["words"], "source": "reference",
-                "parameters": {c["parameter"]: c["value"]}, "uncertainty": {c["parameter"]: c["uncertainty"]},
-                "change": {c["parameter"]: c["change"]}, "floor": {c["parameter"]: c["floor"]},
-                "delta_bic": None, "delta_chi2_holdout": None, "evidence": f"z = {c['z']:.1f} against the measured "
-                "repeatability"} for c in changes if c["named"]]
+    lib, pairs = _library_changes(fits, floors)
+    changes += lib
+    effects = [_effect_of(c) for c in changes if c["named"]]
+    rf = _fits(fits[1][0], ref, new, changes, pairs)
     eff = lambda d: [{"name": e.name, "where": e.where} for e in d.effects]  # noqa: E731
     return {
         "verdict": "explained" if effects else "no_mismatch", "model": "dual-ema", "mode": "reference",
+        "fits": None if rf is None else {**fits_rms(rf), "words": (
+            "residual RMS of the new recording (raw band, channel units), before: the reference's model (its "
+            "nominal parameters and library effects) replayed with this recording's motor angles; after: the same "
+            "with the named changes only")},
         "effects": effects, "where": [], "locations": [],
         "band": {"cutoff_hz": None, "step": 1, "words": "each recording's nominal fit (emacheck diagnose)"},
         "reference": {"recording": str(ref_path), "nominal": dict(ref.nominal), "uncertainty": {},
-                      "words": "no per-fit uncertainty: each change's is the measured repeatability (changes)"},
+                      "words": "no per-fit uncertainty of the nominal parameters: each nominal change's is the "
+                               "measured repeatability (changes); a library effect's from its fits"},
         "nominal": dict(new.nominal), "changes": changes,
-        "floor": {"force_N": floors["friction_N"], "z_min": 3.0, "by_kind": floors, "words": (
-            "a change is named only above its floor (play um, stiffness and sensor gain %, friction N); the floor is "
-            "3 sqrt(2) x the measured spread of the nominal fit, so above it |z| > 3 (hil/analysis/diagnose_floors.py, "
-            "docs/diagnose.md)")},
+        "floor": {"force_N": floors["friction_N"], "z_min": 3.0, "by_kind": floors, "source": floors_source,
+                  "defaults": dict(DUAL_FLOORS), "words": (
+            "a change is named only when supported (|z| > 3) and above its floor (play um, stiffness, sensor and "
+            "load cell gain %, friction N); a nominal parameter's floor is 3 sqrt(2) x the measured spread of the "
+            "nominal fit and its u = floor/3 (hil/analysis/diagnose_floors.py, docs/diagnose.md)")},
         "effects_recording": eff(new), "effects_reference": eff(ref),
-    }
+    }, rf
+
+
+def _effect_of(c: dict) -> dict:
+    """The effect of a named change (diagnosis.json ``effects``)."""
+    name = c["effect"] + "_change" if c.get("source") == "library" else _effect_name(c["parameter"])
+    return {"name": name, "where": c["where"], "words": c["words"], "source": "reference",
+            "parameters": {c["parameter"]: c["value"]}, "uncertainty": {c["parameter"]: c["uncertainty"]},
+            "change": {c["parameter"]: c["change"]}, "floor": {c["parameter"]: c["floor"]},
+            "delta_bic": None, "delta_chi2_holdout": None,
+            "evidence": f"z = {c['z']:.1f}" + (" from the two fits" if c.get("source") == "library"
+                                               else " against the measured repeatability")}
 
 
 def _effect_name(parameter: str) -> str:

@@ -6,7 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
-from hil.cli.common import add_parser, add_recording_args, make_console, outputs_for
+from hil.cli.common import add_parser, add_recording_args, history_url_type, make_console, outputs_for
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
@@ -117,6 +117,11 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
     """``--reference``: single axis against a healthy recording; everything checked before anything is written."""
     from hil.analysis.diagnose_axis import reference_diagnosis
     from hil.errors import RecordingError
+    if str(args.reference) == "history":
+        if args.model != "dual-ema":
+            raise RecordingError("--reference history: the wear history holds dual-EMA checks; a single axis needs "
+                                 "its reference recording")
+        return _cmd_dual_reference(args, path, console)
     if not Path(args.reference).exists():
         raise RecordingError(f"--reference {args.reference}: no such file")
     if args.model != "single-axis":
@@ -146,15 +151,31 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
 
 
 def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
-    """``--reference`` with the dual-EMA model: each nominal parameter against the reference's."""
-    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    """``--reference`` with the dual-EMA model: each nominal parameter and library effect against the reference's."""
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis, floors_for
+    from hil.analysis.diagnose_history import reference_from_history, refuse_other_serials
     t0 = time.perf_counter()
-    data = dual_reference_diagnosis(path, Path(args.reference), args.profile)
+    hist = None
+    if str(args.reference) == "history":
+        from hil.cli.history import history_url_for
+        ref, hist = reference_from_history(path, history_url_for(args.history, args.profile), args.allow_other_serials)
+    else:
+        ref = Path(args.reference)
+    serials = refuse_other_serials(path, ref, args.allow_other_serials)
+    floors, source = floors_for(path, args.profile, args.check)
+    data, fits = dual_reference_diagnosis(path, ref, args.profile, floors, source)
+    data["serials"] = serials
+    if hist is not None:
+        data["reference_history"] = hist
     data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
-    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json",))
+    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json", "diagnosis_report.html"))
     outputs.write_json("diagnosis.json", data)
+    if not args.no_report:
+        from hil.report.diagnose_ref import write_dual_reference_report
+        outputs.write_with("diagnosis_report.html", lambda p: write_dual_reference_report(
+            p, data, fits, json_name=outputs.path("diagnosis.json").name))
     console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
-                  f"{args.reference} ({data['diagnosis_s']:.1f} s)")
+                  f"{ref} ({data['diagnosis_s']:.1f} s)" + (f"; {hist['words']}" if hist else ""))
     for c in data["changes"]:
         console.print(f"  {c['parameter']} ({c['where']}): {c['words']}")
     console.print(f"  written {outputs.path('diagnosis.json')}")
@@ -177,9 +198,18 @@ def register(sub) -> None:
     p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")
     p.add_argument("--reference", metavar="HEALTHY", type=Path,
                    help="compare with this healthy recording of the same rig (single axis: same columns and sample "
-                        "rate; dual-EMA: a run folder or recording): the "
+                        "rate; dual-EMA: a run folder or recording, or 'history': the last check of the same "
+                        "actuator serials in the wear history): the "
                         "nominal model identified on both, each parameter's change with its uncertainty, named "
                         "only above its floor")
+    p.add_argument("--check", metavar="CHECK.toml", type=Path,
+                   help="dual-EMA --reference: the check profile whose [diagnosis] floors to use (default: the "
+                        "recording's run folder's snapshot, else the shipped check.toml)")
+    p.add_argument("--allow-other-serials", action="store_true",
+                   help="dual-EMA: compare with a reference of other actuators (serials differ); refused otherwise")
+    p.add_argument("--history", metavar="URL", type=history_url_type,
+                   help="--reference history: the wear history database (default: the actuation profile's "
+                        "history.url, else the user's SQLite file)")
     p.add_argument("--current-law", choices=("torque", "power"),
                    help="single axis with a current column: torque (a phase current following the torque) or "
                         "power (a supply current following mechanical power at the running speed)")

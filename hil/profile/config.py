@@ -206,6 +206,24 @@ class Safety:
     max_lag_s: float = field(default=0.02, metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_LAG_S))
 
 
+def _floor(kind: str) -> float:
+    from hil.analysis.diagnose_floors import DUAL_FLOORS
+    return field(default=DUAL_FLOORS[kind], metadata=_rng(0.0, lo_open=True))
+
+
+@dataclass(frozen=True)
+class DiagnosisFloors:
+    """Relevance floors of ``emacheck diagnose --reference`` with the dual-EMA model (check profile
+    ``[diagnosis]``): a change is named only above its floor. Defaults: measured on simulated rigs
+    (:data:`hil.analysis.diagnose_floors.DUAL_FLOORS`, docs/diagnose.md); a real rig states its own."""
+
+    play_um: float = _floor("play_um")  #: internal, bearing play and LVDT offset, um
+    stiffness_pct: float = _floor("stiffness_pct")  #: contact stiffness and compliance, %
+    sensor_gain_pct: float = _floor("sensor_gain_pct")  #: LVDT pitch, %
+    friction_N: float = _floor("friction_N")  #: hinge and drive Coulomb friction, N
+    loadcell_gain_pct: float = _floor("loadcell_gain_pct")  #: load cell gain, %
+
+
 @dataclass(frozen=True)
 class Check:
     """The automated check (profiles/check.toml)."""
@@ -214,3 +232,4 @@ class Check:
     calibration: CalibrationStep
     force_fight: ForceFightStep
     safety: Safety
+    diagnosis: DiagnosisFloors = field(default_factory=DiagnosisFloors)

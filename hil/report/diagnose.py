@@ -57,6 +57,31 @@ def figure_overlay(model, d, channel: str):
     return fig
 
 
+def figure_residuals_pair(t, measured, valid, before, after, channel: str, labels: tuple):
+    """One channel against two models (e.g. a reference's and it with the named changes): the recording and
+    both predictions, and both residuals as 0.5 s means (no band)."""
+    from scipy.ndimage import uniform_filter1d
+
+    ok = np.asarray(valid, dtype=bool)
+    sl = thin(int(ok.sum()))
+    fig, ax = pyplot().subplots(2, 1, figsize=(9, 4.5), sharex=True)
+    unit = _unit(channel)
+    ax[0].plot(t[ok][sl], measured[ok][sl], ".", ms=1, color="0.6", label="recording")
+    n = max(1, int(0.5 / np.median(np.diff(t))))
+    for pred, lab in ((before, labels[0]), (after, labels[1])):
+        ax[0].plot(t[ok][sl], pred[ok][sl], lw=0.8, label=lab)
+        r = uniform_filter1d(np.where(ok, measured - pred, 0.0), n)
+        ax[1].plot(t[ok][sl], r[ok][sl], lw=0.8, label=f"residual, {lab} (0.5 s mean)")
+    ax[0].set_ylabel(f"{channel} [{unit}]")
+    ax[0].legend(fontsize=7)
+    ax[1].axhline(0, color="k", lw=0.5)
+    ax[1].set_ylabel(f"residual [{unit}]")
+    ax[1].set_xlabel("t [s]")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
 def figure_regime(d, channel: str):
     """Regime cells of one channel: cell score on the fit half against the held-out half,
     before and after the fitted effects (a mismatch tied to the regime lies on the diagonal)."""
@@ -130,7 +155,7 @@ def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosi
     css = {"no_mismatch": "pass", "explained": "pass", "unexplained": "fail"}[data["verdict"]]
     where = (f"<p>The rest of the mismatch lies at: <b>{esc(', '.join(data['where']))}</b> (strongest first).</p>"
              if data.get("where") else "")
-    parts = [f"<h1>Simulation versus recording: <span class='{css}'>{esc(data['verdict'])}</span></h1>",
+    parts = [f"<h1>Simulation versus recording: <span class='badge {css}'>{esc(data['verdict'])}</span></h1>",
              f"<p>Model {esc(data['model'])}; compared in the band: {esc(data['band']['words'])}; "
              f"BIC before {_g(data['ic_before'], 7)}, after {_g(data['ic_after'], 7)} (dimensionless); "
              f"diagnosis {_g(data['diagnosis_s'], 3)} s.</p>",

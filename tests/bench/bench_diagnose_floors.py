@@ -43,6 +43,8 @@ KINDS = {"backlash_int": ("play_um", "um"), "backlash_bearing": ("play_um", "um"
          "lvdt_pitch": ("sensor_gain_pct", "%"), "lvdt_offset": ("play_um", "um"),
          "hinge_coulomb_N": ("friction_N", "N"), "drive_coulomb_N": ("friction_N", "N")}
 SEEDS = (11, 12, 13)
+#: library candidates (name, variant) fitted on every healthy recording for the floors of their changes
+CANDIDATES = (("coulomb_friction", "drive"), ("loadcell_gain", ""))
 
 
 def _kind(name: str):
@@ -62,11 +64,31 @@ def change_in_unit(name: str, new: float, ref: float) -> float:
     return new - ref
 
 
+def candidate_values(model, period: float, d) -> dict:
+    """Each candidate of :data:`CANDIDATES` at each EMA fitted on a healthy recording (whose diagnosis is
+    ``d``), in its floor's unit: {"name.param@where": (floor key, value)}."""
+    from blf.diagnose import fit_effect
+    from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS
+    out = {}
+    for c in model.candidates:
+        if (c.name, c.variant) in CANDIDATES:
+            e = fit_effect(model, period, d.nominal, c, ())
+            for k, v in e.parameters.items():
+                key, _, scale, _ = LIBRARY_FLOORS[(c.name, k)]
+                out[f"{c.name}.{k}@{c.where}"] = (key, scale * v)
+    return out
+
+
 def independent() -> dict:
     """Fitted minus true internal play (um) and contact stiffness (%), per effect-free recording and EMA."""
-    rows = []
+    from hil.analysis.diagnose import load_model
+    from support.independent_rig import rig_profile
+    rows, gains = [], []
     for name in sorted(n for n, k in KEYS.items() if not k["expect"]):
         d, secs = diagnose_file(DATA / f"{name}.csv.gz")
+        model, period = load_model(DATA / f"{name}.csv.gz", "dual-ema", rig_profile())
+        gains += [{"recording": name, "candidate": k, "value": v}
+                  for k, (kind, v) in candidate_values(model, period, d).items() if kind == "loadcell_gain_pct"]
         truth = KEYS[name]["truth"]
         for e in (1, 2):
             play = d.nominal[f"backlash_int{e}_mm"]
@@ -81,7 +103,11 @@ def independent() -> dict:
         r["play_error_um"] = r["play_fit_um"] - r["play_true_um"]
         r["stiffness_error_pct"] = 100 * (r["stiffness_fit_N_per_mm"] / r["stiffness_true_N_per_mm"] - 1)
         r["pitch_error_pct"] = 100 * (r["pitch_fit"] / r["pitch_true"] - 1)
-    out = {"rows": rows}
+    out = {"rows": rows, "loadcell_gain_rows": gains}
+    x = np.array([g["value"] for g in gains])  # fitted gain error, %; true 0 (no load cell gain in these)
+    sd = float(np.std(x, ddof=1))
+    out["loadcell_gain_pct"] = {"mean": float(x.mean()), "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd,
+                                "n": int(x.size)}
     for key, kind in (("play_error_um", "play_um"), ("stiffness_error_pct", "stiffness_pct"),
                       ("pitch_error_pct", "sensor_gain_pct")):
         x = np.array([r[key] for r in rows])
@@ -97,18 +123,22 @@ def simulated(runs) -> dict:
 
     from blf.diagnose import diagnose
     from hil.analysis.diagnose import load_model
-    nom = []
+    nom, cand = [], []
     for run in runs:
         model, period = load_model(run, "dual-ema", None)
-        nom.append(diagnose(model, period).nominal)
-    pairs = {}
+        d = diagnose(model, period)
+        nom.append(d.nominal)
+        cand.append(candidate_values(model, period, d))
+    pairs, kind_of = {}, {n: _kind(n)[0] for n in nom[0] if _kind(n)} | {k: v[0] for k, v in cand[0].items()}
     for i, j in combinations(range(len(runs)), 2):
-        pairs[f"{SEEDS[j]} vs {SEEDS[i]}"] = {n: change_in_unit(n, nom[j][n], nom[i][n]) for n in nom[0] if _kind(n)}
+        pairs[f"{SEEDS[j]} vs {SEEDS[i]}"] = {n: change_in_unit(n, nom[j][n], nom[i][n]) for n in nom[0] if _kind(n)} \
+            | {k: cand[j][k][1] - cand[i][k][1] for k in cand[0]}
     kinds = {}
     for ch in pairs.values():
         for n, v in ch.items():
-            kinds.setdefault(_kind(n)[0], []).append(v)
-    return {"pairs": pairs, "floor_3rms": {k: 3 * float(np.sqrt(np.mean(np.square(v)))) for k, v in kinds.items()},
+            kinds.setdefault(kind_of[n], []).append(v)
+    return {"pairs": pairs, "kind_of": kind_of,
+            "floor_3rms": {k: 3 * float(np.sqrt(np.mean(np.square(v)))) for k, v in kinds.items()},
             "n": {k: len(v) for k, v in kinds.items()}}
 
 
@@ -136,7 +166,7 @@ def main(argv: list[str]) -> int:
                   f"| {r['play_error_um']:+.2f} | {r['stiffness_fit_N_per_mm']:.0f} "
                   f"| {r['stiffness_true_N_per_mm']:.0f} | {r['stiffness_error_pct']:+.2f} "
                   f"| {r['pitch_error_pct']:+.4f} |")
-        for kind in ("play_um", "stiffness_pct", "sensor_gain_pct"):
+        for kind in ("play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
             s = ind[kind]
             print(f"{kind}: error mean {s['mean']:+.3g}, sd {s['sd']:.3g} over {s['n']}; "
                   f"floor 3 sqrt(2) sd = {s['floor_3sqrt2_sd']:.3g}")
@@ -154,7 +184,8 @@ def main(argv: list[str]) -> int:
     print("| nominal parameter | unit | " + " | ".join(sim["pairs"]) + " |")
     print("|---|---|" + "---|" * len(sim["pairs"]))
     for n in names:
-        print(f"| {n} | {_kind(n)[1]} | " + " | ".join(f"{ch[n]:+.3g}" for ch in sim["pairs"].values()) + " |")
+        unit = {"friction_N": "N", "loadcell_gain_pct": "%"}.get(sim["kind_of"][n]) if not _kind(n) else _kind(n)[1]
+        print(f"| {n} | {unit} | " + " | ".join(f"{ch[n]:+.3g}" for ch in sim["pairs"].values()) + " |")
     for k, v in sim["floor_3rms"].items():
         ind = result.get("independent", {}).get(k.replace("_N", "_N"), {}).get("floor_3sqrt2_sd")
         print(f"{k}: simulated pairs 3 x RMS = {v:.3g} over {sim['n'][k]}"
