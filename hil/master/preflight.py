@@ -65,7 +65,7 @@ from hil.errors import EmacheckError
 from hil.master.limits_setup import limit_targets, limits_for, readback_problem
 from hil.profile.config import Actuation, Safety
 
-__all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
+__all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError", "identity_problems",
            "MasterLossReactionError", "ReactionConfig", "SameSerialError"]
 
 
@@ -251,6 +251,25 @@ def decode(node: NodePlan, index: int, sub: int, data: bytes) -> int | float:
     return struct.unpack("<" + code, raw)[0]
 
 
+def identity_problems(spec, ident: dict | None, devtype: int | None = None) -> list[str]:
+    """What disagrees between a node's identity as read (0x1018 ``ident``: ``vendor_id``, ``product_code``,
+    ``revision``; device type 0x1000 ``devtype``; None: not compared) and the profile's node ``spec``. The
+    preflight stops at the first; the commissioning (:mod:`hil.master.commission`) names them all."""
+    out = []
+    if ident is not None:
+        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] != spec.product_code:
+            out.append(f"{spec.label}: identity 0x1018 vendor 0x{ident['vendor_id']:08X} product "
+                       f"0x{ident['product_code']:08X} does not match the profile ({spec.key}.vendor_id "
+                       f"0x{spec.vendor_id:08X}, {spec.key}.product_code 0x{spec.product_code:08X})")
+        if ident["revision"] < spec.revision_min:
+            out.append(f"{spec.label}: revision 0x{ident['revision']:08X} below "
+                       f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
+    if devtype is not None and devtype & 0xFFFF != spec.device_profile:
+        out.append(f"{spec.label}: device type 0x{devtype:08X} is not a CiA {spec.device_profile} "
+                   f"device (0x1000 bits 0..15 = {devtype & 0xFFFF})")
+    return out
+
+
 # ------------------------------------------------------------------ the preflight
 
 
@@ -341,19 +360,12 @@ class Preflight:
             v = yield from self._read(node, 0x1018, sub, key.replace("_", " "), soft=sub == 4)
             ident[key] = None if isinstance(v, SdoAbortError) else int(v)
         self.identities[spec.node_id] = ident
-        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] != spec.product_code:
-            raise PreflightError(
-                f"{spec.label}: identity 0x1018 vendor 0x{ident['vendor_id']:08X} product "
-                f"0x{ident['product_code']:08X} does not match the profile ({spec.key}.vendor_id "
-                f"0x{spec.vendor_id:08X}, {spec.key}.product_code 0x{spec.product_code:08X})")
-        if ident["revision"] < spec.revision_min:
-            raise PreflightError(f"{spec.label}: revision 0x{ident['revision']:08X} below "
-                                 f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
+        for problem in identity_problems(spec, ident):
+            raise PreflightError(problem)
         self._distinct_serial(spec)
         devtype = int((yield from self._read(node, 0x1000, 0, "device type")))
-        if devtype & 0xFFFF != spec.device_profile:
-            raise PreflightError(f"{spec.label}: device type 0x{devtype:08X} is not a CiA {spec.device_profile} "
-                                 f"device (0x1000 bits 0..15 = {devtype & 0xFFFF})")
+        for problem in identity_problems(spec, None, devtype):
+            raise PreflightError(problem)
 
     def _distinct_serial(self, spec) -> None:
         """The drive ``spec`` must not report the serial number (0x1018:04, with vendor and product) of the

@@ -1,0 +1,68 @@
+"""The commissioning report (``commission.html``): ready or not, every problem with its profile key and
+the value that would fit, what was measured, the drill, where the drives ended."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hil.report.shell import esc, file_link, fmt, master_loss_text, notes, table, write_page
+
+
+def _gain_rows(measured: dict, what: str) -> list[list[str]]:
+    rows = []
+    for phase, gains in (measured.get(what) or {}).items():
+        for ema, g in gains.items():
+            rows.append([phase.replace("_", " "), ema, fmt(g, 4)])
+    return rows
+
+
+def write_commission_report(path: Path, report: dict) -> None:
+    """The page of ``report`` (the commissioning's JSON, :mod:`hil.cli.commission`)."""
+    ready = report["status"] == "ready"
+    badge = "pass" if ready else "fail"
+    sim = " <span class='simulated'>SIMULATED</span>" if report.get("simulated") else ""
+    parts = [f"<h1>Commissioning: <span class='badge {badge}'>{'READY' if ready else 'NOT READY'}</span>{sim}</h1>",
+             f"<p>{esc(report['created'])}, emacheck {esc(report['software']['emacheck'])}; bus "
+             f"{esc(report['bus']['interface'])}:{esc(report['bus']['channel'])}; reached: "
+             f"{esc(report['stage_reached'])}</p>"]
+    if report.get("wiring_faults"):
+        parts.append(notes([f"wiring fault injected: {f['kind']} (EMA {f['ema']}, value {f['value']})"
+                            for f in report["wiring_faults"]]))
+    parts.append("<h2>Problems</h2>")
+    if report["findings"]:
+        parts.append(table(["step", "what", "profile key", "finding", "measured", "fits"],
+                           [[f["stage"], f["kind"], f["key"] or "-", f["text"],
+                             "" if f["measured"] is None else f"{fmt(f['measured'], 4)} {f['unit']}",
+                             "" if f["fits"] is None else f["fits"]] for f in report["findings"]]))
+    else:
+        parts.append("<p>None: the rig is ready for its first check.</p>")
+    parts.append("<h2>Nodes</h2>")
+    parts.append(table(["node", "heard", "answers", "device type", "identity 0x1018", "state before power-up"],
+                       [[k, v.get("heard"), v.get("answers"), f"0x{v['device_type']:08X}" if "device_type" in v else "",
+                         ", ".join(f"{n} 0x{x:08X}" for n, x in (v.get("identity") or {}).items() if x is not None),
+                         v.get("state", "")] for k, v in report["scan"]["nodes"].items()]))
+    m = report["measured"]
+    parts.append("<h2>Measured</h2>")
+    rest = m.get("at_rest") or {}
+    if rest:
+        parts.append(table(["signal at rest", "mean", "peak to peak", "std"],
+                           [[n, fmt(v["mean"], 4), fmt(v["ptp"], 4), fmt(v["std"], 4)] for n, v in rest.items()]))
+    if rows := _gain_rows(m, "lvdt_gain"):
+        parts.append(table(["LVDT gain (mm per mm of motor travel), while", "EMA", "gain"], rows))
+    if rows := _gain_rows(m, "loadcell_gain"):
+        parts.append(table(["load-cell change per change of the force, while", "EMA", "gain"], rows))
+    if rows := _gain_rows(m, "lvdt_follows"):
+        parts.append(table(["force step of", "moved", "mm"], rows))
+    lim = report["limits"]
+    parts.append(f"<p>Motion limits: force {fmt(lim['force_N'], 4)} N (then twice that), speed "
+                 f"{fmt(lim['speed_mm_per_s'], 3)} mm/s, travel {fmt(lim['travel_mm'], 3)} mm; movement stopped "
+                 f"beyond {fmt(lim['max_force_N'], 4)} N or {fmt(lim['max_travel_mm'], 3)} mm.</p>")
+    parts.append("<h2>The master's death</h2>")
+    parts.append(table(["EMA", "reaction"], [[k, master_loss_text(v)] for k, v in report["master_loss"].items()])
+                 if report["master_loss"] else "<p>Not reached.</p>")
+    parts.append("<h2>Drives at the end</h2>")
+    parts.append(table(["EMA", "node", "state", "confirmed", "reachable"],
+                       [[k, d["node"], d["state"], d["confirmed"], d["reachable"]]
+                        for k, d in report["drives_final"].items()]))
+    parts.append(file_link("commission.json", "the report as data"))
+    write_page(path, "emacheck commissioning", parts)
