@@ -91,8 +91,12 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     from hil.master.core import MasterCore
     from hil.master.link import CanopenLink
     from hil.record.canlog import CanLogWriter
+    from hil.transport import InProcessTransport
 
     console = console or make_console(quiet=True)
+    sim = isinstance(transport, InProcessTransport)
+    context = {"simulated": sim, "bus": {"interface": "in-process" if sim else "?", "channel": "simulated" if sim
+                                         else "?"}} | (context or {})
     core = Commission(act, check, rig.plan)
     lim = core.lim
     # during commissioning the drives keep the commissioning's force limit as their max torque themselves
@@ -106,7 +110,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
         return take(frame, t)
 
     master.on_frame = on_frame
-    log = CanLogWriter(out / "can.log", channel=str((context or {}).get("channel", "commission")))
+    log = CanLogWriter(out / "can.log", channel=str(context["bus"]["channel"]))
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
     try:
@@ -123,14 +127,16 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
         link.close()
     final = link.final_states or {}
     for ema, d in final.items():
-        scanned = core.scan.nodes.get(d["node"], {}).get("state")
-        nothing_powered = not master.preflight_done and not d["master_loss"]
-        if d["safe"] or (nothing_powered and scanned == "SWITCH_ON_DISABLED"):
+        scanned = core.scan.nodes.get(d["node"], {})
+        nothing_powered = core.stopped_at is Stage.SCAN
+        # the scan read its state and nothing was powered since; a node that does not answer is named already
+        if d["safe"] or (nothing_powered and scanned.get("state") == "SWITCH_ON_DISABLED") or \
+                scanned.get("answers") is False:
             continue
         core.findings.append(Finding(Stage.DONE, Kind.NOT_SAFE, f"canopen.node_id_{ema}",
                                      f"{ema}: last known {d['state']}, confirmed {d['confirmed']}, reachable "
                                      f"{d['reachable']}"))
-    report = _report(core, master, link, final, context or {})
+    report = _report(core, master, link, final, context)
     rc = ExitCode.PASS if report["status"] == "ready" else ExitCode.NOT_READY
     report["exit_code"] = int(rc)
     outputs = Outputs(out)

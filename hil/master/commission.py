@@ -4,7 +4,7 @@ Fed frames, samples and a time value, returning setpoints and :class:`Finding` s
 bus, a clock or a file (the IO shell is :mod:`hil.cli.commission`, over :mod:`hil.master.link`).
 
 1. **Scan** (:class:`Scan`, a generator of the preflight's requests run by the master core before the
-   preflight): NMT reset communication, a bounded wait in which every boot-up and heartbeat is heard
+   preflight): NMT reset node, a bounded wait in which every boot-up and heartbeat is heard
    (:meth:`Commission.heard`), then per node of the profile its device type 0x1000 and identity
    0x1018 by SDO (a timeout: the node does not answer); every disagreement with the profile is a
    finding (:func:`hil.master.preflight.identity_problems`, the preflight's own comparison). Any
@@ -200,7 +200,7 @@ class Scan:
 
     def run(self) -> Generator:
         """The scan as the preflight's requests; raises :class:`CommissionStop` with any finding."""
-        yield Nmt(NmtCommand.RESET_COMMUNICATION)
+        yield Nmt(NmtCommand.RESET_NODE)
         yield Wait((yield Now()) + self.wait_s)
         for node in self.plan.nodes:
             yield from self._node(node)
@@ -241,12 +241,14 @@ class Scan:
                                          f"not readable ({ident})"))
             return
         for problem in identity_problems(spec, ident, got["device_type"]):
-            key = f"{spec.key}.device_profile" if "device type" in problem else f"{spec.key}.vendor_id"
-            fits = got["device_type"] & 0xFFFF if "device type" in problem else None
-            if "revision" in problem and "below" in problem:
-                key, fits = f"{spec.key}.revision_min", ident["revision"]
-            elif fits is None:
-                fits = f"vendor_id = 0x{ident['vendor_id']:08X}, product_code = 0x{ident['product_code']:08X}"
+            if "device type" in problem:
+                key, fits = f"{spec.key}.device_profile", got["device_type"] & 0xFFFF
+            elif "revision" in problem and "below" in problem:
+                key, fits = f"{spec.key}.revision_min", f"0x{ident['revision']:08X}"
+            elif ident["vendor_id"] != spec.vendor_id:
+                key, fits = f"{spec.key}.vendor_id", f"0x{ident['vendor_id']:08X}"
+            else:
+                key, fits = f"{spec.key}.product_code", f"0x{ident['product_code']:08X}"
             self.findings.append(Finding(Stage.SCAN, Kind.IDENTITY, key, problem, fits=fits))
 
 
@@ -434,6 +436,7 @@ class Commission:
         c = actuation.canopen
         self.scan = Scan(plan, c.boot_timeout_s, c.master_node_id)
         self.stage = Stage.SCAN
+        self.stopped_at: Stage | None = None  #: where an error stopped it (SCAN: nothing was powered)
         self.findings: list[Finding] = []
         self.ema = 1  #: the EMA that moves (the other holds the force)
         self.measured: dict = {"lvdt_gain": {}, "loadcell_gain": {}, "lvdt_follows": {}, "at_rest": {}}
@@ -478,6 +481,7 @@ class Commission:
     def failed(self, exc: BaseException) -> None:
         """An error ended the commissioning (the scan's, the preflight's or the drill's, the link's): its
         findings, or the error itself as one; then stopped."""
+        self.stopped_at = self.stage
         if isinstance(exc, CommissionStop):
             self.findings += self.scan.findings
         elif isinstance(exc, MasterLossReactionError):

@@ -1,0 +1,338 @@
+"""emacheck commission (issue 36 part 6): the rules of hil/master/commission.py at their boundaries, and the
+whole commissioning over CANopen against the simulated rig, clean and with each wiring fault.
+
+The end-to-end cases run once each (module-scoped) and are marked slow; the expected numbers come from the
+simulated-rig profile (profiles/simrig.toml: LVDT gains 1.075 and 0.98, load-cell gains 1.0) and the
+profile's scalings (mm_per_unit 0.001, N_per_unit 0.1), never from a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from importlib import resources
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+
+from hil.cli import main
+from hil.cli.check import master_setup
+from hil.cli.commission import commission, simulated_transport, wiring_fault
+from hil.cli.common import ExitCode
+from hil.master.commission import (
+    FORCE_GAIN_TOLERANCE,
+    MIN_STEP_MOTION_MM,
+    NOISE_FACTOR,
+    TRANSITIONS,
+    Kind,
+    Limits,
+    Stage,
+    force_findings,
+    lvdt_findings,
+    rest_findings,
+    swap_findings,
+)
+from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
+from hil.profile.load import default_profile_path, load_actuation, load_check, load_simrig
+from sim.faults import Fault
+from support.profiles import write_profile_variant
+
+ACT = load_actuation(None)
+CHECK = load_check(None, ACT)
+SIMRIG = load_simrig(None)
+PLAN = master_setup(ACT, None).plan
+LIM = Limits.of(CHECK)
+I_TOTAL = ACT.mechanics.i_total_rad_per_mm
+#: the simulated LVDTs' pitch (profiles/simrig.toml sensors1/2.lvdt_gain): what the slope must find
+G_LVDT = {1: SIMRIG.params.sensors1.lvdt_gain, 2: SIMRIG.params.sensors2.lvdt_gain}
+SCHEMA = json.loads(resources.files("hil.schemas").joinpath("commission.schema.json").read_text())
+
+
+# ------------------------------------------------------------------ the limits and the rules (fast)
+
+
+def test_limits_are_a_quarter_of_the_check_and_below_it():
+    cal = CHECK.calibration
+    assert LIM.force_N == 0.25 * cal.opposing_force_N == 500.0
+    assert LIM.speed_mm_per_s == 0.25 * cal.sweep_speed_mm_per_s == 0.5
+    assert LIM.travel_mm == min(1.0, 0.1 * cal.sweep_amplitude_mm) == 1.0
+    assert LIM.max_force_N == min(4 * LIM.force_N, CHECK.safety.max_force_N) == 2000.0
+    assert 2 * LIM.force_N <= 0.5 * cal.opposing_force_N  # the step's peak: half the check's opposing force
+
+
+def test_every_stage_has_its_transitions_and_the_ends_none():
+    assert set(TRANSITIONS) == set(Stage)
+    assert TRANSITIONS[Stage.DONE] == TRANSITIONS[Stage.STOPPED] == frozenset()
+    assert all(Stage.STOPPED in v for k, v in TRANSITIONS.items() if k not in (Stage.DONE, Stage.STOPPED))
+
+
+def _rest(n=250, seed=1, **over):
+    rng = np.random.default_rng(seed)
+    x = {"phi1": np.zeros(n), "phi2": np.zeros(n),
+         "s1": 0.3 + np.round(rng.uniform(-0.0125, 0.0125, n), 3),
+         "s2": -0.2 + np.round(rng.uniform(-0.0125, 0.0125, n), 3),
+         "F1": np.round(rng.normal(0, 10, n), 1), "F2": np.round(rng.normal(0, 10, n), 1)}
+    x.update(over)
+    return x
+
+
+def test_rest_clean_has_no_finding():
+    assert rest_findings(_rest(), ACT, CHECK, LIM, PLAN) == []
+
+
+def test_rest_frozen_run_at_the_limit_passes_one_more_is_dead():
+    m = CHECK.safety.max_frozen_cycles
+    for run, dead in ((m, False), (m + 1, True)):
+        s1 = _rest()["s1"].copy()
+        s1[100:100 + run] = 0.3005  # a value no neighbour has
+        got = rest_findings(_rest(s1=s1), ACT, CHECK, LIM, PLAN)
+        assert [(f.kind, f.key) for f in got] == ([(Kind.DEAD, "signals.ema1.lvdt")] if dead else []), run
+
+
+def test_rest_noise_at_the_factor_passes_above_is_named_with_the_fitting_value():
+    declared = ACT.sensors.lvdt_noise_pp_mm
+    for ptp, named in ((NOISE_FACTOR * declared * 0.999, False), (NOISE_FACTOR * declared * 1.01, True)):
+        s2 = -0.2 + np.linspace(-ptp / 2, ptp / 2, 250)[np.random.default_rng(2).permutation(250)]
+        got = rest_findings(_rest(s2=s2), ACT, CHECK, LIM, PLAN)
+        assert [(f.kind, f.key) for f in got] == ([(Kind.NOISE, "sensors.lvdt_noise_pp_mm")] if named else [])
+        if named:
+            assert got[0].fits == pytest.approx(ptp, rel=1e-2)
+
+
+def test_rest_load_cell_offset_beyond_the_commissioning_force_fits_an_offset():
+    for mean, named in ((LIM.force_N - 20, False), (LIM.force_N + 60, True)):
+        got = rest_findings(_rest(F2=_rest()["F2"] + mean), ACT, CHECK, LIM, PLAN)
+        assert [(f.kind, f.key) for f in got] == ([(Kind.OFFSET, "signals.ema2.force.offset_N")] if named else [])
+        if named:
+            assert got[0].fits == pytest.approx(-mean, abs=2.0)  # the shipped offset_N is 0
+
+
+def _moved(g1: float, g2: float, k: int = 1, travel: float = 1.0) -> dict:
+    x = np.concatenate([np.linspace(0, travel, 500), np.linspace(travel, 0, 500)])
+    return {"phi1": x * I_TOTAL, "phi2": x * I_TOTAL, "s1": g1 * x + 0.3, "s2": g2 * x - 0.2, "F1": x * 0, "F2": x * 0}
+
+
+TOL = HARD_LVDT_GAIN_TOLERANCE
+
+
+@pytest.mark.parametrize("g,kind", [(1 + TOL - 1e-3, None), (1 + TOL + 1e-3, Kind.SCALE), (1 - TOL + 1e-3, None),
+                                    (1 - TOL - 1e-3, Kind.SCALE), (-1.0, Kind.SIGN), (0.0, Kind.DEAD)])
+def test_lvdt_gain_boundaries_and_the_fitting_scale(g, kind):
+    got, gains = lvdt_findings(_moved(1.0, g), 1, ACT, LIM, PLAN)
+    assert [f.kind for f in got] == ([] if kind is None else [kind])
+    assert gains["ema1"] == pytest.approx(1.0)
+    if kind in (Kind.SCALE, Kind.SIGN):
+        assert got[0].key == "signals.ema2.lvdt.mm_per_unit"
+        assert got[0].fits == pytest.approx(0.001 / g, rel=1e-3)
+
+
+def test_a_motor_that_does_not_move_is_named_and_its_lvdt_not_judged():
+    got, gains = lvdt_findings(_moved(1.0, 1.0, travel=0.49 * LIM.travel_mm / 1.0), 1, ACT, LIM, PLAN)
+    assert [(f.kind, f.key) for f in got] == [(Kind.STILL, "signals.ema1.motor_angle")]
+    assert gains == {}
+
+
+FTOL = FORCE_GAIN_TOLERANCE
+
+
+@pytest.mark.parametrize("rel,kind", [(1 + FTOL - 1e-3, None), (1 + FTOL + 1e-3, Kind.SCALE), (1 - FTOL + 1e-3, None),
+                                      (1 - FTOL - 1e-3, Kind.SCALE), (-1.0, Kind.SIGN), (0.05, Kind.DEAD)])
+def test_load_cell_gain_boundaries_against_the_torque(rel, kind):
+    before = {"F1": -500.0, "F2": 500.0}
+    after = {"F1": -1000.0, "F2": 500.0 + 500.0 * rel}  # EMA 2 pushes +500 N: F2 +500 x rel, F1 -500
+    got, gains = force_findings(before, after, 2, 500.0, PLAN)
+    assert [f.kind for f in got] == ([] if kind is None else [kind])
+    assert gains == pytest.approx({"ema2": rel, "ema1": -1.0})
+    if kind in (Kind.SCALE, Kind.SIGN):
+        assert got[0].key == "signals.ema2.force.N_per_unit"
+        assert got[0].fits == pytest.approx(0.1 / rel, rel=1e-3)
+
+
+def test_swap_rule():
+    ok = {1: (0.07, 0.063, 0.006), 2: (0.07, 0.068, 0.007)}
+    assert swap_findings(ok, PLAN) == []
+    swapped = {1: (0.07, 0.006, 0.063), 2: (0.07, 0.007, 0.068)}
+    (f,) = swap_findings(swapped, PLAN)
+    assert f.kind is Kind.SWAPPED and f.key == "signals.ema1.lvdt, signals.ema2.lvdt"
+    assert f.fits == "signals.ema1.lvdt = 0x2100:00 at ema2; signals.ema2.lvdt = 0x2100:00 at ema1"
+    (one,) = swap_findings({1: swapped[1], 2: ok[2]}, PLAN)
+    assert one.key == "signals.ema1.lvdt" and one.fits is None
+    # too little motion to judge; a wrong LVDT scale (gain 0.1) is divided out, not taken for a swap
+    assert swap_findings({j: (MIN_STEP_MOTION_MM * 0.99, *v[1:]) for j, v in swapped.items()}, PLAN) == []
+    scaled = {1: (0.07, 0.0063, 0.0065), 2: (0.07, 0.068, 0.0007)}
+    assert swap_findings(scaled, PLAN, {1: 0.1, 2: 1.0}) == []
+    assert swap_findings(scaled, PLAN) != []
+
+
+def test_wiring_fault_option():
+    f = wiring_fault("loadcell_scale:2:0.1")
+    assert (f.kind, f.ema, f.param) == ("loadcell_scale", 2, 0.1)
+    assert wiring_fault("lvdts_swapped").ema == 1
+    for bad in ("lvdt_stuck", "lvdt_sign:3", "lvdt_scale:1:x"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            wiring_fault(bad)
+
+
+def test_commission_refuses_real_drives_without_arm_and_without_a_bus(tmp_path, capsys):
+    assert main(["commission", "--interface", "virtual", "--channel", "x", "--out", str(tmp_path / "a")]) == 3
+    assert "--arm" in capsys.readouterr().out
+    assert main(["commission", "--arm", "--out", str(tmp_path / "b")]) == 3
+    assert main(["commission", "--wiring-fault", "lvdt_sign", "--arm", "--interface", "virtual", "--channel", "x",
+                 "--out", str(tmp_path / "c")]) == 3
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+# ------------------------------------------------------------------ over CANopen (slow)
+
+
+def _run(out: Path, faults=(), act=ACT, profile=None, eds=None, true_profile=None):
+    """Commission with the profile ``act`` (``profile``, ``eds``) a simulated rig built as ``true_profile``
+    (default: the shipped one) says."""
+    rig = master_setup(act, profile, eds)
+    true_act = ACT if true_profile is None else load_actuation(true_profile)
+    true_rig = master_setup(true_act, true_profile, None if true_profile is not None else eds)
+    out.mkdir()
+    return commission(act, CHECK, rig, simulated_transport(true_act, true_rig, SIMRIG, tuple(faults), None), out)
+
+
+WIRING = {
+    "lvdt_sign": Fault("lvdt_sign", ema=2),
+    "lvdt_scale": Fault("lvdt_scale", ema=1, value=0.1),
+    "lvdt_dead": Fault("lvdt_dead", ema=1),
+    "loadcell_sign": Fault("loadcell_sign", ema=1),
+    "loadcell_scale": Fault("loadcell_scale", ema=2, value=0.5),
+    "loadcell_dead": Fault("loadcell_dead", ema=2),
+    "lvdts_swapped": Fault("lvdts_swapped"),
+}
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("commission")
+    out = {"clean": _run(base / "clean")}
+    for name, f in WIRING.items():
+        out[name] = _run(base / name, [f])
+    out["drill"] = _run(base / "drill", [Fault("ignore_abort_connection", ema=2)])
+    moved = write_profile_variant("actuation.toml", base / "ids.toml", {"canopen": {"node_id_ema2": 5}})
+    out["node_id"] = _run(base / "node_id", act=load_actuation(moved), profile=moved)
+    return out
+
+
+@pytest.fixture(scope="module")
+def identity_run(tmp_path_factory):
+    """Drives of another product (0x403, their own EDS says so) where the profile expects 0x402."""
+    base = tmp_path_factory.mktemp("commission-identity")
+    text = default_profile_path("ema_drive.eds").read_text()
+    assert text.count("0x00000402") == 2  # [DeviceInfo] ProductNumber and 0x1018:02's default
+    (base / "other_drive.eds").write_text(text.replace("0x00000402", "0x00000403"))
+    other = write_profile_variant("actuation.toml", base / "other.toml",
+                                  {"canopen": {"product_code": 0x403, "eds": "other_drive.eds"}})
+    return _run(base / "identity", true_profile=other)
+
+
+def _keys(run) -> list[tuple[str, str]]:
+    return [(f["kind"], f["key"]) for f in run.report["findings"]]
+
+
+def _safe(run) -> None:
+    """Both drives ended in Switch on disabled, confirmed; no check was started (no check record)."""
+    for ema in ("ema1", "ema2"):
+        d = run.report["drives_final"][ema]
+        assert d["state"] == "SWITCH_ON_DISABLED", (ema, d)
+    assert not (run.out / "signals.csv").exists() and not (run.out / "result.json").exists()
+    jsonschema.validate(json.loads((run.out / "commission.json").read_text()), SCHEMA)
+    assert (run.out / "commission.html").stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_clean_rig_is_ready_with_the_simulators_gains(runs):
+    r = runs["clean"]
+    assert r.exit_code == ExitCode.PASS and r.report["status"] == "ready" and r.report["findings"] == []
+    _safe(r)
+    assert all(r.report["drives_final"][e]["confirmed"] for e in ("ema1", "ema2"))
+    m = r.report["measured"]
+    for moving in ("ema1_moving", "ema2_moving"):
+        for a in (1, 2):  # the slope over 1 mm: LVDT noise and the 0.02 mm cubic non-linearity < 0.002
+            assert m["lvdt_gain"][moving][f"ema{a}"] == pytest.approx(G_LVDT[a], abs=0.002)
+    for j in (1, 2):  # load cells of gain 1.0; the drive's torque in whole per mille of 1 N m (0.5 %) and
+        # the motors' viscous and inertial torque while settling: within 5 %
+        g = m["loadcell_gain"][f"ema{j}_pushing"]
+        assert g[f"ema{j}"] == pytest.approx(1.0, abs=0.05) and g[f"ema{3 - j}"] == pytest.approx(-1.0, abs=0.05)
+        f = m["lvdt_follows"][f"ema{j}_pushing"]  # the pushing EMA's LVDT follows its motor, the other's hardly
+        assert abs(f[f"lvdt{j}_mm"]) > 5 * abs(f[f"lvdt{3 - j}_mm"])
+    for ema in ("ema1", "ema2"):
+        drill = r.report["master_loss"][ema]["drill"]
+        assert drill["outcome"] == "reacted" and 125 <= drill["reaction_ms"] <= 125 + 2 * 2  # + 2 SYNC periods
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,expected,fits,rel", [
+    ("lvdt_sign", [("sign", "signals.ema2.lvdt.mm_per_unit")], -0.001 / G_LVDT[2], 0.005),
+    ("lvdt_scale", [("scale", "signals.ema1.lvdt.mm_per_unit")], 0.001 / (0.1 * G_LVDT[1]), 0.005),
+    ("loadcell_sign", [("sign", "signals.ema1.force.N_per_unit")], -0.1, 0.05),
+    ("loadcell_scale", [("scale", "signals.ema2.force.N_per_unit")], 0.1 / 0.5, 0.05),
+    ("lvdts_swapped", [("swapped", "signals.ema1.lvdt, signals.ema2.lvdt")],
+     "signals.ema1.lvdt = 0x2100:00 at ema2; signals.ema2.lvdt = 0x2100:00 at ema1", None),
+])
+def test_each_wiring_fault_is_named_with_its_key_and_the_fitting_value(runs, name, expected, fits, rel):
+    r = runs[name]
+    assert r.exit_code == ExitCode.NOT_READY and r.report["status"] == "not ready"
+    assert _keys(r) == expected
+    got = r.report["findings"][0]["fits"]
+    # the fitting value absorbs the simulated LVDT's pitch (the slope's 0.002) or the load cell's 5 %
+    assert got == fits if rel is None else got == pytest.approx(fits, rel=rel)
+    _safe(r)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,key", [("lvdt_dead", "signals.ema1.lvdt"), ("loadcell_dead", "signals.ema2.force")])
+def test_a_dead_input_stops_before_anything_moves(runs, name, key):
+    r = runs[name]
+    assert r.exit_code == ExitCode.NOT_READY
+    assert _keys(r) == [("dead", key), ("stopped", "")]
+    assert r.report["findings"][0]["fits"] is None and r.report["findings"][0]["measured"] == 0.0
+    assert r.report["measured"]["lvdt_gain"] == {} and r.report["stage_reached"] == "stopped"
+    _safe(r)
+
+
+@pytest.mark.slow
+def test_a_drive_that_does_not_react_to_the_masters_death_is_named(runs):
+    r = runs["drill"]
+    assert r.exit_code == ExitCode.NOT_READY and _keys(r) == [("master-loss drill", "canopen.external_watchdog")]
+    assert r.report["master_loss"] == {}  # the preflight did not complete: the record is the finding's text
+    assert "node 2 (EMA 2): did not react" in r.report["findings"][0]["text"]
+    _safe(r)
+
+
+@pytest.mark.slow
+def test_the_scan_names_a_node_at_another_id_before_anything_is_powered(runs):
+    r = runs["node_id"]
+    assert r.exit_code == ExitCode.NOT_READY
+    assert _keys(r) == [("answers at another node id", "canopen.node_id_ema2")]
+    assert r.report["findings"][0]["fits"] == 2 and r.report["scan"]["heard"] == [1, 2]
+    assert r.report["scan"]["nodes"]["1"]["state"] == "SWITCH_ON_DISABLED"
+    assert r.report["stage_reached"] == "stopped" and r.report["master_loss"] == {}
+    jsonschema.validate(r.report, SCHEMA)
+
+
+@pytest.mark.slow
+def test_the_scan_names_a_wrong_identity_with_the_value_read(identity_run):
+    r = identity_run
+    assert r.exit_code == ExitCode.NOT_READY
+    assert _keys(r) == [("identity", "canopen.product_code")] * 2  # both drives
+    assert {f["fits"] for f in r.report["findings"]} == {"0x00000403"}
+    assert r.report["stage_reached"] == "stopped" and r.report["master_loss"] == {}
+    jsonschema.validate(r.report, SCHEMA)
+
+
+@pytest.mark.slow
+def test_cli_clean_exit_0_and_a_wiring_fault_exit_6(tmp_path, capsys):
+    assert main(["commission", "--simulate", "--out", str(tmp_path / "ok")]) == 0
+    assert "READY for its first check" in capsys.readouterr().out
+    assert main(["commission", str(default_profile_path("actuation.toml")), "--simulate",
+                 "--wiring-fault", "lvdt_sign:1", "--out", str(tmp_path / "bad")]) == 6
+    out = capsys.readouterr().out
+    assert "signals.ema1.lvdt.mm_per_unit" in out and "NOT READY" in out
+    assert main(["commission", "--simulate", "--out", str(tmp_path / "bad")]) == 3  # written once
