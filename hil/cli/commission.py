@@ -120,9 +120,12 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
             if core.done:
                 break
             smp = link.exchange(sp1, sp2)
-    except (*KNOWN_ERRORS, CanopenError) as exc:
+    except (*KNOWN_ERRORS, CanopenError, KeyboardInterrupt) as exc:
         core.failed(exc)
         link.abort()
+        interrupted = isinstance(exc, KeyboardInterrupt)
+    else:
+        interrupted = False
     finally:
         link.close()
     final = link.final_states or {}
@@ -138,6 +141,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
                                      f"{d['reachable']}"))
     report = _report(core, master, link, final, context)
     rc = ExitCode.PASS if report["status"] == "ready" else ExitCode.NOT_READY
+    rc = ExitCode.ABORTED if interrupted else rc  # Ctrl-C: the drives stopped, the report written, exit 2
     report["exit_code"] = int(rc)
     outputs = Outputs(out)
     outputs.write_json(REPORT_JSON, report)

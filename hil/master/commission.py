@@ -145,7 +145,9 @@ class Limits:
     travel_mm : float
         Out and back: a tenth of ``calibration.sweep_amplitude_mm``, at most 1 mm [mm].
     ramp_s, settle_s : float
-        Force ramps, and the hold after each step [s].
+        Force ramps, and the hold after each step [s]; the levels are averaged over the hold's second half
+        (the surface on its load paths rings at about 25 Hz, barely damped: a shorter hold biased the
+        load-cell gains by 3 %).
     max_force_N : float
         Any load cell beyond this stops the movement: four times ``force_N`` (at most the check's
         ``safety.max_force_N``); also the drives' own max torque 0x6072 during commissioning [N].
@@ -168,7 +170,7 @@ class Limits:
         force = 0.25 * cal.opposing_force_N
         travel = min(1.0, 0.1 * cal.sweep_amplitude_mm)
         return cls(force_N=force, speed_mm_per_s=0.25 * cal.sweep_speed_mm_per_s, travel_mm=travel,
-                   ramp_s=0.25, settle_s=0.3, max_force_N=min(4.0 * force, check.safety.max_force_N),
+                   ramp_s=0.5, settle_s=0.6, max_force_N=min(4.0 * force, check.safety.max_force_N),
                    max_travel_mm=travel + 0.5, max_following_error_mm=check.safety.max_following_error_mm)
 
     def as_json(self) -> dict:
@@ -486,6 +488,8 @@ class Commission:
             self.findings += self.scan.findings
         elif isinstance(exc, MasterLossReactionError):
             self.findings.append(Finding(Stage.PREFLIGHT, Kind.DRILL, "canopen.external_watchdog", str(exc)))
+        elif isinstance(exc, KeyboardInterrupt):
+            self.findings.append(Finding(self.stage, Kind.STOP, "", "interrupted by the operator"))
         else:
             stage = self.stage if self.stage is not Stage.STOPPED else Stage.PREFLIGHT
             kind = Kind.PREFLIGHT if stage in (Stage.SCAN, Stage.PREFLIGHT) else Kind.STOP
