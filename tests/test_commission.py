@@ -22,6 +22,7 @@ from hil.cli.check import master_setup
 from hil.cli.commission import commission, simulated_transport, wiring_fault
 from hil.cli.common import ExitCode
 from hil.master.commission import (
+    DEAD_FRACTION,
     FORCE_GAIN_TOLERANCE,
     MIN_MOTION_FRACTION,
     MIN_STEP_MOTION_MM,
@@ -140,13 +141,13 @@ def test_a_motor_that_does_not_move_is_named_and_its_lvdt_not_judged():
 
 
 def test_an_lvdt_that_hardly_follows_is_dead_not_a_scale():
-    for g, kind in ((0.9e-3, Kind.DEAD), (1.1e-3, Kind.SCALE)):
+    for g, kind in ((0.99 * DEAD_FRACTION, Kind.DEAD), (1.01 * DEAD_FRACTION, Kind.SCALE)):
         got, _ = lvdt_findings(_moved(g, 1.0), 1, ACT, LIM, PLAN)
         assert [f.kind for f in got] == [kind]
 
 
 def test_a_load_cell_that_hardly_changes_is_dead_not_a_scale():
-    for rel, kind in ((0.099, Kind.DEAD), (0.101, Kind.SCALE)):
+    for rel, kind in ((0.99 * DEAD_FRACTION, Kind.DEAD), (1.01 * DEAD_FRACTION, Kind.SCALE)):
         got, _ = force_findings({"F1": 0.0, "F2": 0.0}, {"F1": 500.0 * rel, "F2": -500.0}, 1, 500.0, PLAN)
         assert [(f.kind, f.key.split(".")[1]) for f in got] == [(kind, "ema1")]
 
@@ -162,7 +163,7 @@ FTOL = FORCE_GAIN_TOLERANCE
 
 
 @pytest.mark.parametrize("rel,kind", [(1 + FTOL - 1e-3, None), (1 + FTOL + 1e-3, Kind.SCALE), (1 - FTOL + 1e-3, None),
-                                      (1 - FTOL - 1e-3, Kind.SCALE), (-1.0, Kind.SIGN), (0.05, Kind.DEAD)])
+                                      (1 - FTOL - 1e-3, Kind.SCALE), (-1.0, Kind.SIGN), (0.01, Kind.DEAD)])
 def test_load_cell_gain_boundaries_against_the_torque(rel, kind):
     before = {"F1": -500.0, "F2": 500.0}
     after = {"F1": -1000.0, "F2": 500.0 + 500.0 * rel}  # EMA 2 pushes +500 N: F2 +500 x rel, F1 -500
@@ -228,6 +229,7 @@ WIRING = {
     "lvdt_dead": Fault("lvdt_dead", ema=1),
     "loadcell_sign": Fault("loadcell_sign", ema=1),
     "loadcell_scale": Fault("loadcell_scale", ema=2, value=0.5),
+    "loadcell_scale_10": Fault("loadcell_scale", ema=1, value=0.1),  # a unit mistake
     "loadcell_dead": Fault("loadcell_dead", ema=2),
     "lvdts_swapped": Fault("lvdts_swapped"),
 }
@@ -298,6 +300,7 @@ def test_clean_rig_is_ready_with_the_simulators_gains(runs):
     ("lvdt_scale", [("scale", "signals.ema1.lvdt.mm_per_unit")], 0.001 / (0.1 * G_LVDT[1]), 0.005),
     ("loadcell_sign", [("sign", "signals.ema1.force.N_per_unit")], -0.1, 0.02),
     ("loadcell_scale", [("scale", "signals.ema2.force.N_per_unit")], 0.1 / 0.5, 0.02),
+    ("loadcell_scale_10", [("scale", "signals.ema1.force.N_per_unit")], 0.1 / 0.1, 0.02),
     ("lvdts_swapped", [("swapped", "signals.ema1.lvdt, signals.ema2.lvdt")],
      "signals.ema1.lvdt = 0x2100:00 at ema2; signals.ema2.lvdt = 0x2100:00 at ema1", None),
 ])

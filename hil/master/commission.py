@@ -54,6 +54,9 @@ NOISE_FACTOR = 4.0
 #: A load cell's change against the drive's torque may differ from 1 by this much (the drive's torque
 #: constant and the gear's efficiency; a wrong scale is a factor 2, 10 or 1000).
 FORCE_GAIN_TOLERANCE = 0.25
+#: A channel whose change is below this fraction of the expected one does not respond (a dead input: its
+#: noise alone); above it, a wrong scale is named with the value that fits (down to a factor 50).
+DEAD_FRACTION = 0.02
 #: A move too small to judge a channel by: the motor angle moved less than this fraction of its target.
 MIN_MOTION_FRACTION = 0.5
 #: The LVDT swap is judged only if j's motor moved at least this much during the force step [mm].
@@ -345,7 +348,7 @@ def lvdt_findings(x: dict[str, np.ndarray], k: int, act: Actuation, lim: Limits,
         gains[f"ema{a}"] = g
         per = _per_unit(plan, a, Signal.LVDT)
         fits = None if per is None or not g else float(f"{per / g:.4g}")
-        if not abs(g) > 1e-3:
+        if not abs(g) >= DEAD_FRACTION:
             out.append(Finding(Stage.MOVE, Kind.DEAD, key, f"{key}: does not follow EMA {a}'s motor ({moved:.3f} mm "
                                f"moved, the LVDT {float(np.ptp(x[f's{a}'])):.4f} mm)", g))
         elif g < 0:
@@ -372,7 +375,7 @@ def force_findings(before: dict[str, float], after: dict[str, float], j: int, dF
         fits = None if per is None or not g else float(f"{per / rel:.4g}")
         text = f"{key}: changed by {g * dF:+.0f} N when EMA {j}'s torque changed the force by {dF:+.0f} N " \
                f"(expected {want * dF:+.0f} N)"
-        if abs(rel) < 0.1:
+        if not abs(rel) >= DEAD_FRACTION:
             out.append(Finding(Stage.STEP, Kind.DEAD, key, text + ": it does not respond", rel))
         elif rel < 0:
             out.append(Finding(Stage.STEP, Kind.SIGN, f"{key}.N_per_unit", text + ": wrong sign", rel, "", fits))
