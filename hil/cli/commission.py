@@ -218,9 +218,9 @@ def cmd_commission(args: argparse.Namespace) -> int:
         simrig = load_simrig(args.sim)
         faults = tuple(simrig.faults) + tuple(args.wiring_fault or ())
         transport = simulated_transport(act, rig, simrig, faults, args.seed)
-        context |= {"simulated": True, "wiring_faults": [dataclasses.asdict(f) for f in faults
-                                                         if f.kind in _wiring_kinds()],
-                    "bus": {"interface": "in-process", "channel": "simulated"}}
+        wiring = [dataclasses.asdict(f) for f in faults if f.kind in _wiring_kinds()]
+        context |= {"simulated": True, "seed": simrig.seed if args.seed is None else args.seed,
+                    "wiring_faults": wiring, "bus": {"interface": "in-process", "channel": "simulated"}}
     else:
         bitrate = args.bitrate or act.canopen.bitrate_bps
         bus = open_bus(args.interface, args.channel, bitrate, receive_own_messages=args.interface == "virtual",
@@ -255,21 +255,29 @@ def register(sub) -> None:
         sub, "commission", handler=cmd_commission,
         help="bring a rig up before its first check: nodes, identities, signals, signs and scales, drill",
         description=(
-            "Commission a rig before its first check (docs/commission.md). In order, stopping at the first "
-            "step that finds a problem, with every problem of that step named with its profile key and the "
-            "value that would fit:\n"
-            "  1. scan: NMT reset, which node ids answer (boot-up, heartbeat, SDO 0x1000), identity 0x1018\n"
-            "     and device type against the profile (nothing is powered);\n"
-            "  2. the check's preflight: configuration, the drives' own limits, the master's-death drill;\n"
-            "  3. at rest (0.5 s, drives holding): each LVDT and load cell alive (not frozen), in range,\n"
-            "     noise within 4x the declared, load cells near zero (nothing moves yet);\n"
-            "  4. each EMA in turn, the other holding 1/4 of the check's opposing force in CST: out and back\n"
-            "     min(1 mm, 1/10 of the sweep amplitude) at 1/4 of the sweep speed (each LVDT against its\n"
-            "     motor angle / gear ratio, 1 +- 0.10), then the holding force stepped up once more (each\n"
-            "     load cell against that drive's torque, +-1 within 0.25; which LVDT follows: not swapped);\n"
-            "  5. both drives to Switch on disabled.\n"
-            "Exit 0: ready for its first check; 6: not ready (the report names each problem); 3: bad input.\n"
-            "Writes commission.json, commission.html and can.log into a new folder."))
+            "Commission a rig before its first check (docs/commission.md). In order, stopping at the\n"
+            "first step that finds a problem, every problem of that step named with its profile key and\n"
+            "the value that would fit:\n"
+            "  1. scan: NMT reset node, which node ids answer (boot-up, heartbeat, SDO 0x1000), identity\n"
+            "     0x1018 and device type against the profile (nothing is powered);\n"
+            "  2. the check's preflight: configuration, the drives' own limits (max torque: the\n"
+            "     commissioning's force limit), the master's-death drill (before anything moves);\n"
+            "  3. at rest (0.5 s, drives holding): each LVDT and load cell alive (not one value for more\n"
+            "     than safety.max_frozen_cycles), in range, noise within 4x the declared, load cells\n"
+            "     within the commissioning force of zero (nothing moves yet);\n"
+            "  4. each EMA in turn, the other holding 1/4 of the check's opposing force in CST: out and\n"
+            "     back min(1 mm, 1/10 of the sweep amplitude) at 1/4 of the sweep speed: each LVDT against\n"
+            "     its motor angle over the gear ratio (gain 1 +- 0.10); then the holding force stepped up\n"
+            "     once more: each load cell against that drive's torque (+1 / -1 within 0.25), and the\n"
+            "     LVDT that follows the pushing motor must be its own (else: swapped). Below 2 % of the\n"
+            "     expected change a channel is dead. Any load cell beyond 4x the force, or a motor angle\n"
+            "     0.5 mm beyond the travel from its start, stops the movement. (A rig holding forces in\n"
+            "     CSP is not moved: not ready.)\n"
+            "  5. both drives to Switch on disabled, confirmed.\n"
+            "Exit 0: ready for its first check; 6: not ready (every problem named); 2: Ctrl-C;\n"
+            "3: bad input. Writes commission.json, commission.html and can.log into a new folder.\n\n"
+            "  emacheck commission my-rig.toml --interface socketcan --channel can0 --arm\n"
+            "  emacheck commission --simulate --wiring-fault lvdt_sign:2 --wiring-fault lvdts_swapped"))
     p.add_argument("profile_pos", nargs="?", metavar="PROFILE", type=Path,
                    help="actuation profile (default: the shipped one; --profile says the same)")
     p.add_argument("--simulate", action="store_true",
