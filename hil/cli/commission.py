@@ -187,7 +187,9 @@ def _print(console, report: dict, out: Path) -> None:
         fits = f" -> fits: {f['fits']}" if f["fits"] is not None else ""
         console.print(escape(f"  [{f['stage']}] {f['kind']}: {f['key'] or '-'}: {f['text']}{fits}"), soft_wrap=True)
     for ema, d in report["drives_final"].items():
-        console.print(f"  {ema}: ended in {d['state']} (confirmed {d['confirmed']})")
+        ident = (report["identity"].get(ema) or {}).get("serial")
+        serial = f", serial 0x{ident:08X} (0x1018:04)" if ident else ""
+        console.print(f"  {ema}: node {d['node']}{serial}, ended in {d['state']} (confirmed {d['confirmed']})")
     word = "[green]READY[/green] for its first check" if report["status"] == "ready" else \
         f"[red]NOT READY[/red]: {len(report['findings'])} problem(s)"
     console.print(f"rig {word}; report {out / REPORT_HTML}")
