@@ -259,6 +259,12 @@ def identity_run(tmp_path_factory):
     return _run(base / "identity", true_profile=other)
 
 
+def test_every_wiring_fault_kind_is_commissioned_below():
+    from sim.faults import WIRING_KINDS
+
+    assert {f.kind for f in WIRING.values()} == {k.value for k in WIRING_KINDS}
+
+
 def _keys(run) -> list[tuple[str, str]]:
     return [(f["kind"], f["key"]) for f in run.report["findings"]]
 
