@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import tomllib
 from importlib import resources
 from pathlib import Path
 
 import jsonschema
 import numpy as np
 import pytest
+import tomli_w
 
 from hil.cli import main
 from hil.cli.check import master_setup
@@ -31,6 +33,7 @@ from hil.master.commission import (
     Kind,
     Limits,
     Stage,
+    drives_swapped,
     force_findings,
     lvdt_findings,
     rest_findings,
@@ -40,6 +43,7 @@ from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
 from hil.profile.load import default_profile_path, load_actuation, load_check, load_simrig
 from sim.faults import Fault
 from support.profiles import write_profile_variant
+from support.sensor_rig import sensor_profile, sensor_rig
 
 ACT = load_actuation(None)
 CHECK = load_check(None, ACT)
@@ -192,6 +196,21 @@ def test_swap_rule():
     assert swap_findings(scaled, PLAN) != []
 
 
+def test_drives_at_each_others_node_id_only_where_the_sensors_are_on_a_node_of_their_own(tmp_path):
+    swapped = {1: (0.07, 0.006, 0.063), 2: (0.07, 0.007, 0.068)}
+    signs = force_findings({"F1": 0.0, "F2": 0.0}, {"F1": -500.0, "F2": 500.0}, 1, 500.0, PLAN)[0]
+    assert [f.kind for f in signs] == [Kind.SIGN, Kind.SIGN]
+    found = swap_findings(swapped, PLAN) + signs
+    assert drives_swapped(found, PLAN) == found  # sensors on the drives' inputs: nothing to tell
+    plan = sensor_rig(tmp_path / "sensors.toml")[1].plan
+    found = swap_findings(swapped, plan) + force_findings({"F1": 0.0, "F2": 0.0}, {"F1": -500.0, "F2": 500.0}, 1,
+                                                          500.0, plan)[0]
+    (merged,) = drives_swapped(found, plan)
+    assert merged.key == "canopen.node_id_ema1, canopen.node_id_ema2"
+    assert merged.fits == "canopen.node_id_ema1 = 2; canopen.node_id_ema2 = 1"
+    assert drives_swapped(found[1:], plan) == found[1:]  # one load cell's sign alone: not the drives
+
+
 def test_wiring_fault_option():
     f = wiring_fault("loadcell_scale:2:0.1")
     assert (f.kind, f.ema, f.param) == ("loadcell_scale", 2, 0.1)
@@ -244,6 +263,15 @@ def runs(tmp_path_factory):
     out["drill"] = _run(base / "drill", [Fault("ignore_abort_connection", ema=2)])
     moved = write_profile_variant("actuation.toml", base / "ids.toml", {"canopen": {"node_id_ema2": 5}})
     out["node_id"] = _run(base / "node_id", act=load_actuation(moved), profile=moved)
+    # the LVDTs and load cells on a CiA 401 node of their own; the drives at each other's node id
+    sensors = sensor_profile(base / "sensors.toml")
+    data = tomllib.loads(sensors.read_text())
+    data["canopen"]["node_id_ema1"], data["canopen"]["node_id_ema2"] = 2, 1
+    crossed = base / "crossed.toml"
+    crossed.write_text(tomli_w.dumps(data))
+    act = load_actuation(sensors)
+    out["sensor_clean"] = _run(base / "sensor_clean", act=act, profile=sensors, true_profile=sensors)
+    out["drives_swapped"] = _run(base / "drives_swapped", act=act, profile=sensors, true_profile=crossed)
     return out
 
 
@@ -370,3 +398,21 @@ def test_cli_clean_exit_0_and_a_wiring_fault_exit_6(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "signals.ema1.lvdt.mm_per_unit" in out and "NOT READY" in out
     assert main(["commission", "--simulate", "--out", str(tmp_path / "bad")]) == 3  # written once
+
+
+@pytest.mark.slow
+def test_sensors_on_a_node_of_their_own_clean_and_the_drives_at_each_others_node_id(runs):
+    r = runs["sensor_clean"]
+    assert r.exit_code == ExitCode.PASS and r.report["findings"] == []
+    assert r.report["scan"]["heard"] == [1, 2, 3]
+    for moving in ("ema1_moving", "ema2_moving"):  # 0.000625 mm per unit: the slope as on the drives' inputs
+        for a in (1, 2):
+            assert r.report["measured"]["lvdt_gain"][moving][f"ema{a}"] == pytest.approx(G_LVDT[a], abs=0.002)
+    _safe(r)
+    r = runs["drives_swapped"]
+    assert r.exit_code == ExitCode.NOT_READY
+    assert _keys(r) == [("swapped", "canopen.node_id_ema1, canopen.node_id_ema2")]
+    assert r.report["findings"][0]["fits"] == "canopen.node_id_ema1 = 2; canopen.node_id_ema2 = 1"
+    # the serial numbers read name which actuator each node drives
+    assert r.report["identity"]["ema1"]["serial"] == SIMRIG.serials[1]
+    _safe(r)

@@ -407,6 +407,25 @@ def swap_findings(follows: dict[int, tuple[float, float, float]], plan, gains: d
                     f"{ds_j:.4f} mm and the other LVDT {ds_k:.4f} mm: swapped or misplaced?")]
 
 
+def drives_swapped(findings: list[Finding], plan) -> list[Finding]:
+    """With the sensors on a node of their own, the two drives at each other's node id show as the LVDTs
+    swapped and both load cells of the wrong sign (each pushing drive moves and loads the other EMA's
+    sensors): those three findings become one, naming the node ids and the values that fit."""
+    lvdts = [f for f in findings if f.kind is Kind.SWAPPED and ", " in f.key]
+    signs = [f for f in findings if f.kind is Kind.SIGN and f.key.endswith(".force.N_per_unit")]
+    drives = {"ema1", "ema2"}
+    on_node = all(e.node not in drives for e in plan.map.entries if e.signal in (Signal.LVDT, Signal.FORCE))
+    if not (lvdts and len(signs) == 2 and on_node):
+        return findings
+    n1, n2 = (d.node.spec.node_id for d in plan.drives)
+    merged = Finding(Stage.STEP, Kind.SWAPPED, "canopen.node_id_ema1, canopen.node_id_ema2",
+                     f"the drive at node {n1} moves EMA 2's sensors and the drive at node {n2} EMA 1's (the LVDTs "
+                     f"follow the other drive, both load cells read the other way): the drives are at each other's "
+                     f"node id", fits=f"canopen.node_id_ema1 = {n2}; canopen.node_id_ema2 = {n1}")
+    drop = {id(f) for f in (*lvdts, *signs)}
+    return [f for f in findings if id(f) not in drop] + [merged]
+
+
 # ------------------------------------------------------------------ the cyclic core
 
 
@@ -619,6 +638,7 @@ class Commission:
                 moving = self.measured["lvdt_gain"]
                 gains = {a: moving.get(f"ema{a}_moving", {}).get(f"ema{a}") for a in (1, 2)}
                 self._add(swap_findings(self.measured["lvdt_follows_raw"], self.plan, gains))
+                self.findings = drives_swapped(self.findings, self.plan)
                 self.measured.pop("lvdt_follows_raw")
                 self._goto(Stage.DONE, t)
 
