@@ -156,6 +156,14 @@ def test_a_load_cell_that_hardly_changes_is_dead_not_a_scale():
         assert [(f.kind, f.key.split(".")[1]) for f in got] == [(kind, "ema1")]
 
 
+def test_rest_a_motor_angle_that_wanders_is_named():
+    e = LIM.max_following_error_mm
+    for ptp, named in ((0.99 * e, False), (1.01 * e, True)):
+        phi2 = np.linspace(0.0, ptp * I_TOTAL, 250)
+        got = rest_findings(_rest(phi2=phi2), ACT, CHECK, LIM, PLAN)
+        assert [(f.kind, f.key) for f in got] == ([(Kind.RANGE, "signals.ema2.motor_angle")] if named else [])
+
+
 def test_rest_lvdt_beyond_the_stroke_range_is_named():
     lim_mm = min(ACT.sensors.lvdt_full_scale_mm, ACT.mechanics.stroke_limit_mm)
     for mean, named in ((lim_mm - 0.05, False), (lim_mm + 0.05, True)):

@@ -186,6 +186,9 @@ def _print(console, report: dict, out: Path) -> None:
     for f in report["findings"]:
         fits = f" -> fits: {f['fits']}" if f["fits"] is not None else ""
         console.print(escape(f"  [{f['stage']}] {f['kind']}: {f['key'] or '-'}: {f['text']}{fits}"), soft_wrap=True)
+    ours = {v["node"] for v in report["scan"]["nodes"].values()}
+    if others := [n for n in report["scan"]["heard"] if n not in ours]:
+        console.print(f"  note: node id(s) {', '.join(map(str, others))} answered and are not in the profile")
     for ema, d in report["drives_final"].items():
         ident = (report["identity"].get(ema) or {}).get("serial")
         serial = f", serial 0x{ident:08X} (0x1018:04)" if ident else ""

@@ -266,13 +266,21 @@ def _ema_key(plan, ema: int, signal: Signal) -> str:
 
 
 def rest_findings(x: dict[str, np.ndarray], act: Actuation, check: Check, lim: Limits, plan) -> list[Finding]:
-    """Every LVDT and load cell at rest: alive, in range, noise as declared, load cells near zero.
+    """Every LVDT and load cell at rest: alive, in range, noise as declared, load cells near zero; each motor
+    angle still (both drives hold their position: a motor angle that wanders by more than
+    ``safety.max_following_error_mm`` of stroke reads wrongly, or its drive does not hold).
 
-    ``x``: the at-rest samples, arrays ``s1, s2`` [mm] and ``F1, F2`` [N]."""
+    ``x``: the at-rest samples, arrays ``phi1, phi2`` [rad], ``s1, s2`` [mm] and ``F1, F2`` [N]."""
     out = []
     frozen_max = check.safety.max_frozen_cycles
     s_max = min(act.sensors.lvdt_full_scale_mm, act.mechanics.stroke_limit_mm)
     for ema in (1, 2):
+        wander = float(np.ptp(x[f"phi{ema}"])) / act.mechanics.i_total_rad_per_mm
+        if wander > lim.max_following_error_mm:
+            key = _ema_key(plan, ema, Signal.MOTOR_ANGLE)
+            out.append(Finding(Stage.AT_REST, Kind.RANGE, key, f"{key}: moved {wander:.3f} mm of stroke while its "
+                               f"drive held still (> safety.max_following_error_mm = {lim.max_following_error_mm:g})",
+                               wander, "mm"))
         for sig, name, unit, noise, declared in (
                 (Signal.LVDT, f"s{ema}", "mm", np.ptp(x[f"s{ema}"]), act.sensors.lvdt_noise_pp_mm),
                 (Signal.FORCE, f"F{ema}", "N", np.std(x[f"F{ema}"]), act.sensors.loadcell_noise_std_N)):
