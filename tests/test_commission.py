@@ -23,13 +23,13 @@ from hil.cli import main
 from hil.cli.check import master_setup
 from hil.cli.commission import commission, simulated_transport, wiring_fault
 from hil.cli.common import ExitCode
-from hil.master.commission import (
+from hil.master.commission import TRANSITIONS
+from hil.master.commission_rules import (
     DEAD_FRACTION,
     FORCE_GAIN_TOLERANCE,
     MIN_MOTION_FRACTION,
     MIN_STEP_MOTION_MM,
     NOISE_FACTOR,
-    TRANSITIONS,
     Kind,
     Limits,
     Stage,

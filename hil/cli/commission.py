@@ -87,7 +87,8 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     """
     from hil.canopen.errors import CanopenError
     from hil.errors import KNOWN_ERRORS
-    from hil.master.commission import Commission, Finding, Kind, Stage
+    from hil.master.commission import Commission
+    from hil.master.commission_rules import Finding, Kind, Stage
     from hil.master.core import MasterCore
     from hil.master.link import CanopenLink
     from hil.record.canlog import CanLogWriter
@@ -155,7 +156,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
 def _report(core, master, link, final: dict, context: dict) -> dict:
     """The commissioning report as data (hil/schemas/commission.schema.json)."""
     from hil import __version__
-    from hil.master.commission import FORCE_GAIN_TOLERANCE, NOISE_FACTOR, REST_S
+    from hil.master.commission_rules import FORCE_GAIN_TOLERANCE, NOISE_FACTOR, REST_S
     from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
 
     findings = [f.as_json() for f in core.findings]
