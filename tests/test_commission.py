@@ -36,12 +36,14 @@ from hil.master.commission_rules import (
     drives_swapped,
     force_findings,
     lvdt_findings,
+    push_findings,
     rest_findings,
     swap_findings,
 )
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
 from hil.profile.load import default_profile_path, load_actuation, load_check, load_simrig
 from sim.faults import Fault
+from support.eds import write_eds_variant
 from support.profiles import write_profile_variant
 from support.sensor_rig import sensor_profile, sensor_rig
 
@@ -185,6 +187,21 @@ def test_load_cell_gain_boundaries_against_the_torque(rel, kind):
     if kind in (Kind.SCALE, Kind.SIGN):
         assert got[0].key == "signals.ema2.force.N_per_unit"
         assert got[0].fits == pytest.approx(0.1 / rel, rel=1e-3)
+
+
+def test_push_rule_of_a_rig_without_cst():
+    before = {"F1": 0.0, "F2": 0.0}
+    for ratio, kind in ((1 + FTOL - 1e-3, None), (1 + FTOL + 1e-3, Kind.SCALE), (1 - FTOL + 1e-3, None),
+                        (1 - FTOL - 1e-3, Kind.SCALE)):
+        got, d = push_findings(before, {"F1": 500.0, "F2": -500.0 * ratio}, 1, 500.0, PLAN)  # EMA 1 pushed
+        assert [f.kind for f in got] == ([] if kind is None else [kind]), ratio
+        assert d == pytest.approx({"ema1": 500.0, "ema2": -500.0 * ratio})
+    (f,) = push_findings(before, {"F1": -500.0, "F2": -500.0}, 1, 500.0, PLAN)[0]
+    assert (f.kind, f.key, f.fits) == (Kind.SIGN, "signals.ema1.force.N_per_unit", -0.1)
+    (f,) = push_findings(before, {"F1": 500.0, "F2": -0.99 * DEAD_FRACTION * 500.0}, 1, 500.0, PLAN)[0]
+    assert (f.kind, f.key) == (Kind.DEAD, "signals.ema2.force")
+    (f,) = push_findings(before, {"F1": 0.99 * DEAD_FRACTION * 500.0, "F2": 0.0}, 1, 500.0, PLAN)[0]
+    assert (f.kind, f.key) == (Kind.DEAD, "signals.ema1.force, signals.ema2.force")
 
 
 def test_swap_rule():
@@ -423,4 +440,40 @@ def test_sensors_on_a_node_of_their_own_clean_and_the_drives_at_each_others_node
     assert r.report["findings"][0]["fits"] == "canopen.node_id_ema1 = 2; canopen.node_id_ema2 = 1"
     # the serial numbers read name which actuator each node drives
     assert r.report["identity"]["ema1"]["serial"] == SIMRIG.serials[1]
+    _safe(r)
+
+
+@pytest.fixture(scope="module")
+def csp_runs(tmp_path_factory):
+    """Drives without CST (their EDS offers CSP only, 0x6502 = 0x80): clean and with three wiring faults."""
+    base = tmp_path_factory.mktemp("commission-csp")
+    eds = write_eds_variant(base / "csp_only.eds", defaults={(0x6502, 0): "0x00000080"})
+    prof = write_profile_variant("actuation.toml", base / "act.toml", {"canopen": {"eds": str(eds)}})
+    act = load_actuation(prof)
+    cases = {"clean": [], "loadcell_sign": [Fault("loadcell_sign", ema=1)], "lvdts_swapped": [Fault("lvdts_swapped")],
+             "loadcell_scale": [Fault("loadcell_scale", ema=2, value=0.5)]}
+    return {name: _run(base / name, f, act=act, profile=prof, true_profile=prof) for name, f in cases.items()}
+
+
+@pytest.mark.slow
+def test_a_rig_without_cst_pushes_one_ema_against_the_other(csp_runs):
+    r = csp_runs["clean"]
+    assert [d.force_control.value for d in r.core.plan.drives] == ["csp", "csp"]
+    assert r.exit_code == ExitCode.PASS and r.report["findings"] == []
+    for moving in ("ema1_moving", "ema2_moving"):  # both rams moved together (the play shifts: 0.01)
+        for a in (1, 2):
+            assert r.report["measured"]["lvdt_gain"][moving][f"ema{a}"] == pytest.approx(G_LVDT[a], abs=0.01)
+    for k in (1, 2):  # the push stops once a load cell changed by the commissioning force (+ the last cycles)
+        d = r.report["measured"]["loadcell_push_N"][f"ema{k}_pushing"]
+        assert LIM.force_N <= d[f"ema{k}"] <= 1.1 * LIM.force_N
+        assert d[f"ema{3 - k}"] == pytest.approx(-d[f"ema{k}"], rel=0.02)
+    _safe(r)
+    r = csp_runs["loadcell_sign"]
+    assert _keys(r) == [("sign", "signals.ema1.force.N_per_unit")] and r.report["findings"][0]["fits"] == -0.1
+    _safe(r)
+    assert _keys(csp_runs["lvdts_swapped"]) == [("swapped", "signals.ema1.lvdt, signals.ema2.lvdt")]
+    r = csp_runs["loadcell_scale"]  # no torque to compare with: which one is wrong cannot be told
+    assert _keys(r) == [("scale", "signals.ema1.force.N_per_unit, signals.ema2.force.N_per_unit")]
+    f = r.report["findings"][0]
+    assert f["fits"] is None and f["measured"] == pytest.approx(0.5, abs=0.02)
     _safe(r)

@@ -20,7 +20,9 @@ bus, a clock or a file (the IO shell is :mod:`hil.cli.commission`, over :mod:`hi
    check's sweep speed: each LVDT regressed on its motor angle over the gear ratio (slope 1 within
    the supervisor's LVDT pitch tolerance); then j's force steps up by the same amount: each load
    cell's change against j's torque (+1 for j, -1 for k, within :data:`FORCE_GAIN_TOLERANCE`), and
-   which LVDT follows j's motor (LVDT j, else the two are swapped).
+   which LVDT follows j's motor (LVDT j, else the two are swapped). A holding drive without CST follows
+   k's excursion instead, and k then pushes against it held until a load cell changed by that force
+   (the load cells' signs and their ratio: :func:`~hil.master.commission_rules.push_findings`).
 5. **End**: both drives disabled (the shell confirms Switch on disabled).
 
 States are :class:`~hil.master.commission_rules.Stage` values, their transitions :data:`TRANSITIONS`; the
@@ -51,6 +53,7 @@ from hil.master.commission_rules import (
     ema_key,
     force_findings,
     lvdt_findings,
+    push_findings,
     rest_findings,
     swap_findings,
 )
@@ -198,14 +201,16 @@ class Commission:
         self._rec = _Record()
         self._level: dict[str, float] = {}  #: mean forces / strokes / angles at the end of MOVE
         self._t = 0.0
+        self._push = 0.0  #: a CSP rig's push [mm of stroke] (the force step of a drive without CST)
+        self._pushed = False  #: the push reached the commissioning force (or its travel)
 
     @property
     def done(self) -> bool:
         return self.stage in (Stage.DONE, Stage.STOPPED)
 
-    @property
-    def force_in_cst(self) -> bool:
-        return all(d.force_control is ForceControl.CST for d in self.plan.drives)
+    def in_cst(self, ema: int) -> bool:
+        """EMA ``ema``'s drive holds forces in CST (else: the CSP variant, docs/commission.md)."""
+        return self.plan.drives[ema - 1].force_control is ForceControl.CST
 
     def heard(self, frame: Frame) -> None:
         """Every frame the master is fed, during the scan (boot-ups and heartbeats of any node id)."""
@@ -271,6 +276,8 @@ class Commission:
 
     def _duration(self) -> float:
         lim = self.lim
+        if not self.in_cst(3 - self.ema) and self.stage in (Stage.STEP, Stage.UNLOAD):
+            return lim.push_mm / lim.speed_mm_per_s + lim.settle_s  # the push out, or back
         return {Stage.AT_REST: REST_S, Stage.LOAD: lim.ramp_s + lim.settle_s,
                 Stage.MOVE: 2 * lim.travel_mm / lim.speed_mm_per_s + 2 * lim.settle_s,
                 Stage.STEP: lim.ramp_s + lim.settle_s, Stage.UNLOAD: lim.ramp_s + lim.settle_s}[self.stage]
@@ -284,6 +291,8 @@ class Commission:
         if self.stage is Stage.AT_REST:
             sp = {1: Setpoint(DriveMode.POSITION, start[0]), 2: Setpoint(DriveMode.POSITION, start[1])}
             return sp[1], sp[2]
+        if not self.in_cst(j):
+            return self._setpoints_csp(tau, smp)
         if self.stage is Stage.LOAD:
             sp = {k: hold_k, j: Setpoint(DriveMode.FORCE, lim.force_N * ramp)}
         elif self.stage is Stage.MOVE:
@@ -298,6 +307,30 @@ class Commission:
                 if self._hold is None:
                     self._hold = smp.phi1_rad if j == 1 else smp.phi2_rad
                 sp = {k: hold_k, j: Setpoint(DriveMode.POSITION, self._hold)}
+        return sp[1], sp[2]
+
+    def _setpoints_csp(self, tau: float, smp: Sample) -> tuple[Setpoint, Setpoint]:
+        """A holding EMA j without CST: no force to hold; j follows k's excursion (the rams move together,
+        unloaded), then k pushes against j held until a load cell changed by ``force_N`` (or ``push_mm``),
+        and goes back."""
+        k, lim, start = self.ema, self.lim, self._start
+        j = 3 - k
+        pos = lambda a, mm: Setpoint(DriveMode.POSITION, start[a - 1] + self.i * mm)  # noqa: E731
+        if self.stage is Stage.MOVE:
+            exc = self._excursion(tau)
+            sp = {k: pos(k, exc), j: pos(j, exc)}
+        elif self.stage is Stage.STEP:
+            if not self._pushed and self._level:
+                changed = max(abs(smp.F1_N - self._level["F1"]), abs(smp.F2_N - self._level["F2"]))
+                self._pushed = changed >= lim.force_N or self._push >= lim.push_mm
+            if not self._pushed:
+                self._push = min(lim.push_mm, self._push + lim.speed_mm_per_s * self.T)
+            sp = {k: pos(k, self._push), j: pos(j, 0.0)}
+        elif self.stage is Stage.UNLOAD:
+            self._push = max(0.0, self._push - lim.speed_mm_per_s * self.T)
+            sp = {k: pos(k, self._push), j: pos(j, 0.0)}
+        else:  # LOAD: both hold
+            sp = {k: pos(k, 0.0), j: pos(j, 0.0)}
         return sp[1], sp[2]
 
     def _excursion(self, tau: float) -> float:
@@ -338,11 +371,7 @@ class Commission:
             if found:
                 self.findings.append(Finding(Stage.AT_REST, Kind.STOP, "", "nothing was moved: a signal at rest "
                                              "is wrong"))
-            if found or not self.force_in_cst:
-                if not found:
-                    self.findings.append(Finding(Stage.AT_REST, Kind.STOP, "canopen.force_control",
-                                                 "movement checks need both drives in CST (the holding EMA's "
-                                                 "force); this rig holds forces in CSP: not checked"))
+            if found:
                 self.stage = Stage.STOPPED
                 return
             self._goto(Stage.LOAD, t)
@@ -358,7 +387,7 @@ class Commission:
             self._after_step(k, n_hold)
             self._goto(Stage.UNLOAD, t)
         elif self.stage is Stage.UNLOAD:
-            self._hold = None
+            self._hold, self._push, self._pushed = None, 0.0, False
             if k == 1:
                 self.ema = 2
                 self._goto(Stage.LOAD, t)
@@ -371,17 +400,26 @@ class Commission:
                 self._goto(Stage.DONE, t)
 
     def _after_step(self, k: int, n_hold: int) -> None:
+        """The force step judged: the load cells against j's torque (CST), or against each other after k's
+        push (CSP); and whether the LVDT that moved with the moving motor is its own."""
         j = 3 - k
         after = {n: float(np.mean(v)) for n, v in self._rec.arrays(n_hold).items()}
-        found, gains = force_findings(self._level, after, j, self.lim.force_N, self.plan)
+        if self.in_cst(j):
+            mover = j
+            found, gains = force_findings(self._level, after, j, self.lim.force_N, self.plan)
+            self.measured["loadcell_gain"][f"ema{j}_pushing"] = gains
+        else:
+            mover = k
+            found, changes = push_findings(self._level, after, k, self.lim.force_N, self.plan)
+            self.measured.setdefault("loadcell_push_N", {})[f"ema{k}_pushing"] = changes
         self._add(found)
-        self.measured["loadcell_gain"][f"ema{j}_pushing"] = gains
-        dx = (after[f"phi{j}"] - self._level[f"phi{j}"]) / self.i
-        ds_j = after[f"s{j}"] - self._level[f"s{j}"]
-        ds_k = after[f"s{k}"] - self._level[f"s{k}"]
-        self.measured.setdefault("lvdt_follows_raw", {})[j] = (dx, ds_j, ds_k)
-        self.measured["lvdt_follows"][f"ema{j}_pushing"] = {"motor_mm": dx, f"lvdt{j}_mm": ds_j,
-                                                            f"lvdt{k}_mm": ds_k}
+        other = 3 - mover
+        dx = (after[f"phi{mover}"] - self._level[f"phi{mover}"]) / self.i
+        ds_m = after[f"s{mover}"] - self._level[f"s{mover}"]
+        ds_o = after[f"s{other}"] - self._level[f"s{other}"]
+        self.measured.setdefault("lvdt_follows_raw", {})[mover] = (dx, ds_m, ds_o)
+        self.measured["lvdt_follows"][f"ema{mover}_pushing"] = {"motor_mm": dx, f"lvdt{mover}_mm": ds_m,
+                                                                f"lvdt{other}_mm": ds_o}
 
 
 _DISABLED = Setpoint(DriveMode.DISABLED, 0.0)

@@ -17,7 +17,7 @@ from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation, Check
 
 __all__ = ["DEAD_FRACTION", "FORCE_GAIN_TOLERANCE", "MIN_MOTION_FRACTION", "MIN_STEP_MOTION_MM", "NOISE_FACTOR",
            "REST_S", "Finding", "Kind", "Limits", "Stage", "drives_swapped", "ema_key", "force_findings",
-           "lvdt_findings", "rest_findings", "slope", "swap_findings"]
+           "lvdt_findings", "push_findings", "rest_findings", "slope", "swap_findings"]
 
 #: Time both drives hold still while every signal is read at rest [s].
 REST_S = 0.5
@@ -98,7 +98,8 @@ class Limits:
     ----------
     force_N : float
         The force the holding EMA applies, then once more on the step: a quarter of
-        ``calibration.opposing_force_N`` (at most twice this, half the check's opposing force) [N].
+        ``calibration.opposing_force_N`` (at most twice this, half the check's opposing force) [N]; a
+        rig without CST pushes until a load cell changed by this much.
     speed_mm_per_s : float
         A quarter of ``calibration.sweep_speed_mm_per_s`` [mm/s].
     travel_mm : float
@@ -112,6 +113,10 @@ class Limits:
         ``safety.max_force_N``); also the drives' own max torque 0x6072 during commissioning [N].
     max_travel_mm : float
         A motor angle farther than this from where it started stops the movement [mm].
+    max_following_error_mm : float
+        The check's ``safety.max_following_error_mm``: a motor angle that wanders more at rest [mm].
+    push_mm : float
+        A rig without CST: the longest push of one EMA against the other held [mm] (half the travel).
     """
 
     force_N: float
@@ -122,6 +127,7 @@ class Limits:
     max_force_N: float
     max_travel_mm: float
     max_following_error_mm: float
+    push_mm: float
 
     @classmethod
     def of(cls, check: Check) -> Limits:
@@ -130,7 +136,8 @@ class Limits:
         travel = min(1.0, 0.1 * cal.sweep_amplitude_mm)
         return cls(force_N=force, speed_mm_per_s=0.25 * cal.sweep_speed_mm_per_s, travel_mm=travel,
                    ramp_s=0.5, settle_s=0.6, max_force_N=min(4.0 * force, check.safety.max_force_N),
-                   max_travel_mm=travel + 0.5, max_following_error_mm=check.safety.max_following_error_mm)
+                   max_travel_mm=travel + 0.5, max_following_error_mm=check.safety.max_following_error_mm,
+                   push_mm=0.5 * travel)
 
     def as_json(self) -> dict:
         return {k: getattr(self, k) for k in self.__slots__}
@@ -271,6 +278,42 @@ def force_findings(before: dict[str, float], after: dict[str, float], j: int, dF
             out.append(Finding(Stage.STEP, Kind.SCALE, f"{key}.N_per_unit", text + f": gain {rel:.3f} "
                                f"(1 +- {FORCE_GAIN_TOLERANCE:g})", rel, "", fits))
     return out, gains
+
+
+def push_findings(before: dict[str, float], after: dict[str, float], k: int, force_N: float,
+                  plan) -> tuple[list[Finding], dict]:
+    r"""EMA ``k`` pushed (extended) against the other EMA j held, both in CSP (a rig without CST: no torque to
+    compare with): load cell k must go into compression (+), load cell j into tension (-), and by the same
+    amount (the surface is free: :math:`\Delta F_1 + \Delta F_2 = 0`) within :data:`FORCE_GAIN_TOLERANCE`;
+    below :data:`DEAD_FRACTION` of the larger change a load cell is dead. A wrong sign fits ``-N_per_unit``;
+    which of two disagreeing load cells is wrong cannot be told (no value fits). ``before``/``after``: mean
+    ``F1``, ``F2`` [N]."""
+    j = 3 - k
+    d = {k: after[f"F{k}"] - before[f"F{k}"], j: after[f"F{j}"] - before[f"F{j}"]}
+    big = max(abs(d[k]), abs(d[j]))
+    out = []
+    if big < DEAD_FRACTION * force_N:
+        return [Finding(Stage.STEP, Kind.DEAD, f"{ema_key(plan, 1, Signal.FORCE)}, {ema_key(plan, 2, Signal.FORCE)}",
+                        f"neither load cell changed when EMA {k} pushed against EMA {j} (by {d[k]:+.0f} N and "
+                        f"{d[j]:+.0f} N)")], {f"ema{a}": v for a, v in d.items()}
+    for a, want in ((k, 1.0), (j, -1.0)):
+        key = ema_key(plan, a, Signal.FORCE)
+        text = f"{key}: changed by {d[a]:+.0f} N when EMA {k} pushed against EMA {j} (expected " \
+               f"{'compression, +' if want > 0 else 'tension, -'})"
+        per = _per_unit(plan, a, Signal.FORCE)
+        if abs(d[a]) < DEAD_FRACTION * big:
+            out.append(Finding(Stage.STEP, Kind.DEAD, key, text + ": it does not respond", d[a], "N"))
+        elif d[a] * want < 0:
+            out.append(Finding(Stage.STEP, Kind.SIGN, f"{key}.N_per_unit", text + ": wrong sign", d[a], "N",
+                               None if per is None else -per))
+    if not out:
+        ratio = -d[j] / d[k]
+        if abs(ratio - 1.0) > FORCE_GAIN_TOLERANCE:
+            out.append(Finding(Stage.STEP, Kind.SCALE, f"{ema_key(plan, 1, Signal.FORCE)}.N_per_unit, "
+                               f"{ema_key(plan, 2, Signal.FORCE)}.N_per_unit",
+                               f"the load cells disagree: load cell {j} changed {ratio:.3f} times as much as load "
+                               f"cell {k} (1 +- {FORCE_GAIN_TOLERANCE:g}); one of the scalings is wrong", ratio))
+    return out, {f"ema{a}": v for a, v in d.items()}
 
 
 def swap_findings(follows: dict[int, tuple[float, float, float]], plan, gains: dict | None = None) -> list[Finding]:
