@@ -251,6 +251,7 @@ def test_commission_refuses_real_drives_without_arm_and_without_a_bus(tmp_path, 
     assert main(["commission", "--arm", "--out", str(tmp_path / "b")]) == 3
     assert main(["commission", "--wiring-fault", "lvdt_sign", "--arm", "--interface", "virtual", "--channel", "x",
                  "--out", str(tmp_path / "c")]) == 3
+    assert main(["commission", "a.toml", "--profile", "b.toml", "--simulate", "--out", str(tmp_path / "d")]) == 3
     assert not any(tmp_path.iterdir())  # nothing written
 
 
@@ -322,13 +323,18 @@ def _keys(run) -> list[tuple[str, str]]:
     return [(f["kind"], f["key"]) for f in run.report["findings"]]
 
 
+def _no_nan(word: str):
+    raise AssertionError(f"commission.json holds {word}: not JSON")
+
+
 def _safe(run) -> None:
     """Both drives ended in Switch on disabled, confirmed; no check was started (no check record)."""
     for ema in ("ema1", "ema2"):
         d = run.report["drives_final"][ema]
         assert d["state"] == "SWITCH_ON_DISABLED", (ema, d)
     assert not (run.out / "signals.csv").exists() and not (run.out / "result.json").exists()
-    jsonschema.validate(json.loads((run.out / "commission.json").read_text()), SCHEMA)
+    text = (run.out / "commission.json").read_text()
+    jsonschema.validate(json.loads(text, parse_constant=_no_nan), SCHEMA)  # strict JSON: no NaN, no Infinity
     assert (run.out / "commission.html").stat().st_size > 1000
 
 
@@ -420,6 +426,9 @@ def test_cli_clean_exit_0_and_a_wiring_fault_exit_6(tmp_path, capsys):
     assert "READY for its first check" in capsys.readouterr().out
     assert main(["commission", str(default_profile_path("actuation.toml")), "--simulate",
                  "--wiring-fault", "lvdt_sign:1", "--out", str(tmp_path / "bad")]) == 6
+    report = json.loads((tmp_path / "bad" / "commission.json").read_text(), parse_constant=_no_nan)
+    assert report["wiring_faults"] == [{"kind": "lvdt_sign", "ema": 1, "value": None}]
+    assert report["simulated"] is True and report["seed"] == SIMRIG.seed
     out = capsys.readouterr().out
     assert "signals.ema1.lvdt.mm_per_unit" in out and "NOT READY" in out
     assert main(["commission", "--simulate", "--out", str(tmp_path / "bad")]) == 3  # written once

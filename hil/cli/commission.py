@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -202,6 +203,9 @@ def _print(console, report: dict, out: Path) -> None:
 def cmd_commission(args: argparse.Namespace) -> int:
     """``emacheck commission``: scan, identity, signals at rest, signs and scales in motion, drill, safe end."""
     console = make_console()
+    if args.profile_pos is not None and args.profile is not None and args.profile_pos != args.profile:
+        console.print(f"[red]two actuation profiles given:[/red] {args.profile_pos} and --profile {args.profile}")
+        return ExitCode.INPUT
     profile = args.profile_pos or args.profile
     act = load_actuation(profile)
     check = load_check(args.check, act)
@@ -224,7 +228,8 @@ def cmd_commission(args: argparse.Namespace) -> int:
         simrig = load_simrig(args.sim)
         faults = tuple(simrig.faults) + tuple(args.wiring_fault or ())
         transport = simulated_transport(act, rig, simrig, faults, args.seed)
-        wiring = [dataclasses.asdict(f) for f in faults if f.kind in _wiring_kinds()]
+        wiring = [{"kind": f.kind, "ema": f.ema, "value": f.param if math.isfinite(f.param) else None}
+                  for f in faults if f.kind in _wiring_kinds()]
         context |= {"simulated": True, "seed": simrig.seed if args.seed is None else args.seed,
                     "wiring_faults": wiring, "bus": {"interface": "in-process", "channel": "simulated"}}
     else:

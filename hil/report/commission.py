@@ -26,7 +26,8 @@ def write_commission_report(path: Path, report: dict) -> None:
              f"{esc(report['bus']['interface'])}:{esc(report['bus']['channel'])}; reached: "
              f"{esc(report['stage_reached'])}</p>"]
     if report.get("wiring_faults"):
-        parts.append(notes([f"wiring fault injected: {f['kind']} (EMA {f['ema']}, value {f['value']})"
+        parts.append(notes([f"wiring fault injected: {f['kind']} (EMA {f['ema']}"
+                            + (f", value {f['value']:g})" if f.get("value") is not None else ")")
                             for f in report["wiring_faults"]]))
     parts.append("<h2>Problems</h2>")
     if report["findings"]:
@@ -51,12 +52,14 @@ def write_commission_report(path: Path, report: dict) -> None:
         parts.append(table(["LVDT gain (mm per mm of motor travel), while", "EMA", "gain"], rows))
     if rows := _gain_rows(m, "loadcell_gain"):
         parts.append(table(["load-cell change per change of the force, while", "EMA", "gain"], rows))
+    if rows := _gain_rows(m, "loadcell_push_N"):
+        parts.append(table(["load-cell change [N], drives without CST: while", "EMA", "N"], rows))
     if rows := _gain_rows(m, "lvdt_follows"):
         parts.append(table(["force step of", "moved", "mm"], rows))
     lim = report["limits"]
-    parts.append(f"<p>Motion limits: force {fmt(lim['force_N'], 4)} N (then twice that), speed "
-                 f"{fmt(lim['speed_mm_per_s'], 3)} mm/s, travel {fmt(lim['travel_mm'], 3)} mm; movement stopped "
-                 f"beyond {fmt(lim['max_force_N'], 4)} N or {fmt(lim['max_travel_mm'], 3)} mm.</p>")
+    parts.append(f"<p>Motion limits: force {lim['force_N']:g} N (then twice that), speed "
+                 f"{lim['speed_mm_per_s']:g} mm/s, travel {lim['travel_mm']:g} mm; movement stopped beyond "
+                 f"{lim['max_force_N']:g} N or {lim['max_travel_mm']:g} mm from the start.</p>")
     parts.append("<h2>The master's death</h2>")
     parts.append(table(["EMA", "reaction"], [[k, master_loss_text(v)] for k, v in report["master_loss"].items()])
                  if report["master_loss"] else "<p>Not reached.</p>")
