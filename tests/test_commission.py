@@ -19,11 +19,13 @@ import numpy as np
 import pytest
 import tomli_w
 
+from hil.canopen.frame import Frame
+from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.cli import main
 from hil.cli.check import master_setup
 from hil.cli.commission import commission, simulated_transport, wiring_fault
 from hil.cli.common import ExitCode
-from hil.master.commission import TRANSITIONS
+from hil.master.commission import TRANSITIONS, CommissionStop, Scan
 from hil.master.commission_rules import (
     DEAD_FRACTION,
     FORCE_GAIN_TOLERANCE,
@@ -40,6 +42,7 @@ from hil.master.commission_rules import (
     rest_findings,
     swap_findings,
 )
+from hil.master.preflight import Nmt, Now, SdoRead, Wait
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
 from hil.profile.load import default_profile_path, load_actuation, load_check, load_simrig
 from sim.faults import Fault
@@ -234,6 +237,63 @@ def test_drives_at_each_others_node_id_only_where_the_sensors_are_on_a_node_of_t
     assert merged.key == "canopen.node_id_ema1, canopen.node_id_ema2"
     assert merged.fits == "canopen.node_id_ema1 = 2; canopen.node_id_ema2 = 1"
     assert drives_swapped(found[1:], plan) == found[1:]  # one load cell's sign alone: not the drives
+
+
+def _drive_scan(scan: Scan, answer) -> list:
+    """Run the scan's generator by hand (sans-IO): ``answer(request)`` gives each SDO read's result."""
+    g, asked = scan.run(), []
+    req = next(g)
+    try:
+        while True:
+            asked.append(req)
+            if isinstance(req, SdoRead):
+                req = g.send(answer(req))
+            elif isinstance(req, Now):
+                req = g.send(0.0)
+            elif isinstance(req, Wait):
+                req = g.send(req.until_s)
+            else:
+                req = g.send(True)
+    except StopIteration:
+        return asked
+
+
+def test_scan_names_each_problem_with_its_key_and_the_value_read():
+    scan = Scan(PLAN, 2.0, 127)
+    scan.hear(Frame(0x705, b"\x00"))  # a boot-up of node 5
+    scan.hear(Frame(0x77F, b"\x05"))  # the master's own heartbeat is not a node of the rig
+    values = {(0x1000, 0): 0x00020192, (0x1018, 1): 0x0E3A, (0x1018, 2): 0x0403, (0x1018, 3): 0x0000FFFF,
+              (0x6041, 0): 0x0040}
+
+    def answer(req):
+        if req.node == 2:
+            return SdoTimeout(2, req.index, req.sub, 0.5, Frame(0x602, bytes(8)))
+        if (req.index, req.sub) == (0x1018, 4):  # no serial number: optional, not compared
+            return SdoAbortError(1, 0x1018, 4, 0x06090011)
+        return values[(req.index, req.sub)].to_bytes(4, "little")
+
+    with pytest.raises(CommissionStop):
+        _drive_scan(scan, answer)
+    got = [(f.kind, f.key, f.fits) for f in scan.findings]
+    assert got == [(Kind.IDENTITY, "canopen.product_code", "0x00000403"),
+                   (Kind.IDENTITY, "canopen.revision_min", "0x0000FFFF"),
+                   (Kind.ELSEWHERE, "canopen.node_id_ema2", 5)]
+    assert scan.heard == {5} and scan.nodes[1]["state"] == "SWITCH_ON_DISABLED"
+    assert scan.nodes[1]["identity"]["serial"] is None and scan.nodes[2]["answers"] is False
+
+
+def test_scan_of_a_rig_as_the_profile_says_finds_nothing_and_a_missing_sub_index_is_not_compared():
+    scan = Scan(PLAN, 2.0, 127)
+    spec = PLAN.nodes[0].spec
+    values = {(0x1000, 0): 0x00020192, (0x1018, 1): spec.vendor_id, (0x1018, 4): 7, (0x6041, 0): 0x0040}
+
+    def answer(req):
+        v = values.get((req.index, req.sub))
+        return SdoAbortError(req.node, req.index, req.sub, 0x06090011) if v is None else v.to_bytes(4, "little")
+
+    asked = _drive_scan(scan, answer)
+    assert scan.findings == [] and isinstance(asked[0], Nmt) and isinstance(asked[2], Wait)
+    assert asked[2].until_s == 2.0  # the bounded wait for boot-ups
 
 
 def test_wiring_fault_option():

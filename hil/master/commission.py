@@ -141,19 +141,28 @@ class Scan:
             sw = yield SdoRead(nid, 0x6041, 0, "statusword", soft=True)
             if not isinstance(sw, (SdoTimeout, SdoAbortError)):
                 got["state"] = decode_state(int.from_bytes(bytes(sw[:2]), "little")).name
-        if None in (ident["vendor_id"], ident["product_code"], ident["revision"]):
-            self.findings.append(Finding(Stage.SCAN, Kind.IDENTITY, spec.key, f"{spec.label}: identity 0x1018 "
-                                         f"not readable ({ident})"))
+        self._compare(spec, ident, got["device_type"])
+
+    def _compare(self, spec, ident: dict, devtype: int) -> None:
+        """The identity read against the profile (the preflight's comparison), each problem with its key and the
+        value read; a sub-index the node does not have (CiA 301 makes 0x1018:02..04 optional) is not compared."""
+        if ident["vendor_id"] is None:
+            self.findings.append(Finding(Stage.SCAN, Kind.IDENTITY, f"{spec.key}.vendor_id",
+                                         f"{spec.label}: identity 0x1018:01 (vendor id) not readable"))
             return
-        for problem in identity_problems(spec, ident, got["device_type"]):
-            if "device type" in problem:
-                key, fits = f"{spec.key}.device_profile", got["device_type"] & 0xFFFF
-            elif "revision" in problem and "below" in problem:
-                key, fits = f"{spec.key}.revision_min", f"0x{ident['revision']:08X}"
-            elif ident["vendor_id"] != spec.vendor_id:
-                key, fits = f"{spec.key}.vendor_id", f"0x{ident['vendor_id']:08X}"
-            else:
-                key, fits = f"{spec.key}.product_code", f"0x{ident['product_code']:08X}"
+        read = {"vendor_id": ident["vendor_id"],
+                "product_code": spec.product_code if ident["product_code"] is None else ident["product_code"],
+                "revision": spec.revision_min if ident["revision"] is None else ident["revision"]}
+        keys = []
+        if read["vendor_id"] != spec.vendor_id:
+            keys.append((f"{spec.key}.vendor_id", f"0x{read['vendor_id']:08X}"))
+        elif read["product_code"] != spec.product_code:
+            keys.append((f"{spec.key}.product_code", f"0x{read['product_code']:08X}"))
+        if read["revision"] < spec.revision_min:
+            keys.append((f"{spec.key}.revision_min", f"0x{read['revision']:08X}"))
+        keys.append((f"{spec.key}.device_profile", devtype & 0xFFFF))
+        # identity_problems names them in this order: vendor or product, revision, device type
+        for problem, (key, fits) in zip(identity_problems(spec, read, devtype), keys, strict=False):
             self.findings.append(Finding(Stage.SCAN, Kind.IDENTITY, key, problem, fits=fits))
 
 
@@ -162,7 +171,6 @@ class Scan:
 
 @dataclass
 class _Record:
-    t: list = field(default_factory=list)
     rows: list = field(default_factory=list)
 
     def add(self, smp: Sample) -> None:
