@@ -454,8 +454,10 @@ def test_a_dead_input_stops_before_anything_moves(runs, name, key):
 def test_a_drive_that_does_not_react_to_the_masters_death_is_named(runs):
     r = runs["drill"]
     assert r.exit_code == ExitCode.NOT_READY and _keys(r) == [("master-loss drill", "canopen.external_watchdog")]
-    assert r.report["master_loss"] == {}  # the preflight did not complete: the record is the finding's text
     assert "node 2 (EMA 2): did not react" in r.report["findings"][0]["text"]
+    drills = {e: r.report["master_loss"][e]["drill"] for e in ("ema1", "ema2")}  # the drill's outcome recorded
+    assert drills["ema1"]["outcome"] == "reacted" and drills["ema2"]["outcome"] == "no reaction"
+    assert drills["ema2"]["emcy"] == ["0x8130"] and drills["ema2"]["waited_ms"] >= 2 * 125
     _safe(r)
 
 

@@ -173,7 +173,8 @@ def _report(core, master, link, final: dict, context: dict) -> dict:
         "scan": {"heard": sorted(core.scan.heard), "nodes": {str(k): v for k, v in core.scan.nodes.items()}},
         "identity": {f"ema{d.ema}": ({"node": d.node_id, **d.identity} if d.identity else None)
                      for d in master.drives.values()},
-        "master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in master.drives.values()
+        # from the preflight's own record: the drill's outcome also when it refused the drives
+        "master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in master.preflight.drives
                         if d.master_loss is not None},
         "measured": measured,
         "drives_final": final,
