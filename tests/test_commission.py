@@ -323,7 +323,7 @@ def _run(out: Path, faults=(), act=ACT, profile=None, eds=None, true_profile=Non
     (default: the shipped one) says."""
     rig = master_setup(act, profile, eds)
     true_act = ACT if true_profile is None else load_actuation(true_profile)
-    true_rig = master_setup(true_act, true_profile, None if true_profile is not None else eds)
+    true_rig = master_setup(true_act, true_profile, eds)
     out.mkdir()
     return commission(act, CHECK, rig, simulated_transport(true_act, true_rig, SIMRIG, tuple(faults), None), out)
 
@@ -547,4 +547,24 @@ def test_a_rig_without_cst_pushes_one_ema_against_the_other(csp_runs):
     assert _keys(r) == [("scale", "signals.ema1.force.N_per_unit, signals.ema2.force.N_per_unit")]
     f = r.report["findings"][0]
     assert f["fits"] is None and f["measured"] == pytest.approx(0.5, abs=0.02)
+    _safe(r)
+
+
+VENDOR = Path(__file__).resolve().parents[2] / "shared" / "data" / "vendor-eds"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("example,eds", [("maxon_epos4.toml", "maxon_EPOS4.eds"),
+                                         ("nanotec_cl4e_cia401.toml", "Nanotec_CL4-E-1-12.eds")])
+def test_the_runnable_examples_commission_clean_on_their_vendors_eds(tmp_path, example, eds):
+    """The examples on simulated drives serving the vendor's EDS (../shared/data/vendor-eds, never copied)."""
+    path = VENDOR / eds
+    if not path.is_file():
+        pytest.skip(f"{path} not present (../shared/data/vendor-eds)")
+    profile = default_profile_path("examples") / example
+    r = _run(tmp_path / "c", act=load_actuation(profile), profile=profile, eds=path, true_profile=profile)
+    assert r.exit_code == ExitCode.PASS and r.report["findings"] == []
+    for moving in ("ema1_moving", "ema2_moving"):
+        for a in (1, 2):
+            assert r.report["measured"]["lvdt_gain"][moving][f"ema{a}"] == pytest.approx(G_LVDT[a], abs=0.002)
     _safe(r)
