@@ -54,8 +54,9 @@ Kinds (``value`` is kind-specific; ``ema`` is 1 or 2):
                         rig without a sensor node is refused)
 ======================  =====================================================
 
-Wiring faults (a rig wired wrongly, as ``emacheck commission`` must find it; from the first SYNC on,
-whatever ``start_s``; the reading in the TPDO, whichever node carries it):
+Wiring faults (a rig wired wrongly, as ``emacheck commission`` must find it; on the check's time axis like
+the sensor faults, so the default ``start_s = 0`` means "wired that way"; the reading in the TPDO,
+whichever node carries it):
 
 ======================  =====================================================
 ``lvdt_sign``           the LVDT reads the stroke with the wrong sign
