@@ -112,7 +112,9 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
         return take(frame, t)
 
     master.on_frame = on_frame
-    log = CanLogWriter(out / "can.log", channel=str(context["bus"]["channel"]))
+    # wall-clock stamps on a real bus, as candump writes them (run does the same)
+    log = CanLogWriter(out / "can.log", channel=str(context["bus"]["channel"]),
+                       time_offset_s=0.0 if sim else transport.wall_clock_offset_s)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
                        max_lag_s=check.safety.max_lag_s)
     try:
