@@ -159,7 +159,14 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
 def _report(core, master, link, final: dict, context: dict) -> dict:
     """The commissioning report as data (hil/schemas/commission.schema.json)."""
     from hil import __version__
-    from hil.master.commission_rules import FORCE_GAIN_TOLERANCE, NOISE_FACTOR, REST_S
+    from hil.master.commission_rules import (
+        DEAD_FRACTION,
+        FORCE_GAIN_TOLERANCE,
+        MIN_MOTION_FRACTION,
+        MIN_STEP_MOTION_MM,
+        NOISE_FACTOR,
+        REST_S,
+    )
     from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
 
     findings = [f.as_json() for f in core.findings]
@@ -170,7 +177,8 @@ def _report(core, master, link, final: dict, context: dict) -> dict:
         "stage_reached": core.stage.value,
         "limits": core.lim.as_json(),
         "thresholds": {"rest_s": REST_S, "noise_factor": NOISE_FACTOR, "lvdt_gain_tolerance": HARD_LVDT_GAIN_TOLERANCE,
-                       "force_gain_tolerance": FORCE_GAIN_TOLERANCE,
+                       "force_gain_tolerance": FORCE_GAIN_TOLERANCE, "dead_fraction": DEAD_FRACTION,
+                       "min_motion_fraction": MIN_MOTION_FRACTION, "min_step_motion_mm": MIN_STEP_MOTION_MM,
                        "max_frozen_cycles": core.check.safety.max_frozen_cycles},
         "scan": {"heard": sorted(core.scan.heard), "nodes": {str(k): v for k, v in core.scan.nodes.items()}},
         "identity": {f"ema{d.ema}": ({"node": d.node_id, **d.identity} if d.identity else None)
