@@ -151,7 +151,9 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     outputs.write_json(REPORT_JSON, report)
     from hil.report.commission import write_commission_report
 
-    outputs.write_with(REPORT_HTML, lambda p: write_commission_report(p, report))
+    i = act.mechanics.i_total_rad_per_mm
+    traces = {name: {**x, "x1": x["phi1"] / i, "x2": x["phi2"] / i} for name, x in core.traces.items()}
+    outputs.write_with(REPORT_HTML, lambda p: write_commission_report(p, report, traces, act.timing.sync_period_s))
     _print(console, report, out)
     return CommissionRun(rc, report, out, core, link)
 

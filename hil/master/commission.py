@@ -203,6 +203,9 @@ class Commission:
         self.findings: list[Finding] = []
         self.ema = 1  #: the EMA that moves (the other holds the force)
         self.measured: dict = {"lvdt_gain": {}, "loadcell_gain": {}, "lvdt_follows": {}, "at_rest": {}}
+        #: the samples of each movement and force step, ``"move 1"``, ``"force step 1"`` (k) -> arrays (the report's
+        #: figures)
+        self.traces: dict[str, dict[str, np.ndarray]] = {}
         self._t0 = 0.0  #: the stage's start [s]
         self._start: tuple[float, float] | None = None  #: motor angles at rest [rad]
         self._hold: float | None = None  #: the holding EMA's angle once it is back in CSP [rad]
@@ -370,6 +373,8 @@ class Commission:
     def _end_of_stage(self, smp: Sample) -> None:
         t, k = smp.t_s, self.ema
         n_hold = max(1, int(self.lim.settle_s / 2 / self.T))
+        if self.stage in (Stage.MOVE, Stage.STEP):
+            self.traces[f"{self.stage.value} {k}"] = self._rec.arrays()
         if self.stage is Stage.AT_REST:
             x = self._rec.arrays()
             self.measured["at_rest"] = {n: {"mean": float(np.mean(v)), "ptp": float(np.ptp(v)),
@@ -379,7 +384,6 @@ class Commission:
             if found:
                 self.findings.append(Finding(Stage.AT_REST, Kind.STOP, "", "nothing was moved: a signal at rest "
                                              "is wrong"))
-            if found:
                 self.stage = Stage.STOPPED
                 return
             self._goto(Stage.LOAD, t)

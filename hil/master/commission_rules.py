@@ -106,8 +106,8 @@ class Limits:
         Out and back: a tenth of ``calibration.sweep_amplitude_mm``, at most 1 mm [mm].
     ramp_s, settle_s : float
         Force ramps, and the hold after each step [s]; the levels are averaged over the hold's second half
-        (the surface on its load paths rings at about 25 Hz, barely damped: a shorter hold biased the
-        load-cell gains by 3 %).
+        (the load paths with the surface and the motors' reflected inertia ring at about 10 Hz, barely
+        damped: a shorter hold biased the load-cell gains by 3 %).
     max_force_N : float
         Any load cell beyond this stops the movement: four times ``force_N`` (at most the check's
         ``safety.max_force_N``); also the drives' own max torque 0x6072 during commissioning [N].

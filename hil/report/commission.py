@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hil.report.shell import esc, file_link, fmt, master_loss_text, notes, table, write_page
+import numpy as np
+
+from hil.report.shell import esc, file_link, fmt, img, master_loss_text, notes, pyplot, table, thin, write_page
 
 
 def _gain_rows(measured: dict, what: str) -> list[list[str]]:
@@ -16,8 +18,40 @@ def _gain_rows(measured: dict, what: str) -> list[list[str]]:
     return rows
 
 
-def write_commission_report(path: Path, report: dict) -> None:
-    """The page of ``report`` (the commissioning's JSON, :mod:`hil.cli.commission`)."""
+def figure_movements(traces: dict, T: float):
+    """Per EMA's turn: each LVDT's stroke change against its motor's travel while that EMA moved (the dashed
+    line: slope 1, a right sign and scale), and both load cells' change through the force step.
+
+    ``traces``: ``"move k"`` / ``"force step k"`` -> arrays ``x1, x2`` (motor angle over the gear ratio) [mm],
+    ``s1, s2`` [mm], ``F1, F2`` [N], one sample per SYNC period ``T`` [s]."""
+    plt = pyplot()
+    fig, ax = plt.subplots(2, 2, figsize=(10, 7))
+    for row, k in enumerate((1, 2)):
+        move, step = traces.get(f"move {k}"), traces.get(f"force step {k}")
+        a = ax[row][0]
+        if move is not None:
+            sl = thin(move["x1"].size, 2000)
+            for e, style in ((1, "C0"), (2, "C1")):
+                x, y = move[f"x{e}"] - move[f"x{e}"][0], move[f"s{e}"] - move[f"s{e}"][0]
+                a.plot(x[sl], y[sl], style, lw=1, label=f"LVDT {e} vs motor {e}")
+            lim = max(1e-3, float(abs(move[f"x{k}"] - move[f"x{k}"][0]).max()))
+            a.plot([0, lim], [0, lim], "k--", lw=0.8, label="slope 1")
+        a.set(title=f"EMA {k} moves", xlabel="motor travel / gear ratio [mm]", ylabel="LVDT change [mm]")
+        a.legend(fontsize=8)
+        a = ax[row][1]
+        if step is not None:
+            t = T * (1 + np.arange(step["F1"].size))
+            for e in (1, 2):
+                a.plot(t, step[f"F{e}"] - step[f"F{e}"][0], lw=1, label=f"load cell {e}")
+        a.set(title=f"force step in EMA {k}'s turn", xlabel="t [s]", ylabel="force change [N]")
+        a.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def write_commission_report(path: Path, report: dict, traces: dict | None = None, T: float = 0.002) -> None:
+    """The page of ``report`` (the commissioning's JSON, :mod:`hil.cli.commission`); ``traces`` (see
+    :func:`figure_movements`) adds the movements' figure."""
     ready = report["status"] == "ready"
     badge = "pass" if ready else "fail"
     sim = " <span class='simulated'>SIMULATED</span>" if report.get("simulated") else ""
@@ -56,6 +90,8 @@ def write_commission_report(path: Path, report: dict) -> None:
         parts.append(table(["load-cell change [N], drives without CST: while", "EMA", "N"], rows))
     if rows := _gain_rows(m, "lvdt_follows"):
         parts.append(table(["force step of", "moved", "mm"], rows))
+    if traces:
+        parts.append(img(figure_movements(traces, T)))
     lim = report["limits"]
     parts.append(f"<p>Motion limits: force {lim['force_N']:g} N (then twice that), speed "
                  f"{lim['speed_mm_per_s']:g} mm/s, travel {lim['travel_mm']:g} mm; movement stopped beyond "
