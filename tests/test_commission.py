@@ -403,6 +403,8 @@ def test_clean_rig_is_ready_with_the_simulators_gains(runs):
     r = runs["clean"]
     assert r.exit_code == ExitCode.PASS and r.report["status"] == "ready" and r.report["findings"] == []
     _safe(r)
+    assert (r.out / "commission.html").read_text().count("data:image/png;base64,") == 1  # the movements' figure
+    assert sorted(r.core.traces) == ["force step 1", "force step 2", "move 1", "move 2"]
     assert all(r.report["drives_final"][e]["confirmed"] for e in ("ema1", "ema2"))
     m = r.report["measured"]
     for moving in ("ema1_moving", "ema2_moving"):
