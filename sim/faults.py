@@ -57,6 +57,21 @@ Kinds (``value`` is kind-specific; ``ema`` is 1 or 2):
                         rig without a sensor node is refused)
 ======================  =====================================================
 
+Wiring faults (a rig wired wrongly, as ``emacheck commission`` must find it; on the check's time axis like
+the sensor faults, so the default ``start_s = 0`` means "wired that way"; the reading in the TPDO,
+whichever node carries it):
+
+======================  =====================================================
+``lvdt_sign``           the LVDT reads the stroke with the wrong sign
+``lvdt_scale``          the LVDT reads ``value`` times the stroke (default 0.5)
+``lvdt_dead``           the LVDT input reads 0 (a broken wire)
+``loadcell_sign``       the load cell reads the force with the wrong sign
+``loadcell_scale``      the load cell reads ``value`` times the force (0.5)
+``loadcell_dead``       the load-cell input reads 0
+``lvdts_swapped``       LVDT 1 reads EMA 2's stroke and LVDT 2 EMA 1's
+                        (``ema`` ignored)
+======================  =====================================================
+
 Drive faults (time base: bus time since power-on, see above; ``ema`` is the
 drive), behaviours of drives seen in the field that the master's CiA 402
 rules must catch or handle:
@@ -118,8 +133,8 @@ from hil.canopen.pdo import Direction
 from hil.canopen.process import DriveMode
 from hil.canopen.signalmap import Scale, Signal
 
-__all__ = ["BOOT_FAULT_CODE", "DRIVE_KINDS", "FaultKind", "Fault", "FaultInjector", "SYNC_STOPPED_PERIODS",
-           "TruthTrace", "SDO_ABORT_CODE"]
+__all__ = ["BOOT_FAULT_CODE", "DRIVE_KINDS", "WIRING_KINDS", "FaultKind", "Fault", "FaultInjector",
+           "SYNC_STOPPED_PERIODS", "TruthTrace", "SDO_ABORT_CODE"]
 
 #: SYNC periods without a SYNC after which the check's time axis follows the bus time (SYNC stopped)
 SYNC_STOPPED_PERIODS = 2
@@ -152,6 +167,13 @@ class FaultKind(Enum):
     FAULT_RESET_IGNORED = "fault_reset_ignored"
     MODE_NOT_CONFIRMED = "mode_not_confirmed"
     NOT_READY_UNTIL_CONTROLWORD = "not_ready_until_controlword"
+    LVDT_SIGN = "lvdt_sign"
+    LVDT_SCALE = "lvdt_scale"
+    LVDT_DEAD = "lvdt_dead"
+    LOADCELL_SIGN = "loadcell_sign"
+    LOADCELL_SCALE = "loadcell_scale"
+    LOADCELL_DEAD = "loadcell_dead"
+    LVDTS_SWAPPED = "lvdts_swapped"
 
 
 #: Drive faults: they act from the drives' power-on, before SYNC starts (``start_s`` is the bus time
@@ -159,6 +181,9 @@ class FaultKind(Enum):
 DRIVE_KINDS = frozenset((FaultKind.IGNORE_ABORT_CONNECTION, FaultKind.QUICK_STOP_STAYS,
                          FaultKind.STARTS_IN_FAULT, FaultKind.FAULT_RESET_IGNORED,
                          FaultKind.MODE_NOT_CONFIRMED, FaultKind.NOT_READY_UNTIL_CONTROLWORD))
+#: Wiring faults: the rig's sensors wired wrongly (a sign, a scale, a dead input, two LVDTs swapped).
+WIRING_KINDS = frozenset((FaultKind.LVDT_SIGN, FaultKind.LVDT_SCALE, FaultKind.LVDT_DEAD, FaultKind.LOADCELL_SIGN,
+                          FaultKind.LOADCELL_SCALE, FaultKind.LOADCELL_DEAD, FaultKind.LVDTS_SWAPPED))
 #: Error code of a drive that boots into FAULT (``starts_in_fault``, ``fault_reset_ignored``).
 BOOT_FAULT_CODE = 0x5000
 
@@ -173,6 +198,8 @@ DEFAULT_VALUE: dict[FaultKind, float | None] = {
     FaultKind.BUS_ERRORS: 0.5,  # loss probability
     FaultKind.STARTS_IN_FAULT: float(BOOT_FAULT_CODE),  # error code
     FaultKind.FAULT_RESET_IGNORED: 4.0,  # fault resets a FAULT takes to clear
+    FaultKind.LVDT_SCALE: 0.5,  # reading / true stroke
+    FaultKind.LOADCELL_SCALE: 0.5,  # reading / true force
 }
 
 _EMCY_CODE = {FaultKind.EMCY_OVER_CURRENT: 0x2310, FaultKind.EMCY_OVER_TEMPERATURE: 0x4310,
@@ -281,6 +308,7 @@ class FaultInjector:
         self._truth: list[tuple] = []
         self._held: list[tuple[int, Frame]] = []  # (due SYNC count, frame) of late TPDOs
         self._stuck: dict[int, float] = {}  # EMA -> frozen LVDT value [mm]
+        self._lvdt_now: dict[int, float] = {}  # EMA -> this SYNC's LVDT reading [mm] (lvdts_swapped)
         self._started: set[int] = set()  # indices of faults whose onset happened
         #: kind -> time of the onset: check time, bus time since power-on for the drive faults
         self.onset_s: dict[str, float] = {}
@@ -417,6 +445,11 @@ class FaultInjector:
             out += [self._sensor_faults(f) for k, f in self._held if k <= self.syncs]
             self._held = [(k, f) for k, f in self._held if k > self.syncs]
         drive_ids = self._drive_ids
+        if at_sync and self._active(FaultKind.LVDTS_SWAPPED):  # both LVDTs of this SYNC, before either is changed
+            for fr in frames:
+                for (ema, sig), v in self._codec.scaled(fr).items():
+                    if sig is Signal.LVDT:
+                        self._lvdt_now[ema] = v
         silent = self._silent_sensors() if self._silent_sensor else ()
         for fr in frames:
             cid = fr.arbitration_id
@@ -492,7 +525,7 @@ class FaultInjector:
         for (ema, sig), v in values.items():
             node = self._nodes[ema].node_id
             if sig is Signal.LVDT:
-                x = v
+                x = self._lvdt_wiring(ema, node, v)
                 if self._active(FaultKind.LVDT_STUCK, node):
                     x = self._stuck.setdefault(ema, v)
                 for f in self._active(FaultKind.LVDT_SPIKE, node):
@@ -500,12 +533,29 @@ class FaultInjector:
                 if x != v:
                     changes[(ema, sig)] = x
             elif sig is Signal.FORCE:
+                x = self._wired(v, node, FaultKind.LOADCELL_SIGN, FaultKind.LOADCELL_SCALE, FaultKind.LOADCELL_DEAD)
                 for f in self._active(FaultKind.LOADCELL_SATURATION, node):
-                    if abs(v) > f.param:
-                        changes[(ema, sig)] = math.copysign(f.param, v)
+                    if abs(x) > f.param:
+                        x = math.copysign(f.param, x)
+                if x != v:
+                    changes[(ema, sig)] = x
             elif sig is Signal.MOTOR_ANGLE and self._active(FaultKind.RESOLVER_WRAP, node):
                 changes[(ema, sig)] = v + 2.0 * math.pi
         return self._codec.rescaled(fr, changes) if changes else fr
+
+    def _lvdt_wiring(self, ema: int, node: int, v: float) -> float:
+        """The LVDT reading as the rig's wiring makes it (``lvdts_swapped``, then sign, scale, dead)."""
+        if self._active(FaultKind.LVDTS_SWAPPED):
+            v = self._lvdt_now.get(3 - ema, v)
+        return self._wired(v, node, FaultKind.LVDT_SIGN, FaultKind.LVDT_SCALE, FaultKind.LVDT_DEAD)
+
+    def _wired(self, v: float, node: int, sign: FaultKind, scale: FaultKind, dead: FaultKind) -> float:
+        """A reading through a wrong sign, a wrong scale or a dead input of the EMA whose drive is ``node``."""
+        if self._active(dead, node):
+            return 0.0
+        for f in self._active(scale, node):
+            v *= f.param
+        return -v if self._active(sign, node) else v
 
     def _node(self, node_id: int):
         return next(n for n in self.pair.nodes if n.node_id == node_id)

@@ -14,7 +14,8 @@ from hil.record.runfolder import COLUMN_UNITS, SIGNAL_COLUMNS, Signals
 
 def test_every_command_registers_a_handler():
     ap = build_parser()
-    names = {"dry-run", "run", "profile", "simulate", "analyze", "serv", "diagnose", "history", "sim-serve"}
+    names = {"dry-run", "run", "commission", "profile", "simulate", "analyze", "serv", "diagnose", "history",
+             "sim-serve"}
     sub = next(a for a in ap._actions if a.dest == "cmd")  # argparse's sub-parser action
     assert set(sub.choices) == names and len(COMMANDS) == len(names)
     for name, p in sub.choices.items():

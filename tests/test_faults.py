@@ -529,9 +529,12 @@ def test_drive_fault_handled_by_the_master_up_to_operation_enabled(fault):
 def test_every_fault_kind_is_covered():
     # master_silent: the master's own death, which the drives handle (consumer heartbeat, 0x6007),
     # not the master: tests/test_master_loss.py asserts their reaction, the truth and the run folder;
-    # sensor_node_silent: tests/test_sim_nodes.py (the node) and the sensor-rig dry-run below
+    # sensor_node_silent: tests/test_sim_nodes.py (the node) and the sensor-rig dry-run below;
+    # the wiring faults: tests/test_commission.py (each named by the commissioning)
+    from sim.faults import WIRING_KINDS
+
     covered = ({c[0].kind for c in CASES} | {c[0].kind for c in DRIVE_CASES}
-               | {"node_silent", "sdo_abort", "master_silent", "sensor_node_silent"})
+               | {"node_silent", "sdo_abort", "master_silent", "sensor_node_silent"} | {k.value for k in WIRING_KINDS})
     assert covered == {k.value for k in FaultKind}
 
 

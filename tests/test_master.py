@@ -21,7 +21,7 @@ from hil.canopen.sdo import SdoAbortError
 from hil.canopen.signalmap import ForceControl
 from hil.master import events as event
 from hil.master.core import DriveFault, HeartbeatLost, MasterCore, MasterLossReactionError, PreflightError
-from hil.master.preflight import DrillOutcome
+from hil.master.drill import DrillOutcome
 from hil.profile.load import load_actuation
 from hil.profile.rig import plan_for
 from sim.faults import Fault, FaultInjector

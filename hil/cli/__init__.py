@@ -11,7 +11,7 @@ than its cyclic loop needs before the first SYNC. Shared pieces are in
 Exit status (:class:`hil.cli.common.ExitCode`): 0 pass, 1 fail (backlash
 above B_spec), 2 aborted, 3 bad input (profile, recording, EDS, arguments,
 a history database URL, file or login that cannot be used), 4 internal error,
-5 inconclusive. Any error, expected or not, is one line on the console;
+5 inconclusive, 6 not ready (commission). Any error, expected or not, is one line on the console;
 an unexpected one leaves its traceback in a file whose path that line names.
 """
 
@@ -22,11 +22,11 @@ import sys
 from typing import NoReturn
 
 from hil import __version__
-from hil.cli import analyze, diagnose, dry_run, history, profile, run, serv, sim_serve, simulate
+from hil.cli import analyze, commission, diagnose, dry_run, history, profile, run, serv, sim_serve, simulate
 from hil.cli.common import EPILOG, ExitCode
 
 #: The commands in the order ``--help`` lists them.
-COMMANDS = (dry_run, run, profile, simulate, analyze, serv, diagnose, history, sim_serve)
+COMMANDS = (dry_run, run, commission, profile, simulate, analyze, serv, diagnose, history, sim_serve)
 
 
 class _Parser(argparse.ArgumentParser):

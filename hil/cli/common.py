@@ -28,6 +28,7 @@ class ExitCode(IntEnum):
     INPUT = 3  #: bad input: profile, recording, EDS or arguments; the message names file, field or line
     INTERNAL = 4  #: an internal error (a bug): one line on the console, the traceback in the log
     INCONCLUSIVE = 5  #: a reading's uncertainty straddles its limit, or a channel was not measured
+    NOT_READY = 6  #: commission: the rig is not ready for its first check (every problem named in its report)
 
 
 EPILOG = """\
@@ -36,8 +37,9 @@ exit status: 0 pass (diagnose, sim-serve: done), 1 fail (a backlash proven above
 recording, EDS, CAN interface, arguments, an --out that is a file or, for a check, holds
 files, two EMAs of one serial: the message names the file, field or line),
 4 internal error, 5 inconclusive (a reading whose uncertainty straddles B_spec, or a
-channel not measured). history: 2 its database is down or locked, 3 its URL, file or
-login cannot be used; a check's recording in the history never changes its exit status.
+channel not measured), 6 commission: the rig is not ready (every problem named).
+history: 2 its database is down or locked, 3 its URL, file or login cannot be used; a
+check's recording in the history never changes its exit status.
 Profiles default to the shipped ones (profiles/*.toml)."""
 
 
@@ -88,10 +90,10 @@ def add_recording_args(
                         f"the recording next to it: nothing is overwritten)")
 
 
-def add_bus_args(p: argparse.ArgumentParser, interfaces: str) -> None:
-    """``--interface``, ``--channel``, ``--bitrate``: a python-can bus."""
-    p.add_argument("--interface", required=True, help=f"python-can interface, e.g. {interfaces}")
-    p.add_argument("--channel", required=True, help="channel, e.g. can0 or vcan0")
+def add_bus_args(p: argparse.ArgumentParser, interfaces: str, *, required: bool = True) -> None:
+    """``--interface``, ``--channel``, ``--bitrate``: a python-can bus (``required``: the first two)."""
+    p.add_argument("--interface", required=required, help=f"python-can interface, e.g. {interfaces}")
+    p.add_argument("--channel", required=required, help="channel, e.g. can0 or vcan0")
     p.add_argument("--bitrate", type=_bitrate, metavar="BPS",
                    help="bit rate in bit/s, 10000-1000000 (default: the actuation profile's)")
     p.add_argument("--multicast-hops", type=_multicast_hops, default=None, metavar="N",

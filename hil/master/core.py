@@ -147,6 +147,7 @@ class MasterCore:
         self._sdo = {n: SdoClient(n, timeout_s=c.sdo_timeout_s) for n in self.nodes}
         self.preflight = Preflight(actuation, plan, self.emcy_codes_since, self._sdo_status, forces, safety)
         self._gen: Generator | None = None
+        self.steps: Generator | None = None  #: run by start() instead of the preflight (hil.master.commission)
         self._pending: object | None = None
         self._boot_deadline = 0.0
         self._complete = False
@@ -178,7 +179,7 @@ class MasterCore:
             raise PreflightError(f"master already started (phase {self.phase.value})")
         self.phase = Phase.PREFLIGHT
         self._hb_next = t  # the heartbeat starts with the first frame: the first poll sends it
-        self._gen = self.preflight.run()
+        self._gen = self.preflight.run() if self.steps is None else self.steps
         return self._advance(None, t, first=True)
 
     @property

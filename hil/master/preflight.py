@@ -41,7 +41,6 @@ import math
 import struct
 from collections.abc import Generator
 from dataclasses import dataclass, field
-from enum import Enum
 
 from canopen.objectdictionary import datatypes as dt
 
@@ -62,11 +61,12 @@ from hil.canopen.signalmap import (
     torque_scale,
 )
 from hil.errors import EmacheckError
+from hil.master.drill import DrillOutcome, DrillResult, MasterLossRecord, ReactionConfig
 from hil.master.limits_setup import limit_targets, limits_for, readback_problem
 from hil.master.powerup import PowerWalk
 from hil.profile.config import Actuation, Safety
 
-__all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError",
+__all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "PreflightError", "identity_problems",
            "MasterLossReactionError", "ReactionConfig", "SameSerialError"]
 
 
@@ -143,85 +143,6 @@ class Heartbeat:
     on: bool
 
 
-# ------------------------------------------------------------------ the master-loss record
-
-
-class DrillOutcome(Enum):
-    REACTED = "reacted"  #: the drive left OPERATION_ENABLED after the master fell silent
-    NO_REACTION = "no reaction"  #: still OPERATION_ENABLED at the drill's deadline
-    SKIPPED = "skipped"  #: the profile says why (canopen.skip_master_loss_drill)
-    NOT_CONFIGURED = "not configured"  #: the drive has no reaction to drill (external watchdog stated)
-    #: configured, but the drill did not get to the master's silence (the preflight stopped first; ``note``: why)
-    NOT_RUN = "not run"
-
-
-@dataclass(frozen=True, slots=True)
-class DrillResult:
-    """What the drill observed of one drive.
-
-    Attributes
-    ----------
-    outcome : DrillOutcome
-    reaction_ms : float or None
-        From the master's last heartbeat to the first statusword outside OPERATION_ENABLED [ms].
-    waited_ms : float or None
-        How long the master stayed silent [ms].
-    state_after : str or None
-        The state the drive reacted into (e.g. ``QUICK_STOP_ACTIVE``).
-    emcy : tuple of int
-        EMCY error codes the drive sent while the master was silent.
-    note : str
-        Why it was skipped, or what else the engineer should know.
-    """
-
-    outcome: DrillOutcome
-    reaction_ms: float | None = None
-    waited_ms: float | None = None
-    state_after: str | None = None
-    emcy: tuple[int, ...] = ()
-    note: str = ""
-
-
-@dataclass(frozen=True, slots=True)
-class ReactionConfig:
-    """The reaction to the master's death as written and read back (what the drive was told).
-
-    ``consumer_heartbeat_ms``, ``master_node_id`` and ``abort_connection_option`` are what was written;
-    None (absent from the JSON) when nothing was written (the drive's EDS lacks the objects: ``problems``
-    names which)."""
-
-    consumer_heartbeat_ms: int | None
-    master_node_id: int | None
-    abort_connection_option: int | None
-    configured: bool  #: every object written and read back as intended
-    problems: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True, slots=True)
-class MasterLossRecord:
-    """How one drive is protected against the master's death: configured, and observed by the drill."""
-
-    reaction: ReactionConfig
-    drill: DrillResult
-    external_watchdog: str = ""
-
-    @property
-    def armed(self) -> bool:
-        """The drive may be enabled for the check: it reacted in the drill, the drill was skipped with a
-        reason, or the rig states another protection."""
-        return bool(self.external_watchdog) or self.drill.outcome in (DrillOutcome.REACTED, DrillOutcome.SKIPPED)
-
-    def as_json(self) -> dict:
-        d, r = self.drill, self.reaction
-        written = {k: v for k, v in (("consumer_heartbeat_ms", r.consumer_heartbeat_ms),
-                                     ("master_node_id", r.master_node_id),
-                                     ("abort_connection_option", r.abort_connection_option)) if v is not None}
-        return {**written, "configured": r.configured, "problems": list(r.problems),
-                "drill": {"outcome": d.outcome.value, "reaction_ms": d.reaction_ms, "waited_ms": d.waited_ms,
-                          "state_after": d.state_after, "emcy": [f"0x{c:04X}" for c in d.emcy], "note": d.note},
-                "external_watchdog": self.external_watchdog}
-
-
 def _refusal(r) -> str:
     """An SDO read's failure in words: the abort's code and meaning, or the timeout."""
     return f"SDO abort 0x{int(r.code):08X}, {describe(r.code)}" if isinstance(r, SdoAbortError) else "no answer"
@@ -261,6 +182,26 @@ def decode(node: NodePlan, index: int, sub: int, data: bytes) -> int | float:
     size = struct.calcsize(code)
     raw = bytes(data[:size]).ljust(size, b"\0")
     return struct.unpack("<" + code, raw)[0]
+
+
+def identity_problems(spec, ident: dict | None, devtype: int | None = None) -> list[str]:
+    """What disagrees between a node's identity as read (0x1018 ``ident``: ``vendor_id``, ``product_code``,
+    ``revision``; device type 0x1000 ``devtype``; None: not compared) and the profile's node ``spec``. The
+    preflight stops at the first; the commissioning (:mod:`hil.master.commission`) names them all."""
+    out = []
+    if ident is not None:
+        hexed = {k: "not read" if v is None else f"0x{v:08X}" for k, v in ident.items()}
+        if ident["vendor_id"] != spec.vendor_id or ident.get("product_code") not in (None, spec.product_code):
+            out.append(f"{spec.label}: identity 0x1018 vendor {hexed['vendor_id']} product "
+                       f"{hexed.get('product_code', 'not read')} does not match the profile ({spec.key}.vendor_id "
+                       f"0x{spec.vendor_id:08X}, {spec.key}.product_code 0x{spec.product_code:08X})")
+        if ident.get("revision") is not None and ident["revision"] < spec.revision_min:
+            out.append(f"{spec.label}: revision 0x{ident['revision']:08X} below "
+                       f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
+    if devtype is not None and devtype & 0xFFFF != spec.device_profile:
+        out.append(f"{spec.label}: device type 0x{devtype:08X} is not a CiA {spec.device_profile} "
+                   f"device (0x1000 bits 0..15 = {devtype & 0xFFFF})")
+    return out
 
 
 # ------------------------------------------------------------------ the preflight
@@ -360,20 +301,12 @@ class Preflight:
         if unread:
             self.events.append((spec.node_id, f"identity {'; '.join(unread)} not read: not compared with the "
                                               f"profile's {spec.key}.product_code / revision_min"))
-        hexed = {k: "not read" if v is None else f"0x{v:08X}" for k, v in ident.items()}
-        if ident["vendor_id"] != spec.vendor_id or ident["product_code"] not in (None, spec.product_code):
-            raise PreflightError(
-                f"{spec.label}: identity 0x1018 vendor {hexed['vendor_id']} product "
-                f"{hexed['product_code']} does not match the profile ({spec.key}.vendor_id "
-                f"0x{spec.vendor_id:08X}, {spec.key}.product_code 0x{spec.product_code:08X})")
-        if ident["revision"] is not None and ident["revision"] < spec.revision_min:
-            raise PreflightError(f"{spec.label}: revision 0x{ident['revision']:08X} below "
-                                 f"{spec.key}.revision_min 0x{spec.revision_min:08X}")
+        for problem in identity_problems(spec, ident):
+            raise PreflightError(problem)
         self._distinct_serial(spec)
         devtype = int((yield from self._read(node, 0x1000, 0, "device type")))
-        if devtype & 0xFFFF != spec.device_profile:
-            raise PreflightError(f"{spec.label}: device type 0x{devtype:08X} is not a CiA {spec.device_profile} "
-                                 f"device (0x1000 bits 0..15 = {devtype & 0xFFFF})")
+        for problem in identity_problems(spec, None, devtype):
+            raise PreflightError(problem)
 
     def _distinct_serial(self, spec) -> None:
         """The drive ``spec`` must not report the serial number (0x1018:04, with vendor and product) of the

@@ -13,7 +13,7 @@ from enum import Enum
 
 from hil.canopen.cia402 import State
 from hil.canopen.signalmap import ForceControl
-from hil.master.preflight import MasterLossRecord
+from hil.master.drill import MasterLossRecord
 
 __all__ = ["DriveView", "NodeView", "Phase", "RESET_WAIT_CYCLES", "STILL_CYCLES", "STILL_MM"]
 

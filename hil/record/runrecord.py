@@ -555,7 +555,7 @@ class RunRecord:
     files_sha256: dict[str, str] | None = None  #: file name -> SHA-256
     wear: Wear | None = None
     process_image: dict | None = None  #: :func:`hil.canopen.cycle.image_of`
-    master_loss: dict[str, dict] | None = None  #: EMA -> :meth:`hil.master.preflight.MasterLossRecord.as_json`
+    master_loss: dict[str, dict] | None = None  #: EMA -> :meth:`hil.master.drill.MasterLossRecord.as_json`
     identity: dict[str, Identity | None] | None = None  #: EMA -> identity (None: not read)
     safety: SafetyViolation | None = None
     drives_final: dict[str, DriveFinal] | None = None  #: EMA -> its final state

@@ -1,0 +1,318 @@
+"""``emacheck commission``: a rig brought up before its first check (the IO shell of
+:mod:`hil.master.commission`, over :mod:`hil.master.link` as the check runs).
+
+Real drives: ``--interface``, ``--channel`` and ``--arm``. Simulated drives in process: ``--simulate``
+(the dry-run's simulated rig, with ``--wiring-fault`` or the simulated-rig profile's ``[[faults]]``).
+The report (``commission.json``, ``commission.html``) and the CAN log go into a new folder, written once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from hil.cli.check import master_setup, rig_nodes_text
+from hil.cli.common import (
+    ExitCode,
+    Outputs,
+    add_bus_args,
+    add_parser,
+    add_profile_args,
+    check_new_run_folder,
+    file_hashes,
+    make_console,
+    multicast_hops_for,
+    open_bus,
+    out_dir,
+    utc_iso,
+)
+from hil.profile.load import load_actuation, load_check, load_simrig
+
+#: The report's file names in the commissioning's folder.
+REPORT_JSON, REPORT_HTML = "commission.json", "commission.html"
+
+
+@dataclass
+class CommissionRun:
+    """What :func:`commission` leaves behind: the exit status, the report (as written), the live objects."""
+
+    exit_code: int
+    report: dict
+    out: Path
+    core: object
+    link: object
+
+
+def wiring_fault(text: str):
+    """``--wiring-fault KIND[:EMA[:VALUE]]`` -> a :class:`sim.faults.Fault` (argparse type)."""
+    from blf.errors import InputError
+    from sim.faults import WIRING_KINDS, Fault, FaultKind
+
+    parts = text.split(":")
+    kinds = sorted(k.value for k in WIRING_KINDS)
+    if parts[0] not in kinds:
+        raise argparse.ArgumentTypeError(f"{parts[0]!r} is not a wiring fault; known: {', '.join(kinds)}")
+    try:
+        ema = int(parts[1]) if len(parts) > 1 and parts[1] else 1
+        kw = {"value": float(parts[2])} if len(parts) > 2 else {}
+        return Fault(FaultKind(parts[0]).value, ema=ema, **kw)
+    except (ValueError, InputError) as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc} (KIND[:EMA[:VALUE]], EMA 1 or 2)") from None
+
+
+def simulated_transport(act, rig, simrig, faults, seed: int | None):
+    """The dry-run's simulated rig on the in-process bus, with ``faults`` (wiring faults among them)."""
+    import numpy as np
+
+    from hil.canopen.od import load_eds
+    from hil.transport import InProcessTransport
+    from sim.drives import SimDrivePair
+    from sim.faults import FaultInjector
+    from sim.plant import RigPlant
+
+    seed = simrig.seed if seed is None else seed
+    rng = np.random.default_rng(seed)
+    pair = SimDrivePair(RigPlant(simrig.params, rng), rig.plan,
+                        lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id), serials=simrig.serials)
+    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=False)
+    return InProcessTransport(injector, act.timing.sync_period_s)
+
+
+def commission(act, check, rig, transport, out: Path, *, console=None, context: dict | None = None) -> CommissionRun:
+    """Commission the rig over ``transport``; the report and the CAN log go into ``out`` (new or empty).
+
+    Returns the exit status (0 ready, :attr:`ExitCode.NOT_READY` with every problem named) and the report.
+    """
+    from hil.canopen.errors import CanopenError
+    from hil.errors import KNOWN_ERRORS
+    from hil.master.commission import Commission
+    from hil.master.commission_rules import Finding, Kind, Stage
+    from hil.master.core import MasterCore
+    from hil.master.link import CanopenLink
+    from hil.record.canlog import CanLogWriter
+    from hil.transport import InProcessTransport
+
+    console = console or make_console(quiet=True)
+    sim = isinstance(transport, InProcessTransport)
+    context = {"simulated": sim, "bus": {"interface": "in-process" if sim else "?", "channel": "simulated" if sim
+                                         else "?"}} | (context or {})
+    core = Commission(act, check, rig.plan)
+    lim = core.lim
+    # during commissioning the drives keep the commissioning's force limit as their max torque themselves
+    safety = dataclasses.replace(check.safety, max_force_N=lim.max_force_N)
+    master = MasterCore(act, rig.plan, forces=(2.0 * lim.force_N, lim.max_force_N), safety=safety)
+    master.steps = core.steps(master.preflight)
+    take = master.on_frame
+
+    def on_frame(frame, t):  # every frame the master is fed is heard by the scan too (any node id)
+        core.heard(frame)
+        return take(frame, t)
+
+    master.on_frame = on_frame
+    # wall-clock stamps on a real bus, as candump writes them (run does the same)
+    log = CanLogWriter(out / "can.log", channel=str(context["bus"]["channel"]),
+                       time_offset_s=0.0 if sim else transport.wall_clock_offset_s)
+    link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
+                       max_lag_s=check.safety.max_lag_s)
+    try:
+        smp = link.first_sample()
+        while True:
+            sp1, sp2 = core.step(smp)
+            if core.done:
+                break
+            smp = link.exchange(sp1, sp2)
+    except (*KNOWN_ERRORS, CanopenError, KeyboardInterrupt) as exc:
+        core.failed(exc)
+        link.abort()
+        interrupted = isinstance(exc, KeyboardInterrupt)
+    else:
+        interrupted = False
+    finally:
+        link.close()
+    final = link.final_states or {}
+    for ema, d in final.items():
+        scanned = core.scan.nodes.get(d["node"], {})
+        nothing_powered = core.stopped_at is Stage.SCAN
+        # the scan read its state and nothing was powered since; a node that does not answer is named already
+        if d["safe"] or (nothing_powered and scanned.get("state") == "SWITCH_ON_DISABLED") or \
+                scanned.get("answers") is False:
+            continue
+        core.findings.append(Finding(Stage.DONE, Kind.NOT_SAFE, f"canopen.node_id_{ema}",
+                                     f"{ema}: last known {d['state']}, confirmed {d['confirmed']}, reachable "
+                                     f"{d['reachable']}"))
+    report = _report(core, master, link, final, context)
+    rc = ExitCode.PASS if report["status"] == "ready" else ExitCode.NOT_READY
+    rc = ExitCode.ABORTED if interrupted else rc  # Ctrl-C: the drives stopped, the report written, exit 2
+    report["exit_code"] = int(rc)
+    outputs = Outputs(out)
+    outputs.write_json(REPORT_JSON, report)
+    from hil.report.commission import write_commission_report
+
+    i = act.mechanics.i_total_rad_per_mm
+    traces = {name: {**x, "x1": x["phi1"] / i, "x2": x["phi2"] / i} for name, x in core.traces.items()}
+    outputs.write_with(REPORT_HTML, lambda p: write_commission_report(p, report, traces, act.timing.sync_period_s))
+    _print(console, report, out)
+    return CommissionRun(rc, report, out, core, link)
+
+
+def _report(core, master, link, final: dict, context: dict) -> dict:
+    """The commissioning report as data (hil/schemas/commission.schema.json)."""
+    from hil import __version__
+    from hil.master.commission_rules import (
+        DEAD_FRACTION,
+        FORCE_GAIN_TOLERANCE,
+        MIN_MOTION_FRACTION,
+        MIN_STEP_MOTION_MM,
+        NOISE_FACTOR,
+        REST_S,
+    )
+    from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
+
+    findings = [f.as_json() for f in core.findings]
+    measured = {k: v for k, v in core.measured.items() if not k.endswith("_raw")}
+    return {
+        "kind": "commission", "status": "not ready" if findings else "ready", "exit_code": None,
+        "created": utc_iso(), "software": {"emacheck": __version__}, **context,
+        "stage_reached": core.stage.value,
+        "limits": core.lim.as_json(),
+        "thresholds": {"rest_s": REST_S, "noise_factor": NOISE_FACTOR, "lvdt_gain_tolerance": HARD_LVDT_GAIN_TOLERANCE,
+                       "force_gain_tolerance": FORCE_GAIN_TOLERANCE, "dead_fraction": DEAD_FRACTION,
+                       "min_motion_fraction": MIN_MOTION_FRACTION, "min_step_motion_mm": MIN_STEP_MOTION_MM,
+                       "max_frozen_cycles": core.check.safety.max_frozen_cycles},
+        "scan": {"heard": sorted(core.scan.heard), "nodes": {str(k): v for k, v in core.scan.nodes.items()}},
+        "identity": {f"ema{d.ema}": ({"node": d.node_id, **d.identity} if d.identity else None)
+                     for d in master.drives.values()},
+        # from the preflight's own record: the drill's outcome also when it refused the drives
+        "master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in master.preflight.drives
+                        if d.master_loss is not None},
+        "measured": measured,
+        "drives_final": final,
+        "close_errors": list(link.close_errors),
+        "findings": findings,
+    }
+
+
+def _print(console, report: dict, out: Path) -> None:
+    from rich.markup import escape
+
+    for f in report["findings"]:
+        fits = f" -> fits: {f['fits']}" if f["fits"] is not None else ""
+        console.print(escape(f"  [{f['stage']}] {f['kind']}: {f['key'] or '-'}: {f['text']}{fits}"), soft_wrap=True)
+    ours = {v["node"] for v in report["scan"]["nodes"].values()}
+    if others := [n for n in report["scan"]["heard"] if n not in ours]:
+        console.print(f"  note: node id(s) {', '.join(map(str, others))} answered and are not in the profile")
+    for ema, d in report["drives_final"].items():
+        ident = (report["identity"].get(ema) or {}).get("serial")
+        serial = f", serial 0x{ident:08X} (0x1018:04)" if ident else ""
+        console.print(f"  {ema}: node {d['node']}{serial}, ended in {d['state']} (confirmed {d['confirmed']})")
+    word = "[green]READY[/green] for its first check" if report["status"] == "ready" else \
+        f"[red]NOT READY[/red]: {len(report['findings'])} problem(s)"
+    console.print(f"rig {word}; report {out / REPORT_HTML}")
+
+
+def cmd_commission(args: argparse.Namespace) -> int:
+    """``emacheck commission``: scan, identity, signals at rest, signs and scales in motion, drill, safe end."""
+    console = make_console()
+    if args.profile_pos is not None and args.profile is not None and args.profile_pos != args.profile:
+        console.print(f"[red]two actuation profiles given:[/red] {args.profile_pos} and --profile {args.profile}")
+        return ExitCode.INPUT
+    profile = args.profile_pos or args.profile
+    act = load_actuation(profile)
+    check = load_check(args.check, act)
+    if not args.simulate and (args.interface is None or args.channel is None):
+        console.print("[red]give --interface and --channel[/red] (real drives), or --simulate")
+        return ExitCode.INPUT
+    if not args.simulate and not args.arm:
+        console.print("[red]refusing to move anything:[/red] `emacheck commission` moves real actuators a little; "
+                      "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
+        return ExitCode.INPUT
+    if args.wiring_fault and not args.simulate:
+        console.print("[red]--wiring-fault needs --simulate[/red]")
+        return ExitCode.INPUT
+    rig = master_setup(act, profile, args.eds)
+    check_new_run_folder(args.out)
+    context = {"profiles": {"actuation": str(profile or "(shipped)"), "check": str(args.check or "(shipped)")},
+               "files_sha256": file_hashes(actuation=profile, check=args.check)}
+    bus = None
+    if args.simulate:
+        simrig = load_simrig(args.sim)
+        faults = tuple(simrig.faults) + tuple(args.wiring_fault or ())
+        transport = simulated_transport(act, rig, simrig, faults, args.seed)
+        wiring = [{"kind": f.kind, "ema": f.ema, "value": f.param if math.isfinite(f.param) else None}
+                  for f in faults if f.kind in _wiring_kinds()]
+        context |= {"simulated": True, "seed": simrig.seed if args.seed is None else args.seed,
+                    "wiring_faults": wiring, "bus": {"interface": "in-process", "channel": "simulated"}}
+    else:
+        bitrate = args.bitrate or act.canopen.bitrate_bps
+        bus = open_bus(args.interface, args.channel, bitrate, receive_own_messages=args.interface == "virtual",
+                       multicast_hops=args.multicast_hops)
+        from hil.transport import BusTransport
+
+        transport = BusTransport(bus, act.timing.sync_period_s)
+        context |= {"simulated": False, "bus": {"interface": args.interface, "channel": args.channel,
+                                                "bitrate_bps": bitrate,
+                                                "multicast_hops": multicast_hops_for(args.interface,
+                                                                                     args.multicast_hops)}}
+    out = out_dir(args, "commission")
+    console.print(f"emacheck commission: {rig_nodes_text(rig)} on {context['bus']['interface']}:"
+                  f"{context['bus']['channel']}; folder {out}")
+    try:
+        run = commission(act, check, rig, transport, out, console=console, context=context)
+    finally:
+        transport.close()
+        if bus is not None:
+            bus.shutdown()
+    return run.exit_code
+
+
+def _wiring_kinds() -> set[str]:
+    from sim.faults import WIRING_KINDS
+
+    return {k.value for k in WIRING_KINDS}
+
+
+def register(sub) -> None:
+    p = add_parser(
+        sub, "commission", handler=cmd_commission,
+        help="bring a rig up before its first check: nodes, identities, signals, signs and scales, drill",
+        description=(
+            "Commission a rig before its first check (docs/commission.md). In order, stopping at the\n"
+            "first step that finds a problem, every problem of that step named with its profile key and\n"
+            "the value that would fit:\n"
+            "  1. scan: NMT reset node, which node ids answer (boot-up, heartbeat, SDO 0x1000), identity\n"
+            "     0x1018 and device type against the profile (nothing is powered);\n"
+            "  2. the check's preflight: configuration, the drives' own limits (max torque: the\n"
+            "     commissioning's force limit), the master's-death drill (before anything moves);\n"
+            "  3. at rest (0.5 s, drives holding): each LVDT and load cell alive (not one value for more\n"
+            "     than safety.max_frozen_cycles), in range, noise within 4x the declared, load cells\n"
+            "     within the commissioning force of zero (nothing moves yet);\n"
+            "  4. each EMA in turn, the other holding 1/4 of the check's opposing force in CST: out and\n"
+            "     back min(1 mm, 1/10 of the sweep amplitude) at 1/4 of the sweep speed: each LVDT against\n"
+            "     its motor angle over the gear ratio (gain 1 +- 0.10); then the holding force stepped up\n"
+            "     once more: each load cell against that drive's torque (+1 / -1 within 0.25), and the\n"
+            "     LVDT that follows the pushing motor must be its own (else: swapped). Below 2 % of the\n"
+            "     expected change a channel is dead. Any load cell beyond 4x the force, or a motor angle\n"
+            "     0.5 mm beyond the travel from its start, stops the movement. Drives without CST: the\n"
+            "     other EMA follows the move; then each EMA pushes against the other held until a load\n"
+            "     cell changed by that force: signs, and the two load cells against each other.\n"
+            "  5. both drives to Switch on disabled, confirmed.\n"
+            "Exit 0: ready for its first check; 6: not ready (every problem named); 2: Ctrl-C;\n"
+            "3: bad input. Writes commission.json, commission.html and can.log into a new folder.\n\n"
+            "  emacheck commission my-rig.toml --interface socketcan --channel can0 --arm\n"
+            "  emacheck commission --simulate --wiring-fault lvdt_sign:2 --wiring-fault lvdts_swapped"))
+    p.add_argument("profile_pos", nargs="?", metavar="PROFILE", type=Path,
+                   help="actuation profile (default: the shipped one; --profile says the same)")
+    p.add_argument("--simulate", action="store_true",
+                   help="the simulated drives on an in-process bus instead of --interface/--channel (no --arm)")
+    p.add_argument("--wiring-fault", action="append", type=wiring_fault, metavar="KIND[:EMA[:VALUE]]",
+                   help="with --simulate, wire the simulated rig wrongly (repeatable): lvdt_sign, lvdt_scale "
+                        "(VALUE: reading / stroke, default 0.5), lvdt_dead, loadcell_sign, loadcell_scale, "
+                        "loadcell_dead, lvdts_swapped; e.g. lvdt_sign:2, loadcell_scale:1:0.1")
+    p.add_argument("--arm", action="store_true", help="confirm that the actuators may move (real drives)")
+    p.add_argument("--out", metavar="DIR", type=Path,
+                   help="new or empty folder for the report (default emacheck-runs/<time>-commission)")
+    add_profile_args(p, sim=True)
+    add_bus_args(p.add_argument_group("real drives (with --arm)"), "socketcan, pcan, kvaser", required=False)
