@@ -23,6 +23,7 @@ SYNC to SYNC; ``emacheck run`` writes it into meta.json ``timing``.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 
@@ -391,6 +392,8 @@ class CanopenLink:
                                 f"(frames waited for it; {self._lag_limit_text()})")
                 self._observe_sync(lag, ahead=1)  # the stall that stops the check is recorded too
                 self.m.latch(err)
+                with contextlib.suppress(*KNOWN_ERRORS):  # (the master latched: later faults are recorded)
+                    self._feed(got)  # the frames that waited reach the master and the log
                 raise err
             self._feed(got, in_order)
         self._send(self.m.poll(self.tr.now()))
