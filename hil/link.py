@@ -19,6 +19,14 @@ On a real bus the link measures its own timing per SYNC cycle
 (:attr:`CanopenLink.timing`, a :class:`hil.cycletiming.CycleTiming`): SYNC
 arrival to the RPDOs sent, sample complete to RPDOs sent (the loop's work),
 SYNC to SYNC; ``emacheck run`` writes it into meta.json ``timing``.
+
+A stall of the master (its computer did not run it; frames waited) within the
+freshness limit in force (:attr:`CanopenLink.stale`, docs/safety.md) is
+tolerated: the frames that waited reach the master cycle by cycle
+(:attr:`CanopenLink.held`), each sample is returned in order at its own SYNC's
+time (:attr:`CanopenLink.behind` while newer ones wait; their setpoints are not
+sent), and :attr:`CanopenLink.stall_watch` records it. A longer one stops the
+check with :class:`StaleData` naming the limit and its profile key.
 """
 
 from __future__ import annotations
