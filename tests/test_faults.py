@@ -15,6 +15,10 @@ Stated reaction bounds (T = SYNC period 2 ms, P = heartbeat period 0.1 s):
 * frozen sensor: <= (max_frozen_cycles + 1) T; spike, resolver wrap: the same cycle.
 * lost RPDOs and runaway (following error): max_following_error / speed + 0.1 s;
   a drive deaf to its RPDOs gets the quick stop by SDO after SDO_FALLBACK_CYCLES.
+* stalls of the master (``STALL_CASES``): tolerated up to the derived freshness
+  limit (40 ms), every one recorded; a longer one stops when it ends, naming
+  ``safety.max_stale_ms``; a violation inside one is judged at its own sample
+  and the drives get the quick stop within 2 T of the stall's end.
 
 Overshoot margin on the true force and stroke: what the fastest true rate seen
 in the run allows during 2 T, plus the sensor noise (5 sigma of the load cell,
