@@ -66,9 +66,9 @@ class LinkError(EmacheckError, RuntimeError):
 
 
 class StaleData(LinkError):
-    """Sensor freshness: no complete sample for more SYNC cycles than ``safety.max_stale_cycles``, or the
-    master took a SYNC later than the freshness limit in force (``safety.max_stale_ms`` where both drives
-    keep their limits, else ``safety.max_lag_s``)."""
+    """Sensor freshness: no complete sample for more SYNC cycles, or the master took a SYNC later, than the
+    freshness limit in force (``safety.max_stale_ms`` where both drives keep their limits, else
+    ``safety.max_stale_cycles`` and ``safety.max_lag_s``)."""
 
 
 class CanopenLink:
@@ -95,7 +95,8 @@ class CanopenLink:
         keep, the freshness limit in force (:func:`hil.staleness.stale_limit`, :attr:`stale`); where it is
         the derived stall budget (both drives keep their limits), it replaces ``max_lag_s``: a stall of
         the master up to ``safety.max_stale_ms`` is tolerated, its frames taken in order, each sample at
-        its own SYNC's time. Missing TPDOs (frames that never come: not a stall) stay ``max_missing_cycles``.
+        its own SYNC's time; and it replaces ``max_missing_cycles`` (SYNC cycles without a complete sample:
+        while none comes the master sends no new setpoint, the drives hold, as in a stall).
     """
 
     def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
@@ -251,7 +252,7 @@ class CanopenLink:
             missing += 1
             if missing > self.max_missing:
                 err = StaleData(f"sensor data stale: no complete sample for {missing} SYNC cycles "
-                                f"(safety.max_stale_cycles = {self.max_missing}); missing: "
+                                f"({self._missing_limit_text()}); missing: "
                                 + ", ".join(f"COB-ID 0x{c:03X}" for c in self.m.decoder.missing())
                                 + f"; drive states {[d.state.name for d in self.m.drives.values()]}")
                 self.m.latch(err)
@@ -268,12 +269,14 @@ class CanopenLink:
 
     def _apply_stale_limit(self) -> None:
         """The freshness limit in force from what the drives were confirmed to keep: the derived stall
-        budget replaces the lag limit; a drive that keeps none keeps today's short limits."""
+        budget replaces the lag limit and the count of SYNC cycles without a complete sample; a drive that
+        keeps none keeps today's short limits."""
         if self.safety is None:
             return
         self.stale = stale_limit(self.m.act, self.safety, self.kept_limits)
         if self.stale.derived:
             self.max_lag_s = min(self.stale.ms / 1000.0, HARD_MAX_LAG_S)
+            self.max_missing = self.stale.cycles
 
     @property
     def behind(self) -> bool:
@@ -405,6 +408,12 @@ class CanopenLink:
                 raise err
             self._feed(got, in_order)
         self._send(self.m.poll(self.tr.now()))
+
+    def _missing_limit_text(self) -> str:
+        st = self.stale
+        if st is not None and st.derived:
+            return f"safety.max_stale_ms: {self.max_missing} SYNC cycles, {st.why}"
+        return f"safety.max_stale_cycles = {self.max_missing}"
 
     def _lag_limit_text(self) -> str:
         st = self.stale

@@ -166,12 +166,34 @@ def test_link_tolerates_a_stall_exactly_at_the_derived_limit_and_stops_one_step_
     assert isinstance(over.m.fault, StaleData) and over.m.quick_stop
 
 
+def _silent_link(safety, lost: int) -> CanopenLink:
+    act, sim = load_actuation(), load_simrig()
+    m = cyclic_master(act, RigPlant(sim.params, np.random.default_rng(1)), safety=safety)
+    bus = ScriptedBus(T_EXACT, silent=lambda k: k <= lost)
+    link = CanopenLink(m, bus, max_missing_cycles=2, max_lag_s=0.02, safety=safety)
+    link.preflight = lambda: None
+    link._apply_stale_limit()
+    return link
+
+
+def test_link_tolerates_cycles_without_a_sample_up_to_the_derived_limit_and_stops_one_beyond(check):
+    """Both drives keep their limits: the derived limit's 20 SYNC cycles without a complete sample replace
+    ``safety.max_stale_cycles`` (2): 20 in a row are tolerated, the 21st stops naming ``safety.max_stale_ms``."""
+    ok = _silent_link(check.safety, 20)
+    assert ok.max_missing == 20 and ok._next_sample() is not None and ok.tr.k == 21 and ok.m.fault is None
+    over = _silent_link(check.safety, 21)
+    with pytest.raises(StaleData, match=r"^sensor data stale: no complete sample for 21 SYNC cycles "
+                                        r"\(safety.max_stale_ms: 20 SYNC cycles, safety.max_stale_ms = 40 ms\)"):
+        over._next_sample()
+    assert over.tr.k == 21 and isinstance(over.m.fault, StaleData)
+
+
 def test_link_of_drives_that_keep_not_all_limits_keeps_the_short_lag_limit(check):
     """A master without the check's safety profile writes no speed limit (0x6080): the derived budget does
     not apply, the lag limit stays ``safety.max_lag_s`` (20 ms), and a 21 ms stall stops naming it."""
     link = _stalling_link(check.safety, 0.021, with_safety_master=False)
     assert not link.stale.derived and "does not keep max motor speed" in link.stale.why
-    assert link.max_lag_s == 0.02 and link.stall_record()["limit"] == "safety.max_lag_s"
+    assert link.max_lag_s == 0.02 and link.max_missing == 2 and link.stall_record()["limit"] == "safety.max_lag_s"
     with pytest.raises(StaleData, match=r"safety.max_lag_s = 20 ms\)$"):
         link._next_sample()
 
