@@ -39,7 +39,7 @@ from test_master_loss import silent_figures  # noqa: E402
 
 from hil.cli.dry_run import dry_run  # noqa: E402
 from hil.profiles import load_actuation, load_check, load_simrig  # noqa: E402
-from hil.runfolder import read_signals  # noqa: E402
+from hil.runfolder import read_record, read_signals  # noqa: E402
 from sim.faults import Fault  # noqa: E402
 from support.profiles import write_profile_variant  # noqa: E402
 
@@ -122,7 +122,7 @@ def main() -> int:
                 row.update(reaction_ms=None, stop_ms=None, peak_F_N=0.0, peak_s_mm=float("nan"), rows=0)
             else:
                 onset = r.injector.onset_s.get(fault.kind, fault.start_s)
-                t_det = _t_detect(r, meta)
+                t_det = _t_detect(r, read_record(r.out))
                 sig = read_signals(r.out / "signals.csv")
                 if "limit" in name:
                     lim = meta["safety"]["threshold"]
