@@ -290,3 +290,36 @@ def test_dry_run_stall_of_half_the_interval_is_refused_before_the_run_folder(tmp
     rc = main(["dry-run", "--master-stall-ms", "600", "--master-stall-every-s", "1.2", "--out", str(tmp_path / "r")])
     assert rc == 3 and not (tmp_path / "r").exists()
     assert "--master-stall-ms 600 is not shorter than half of --master-stall-every-s 1.2 s" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ the analysis reads what the master accepted
+
+def _held_gap(periods: float):
+    """A smooth recording at 2 ms with one gap of ``periods`` SYNC periods (both drives holding over it)."""
+    from hil.runfolder import Signals
+
+    t = np.concatenate([np.arange(1, 2001) * T, 2000 * T + periods * T + np.arange(0, 2000) * T])
+    x = np.where(t < 2000 * T + 1e-9, 0.5 * np.sin(t), 0.5 * np.sin(2000 * T))
+    x[2000:] = 0.5 * np.sin(2000 * T) + 0.5 * (np.sin(t[2000:] - periods * T) - np.sin(2000 * T))
+    z = np.zeros_like(t)
+    return Signals(t, x * 5.0, x * 5.0, x, x, z, z)
+
+
+@pytest.mark.parametrize("periods, with_stalls, refused", [
+    (10.0, False, False), (11.0, False, True),  # a recording from elsewhere: 10 periods
+    (21.0, True, False), (22.0, True, True),  # a check held to 40 ms: 20 missed SYNCs, a gap of 21 periods
+])
+def test_a_gap_the_master_accepted_is_one_the_analysis_reads(periods, with_stalls, refused, tmp_path):
+    from hil.errors import RecordingError
+    from hil.runrecord import RunRecord, Stalls
+    from hil.signals_csv import gap_periods_for, refuse_jumps
+
+    meta = RunRecord(stalls=Stalls(0, 0.0, [], 40.0, "safety.max_stale_ms")) if with_stalls else None
+    assert gap_periods_for(meta, T) == pytest.approx(21.0 if with_stalls else 10.0, abs=1e-12)
+    sig = _held_gap(periods)
+    if refused:
+        with pytest.raises(RecordingError, match=rf"a jump in time: .* more than {21 if with_stalls else 10} "
+                                                 r"sample periods"):
+            refuse_jumps(sig, tmp_path / "signals.csv", 5.0, lines=True, meta=meta, sync_period_s=T)
+    else:
+        refuse_jumps(sig, tmp_path / "signals.csv", 5.0, lines=True, meta=meta, sync_period_s=T)
