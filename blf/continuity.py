@@ -8,10 +8,11 @@ motion itself.
 
 **Time.** Let :math:`T` be the median sample period. A sample ``i`` whose time step
 :math:`t_i - t_{i-1} > G \\cdot T` with :math:`G` = :data:`GAP_PERIODS` (= 10) is a gap: samples are
-missing for longer than any source of emacheck's recordings leaves out (the master's supervisor stops a
-check after :data:`hil.profile.config.HARD_MAX_STALE_CYCLES` = 5 missing cycles, so a run never holds a gap of
-more than 6 periods; 10 leaves a recording from elsewhere up to 9 lost samples in a row). A time step
-:math:`\\le 0` (time that stands or goes back) is a jump too.
+missing for longer than a recording from elsewhere should leave out (up to 9 lost samples in a row). A
+check's own recording may hold a longer gap where its master tolerated a stall (up to the derived
+freshness limit, 40 ms: 21 periods at 2 ms); its caller passes that as ``gap_periods``
+(:func:`hil.record.signals_csv.gap_periods_for`, from the run record). A time step :math:`\\le 0` (time that
+stands or goes back) is a jump too.
 
 **Position.** For a position channel ``x`` (a motor angle in rad, an LVDT stroke in mm) with a largest
 plausible speed :math:`v_x` (in the channel's unit per second) and a sample noise :math:`\\sigma_x`, a

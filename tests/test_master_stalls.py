@@ -166,12 +166,34 @@ def test_link_tolerates_a_stall_exactly_at_the_derived_limit_and_stops_one_step_
     assert isinstance(over.m.fault, StaleData) and over.m.quick_stop
 
 
+def _silent_link(safety, lost: int) -> CanopenLink:
+    act, sim = load_actuation(), load_simrig()
+    m = cyclic_master(act, RigPlant(sim.params, np.random.default_rng(1)), safety=safety)
+    bus = ScriptedBus(T_EXACT, silent=lambda k: k <= lost)
+    link = CanopenLink(m, bus, max_missing_cycles=2, max_lag_s=0.02, safety=safety)
+    link.preflight = lambda: None
+    link._apply_stale_limit()
+    return link
+
+
+def test_link_tolerates_cycles_without_a_sample_up_to_the_derived_limit_and_stops_one_beyond(check):
+    """Both drives keep their limits: the derived limit's 20 SYNC cycles without a complete sample replace
+    ``safety.max_stale_cycles`` (2): 20 in a row are tolerated, the 21st stops naming ``safety.max_stale_ms``."""
+    ok = _silent_link(check.safety, 20)
+    assert ok.max_missing == 20 and ok._next_sample() is not None and ok.tr.k == 21 and ok.m.fault is None
+    over = _silent_link(check.safety, 21)
+    with pytest.raises(StaleData, match=r"^sensor data stale: no complete sample for 21 SYNC cycles "
+                                        r"\(safety.max_stale_ms: 20 SYNC cycles, safety.max_stale_ms = 40 ms\)"):
+        over._next_sample()
+    assert over.tr.k == 21 and isinstance(over.m.fault, StaleData)
+
+
 def test_link_of_drives_that_keep_not_all_limits_keeps_the_short_lag_limit(check):
     """A master without the check's safety profile writes no speed limit (0x6080): the derived budget does
     not apply, the lag limit stays ``safety.max_lag_s`` (20 ms), and a 21 ms stall stops naming it."""
     link = _stalling_link(check.safety, 0.021, with_safety_master=False)
     assert not link.stale.derived and "does not keep max motor speed" in link.stale.why
-    assert link.max_lag_s == 0.02 and link.stall_record()["limit"] == "safety.max_lag_s"
+    assert link.max_lag_s == 0.02 and link.max_missing == 2 and link.stall_record()["limit"] == "safety.max_lag_s"
     with pytest.raises(StaleData, match=r"safety.max_lag_s = 20 ms\)$"):
         link._next_sample()
 
@@ -268,3 +290,36 @@ def test_dry_run_stall_of_half_the_interval_is_refused_before_the_run_folder(tmp
     rc = main(["dry-run", "--master-stall-ms", "600", "--master-stall-every-s", "1.2", "--out", str(tmp_path / "r")])
     assert rc == 3 and not (tmp_path / "r").exists()
     assert "--master-stall-ms 600 is not shorter than half of --master-stall-every-s 1.2 s" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ the analysis reads what the master accepted
+
+def _held_gap(periods: float):
+    """A smooth recording at 2 ms with one gap of ``periods`` SYNC periods (both drives holding over it)."""
+    from hil.record.runfolder import Signals
+
+    t = np.concatenate([np.arange(1, 2001) * T, 2000 * T + periods * T + np.arange(0, 2000) * T])
+    x = np.where(t < 2000 * T + 1e-9, 0.5 * np.sin(t), 0.5 * np.sin(2000 * T))
+    x[2000:] = 0.5 * np.sin(2000 * T) + 0.5 * (np.sin(t[2000:] - periods * T) - np.sin(2000 * T))
+    z = np.zeros_like(t)
+    return Signals(t, x * 5.0, x * 5.0, x, x, z, z)
+
+
+@pytest.mark.parametrize("periods, with_stalls, refused", [
+    (10.0, False, False), (11.0, False, True),  # a recording from elsewhere: 10 periods
+    (21.0, True, False), (22.0, True, True),  # a check held to 40 ms: 20 missed SYNCs, a gap of 21 periods
+])
+def test_a_gap_the_master_accepted_is_one_the_analysis_reads(periods, with_stalls, refused, tmp_path):
+    from hil.errors import RecordingError
+    from hil.record.runrecord import RunRecord, Stalls
+    from hil.record.signals_csv import gap_periods_for, refuse_jumps
+
+    meta = RunRecord(stalls=Stalls(0, 0.0, [], 40.0, "safety.max_stale_ms")) if with_stalls else None
+    assert gap_periods_for(meta, T) == pytest.approx(21.0 if with_stalls else 10.0, abs=1e-12)
+    sig = _held_gap(periods)
+    if refused:
+        with pytest.raises(RecordingError, match=rf"a jump in time: .* more than {21 if with_stalls else 10} "
+                                                 r"sample periods"):
+            refuse_jumps(sig, tmp_path / "signals.csv", 5.0, lines=True, meta=meta, sync_period_s=T)
+    else:
+        refuse_jumps(sig, tmp_path / "signals.csv", 5.0, lines=True, meta=meta, sync_period_s=T)

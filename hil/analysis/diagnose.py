@@ -51,7 +51,8 @@ def load_dual(path: Path, profile: Path | None):
         refuse_unusable(sig, channels=CHECK_CHANNELS, min_rows=1000, what="the diagnosis")
     except RecordingError as exc:
         raise RecordingError(f"{sig_path}: {exc}") from None
-    refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta)
+    refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta,
+                     sync_period_s=act.timing.sync_period_s)
     check_units(sig, act)
     check = check_for(meta, act)
     try:

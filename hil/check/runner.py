@@ -25,7 +25,14 @@ INTERRUPTED = "interrupted by the operator"
 
 
 class Link(Protocol):
-    """Carries setpoints to the two drives and returns the next synchronous sample."""
+    """Carries setpoints to the two drives and returns the next synchronous sample.
+
+    A link may also have (the loop reads them where it has): ``kept_limits`` (per EMA the limits its drive
+    keeps itself: the supervisor's freshness limit), ``in_force`` (the setpoints the drives followed at the
+    sample returned), ``behind`` (a stall's backlog: a newer sample is here already), ``stall_record()``
+    (meta.json ``stalls``), ``preflight_record()``, ``force_by_position``, ``final_states``, ``timing``
+    (:class:`hil.master.link.CanopenLink`).
+    """
 
     def first_sample(self) -> Sample: ...
 

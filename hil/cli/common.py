@@ -630,7 +630,8 @@ def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None, *,
     sig = read_signals(sig_path) if not is_can_log(sig_path) else _decoded(sig_path, act, meta)
     refuse_unusable(sig, channels=channels, min_rows=min_rows, what=what)
     if jumps:
-        refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta)
+        refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta,
+                     sync_period_s=act.timing.sync_period_s)
     return sig
 
 

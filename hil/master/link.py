@@ -19,10 +19,19 @@ On a real bus the link measures its own timing per SYNC cycle
 (:attr:`CanopenLink.timing`, a :class:`hil.record.cycletiming.CycleTiming`): SYNC
 arrival to the RPDOs sent, sample complete to RPDOs sent (the loop's work),
 SYNC to SYNC; ``emacheck run`` writes it into meta.json ``timing``.
+
+A stall of the master (its computer did not run it; frames waited) within the
+freshness limit in force (:attr:`CanopenLink.stale`, docs/safety.md) is
+tolerated: the frames that waited reach the master cycle by cycle
+(:attr:`CanopenLink.held`), each sample is returned in order at its own SYNC's
+time (:attr:`CanopenLink.behind` while newer ones wait; their setpoints are not
+sent), and :attr:`CanopenLink.stall_watch` records it. A longer one stops the
+check with :class:`StaleData` naming the limit and its profile key.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 
@@ -58,9 +67,9 @@ class LinkError(EmacheckError, RuntimeError):
 
 
 class StaleData(LinkError):
-    """Sensor freshness: no complete sample for more SYNC cycles than ``safety.max_stale_cycles``, or the
-    master took a SYNC later than the freshness limit in force (``safety.max_stale_ms`` where both drives
-    keep their limits, else ``safety.max_lag_s``)."""
+    """Sensor freshness: no complete sample for more SYNC cycles, or the master took a SYNC later, than the
+    freshness limit in force (``safety.max_stale_ms`` where both drives keep their limits, else
+    ``safety.max_stale_cycles`` and ``safety.max_lag_s``)."""
 
 
 class CanopenLink:
@@ -87,7 +96,8 @@ class CanopenLink:
         keep, the freshness limit in force (:func:`hil.check.staleness.stale_limit`, :attr:`stale`); where it is
         the derived stall budget (both drives keep their limits), it replaces ``max_lag_s``: a stall of
         the master up to ``safety.max_stale_ms`` is tolerated, its frames taken in order, each sample at
-        its own SYNC's time. Missing TPDOs (frames that never come: not a stall) stay ``max_missing_cycles``.
+        its own SYNC's time; and it replaces ``max_missing_cycles`` (SYNC cycles without a complete sample:
+        while none comes the master sends no new setpoint, the drives hold, as in a stall).
     """
 
     def __init__(self, master: MasterCore, transport, log: CanLogWriter | None = None,
@@ -243,7 +253,7 @@ class CanopenLink:
             missing += 1
             if missing > self.max_missing:
                 err = StaleData(f"sensor data stale: no complete sample for {missing} SYNC cycles "
-                                f"(safety.max_stale_cycles = {self.max_missing}); missing: "
+                                f"({self._missing_limit_text()}); missing: "
                                 + ", ".join(f"COB-ID 0x{c:03X}" for c in self.m.decoder.missing())
                                 + f"; drive states {[d.state.name for d in self.m.drives.values()]}")
                 self.m.latch(err)
@@ -260,12 +270,14 @@ class CanopenLink:
 
     def _apply_stale_limit(self) -> None:
         """The freshness limit in force from what the drives were confirmed to keep: the derived stall
-        budget replaces the lag limit; a drive that keeps none keeps today's short limits."""
+        budget replaces the lag limit and the count of SYNC cycles without a complete sample; a drive that
+        keeps none keeps today's short limits."""
         if self.safety is None:
             return
         self.stale = stale_limit(self.m.act, self.safety, self.kept_limits)
         if self.stale.derived:
             self.max_lag_s = min(self.stale.ms / 1000.0, HARD_MAX_LAG_S)
+            self.max_missing = self.stale.cycles
 
     @property
     def behind(self) -> bool:
@@ -398,9 +410,17 @@ class CanopenLink:
                                 f"(frames waited for it; {self._lag_limit_text()})")
                 self._observe_sync(lag, ahead=1)  # the stall that stops the check is recorded too
                 self.m.latch(err)
+                with contextlib.suppress(*KNOWN_ERRORS):  # (the master latched: later faults are recorded)
+                    self._feed(got)  # the frames that waited reach the master and the log
                 raise err
             self._feed(got, in_order)
         self._send(self.m.poll(self.tr.now()))
+
+    def _missing_limit_text(self) -> str:
+        st = self.stale
+        if st is not None and st.derived:
+            return f"safety.max_stale_ms: {self.max_missing} SYNC cycles, {st.why}"
+        return f"safety.max_stale_cycles = {self.max_missing}"
 
     def _lag_limit_text(self) -> str:
         st = self.stale

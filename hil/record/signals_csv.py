@@ -273,22 +273,39 @@ def _parts_made_apart(meta) -> bool:
     return meta is not None and meta.mode == RunMode.SIMULATE_SCENARIO
 
 
-def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool, meta=None) -> None:
+def gap_periods_for(meta, sync_period_s: float | None) -> float:
+    """The time-gap limit of :func:`blf.continuity.find_jumps` for a recording [sample periods]:
+    :data:`blf.continuity.GAP_PERIODS`, or where its run record holds the stall limit the master held the
+    check to (meta.json ``stalls.limit_ms``, at the SYNC period ``sync_period_s``) the gap that limit lets a
+    run hold, ``limit / T + 1`` periods, if longer (40 ms at 2 ms: 21): a run the master accepted is one
+    the analysis reads (docs/safety.md, *A stall of the master*)."""
+    from blf.continuity import GAP_PERIODS
+
+    st = getattr(meta, "stalls", None)
+    if st is None or not sync_period_s or sync_period_s <= 0:
+        return GAP_PERIODS
+    return max(GAP_PERIODS, st.limit_ms / 1000.0 / sync_period_s + 1.0)
+
+
+def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool, meta=None,
+                 sync_period_s: float | None = None) -> None:
     """Refuse a recording with a jump in time or position (:func:`blf.continuity.find_jumps`), naming
     its line (a CSV: ``lines``) or sample and time; the largest plausible speed is
     :data:`PLAUSIBLE_SPEED_FACTOR` times the ram-speed hard cap, in rad/s for the motor angles.
 
     ``meta``: the recording's run record (:class:`hil.record.runrecord.RunRecord`), if any. Where it declares the
     steps simulated one after the other, each from its own start (mode ``simulate-scenario``), a position
-    step into the first sample of a step is not judged (:func:`part_starts`); time is judged everywhere."""
+    step into the first sample of a step is not judged (:func:`part_starts`); time is judged everywhere, a gap
+    against :func:`gap_periods_for` (``sync_period_s``: the actuation's SYNC period)."""
     if sig.n < 2:
         return
-    from blf.continuity import GAP_PERIODS, NOISE_K, find_jumps
+    from blf.continuity import NOISE_K, find_jumps
     from hil.profile.config import HARD_MAX_VELOCITY_MM_PER_S
 
     v_mm = PLAUSIBLE_SPEED_FACTOR * HARD_MAX_VELOCITY_MM_PER_S
     speed = {c: v_mm * (i_total_rad_per_mm if u == "rad" else 1.0) for c, u in POSITION_UNITS.items()}
-    found = find_jumps(sig.t, {c: getattr(sig, c) for c in POSITION_UNITS}, speed,
+    gap_periods = gap_periods_for(meta, sync_period_s)
+    found = find_jumps(sig.t, {c: getattr(sig, c) for c in POSITION_UNITS}, speed, gap_periods=gap_periods,
                        part_starts=part_starts(sig) if _parts_made_apart(meta) else ())
     j = found.first
     if j is None:
@@ -300,7 +317,7 @@ def refuse_jumps(sig, path: Path, i_total_rad_per_mm: float, *, lines: bool, met
     if j.kind == "time_gap":
         raise RecordingError(
             f"{at}: a jump in time: {j.after - j.before:.6g} s since the last sample (t = {j.before} s), more than "
-            f"{GAP_PERIODS:g} sample periods ({j.limit:.6g} s){more}: samples missing or recordings joined; "
+            f"{gap_periods:g} sample periods ({j.limit:.6g} s){more}: samples missing or recordings joined; "
             f"analyse each continuous part on its own")
     unit = POSITION_UNITS[j.channel]
     raise RecordingError(

@@ -1,6 +1,6 @@
 """Benchmark (not a test): every injected fault in a dry-run; reaction time, peak true force, data kept.
 
-    python tests/bench/bench_faults.py [--json bench_faults.json]
+    python tests/bench/bench_faults.py [--json bench_faults.json] [--stalls]
 
 For each fault of :mod:`sim.faults` (the cases of tests/test_faults.py plus the
 force- and stroke-limit runaways) it prints: what detected it, the reaction
@@ -9,6 +9,10 @@ sample beyond the limit), when the quick stop / disable reached the drives,
 the peak true force and stroke after the onset (plant truth, no sensor
 errors), the drives' final states and the data kept in the run folder
 (signals rows, the last sample time, CAN frames logged).
+
+The master's stalls (``dry-run --master-stall-ms``, the rows of tests/test_faults.py ``STALL_CASES``; only
+these with ``--stalls``): reaction from the stall's begin (over the limit) or the runaway's onset (an
+overspeed inside a stall) to the stall's end, when the master takes the backlog and reacts; stop from there.
 
 ``master_silent`` (the master's death, at the force fight's 6 kN) is detected
 by the drives, not the master: its reaction is from the master's last frame to
@@ -30,12 +34,15 @@ import numpy as np
 TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (conftest, support)
 
-from test_faults import CASES, T, _t_detect, _t_safe_command  # noqa: E402
+from test_faults import CASES, STALL_CASES, T, _first_stall_s, _t_detect, _t_safe_command  # noqa: E402
 from test_master_loss import silent_figures  # noqa: E402
 
 from hil.cli.dry_run import dry_run  # noqa: E402
 from hil.profile.load import load_actuation, load_check, load_simrig  # noqa: E402
-from hil.record.runfolder import read_signals  # noqa: E402
+from hil.record.runfolder import (  # noqa: E402
+    read_record,
+    read_signals,  # noqa: E402
+)
 from sim.faults import Fault  # noqa: E402
 from support.profiles import write_profile_variant  # noqa: E402
 
@@ -50,9 +57,40 @@ def _limit_checks(act, tmp: Path):
     return load_check(f, act), load_check(s, act)
 
 
+def _stall_rows(act, chk, sim, tmp: Path) -> list[dict]:
+    """The rows of the master's stalls (tests/test_faults.py ``STALL_CASES``)."""
+    rows = []
+    for k, (stall_ms, every_s, runaway, _words) in enumerate(STALL_CASES):
+        t_stall = _first_stall_s(sim.seed, every_s)
+        end = t_stall + stall_ms / 1000.0
+        faults = [Fault("runaway", 1, t_stall + 2 * T, value=15.0)] if runaway else []
+        r = dry_run(act, chk, sim, tmp / f"stall{k}", faults=faults, stall=(stall_ms, every_s))
+        meta = json.loads((r.out / "meta.json").read_text())
+        st, tr, sig = meta["stalls"], r.injector.truth, read_signals(r.out / "signals.csv")
+        name = f"master stalls {stall_ms:g} ms / {every_s:g} s" + (", runaway 15 mm/s in one" if runaway else "")
+        row = {"fault": name, "ema": 1 if runaway else None, "status": meta["status"],
+               "stalls": st["count"], "longest_ms": st["longest_ms"], "rows": int(sig.n),
+               "frames_logged": meta["can"]["frames_logged"], "last_t_s": float(sig.t[-1])}
+        if meta["status"] == "done":
+            row.update(detected_by=f"— (passes; {st['count']} stalls recorded)", reaction_ms=None, stop_ms=None,
+                       peak_F_N=round(float(np.abs(tr.F_N).max()), 0), peak_s_mm=round(float(np.abs(tr.s_mm).max()), 3))
+        else:
+            onset = t_stall + 2 * T if runaway else t_stall
+            m = tr.t_s >= onset
+            row.update(detected_by=meta.get("safety", {}).get("limit") or "StaleData: safety.max_stale_ms",
+                       reaction_ms=round((end - onset) * 1e3, 1),
+                       stop_ms=round((_t_safe_command(tr, end) - end) * 1e3, 1),
+                       peak_F_N=round(float(np.abs(tr.F_N[m]).max()), 0),
+                       peak_s_mm=round(float(np.abs(tr.s_mm[m]).max()), 3))
+        row["final"] = " / ".join(s.name for s in r.injector.final_states())
+        rows.append(row)
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", default="bench_faults.json")
+    ap.add_argument("--stalls", action="store_true", help="only the rows of the master's stalls")
     args = ap.parse_args()
     act = load_actuation()
     chk = load_check(None, act)
@@ -68,7 +106,7 @@ def main() -> int:
             (Fault("runaway", 1, 2.7, value=5.0), s_chk, "runaway -> stroke limit"),
             (Fault("master_silent", 1, 78.0), chk, "master_silent"),
         ]
-        for k, (fault, check, name) in enumerate(cases):
+        for k, (fault, check, name) in enumerate([] if args.stalls else cases):
             r = dry_run(act, check, sim, tmp / f"run{k}", faults=[fault])
             meta = json.loads((r.out / "meta.json").read_text())
             tr = r.injector.truth
@@ -87,7 +125,7 @@ def main() -> int:
                 row.update(reaction_ms=None, stop_ms=None, peak_F_N=0.0, peak_s_mm=float("nan"), rows=0)
             else:
                 onset = r.injector.onset_s.get(fault.kind, fault.start_s)
-                t_det = _t_detect(r, meta)
+                t_det = _t_detect(r, read_record(r.out))
                 sig = read_signals(r.out / "signals.csv")
                 if "limit" in name:
                     lim = meta["safety"]["threshold"]
@@ -105,6 +143,7 @@ def main() -> int:
                            rows=int(sig.n), last_t_s=float(sig.t[-1]), t_detect_s=round(t_det, 4))
             row["final"] = " / ".join(s.name for s in r.injector.final_states())
             rows.append(row)
+        rows += _stall_rows(act, chk, sim, tmp)
     hdr = (f"{'fault':<26}{'detected by':<26}{'reaction ms':>12}{'stop ms':>9}{'peak |F| N':>11}"
            f"{'peak |s| mm':>12}{'rows':>7}{'frames':>8}  final states")
     print(hdr)

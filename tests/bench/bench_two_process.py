@@ -414,6 +414,7 @@ def one_check(k: int, a, folder: Path, ktrace: KernelTrace | None = None) -> dic
     return {"k": k, "channel": channel, "rc": rc, "wall_s": round(wall, 2), "status": meta.get("status"),
             "verdict": result.get("status"), "reason": meta.get("reason"), "safety": meta.get("safety"),
             "can": meta.get("can"), "master_timing": meta.get("timing"), "sim": simj,
+            "master_stalls": meta.get("stalls"),  # the master's own record (meta.json stalls)
             "run_out_tail": run_out.splitlines()[-12:], "sim_out": sim_out[-8:], "stalls": found,
             "witnesses": [{"cpu": w["cpu"], "fifo": w["fifo"], "wakeups": w["wakeups"],
                            "late_over_1ms": sum(d > 1e-3 for _, d in w["late"]),
@@ -553,6 +554,8 @@ def main(argv=None) -> int:
                                 f"{t['reaction']['p99.9_ms']:.3f}/{t['reaction']['max_ms']:.2f}") if t else "-"
                 print(f"check {k + 1}/{a.n}: {r['status']} {r.get('verdict')} ({r.get('wall_s')} s); reaction "
                       f"p50/p99/p99.9/max ms: master {fm(mt)}, sim-serve {fm(st)}"
+                      + (f"; master's stalls: {ms['count']}, longest {ms['longest_ms']:g} ms (limit {ms['limit_ms']:g}"
+                         f" ms, {ms['limit']})" if (ms := r.get("master_stalls")) else "")
                       + (f"; ABORT: {r['reason']} [{cause(r)}]" if r["status"] != "done" else ""), flush=True)
                 for st in r.get("stalls", ()):
                     print(f"    stall {st['ms']:.1f} ms at {st['start']:.3f} (first gap {st['first']['ms']:.1f} ms): "
