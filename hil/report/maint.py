@@ -37,10 +37,6 @@ from hil.report.shell import (
 from hil.runfolder import Signals
 from hil.runrecord import RunRecord, Timing
 
-#: the resolution the figures are drawn at [dpi]; each figure is also laid out (``tight_layout``) at it,
-#: so that the layout, the crop and the drawing measure every text at one resolution, once
-FIG_DPI = 90
-
 _LABEL = {"int1": ("F_1", "D_{int,1}"), "int2": ("F_2", "D_{int,2}"), "ext": ("F_2 - F_1", "D_{ext}")}
 
 
@@ -58,7 +54,7 @@ def figure_time(sig: Signals, an: Analysis, act: Actuation):
     ff = an.segments.force_fight
     t = sig.t[ff]
     sl = thin(t.size)
-    fig, axes = pyplot().subplots(2, 3, figsize=(13, 5.5), dpi=FIG_DPI, sharex=True)
+    fig, axes = pyplot().subplots(2, 3, figsize=(13, 5.5), sharex=True)
     for j, ch in enumerate(CHANNELS):
         d, f = _channel_data(sig, an, ch)
         fl, dl = _LABEL[ch]
@@ -79,7 +75,7 @@ def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
     """Paper Figure 4: F versus D and the binned derivative dF/dD with median, D_lc, D_rc."""
     fl, dl = _LABEL[ch]
     sl = thin(d.size)
-    fig, (a0, a1) = pyplot().subplots(2, 1, figsize=(9, 6), dpi=FIG_DPI, sharex=True)
+    fig, (a0, a1) = pyplot().subplots(2, 1, figsize=(9, 6), sharex=True)
     a0.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.3, label="samples")
     a0.plot(r.curve.d_mm, r.curve.f_N / 1e3, "-", color="k", lw=1, label="binned (median per bin)")
     a0.set_ylabel(f"${fl}$ [kN]")
@@ -121,7 +117,7 @@ def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth
     fl, dl = _LABEL[ch]
     sl = thin(d.size)
     L = r.lines
-    fig, ax = pyplot().subplots(figsize=(9, 4.5), dpi=FIG_DPI)
+    fig, ax = pyplot().subplots(figsize=(9, 4.5))
     ax.plot(d[sl], f[sl] / 1e3, ".", ms=1.5, alpha=0.25, color="C0", label="samples")
     for line, col in ((L.left, "C3"), (L.right, "C2")):
         fr = np.linspace(min(line.f_min_N, 0.0), max(line.f_max_N, 0.0), 50)
@@ -146,7 +142,7 @@ def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth
 def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
     """Paper Figure 9: LVDT stroke versus motor angle referred to the ram, and residuals."""
     i = act.mechanics.i_total_rad_per_mm
-    fig, axes = pyplot().subplots(2, 2, figsize=(12, 6), dpi=FIG_DPI, sharex="col")
+    fig, axes = pyplot().subplots(2, 2, figsize=(12, 6), sharex="col")
     for j, (k, mask, phi, s) in enumerate((("ema1", an.segments.cal1, sig.phi1, sig.s1),
                                            ("ema2", an.segments.cal2, sig.phi2, sig.s2))):
         c = an.calibration[k]
@@ -281,7 +277,7 @@ def figure_timing(timing: Timing):
     r = timing.summary.reaction
     bins = np.asarray(r.histogram, dtype=float).reshape(-1, 2)
     w = r.bin_ms
-    fig, ax = plt.subplots(figsize=(8, 3.2), dpi=FIG_DPI)
+    fig, ax = plt.subplots(figsize=(8, 3.2))
     ax.bar(bins[:, 0], bins[:, 1], width=w, align="edge", color="#4477aa")
     ax.set_yscale("log")
     for x, style, label in ((r.p999_ms, "--", f"p99.9 {r.p999_ms:.3f} ms"),
@@ -307,7 +303,7 @@ def timing_section(timing: Timing) -> str:
     note = (f"<p>{s.cycles} SYNC cycles, {s.late} answered after a period, "
             f"{s.unanswered} unanswered, {s.syncs_missing} SYNC periods missing "
             f"(SYNC {esc(timing.sync)}).</p>")
-    return tab + note + img(figure_timing(timing), dpi=FIG_DPI, tight=True)
+    return tab + note + img(figure_timing(timing), dpi=90, tight=True)
 
 
 def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
@@ -323,7 +319,7 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
     parts = head_parts(result, intro)
     parts.append(trace_lines(result.get("trace")))
     parts.append(uncertainty_section(result))
-    parts.append(f"<h2>Force fight (paper Fig. 3)</h2>{img(figure_time(sig, an, act), dpi=FIG_DPI, tight=True)}")
+    parts.append(f"<h2>Force fight (paper Fig. 3)</h2>{img(figure_time(sig, an, act), dpi=90, tight=True)}")
     truth = result.get("truth")
     for ch in CHANNELS:
         r = an.maint[ch]
@@ -332,10 +328,10 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
             parts.append("<p class='inconclusive'>Not measured (the reason is in the decision above).</p>")
             continue
         d, f = _channel_data(sig, an, ch)
-        parts.append(img(figure_dfdd(ch, d, f, r), dpi=FIG_DPI, tight=True)
+        parts.append(img(figure_dfdd(ch, d, f, r), dpi=90, tight=True)
                      + img(figure_lines(ch, d, f, r, truth, (result.get("verdict", {}).get(ch) or {})
-                                        .get("uncertainty_mm")), dpi=FIG_DPI, tight=True))
-    parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=FIG_DPI, tight=True)}")
+                                        .get("uncertainty_mm")), dpi=90, tight=True))
+    parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
     timing = meta.timing if meta is not None else None
     if timing is not None and timing.summary.reaction.n:
         parts.append("<h2>Loop timing (master)</h2>" + timing_section(timing))
