@@ -307,3 +307,48 @@ def test_master_loss_steps_refuse_what_0x1016_cannot_hold(node, ms, message):
     with pytest.raises(CanopenInputError) as exc:
         master_loss_steps(node, ms)
     assert str(exc.value) == message
+
+
+def _od_state(o, seen=None):
+    """Every attribute of every object of an object dictionary, recursively (``parent`` links left out:
+    they are checked by identity), sets as sorted lists."""
+    seen = set() if seen is None else seen
+    if isinstance(o, (int, float, str, bytes, bool, type(None))):
+        return o
+    if isinstance(o, (set, frozenset)):
+        return sorted(map(repr, o))
+    if isinstance(o, (list, tuple)):
+        return [_od_state(x, seen) for x in o]
+    if isinstance(o, dict):
+        return {repr(k): _od_state(v, seen) for k, v in o.items()}
+    if id(o) in seen:
+        return f"<{type(o).__name__} again>"
+    seen.add(id(o))
+    return {type(o).__name__: {k: _od_state(v, seen) for k, v in vars(o).items() if k != "parent"}}
+
+
+@pytest.mark.parametrize("node_id", [None, 1, 2])
+def test_each_load_is_canopens_own_parse_and_a_fresh_copy(tmp_path, node_id):
+    """load_eds parses a text once and hands out copies: each equal to canopen's own parse of the file,
+    attribute by attribute, and independent (a change to one is not in the next); a file changed under
+    the same name is parsed anew."""
+    import io
+
+    import canopen.objectdictionary as cod
+
+    path = tmp_path / "drive.eds"
+    shutil.copy(default_eds_path(), path)
+    fh = io.StringIO(path.read_text())
+    fh.name = str(path)
+    want = _od_state(cod.import_od(fh, node_id))
+    a, b = load_eds(path, node_id=node_id), load_eds(path, node_id=node_id)
+    assert _od_state(a) == want and _od_state(b) == want
+    assert a is not b and all(a[i] is not b[i] and b[i].parent is b for i in b)
+    a[0x1018][1].default = 0xBAD
+    assert load_eds(path, node_id=node_id)[0x1018][1].default == b[0x1018][1].default != 0xBAD
+    text = path.read_text()
+    assert "ProductNumber=0x00000402" in text
+    path.write_text(text.replace("ProductNumber=0x00000402", "ProductNumber=0x00000403"))  # not the cached text
+    fh = io.StringIO(path.read_text())
+    fh.name = str(path)
+    assert _od_state(load_eds(path, node_id=node_id)) == _od_state(cod.import_od(fh, node_id)) != want

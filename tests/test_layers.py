@@ -38,6 +38,18 @@ def _modules() -> list[Path]:
     return sorted(p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py"))
 
 
+_TREES: dict[str, ast.Module] = {}
+
+
+def _parse(source: str, filename: str = "<unknown>") -> ast.Module:
+    """``ast.parse`` of ``source``, once per text: the import, length and private-name rules walk the same
+    modules' trees (the trees are only read)."""
+    tree = _TREES.get(source)
+    if tree is None:
+        tree = _TREES[source] = ast.parse(source, filename=filename)
+    return tree
+
+
 def _module_name(path: Path) -> str:
     rel = path.relative_to(ROOT).with_suffix("")
     parts = list(rel.parts)
@@ -48,7 +60,7 @@ def _module_name(path: Path) -> str:
 
 def _imports(path: Path) -> list[tuple[int, str]]:
     """(line, absolute module name) of every import in the module, relative ones resolved."""
-    tree = ast.parse(path.read_text(), filename=str(path))
+    tree = _parse(path.read_text(), str(path))
     me = _module_name(path)
     package = me if path.name == "__init__.py" else me.rpartition(".")[0]
     out = []
@@ -150,7 +162,7 @@ def test_no_module_over_700_lines(path):
 def _function_lengths(source: str) -> list[tuple[int, str, int]]:
     """(line of the ``def``, name, body lines without the docstring) of every function in ``source``."""
     out = []
-    for node in ast.walk(ast.parse(source)):
+    for node in ast.walk(_parse(source)):
         if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             continue
         body = node.body
@@ -226,7 +238,7 @@ def _defined_names(tree: ast.AST) -> set[str]:
 
 def _foreign_private(source: str, where: str) -> list[str]:
     """Uses of underscore names (not dunders) that the module does not define itself."""
-    tree = ast.parse(source)
+    tree = _parse(source)
     mine = _defined_names(tree)
     bad = []
     for n in ast.walk(tree):

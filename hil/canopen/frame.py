@@ -70,10 +70,15 @@ class Frame:
     def trusted(cls, arbitration_id: int, data: bytes) -> Frame:
         """A frame from a source that already guarantees an 11-bit id and <= 8 bytes of
         ``bytes`` (a python-can message, a struct-packed PDO): no re-validation (hot path)."""
-        f = object.__new__(cls)
-        object.__setattr__(f, "arbitration_id", arbitration_id)
-        object.__setattr__(f, "data", data)
+        f = _new(cls)
+        _set_id(f, arbitration_id)  # the slots' own setters: what object.__setattr__ finds, without the lookup
+        _set_data(f, data)
         return f
+
+
+_new = object.__new__
+_set_id = Frame.__dict__["arbitration_id"].__set__
+_set_data = Frame.__dict__["data"].__set__
 
 
 _SYNC_FRAME = Frame(SYNC_COB_ID, b"")
