@@ -1,0 +1,181 @@
+"""Benchmark: can the re-levelled -40 kgf Cranfield current be told from an honest one? (issue 35, target 5)
+
+The README of ../shared/data/cranfield-actuator says the -40 kgf current was re-levelled segment by
+segment in preprocessing (extension, retraction and dwell means equal across all conditions), so its
+force content cannot be trusted. This script prints the figures of the two candidate rules tried for
+flagging such a recording (the rows at +20 and +40 kgf must stay trusted, every -40 kgf row flagged),
+on the steady part of each segment: extension and retraction from 40 samples (1.6 s) after the
+set-point step to 4 samples before the next one, the dwell likewise (samples 40-119, 164-194 and
+239-319 of every 324-sample cycle, found from the set point, not hard-coded).
+
+a) **Pair rule** (a recording against its reference at the same load): for each segment kind the
+   difference of the two recordings' mean currents ``d`` and its statistical uncertainty
+   ``u = sqrt(s_1^2/n_1 + s_2^2/n_2)`` (s the standard deviation of the per-cycle segment means, n
+   the number of cycles), ``z = d/u``. Independent recordings of one actuator differ by at least
+   their uncertainty; levels imposed by re-levelling agree far better. Flag when all three |z| < c,
+   c from ``P(|z| < c)^3 = alpha`` for independent recordings (z standard normal): alpha = 0.01
+   gives c = 0.274.
+b) **Under-dispersion within one recording**: per run and segment kind, the block means (10 samples,
+   0.4 s, longer than the noise's correlation) of each cycle form a cycles x blocks table; a two-way
+   analysis of variance gives ``F = MS_cycle / MS_residual`` with (C-1, (C-1)(J-1)) degrees of
+   freedom, pooled over the runs (sums of squares added). An honest current's segment levels scatter
+   from cycle to cycle at least as much as its noise predicts (F >= 1 in expectation, more with
+   drift); a level imposed on every segment scatters less. One-sided p = P(F' <= F); flag when
+   p < 0.001 in a segment kind.
+c) **Under-dispersion between runs** (the earlier try of docs/diagnose.md, as a test): per segment
+   kind, the run means of the per-cycle segment means against their scatter within the runs, a
+   one-way analysis of variance, F = MS_run / MS_cycle-within-run, the two moving kinds pooled; runs
+   are sessions, which drift, so an honest current has F >= 1; flag at p < 0.001.
+
+    python tests/bench/bench_diagnose_cranfield_relevel.py [/tmp/relevel.json]
+
+About 2 s on one core. Exits 2 where ../shared is absent.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+TESTS = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(TESTS.parent), str(TESTS)]
+
+from support.cranfield import CRANFIELD, DEVELOPMENT, read_condition  # noqa: E402
+
+CYCLE = 324  #: samples per cycle (README)
+SETTLE = 40  #: samples skipped after a set-point step (1.6 s; the lag settles within about 1 s)
+BEFORE = 4  #: samples left out before the next step
+BLOCK = 10  #: samples per block mean in rule b
+ALPHA = 0.01  #: rule a: chance that three independent |z| all fall under c
+P_UNDER = 1e-3  #: rule b: one-sided p of under-dispersion that flags
+KINDS = ("extension", "dwell", "retraction")
+C_PAIR = float(stats.norm.ppf((1.0 + ALPHA ** (1.0 / 3.0)) / 2.0))
+
+
+def windows(set_point_mm: np.ndarray) -> dict:
+    """Steady sample windows of each segment kind, from the set point of one cycle."""
+    v = np.diff(set_point_mm)
+    steps = np.nonzero(np.abs(np.diff(v)) > 1e-6)[0] + 1  # the stop and the start of the return
+    stop, start = int(steps[0]), int(steps[-1])
+    return {"extension": (SETTLE, stop - BEFORE), "dwell": (stop + SETTLE, start - BEFORE),
+            "retraction": (start + SETTLE, CYCLE - BEFORE)}
+
+
+def runs_of(name: str, load_kgf: float, runs=range(1, 11)) -> tuple:
+    """Per run, the current as a cycles x samples array; and the windows."""
+    d = read_condition(name)
+    sel = (d["load"] == load_kgf) & np.isin(d["run"], list(runs))
+    win = windows(d["set_point"][sel][:CYCLE])
+    out = [d["current"][sel & (d["run"] == r)].reshape(-1, CYCLE) for r in runs
+           if (sel & (d["run"] == r)).any()]
+    return out, win
+
+
+def pair_z(new: tuple, ref: tuple) -> dict:
+    """Rule a: per kind, d (A), u (A) and z of the new recording's mean segment current minus the reference's."""
+    out = {}
+    for k in KINDS:
+        (a, b) = new[1][k]
+        m1 = np.concatenate(new[0])[:, a:b].mean(1)
+        m2 = np.concatenate(ref[0])[:, a:b].mean(1)
+        d = m1.mean() - m2.mean()
+        u = float(np.hypot(m1.std(ddof=1) / np.sqrt(m1.size), m2.std(ddof=1) / np.sqrt(m2.size)))
+        out[k] = {"d_A": float(d), "u_A": u, "z": float(d / u)}
+    return out
+
+
+def under_dispersion(rec: tuple) -> dict:
+    """Rule b: per kind, the pooled F of cycle levels against the cycle x block residual, and its lower p."""
+    out = {}
+    for k in KINDS:
+        a, b = rec[1][k]
+        j = (b - a) // BLOCK
+        ss_c = ss_r = df_c = df_r = 0.0
+        for cyc in rec[0]:
+            x = cyc[:, a:a + j * BLOCK].reshape(cyc.shape[0], j, BLOCK).mean(2)  # cycles x blocks
+            c = x.shape[0]
+            if c < 2:
+                continue
+            row = x.mean(1, keepdims=True)
+            col = x.mean(0, keepdims=True)
+            ss_c += j * float(((row - x.mean()) ** 2).sum())
+            ss_r += float(((x - row - col + x.mean()) ** 2).sum())
+            df_c += c - 1
+            df_r += (c - 1) * (j - 1)
+        f = (ss_c / df_c) / (ss_r / df_r)
+        out[k] = {"F": f, "df": [df_c, df_r], "p_under": float(stats.f.cdf(f, df_c, df_r))}
+    return out
+
+
+def run_dispersion(rec: tuple) -> dict:
+    """Rule c: F of the run levels against the cycles within the runs, the moving kinds pooled, and its lower p."""
+    ssb = ssw = dfb = dfw = 0.0
+    for k in ("extension", "retraction"):
+        a, b = rec[1][k]
+        m = [c[:, a:b].mean(1) for c in rec[0]]
+        g = np.concatenate(m).mean()
+        ssb += sum(x.size * (x.mean() - g) ** 2 for x in m)
+        ssw += sum(((x - x.mean()) ** 2).sum() for x in m)
+        dfb += len(m) - 1
+        dfw += sum(x.size for x in m) - len(m)
+    f = (ssb / dfb) / (ssw / dfw)
+    return {"F": float(f), "df": [dfb, dfw], "p_under": float(stats.f.cdf(f, dfb, dfw))}
+
+
+def table() -> list:
+    """One row per condition and load: rule a on the pair, rules b and c on the condition's whole file."""
+    rows = []
+    for load in (20.0, 40.0, -40.0):
+        ref = runs_of("normal", load)
+        for name in DEVELOPMENT:
+            new = runs_of(name, load)
+            if name == "normal":
+                new, ref_row = runs_of(name, load, range(6, 11)), runs_of(name, load, range(1, 6))
+                label = "normal 6-10 vs 1-5"
+            else:
+                ref_row, label = ref, name
+            z = pair_z(new, ref_row)
+            whole = runs_of(name, load)
+            u = under_dispersion(whole)
+            rr = run_dispersion(whole)
+            rows.append({"condition": label, "load_kgf": load, "pair": z, "under": u, "runs": rr,
+                         "flag_a": all(abs(z[k]["z"]) < C_PAIR for k in KINDS),
+                         "flag_b": any(u[k]["p_under"] < P_UNDER for k in KINDS),
+                         "flag_c": rr["p_under"] < P_UNDER})
+    return rows
+
+
+def main(argv: list) -> int:
+    if not (CRANFIELD / "normal.csv.gz").exists():
+        print(f"Cranfield recordings not present at {CRANFIELD}", file=sys.stderr)
+        return 2
+    rows = table()
+    print(f"rule a: flag when |z| < c = {C_PAIR:.3f} in all three kinds (alpha {ALPHA}); "
+          f"rule b: flag when p_under < {P_UNDER:g} in a kind; "
+          f"rule c: flag when p_under < {P_UNDER:g}\n")
+    print("| condition | load kgf | z extension | z dwell | z retraction | a | F extension (p) | F dwell (p) "
+          "| F retraction (p) | b | F runs (p) | c |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        zs = " | ".join(f"{r['pair'][k]['z']:+.2f}" for k in KINDS)
+        fs = " | ".join(f"{r['under'][k]['F']:.2f} ({r['under'][k]['p_under']:.1g})" for k in KINDS)
+        print(f"| {r['condition']} | {r['load_kgf']:+.0f} | {zs} | {'flag' if r['flag_a'] else '-'} | {fs} "
+              f"| {'flag' if r['flag_b'] else '-'} | {r['runs']['F']:.2f} ({r['runs']['p_under']:.1g}) "
+              f"| {'flag' if r['flag_c'] else '-'} |")
+    for rule in ("a", "b", "c"):
+        bad = sum(r[f"flag_{rule}"] for r in rows if r["load_kgf"] < 0)
+        false = sum(r[f"flag_{rule}"] for r in rows if r["load_kgf"] > 0)
+        print(f"\nrule {rule}: flags {bad} of 7 rows at -40 kgf, {false} of 14 at +20/+40 kgf")
+    if len(argv) > 1:
+        Path(argv[1]).write_text(json.dumps({"c_pair": C_PAIR, "alpha": ALPHA, "p_under": P_UNDER, "rows": rows},
+                                            indent=1))
+        print(f"written {argv[1]}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
