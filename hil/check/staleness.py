@@ -14,9 +14,17 @@ accepts, and never so long that the drives' consumer heartbeat would stop them f
     t_{stale} = \\min\\Big(\\texttt{max\\_stale\\_ms},\\ \\texttt{HARD\\_MAX\\_STALE\\_MS},\\
                 \\frac{e_{max}}{v_{max}},\\ C - P_{hb} - 2T\\Big)
 
-with ``e_max`` / ``v_max`` the check's following error and speed limits (each capped), ``C`` the drives'
+with ``e_max`` / ``v_max`` this run's following error and speed limits (each capped), ``C`` the drives'
 consumer heartbeat time on the master (0x1016), ``P_hb`` the master's heartbeat period (the consumer counts
 from its last heartbeat, up to one period before the stall began) and ``2 T`` the master's own reaction.
+The physics terms are computed from this run's own values: ``e / v`` bounds the motion the master cannot
+see, ``v t <= e``, whatever ``e`` and ``v`` the profile sets; the consumer term keeps the stall inside the
+drives' own stop. ``HARD_MAX_STALE_MS`` (100 ms) is a ceiling independent of them: the master is never blind
+longer than the rig's independent stop path on the master's loss is assumed to take (docs/drives.md
+section 5: a watchdog relay drops STO 100 ms after the master's last heartbeat). (It was 2 mm / 50 mm/s =
+40 ms, ``e / v`` at the two hard caps: one point of the ``e / v`` term, 10 ms at e = 0.5 mm, v = 50 mm/s and
+200 ms at e = 2 mm, v = 10 mm/s, not a bound of anything.) Shipped: min(50, 100, 50, 71) = 50 ms = 25 SYNC
+cycles at 2 ms.
 A drive that does not keep all three of 0x607D, 0x6072 and 0x6080 (a drive that keeps none of its limits
 among them) keeps today's short limit, ``safety.max_stale_cycles`` SYNC cycles (hard cap 5).
 """

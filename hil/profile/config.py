@@ -146,9 +146,12 @@ HARD_MAX_D_INT_MM = 2.0
 HARD_LVDT_GAIN_TOLERANCE = 0.10  #: D plausibility allows this LVDT pitch error (the paper's is 7.5 %)
 HARD_MAX_STALE_CYCLES = 5  #: SYNC cycles a sample may be missing before it is stale (drives keeping no limits)
 #: the freshness limit where the drives keep their limits themselves [ms] (docs/safety.md, *A stall of the
-#: master*): the time in which a ram at the fastest speed any profile allows (HARD_MAX_VELOCITY_MM_PER_S) moves
-#: by the largest following error any profile accepts (HARD_MAX_FOLLOWING_ERROR_MM): 2 mm / 50 mm/s = 40 ms
-HARD_MAX_STALE_MS = 1000.0 * HARD_MAX_FOLLOWING_ERROR_MM / HARD_MAX_VELOCITY_MM_PER_S
+#: master*): a ceiling independent of the profile's physics terms, which set the value below it at run time
+#: (e / v, the undetected motion v t <= e, from this run's own e and v; C - P_hb - 2 T from its heartbeats):
+#: the master is never blind longer than the rig's independent stop path on the master's loss is assumed to
+#: take (docs/drives.md section 5: a watchdog relay drops STO 100 ms after the master's last heartbeat).
+#: (It was 2 mm / 50 mm/s = 40 ms, e / v at the two caps: one point of e / v, not a bound of anything.)
+HARD_MAX_STALE_MS = 100.0
 HARD_MAX_FROZEN_CYCLES = 100  #: cycles a noisy sensor may repeat the same value
 HARD_MAX_LAG_S = 0.5  #: longest a received frame may wait before the master takes it [s]
 
@@ -198,9 +201,10 @@ class Safety:
     #: sensor freshness: cycles a noisy LVDT or load cell may repeat exactly the same value
     max_frozen_cycles: int = field(default=25, metadata=_rng(3, 10_000, hard_max=HARD_MAX_FROZEN_CYCLES))
     #: sensor freshness where both drives keep their stroke, torque and speed limits themselves [ms] (the
-    #: master's stall budget, hil/check/staleness.py; at run time also at most the drives' consumer heartbeat time
-    #: minus one master heartbeat period and 2 SYNC periods, and the following error over the speed limit)
-    max_stale_ms: float = field(default=40.0, metadata=_rng(0.0, 10_000.0, lo_open=True, hard_max=HARD_MAX_STALE_MS))
+    #: master's stall budget, hil/check/staleness.py; at run time also at most HARD_MAX_STALE_MS, the drives'
+    #: consumer heartbeat time minus one master heartbeat period and 2 SYNC periods, and the following error over
+    #: the speed limit; the default is that last term of the shipped profile, 0.5 mm / 10 mm/s = 50 ms)
+    max_stale_ms: float = field(default=50.0, metadata=_rng(0.0, 10_000.0, lo_open=True, hard_max=HARD_MAX_STALE_MS))
     #: master lag: the longest a SYNC may wait in the master's socket before it is taken [s]
     #: (the master fell behind the bus, or the computer stalled); real bus only
     max_lag_s: float = field(default=0.02, metadata=_rng(0.0, 10.0, lo_open=True, hard_max=HARD_MAX_LAG_S))

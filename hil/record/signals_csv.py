@@ -277,7 +277,7 @@ def gap_periods_for(meta, sync_period_s: float | None) -> float:
     """The time-gap limit of :func:`blf.continuity.find_jumps` for a recording [sample periods]:
     :data:`blf.continuity.GAP_PERIODS`, or where its run record holds the stall limit the master held the
     check to (meta.json ``stalls.limit_ms``, at the SYNC period ``sync_period_s``) the gap that limit lets a
-    run hold, ``limit / T + 1`` periods, if longer (40 ms at 2 ms: 21): a run the master accepted is one
+    run hold, ``limit / T + 1`` periods, if longer (50 ms at 2 ms: 26): a run the master accepted is one
     the analysis reads (docs/safety.md, *A stall of the master*)."""
     from blf.continuity import GAP_PERIODS
 

@@ -1,6 +1,6 @@
 """Benchmark (not a test): every injected fault in a dry-run; reaction time, peak true force, data kept.
 
-    python tests/bench/bench_faults.py [--json bench_faults.json] [--stalls]
+    python tests/bench/bench_faults.py [--json bench_faults.json] [--stalls] [--only NAME ...]
 
 For each fault of :mod:`sim.faults` (the cases of tests/test_faults.py plus the
 force- and stroke-limit runaways) it prints: what detected it, the reaction
@@ -91,6 +91,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", default="bench_faults.json")
     ap.add_argument("--stalls", action="store_true", help="only the rows of the master's stalls")
+    ap.add_argument("--only", nargs="+", metavar="NAME", default=None,
+                    help="only the fault rows of these names (e.g. tpdo_missing tpdo_late bus_errors node_silent; "
+                         "with --stalls also the stall rows, else none)")
     args = ap.parse_args()
     act = load_actuation()
     chk = load_check(None, act)
@@ -106,7 +109,12 @@ def main() -> int:
             (Fault("runaway", 1, 2.7, value=5.0), s_chk, "runaway -> stroke limit"),
             (Fault("master_silent", 1, 78.0), chk, "master_silent"),
         ]
-        for k, (fault, check, name) in enumerate([] if args.stalls else cases):
+        if args.only is not None:
+            unknown = sorted(set(args.only) - {c[2] for c in cases})
+            if unknown:
+                ap.error(f"--only: no fault row named {', '.join(unknown)} (rows: {', '.join(c[2] for c in cases)})")
+            cases = [c for c in cases if c[2] in args.only]
+        for k, (fault, check, name) in enumerate([] if args.stalls and args.only is None else cases):
             r = dry_run(act, check, sim, tmp / f"run{k}", faults=[fault])
             meta = json.loads((r.out / "meta.json").read_text())
             tr = r.injector.truth
@@ -143,7 +151,8 @@ def main() -> int:
                            rows=int(sig.n), last_t_s=float(sig.t[-1]), t_detect_s=round(t_det, 4))
             row["final"] = " / ".join(s.name for s in r.injector.final_states())
             rows.append(row)
-        rows += _stall_rows(act, chk, sim, tmp)
+        if args.only is None or args.stalls:
+            rows += _stall_rows(act, chk, sim, tmp)
     hdr = (f"{'fault':<26}{'detected by':<26}{'reaction ms':>12}{'stop ms':>9}{'peak |F| N':>11}"
            f"{'peak |s| mm':>12}{'rows':>7}{'frames':>8}  final states")
     print(hdr)
