@@ -28,6 +28,7 @@ from hil.report.shell import (
     identification,
     img,
     notes,
+    page_html,
     page_title,
     pyplot,
     signoff_block,
@@ -309,8 +310,14 @@ def timing_section(timing: Timing) -> str:
 
 def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
                  json_name: str = "result.json") -> None:
-    """Write the self-contained HTML report (``json_name``: the result file beside it, linked); its figures
-    drawn by two processes at once (:func:`hil.report.shell.drawn`)."""
+    """Write the self-contained HTML report (``json_name``: the result file beside it, linked)."""
+    Path(path).write_text(report_html(sig, an, result, act, meta, json_name=json_name))
+
+
+def report_html(sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
+                json_name: str = "result.json") -> str:
+    """The text of the HTML report (:func:`write_report`); its figures drawn by two processes at once
+    (:func:`hil.report.shell.drawn`)."""
     source = {"step column": "the run's step column", "detected": "the recording itself (no step column)"}
     intro = (f"<p>Actuation: {esc(getattr(act, 'name', ''))}; B_spec internal {act.mechanics.backlash_spec_int_mm} mm, "
              f"external {act.mechanics.backlash_spec_ext_mm} mm; {sig.n} samples, "
@@ -339,7 +346,7 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
     if timing is not None and timing.summary.reaction.n:
         parts.append(("<h2>Loop timing (master)</h2>", lambda: timing_section(timing)))
     parts.append(file_link(json_name))
-    write_page(path, page_title("emacheck maintenance check", result), drawn(parts))
+    return page_html(page_title("emacheck maintenance check", result), drawn(parts))
 
 
 def write_stopped_report(path: Path, result: dict, *, json_name: str = "result.json") -> None:

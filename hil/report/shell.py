@@ -388,6 +388,11 @@ def master_loss_text(ml: dict) -> str:
 
 def write_page(path: Path, title: str, parts: Iterable[str]) -> None:
     """Write a self-contained HTML page: the shell's style, then ``parts`` in order."""
+    Path(path).write_text(page_html(title, parts))
+
+
+def page_html(title: str, parts: Iterable[str]) -> str:
+    """The text of a self-contained HTML page (:func:`write_page`)."""
     head = (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}</title>"
             f"<style>{CSS}</style></head><body>")
-    Path(path).write_text("\n".join([head, *parts, "</body></html>"]))
+    return "\n".join([head, *parts, "</body></html>"])
