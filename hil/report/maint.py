@@ -311,7 +311,8 @@ def timing_section(timing: Timing) -> str:
 def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
                  json_name: str = "result.json") -> None:
     """Write the self-contained HTML report (``json_name``: the result file beside it, linked)."""
-    Path(path).write_text(report_html(sig, an, result, act, meta, json_name=json_name))
+    text = report_html(sig, an, result, act, meta, json_name=json_name)
+    Path(path).write_text(text)
 
 
 def report_html(sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
