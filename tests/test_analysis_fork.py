@@ -109,3 +109,26 @@ def test_a_fork_that_fails_answers_none(tmp_path, actuation):
     fork = AnalysisFork(actuation, tmp_path)
     assert fork.analysed(None, None) is None
     assert fork.pid is None
+
+
+def test_a_hung_fork_is_given_up_after_the_timeout():
+    from hil.report.shell import read_until_eof
+
+    r, w = os.pipe()
+    try:
+        os.write(w, b"part of an answer")
+        t0 = time.monotonic()
+        assert read_until_eof(r, timeout_s=0.2) == b""  # the writer never closed: no answer
+        assert 0.15 < time.monotonic() - t0 < 5.0
+        os.close(w)
+        w = -1
+        assert read_until_eof(r, timeout_s=0.2) == b""  # (what was read before is not kept)
+    finally:
+        os.close(r)
+        if w >= 0:
+            os.close(w)
+    r, w = os.pipe()
+    os.write(w, b"a whole answer")
+    os.close(w)
+    assert read_until_eof(r, timeout_s=5.0) == b"a whole answer"
+    os.close(r)

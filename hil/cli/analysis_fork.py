@@ -14,12 +14,13 @@ error is then raised there, as it always was.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import pickle
 import signal
 import threading
 from pathlib import Path
+
+from hil.report.shell import read_until_eof, reap_fork
 
 
 class AnalysisFork:
@@ -58,16 +59,15 @@ class AnalysisFork:
             with os.fdopen(self._req, "wb") as f:
                 self._req = -1
                 pickle.dump((rec, truth), f, protocol=pickle.HIGHEST_PROTOCOL)
-            with os.fdopen(self._res, "rb") as f:
-                self._res = -1
-                data = f.read()
-        except OSError:  # the fork is gone (a broken pipe)
+            data = read_until_eof(self._res)  # (b"" from a fork that ended without an answer or hung)
+        except (OSError, pickle.PicklingError):  # the fork is gone (a broken pipe)
             data = b""
         finally:
             self.close()
-        if not data:
+        try:
+            return pickle.loads(data) if data else None
+        except (EOFError, pickle.UnpicklingError):  # cut short: the fork died while it sent
             return None
-        return pickle.loads(data)
 
     def close(self) -> None:
         """End the fork (if it still waits: the request pipe closed, then stopped) and wait for it."""
@@ -78,10 +78,7 @@ class AnalysisFork:
         if self.pid is None:
             return
         pid, self.pid = self.pid, None
-        if os.waitpid(pid, os.WNOHANG)[0] == 0:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGTERM)
-            os.waitpid(pid, 0)
+        reap_fork(pid)
 
 
 def _serve(req_r: int, res_w: int, act, out: Path) -> None:

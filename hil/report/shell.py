@@ -134,20 +134,41 @@ def _draw_forked(jobs: dict[int, Callable[[], str]]) -> dict[int, str]:
     try:
         while (b := os.read(todo_r, 1)):
             done[b[0]] = jobs[b[0]]()
-        with os.fdopen(back_r, "rb") as f:
-            back_r = -1
-            with contextlib.suppress(EOFError, pickle.UnpicklingError):  # the fork died: the caller draws its share
-                done.update(pickle.load(f))
+        data = read_until_eof(back_r)
+        with contextlib.suppress(EOFError, pickle.UnpicklingError):  # the fork died: the caller draws its share
+            done.update(pickle.loads(data))
     finally:
         os.close(todo_r)
-        if back_r >= 0:
-            os.close(back_r)
-        _reap(pid)
+        os.close(back_r)
+        reap_fork(pid)
     return done
 
 
-def _reap(pid: int) -> None:
-    """Wait for the figure fork ``pid``; stop it first if it is still running (this process interrupted)."""
+#: how long a process waits for its fork's answer [s] before it stops the fork and does the work itself: a
+#: hung fork (the analysis and report take ~1 s on a quiet machine, ~10 s at a load average of 8)
+FORK_TIMEOUT_S = 600.0
+
+
+def read_until_eof(fd: int, timeout_s: float = FORK_TIMEOUT_S) -> bytes:
+    """What the pipe ``fd`` gives until its writer (a fork) closes it; ``b""`` if that takes longer than
+    ``timeout_s``."""
+    import select
+    import time
+
+    chunks = []
+    deadline = time.monotonic() + timeout_s
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            return b""
+        if not (b := os.read(fd, 1 << 20)):
+            return b"".join(chunks)
+        chunks.append(b)
+
+
+def reap_fork(pid: int) -> None:
+    """Wait for the fork ``pid``; stop it first (SIGTERM) if it is still running (this process interrupted,
+    or the fork hung)."""
     import signal
 
     if os.waitpid(pid, os.WNOHANG)[0] == 0:
