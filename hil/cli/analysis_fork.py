@@ -20,8 +20,6 @@ import signal
 import threading
 from pathlib import Path
 
-from hil.report.shell import read_until_eof, reap_fork
-
 
 class AnalysisFork:
     """A fork of this process that imports the analysis now and analyses the run folder ``out`` when
@@ -55,6 +53,8 @@ class AnalysisFork:
         simulator's truth beside it), or None (no fork, or it ended without an answer)."""
         if self.pid is None:
             return None
+        from hil.report.shell import read_until_eof
+
         try:
             with os.fdopen(self._req, "wb") as f:
                 self._req = -1
@@ -78,6 +78,8 @@ class AnalysisFork:
         if self.pid is None:
             return
         pid, self.pid = self.pid, None
+        from hil.report.shell import reap_fork  # (here: `run` imports this module, never the report before its loop)
+
         reap_fork(pid)
 
 
