@@ -168,13 +168,13 @@ def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) 
     }
 
 
-def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: dict | None,
-                       meta: RunRecord | None, console: Console, trace_extra: dict | None = None) -> dict:
-    """Read the signals back, analyse, write result.json and report.html into ``outputs``."""
+def analysed(sig_path: Path, act: Actuation, truth: dict | None, meta: RunRecord | None,
+             trace_extra: dict | None = None) -> tuple:
+    """Read the signals back and analyse them: ``(signals, analysis, result)``, the result as result.json
+    holds it."""
     # imported here, not at the top: `emacheck run` loads the analysis only after the cyclic loop
     from hil.analysis.maint import MIN_SAMPLES_CHECK, analyze_signals, result_dict
     from hil.record.signals_csv import CHECK_CHANNELS
-    from hil.report.maint import write_report
 
     t0 = time.perf_counter()
     # a run that stopped early may have held still (its analysis says what is missing, not "constant"),
@@ -196,6 +196,24 @@ def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: 
         result["notes"] = list(result["notes"]) + [n for n in sig.notes if n not in result["notes"]]
     result["trace"] = trace_of(meta, sig_path, trace_extra)
     result["analysis_s"] = round(time.perf_counter() - t0, 3)
+    return sig, an, result
+
+
+def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: dict | None,
+                       meta: RunRecord | None, console: Console, trace_extra: dict | None = None,
+                       prepared: tuple[dict, str] | None = None) -> dict:
+    """Read the signals back, analyse, write result.json and report.html into ``outputs``. ``prepared``:
+    the result and the report's HTML of exactly this (:class:`hil.cli.analysis_fork.AnalysisFork`), only
+    written here."""
+    if prepared is not None:
+        result, html = prepared
+        outputs.folder.mkdir(parents=True, exist_ok=True)
+        outputs.write_json("result.json", result)
+        outputs.write_with("report.html", lambda path: Path(path).write_text(html))
+        return result
+    from hil.report.maint import write_report
+
+    sig, an, result = analysed(sig_path, act, truth, meta, trace_extra)
     outputs.folder.mkdir(parents=True, exist_ok=True)
     outputs.write_json("result.json", result)  # created, never over another result (but a run's own)
     outputs.write_with("report.html", lambda path: write_report(path, sig, an, result, act, meta,
@@ -367,9 +385,11 @@ def print_master_loss(console: Console, meta: RunRecord) -> None:
         console.print(f"EMA {ema[-1]} reaction to losing the master: {escape(master_loss_text(ml))}")
 
 
-def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Console) -> int:
+def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Console, prepare=None) -> int:
     """Analyse a finished check; an aborted one gets result.json with the reason (and the
-    analysis where enough data was recorded) and the console says where each drive ended."""
+    analysis where enough data was recorded) and the console says where each drive ended. ``prepare``
+    (a finished check's record -> the result and the report's HTML, or None): who analyses a finished
+    check if not this process (:meth:`hil.cli.analysis_fork.AnalysisFork.analysed`)."""
     run = Outputs(out, own=True)  # the run's own result, written into its folder as the run ends
     rec = meta.record
     if outcome.status != RunStatus.DONE:
@@ -393,6 +413,7 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
         print_summary(console, result, out)
         return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
     print_master_loss(console, rec)
-    result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console)
+    result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console,
+                                prepared=prepare(rec) if prepare is not None else None)
     print_summary(console, result, out)
     return exit_for(result)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from rich.console import Console
 
+from hil.cli.analysis_fork import AnalysisFork
 from hil.cli.check import (
     canopen_check,
     master_setup,
@@ -68,6 +69,19 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     has planned it already. ``stall``: (ms, mean interval s) of the master's injected stalls
     (:class:`hil.master.stalls.MasterStalls`, drawn from ``[seed, 37]``; meta.json ``stalls.injected``).
     """
+    console = console or make_console(quiet=quiet)
+    rig = rig if rig is not None else master_setup(act, profile_path, eds, check)
+    fork = AnalysisFork(act, out)  # imports the analysis on the other core while the loop runs
+    try:
+        return _dry_run(act, check, simrig, out, fork, seed=seed, faults=faults, realtime=realtime, quiet=quiet,
+                        console=console, rig=rig, trace=trace, stall=stall)
+    finally:
+        fork.close()
+
+
+def _dry_run(act, check, simrig, out: Path, fork, *, seed, faults, realtime, quiet, console, rig, trace,
+             stall) -> DryRun:
+    """:func:`dry_run` with its console, planned rig and :class:`~hil.cli.analysis_fork.AnalysisFork`."""
     import numpy as np
 
     from hil.canopen.od import load_eds
@@ -81,8 +95,6 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     from sim.plant import RigPlant
     from sim.truth import rig_truth
 
-    console = console or make_console(quiet=quiet)
-    rig = rig if rig is not None else master_setup(act, profile_path, eds, check)
     load = rig.plan.load
     seed = simrig.seed if seed is None else seed
     faults = tuple(simrig.faults if faults is None else faults)
@@ -130,7 +142,7 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
                       f"{st.limit})")
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated in {wall:.2f} s wall "
                   f"({outcome.duration_s / max(wall, 1e-9):.1f}x real time); {log.frames} CAN frames logged")
-    rc = result_after(out, act, truth, meta, outcome, console)
+    rc = result_after(out, act, truth, meta, outcome, console, prepare=lambda rec: fork.analysed(rec, truth))
     return DryRun(rc, outcome, out, injector, master, link, wall)
 
 

@@ -20,6 +20,7 @@ from hil.record.runfolder import Signals
 from hil.record.runrecord import RunRecord, Timing
 from hil.report.shell import (
     column,
+    drawn,
     esc,
     file_link,
     fmt,
@@ -27,6 +28,7 @@ from hil.report.shell import (
     identification,
     img,
     notes,
+    page_html,
     page_title,
     pyplot,
     signoff_block,
@@ -309,6 +311,14 @@ def timing_section(timing: Timing) -> str:
 def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
                  json_name: str = "result.json") -> None:
     """Write the self-contained HTML report (``json_name``: the result file beside it, linked)."""
+    text = report_html(sig, an, result, act, meta, json_name=json_name)
+    Path(path).write_text(text)
+
+
+def report_html(sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
+                json_name: str = "result.json") -> str:
+    """The text of the HTML report (:func:`write_report`); its figures drawn by two processes at once
+    (:func:`hil.report.shell.drawn`)."""
     source = {"step column": "the run's step column", "detected": "the recording itself (no step column)"}
     intro = (f"<p>Actuation: {esc(getattr(act, 'name', ''))}; B_spec internal {act.mechanics.backlash_spec_int_mm} mm, "
              f"external {act.mechanics.backlash_spec_ext_mm} mm; {sig.n} samples, "
@@ -316,10 +326,10 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
              f"{esc(source.get(an.segments.source, an.segments.source))}.</p>")
     if meta is not None and meta.seed is not None:
         intro += f"<p>Simulated rig, seed {meta.seed}.</p>"
-    parts = head_parts(result, intro)
+    parts: list = head_parts(result, intro)
     parts.append(trace_lines(result.get("trace")))
     parts.append(uncertainty_section(result))
-    parts.append(f"<h2>Force fight (paper Fig. 3)</h2>{img(figure_time(sig, an, act), dpi=90, tight=True)}")
+    parts.append(("<h2>Force fight (paper Fig. 3)</h2>", lambda: img(figure_time(sig, an, act), dpi=90, tight=True)))
     truth = result.get("truth")
     for ch in CHANNELS:
         r = an.maint[ch]
@@ -328,15 +338,16 @@ def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actu
             parts.append("<p class='inconclusive'>Not measured (the reason is in the decision above).</p>")
             continue
         d, f = _channel_data(sig, an, ch)
-        parts.append(img(figure_dfdd(ch, d, f, r), dpi=90, tight=True)
-                     + img(figure_lines(ch, d, f, r, truth, (result.get("verdict", {}).get(ch) or {})
-                                        .get("uncertainty_mm")), dpi=90, tight=True))
-    parts.append(f"<h2>LVDT calibration</h2>{img(figure_calibration(sig, an, act), dpi=90, tight=True)}")
+        u_mm = (result.get("verdict", {}).get(ch) or {}).get("uncertainty_mm")
+        parts.append((lambda ch=ch, d=d, f=f, r=r: img(figure_dfdd(ch, d, f, r), dpi=90, tight=True),
+                      lambda ch=ch, d=d, f=f, r=r, u_mm=u_mm: img(figure_lines(ch, d, f, r, truth, u_mm), dpi=90,
+                                                                  tight=True)))
+    parts.append(("<h2>LVDT calibration</h2>", lambda: img(figure_calibration(sig, an, act), dpi=90, tight=True)))
     timing = meta.timing if meta is not None else None
     if timing is not None and timing.summary.reaction.n:
-        parts.append("<h2>Loop timing (master)</h2>" + timing_section(timing))
+        parts.append(("<h2>Loop timing (master)</h2>", lambda: timing_section(timing)))
     parts.append(file_link(json_name))
-    write_page(path, page_title("emacheck maintenance check", result), parts)
+    return page_html(page_title("emacheck maintenance check", result), drawn(parts))
 
 
 def write_stopped_report(path: Path, result: dict, *, json_name: str = "result.json") -> None:

@@ -11,9 +11,12 @@ of ``emacheck run``).
 from __future__ import annotations
 
 import base64
+import contextlib
 import html
 import io
-from collections.abc import Iterable, Sequence
+import os
+import threading
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -69,6 +72,109 @@ def figure_uri(fig: Any, *, dpi: int = 80, tight: bool = False) -> str:
 def img(fig: Any, *, dpi: int = 80, tight: bool = False) -> str:
     """An ``<img>`` element showing ``fig`` (see :func:`figure_uri`)."""
     return f"<img src='{figure_uri(fig, dpi=dpi, tight=tight)}'>"
+
+
+def drawn(parts: Sequence[str | Callable[[], str] | tuple], *, processes: int = 2) -> list[str]:
+    """``parts`` with each callable (a figure's ``<img>``, :func:`img`) replaced by what it returns and each
+    tuple of those joined into one string, the figures drawn by up to ``processes`` processes at once;
+    the same strings in the same order as one process draws them.
+
+    The second process is a fork of this one (nothing pickled in, the PNG data URIs pickled back): both
+    take the next figure not yet taken, in the order of ``parts``, from a pipe holding their indices
+    (one byte each, a read of one byte from a pipe is atomic). A figure the fork did not return (it
+    died, or is killed by the interrupt that stops this process) is drawn here. One process where
+    there is no ``os.fork``, where another thread runs (a fork copies only the calling thread), with
+    fewer than two figures or ``processes`` below 2.
+    """
+    pieces = [list(p) if isinstance(p, tuple) else [p] for p in parts]
+    flat = [x for p in pieces for x in p]
+    jobs = {i: x for i, x in enumerate(flat) if callable(x)}
+    done: dict[int, str] = {}
+    if processes >= 2 and 2 <= len(jobs) and max(jobs) < 256 and hasattr(os, "fork") \
+            and threading.active_count() == 1:
+        pyplot()  # imported once, before the fork: both processes have it
+        done = _draw_forked(jobs)
+    out = [done[i] if i in done else (x() if callable(x) else x) for i, x in enumerate(flat)]
+    it = iter(out)
+    return ["".join(next(it) for _ in p) for p in pieces]
+
+
+def _draw_forked(jobs: dict[int, Callable[[], str]]) -> dict[int, str]:
+    """Draw ``jobs`` (index: callable) in this process and a fork of it, each taking the next index from
+    a shared pipe; what both drew (the fork's share pickled back through a second pipe)."""
+    import gc
+    import pickle
+    import signal
+
+    todo_r, todo_w = os.pipe()
+    os.write(todo_w, bytes(sorted(jobs)))  # at most 255 indices: less than a pipe's buffer
+    os.close(todo_w)  # the pipe empty: a read returns b"", no figure left
+    back_r, back_w = os.pipe()
+    gc.freeze()  # the heap as it is stays out of both collectors' passes (pages shared by the fork stay shared)
+    try:
+        pid = os.fork()
+    finally:
+        gc.unfreeze()
+    if pid == 0:  # the fork: draw, send, leave without running anything of the parent's (atexit, buffers)
+        code = 1
+        try:
+            for s in (signal.SIGINT, signal.SIGTERM):  # not the parent's handlers: an interrupt ends the fork
+                signal.signal(s, signal.SIG_DFL)
+            os.close(back_r)
+            mine = {}
+            while (b := os.read(todo_r, 1)):
+                mine[b[0]] = jobs[b[0]]()
+            with os.fdopen(back_w, "wb") as f:
+                pickle.dump(mine, f, protocol=pickle.HIGHEST_PROTOCOL)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(back_w)
+    done: dict[int, str] = {}
+    try:
+        while (b := os.read(todo_r, 1)):
+            done[b[0]] = jobs[b[0]]()
+        data = read_until_eof(back_r)
+        with contextlib.suppress(EOFError, pickle.UnpicklingError):  # the fork died: the caller draws its share
+            done.update(pickle.loads(data))
+    finally:
+        os.close(todo_r)
+        os.close(back_r)
+        reap_fork(pid)
+    return done
+
+
+#: how long a process waits for its fork's answer [s] before it stops the fork and does the work itself: a
+#: hung fork (the analysis and report take ~1 s on a quiet machine, ~10 s at a load average of 8)
+FORK_TIMEOUT_S = 600.0
+
+
+def read_until_eof(fd: int, timeout_s: float = FORK_TIMEOUT_S) -> bytes:
+    """What the pipe ``fd`` gives until its writer (a fork) closes it; ``b""`` if that takes longer than
+    ``timeout_s``."""
+    import select
+    import time
+
+    chunks = []
+    deadline = time.monotonic() + timeout_s
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            return b""
+        if not (b := os.read(fd, 1 << 20)):
+            return b"".join(chunks)
+        chunks.append(b)
+
+
+def reap_fork(pid: int) -> None:
+    """Wait for the fork ``pid``; stop it first (SIGTERM) if it is still running (this process interrupted,
+    or the fork hung)."""
+    import signal
+
+    if os.waitpid(pid, os.WNOHANG)[0] == 0:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
+        os.waitpid(pid, 0)
 
 
 def thin(n: int, max_points: int = 6000) -> slice:
@@ -303,6 +409,11 @@ def master_loss_text(ml: dict) -> str:
 
 def write_page(path: Path, title: str, parts: Iterable[str]) -> None:
     """Write a self-contained HTML page: the shell's style, then ``parts`` in order."""
+    Path(path).write_text(page_html(title, parts))
+
+
+def page_html(title: str, parts: Iterable[str]) -> str:
+    """The text of a self-contained HTML page (:func:`write_page`)."""
     head = (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}</title>"
             f"<style>{CSS}</style></head><body>")
-    Path(path).write_text("\n".join([head, *parts, "</body></html>"]))
+    return "\n".join([head, *parts, "</body></html>"])
