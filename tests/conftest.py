@@ -57,6 +57,15 @@ def pytest_report_header(config):
     return None
 
 
+#: this process is a pytest-xdist worker (not: a pytest it started, which inherits PYTEST_XDIST_WORKER)
+_XDIST_WORKER = False
+
+
+def pytest_configure(config):
+    global _XDIST_WORKER
+    _XDIST_WORKER = hasattr(config, "workerinput")
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """Each test without an ``xdist_group`` gets its module's (before xdist reads the marks: tryfirst);
@@ -72,6 +81,26 @@ def pytest_collection_modifyitems(config, items):
                else len(FIRST_GROUPS))
 
 
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Under xdist the vcan stage (``@pytest.mark.vcan``) runs with the host to itself: it holds an
+    exclusive lock for its whole protocol (fixtures included), every other test a shared one. Its
+    user-mode-linux guest runs the master's 2 ms loop on one host thread; with the other worker's tests
+    (and the independent-rig diagnosis's own two processes) beside it, the guest's master stalled past
+    its 10 ms limit on both attempts (2026-11-26, docs/testing.md, "Parallel")."""
+    if not _XDIST_WORKER:
+        return (yield)
+    import fcntl
+
+    lock_path = item.config._tmp_path_factory.getbasetemp().parent / "host.lock"
+    with open(lock_path, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX if item.get_closest_marker("vcan") else fcntl.LOCK_SH)
+        try:
+            return (yield)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 def once_per_run(tmp_path_factory, name: str, make):
     """``make(folder) -> picklable`` run once per test run, however many xdist workers ask.
 
@@ -82,7 +111,7 @@ def once_per_run(tmp_path_factory, name: str, make):
     import fcntl
     import pickle
 
-    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+    if not _XDIST_WORKER:
         return make(tmp_path_factory.mktemp(name))
     root = tmp_path_factory.getbasetemp().parent / f"once-{name}"
     root.mkdir(exist_ok=True)
