@@ -34,8 +34,11 @@ atexit.register(shutil.rmtree, os.environ["XDG_DATA_HOME"], ignore_errors=True)
 #: groups whose tests share something of the host and so run one at a time, on one worker: named in the
 #: test modules with ``pytestmark = pytest.mark.xdist_group(...)``. Every other test's group is its module
 #: (its module-scoped fixtures are built once per run, as in a serial run).
-#: The groups that take longest, started first so that none of them is left to run alone at the end.
-FIRST_GROUPS = ("vcan", "tests/test_diagnose_independent.py", "tests/test_independent_rig.py", "wall_clock")
+#: The groups that take longest, started first so that none of them is left to run alone at the end (the
+#: vcan stage, which holds the host alone, first; beside its start a module of short tests, so that the
+#: other worker waits for it after a short test, not after the 2-3 min diagnosis).
+FIRST_GROUPS = ("vcan", "tests/test_eds.py", "tests/test_diagnose_independent.py", "tests/test_diagnose_floors.py",
+                "tests/test_diagnose_dual_reference.py", "wall_clock", "tests/test_independent_rig.py")
 
 
 def pytest_addoption(parser, pluginmanager):
