@@ -47,10 +47,10 @@ def pytest_addoption(parser, pluginmanager):
     if pluginmanager.has_plugin("xdist"):
         return
     group = parser.getgroup("xdist", "pytest-xdist not loaded: serial run")
-    group._addoption("-n", "--numprocesses", dest="numprocesses", default=None,
-                    help="ignored: pytest-xdist is not loaded, the tests run in this process")
-    group.addoption("--dist", dest="dist", default="no", help="ignored: pytest-xdist is not loaded")
-    group.addoption("--no-loadscope-reorder", dest="loadscopereorder", action="store_false", default=True,
+    group._addoption("-n", "--numprocesses", dest="ignored_numprocesses", default=None,
+                     help="ignored: pytest-xdist is not loaded, the tests run in this process")
+    group.addoption("--dist", dest="ignored_dist", default="no", help="ignored: pytest-xdist is not loaded")
+    group.addoption("--no-loadscope-reorder", dest="ignored_loadscopereorder", action="store_false", default=True,
                     help="ignored: pytest-xdist is not loaded")
 
 
