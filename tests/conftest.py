@@ -29,6 +29,112 @@ os.environ["XDG_DATA_HOME"] = tempfile.mkdtemp(prefix="emacheck-test-data-")
 atexit.register(shutil.rmtree, os.environ["XDG_DATA_HOME"], ignore_errors=True)
 
 
+# --- pytest-xdist: the run is split over worker processes (docs/testing.md, "Parallel") ---
+
+#: groups whose tests share something of the host and so run one at a time, on one worker: named in the
+#: test modules with ``pytestmark = pytest.mark.xdist_group(...)``. Every other test's group is its module
+#: (its module-scoped fixtures are built once per run, as in a serial run).
+#: The groups that take longest, started first so that none of them is left to run alone at the end (the
+#: vcan stage, which holds the host alone, first; beside its start a module of short tests, so that the
+#: other worker waits for it after a short test, not after the 2-3 min diagnosis).
+FIRST_GROUPS = ("vcan", "tests/test_eds.py", "tests/test_diagnose_independent.py", "tests/test_diagnose_floors.py",
+                "tests/test_diagnose_dual_reference.py", "wall_clock", "tests/test_independent_rig.py")
+
+
+def pytest_addoption(parser, pluginmanager):
+    """Without pytest-xdist (``-p no:xdist`` or not installed) the addopts' ``-n``/``--dist`` are accepted
+    and ignored: the tests run serially in this process."""
+    if pluginmanager.has_plugin("xdist"):
+        return
+    group = parser.getgroup("xdist", "pytest-xdist not loaded: serial run")
+    group._addoption("-n", "--numprocesses", dest="ignored_numprocesses", default=None,
+                     help="ignored: pytest-xdist is not loaded, the tests run in this process")
+    group.addoption("--dist", dest="ignored_dist", default="no", help="ignored: pytest-xdist is not loaded")
+    group.addoption("--no-loadscope-reorder", dest="ignored_loadscopereorder", action="store_false", default=True,
+                    help="ignored: pytest-xdist is not loaded")
+
+
+def pytest_report_header(config):
+    if not config.pluginmanager.has_plugin("xdist"):
+        return "pytest-xdist not loaded: the tests run serially in this process"
+    return None
+
+
+#: this process is a pytest-xdist worker (not: a pytest it started, which inherits PYTEST_XDIST_WORKER)
+_XDIST_WORKER = False
+
+
+def pytest_configure(config):
+    global _XDIST_WORKER
+    _XDIST_WORKER = hasattr(config, "workerinput")
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Each test without an ``xdist_group`` gets its module's (before xdist reads the marks: tryfirst);
+    the longest groups are moved to the front (stable: the order within a group is kept)."""
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
+
+    def group(item) -> str:
+        return str(item.get_closest_marker("xdist_group").args[0])
+
+    items.sort(key=lambda item: FIRST_GROUPS.index(group(item)) if group(item) in FIRST_GROUPS
+               else len(FIRST_GROUPS))
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Under xdist the vcan stage (``@pytest.mark.vcan``) runs with the host to itself: it holds an
+    exclusive lock for its whole protocol (fixtures included), every other test a shared one. Its
+    user-mode-linux guest runs the master's 2 ms loop on one host thread; with the other worker's tests
+    (and the independent-rig diagnosis's own two processes) beside it, the guest's master stalled past
+    its 10 ms limit on both attempts (2026-11-26, docs/testing.md, "Parallel")."""
+    if not _XDIST_WORKER:
+        return (yield)
+    import fcntl
+
+    lock_path = item.config._tmp_path_factory.getbasetemp().parent / "host.lock"
+    with open(lock_path, "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX if item.get_closest_marker("vcan") else fcntl.LOCK_SH)
+        try:
+            return (yield)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def once_per_run(tmp_path_factory, name: str, make):
+    """``make(folder) -> picklable`` run once per test run, however many xdist workers ask.
+
+    Serially (no worker) it is simply called in a new temporary folder. Under xdist the first worker to
+    ask builds it under the run's shared base folder, holding a lock; the others wait and read its
+    pickled answer. A ``make`` that raises leaves no answer: the next worker tries again (and fails the
+    same way), as each would serially."""
+    import fcntl
+    import pickle
+
+    if not _XDIST_WORKER:
+        return make(tmp_path_factory.mktemp(name))
+    root = tmp_path_factory.getbasetemp().parent / f"once-{name}"
+    root.mkdir(exist_ok=True)
+    answer = root / "answer.pickle"
+    with open(root / "lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if answer.exists():
+                return pickle.loads(answer.read_bytes())
+            folder = root / "made"
+            if folder.exists():  # a failed attempt's leftovers
+                shutil.rmtree(folder)
+            folder.mkdir()
+            made = make(folder)
+            answer.write_bytes(pickle.dumps(made))
+            return made
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 @pytest.fixture(scope="session")
 def actuation():
     return load_actuation()
@@ -66,9 +172,12 @@ def dry_run(tmp_path_factory):
     its run folder and exit status. Users are marked ``slow``; none may change the folder's files."""
     from hil.cli import main
 
-    out = tmp_path_factory.mktemp("dry") / "run"
-    rc = main(["dry-run", "--out", str(out), "--quiet"])
-    return out, rc
+    def make(where: Path) -> dict:
+        out = where / "run"
+        return {"out": str(out), "rc": main(["dry-run", "--out", str(out), "--quiet"])}
+
+    made = once_per_run(tmp_path_factory, "dry", make)
+    return Path(made["out"]), made["rc"]
 
 
 @pytest.fixture(scope="session")
@@ -76,7 +185,11 @@ def default_run(tmp_path_factory, actuation, check_profile, simrig):
     """Run folder of one simulated check with the shipped profiles and seed.
 
     Its users are marked ``slow`` (a whole simulated check): the fast loop never runs it."""
-    out = tmp_path_factory.mktemp("run") / "default"
-    outcome, truth = simulate_run(out, actuation, check_profile, simrig, simrig.seed)
-    assert outcome.status == "done", outcome.reason
-    return out, truth
+    def make(where: Path) -> dict:
+        out = where / "default"
+        outcome, truth = simulate_run(out, actuation, check_profile, simrig, simrig.seed)
+        assert outcome.status == "done", outcome.reason
+        return {"out": str(out), "truth": truth}
+
+    made = once_per_run(tmp_path_factory, "run", make)
+    return Path(made["out"]), made["truth"]

@@ -41,7 +41,8 @@ from hil.record.runfolder import read_record, read_signals, resolve_recording
 from hil.record.runrecord import RunRecord
 
 #: twenty dry-runs killed and analysed: not in the fast loop (-m "not slow")
-pytestmark = pytest.mark.slow
+# SIGKILL at wall-clock times: one such test at a time (docs/testing.md, "Parallel")
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("wall_clock")]
 
 SEED = 20261122
 N_KILLS = 20

@@ -8,6 +8,9 @@ import pytest
 
 from hil.transport import BusTransport
 
+# a 0.5 s wall-clock wait for frames: one such test at a time (docs/testing.md, "Parallel")
+pytestmark = pytest.mark.xdist_group("wall_clock")
+
 
 def test_loop_sync_schedule_keeps_phase_and_counts_skipped_periods():
     bus = can.Bus(interface="virtual", channel="emacheck-loop-sync", receive_own_messages=True)

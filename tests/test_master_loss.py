@@ -46,6 +46,10 @@ from sim.faults import Fault
 from support.ci import skip_or_fail
 from support.profiles import write_profile_variant
 
+# SIGKILL at wall-clock times (udp_multicast in a private namespace): one such test at a time
+# (docs/testing.md, "Parallel")
+pytestmark = pytest.mark.xdist_group("wall_clock")
+
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "tests" / "bench" / "bench_master_loss.py"
 KILL_SEED = 20261124

@@ -19,6 +19,8 @@ from support.run_flags import assert_run_flag
 
 can = pytest.importorskip("can")
 pytest.importorskip("msgpack", reason="python-can's udp_multicast needs msgpack (the [test] extra)")
+# one multicast test at a time on this host (docs/testing.md, "Parallel")
+pytestmark = pytest.mark.xdist_group("udp_multicast")
 
 GROUP_V4 = "239.74.201.9"
 GROUP_V6 = "ff15:7079:7468:6f6e:6465:6d6f:6d63:6173"

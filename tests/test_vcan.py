@@ -29,6 +29,9 @@ import vcan_stage  # noqa: E402
 
 from support.ci import skip_or_fail  # noqa: E402
 
+# one vcan stage (vcan0 or a user-mode-linux guest) per host; started first (tests/conftest.py)
+pytestmark = pytest.mark.xdist_group("vcan")
+
 INNER = "tests/vcan/vcan_check_traffic.py"
 #: The inner tests take ~235 s inside UML (a whole check of ~56 s of real time, one killed after
 #: 8 s and one after ~34 s, each process starting in 10-60 s there); bounds, not targets.

@@ -70,7 +70,7 @@ def cmd_profile_check(args: argparse.Namespace) -> int:
                                                         for p in exc.problems]}, indent=1))
         else:
             console.print(f"[red]{escape(str(args.profile_file))}: {len(exc.problems)} problem(s); "
-                          f"nothing was sent on any bus[/red]")
+                          f"nothing was sent on any bus[/red]", soft_wrap=True)  # a long path: one line
             for p in exc.problems:
                 console.print(f"  [bold]{escape(p.key)}[/bold]" + (f" {escape(p.obj)}" if p.obj else "")
                               + f": {escape(p.message)}", soft_wrap=True)

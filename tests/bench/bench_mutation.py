@@ -81,7 +81,8 @@ def scratch_copy(dest: Path, module: str) -> None:
         'source_paths = ["hil", "blf", "sim", "profiles"]\n'
         f"only_mutate = [{json.dumps(module)}]\n"
         f"pytest_add_cli_args_test_selection = {json.dumps(tests)}\n"
-        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-m", "not slow"]\n'
+        # in mutmut's own process: its trampoline and test stats do not cross to pytest-xdist's workers
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-p", "no:xdist", "-m", "not slow"]\n'
     )
     with open(dest / "pyproject.toml", "a") as fh:
         fh.write(cfg)
