@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from hil.canopen.frame import Frame
+from hil.canopen.frame import Frame, sync_frame
 from hil.check.sequence import CheckSequence, Step
 from hil.check.supervisor import Supervisor
 from hil.master.core import MasterCore
@@ -216,3 +216,113 @@ def test_sync_schedule_follows_a_producer_whose_clock_runs_apart(ppm):
     for k in range(n):
         s.on_sync(5.0 + k * T * (1 + ppm * 1e-6))
     assert s.skipped == 0 and s.slot == n
+
+
+class LoopTimedTransport(InProcessTransport):
+    """The dry-run's transport with the master's loop-timed SYNC (issue 37): SYNC number ``n`` leaves
+    ``late[n]`` [s] after its due time, the slot it belongs to is :meth:`hil.transport.BusTransport.send_sync`'s
+    (the master's sample carries it) and the simulated pair sees the SYNC when it left."""
+
+    def __init__(self, pair, T: float, late: dict[int, float], bias: float = 0.0, latency: float = 0.0) -> None:
+        import can
+
+        from hil.transport import BusTransport
+
+        super().__init__(pair, T)
+        self.n, self.late, self._now = 0, late, 0.0
+        self.bias, self.latency = bias, latency  # every other SYNC leaves bias late; the pair sees it latency on
+        self.loop = BusTransport(can.Bus(interface="virtual", channel="emacheck-loop-timed"), T)
+        self.loop.clock = lambda: self._now
+
+    def next_sync(self) -> float | None:
+        if not self._sync_on:
+            return None
+        self.n += 1
+        if self.n == 1:
+            self._now = self.t + self.T
+            self.loop.start_sync()
+        leave = self._now = self.loop.sync_due() + self.late.get(self.n, self.bias)
+        self.loop.send_sync()
+        slot = self.loop.sync_slot_s
+        self.t = leave = leave + self.latency
+        self._to_master.extend([(f, slot) for f in self.pair.tick(leave)])
+        self._to_slaves.append(sync_frame())
+        self._pump_slaves()  # the pair's TPDOs in answer, stamped when the SYNC left
+        self.t = slot
+        return slot
+
+    def close(self) -> None:
+        super().close()
+        self.loop.close()
+        self.loop.bus.shutdown()
+
+
+AT_APPROACH = 262  #: the SYNC (counted from the first) 6 samples into the approach at 5 mm/s
+
+
+def _run_loop_timed(actuation, check, simrig, late: dict[int, float], cycles: int = AT_APPROACH + 20, **kw):
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(1)))
+    tr = LoopTimedTransport(pair, actuation.timing.sync_period_s, late, **kw)
+    m = MasterCore(actuation, shipped_rig().plan,
+                   forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
+    link = CanopenLink(m, tr, max_missing_cycles=check.safety.max_stale_cycles, max_lag_s=check.safety.max_lag_s)
+    seq, sup = CheckSequence(actuation, check), Supervisor(actuation, check)
+    samples, plant_t, violation = [], [], None
+    try:
+        smp = link.first_sample()
+        sp = (None, None)
+        for _ in range(cycles):
+            samples.append(smp)
+            plant_t.append(pair.plant.t_s)
+            if sp[0] is not None:
+                violation = sup.check(smp, *sp)
+                if violation is not None:
+                    break
+            out = seq.step(smp)
+            sp = (out.sp1, out.sp2)
+            smp = link.exchange(*sp)
+        skipped = tr.loop.sync_skipped
+    finally:
+        tr.close()
+    return pair, seq, samples, np.array(plant_t), violation, skipped
+
+
+@pytest.fixture(scope="module")
+def approach_on_time(actuation, check_profile, simrig):
+    """Every loop-timed SYNC on time: the approach's speeds [mm/s], per EMA, and its peak."""
+    _, seq, samples, _, violation, skipped = _run_loop_timed(actuation, check_profile, simrig, {})
+    assert violation is None and skipped == 0 and seq.step_now is Step.APPROACH
+    v = _speeds_mm_per_s(samples, actuation.mechanics.i_total_rad_per_mm)[1]
+    assert v.max() > 5.0  # (the approach at 5 mm/s is under way: a doubled period would read ~10)
+    return v
+
+
+T_NOM = 0.002  #: the shipped SYNC period [s] (asserted in the test)
+
+
+_BOUNDARIES = [(0.5 - 5e-7, 0.0), (0.5 + 5e-7, 0.0), (1.5 - 5e-7, 0.0), (1.5 + 5e-7, 0.0)]  # 1 ns either side
+_EARLY_THEN_LATE = [(0.7, 0.3), (0.7, 0.45), (1.7, 0.3), (2.3, 0.0)]  # early for its slot, then the next late
+
+
+@pytest.mark.parametrize("late_T, bias_latency_T", [(x, (0.0, 0.0)) for x in _BOUNDARIES + _EARLY_THEN_LATE]
+                         + [(x, (0.1, 0.3)) for x in _EARLY_THEN_LATE])
+def test_a_loop_timed_sync_late_in_the_approach_steps_the_drives_its_slots_periods(
+        actuation, check_profile, simrig, approach_on_time, late_T, bias_latency_T):
+    """Issue 37: a loop-timed SYNC leaves late (its slot is the nearest, up to T/2 early for it) and the
+    next leaves late within its slot: the simulated drives step the plant the periods the samples'
+    times say (their cycle locked to SYNC, not re-timed by each SYNC's jitter), so the supervisor
+    reads the approach's speed, not one period's extra motion over one period (2x, > 10 mm/s). Also
+    with every other SYNC 0.1 T late and 0.3 T of latency to the pair (the lock takes that phase)."""
+    T = actuation.timing.sync_period_s
+    assert T == T_NOM
+    bias, latency = bias_latency_T
+    late = {AT_APPROACH: late_T[0] * T, AT_APPROACH + 1: late_T[1] * T}
+    pair, seq, samples, plant_t, violation, skipped = _run_loop_timed(
+        actuation, check_profile, simrig, late, bias=bias * T, latency=latency * T)
+    assert violation is None and seq.step_now is Step.APPROACH
+    v = _speeds_mm_per_s(samples, actuation.mechanics.i_total_rad_per_mm)[1]
+    assert v.max() <= approach_on_time.max() + 0.2
+    expect_skipped = sum(int(x + 0.5) if x > 0.5 else 0 for x in late_T)
+    assert skipped == expect_skipped and pair.stats.free_steps == expect_skipped
+    t = np.array([s.t_s for s in samples])
+    assert np.diff(plant_t) == pytest.approx(np.diff(t), abs=1e-9)  # plant time = the samples' time

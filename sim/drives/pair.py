@@ -57,10 +57,19 @@ on the drives' clock. It does so while a drive's power stage is on
 (OPERATION_ENABLED, QUICK_STOP_ACTIVE, FAULT_REACTION_ACTIVE); with every
 drive disabled (holding brakes) the rig is at rest and is not stepped. These
 steps are counted in ``stats.free_steps``, not in ``stats.plant_steps``.
-The same holds for a late SYNC: one that comes more than 1.5 periods after
-the last step first lets the drives' own cycle run up to the period nearest
-to it (so that its TPDOs carry the rig at that time, as real drives' would),
-however short the gap was for :meth:`SimDrivePair.tick` to notice.
+The same holds for a late SYNC: one that comes more than half a period after
+the period following the last step first lets the drives' own cycle run up
+to the period nearest to it (so that its TPDOs carry the rig at that time, as
+real drives' would), however short the gap was for :meth:`SimDrivePair.tick`
+to notice. The drives' cycle is locked to SYNC as a real drive's is (a phase
+lock, :data:`SYNC_PHASE_GAIN`), not re-timed by each SYNC: the periods are
+counted on that cycle, so a SYNC that left up to T/2 off its period (the
+master's loop-timed SYNC takes the nearest slot,
+:meth:`hil.transport.BusTransport.send_sync`) is stepped as the periods the
+master's sample times say (issue 37: counted from each SYNC's own time, a
+SYNC sent early for its slot and the next sent late for its own made two
+periods of motion in one period's sample: the approach at 5 mm/s read over
+10 mm/s).
 
 Choices
 -------
@@ -109,10 +118,13 @@ from sim.drives.served import live_inputs, own_data
 from sim.drives.stats import PairCounters, SimPairStats
 from sim.plant import RigPlant
 
-__all__ = ["FREE_RUN_AFTER_CYCLES", "SimDrivePair", "SimPairStats"]
+__all__ = ["FREE_RUN_AFTER_CYCLES", "SYNC_PHASE_GAIN", "SimDrivePair", "SimPairStats"]
 
 #: SYNC periods without a SYNC after which the drives run their cycle on their own clock.
 FREE_RUN_AFTER_CYCLES = 5
+#: Gain of the drives' SYNC phase lock [1]: each SYNC moves the drives' cycle by this fraction of its
+#: offset from the period it belongs to (a first-order loop, time constant 1 / gain = 16 periods).
+SYNC_PHASE_GAIN = 1.0 / 16.0
 #: CiA 402 states with the power stage on: the drives' own cycle steps the rig while one is in them.
 _POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 
@@ -517,11 +529,20 @@ class SimDrivePair:
             self._counters.bad_frames_ignored += 1
             return
         self._counters.syncs += 1
-        if self._last_sync_t is not None and t - self._last_step_t > 1.5 * self._T:
-            # SYNC periods passed without a SYNC (its producer was late): the rig did not wait, the
-            # drives ran their own cycle on the last setpoints; this SYNC takes the nearest period
-            self._free_run(t - 0.5 * self._T)
-        self._last_sync_t = self._last_step_t = t
+        step_t = t
+        if self._last_sync_t is not None:
+            # the drives' cycle is locked to SYNC (module docstring, "late SYNC"): this SYNC is the
+            # period after the last step unless it came more than half a period after that period
+            # (the master's nearest-slot rule, hil.transport.BusTransport.send_sync, on the same
+            # numbers); then the periods passed over ran on the drives' own cycle first
+            T = self._T
+            late = t - self._last_step_t - T
+            if late > 0.5 * T:
+                self._free_run(self._last_step_t + int(late / T + 0.5) * T)
+            step_t = self._last_step_t + T
+            step_t += SYNC_PHASE_GAIN * (t - step_t)
+        self._last_sync_t = t
+        self._last_step_t = step_t
         cob = frame.arbitration_id
         n0, n1 = self.nodes
         c0 = n0.sync_cob_id == cob
@@ -587,7 +608,8 @@ class SimDrivePair:
         T = self._T
         while self._last_step_t + T <= now + TIME_EPS_S:
             if n0.state_machine.state not in _POWERED and n1.state_machine.state not in _POWERED:
-                self._last_step_t = now  # every power stage off: the rig rests on its brakes
+                # every power stage off: the rig rests on its brakes (the cycle keeps its phase)
+                self._last_step_t += int((now + TIME_EPS_S - self._last_step_t) / T) * T
                 return
             tau = self._last_step_t + T
             for node in self.nodes:
