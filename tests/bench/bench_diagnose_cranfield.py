@@ -21,6 +21,7 @@ runs 6-10 against runs 1-5 at +20 and +40 kgf, their RMS, x 3.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import tempfile
@@ -99,7 +100,15 @@ def repeatability(folder: Path) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_cranfield.json"))
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("json", nargs="?", default="bench_diagnose_cranfield.json",
+                    help="where to write the figures (default: bench_diagnose_cranfield.json in the current folder)")
+    ap.add_argument("--repeatability", action="store_true",
+                    help="also print how the default floor was measured (normal runs 6-10 against 1-5)")
+    args = ap.parse_args(argv)
+    out = Path(args.json)
+    argv = ["--repeatability"] if args.repeatability else []
     if not (CRANFIELD / "normal.csv.gz").exists():
         print(f"Cranfield recordings not present at {CRANFIELD}")
         return 2
