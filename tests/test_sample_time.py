@@ -48,22 +48,31 @@ def _run(actuation, check, simrig, extra: int, cycles: int = STALL_AT + 60):
                    forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
     link = CanopenLink(m, tr, max_missing_cycles=check.safety.max_stale_cycles, max_lag_s=check.safety.max_lag_s)
     seq, sup = CheckSequence(actuation, check), Supervisor(actuation, check)
-    samples, violation = [], None
     try:
-        smp = link.first_sample()
-        sp = (None, None)
-        for _ in range(cycles):
-            samples.append(smp)
-            if sp[0] is not None:
-                violation = sup.check(smp, *sp)
-                if violation is not None:
-                    break
-            out = seq.step(smp)
-            sp = (out.sp1, out.sp2)
-            smp = link.exchange(*sp)
+        samples, violation = _loop(link, seq, sup, cycles)
     finally:
         tr.close()
     return m, pair, seq, samples, violation
+
+
+def _loop(link, seq, sup, cycles: int, each=None):
+    """The check loop in process: ``cycles`` samples through the sequence and the supervisor (``each``
+    called with every sample first); returns the samples and the first violation (None)."""
+    samples, violation = [], None
+    smp = link.first_sample()
+    sp = (None, None)
+    for _ in range(cycles):
+        samples.append(smp)
+        if each is not None:
+            each(smp)
+        if sp[0] is not None:
+            violation = sup.check(smp, *sp)
+            if violation is not None:
+                break
+        out = seq.step(smp)
+        sp = (out.sp1, out.sp2)
+        smp = link.exchange(*sp)
+    return samples, violation
 
 
 def _speeds_mm_per_s(samples, i_rad_per_mm: float) -> tuple[np.ndarray, np.ndarray]:
@@ -267,20 +276,9 @@ def _run_loop_timed(actuation, check, simrig, late: dict[int, float], cycles: in
                    forces=(check.calibration.opposing_force_N, check.safety.max_force_N))
     link = CanopenLink(m, tr, max_missing_cycles=check.safety.max_stale_cycles, max_lag_s=check.safety.max_lag_s)
     seq, sup = CheckSequence(actuation, check), Supervisor(actuation, check)
-    samples, plant_t, violation = [], [], None
+    plant_t = []
     try:
-        smp = link.first_sample()
-        sp = (None, None)
-        for _ in range(cycles):
-            samples.append(smp)
-            plant_t.append(pair.plant.t_s)
-            if sp[0] is not None:
-                violation = sup.check(smp, *sp)
-                if violation is not None:
-                    break
-            out = seq.step(smp)
-            sp = (out.sp1, out.sp2)
-            smp = link.exchange(*sp)
+        samples, violation = _loop(link, seq, sup, cycles, lambda smp: plant_t.append(pair.plant.t_s))
         skipped = tr.loop.sync_skipped
     finally:
         tr.close()
