@@ -13,7 +13,7 @@ fork leaves the caller to do that work itself:
 
 A fork runs nothing of the parent's: SIGINT and SIGTERM end it (not the parent's handlers) and it leaves
 by ``os._exit`` (no atexit handlers, no flush of buffers it shares with the parent). Only the standard
-library is imported here (``emacheck run`` imports this before its loop).
+library is imported here (the dry-run imports this before its loop).
 """
 
 from __future__ import annotations
