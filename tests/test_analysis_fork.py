@@ -1,5 +1,6 @@
 """The dry-run's two forks: the report's figures drawn by two processes (hil.report.shell.drawn) and the
-analysis prepared during the loop (hil.cli.analysis_fork.AnalysisFork); each gives what one process gives."""
+analysis prepared during the loop (hil.cli.analysis_fork.AnalysisFork); each gives what one process gives,
+and where the fork (hil.forks) fails, hangs or cannot be had the caller does the work itself."""
 
 from __future__ import annotations
 
@@ -112,7 +113,7 @@ def test_a_fork_that_fails_answers_none(tmp_path, actuation):
 
 
 def test_a_hung_fork_is_given_up_after_the_timeout():
-    from hil.report.shell import read_until_eof
+    from hil.forks import read_until_eof
 
     r, w = os.pipe()
     try:
@@ -132,3 +133,65 @@ def test_a_hung_fork_is_given_up_after_the_timeout():
     os.close(w)
     assert read_until_eof(r, timeout_s=5.0) == b"a whole answer"
     os.close(r)
+
+
+def _open_fds() -> set[int]:
+    return {int(x) for x in os.listdir("/proc/self/fd")} if os.path.isdir("/proc/self/fd") else set()
+
+
+def test_where_os_fork_fails_the_caller_does_the_work_and_no_pipe_is_left_open(monkeypatch, tmp_path, actuation):
+    """os.fork raising (EAGAIN, ENOMEM): no fork, the figures drawn here, the analysis fork answers None."""
+    from hil.cli.analysis_fork import AnalysisFork
+
+    def no_fork():
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    before = _open_fds()
+    me = os.getpid()
+    parts = ["a", lambda: f"1 by {os.getpid()}", ("b", lambda: f"2 by {os.getpid()}")]
+    assert drawn(parts) == ["a", f"1 by {me}", f"b2 by {me}"]
+    fork = AnalysisFork(actuation, tmp_path)
+    assert fork.pid is None and fork.analysed(None, None) is None
+    fork.close()
+    assert _open_fds() == before
+
+
+def test_no_fork_while_another_thread_runs(tmp_path, actuation):
+    """A fork copies only the calling thread: while another runs, the figures are drawn here, no analysis fork."""
+    from hil.cli.analysis_fork import AnalysisFork
+    from hil.forks import can_fork
+
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, daemon=True)
+    other.start()
+    try:
+        assert not can_fork()
+        me = os.getpid()
+        assert drawn([lambda: str(os.getpid()), lambda: str(os.getpid())]) == [str(me), str(me)]
+        fork = AnalysisFork(actuation, tmp_path)
+        assert fork.pid is None and fork.analysed(None, None) is None
+    finally:
+        stop.set()
+        other.join()
+
+
+@needs_fork
+def test_a_fork_that_raises_or_hangs_answers_none_and_is_reaped():
+    from hil.forks import start
+
+    def fails():
+        raise ValueError("in the fork")
+
+    fork = start(fails)
+    assert fork is not None and fork.answer() is None
+    with pytest.raises(ChildProcessError):
+        os.waitpid(fork.pid, os.WNOHANG)  # reaped
+    fork = start(lambda: time.sleep(60))
+    t0 = time.monotonic()
+    assert fork.answer(timeout_s=0.2) is None  # given up after the timeout, stopped, reaped
+    assert time.monotonic() - t0 < 10.0
+    with pytest.raises(ChildProcessError):
+        os.waitpid(fork.pid, os.WNOHANG)
+    fork = start(lambda: {"answer": 42})
+    assert fork.answer() == {"answer": 42}

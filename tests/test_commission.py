@@ -25,7 +25,7 @@ from hil.cli import main
 from hil.cli.check import master_setup
 from hil.cli.commission import commission, simulated_transport, wiring_fault
 from hil.cli.common import ExitCode
-from hil.master.commission import TRANSITIONS, CommissionStop, Scan
+from hil.master.commission import TRANSITIONS, Commission, CommissionMaster, CommissionStop, Scan
 from hil.master.commission_rules import (
     DEAD_FRACTION,
     FORCE_GAIN_TOLERANCE,
@@ -294,6 +294,20 @@ def test_scan_of_a_rig_as_the_profile_says_finds_nothing_and_a_missing_sub_index
     asked = _drive_scan(scan, answer)
     assert scan.findings == [] and isinstance(asked[0], Nmt) and isinstance(asked[2], Wait)
     assert asked[2].until_s == 2.0  # the bounded wait for boot-ups
+
+
+def test_the_commissionings_master_lets_the_scan_hear_every_frame_it_is_fed():
+    """CommissionMaster (a MasterCore): the scan hears each frame before the master handles it, only during
+    the scan; start() runs the scan first (steps); nothing is patched on the instance."""
+    core = Commission(ACT, CHECK, PLAN)
+    master = CommissionMaster(core, ACT, PLAN, forces=(2.0 * LIM.force_N, LIM.max_force_N), safety=CHECK.safety)
+    assert "on_frame" not in vars(master) and master.steps is not None
+    unknown = master.unknown_frames
+    master.on_frame(Frame(0x705, b"\x00"), 0.0)  # a boot-up of node 5, at an id the rig does not have
+    assert core.scan.heard == {5} and master.unknown_frames == unknown + 1  # heard, and handled by the master
+    core.stage = Stage.PREFLIGHT
+    master.on_frame(Frame(0x706, b"\x00"), 0.0)
+    assert core.scan.heard == {5}  # after the scan, not heard
 
 
 def test_wiring_fault_option():

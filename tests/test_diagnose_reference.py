@@ -250,6 +250,21 @@ def test_without_a_reference_a_stated_current_gain_is_used_and_the_masks_reporte
                                                                              "asymmetric_friction"}
 
 
+def test_without_a_reference_the_recording_is_read_once(tmp_path, monkeypatch):
+    """The effort check against the load column and the model are made of the same arrays, read once."""
+    import hil.analysis.diagnose_axis as axis
+
+    reads = []
+    read_axis = axis.read_axis
+    monkeypatch.setattr(axis, "read_axis", lambda path: reads.append(path) or read_axis(path))
+    new = write_csv(tmp_path / "new.csv")
+    out = tmp_path / "o"
+    assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--current-per-force",
+                 str(K_A_PER_N), "--out", str(out), "--quiet", "--no-report"]) == 0
+    data = json.loads((out / "diagnosis.json").read_text())
+    assert data["effort"]["recording"]["checked"] and reads == [new]
+
+
 def test_a_current_without_a_stated_gain_or_reference_exits_3(tmp_path):
     new = write_csv(tmp_path / "new.csv")
     assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--out",
@@ -264,14 +279,14 @@ def test_a_term_the_recording_cannot_separate_is_no_candidate(tmp_path, speeds, 
     held (no acceleration in the samples compared) and Coulomb and viscous are one friction. Two speed levels
     separate Coulomb from viscous and |v| from an offset, not yet a two-parameter Stribeck curve from
     Coulomb plus viscous (two speeds per direction, four odd terms); four levels do."""
-    from hil.analysis.diagnose_axis import AxisOptions, single_axis_model
+    from hil.analysis.diagnose_axis import AxisOptions, read_axis, single_axis_model
     rng = np.random.default_rng(5)
     t, qr, q, d = trapezoid(8, speeds=speeds, rng=rng)
     i = power_current(qr, q, d, 1600.0, 196.0, rng)
     cols = np.column_stack([t, q, qr, i, np.full(t.size, 196.0)])
     path = tmp_path / "x.csv"
     np.savetxt(path, cols, delimiter=",", header="t,q,q_ref,current,load", comments="")
-    model, _ = single_axis_model(path, AxisOptions(current_law="power", current_a_per_N=K_A_PER_N))
+    model, _ = single_axis_model(read_axis(path), AxisOptions(current_law="power", current_a_per_N=K_A_PER_N))
     names = {c.name for c in model.candidates}
     assert ("asymmetric_friction" in names) is asym and ("stribeck_friction" in names) is stribeck
     assert ("viscous_N_s_per_m" in model.names) is asym

@@ -204,9 +204,8 @@ FOREIGN_PRIVATE_OK = {
     ("hil/cli/common.py", "_multicast"): "python-can's udp_multicast bus keeps its one socket there, with no public "
     "way to set IP_MULTICAST_ALL off on it (open_bus fails closed if it is gone)",
     ("hil/cli/common.py", "_socket"): "the socket of python-can's udp_multicast bus (see _multicast)",
-    ("hil/cli/analysis_fork.py", "_exit"): "os._exit, the documented way for a fork to end without the parent's "
+    ("hil/forks.py", "_exit"): "os._exit, the documented way for a fork to end without the parent's "
     "cleanup (atexit, buffered files)",
-    ("hil/report/shell.py", "_exit"): "os._exit in the figures' fork (see hil/cli/analysis_fork.py)",
 }
 
 

@@ -71,11 +71,11 @@ def load_dual(path: Path, profile: Path | None):
 def load_model(path: Path, model: str, profile: Path | None, axis_options=None):
     """Replay model and sample period of a recording (run folder, CSV, CAN log, .mat); a single axis is
     read with ``axis_options`` (:class:`hil.analysis.diagnose_axis.AxisOptions`, how to read its effort)."""
-    from hil.analysis.diagnose_axis import AxisOptions, single_axis_model
+    from hil.analysis.diagnose_axis import AxisOptions, read_axis, single_axis_model
     if not Path(path).exists():
         raise RecordingError(f"{path}: no such file or folder")
     if model == "single-axis":
-        return single_axis_model(Path(path), axis_options or AxisOptions())
+        return single_axis_model(read_axis(Path(path)), axis_options or AxisOptions())
     return load_dual(Path(path), profile)
 
 

@@ -390,12 +390,12 @@ def _rd(d: dict) -> dict:
     return {k: _r(v) for k, v in d.items()}
 
 
-def model_effort_check(path: Path, opts: AxisOptions) -> dict | None:
-    """Without a reference: diagnosis.json's ``effort`` of a single-axis recording with a known load (the
-    nominal model fitted on it alone, :func:`blf.axis_reference.effort_load_check`); None without a load."""
+def model_effort_check(rec: AxisRecording, opts: AxisOptions) -> dict | None:
+    """Without a reference: diagnosis.json's ``effort`` of a single-axis recording (:func:`read_axis`) with a
+    known load (the nominal model fitted on it alone, :func:`blf.axis_reference.effort_load_check`); None
+    without a load."""
     from blf.axis_reference import effort_load_check, fit_axis
     from blf.errors import AnalysisError
-    rec = read_axis(path)
     if rec.load is None:
         return None
     k, _, rel = conversion(rec, opts)
@@ -417,12 +417,12 @@ def untrusted_dict(effort: dict) -> dict:
             "band": {"cutoff_hz": None, "step": 1, "words": "nothing compared: the effort is not trusted"}}
 
 
-def single_axis_model(path: Path, opts: AxisOptions):
-    """The replay model of :func:`blf.diagnose.diagnose` (no reference) and its sample period (s).
+def single_axis_model(rec: AxisRecording, opts: AxisOptions):
+    """The replay model of :func:`blf.diagnose.diagnose` (no reference) and its sample period (s), of a
+    single-axis recording (:func:`read_axis`).
 
     A current needs its conversion stated (law and gain); the masked samples are not compared."""
     from sim.single_axis import SingleAxisReplay
-    rec = read_axis(path)
     k, _, _ = conversion(rec, opts)
     m = _mask(rec, opts)
     force = axis_force(rec, opts, k, m.moving)

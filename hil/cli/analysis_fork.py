@@ -8,83 +8,72 @@ on disk (the same function as in process, :func:`hil.cli.check.analysed`) and dr
 (its figures by two processes, :func:`hil.report.shell.drawn`); it sends back the result and the
 report's HTML and writes nothing: result.json and report.html are written by the dry-run itself
 (:func:`hil.cli.check.analyze_and_report`). Whatever goes wrong in the fork (an analysis error, a
-crash, an interrupt) ends it without an answer, and the dry-run analyses in process as before: an
-error is then raised there, as it always was.
+crash, an interrupt, no answer within :data:`hil.forks.FORK_TIMEOUT_S`) ends it without an answer, and
+the dry-run analyses in process as before: an error is then raised there, as it always was. The fork
+itself (when to fork, its setup and end, the wait, the reaping) is :mod:`hil.forks`; this module is
+only what the fork does.
 """
 
 from __future__ import annotations
 
 import os
 import pickle
-import signal
-import threading
 from pathlib import Path
+
+from hil.forks import can_fork, send, start
 
 
 class AnalysisFork:
     """A fork of this process that imports the analysis now and analyses the run folder ``out`` when
-    asked (:meth:`analysed`); nothing (``pid`` None) where there is no ``os.fork`` or another thread
-    runs (a fork copies only the calling thread)."""
+    asked (:meth:`analysed`); nothing (``pid`` None) where there is no fork (:func:`hil.forks.start`:
+    no ``os.fork``, another thread runs, or ``os.fork`` fails)."""
 
     def __init__(self, act, out: Path) -> None:
-        self.pid: int | None = None
-        if not hasattr(os, "fork") or threading.active_count() != 1:
+        self._fork = None
+        self._req = -1
+        if not can_fork():
             return
         req_r, req_w = os.pipe()
-        res_r, res_w = os.pipe()
-        pid = os.fork()
-        if pid == 0:  # the fork: never returns, runs nothing of the parent's (atexit, buffers, handlers)
-            code = 1
-            try:
-                for s in (signal.SIGINT, signal.SIGTERM):  # an interrupt ends the fork, silently
-                    signal.signal(s, signal.SIG_DFL)
-                os.close(req_w)
-                os.close(res_r)
-                _serve(req_r, res_w, act, Path(out))
-                code = 0
-            finally:
-                os._exit(code)
+        self._fork = start(lambda: _serve(req_r, act, Path(out)), child_closes=(req_w,))
         os.close(req_r)
-        os.close(res_w)
-        self.pid, self._req, self._res = pid, req_w, res_r
+        if self._fork is None:
+            os.close(req_w)
+        else:
+            self._req = req_w
+
+    @property
+    def pid(self) -> int | None:
+        """The fork's process id; None: no fork, or it has ended (:meth:`close`)."""
+        return self._fork.pid if self._fork is not None else None
 
     def analysed(self, rec, truth: dict | None) -> tuple[dict, str] | None:
         """The result and the report's HTML of the finished check whose record is ``rec`` (``truth``: the
-        simulator's truth beside it), or None (no fork, or it ended without an answer)."""
-        if self.pid is None:
+        simulator's truth beside it), or None (no fork, or it ended without an answer or hung:
+        :meth:`hil.forks.Fork.answer`)."""
+        if self._fork is None:
             return None
-        from hil.report.shell import read_until_eof
-
         try:
-            with os.fdopen(self._req, "wb") as f:
-                self._req = -1
-                pickle.dump((rec, truth), f, protocol=pickle.HIGHEST_PROTOCOL)
-            data = read_until_eof(self._res)  # (b"" from a fork that ended without an answer or hung)
+            req, self._req = self._req, -1
+            send(req, (rec, truth))
+            return self._fork.answer()
         except (OSError, pickle.PicklingError):  # the fork is gone (a broken pipe)
-            data = b""
+            return None
         finally:
             self.close()
-        try:
-            return pickle.loads(data) if data else None
-        except (EOFError, pickle.UnpicklingError):  # cut short: the fork died while it sent
-            return None
 
     def close(self) -> None:
         """End the fork (if it still waits: the request pipe closed, then stopped) and wait for it."""
-        for fd in (self._req, self._res) if self.pid is not None else ():
-            if fd >= 0:
-                os.close(fd)
-        self._req = self._res = -1
-        if self.pid is None:
-            return
-        pid, self.pid = self.pid, None
-        from hil.report.shell import reap_fork  # (here: `run` imports this module, never the report before its loop)
-
-        reap_fork(pid)
+        if self._req >= 0:
+            os.close(self._req)
+            self._req = -1
+        if self._fork is not None:
+            fork, self._fork = self._fork, None
+            fork.close()
 
 
-def _serve(req_r: int, res_w: int, act, out: Path) -> None:
-    """In the fork: import, wait for the finished check's record, analyse and draw, send."""
+def _serve(req_r: int, act, out: Path) -> tuple[dict, str] | None:
+    """In the fork: import, wait for the finished check's record, analyse and draw; the result and the
+    report's HTML (sent back by :func:`hil.forks.start`), None if the dry-run did not ask."""
     from hil.cli.check import analysed
     from hil.cli.common import Outputs
     from hil.report.maint import report_html
@@ -94,9 +83,8 @@ def _serve(req_r: int, res_w: int, act, out: Path) -> None:
     with os.fdopen(req_r, "rb") as f:
         data = f.read()
     if not data:  # the dry-run did not ask (its check did not finish)
-        return
+        return None
     rec, truth = pickle.loads(data)
     sig, an, result = analysed(out / "signals.csv", act, truth, rec)
     html = report_html(sig, an, result, act, rec, json_name=Outputs(out, own=True).path("result.json").name)
-    with os.fdopen(res_w, "wb") as f:
-        pickle.dump((result, html), f, protocol=pickle.HIGHEST_PROTOCOL)
+    return result, html

@@ -204,20 +204,23 @@ def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: 
                        prepared: tuple[dict, str] | None = None) -> dict:
     """Read the signals back, analyse, write result.json and report.html into ``outputs``. ``prepared``:
     the result and the report's HTML of exactly this (:class:`hil.cli.analysis_fork.AnalysisFork`), only
-    written here."""
+    written here. The report is drawn after result.json is written (an interrupt while it is drawn
+    leaves the result)."""
     if prepared is not None:
         result, html = prepared
-        outputs.folder.mkdir(parents=True, exist_ok=True)
-        outputs.write_json("result.json", result)
-        outputs.write_with("report.html", lambda path: Path(path).write_text(html))
-        return result
-    from hil.report.maint import write_report
 
-    sig, an, result = analysed(sig_path, act, truth, meta, trace_extra)
+        def write(path: Path) -> None:
+            Path(path).write_text(html)
+    else:
+        from hil.report.maint import write_report
+
+        sig, an, result = analysed(sig_path, act, truth, meta, trace_extra)
+
+        def write(path: Path) -> None:
+            write_report(path, sig, an, result, act, meta, json_name=outputs.path("result.json").name)
     outputs.folder.mkdir(parents=True, exist_ok=True)
     outputs.write_json("result.json", result)  # created, never over another result (but a run's own)
-    outputs.write_with("report.html", lambda path: write_report(path, sig, an, result, act, meta,
-                                                                json_name=outputs.path("result.json").name))
+    outputs.write_with("report.html", write)
     return result
 
 

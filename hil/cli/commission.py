@@ -88,9 +88,8 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     """
     from hil.canopen.errors import CanopenError
     from hil.errors import KNOWN_ERRORS
-    from hil.master.commission import Commission
+    from hil.master.commission import Commission, CommissionMaster
     from hil.master.commission_rules import Finding, Kind, Stage
-    from hil.master.core import MasterCore
     from hil.master.link import CanopenLink
     from hil.record.canlog import CanLogWriter
     from hil.transport import InProcessTransport
@@ -103,15 +102,8 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     lim = core.lim
     # during commissioning the drives keep the commissioning's force limit as their max torque themselves
     safety = dataclasses.replace(check.safety, max_force_N=lim.max_force_N)
-    master = MasterCore(act, rig.plan, forces=(2.0 * lim.force_N, lim.max_force_N), safety=safety)
-    master.steps = core.steps(master.preflight)
-    take = master.on_frame
-
-    def on_frame(frame, t):  # every frame the master is fed is heard by the scan too (any node id)
-        core.heard(frame)
-        return take(frame, t)
-
-    master.on_frame = on_frame
+    # every frame the master is fed is heard by the scan too (any node id); the scan runs before the preflight
+    master = CommissionMaster(core, act, rig.plan, forces=(2.0 * lim.force_N, lim.max_force_N), safety=safety)
     # wall-clock stamps on a real bus, as candump writes them (run does the same)
     log = CanLogWriter(out / "can.log", channel=str(context["bus"]["channel"]),
                        time_offset_s=0.0 if sim else transport.wall_clock_offset_s)

@@ -15,6 +15,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from blf.diagnose import diagnose
     from blf.errors import AnalysisError, InputError
     from hil.analysis.diagnose import diagnosis_dict, load_model
+    from hil.analysis.diagnose_axis import single_axis_model
     from hil.errors import RecordingError
     from hil.report.diagnose import write_report
     console = make_console()
@@ -22,7 +23,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     opts = _axis_options(args)
     if args.reference is not None:
         return _cmd_reference(args, path, opts, console)
-    effort = _model_effort(args, path, opts)
+    t0 = time.perf_counter()
+    axis = _single_axis(args, path)  # read once: the effort check and the model are made of the same arrays
+    read_s = time.perf_counter() - t0
+    effort = _model_effort(args, axis, opts)
     if effort is not None and not effort["trusted"]:
         from hil.analysis.diagnose_axis import untrusted_dict
         outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
@@ -31,9 +35,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         console.print(f"[bold]effort not trusted, not diagnosed[/bold]: {effort['words']}; written "
                       f"{outputs.path('diagnosis.json')}")
         return 5  # inconclusive: the reason is in diagnosis.json (README, Exit status)
-    t0 = time.perf_counter()
+    t0 = time.perf_counter() - read_s  # (the diagnosis's time includes reading the recording, as it did)
     try:
-        model, period = load_model(path, args.model, args.profile, opts)
+        model, period = single_axis_model(axis, opts) if axis is not None else \
+            load_model(path, args.model, args.profile, opts)
         d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
     except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input
         raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
@@ -91,14 +96,24 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
-def _model_effort(args: argparse.Namespace, path: Path, opts):
-    """Single axis with a load column, no reference: whether its effort sees the load (None otherwise)."""
-    if args.model != "single-axis" or path.is_dir() or path.suffix.lower() == ".mat":
+def _single_axis(args: argparse.Namespace, path: Path):
+    """The single-axis recording (:func:`hil.analysis.diagnose_axis.read_axis`), read once for the effort
+    check and the model; None for the dual-EMA model."""
+    if args.model != "single-axis":
+        return None
+    from hil.analysis.diagnose_axis import read_axis
+    return read_axis(path)
+
+
+def _model_effort(args: argparse.Namespace, axis, opts):
+    """Single axis (``axis``: its recording) with a load column, no reference: whether its effort sees the
+    load (None otherwise: no load column, an EMPS ``.mat`` has none)."""
+    if axis is None:
         return None
     from hil.analysis.diagnose_axis import AxisOptions, model_effort_check
     floor = args.force_floor_N if args.force_floor_N is not None else AxisOptions().force_floor_N
     import dataclasses
-    return model_effort_check(path, dataclasses.replace(opts, force_floor_N=floor))
+    return model_effort_check(axis, dataclasses.replace(opts, force_floor_N=floor))
 
 
 def _axis_options(args: argparse.Namespace):

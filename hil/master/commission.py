@@ -57,10 +57,11 @@ from hil.master.commission_rules import (
     rest_findings,
     swap_findings,
 )
+from hil.master.core import MasterCore
 from hil.master.preflight import MasterLossReactionError, Nmt, Now, PreflightError, SdoRead, Wait, identity_problems
 from hil.profile.config import Actuation, Check
 
-__all__ = ["Commission", "CommissionStop", "Scan", "TRANSITIONS"]
+__all__ = ["Commission", "CommissionMaster", "CommissionStop", "Scan", "TRANSITIONS"]
 
 #: The commissioning's transitions (an illegal one raises).
 TRANSITIONS: dict[Stage, frozenset[Stage]] = {
@@ -435,3 +436,28 @@ class Commission:
 
 
 _DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
+
+
+class CommissionMaster(MasterCore):
+    """The master core of a commissioning: :class:`~hil.master.core.MasterCore` as the check's, but every
+    frame it is fed is heard by the commissioning's scan too (:meth:`Commission.heard`: boot-ups and
+    heartbeats of any node id) before the master handles it, and :meth:`~hil.master.core.MasterCore.start`
+    runs the scan and then the preflight (:meth:`Commission.steps`) instead of the preflight alone.
+
+    Parameters
+    ----------
+    core : Commission
+        The commissioning that hears the frames.
+    actuation, plan, forces, safety
+        As :class:`~hil.master.core.MasterCore`'s.
+    """
+
+    def __init__(self, core: Commission, actuation: Actuation, plan, forces: tuple[float, float], safety) -> None:
+        super().__init__(actuation, plan, forces=forces, safety=safety)
+        self.commission = core
+        self.steps = core.steps(self.preflight)
+
+    def on_frame(self, frame: Frame, t: float) -> list[Frame]:
+        """:meth:`Commission.heard`, then :meth:`MasterCore.on_frame <hil.master.core.MasterCore.on_frame>`."""
+        self.commission.heard(frame)
+        return super().on_frame(frame, t)

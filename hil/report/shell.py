@@ -11,15 +11,13 @@ of ``emacheck run``).
 from __future__ import annotations
 
 import base64
-import contextlib
 import html
 import io
-import os
-import threading
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from hil.forks import can_fork, run_in_two
 from hil.history.record import is_simulated
 from hil.history.trends import fmt_serial
 
@@ -79,102 +77,22 @@ def drawn(parts: Sequence[str | Callable[[], str] | tuple], *, processes: int = 
     tuple of those joined into one string, the figures drawn by up to ``processes`` processes at once;
     the same strings in the same order as one process draws them.
 
-    The second process is a fork of this one (nothing pickled in, the PNG data URIs pickled back): both
-    take the next figure not yet taken, in the order of ``parts``, from a pipe holding their indices
-    (one byte each, a read of one byte from a pipe is atomic). A figure the fork did not return (it
-    died, or is killed by the interrupt that stops this process) is drawn here. One process where
-    there is no ``os.fork``, where another thread runs (a fork copies only the calling thread), with
-    fewer than two figures or ``processes`` below 2.
+    The second process is a fork of this one (nothing pickled in, the PNG data URIs pickled back), both
+    taking the next figure not yet taken in the order of ``parts`` (:func:`hil.forks.run_in_two`). A
+    figure the fork did not return (it died, or is killed by the interrupt that stops this process) is
+    drawn here. One process where there is no fork (:func:`hil.forks.can_fork`: no ``os.fork``, another
+    thread runs; or ``os.fork`` fails), with fewer than two figures or ``processes`` below 2.
     """
     pieces = [list(p) if isinstance(p, tuple) else [p] for p in parts]
     flat = [x for p in pieces for x in p]
     jobs = {i: x for i, x in enumerate(flat) if callable(x)}
     done: dict[int, str] = {}
-    if processes >= 2 and 2 <= len(jobs) and max(jobs) < 256 and hasattr(os, "fork") \
-            and threading.active_count() == 1:
+    if processes >= 2 and 2 <= len(jobs) and max(jobs) < 256 and can_fork():
         pyplot()  # imported once, before the fork: both processes have it
-        done = _draw_forked(jobs)
+        done = run_in_two(jobs)
     out = [done[i] if i in done else (x() if callable(x) else x) for i, x in enumerate(flat)]
     it = iter(out)
     return ["".join(next(it) for _ in p) for p in pieces]
-
-
-def _draw_forked(jobs: dict[int, Callable[[], str]]) -> dict[int, str]:
-    """Draw ``jobs`` (index: callable) in this process and a fork of it, each taking the next index from
-    a shared pipe; what both drew (the fork's share pickled back through a second pipe)."""
-    import gc
-    import pickle
-    import signal
-
-    todo_r, todo_w = os.pipe()
-    os.write(todo_w, bytes(sorted(jobs)))  # at most 255 indices: less than a pipe's buffer
-    os.close(todo_w)  # the pipe empty: a read returns b"", no figure left
-    back_r, back_w = os.pipe()
-    gc.freeze()  # the heap as it is stays out of both collectors' passes (pages shared by the fork stay shared)
-    try:
-        pid = os.fork()
-    finally:
-        gc.unfreeze()
-    if pid == 0:  # the fork: draw, send, leave without running anything of the parent's (atexit, buffers)
-        code = 1
-        try:
-            for s in (signal.SIGINT, signal.SIGTERM):  # not the parent's handlers: an interrupt ends the fork
-                signal.signal(s, signal.SIG_DFL)
-            os.close(back_r)
-            mine = {}
-            while (b := os.read(todo_r, 1)):
-                mine[b[0]] = jobs[b[0]]()
-            with os.fdopen(back_w, "wb") as f:
-                pickle.dump(mine, f, protocol=pickle.HIGHEST_PROTOCOL)
-            code = 0
-        finally:
-            os._exit(code)
-    os.close(back_w)
-    done: dict[int, str] = {}
-    try:
-        while (b := os.read(todo_r, 1)):
-            done[b[0]] = jobs[b[0]]()
-        data = read_until_eof(back_r)
-        with contextlib.suppress(EOFError, pickle.UnpicklingError):  # the fork died: the caller draws its share
-            done.update(pickle.loads(data))
-    finally:
-        os.close(todo_r)
-        os.close(back_r)
-        reap_fork(pid)
-    return done
-
-
-#: how long a process waits for its fork's answer [s] before it stops the fork and does the work itself: a
-#: hung fork (the analysis and report take ~1 s on a quiet machine, ~10 s at a load average of 8)
-FORK_TIMEOUT_S = 600.0
-
-
-def read_until_eof(fd: int, timeout_s: float = FORK_TIMEOUT_S) -> bytes:
-    """What the pipe ``fd`` gives until its writer (a fork) closes it; ``b""`` if that takes longer than
-    ``timeout_s``."""
-    import select
-    import time
-
-    chunks = []
-    deadline = time.monotonic() + timeout_s
-    while True:
-        left = deadline - time.monotonic()
-        if left <= 0 or not select.select([fd], [], [], left)[0]:
-            return b""
-        if not (b := os.read(fd, 1 << 20)):
-            return b"".join(chunks)
-        chunks.append(b)
-
-
-def reap_fork(pid: int) -> None:
-    """Wait for the fork ``pid``; stop it first (SIGTERM) if it is still running (this process interrupted,
-    or the fork hung)."""
-    import signal
-
-    if os.waitpid(pid, os.WNOHANG)[0] == 0:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGTERM)
-        os.waitpid(pid, 0)
 
 
 def thin(n: int, max_points: int = 6000) -> slice:
