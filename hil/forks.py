@@ -89,12 +89,13 @@ def start(work: Callable[[], Any], *, child_closes: Iterable[int] = (), freeze_g
     try:
         pid = os.fork()
     except OSError:  # no process to be had (EAGAIN, ENOMEM): the caller does the work itself
+        if freeze_gc:
+            gc.unfreeze()
         os.close(r)
         os.close(w)
         return None
-    finally:
-        if freeze_gc:
-            gc.unfreeze()
+    if freeze_gc and pid != 0:  # the fork keeps the heap frozen: its collector never walks (and copies) it
+        gc.unfreeze()
     if pid == 0:  # the fork: never returns, runs nothing of the parent's (atexit, buffers, handlers)
         code = 1
         try:
