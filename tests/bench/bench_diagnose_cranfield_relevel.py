@@ -46,7 +46,7 @@ f) **Offset steps at a fixed phase whose size varies from cycle to cycle** (per-
 
     python tests/bench/bench_diagnose_cranfield_relevel.py [/tmp/relevel.json]
 
-About 2 s on one core. Exits 2 where ../shared is absent.
+About 4 s on one core. Exits 2 where ../shared is absent.
 """
 
 from __future__ import annotations
@@ -229,6 +229,23 @@ def table() -> list:
     return rows
 
 
+def halves() -> dict:
+    """Rules e and f on runs 1-5 and on runs 6-10 alone (the files the reference comparison diagnoses)."""
+    out = {}
+    for runs in (range(1, 6), range(6, 11)):
+        for load in (20.0, 40.0, -40.0):
+            side = out.setdefault(f"runs {runs[0]}-{runs[-1]}, {'-40' if load < 0 else '+20/+40'} kgf",
+                                  {"rows": 0, "e": 0, "f": 0})
+            for name in DEVELOPMENT:
+                cur = runs_of(name, load, runs)[0]
+                zones = motion_zones(np.concatenate(runs_of(name, load, runs, "set_point")[0]),
+                                     np.concatenate(runs_of(name, load, runs, "position_error")[0]))
+                side["rows"] += 1
+                side["e"] += bool(recurring_steps(np.concatenate(cur), zones)["flagged"])
+                side["f"] += bool(varying_steps(cur, zones)["flagged"])
+    return out
+
+
 def main(argv: list) -> int:
     if not (CRANFIELD / "normal.csv.gz").exists():
         print(f"Cranfield recordings not present at {CRANFIELD}", file=sys.stderr)
@@ -263,9 +280,13 @@ def main(argv: list) -> int:
         bad = sum(r[f"flag_{rule}"] for r in rows if r["load_kgf"] < 0)
         false = sum(r[f"flag_{rule}"] for r in rows if r["load_kgf"] > 0)
         print(f"\nrule {rule}: flags {bad} of 7 rows at -40 kgf, {false} of 14 at +20/+40 kgf")
+    half = halves()
+    print()
+    for k, v in half.items():
+        print(f"{k}: rule e flags {v['e']} of {v['rows']}, rule f {v['f']} of {v['rows']}")
     if len(argv) > 1:
-        Path(argv[1]).write_text(json.dumps({"c_pair": C_PAIR, "alpha": ALPHA, "p_under": P_UNDER, "rows": rows},
-                                            indent=1))
+        Path(argv[1]).write_text(json.dumps({"c_pair": C_PAIR, "alpha": ALPHA, "p_under": P_UNDER, "rows": rows,
+                                             "halves": half}, indent=1))
         print(f"written {argv[1]}")
     return 0
 
