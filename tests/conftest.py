@@ -3,10 +3,20 @@
 from __future__ import annotations
 
 import atexit
+import gc
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
+
+# Bytecode: this machine's environment sets PYTHONDONTWRITEBYTECODE=1, so every pytest process (each
+# xdist worker, every run) compiled the project's modules and rewrote the ~90 test modules' asserts
+# anew: about 4 of a worker's 7.5 s of collection CPU (docs/performance.md, "Fast loop, fourth pass").
+# The tests' own process writes its bytecode (git-ignored __pycache__; pytest's rewritten test modules
+# under their own tag); each file's is checked against its source's mtime and size at every import, as
+# Python's own cache is. The commands the tests start keep the environment's setting and read it.
+sys.dont_write_bytecode = False
 
 # One OpenBLAS thread for the tests and every command they start (subprocesses inherit it); set
 # before numpy is first imported, which loads OpenBLAS. The tests' matrices are small, and on a
@@ -82,6 +92,17 @@ def pytest_collection_modifyitems(config, items):
 
     items.sort(key=lambda item: FIRST_GROUPS.index(group(item)) if group(item) in FIRST_GROUPS
                else len(FIRST_GROUPS))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_finish(session):
+    """What collection built (the imported modules, numba's and scipy's objects, the test items: ~260 000
+    objects the collector tracks, ~0.1-0.2 s per full collection) lives until the run ends: moved out of
+    the collector's generations, so its full collections (during the tests, and pytest's five at the end
+    of the session, which look for unraisable exceptions) no longer walk it. Garbage made after this is
+    collected as before."""
+    gc.collect()
+    gc.freeze()
 
 
 @pytest.hookimpl(wrapper=True)

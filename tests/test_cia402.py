@@ -431,6 +431,21 @@ def test_master_table_commands_are_transitions_or_hold_the_state():
     assert {(g, s) for g in Goal for s in State if s is not S.QUICK_STOP_ACTIVE} == set(MASTER_COMMANDS)
 
 
+def test_controlword_and_master_command_take_a_member_or_its_value():
+    """The hot path takes the members as they are and anything else through its Enum (b09b4a3): a value
+    gives its member's answer, a value of no member is refused."""
+    for c in Command:
+        assert controlword(c.value) == controlword(c), c
+    for (goal, state), cmd in MASTER_COMMANDS.items():
+        assert master_command(goal.value, state) is cmd, (goal, state)
+        assert master_command(goal, state.value) is cmd, (goal, state)
+        assert master_command(goal.value, state.value) is cmd, (goal, state)
+    with pytest.raises(ValueError, match="'halt' is not a valid Command"):
+        controlword("halt")
+    with pytest.raises(ValueError, match="'up' is not a valid Goal"):
+        master_command("up", S.FAULT)
+
+
 @pytest.mark.parametrize("goal", [g for g in Goal if g is not Goal.DISABLED], ids=lambda g: g.name)
 def test_master_in_quick_stop_active_waits_for_standstill(goal):
     """Quick stop while the drive may still move (the default: not known to stand still), disable

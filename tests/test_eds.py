@@ -156,6 +156,23 @@ def test_missing_or_garbage_eds(tmp_path):
         load_eds(bad)
 
 
+@pytest.mark.parametrize("exc, reason", [(PermissionError(13, "Permission denied"), "Permission denied"),
+                                         (OSError("no strerror"), "no strerror")])
+def test_an_eds_that_cannot_be_read_is_refused_with_the_systems_reason(tmp_path, monkeypatch, exc, reason):
+    """A read error (as root no permission bit refuses a read, so the read is made to fail) names the file
+    and the system's reason, else the error itself."""
+    eds = tmp_path / "drive.eds"
+    shutil.copy(default_eds_path(), eds)
+
+    def fail(self):
+        raise exc
+
+    monkeypatch.setattr(Path, "read_bytes", fail)
+    with pytest.raises(EdsError) as err:
+        load_eds(eds)
+    assert str(err.value) == f"{eds}: cannot read the EDS: {reason}"
+
+
 def test_master_loss_objects_in_the_shipped_eds(od):
     """The drive's own reaction to the master's death: consumer heartbeat 0x1016 (four entries,
     all unused by default) and the CiA 402 abort connection option 0x6007 (default 1, fault)."""

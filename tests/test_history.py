@@ -27,6 +27,10 @@ from support import postgres
 from support.ci import skip_or_fail
 from support.wear import SERIALS, true_crossing_fh, wear_results
 
+#: one xdist group for the modules that use this process's PostgreSQL server (support/postgres.py): one
+#: worker starts it once per run, not each worker once (docs/testing.md, "Parallel")
+pytestmark = pytest.mark.xdist_group("postgresql")
+
 SCHEMA = json.loads((Path(__file__).resolve().parents[1] / "hil" / "schemas" / "history.schema.json").read_text())
 
 

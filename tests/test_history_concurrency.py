@@ -17,6 +17,10 @@ from hil.history import schema as S
 from hil.history.store import HistoryStore
 from support import postgres
 
+#: one xdist group for the modules that use this process's PostgreSQL server (support/postgres.py): one
+#: worker starts it once per run, not each worker once (docs/testing.md, "Parallel")
+pytestmark = pytest.mark.xdist_group("postgresql")
+
 WRITER = Path(__file__).resolve().parent / "support" / "history_writer.py"
 
 

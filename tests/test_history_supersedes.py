@@ -17,6 +17,10 @@ from hil.history.store import HistoryStore
 from support import postgres
 from support.wear import wear_results
 
+#: one xdist group for the modules that use this process's PostgreSQL server (support/postgres.py): one
+#: worker starts it once per run, not each worker once (docs/testing.md, "Parallel")
+pytestmark = pytest.mark.xdist_group("postgresql")
+
 
 def _results():
     first = wear_results(n=1, simulated=False)[0]

@@ -44,13 +44,17 @@ EQUIVALENT = Path(__file__).with_name("mutation_equivalent.toml")
 #: tests/test_blf_maint.py (20 s of every mutant's run); tests/test_boundaries_maint.py has the
 #: known answers that stand in for them
 TESTS: dict[str, list[str]] = {
-    "hil/check/supervisor.py": ["tests/test_boundaries_supervisor.py", "tests/test_faults_bad_input.py"],
+    # test_boundaries_staleness: the freshness limit in force (kept limits, its name and reason; issue 37)
+    "hil/check/supervisor.py": ["tests/test_boundaries_supervisor.py", "tests/test_boundaries_staleness.py",
+                                "tests/test_faults_bad_input.py"],
     "blf/verdict.py": ["tests/test_boundaries_verdict.py", "tests/test_verdict.py"],
     "blf/maint.py": ["tests/test_boundaries_maint.py", "tests/test_blf_maint.py",
                      "-k", "not acceptance and not sigmas_match_seed_spread and not slope_sign_corners"],
     # the CANopen modules (issue 23's rewrite): the tests that pin them by mutation (issue 26) are in these files
     "hil/canopen/cia402.py": ["tests/test_cia402.py", "tests/test_sim_slave.py", "tests/test_master.py"],
-    "hil/canopen/od.py": ["tests/test_eds.py", "tests/test_master.py", "tests/test_sim_slave.py"],
+    # test_bad_recordings: load_eds' refusals of a folder and of text that is not UTF-8, and a byte-order mark read
+    "hil/canopen/od.py": ["tests/test_eds.py", "tests/test_master.py", "tests/test_sim_slave.py",
+                          "tests/test_bad_recordings.py"],
     "sim/drives/nmt_slave.py": ["tests/test_boundaries_nmt_slave.py", "tests/test_sim_slave.py"],
 }
 DEFAULT = ["hil/check/supervisor.py", "blf/verdict.py", "blf/maint.py"]
