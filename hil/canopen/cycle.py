@@ -20,6 +20,7 @@ type's range. No IO, no clock.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -36,6 +37,8 @@ __all__ = ["CycleDecoder", "RxValues", "SAMPLE_SLOTS", "SetpointEncoder", "SyncS
 SAMPLE_SLOTS: dict[tuple[int, Signal], int] = {
     (1, Signal.MOTOR_ANGLE): 0, (2, Signal.MOTOR_ANGLE): 1, (1, Signal.LVDT): 2, (2, Signal.LVDT): 3,
     (1, Signal.FORCE): 4, (2, Signal.FORCE): 5}
+
+_trusted = Frame.trusted
 
 
 def _resolved(ch: Channel) -> Scale | None:
@@ -243,6 +246,14 @@ class SetpointEncoder:
                              for pos, sig, sc in sorted(items, key=lambda x: x[0]))
                 out.append((spec, rows))
             self._sync[ema] = tuple(out)
+        #: :meth:`frames`' hot path per EMA: ((PdoSpec, COB-ID, struct pack, ((kind, units per SI, (lo, hi) of
+        #: the integer type or None), ...)), ...), kind 0 the controlword, 1 the target position, 2 the torque
+        self._fast: dict[int, tuple] = {
+            ema: tuple((spec, spec.cob_id, struct.Struct(spec.struct_format).pack,
+                        tuple((0 if sig is Signal.CONTROLWORD else 1 if sig is Signal.TARGET_POSITION else 2, k,
+                               TYPE_RANGE.get(t)) for _, sig, k, t in rows))
+                       for spec, rows in per_ema)
+            for ema, per_ema in self._sync.items()}
 
     def has_mode_pdo(self, ema: int) -> bool:
         """True when the EMA's modes of operation travels in an RPDO (CST in use)."""
@@ -256,16 +267,22 @@ class SetpointEncoder:
         to its type.
         """
         out = []
-        for spec, rows in self._sync[ema]:
+        for spec, cob, pack, rows in self._fast[ema]:  # (encode_raw and PdoSpec.pack inlined: every SYNC cycle)
             vals = []
-            for _, sig, k, t in rows:
-                if sig is Signal.CONTROLWORD:
+            for kind, k, rng in rows:
+                if kind == 0:
                     vals.append(controlword)
-                elif sig is Signal.TARGET_POSITION:
-                    vals.append(encode_raw(t, target_position_rad * k))
-                else:
-                    vals.append(encode_raw(t, target_torque_N * k))
-            out.append(spec.pack(vals))
+                    continue
+                x = (target_position_rad if kind == 1 else target_torque_N) * k
+                if rng is not None:
+                    v = round(x)
+                    lo, hi = rng
+                    x = lo if v < lo else hi if v > hi else v
+                vals.append(x)
+            try:
+                out.append(_trusted(cob, pack(*vals)))
+            except struct.error:
+                out.append(spec.pack(vals))  # raises PdoError naming the PDO and the values
         return out
 
     def mode_frame(self, ema: int, mode: int) -> Frame | None:
