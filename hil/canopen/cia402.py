@@ -284,8 +284,19 @@ def decode_state(sw: int) -> State:
     fault                   0x004F  0x0008 (x0xx 1000)
     ======================  ======  =====================
     """
-    state = match_state(sw)
-    return State.NOT_READY_TO_SWITCH_ON if state is None else state
+    if sw.__class__ is int:  # (the hot path: a word decoded before)
+        state = _DECODED.get(sw)
+        if state is not None:
+            return state
+    state = match_state(sw)  # (validates: an int here is a 16-bit word)
+    state = State.NOT_READY_TO_SWITCH_ON if state is None else state
+    if sw.__class__ is int:
+        _DECODED[sw] = state
+    return state
+
+
+#: :func:`decode_state`'s words decoded so far (at most the 65 536 16-bit words)
+_DECODED: dict[int, State] = {}
 
 
 def state_word(state: State, *, extra: Statusword | int = 0) -> int:

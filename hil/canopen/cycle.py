@@ -103,6 +103,10 @@ class CycleDecoder:
                          for slot, pos, sc in sorted(items))
             status_emas = tuple(slot - 5 for slot, _, _, _ in rows if slot in (6, 7))
             self._pdos[cob] = (by_cob[cob], rows, status_emas)
+        #: :meth:`feed`'s hot path: COB-ID -> (PdoSpec, payload size, struct unpack, rows, status EMAs)
+        self._feed = {cob: (spec, st.size, st.unpack, rows, emas)
+                      for cob, (spec, rows, emas) in self._pdos.items()
+                      for st in (struct.Struct(spec.struct_format),)}
         self._others = frozenset(c for c in by_cob if c not in self._pdos)
         self._expected = frozenset(self._pdos)
         self._got: set[int] = set()
@@ -120,13 +124,15 @@ class CycleDecoder:
         """Decode one frame; returns None if it is no TPDO of the layout, else the EMAs (1, 2)
         whose statusword it carried. Raises :class:`~hil.canopen.pdo.PdoLengthError` on a wrong length."""
         cob = frame.arbitration_id
-        hit = self._pdos.get(cob)
+        hit = self._feed.get(cob)
         if hit is None:
             if cob in self._others:
                 return ()
             return None
-        spec, rows, status_emas = hit
-        vals = spec.unpack(frame)
+        spec, size, unpack, rows, status_emas = hit
+        data = frame.data
+        # (PdoSpec.unpack inlined, which raises PdoLengthError for a wrong length)
+        vals = unpack(data) if len(data) == size else spec.unpack(frame)
         for slot, pos, k, off in rows:
             v = vals[pos]
             if slot < 6:
