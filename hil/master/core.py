@@ -285,8 +285,42 @@ class MasterCore:
         and otherwise ignored. Any exception latches :attr:`fault` and sets
         :attr:`quick_stop` (fail closed) before it propagates.
         """
+        # (one call per frame: the body is here, not in a method of its own; PdoError is counted, any other
+        # exception latches)
         try:
-            return self._on_frame(frame, t)
+            cid = frame.arbitration_id
+            try:
+                if cid == SYNC_COB_ID:
+                    self._on_sync(t)
+                    return []
+                dec = self.decoder
+                if dec is not None:
+                    hit = dec.feed(frame)
+                    if hit is not None:
+                        if self.phase is Phase.CYCLIC:
+                            for ema in hit:
+                                self._on_status(self.drives[self.order[ema - 1]], t)
+                            if not self._complete and dec.complete:
+                                self._complete = True
+                                self.samples.append(dec.sample(self.sync_schedule.t_s))  # (not the SYNC count)
+                        return []
+                base, node = split_cob_id(cid)
+                if node in self.nodes:
+                    if base == HEARTBEAT_COB_ID_BASE:
+                        return self._on_heartbeat(node, frame.data, t)
+                    if base == EMCY_COB_ID_BASE:
+                        self._on_emcy(node, frame.data, t)
+                        return []
+                    if base == SDO_RX_COB_ID_BASE:
+                        return self._on_sdo(node, frame, t)
+                if cid in self._own or cid == NMT_COB_ID:
+                    return []  # our own RPDOs, SDO requests, NMT seen on the bus
+                self.unknown_frames += 1
+                return []
+            except PdoError as exc:
+                self.bad_frames += 1
+                self.events.append(event.BadFrame(t, split_cob_id(cid)[1], str(exc)))
+                return []
         except BaseException as exc:
             self.latch(exc)
             raise
@@ -309,41 +343,6 @@ class MasterCore:
             raise exc
         self.later_faults.append(f"{type(exc).__name__}: {exc}")
         self.events.append(event.LaterFault(t, node, str(exc)))
-
-    def _on_frame(self, frame: Frame, t: float) -> list[Frame]:
-        cid = frame.arbitration_id
-        try:
-            if cid == SYNC_COB_ID:
-                self._on_sync(t)
-                return []
-            dec = self.decoder
-            if dec is not None:
-                hit = dec.feed(frame)
-                if hit is not None:
-                    if self.phase is Phase.CYCLIC:
-                        for ema in hit:
-                            self._on_status(self.drives[self.order[ema - 1]], t)
-                        if not self._complete and dec.complete:
-                            self._complete = True
-                            self.samples.append(dec.sample(self.sync_schedule.t_s))  # (not the SYNC count)
-                    return []
-            base, node = split_cob_id(cid)
-            if node in self.nodes:
-                if base == HEARTBEAT_COB_ID_BASE:
-                    return self._on_heartbeat(node, frame.data, t)
-                if base == EMCY_COB_ID_BASE:
-                    self._on_emcy(node, frame.data, t)
-                    return []
-                if base == SDO_RX_COB_ID_BASE:
-                    return self._on_sdo(node, frame, t)
-            if cid in self._own or cid == NMT_COB_ID:
-                return []  # our own RPDOs, SDO requests, NMT seen on the bus
-            self.unknown_frames += 1
-            return []
-        except PdoError as exc:
-            self.bad_frames += 1
-            self.events.append(event.BadFrame(t, split_cob_id(cid)[1], str(exc)))
-            return []
 
     def _on_sdo(self, node: int, frame: Frame, t: float) -> list[Frame]:
         if self.confirmation is not None:
