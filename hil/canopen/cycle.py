@@ -382,8 +382,11 @@ class SyncSchedule:
         if self.slot == 0:
             self._t_last, self.slot = t, 1
             return 0
-        skipped = max(0, int((t - self._t_last) / self.T - 0.5))
+        skipped = int((t - self._t_last) / self.T - 0.5)
         self._t_last = t
+        if skipped <= 0:  # (on time: every SYNC)
+            self.slot += 1
+            return 0
         self.slot += 1 + skipped
         self.skipped += skipped
         return skipped

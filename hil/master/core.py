@@ -39,6 +39,7 @@ from collections.abc import Generator
 from dataclasses import replace
 
 from hil.canopen.cia402 import (
+    MASTER_COMMANDS,
     SAFE_STATES,
     Command,
     Controlword,
@@ -86,6 +87,14 @@ from hil.master.preflight import (
 )
 from hil.master.views import RESET_WAIT_CYCLES, STILL_MM, DriveView, NodeView, Phase
 from hil.profile.config import Actuation
+
+_CSP = int(OperationMode.CSP)  #: the modes of operation as the RPDO carries them
+_CST = int(OperationMode.CST)
+#: controlwords of :data:`~hil.canopen.cia402.MASTER_COMMANDS` by the identities of (goal, state), for the states
+#: but QUICK_STOP_ACTIVE and the commands but a fault reset or none (those through :func:`master_command`)
+_PLAIN_CONTROLWORD: dict[tuple[int, int], int] = {
+    (id(g), id(s)): controlword(c) for (g, s), c in MASTER_COMMANDS.items()
+    if s is not State.QUICK_STOP_ACTIVE and c is not None and c is not Command.FAULT_RESET}
 
 __all__ = ["DriveFault", "DriveView", "HeartbeatLost", "MasterCore", "MasterEvent",
            "MasterLossReactionError", "NodeView", "Phase", "PreflightError", "SAFE_STATES"]
@@ -508,9 +517,13 @@ class MasterCore:
     def _command(self, d: DriveView, goal: Goal, phi: float) -> int:
         """The controlword for ``d`` on its way to ``goal`` (:func:`~hil.canopen.cia402.master_command`),
         with bounded fault resets (a rising edge of bit 7 every :data:`RESET_WAIT_CYCLES` cycles)."""
-        if d.state is not State.QUICK_STOP_ACTIVE:
+        state = d.state
+        if state is not State.QUICK_STOP_ACTIVE:
             d.still.clear()
-        cmd = master_command(goal, d.state, stopped=self._stopped(d, phi) if d.state is State.QUICK_STOP_ACTIVE
+            cw = _PLAIN_CONTROLWORD.get((id(goal), id(state)))  # (the table's every cycle, without two calls)
+            if cw is not None:
+                return cw
+        cmd = master_command(goal, state, stopped=self._stopped(d, phi) if state is State.QUICK_STOP_ACTIVE
                              else False)
         if cmd is Command.FAULT_RESET:
             if d.reset_wait > 0:
@@ -540,19 +553,20 @@ class MasterCore:
         """
         out: list[Frame] = []
         enc = self.encoder
-        per_drive = ((self.order[0], sp1, sample.phi1_rad), (self.order[1], sp2, sample.phi2_rad))
-        for k, (n, sp, phi) in enumerate(per_drive):
-            d = self.drives[n]
+        order, drives = self.order, self.drives
+        for k, n, sp, phi in ((0, order[0], sp1, sample.phi1_rad), (1, order[1], sp2, sample.phi2_rad)):
+            d = drives[n]
             target, torque = phi, 0.0
-            if sp.mode is DriveMode.DISABLED:
+            sp_mode = sp.mode
+            if sp_mode is DriveMode.DISABLED:
                 goal = Goal.QUICK_STOP if self.quick_stop else Goal.ORDERLY_DOWN
-                mode = d.mode_sent if d.mode_sent is not None else int(OperationMode.CSP)
+                mode = d.mode_sent if d.mode_sent is not None else _CSP
             else:
                 goal = Goal.ENABLED
-                if sp.mode is DriveMode.POSITION:
-                    mode, target = int(OperationMode.CSP), sp.value
+                if sp_mode is DriveMode.POSITION:
+                    mode, target = _CSP, sp.value
                 elif d.force_control is ForceControl.CST:
-                    mode, torque = int(OperationMode.CST), sp.value
+                    mode, torque = _CST, sp.value
                 else:
                     raise DriveFault(f"{d.label}: a force setpoint for a drive that holds forces in CSP "
                                      f"(the sequence must close the force loop itself)")
