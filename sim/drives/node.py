@@ -209,8 +209,7 @@ class SimNode(PdoEngine, NmtSlave):
         """Take a plant sample ``(t_s, phi1, phi2, s1, s2, F1, F2)``: the inputs are computed anew."""
         self.raw_sample = raw
         memo = self.input_memo
-        for j in range(len(memo)):
-            memo[j] = None
+        memo[:] = (None,) * len(memo)  # (the same list: the input getters share it)
 
     # ------------------------------------------------------------------ application hooks
 
