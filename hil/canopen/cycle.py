@@ -109,6 +109,7 @@ class CycleDecoder:
                       for st in (struct.Struct(spec.struct_format),)}
         self._others = frozenset(c for c in by_cob if c not in self._pdos)
         self._expected = frozenset(self._pdos)
+        self._n_expected = len(self._expected)
         self._got: set[int] = set()
 
     @property
@@ -148,7 +149,7 @@ class CycleDecoder:
     @property
     def complete(self) -> bool:
         """Every TPDO with an input has arrived since the last :meth:`reset`."""
-        return len(self._got) == len(self._expected)
+        return len(self._got) == self._n_expected
 
     def missing(self) -> list[int]:
         """COB-IDs of this cycle's TPDOs that have not arrived."""
