@@ -573,7 +573,8 @@ class FaultInjector:
     def on_frame(self, frame: Frame, t: float) -> list[Frame]:
         """As :meth:`sim.drives.SimDrivePair.on_frame`, with the faults applied."""
         is_sync = frame.arbitration_id == 0x080 and len(frame.data) <= 1
-        self._t_bus = max(self._t_bus, t)
+        if t > self._t_bus:  # (= max(self._t_bus, t), every frame)
+            self._t_bus = t
         if is_sync:
             self._t_sync = t
             self.syncs += 1

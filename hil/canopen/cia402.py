@@ -137,6 +137,7 @@ _CONTROLWORD: dict[Command, int] = {
     Command.ENABLE_OPERATION: 0x000F,
     Command.FAULT_RESET: 0x0080,
 }
+_CONTROLWORD_BY_ID: dict[int, int] = {id(c): w for c, w in _CONTROLWORD.items()}  #: (:func:`controlword`)
 
 # (mask, value) of the statusword bits 6, 5, 3, 2, 1, 0.
 _STATE_PATTERN: dict[State, tuple[int, int]] = {
@@ -208,7 +209,9 @@ def controlword(cmd: Command) -> int:
     0x0080 (the drive acts on the rising edge of bit 7, so the word before
     must have bit 7 clear).
     """
-    return _CONTROLWORD[cmd if cmd.__class__ is Command else Command(cmd)]
+    # (keyed by the member's identity, an int: an Enum member hashes through Enum.__hash__, in Python; the
+    # members live as long as the module)
+    return _CONTROLWORD_BY_ID[id(cmd if cmd.__class__ is Command else Command(cmd))]
 
 
 def decode_command(cw: int, previous_cw: int | None = None) -> Command | None:
@@ -281,8 +284,19 @@ def decode_state(sw: int) -> State:
     fault                   0x004F  0x0008 (x0xx 1000)
     ======================  ======  =====================
     """
-    state = match_state(sw)
-    return State.NOT_READY_TO_SWITCH_ON if state is None else state
+    if sw.__class__ is int:  # (the hot path: a word decoded before)
+        state = _DECODED.get(sw)
+        if state is not None:
+            return state
+    state = match_state(sw)  # (validates: an int here is a 16-bit word)
+    state = State.NOT_READY_TO_SWITCH_ON if state is None else state
+    if sw.__class__ is int:
+        _DECODED[sw] = state
+    return state
+
+
+#: :func:`decode_state`'s words decoded so far (at most the 65 536 16-bit words)
+_DECODED: dict[int, State] = {}
 
 
 def state_word(state: State, *, extra: Statusword | int = 0) -> int:
@@ -557,6 +571,9 @@ MASTER_COMMANDS: dict[tuple[Goal, State], Command | None] = {
         (State.FAULT, Command.FAULT_RESET))},
 }
 
+#: :data:`MASTER_COMMANDS` keyed by the members' identities (:func:`master_command`)
+_MASTER_BY_ID: dict[tuple[int, int], Command | None] = {(id(g), id(s)): c for (g, s), c in MASTER_COMMANDS.items()}
+
 
 def master_command(goal: Goal, state: State, *, stopped: bool = False) -> Command | None:
     """The command the master sends a drive in ``state`` on its way to ``goal``.
@@ -581,9 +598,10 @@ def master_command(goal: Goal, state: State, *, stopped: bool = False) -> Comman
     """
     if state is _QSA:
         return Command.DISABLE_VOLTAGE if stopped or goal is Goal.DISABLED else Command.QUICK_STOP
-    # (the members themselves as they are, anything else through its Enum: the master's hot path)
-    return MASTER_COMMANDS[(goal if goal.__class__ is Goal else Goal(goal),
-                            state if state.__class__ is State else State(state))]
+    # (the members themselves as they are, anything else through its Enum; looked up by their identities,
+    # ints, not through Enum.__hash__, in Python: the master's hot path)
+    return _MASTER_BY_ID[(id(goal if goal.__class__ is Goal else Goal(goal)),
+                          id(state if state.__class__ is State else State(state)))]
 
 
 def enables_operation(cw: int) -> bool:

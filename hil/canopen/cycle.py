@@ -20,6 +20,7 @@ type's range. No IO, no clock.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -36,6 +37,8 @@ __all__ = ["CycleDecoder", "RxValues", "SAMPLE_SLOTS", "SetpointEncoder", "SyncS
 SAMPLE_SLOTS: dict[tuple[int, Signal], int] = {
     (1, Signal.MOTOR_ANGLE): 0, (2, Signal.MOTOR_ANGLE): 1, (1, Signal.LVDT): 2, (2, Signal.LVDT): 3,
     (1, Signal.FORCE): 4, (2, Signal.FORCE): 5}
+
+_trusted = Frame.trusted
 
 
 def _resolved(ch: Channel) -> Scale | None:
@@ -100,8 +103,13 @@ class CycleDecoder:
                          for slot, pos, sc in sorted(items))
             status_emas = tuple(slot - 5 for slot, _, _, _ in rows if slot in (6, 7))
             self._pdos[cob] = (by_cob[cob], rows, status_emas)
+        #: :meth:`feed`'s hot path: COB-ID -> (PdoSpec, payload size, struct unpack, rows, status EMAs)
+        self._feed = {cob: (spec, st.size, st.unpack, rows, emas)
+                      for cob, (spec, rows, emas) in self._pdos.items()
+                      for st in (struct.Struct(spec.struct_format),)}
         self._others = frozenset(c for c in by_cob if c not in self._pdos)
         self._expected = frozenset(self._pdos)
+        self._n_expected = len(self._expected)
         self._got: set[int] = set()
 
     @property
@@ -117,13 +125,15 @@ class CycleDecoder:
         """Decode one frame; returns None if it is no TPDO of the layout, else the EMAs (1, 2)
         whose statusword it carried. Raises :class:`~hil.canopen.pdo.PdoLengthError` on a wrong length."""
         cob = frame.arbitration_id
-        hit = self._pdos.get(cob)
+        hit = self._feed.get(cob)
         if hit is None:
             if cob in self._others:
                 return ()
             return None
-        spec, rows, status_emas = hit
-        vals = spec.unpack(frame)
+        spec, size, unpack, rows, status_emas = hit
+        data = frame.data
+        # (PdoSpec.unpack inlined, which raises PdoLengthError for a wrong length)
+        vals = unpack(data) if len(data) == size else spec.unpack(frame)
         for slot, pos, k, off in rows:
             v = vals[pos]
             if slot < 6:
@@ -139,7 +149,7 @@ class CycleDecoder:
     @property
     def complete(self) -> bool:
         """Every TPDO with an input has arrived since the last :meth:`reset`."""
-        return len(self._got) == len(self._expected)
+        return len(self._got) == self._n_expected
 
     def missing(self) -> list[int]:
         """COB-IDs of this cycle's TPDOs that have not arrived."""
@@ -243,6 +253,14 @@ class SetpointEncoder:
                              for pos, sig, sc in sorted(items, key=lambda x: x[0]))
                 out.append((spec, rows))
             self._sync[ema] = tuple(out)
+        #: :meth:`frames`' hot path per EMA: ((PdoSpec, COB-ID, struct pack, ((kind, units per SI, (lo, hi) of
+        #: the integer type or None), ...)), ...), kind 0 the controlword, 1 the target position, 2 the torque
+        self._fast: dict[int, tuple] = {
+            ema: tuple((spec, spec.cob_id, struct.Struct(spec.struct_format).pack,
+                        tuple((0 if sig is Signal.CONTROLWORD else 1 if sig is Signal.TARGET_POSITION else 2, k,
+                               TYPE_RANGE.get(t)) for _, sig, k, t in rows))
+                       for spec, rows in per_ema)
+            for ema, per_ema in self._sync.items()}
 
     def has_mode_pdo(self, ema: int) -> bool:
         """True when the EMA's modes of operation travels in an RPDO (CST in use)."""
@@ -256,16 +274,22 @@ class SetpointEncoder:
         to its type.
         """
         out = []
-        for spec, rows in self._sync[ema]:
+        for spec, cob, pack, rows in self._fast[ema]:  # (encode_raw and PdoSpec.pack inlined: every SYNC cycle)
             vals = []
-            for _, sig, k, t in rows:
-                if sig is Signal.CONTROLWORD:
+            for kind, k, rng in rows:
+                if kind == 0:
                     vals.append(controlword)
-                elif sig is Signal.TARGET_POSITION:
-                    vals.append(encode_raw(t, target_position_rad * k))
-                else:
-                    vals.append(encode_raw(t, target_torque_N * k))
-            out.append(spec.pack(vals))
+                    continue
+                x = (target_position_rad if kind == 1 else target_torque_N) * k
+                if rng is not None:
+                    v = round(x)
+                    lo, hi = rng
+                    x = lo if v < lo else hi if v > hi else v
+                vals.append(x)
+            try:
+                out.append(_trusted(cob, pack(*vals)))
+            except struct.error:
+                out.append(spec.pack(vals))  # raises PdoError naming the PDO and the values
         return out
 
     def mode_frame(self, ema: int, mode: int) -> Frame | None:
@@ -359,8 +383,11 @@ class SyncSchedule:
         if self.slot == 0:
             self._t_last, self.slot = t, 1
             return 0
-        skipped = max(0, int((t - self._t_last) / self.T - 0.5))
+        skipped = int((t - self._t_last) / self.T - 0.5)
         self._t_last = t
+        if skipped <= 0:  # (on time: every SYNC)
+            self.slot += 1
+            return 0
         self.slot += 1 + skipped
         self.skipped += skipped
         return skipped

@@ -202,7 +202,8 @@ class CheckSequence:
 
     @property
     def finished(self) -> bool:
-        return self._step in TERMINAL
+        st = self._step  # (= st in TERMINAL, without hashing an Enum member: every cycle)
+        return st is Step.DONE or st is Step.ABORTED
 
     def planned_duration_s(self) -> float:
         """Planned duration of the whole check in s (for progress displays)."""

@@ -155,29 +155,33 @@ class Supervisor:
         return v
 
     def _check(self, smp: Sample, sp1: Setpoint, sp2: Setpoint) -> Violation | None:
+        # (once per SYNC cycle: the sample's fields read once, the checks in a fixed order, each EMA's
+        # written out; a message is made only for a violation)
         lim = self.lim
-        t = smp.t_s
-        vals = (smp.s1_mm, smp.s2_mm, smp.F1_N, smp.F2_N, smp.phi1_rad, smp.phi2_rad)
-        if not all(v - v == 0.0 for v in vals):  # NaN or inf from a sensor path
-            return Violation(t, "sensor_invalid", f"non-finite sensor value in {vals}")
-        for k, (f, x) in enumerate(((smp.F1_N, smp.s1_mm), (smp.F2_N, smp.s2_mm)), start=1):
-            if abs(x) > lim.max_stroke_mm:
-                return Violation(t, "max_stroke_mm", f"|s{k}| = {abs(x):.3f} mm > {lim.max_stroke_mm} mm",
-                                 abs(x), lim.max_stroke_mm)
-            if abs(f) > lim.max_force_N:
-                return Violation(t, "max_force_N", f"|F{k}| = {abs(f):.0f} N > {lim.max_force_N:.0f} N",
-                                 abs(f), lim.max_force_N)
-        fight = abs(smp.F1_N - smp.F2_N) / 2.0
+        t, phi1, phi2, s1, s2, F1, F2 = smp.t_s, smp.phi1_rad, smp.phi2_rad, smp.s1_mm, smp.s2_mm, smp.F1_N, smp.F2_N
+        if not (s1 - s1 == 0.0 and s2 - s2 == 0.0 and F1 - F1 == 0.0 and F2 - F2 == 0.0
+                and phi1 - phi1 == 0.0 and phi2 - phi2 == 0.0):  # NaN or inf from a sensor path
+            return Violation(t, "sensor_invalid", f"non-finite sensor value in {(s1, s2, F1, F2, phi1, phi2)}")
+        stroke, force = lim.max_stroke_mm, lim.max_force_N
+        a1, a2, f1, f2 = abs(s1), abs(s2), abs(F1), abs(F2)
+        if a1 > stroke or f1 > force or a2 > stroke or f2 > force:
+            for k, (f, x) in enumerate(((f1, a1), (f2, a2)), start=1):
+                if x > stroke:
+                    return Violation(t, "max_stroke_mm", f"|s{k}| = {x:.3f} mm > {stroke} mm", x, stroke)
+                if f > force:
+                    return Violation(t, "max_force_N", f"|F{k}| = {f:.0f} N > {force:.0f} N", f, force)
+        fight = abs(F1 - F2) / 2.0
         if fight > lim.max_force_fight_N:
             return Violation(t, "max_force_fight_N", f"force fight |F1 - F2|/2 = {fight:.0f} N > "
                              f"{lim.max_force_fight_N:.0f} N", fight, lim.max_force_fight_N)
-        imb = abs(smp.F1_N + smp.F2_N)
+        imb = abs(F1 + F2)
         if imb > lim.max_force_imbalance_N:
             return Violation(t, "max_force_imbalance_N", f"load cells disagree: |F1 + F2| = {imb:.0f} N > "
                              f"{lim.max_force_imbalance_N:.0f} N", imb, lim.max_force_imbalance_N)
-        for k, (phi, sp) in enumerate(((smp.phi1_rad, sp1), (smp.phi2_rad, sp2)), start=1):
+        i = self.i
+        for k, phi, sp in ((1, phi1, sp1), (2, phi2, sp2)):
             if sp.mode == DriveMode.POSITION:
-                err = abs(sp.value - phi) / self.i
+                err = abs(sp.value - phi) / i
                 if err > lim.max_following_error_mm:
                     return Violation(t, "max_following_error_mm",
                                      f"EMA {k} following error {err:.3f} mm > {lim.max_following_error_mm} mm",
@@ -185,11 +189,11 @@ class Supervisor:
         if self._ref is None:
             self._ref = smp
         ref = self._ref
-        for k, (s, x, s0, x0) in enumerate(((smp.s1_mm, smp.phi1_rad / self.i, ref.s1_mm, ref.phi1_rad / self.i),
-                                           (smp.s2_mm, smp.phi2_rad / self.i, ref.s2_mm, ref.phi2_rad / self.i)),
-                                          start=1):
+        d_int = lim.max_d_int_mm
+        for k, s, x, s0, x0 in ((1, s1, phi1 / i, ref.s1_mm, ref.phi1_rad / i),
+                                (2, s2, phi2 / i, ref.s2_mm, ref.phi2_rad / i)):
             dd = abs((s - s0) - (x - x0))
-            allowed = lim.max_d_int_mm + HARD_LVDT_GAIN_TOLERANCE * abs(x - x0)
+            allowed = d_int + HARD_LVDT_GAIN_TOLERANCE * abs(x - x0)
             if dd > allowed:
                 return Violation(t, "max_d_int_mm", f"EMA {k} LVDT versus motor angle implausible: "
                                  f"D moved {dd:.3f} mm > {allowed:.3f} mm", dd, allowed)
@@ -202,19 +206,22 @@ class Supervisor:
                 return Violation(t, lim.stale_name, f"sensor data stale: {missed} SYNC cycles without a "
                                  f"sample > {lim.max_stale_cycles}{why}", missed, lim.max_stale_cycles)
             if dt > 0:
-                for k, (a, b) in enumerate(((smp.phi1_rad, prev.phi1_rad), (smp.phi2_rad, prev.phi2_rad)), start=1):
-                    v = abs(a - b) / self.i / dt
-                    if v > lim.max_velocity_mm_per_s:
-                        return Violation(t, "max_velocity_mm_per_s",
-                                         f"EMA {k} speed {v:.2f} mm/s > {lim.max_velocity_mm_per_s} mm/s",
-                                         v, lim.max_velocity_mm_per_s)
+                vmax = lim.max_velocity_mm_per_s
+                for k, a, b in ((1, phi1, prev.phi1_rad), (2, phi2, prev.phi2_rad)):
+                    v = abs(a - b) / i / dt
+                    if v > vmax:
+                        return Violation(t, "max_velocity_mm_per_s", f"EMA {k} speed {v:.2f} mm/s > {vmax} mm/s",
+                                         v, vmax)
             same = self._same
-            for j, (a, b, name, unit) in enumerate(((smp.s1_mm, prev.s1_mm, "LVDT 1", "mm"),
-                                                    (smp.s2_mm, prev.s2_mm, "LVDT 2", "mm"),
-                                                    (smp.F1_N, prev.F1_N, "load cell 1", "N"),
-                                                    (smp.F2_N, prev.F2_N, "load cell 2", "N"))):
-                same[j] = same[j] + 1 if a == b else 0
-                if same[j] > lim.max_frozen_cycles:
-                    return Violation(t, "max_frozen_cycles", f"{name} frozen: the same value {a:.6g} {unit} for "
-                                     f"{same[j]} cycles > {lim.max_frozen_cycles}", same[j], lim.max_frozen_cycles)
+            frozen = lim.max_frozen_cycles
+            same[0] = same[0] + 1 if s1 == prev.s1_mm else 0
+            same[1] = same[1] + 1 if s2 == prev.s2_mm else 0
+            same[2] = same[2] + 1 if F1 == prev.F1_N else 0
+            same[3] = same[3] + 1 if F2 == prev.F2_N else 0
+            if same[0] > frozen or same[1] > frozen or same[2] > frozen or same[3] > frozen:
+                for j, (a, name, unit) in enumerate(((s1, "LVDT 1", "mm"), (s2, "LVDT 2", "mm"),
+                                                     (F1, "load cell 1", "N"), (F2, "load cell 2", "N"))):
+                    if same[j] > frozen:
+                        return Violation(t, "max_frozen_cycles", f"{name} frozen: the same value {a:.6g} {unit} "
+                                         f"for {same[j]} cycles > {frozen}", same[j], frozen)
         return None

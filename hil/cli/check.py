@@ -326,7 +326,8 @@ def canopen_check(console: Console, act, check, link, meta: MetaWriter, quiet: b
     t0 = time.perf_counter()
     try:
         with LiveProgress(console, 0.0, not quiet) as live:
-            outcome = run_check(link, act, check, meta, on_cycle=live)
+            # (no progress display: no progress computed either, a Progress per cycle for nothing)
+            outcome = run_check(link, act, check, meta, on_cycle=live if live.enabled else None)
     except (*KNOWN_ERRORS, KeyboardInterrupt) as exc:
         reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
         rec = meta.record

@@ -65,7 +65,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     console.print(f"emacheck simulate: seed {seed}, run folder {out}")
     t0 = time.perf_counter()
     with LiveProgress(console, 0.0, not args.quiet) as live:
-        outcome = run_check(PlantLink(plant), act, check, meta, on_cycle=live)
+        outcome = run_check(PlantLink(plant), act, check, meta, on_cycle=live if live.enabled else None)
     wall = time.perf_counter() - t0
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated "
                   f"({outcome.samples} samples) in {wall:.2f} s wall")

@@ -39,6 +39,7 @@ from collections.abc import Generator
 from dataclasses import replace
 
 from hil.canopen.cia402 import (
+    MASTER_COMMANDS,
     SAFE_STATES,
     Command,
     Controlword,
@@ -86,6 +87,14 @@ from hil.master.preflight import (
 )
 from hil.master.views import RESET_WAIT_CYCLES, STILL_MM, DriveView, NodeView, Phase
 from hil.profile.config import Actuation
+
+_CSP = int(OperationMode.CSP)  #: the modes of operation as the RPDO carries them
+_CST = int(OperationMode.CST)
+#: controlwords of :data:`~hil.canopen.cia402.MASTER_COMMANDS` by the identities of (goal, state), for the states
+#: but QUICK_STOP_ACTIVE and the commands but a fault reset or none (those through :func:`master_command`)
+_PLAIN_CONTROLWORD: dict[tuple[int, int], int] = {
+    (id(g), id(s)): controlword(c) for (g, s), c in MASTER_COMMANDS.items()
+    if s is not State.QUICK_STOP_ACTIVE and c is not None and c is not Command.FAULT_RESET}
 
 __all__ = ["DriveFault", "DriveView", "HeartbeatLost", "MasterCore", "MasterEvent",
            "MasterLossReactionError", "NodeView", "Phase", "PreflightError", "SAFE_STATES"]
@@ -285,8 +294,42 @@ class MasterCore:
         and otherwise ignored. Any exception latches :attr:`fault` and sets
         :attr:`quick_stop` (fail closed) before it propagates.
         """
+        # (one call per frame: the body is here, not in a method of its own; PdoError is counted, any other
+        # exception latches)
         try:
-            return self._on_frame(frame, t)
+            cid = frame.arbitration_id
+            try:
+                if cid == SYNC_COB_ID:
+                    self._on_sync(t)
+                    return []
+                dec = self.decoder
+                if dec is not None:
+                    hit = dec.feed(frame)
+                    if hit is not None:
+                        if self.phase is Phase.CYCLIC:
+                            for ema in hit:
+                                self._on_status(self.drives[self.order[ema - 1]], t)
+                            if not self._complete and dec.complete:
+                                self._complete = True
+                                self.samples.append(dec.sample(self.sync_schedule.t_s))  # (not the SYNC count)
+                        return []
+                base, node = split_cob_id(cid)
+                if node in self.nodes:
+                    if base == HEARTBEAT_COB_ID_BASE:
+                        return self._on_heartbeat(node, frame.data, t)
+                    if base == EMCY_COB_ID_BASE:
+                        self._on_emcy(node, frame.data, t)
+                        return []
+                    if base == SDO_RX_COB_ID_BASE:
+                        return self._on_sdo(node, frame, t)
+                if cid in self._own or cid == NMT_COB_ID:
+                    return []  # our own RPDOs, SDO requests, NMT seen on the bus
+                self.unknown_frames += 1
+                return []
+            except PdoError as exc:
+                self.bad_frames += 1
+                self.events.append(event.BadFrame(t, split_cob_id(cid)[1], str(exc)))
+                return []
         except BaseException as exc:
             self.latch(exc)
             raise
@@ -309,41 +352,6 @@ class MasterCore:
             raise exc
         self.later_faults.append(f"{type(exc).__name__}: {exc}")
         self.events.append(event.LaterFault(t, node, str(exc)))
-
-    def _on_frame(self, frame: Frame, t: float) -> list[Frame]:
-        cid = frame.arbitration_id
-        try:
-            if cid == SYNC_COB_ID:
-                self._on_sync(t)
-                return []
-            dec = self.decoder
-            if dec is not None:
-                hit = dec.feed(frame)
-                if hit is not None:
-                    if self.phase is Phase.CYCLIC:
-                        for ema in hit:
-                            self._on_status(self.drives[self.order[ema - 1]], t)
-                        if not self._complete and dec.complete:
-                            self._complete = True
-                            self.samples.append(dec.sample(self.sync_schedule.t_s))  # (not the SYNC count)
-                    return []
-            base, node = split_cob_id(cid)
-            if node in self.nodes:
-                if base == HEARTBEAT_COB_ID_BASE:
-                    return self._on_heartbeat(node, frame.data, t)
-                if base == EMCY_COB_ID_BASE:
-                    self._on_emcy(node, frame.data, t)
-                    return []
-                if base == SDO_RX_COB_ID_BASE:
-                    return self._on_sdo(node, frame, t)
-            if cid in self._own or cid == NMT_COB_ID:
-                return []  # our own RPDOs, SDO requests, NMT seen on the bus
-            self.unknown_frames += 1
-            return []
-        except PdoError as exc:
-            self.bad_frames += 1
-            self.events.append(event.BadFrame(t, split_cob_id(cid)[1], str(exc)))
-            return []
 
     def _on_sdo(self, node: int, frame: Frame, t: float) -> list[Frame]:
         if self.confirmation is not None:
@@ -509,9 +517,13 @@ class MasterCore:
     def _command(self, d: DriveView, goal: Goal, phi: float) -> int:
         """The controlword for ``d`` on its way to ``goal`` (:func:`~hil.canopen.cia402.master_command`),
         with bounded fault resets (a rising edge of bit 7 every :data:`RESET_WAIT_CYCLES` cycles)."""
-        if d.state is not State.QUICK_STOP_ACTIVE:
+        state = d.state
+        if state is not State.QUICK_STOP_ACTIVE:
             d.still.clear()
-        cmd = master_command(goal, d.state, stopped=self._stopped(d, phi) if d.state is State.QUICK_STOP_ACTIVE
+            cw = _PLAIN_CONTROLWORD.get((id(goal), id(state)))  # (the table's every cycle, without two calls)
+            if cw is not None:
+                return cw
+        cmd = master_command(goal, state, stopped=self._stopped(d, phi) if state is State.QUICK_STOP_ACTIVE
                              else False)
         if cmd is Command.FAULT_RESET:
             if d.reset_wait > 0:
@@ -541,19 +553,20 @@ class MasterCore:
         """
         out: list[Frame] = []
         enc = self.encoder
-        per_drive = ((self.order[0], sp1, sample.phi1_rad), (self.order[1], sp2, sample.phi2_rad))
-        for k, (n, sp, phi) in enumerate(per_drive):
-            d = self.drives[n]
+        order, drives = self.order, self.drives
+        for k, n, sp, phi in ((0, order[0], sp1, sample.phi1_rad), (1, order[1], sp2, sample.phi2_rad)):
+            d = drives[n]
             target, torque = phi, 0.0
-            if sp.mode is DriveMode.DISABLED:
+            sp_mode = sp.mode
+            if sp_mode is DriveMode.DISABLED:
                 goal = Goal.QUICK_STOP if self.quick_stop else Goal.ORDERLY_DOWN
-                mode = d.mode_sent if d.mode_sent is not None else int(OperationMode.CSP)
+                mode = d.mode_sent if d.mode_sent is not None else _CSP
             else:
                 goal = Goal.ENABLED
-                if sp.mode is DriveMode.POSITION:
-                    mode, target = int(OperationMode.CSP), sp.value
+                if sp_mode is DriveMode.POSITION:
+                    mode, target = _CSP, sp.value
                 elif d.force_control is ForceControl.CST:
-                    mode, torque = int(OperationMode.CST), sp.value
+                    mode, torque = _CST, sp.value
                 else:
                     raise DriveFault(f"{d.label}: a force setpoint for a drive that holds forces in CSP "
                                      f"(the sequence must close the force loop itself)")

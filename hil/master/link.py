@@ -208,9 +208,13 @@ class CanopenLink:
     def _observe_sync(self, late_s: float, ahead: int = 0) -> None:
         """The stall watch told how late the master took (or sent) a SYNC [s], at its period's time on the
         check's time axis (the master's SYNC schedule; ``ahead`` periods after the last one it saw)."""
+        watch = self.stall_watch
+        if late_s <= watch.T:  # (on time, every SYNC: its time not needed)
+            watch.on_time()
+            return
         sched = getattr(self.m, "sync_schedule", None)
         if sched is not None:
-            self.stall_watch.observe(sched.t_s + ahead * sched.T, late_s)
+            watch.observe(sched.t_s + ahead * sched.T, late_s)
 
     # --------------------------------------------------------------- phases
 
@@ -336,7 +340,7 @@ class CanopenLink:
             # stopping after a fault: one safe-state cycle, no complete sample required
             self._safe_cycle()
             return self._last
-        if self.behind:
+        if self.m.samples or self.held:  # (= self.behind)
             # a stall's backlog: the next sample is here already; the setpoints of a past SYNC are not
             # sent (the drives take the latest at the next SYNC), a stop is, at once
             if stop:

@@ -121,6 +121,12 @@ class StallWatch:
         elif late_s > o.late_s:
             o.late_s = late_s
 
+    def on_time(self) -> None:
+        """A SYNC taken within one period of its time (:meth:`observe` of a lateness up to ``T``, whatever
+        its time): it ends an open stall."""
+        if self._open is not None:
+            self._close()
+
     def _close(self) -> None:
         o, self._open = self._open, None
         self.count += 1

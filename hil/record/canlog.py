@@ -103,15 +103,19 @@ def candump_lines(records: list[LogRecord], channel: str | int, first_t: float |
     if first_t is None:
         first_t = records[0][0] or 0.0
     channel = _channel_name(channel)
-    fmt = "(%f) " + channel.replace("%", "%%") + " %03X#%s%s"
+    head_fmt = "(%f) " + channel.replace("%", "%%") + " "
     eols = (" T\n", " R\n")
     lines = []
     append = lines.append
+    last_t = head = None  # (the frames of a SYNC cycle share their time: formatted once; a zero each time, -0.0)
     for t, cid, data, rx, kind in records:
         if t is None or t < first_t:
             t = first_t
         if kind is None:
-            append(fmt % (t, cid, data.hex().upper(), eols[rx]))
+            if t != last_t or not t:
+                head = head_fmt % t
+                last_t = t
+            append(f"{head}{cid:03X}#{data.hex().upper()}{eols[rx]}")
         else:
             append(_other_line(t, cid, data, rx, kind, channel))
     return "".join(lines), first_t

@@ -359,8 +359,7 @@ class Cia402Drive:
         self._phi_rad = raw[1 + k]
         self._pos_memo = None
         memo = self.input_memo
-        for j in range(len(memo)):
-            memo[j] = None
+        memo[:] = (None,) * len(memo)  # (the same list: the input getters share it)
         self.torque_stale = True
 
     def _no_torque_source(self) -> None:

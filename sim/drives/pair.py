@@ -425,7 +425,7 @@ class SimDrivePair:
         hil.canopen.errors.CanopenInputError
             ``frame`` is not a :class:`hil.canopen.frame.Frame` or ``t`` not a finite time.
         """
-        if not isinstance(frame, Frame):
+        if frame.__class__ is not Frame and not isinstance(frame, Frame):
             raise CanopenInputError(f"frame must be a hil.canopen.frame.Frame, got {type(frame).__name__}")
         if t.__class__ is float and t - t == 0.0:  # finite float: _clock without the conversions
             now = self._now
@@ -486,7 +486,12 @@ class SimDrivePair:
             for s in self.sensors:
                 if s.event_tpdos:
                     s.send_event_tpdos(now)
-        return self._drain()
+        out = self._out  # (_drain inlined: every frame)
+        if not out:
+            return []
+        frames = out.copy()
+        out.clear()
+        return frames
 
     def _sensor_frame(self, frame: Frame, now: float) -> bool:
         """A frame no drive consumes, for the sensor nodes: an SDO request, a SYNC of a sensor node's
