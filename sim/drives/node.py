@@ -46,11 +46,11 @@ from typing import TYPE_CHECKING
 
 import canopen.objectdictionary as cod
 
+from hil.canopen.cycle import encode_raw
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtState
 from hil.canopen.od import lookup
-from hil.canopen.pdo import TYPE_RANGE
 from hil.canopen.signalmap import Scale, Signal
 from sim.drives.nmt_slave import NmtSlave
 from sim.drives.pdo_engine import PdoEngine
@@ -189,18 +189,12 @@ class SimNode(PdoEngine, NmtSlave):
         slot = SAMPLE_SLOT[inp.signal] + inp.ema - 1
         units, off, dtype = inp.scale.units_per_si, inp.scale.offset, inp.data_type
         memo = self.input_memo
-        rng = TYPE_RANGE.get(dtype)  # (hil.canopen.cycle.encode_raw inlined: every input of every sample)
-        lo, hi = rng if rng is not None else (0, 0)
 
         def get() -> int | float:
             v = memo[k]
             if v is None:
                 x = self.raw_sample[slot]
-                v = (x - off) * units if off else x * units
-                if rng is not None:  # rounded (ties to even) and clipped to the integer type's range
-                    v = round(v)
-                    v = lo if v < lo else hi if v > hi else v
-                memo[k] = v
+                v = memo[k] = encode_raw(dtype, (x - off) * units if off else x * units)
             return v
 
         return get
