@@ -45,8 +45,7 @@ atexit.register(shutil.rmtree, os.environ["XDG_DATA_HOME"], ignore_errors=True)
 #: test modules with ``pytestmark = pytest.mark.xdist_group(...)``. Every other test's group is its module
 #: (its module-scoped fixtures are built once per run, as in a serial run).
 #: The groups that take longest, started first so that none of them is left to run alone at the end (the
-#: vcan stage, which holds the host alone, first; beside its start a module of short tests, so that the
-#: other worker waits for it after a short test, not after the 2-3 min diagnosis).
+#: vcan stage first; it runs beside the other worker since 2026-11-27, docs/testing.md, "Parallel").
 FIRST_GROUPS = ("vcan", "tests/test_eds.py", "tests/test_diagnose_independent.py", "tests/test_diagnose_floors.py",
                 "tests/test_diagnose_dual_reference.py", "wall_clock", "tests/test_independent_rig.py")
 
@@ -103,26 +102,6 @@ def pytest_collection_finish(session):
     collected as before."""
     gc.collect()
     gc.freeze()
-
-
-@pytest.hookimpl(wrapper=True)
-def pytest_runtest_protocol(item, nextitem):
-    """Under xdist the vcan stage (``@pytest.mark.vcan``) runs with the host to itself: it holds an
-    exclusive lock for its whole protocol (fixtures included), every other test a shared one. Its
-    user-mode-linux guest runs the master's 2 ms loop on one host thread; with the other worker's tests
-    (and the independent-rig diagnosis's own two processes) beside it, the guest's master stalled past
-    its 10 ms limit on both attempts (2026-11-26, docs/testing.md, "Parallel")."""
-    if not _XDIST_WORKER:
-        return (yield)
-    import fcntl
-
-    lock_path = item.config._tmp_path_factory.getbasetemp().parent / "host.lock"
-    with open(lock_path, "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX if item.get_closest_marker("vcan") else fcntl.LOCK_SH)
-        try:
-            return (yield)
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def once_per_run(tmp_path_factory, name: str, make):

@@ -15,7 +15,8 @@ abort connection option 0x6007, checked from the capture and by SDO from a
 separate client).
 
 Profiles (all in tests/vcan/, their headers say why): ``check.toml`` (6 mm
-sweep, two force-fight cycles, 3 mm/s approach: 55.5 s instead of 115.5 s),
+sweep, two force-fight cycles, 3 mm/s approach: 55.5 s instead of 115.5 s; the scenario that
+kills ``run`` mid force fight sweeps 1 mm and reaches the fight 20 s sooner),
 ``actuation.toml`` (SYNC at 100 Hz instead of 500 Hz, heartbeat 0.5 s instead
 of 0.1 s), ``simrig.toml`` (the plant sampled at the SYNC period);
 ``EMACHECK_VCAN_500HZ=1`` uses the shipped actuation and rig profiles instead.
@@ -68,11 +69,16 @@ CHECK_S = 55.0
 #: Seconds a whole check (55.5 s of rig time) may take, with a slow UML clock and start-up.
 RUN_TIMEOUT_S = 240.0
 READY_TIMEOUT_S = 60.0
-#: sim-serve is killed once the master logged this much of the check [s]
-KILL_AFTER_S = 8.0
+#: sim-serve is killed once the master logged this much of the check [s] (the first calibration sweep
+#: starts at 2.6 s: both drives enabled, one moving, the other in force mode)
+KILL_AFTER_S = 3.0
 #: run is killed mid force fight, once its signals.csv shows this force-fight level |F1 - F2| / 2 [N]
-#: (the fight of tests/vcan/check.toml peaks at 6 kN about 34 s into the check)
+#: (the fight of tests/vcan/check.toml peaks at 6 kN about 34 s into the check; with the sweeps of
+#: FIGHT_SWEEP_MM, about 14 s: the in-process dry-run with the same profiles)
 KILL_RUN_FIGHT_N = 5000.0
+#: the calibration sweep of the scenario that kills run mid force fight [mm]: only the fight matters
+#: there, and a 1 mm sweep reaches it 20 s sooner than check.toml's 6 mm
+FIGHT_SWEEP_MM = 1.0
 #: statusword poll period of the separate SDO client after the kill [s]
 POLL_S = 0.01
 
@@ -162,11 +168,13 @@ def _scenario(base: Path, kill_after_s: float | None) -> dict:
         with open(capture, "w") as cap_f:
             # a large receive buffer: candump runs below the real-time master and drives
             dump = procs.start(["candump", "-L", "-r", str(8 << 20), CHANNEL], cap_f)
+        t_serve = time.monotonic()
         serve = procs.start(_cli("sim-serve", "--interface", "socketcan", "--channel", CHANNEL,
                                  "--rt-priority", RT_PRIORITY, *_profile_args(sim=True)),
                             subprocess.PIPE, text=True, bufsize=1)
         serve_lines = Lines(serve.stdout)
         res["ready_line"] = serve_lines.wait_for("ready", READY_TIMEOUT_S, serve)
+        res["serve_ready_s"] = time.monotonic() - t_serve
         # candump records: the boot-up frames of both drives are in the capture
         _wait_for_file_text(capture, ("701#00", "702#00"), 10.0)
         with open(base / "run.out", "w") as run_log:  # (the child has its own copy of the fd)
@@ -205,12 +213,26 @@ def _scenario(base: Path, kill_after_s: float | None) -> dict:
 
 
 def _last_csv_row(path: Path) -> list[str] | None:
+    """The last complete row of a growing CSV (its tail only: polled every 20 ms inside UML)."""
     try:
-        text = path.read_text()
+        with open(path, "rb") as f:
+            size = f.seek(0, os.SEEK_END)
+            f.seek(max(0, size - 4096))
+            text = f.read().decode(errors="replace")
     except OSError:
         return None
     lines = text.rstrip("\n").split("\n")
     return lines[-1].split(",") if len(lines) > 1 and text.endswith("\n") else None
+
+
+def _fight_check(base: Path) -> Path:
+    """tests/vcan/check.toml with the calibration sweeps of FIGHT_SWEEP_MM, written into ``base``."""
+    line = "sweep_amplitude_mm = 6.0"
+    text = CHECK.read_text()
+    assert text.count(line) == 1, f"{CHECK}: no single {line!r}"
+    out = base / "check_fight.toml"
+    out.write_text(text.replace(line, f"sweep_amplitude_mm = {FIGHT_SWEEP_MM}"))
+    return out
 
 
 def _read_statusword(bus, node: int, timeout_s: float = 0.2) -> tuple[float, int] | None:
@@ -245,6 +267,7 @@ def _master_kill_scenario(base: Path) -> dict:
     base.mkdir(parents=True, exist_ok=True)
     out = base / "run"
     capture = base / "candump.log"
+    check = _fight_check(base)
     procs = Procs()
     res: dict = {"out": out, "capture": capture, "polls": []}
     try:
@@ -258,7 +281,7 @@ def _master_kill_scenario(base: Path) -> dict:
         _wait_for_file_text(capture, ("701#00", "702#00"), 10.0)
         with open(base / "run.out", "w") as run_log:  # (the child has its own copy of the fd)
             run = procs.start(_cli("run", "--interface", "socketcan", "--channel", CHANNEL, "--arm", "--quiet",
-                                   "--rt-priority", MASTER_RT_PRIORITY, "--check", str(CHECK), "--out", str(out),
+                                   "--rt-priority", MASTER_RT_PRIORITY, "--check", str(check), "--out", str(out),
                                    *_profile_args(sim=False)), run_log)
         deadline = time.monotonic() + RUN_TIMEOUT_S
         row = None
@@ -360,8 +383,13 @@ def test_whole_check_over_vcan_recovers_truth(full_check, actuation):
     cycles = meta["duration_s"] / T
     assert meta["can"]["bad_frames"] == 0
     assert meta["can"]["missing_cycles"] <= 0.02 * cycles, meta["can"]
-    # run's lag and page-fault counters are recorded, and the lag stayed within safety.max_lag_s
-    assert 0 <= meta["can"]["max_lag_ms"] <= 1e3 * meta["profiles"]["check"]["safety"]["max_lag_s"], meta["can"]
+    # run's lag and page-fault counters are recorded, and the lag stayed within the limit in force: the
+    # stall budget (safety.max_stale_ms: e / v = 40 ms here, the drives keep their limits; the header of
+    # tests/vcan/check.toml), which replaces safety.max_lag_s (20 ms) once the preflight has read the
+    # limits back (docs/safety.md)
+    stalls = meta["stalls"]
+    assert stalls["limit"] == "safety.max_stale_ms" and stalls["limit_ms"] == 40.0, stalls
+    assert 0 <= meta["can"]["max_lag_ms"] <= stalls["limit_ms"], (meta["can"], stalls)
     # the loop touches no new memory cycle after cycle (gc frozen, buffers made before it): a page fault
     # costs ~0.9 ms inside UML (docs/vcan.md), so at most one per 100 cycles in the cyclic loop (measured
     # on the host: 0 in 5553); and the whole check (preflight, drill, safe stop) no locked-in thread
@@ -377,7 +405,8 @@ def test_whole_check_over_vcan_recovers_truth(full_check, actuation):
     late = int(last.split(" late RPDOs")[0].split()[-1])
     # RPDOs that came after their SYNC (the master's cycle ran late): at most 2 % in UML
     assert syncs > CHECK_S / T and steps == syncs + 1 and late <= 0.02 * syncs, last
-    print(f"\nvcan check: {res['run_wall_s']:.1f} s wall for {meta['duration_s']:.1f} s of check; "
+    print(f"\nvcan check: sim-serve ready {res['serve_ready_s']:.1f} s after its start; "
+          f"run {res['run_wall_s']:.1f} s wall for {meta['duration_s']:.1f} s of check; "
           f"{meta['can']['missing_cycles']} of {cycles:.0f} cycles incomplete; {last}")
 
 
