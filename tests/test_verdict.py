@@ -195,18 +195,18 @@ def test_a_can_interface_that_cannot_be_opened_exits_3_and_leaves_no_run_folder(
 
 @pytest.mark.slow
 def test_ctrl_c_writes_an_aborted_result_and_names_each_drives_final_state(tmp_path, monkeypatch, capsys):
-    import hil.cli.check as chk
+    import hil.check.runner as runner
 
     calls = {"n": 0}
-    original = chk.LiveProgress.__call__
+    original = runner.run_check
 
-    def interrupt(self, prog, smp):
+    def interrupt(prog, smp):
         calls["n"] += 1
         if calls["n"] == 3000:  # 6 s into the check: the operator presses Ctrl-C
             raise KeyboardInterrupt
-        return original(self, prog, smp)
 
-    monkeypatch.setattr(chk.LiveProgress, "__call__", interrupt)
+    # the loop's per-cycle callback (a quiet run has none: nothing is displayed) is where the interrupt lands
+    monkeypatch.setattr(runner, "run_check", lambda *a, on_cycle=None, **k: original(*a, on_cycle=interrupt, **k))
     out = tmp_path / "run"
     rc = main(["dry-run", "--quiet", "--out", str(out)])
     console = capsys.readouterr().out
