@@ -145,12 +145,18 @@ def test_decode_rejects_non_words():
         decode_command(-1)
 
 
-def test_decode_state_all_words():
+def test_decode_state_all_words(monkeypatch):
+    import hil.canopen.cia402 as cia402
+
+    # decode_state remembers the words it decoded: from an empty memo each word is decoded (first call) and
+    # then answered from the memo (second call); both must give the state
+    monkeypatch.setattr(cia402, "_DECODED", {})
     unmatched = 0
     for sw in range(0x10000):
         hits = [s for s, mask, value in MASKS if sw & mask == value]
         assert len(hits) <= 1  # the patterns are disjoint
         got = decode_state(sw)
+        assert decode_state(sw) is got
         if hits:
             assert got is hits[0] and match_state(sw) is hits[0]
         else:

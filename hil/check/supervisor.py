@@ -164,12 +164,14 @@ class Supervisor:
             return Violation(t, "sensor_invalid", f"non-finite sensor value in {(s1, s2, F1, F2, phi1, phi2)}")
         stroke, force = lim.max_stroke_mm, lim.max_force_N
         a1, a2, f1, f2 = abs(s1), abs(s2), abs(F1), abs(F2)
-        if a1 > stroke or f1 > force or a2 > stroke or f2 > force:
-            for k, (f, x) in enumerate(((f1, a1), (f2, a2)), start=1):
-                if x > stroke:
-                    return Violation(t, "max_stroke_mm", f"|s{k}| = {x:.3f} mm > {stroke} mm", x, stroke)
-                if f > force:
-                    return Violation(t, "max_force_N", f"|F{k}| = {f:.0f} N > {force:.0f} N", f, force)
+        if a1 > stroke:
+            return _stroke(t, 1, a1, stroke)
+        if f1 > force:
+            return _force(t, 1, f1, force)
+        if a2 > stroke:
+            return _stroke(t, 2, a2, stroke)
+        if f2 > force:
+            return _force(t, 2, f2, force)
         fight = abs(F1 - F2) / 2.0
         if fight > lim.max_force_fight_N:
             return Violation(t, "max_force_fight_N", f"force fight |F1 - F2|/2 = {fight:.0f} N > "
@@ -218,10 +220,27 @@ class Supervisor:
             same[1] = same[1] + 1 if s2 == prev.s2_mm else 0
             same[2] = same[2] + 1 if F1 == prev.F1_N else 0
             same[3] = same[3] + 1 if F2 == prev.F2_N else 0
-            if same[0] > frozen or same[1] > frozen or same[2] > frozen or same[3] > frozen:
-                for j, (a, name, unit) in enumerate(((s1, "LVDT 1", "mm"), (s2, "LVDT 2", "mm"),
-                                                     (F1, "load cell 1", "N"), (F2, "load cell 2", "N"))):
-                    if same[j] > frozen:
-                        return Violation(t, "max_frozen_cycles", f"{name} frozen: the same value {a:.6g} {unit} "
-                                         f"for {same[j]} cycles > {frozen}", same[j], frozen)
+            # (each counter checked on its own, in the order s1, s2, F1, F2: no pre-filter whose
+            # comparison a test could not tell from the one it guards)
+            if same[0] > frozen:
+                return _frozen(t, "LVDT 1", s1, "mm", same[0], frozen)
+            if same[1] > frozen:
+                return _frozen(t, "LVDT 2", s2, "mm", same[1], frozen)
+            if same[2] > frozen:
+                return _frozen(t, "load cell 1", F1, "N", same[2], frozen)
+            if same[3] > frozen:
+                return _frozen(t, "load cell 2", F2, "N", same[3], frozen)
         return None
+
+
+def _stroke(t: float, k: int, x_mm: float, limit_mm: float) -> Violation:
+    return Violation(t, "max_stroke_mm", f"|s{k}| = {x_mm:.3f} mm > {limit_mm} mm", x_mm, limit_mm)
+
+
+def _force(t: float, k: int, f_N: float, limit_N: float) -> Violation:
+    return Violation(t, "max_force_N", f"|F{k}| = {f_N:.0f} N > {limit_N:.0f} N", f_N, limit_N)
+
+
+def _frozen(t: float, name: str, value: float, unit: str, cycles: int, limit: int) -> Violation:
+    return Violation(t, "max_frozen_cycles", f"{name} frozen: the same value {value:.6g} {unit} for {cycles} "
+                     f"cycles > {limit}", cycles, limit)
