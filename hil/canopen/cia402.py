@@ -573,6 +573,12 @@ MASTER_COMMANDS: dict[tuple[Goal, State], Command | None] = {
 
 #: :data:`MASTER_COMMANDS` keyed by the members' identities (:func:`master_command`)
 _MASTER_BY_ID: dict[tuple[int, int], Command | None] = {(id(g), id(s)): c for (g, s), c in MASTER_COMMANDS.items()}
+#: the controlwords of :data:`MASTER_COMMANDS` keyed by the identities of (goal, state), for every entry but
+#: QUICK_STOP_ACTIVE's and those whose command is a fault reset or none (those need :func:`master_command`
+#: and the master's own handling): the master's every cycle, one look-up
+PLAIN_CONTROLWORDS: dict[tuple[int, int], int] = {
+    (id(g), id(s)): _CONTROLWORD[c] for (g, s), c in MASTER_COMMANDS.items()
+    if s is not State.QUICK_STOP_ACTIVE and c is not None and c is not Command.FAULT_RESET}
 
 
 def master_command(goal: Goal, state: State, *, stopped: bool = False) -> Command | None:

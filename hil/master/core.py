@@ -39,7 +39,7 @@ from collections.abc import Generator
 from dataclasses import replace
 
 from hil.canopen.cia402 import (
-    MASTER_COMMANDS,
+    PLAIN_CONTROLWORDS,
     SAFE_STATES,
     Command,
     Controlword,
@@ -90,11 +90,6 @@ from hil.profile.config import Actuation
 
 _CSP = int(OperationMode.CSP)  #: the modes of operation as the RPDO carries them
 _CST = int(OperationMode.CST)
-#: controlwords of :data:`~hil.canopen.cia402.MASTER_COMMANDS` by the identities of (goal, state), for the states
-#: but QUICK_STOP_ACTIVE and the commands but a fault reset or none (those through :func:`master_command`)
-_PLAIN_CONTROLWORD: dict[tuple[int, int], int] = {
-    (id(g), id(s)): controlword(c) for (g, s), c in MASTER_COMMANDS.items()
-    if s is not State.QUICK_STOP_ACTIVE and c is not None and c is not Command.FAULT_RESET}
 
 __all__ = ["DriveFault", "DriveView", "HeartbeatLost", "MasterCore", "MasterEvent",
            "MasterLossReactionError", "NodeView", "Phase", "PreflightError", "SAFE_STATES"]
@@ -520,7 +515,7 @@ class MasterCore:
         state = d.state
         if state is not State.QUICK_STOP_ACTIVE:
             d.still.clear()
-            cw = _PLAIN_CONTROLWORD.get((id(goal), id(state)))  # (the table's every cycle, without two calls)
+            cw = PLAIN_CONTROLWORDS.get((id(goal), id(state)))  # (the table's every cycle, without two calls)
             if cw is not None:
                 return cw
         cmd = master_command(goal, state, stopped=self._stopped(d, phi) if state is State.QUICK_STOP_ACTIVE

@@ -340,7 +340,7 @@ class CanopenLink:
             # stopping after a fault: one safe-state cycle, no complete sample required
             self._safe_cycle()
             return self._last
-        if self.m.samples or self.held:  # (= self.behind)
+        if self.behind:
             # a stall's backlog: the next sample is here already; the setpoints of a past SYNC are not
             # sent (the drives take the latest at the next SYNC), a stop is, at once
             if stop:

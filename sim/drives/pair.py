@@ -486,12 +486,7 @@ class SimDrivePair:
             for s in self.sensors:
                 if s.event_tpdos:
                     s.send_event_tpdos(now)
-        out = self._out  # (_drain inlined: every frame)
-        if not out:
-            return []
-        frames = out.copy()
-        out.clear()
-        return frames
+        return self._drain()
 
     def _sensor_frame(self, frame: Frame, now: float) -> bool:
         """A frame no drive consumes, for the sensor nodes: an SDO request, a SYNC of a sensor node's
