@@ -19,31 +19,33 @@ and in CST the max motor speed 0x6080 as a speed limitation of the torque (:meth
   speed limitation in torque mode (Lenze i700 0x2946, ABB ACSM1, Delta ASDA, CiA 402's extended torque
   mode 0x60C8/0x60C9 with 0x60CA; sources in docs/safety.md) reduce the torque so that the speed stays at
   the limit, and hand back to the target torque once a counter-torque brings the speed below it. Their
-  speed loop runs at tens of kHz; here the drive acts once per drive cycle T (the plant's sample period),
-  so it limits the torque of the cycle to what brings the motor to the limit by the cycle's end:
+  speed loop runs at kHz; here the drive acts once per drive cycle T (the plant's sample period), so it
+  gives at most the torque that brings the motor to the limit by the cycle's end. In speed gained per
+  cycle (:math:`g = \\tau T / J`, J the plant's motor inertia [kg m^2], :math:`\\tau` [N m]), with the
+  motor angles :math:`\\varphi` sampled at this and the last two cycles, the mean speeds
+  :math:`m_k = (\\varphi_k - \\varphi_{k-1})/T` and the torques the drive commanded in CST
+  (:math:`g_{k-1}, g_{k-2}`; 0 in another mode):
 
-  .. math:: \\hat\\omega_k = \\frac{\\varphi_k - \\varphi_{k-1}}{T} + \\frac{T}{2J}\\,\\tau_{k-1},\\qquad
-            \\tau_k = \\mathrm{clip}\\Big(\\tau_{cmd},\\ \\frac{J}{T}(-\\omega_{max} - \\hat\\omega_k),\\
-            \\frac{J}{T}(\\omega_{max} - \\hat\\omega_k)\\Big)
+  .. math:: \\hat d = m_k - m_{k-1} - \\tfrac12 (g_{k-1} + g_{k-2}),\\qquad
+            \\hat\\omega_{k+1}(g) = m_k + \\tfrac12 g_{k-1} + \\tfrac32 \\hat d + g,\\qquad
+            |\\hat\\omega_{k+1}| \\le \\omega_{max}
 
-  (motor angle :math:`\\varphi` [rad] as sampled, :math:`\\tau_{k-1}` the torque the drive commanded in the
-  last cycle [N m], 0 when it was not in CST; :math:`J` the motor inertia [kg m^2] of the plant parameters,
-  :math:`\\omega_{max}` = 0x6080 [rad/s]); then clipped to 0x6072. Derivation: the free motor (in its
-  backlash, no load) obeys :math:`\\omega_{k+1} = \\omega_k + \\tau_k T / J` over a cycle with the torque
-  held, and the mean speed over the last cycle lags the speed at its end by :math:`\\tau_{k-1}T/(2J)`, so
-  :math:`\\hat\\omega_k` is that speed and the gain :math:`J/T` [N m s/rad] is dead-beat: a limited cycle
-  ends at :math:`\\pm\\omega_{max}` exactly. Overshoot: only the estimate's error, the angle's quantisation
-  q (each sample rounded by q/2): :math:`\\omega \\le \\omega_{max} + q/T` at the samples and, the torque
-  constant within a cycle, between them (shipped: 12-bit resolver, T = 2 ms, i = 5.027 rad/mm:
-  q / (T i) = 0.15 mm/s at the ram). Viscous loss and friction slow the motor below the estimate (the
-  limit acts earlier). With a load of effective inertia :math:`J' \\ge J` (the motor in contact carries
-  the chain and the surface), :math:`\\rho = J/J'`, the error e = omega - omega_max and the torque obey
-  :math:`u_k = -e_k - c\\,u_{k-1}`, :math:`e_{k+1} = e_k + \\rho u_k`, :math:`c = (1-\\rho)/2`, with
-  poles :math:`\\lambda^2 - c\\lambda - c = 0`, inside the unit circle for every :math:`0 < \\rho \\le 1`
-  (the larger root is below 1 iff c < 1/2): stable at the drive cycle whatever the load, without
-  overshoot beyond one cycle of an external force that pushes the motor the way it moves
-  (:math:`\\tfrac{3}{2}\\,T\\,F_{ext}/(J i^2)` at the ram). Statusword bit 11 while it limits. 0 or no
-  0x6080: no limit (a drive whose EDS lacks 0x6080 keeps no speed limit in CST either).
+  i.e. :math:`\\tau_k = \\mathrm{clip}(\\tau_{cmd}, \\tfrac{J}{T}(-\\omega_{max} - \\hat\\omega_{k+1}(0)),
+  \\tfrac{J}{T}(\\omega_{max} - \\hat\\omega_{k+1}(0)))`, then clipped to 0x6072
+  (:math:`\\omega_{max}` = 0x6080 in rad/s). Derivation: over a cycle with the torque held and a load
+  d (speed per cycle) constant over two cycles, :math:`\\omega_{k+1} = \\omega_k + g_k + d` and the mean
+  lags the end, :math:`m_k = \\omega_k - (g_{k-1} + d)/2`; the difference of two means gives d, so
+  :math:`\\hat\\omega_{k+1}` is exact for a free motor (d = 0) and for a steady load (in contact the
+  chain's force: the torque is kept up to the limit itself, not cut early as a free-motor prediction
+  would at long cycles). The gain J/T [N m s/rad] is dead-beat: a limited cycle ends at the limit.
+  Overshoot: the estimate's error from the angle's quantisation q (each sample rounded by q/2:
+  :math:`(\\tfrac52 e_k - 4 e_{k-1} + \\tfrac32 e_{k-2})/T`), at most :math:`4q/T`: shipped 12-bit
+  resolver, T = 2 ms, i = 5.027 rad/mm: 0.61 mm/s at the ram (0.12 mm/s at the vcan stage's 10 ms), plus
+  a change of the load within a cycle. Stability: with a load of effective inertia J' the loop
+  (states :math:`\\omega, m_k, m_{k-1}, g_{k-1}, g_{k-2}`) has its poles inside the unit circle for
+  :math:`0.6 J < J'` (spectral radius 0.42 at J' = 1.1 J, 0.76 at 2 J, 0.96 at 10 J, 0 at J' = J), so at
+  the drive cycle whatever the load the motor carries (J' >= J). Statusword bit 11 while it limits. 0 or
+  no 0x6080: no limit (a drive whose EDS lacks 0x6080 keeps no speed limit in CST either).
 
 It uses ``store``, ``position_inc``, ``angle_increments_per_rad`` and ``enter_fault`` of the drive.
 """
@@ -74,10 +76,12 @@ class DriveLimits:
         The motor's inertia J [kg m^2] (the plant's), the CST speed limit's gain J / T.
     following_error_cycles : int
         Drive cycles in a row with the following error beyond the window.
-    last_cycle_phi_rad : float or None
-        The motor angle sampled at the last drive cycle [rad] (None before the first).
-    last_cst_torque_Nm : float
-        The motor torque the drive commanded in that cycle in CST [N m] (0 in another mode).
+    speed_history : list
+        ``[phi_k, phi_k-1, phi_k-2, tau_k-1, tau_k-2]``: the motor angles sampled at this and the last two
+        drive cycles [rad] (None before they exist) and the motor torques the drive commanded in CST in
+        the last two [N m] (0 in another mode); :meth:`cycle_angle` shifts it.
+    cst_torque_Nm : float
+        The torque commanded in CST in this cycle [N m] (0 until :meth:`speed_held`).
     """
 
     def init_limits(self, sample_period_s: float, motor_inertia_kg_m2: float) -> None:
@@ -88,43 +92,47 @@ class DriveLimits:
         self.reset_speed_estimate()
 
     def reset_speed_estimate(self) -> None:
-        """No motor angle of a last cycle (power-on, reset node): the CST speed limit waits one cycle."""
-        self.last_cycle_phi_rad: float | None = None
-        self.last_cst_torque_Nm = 0.0
+        """No motor angles of earlier cycles (power-on, reset node): the CST speed limit waits a cycle."""
+        self.speed_history: list = [None, None, None, 0.0, 0.0]
+        self.cst_torque_Nm = 0.0
+
+    def cycle_angle(self, phi_rad: float) -> None:
+        """A drive cycle begins with the motor angle ``phi_rad`` [rad] sampled now (every mode)."""
+        h = self.speed_history
+        h[2] = h[1]
+        h[1] = h[0]
+        h[0] = phi_rad
+        h[4] = h[3]
+        h[3] = self.cst_torque_Nm
+        self.cst_torque_Nm = 0.0
 
     def speed_held(self, force_N: float, force_max_N: float, i_total_rad_per_mm: float) -> float:
         """The ram force of this CST cycle after the max motor speed 0x6080 (module docstring): ``force_N``
-        (the target torque after 0x6072, as a ram force [N]) clipped to the range that keeps the motor
-        speed within 0x6080 by the cycle's end, then to +-``force_max_N`` (0x6072 [N]). Call once per
-        drive cycle in CST, after :meth:`cycle_angle`; it remembers the torque for the next estimate."""
-        prev = self.speed_prev_phi
+        (the target torque after 0x6072, as a ram force [N]) clipped to the range whose predicted speed
+        at the cycle's end lies within +-0x6080, then to +-``force_max_N`` (0x6072 as a ram force [N]).
+        Called once per drive cycle in CST, after :meth:`cycle_angle`."""
+        phi, phi1, phi2, tau1, tau2 = self.speed_history
         gear = i_total_rad_per_mm * 1000.0  # rad/m: motor torque [N m] = force [N] / gear
         rpm = self.store.int_or(0x6080, 0, 0)
         f = force_N
-        if rpm > 0 and prev is not None:
+        if rpm > 0 and phi1 is not None:
             T = self.limit_period_s
             J = self.motor_inertia_kg_m2
-            w_hat = (self.cycle_phi_rad - prev) / T + self.speed_prev_torque_Nm * T / (2.0 * J)
+            c = T / J  # speed gained per N m over a cycle [rad/s]
+            m = (phi - phi1) / T  # the mean speed over the last cycle [rad/s]
+            d = 0.0 if phi2 is None else m - (phi1 - phi2) / T - 0.5 * c * (tau1 + tau2)  # the load's gain
+            w_end = m + 0.5 * c * tau1 + 1.5 * d  # the speed at the cycle's end without torque
             w_max = rpm_to_rad_per_s(rpm)
-            k = J / T * gear  # [N per rad/s]: the dead-beat gain J / T, as a ram force
-            hi = k * (w_max - w_hat)
+            k = gear / c  # [N per rad/s]: the dead-beat gain J / T, as a ram force
+            hi = k * (w_max - w_end)
             if f > hi:
                 f = hi if hi > -force_max_N else -force_max_N
             else:
-                lo = k * (-w_max - w_hat)
+                lo = k * (-w_max - w_end)
                 if f < lo:
                     f = lo if lo < force_max_N else force_max_N
-        self.last_cst_torque_Nm = f / gear
+        self.cst_torque_Nm = f / gear
         return f
-
-    def cycle_angle(self, phi_rad: float) -> None:
-        """The start of a drive cycle with the motor angle ``phi_rad`` [rad] sampled now: keeps the last
-        cycle's angle and torque (0 unless it was a CST cycle) for :meth:`speed_held`."""
-        self.speed_prev_phi = self.last_cycle_phi_rad
-        self.speed_prev_torque_Nm = self.last_cst_torque_Nm
-        self.cycle_phi_rad = phi_rad
-        self.last_cycle_phi_rad = phi_rad
-        self.last_cst_torque_Nm = 0.0
 
     def speed_limited(self, demand_inc: int, previous_inc: int | None) -> int:
         """The position demand of this cycle after the max motor speed 0x6080 (``previous_inc``: the last
