@@ -11,11 +11,16 @@ without 0x6080 it is not limited.
 from __future__ import annotations
 
 import math
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
+import tomli_w
 from test_drive_limits import Rig
 
+from hil.cli import main
+from hil.record.runfolder import read_signals
 from sim.drives.limits import DriveLimits
 from sim.params import EmaMechanics
 from sim.plant import RigPlant
@@ -140,3 +145,27 @@ def test_cst_speed_estimate_of_a_free_motor_is_exact():
     d.cycle_angle(w0 * 3 * T_S + g * 9 * T_S / 2)
     d.objects[(0x6080, 0)] = RPM_10
     assert d.speed_held(5000.0, 8000.0, I_TOTAL) == pytest.approx(K * 1.0)
+
+
+VCAN = Path(__file__).resolve().parent / "vcan"
+
+
+@pytest.mark.slow
+def test_worn_play_crossing_in_force_mode_held_by_the_drive_in_a_whole_check(tmp_path):
+    """The vcan stage's profiles (10 ms SYNC, v = 12.5 mm/s, so 0x6080 = 600 rpm) with 0.5 mm of internal
+    play in both EMAs: EMA 1 in force mode crosses its play as its opposing force ramps on. Before the
+    drives kept 0x6080 in CST it reached 12.91 mm/s there and the master stopped the check
+    (docs/safety.md, *Speed in cyclic torque mode*); now the drive holds it and the check runs to its end."""
+    data = tomllib.loads((VCAN / "simrig.toml").read_text())
+    data["ema1"]["backlash_int_mm"] = data["ema2"]["backlash_int_mm"] = 0.5
+    sim = tmp_path / "simrig.toml"
+    sim.write_text(tomli_w.dumps(data))
+    out = tmp_path / "run"
+    main(["dry-run", "--profile", str(VCAN / "actuation.toml"), "--sim", str(sim), "--check",
+          str(VCAN / "check.toml"), "--quiet", "--out", str(out)])
+    sig = read_signals(out / "signals.csv")
+    t, phi1, mode1 = sig.t, sig.phi1, np.asarray(sig.mode1, dtype=float)
+    v = np.abs(np.diff(phi1)) / I_TOTAL / np.diff(t)
+    cst = mode1[1:] == 10
+    assert t[-1] > 50.0  # the whole check (55.5 s): not stopped by the master's speed check
+    assert 11.5 < v[cst].max() <= 12.5  # the crossing, held at 0x6080 (it engages: unlimited 12.91)
