@@ -124,7 +124,7 @@ def _drive(od: cod.ObjectDictionary, node_id: int = 1, *, own: bool = True) -> t
                     info.revision_number or 0, DeviceProfile.DRIVE, 0.1, "canopen")
     out: list[Frame] = []
     drive = SimDrive(node_id, 0, od, gear_ratio_rad_per_mm=5.0, counts_per_rev=None, sample_period_s=0.002,
-                     counters=PairCounters(), outbox=out,
+                     counters=PairCounters(), outbox=out, motor_inertia_kg_m2=1e-4,
                      own_data=own_data(od, spec, ForceControl.CST) if own else None)
 
     class _One:

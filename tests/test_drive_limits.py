@@ -285,7 +285,7 @@ class _Stub(DriveLimits):
         self.position_inc = 0
         self.faults: list[int] = []
         self.store = self
-        self.init_limits(T_S)
+        self.init_limits(T_S, 1.0e-4)
 
     def int_or(self, index: int, sub: int, default: int) -> int:
         return self.objects.get((index, sub), default)

@@ -42,7 +42,9 @@ Choices (CiA 402 leaves them open or this drive restricts them)
 * Software position limits 0x607D: a write that makes max < min is aborted
   (0x06090036). In CSP the target is clipped to them (CiA 402), in CST the target torque to the max
   torque 0x6072; the max motor speed 0x6080 and the following error window and time out 0x6065/0x6066
-  (fault 0x8611) are :mod:`sim.drives.limits`. Rated torque 0x6076 and 0x608F must be > 0 (0x06090032).
+  (fault 0x8611) are :mod:`sim.drives.limits`, as is 0x6080 in CST (a speed limitation of the
+  torque: it is reduced so that the motor speed stays within 0x6080). Rated torque 0x6076 and 0x608F
+  must be > 0 (0x06090032).
 * Fault hooks (set by :mod:`sim.faults`, off by default): ``boot_fault``
   (an error code: the drive enters FAULT at every boot, power-on or reset
   node, with an EMCY after its boot-up frame, until a fault reset clears
@@ -57,7 +59,7 @@ Choices (CiA 402 leaves them open or this drive restricts them)
   transition 1 to SWITCH_ON_DISABLED; a CiA 402 slave on lely-core seen in the field).
 * Statusword: bit 12 (drive follows the command) in OPERATION_ENABLED with a
   supported mode, bit 11 when the last target was clipped (0x607D or 0x6080 in CSP,
-  0x6072 in CST), bit 10 in CSP when the effective target is within
+  0x6072 or 0x6080 in CST), bit 10 in CSP when the effective target is within
   :data:`TARGET_WINDOW_INC` of the position.
 """
 
@@ -289,6 +291,7 @@ class Cia402Drive:
         self._mode_display = int(d.default or 0) if d is not None else 0
         self._limit_active = False
         self._target_eff_inc: int | None = None
+        self.reset_speed_estimate()
         self._qs_phi_rad = 0.0
         self._qs_left = 0
         self._qs_stay = False
@@ -445,7 +448,8 @@ class Cia402Drive:
         State bits from the state machine, remote (bit 9) always; in
         OPERATION_ENABLED with a supported mode: bit 12 (drive follows the
         command), bit 11 when the last target was clipped (software position
-        limits 0x607D in CSP, max torque 0x6072 in CST), bit 10 in CSP when
+        limits 0x607D or max motor speed 0x6080 in CSP, max torque 0x6072 or
+        the speed limitation by 0x6080 in CST), bit 10 in CSP when
         ``|effective target - position actual| <= TARGET_WINDOW_INC``.
         """
         return self._statusword_now()
@@ -571,6 +575,7 @@ class Cia402Drive:
         """
         sm = self.state_machine
         prev_demand = self._target_eff_inc  # the last cycle's CSP demand (None: it was not in CSP)
+        self.cycle_angle(self._phi_rad)  # (sim.drives.limits: the CST speed estimate)
         if sm.state is _FRA:
             sm.fault_reaction_done()
         if sm.state is _QSA:
@@ -624,13 +629,15 @@ class Cia402Drive:
                 if tmax is None:
                     tmax = self.store.int_or(0x6072, 0, 32767)
                 eff = min(max(tau, -tmax), tmax)
-                self._limit_active = eff != tau
                 rated_Nm = self._rated_Nm()
                 i_total = self._i_total
                 if 0.0 < rated_Nm < math.inf and 0.0 < i_total < math.inf:
-                    value = permille_to_force_N_unchecked(eff, i_total, rated_Nm)
+                    force = permille_to_force_N_unchecked(eff, i_total, rated_Nm)
                 else:
-                    value = permille_to_force_N(eff, i_total, rated_Nm)  # raises its own error
+                    force = permille_to_force_N(eff, i_total, rated_Nm)  # raises its own error
+                # the max motor speed 0x6080 (sim.drives.limits), within 0x6072
+                value = self.speed_held(force, permille_to_force_N_unchecked(tmax, i_total, rated_Nm), i_total)
+                self._limit_active = eff != tau or value != force
                 mode_out = _MODE_FORCE
         self._sp_mode = mode_out  # (_set_setpoint inlined)
         self._sp_value = value

@@ -59,6 +59,8 @@ class SimDrive(Cia402Drive, DriveLimits, SimNode):
         The motor angle is in position user units (0x6091/0x6092 as stored).
     rated_torque_Nm : float or None
         The rated torque the profile states (torque scaling); None: 0x6076 as stored.
+    motor_inertia_kg_m2 : float
+        The plant's motor inertia [kg m^2]: the gain of the speed limit in CST (:mod:`sim.drives.limits`).
 
     Attributes
     ----------
@@ -94,7 +96,7 @@ class SimDrive(Cia402Drive, DriveLimits, SimNode):
                  counters: PairCounters, outbox: list[Frame], serial: int | None = None,
                  inputs: tuple[LiveInput, ...] = (), own_data: dict | None = None,
                  gear_object: tuple[int, int] | None = None, factor_group: bool = False,
-                 rated_torque_Nm: float | None = None) -> None:
+                 rated_torque_Nm: float | None = None, motor_inertia_kg_m2: float) -> None:
         self.ema_index = ema_index
         self.gear_object = gear_object
         self.factor_group = factor_group
@@ -104,5 +106,5 @@ class SimDrive(Cia402Drive, DriveLimits, SimNode):
                          own_data=own_data)
         self.init_drive(gear_ratio_rad_per_mm, counts_per_rev, sample_period_s,
                          angle_units_per_rad=angle_k, rated_torque_Nm=rated_torque_Nm)
-        self.init_limits(sample_period_s)
+        self.init_limits(sample_period_s, motor_inertia_kg_m2)
         self.init_comm()

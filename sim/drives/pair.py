@@ -287,7 +287,7 @@ class SimDrivePair:
                                   own_data=own_data(od, spec, dp.force_control, _counts(angle)),
                                   gear_object=plan.gear_ratio_object,
                                   factor_group=angle is not None and angle.source is ScaleSource.FACTOR_GROUP,
-                                  rated_torque_Nm=rated))
+                                  rated_torque_Nm=rated, motor_inertia_kg_m2=params.drive.motor_inertia_kg_m2))
         self.nodes: tuple[SimDrive, SimDrive] = (nodes[0], nodes[1])
         for node in self.nodes:
             node.torque_fetch = self._fetch_torque
