@@ -46,11 +46,11 @@ from typing import TYPE_CHECKING
 
 import canopen.objectdictionary as cod
 
-from hil.canopen.cycle import encode_raw
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtState
 from hil.canopen.od import lookup
+from hil.canopen.pdo import encode_raw
 from hil.canopen.signalmap import Scale, Signal
 from sim.drives.nmt_slave import NmtSlave
 from sim.drives.pdo_engine import PdoEngine
