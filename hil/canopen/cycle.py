@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
-from hil.canopen.pdo import Direction, PdoSpec, encode_raw
+from hil.canopen.pdo import Direction, PdoSpec, encode_raw, raw_encoder
 from hil.canopen.plan import Channel
 from hil.canopen.process import Sample
 from hil.canopen.signalmap import Scale, Signal
@@ -235,11 +235,11 @@ class SetpointEncoder:
                              for pos, sig, sc in sorted(items, key=lambda x: x[0]))
                 out.append((spec, rows))
             self._sync[ema] = tuple(out)
-        #: :meth:`frames`' plan per EMA: ((PdoSpec, ((kind, units per SI, data type), ...)), ...), kind 0
-        #: the controlword, 1 the target position, 2 the target torque
+        #: :meth:`frames`' plan per EMA: ((PdoSpec, ((kind, units per SI, raw encoder of the data type),
+        #: ...)), ...), kind 0 the controlword, 1 the target position, 2 the target torque
         self._fast: dict[int, tuple] = {
             ema: tuple((spec, tuple((0 if sig is Signal.CONTROLWORD else 1 if sig is Signal.TARGET_POSITION else 2,
-                                     k, t) for _, sig, k, t in rows))
+                                     k, raw_encoder(t)) for _, sig, k, t in rows))
                        for spec, rows in per_ema)
             for ema, per_ema in self._sync.items()}
 
@@ -255,8 +255,8 @@ class SetpointEncoder:
         to its type.
         """
         return [spec.pack([controlword if kind == 0 else
-                           encode_raw(t, (target_position_rad if kind == 1 else target_torque_N) * k)
-                           for kind, k, t in rows])
+                           encode((target_position_rad if kind == 1 else target_torque_N) * k)
+                           for kind, k, encode in rows])
                 for spec, rows in self._fast[ema]]
 
     def mode_frame(self, ema: int, mode: int) -> Frame | None:

@@ -39,7 +39,7 @@ from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.frame import Frame
 
 __all__ = ["COB_ID_INVALID", "COB_ID_NO_RTR", "Direction", "MappedObject", "PdoCodec", "PdoError", "PdoLayout",
-           "PdoLengthError", "PdoSpec", "SdoWrite", "TYPE_BITS", "TYPE_RANGE", "encode_raw", "pdo_codec",
+           "PdoLengthError", "PdoSpec", "SdoWrite", "TYPE_BITS", "TYPE_RANGE", "encode_raw", "pdo_codec", "raw_encoder",
            "predefined_cob_id"]
 
 # --------------------------------------------------------------------------- layout
@@ -88,13 +88,36 @@ TYPE_RANGE: dict[int, tuple[int, int]] = {
 
 def encode_raw(data_type: int, x: float) -> int | float:
     """The raw value of ``x`` for an entry of ``data_type``: rounded to nearest (ties to even) and clipped
-    to the integer type's range (:data:`TYPE_RANGE`); REAL32 (any type without a range) as it is."""
+    to the integer type's range (:data:`TYPE_RANGE`); a type without a range (REAL32) as it is.
+
+    .. math:: r = \\min(\\max(\\mathrm{round}(x),\\ lo),\\ hi)
+
+    ``x`` is the value in the object's unit (increments, per mille, 0.001 mm, ...): finite (``round``
+    raises ValueError for NaN and OverflowError for an infinity). The hot paths hold
+    :func:`raw_encoder` of their data type instead.
+    """
+    return raw_encoder(data_type)(x)
+
+
+def _as_is(x: float) -> float:
+    return x
+
+
+@cache
+def raw_encoder(data_type: int) -> Callable[[float], int | float]:
+    """:func:`encode_raw` for one data type, its range bound once: ``raw_encoder(t)(x) == encode_raw(t, x)``
+    (the one round-and-clip; the unit kernels of :mod:`hil.canopen.units`, the master's setpoints and the
+    simulated drives' inputs call it per value)."""
     rng = TYPE_RANGE.get(data_type)
     if rng is None:
-        return x
-    v = round(x)
+        return _as_is
     lo, hi = rng
-    return lo if v < lo else hi if v > hi else v
+
+    def round_clip(x: float) -> int:
+        v = round(x)
+        return lo if v < lo else hi if v > hi else v
+
+    return round_clip
 
 
 # --------------------------------------------------------------------------- codec
