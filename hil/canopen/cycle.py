@@ -254,10 +254,14 @@ class SetpointEncoder:
         target torque ``round(F * k)`` (per mille of the rated torque) clipped
         to its type.
         """
-        return [spec.pack([controlword if kind == 0 else
-                           encode((target_position_rad if kind == 1 else target_torque_N) * k)
-                           for kind, k, encode in rows])
-                for spec, rows in self._fast[ema]]
+        out = []
+        for spec, rows in self._fast[ema]:  # (loops, not comprehensions: each of those is a call, every cycle)
+            vals = []
+            for kind, k, encode in rows:
+                vals.append(controlword if kind == 0 else
+                            encode((target_position_rad if kind == 1 else target_torque_N) * k))
+            out.append(spec.pack(vals))
+        return out
 
     def mode_frame(self, ema: int, mode: int) -> Frame | None:
         """The event RPDO that sets the modes of operation, None when the EMA has none."""
