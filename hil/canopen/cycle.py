@@ -22,6 +22,7 @@ through its PDO's codec (:meth:`PdoSpec.pack <hil.canopen.pdo.PdoSpec.pack>`,
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -101,6 +102,8 @@ class CycleDecoder:
                          for slot, pos, sc in sorted(items))
             status_emas = tuple(slot - 5 for slot, _, _, _ in rows if slot in (6, 7))
             self._pdos[cob] = (by_cob[cob], rows, status_emas)
+        #: :meth:`feed`'s: COB-ID -> (the PdoSpec's codec unpack, PdoSpec, rows, status EMAs)
+        self._feed = {cob: (spec.codec.unpack, spec, rows, emas) for cob, (spec, rows, emas) in self._pdos.items()}
         self._others = frozenset(c for c in by_cob if c not in self._pdos)
         self._expected = frozenset(self._pdos)
         self._n_expected = len(self._expected)
@@ -119,13 +122,16 @@ class CycleDecoder:
         """Decode one frame; returns None if it is no TPDO of the layout, else the EMAs (1, 2)
         whose statusword it carried. Raises :class:`~hil.canopen.pdo.PdoLengthError` on a wrong length."""
         cob = frame.arbitration_id
-        hit = self._pdos.get(cob)
+        hit = self._feed.get(cob)
         if hit is None:
             if cob in self._others:
                 return ()
             return None
-        spec, rows, status_emas = hit
-        vals = spec.unpack(frame)
+        unpack, spec, rows, status_emas = hit
+        try:
+            vals = unpack(frame.data)  # the PDO's codec (PdoSpec.unpack but for the message of its error)
+        except struct.error:
+            vals = spec.unpack(frame)  # raises PdoLengthError naming the PDO, its COB-ID and both lengths
         for slot, pos, k, off in rows:
             v = vals[pos]
             if slot < 6:
