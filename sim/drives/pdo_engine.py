@@ -71,6 +71,7 @@ RESTRICTED_CAN_IDS = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x
                       (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x77F), (0x780, 0x7FF))
 _K_CONTROLWORD = (0x6040, 0)
 _trusted = Frame.trusted
+_OPERATIONAL = NmtState.OPERATIONAL  # (a module constant: an Enum member read off its class is a Python lookup)
 _ONLY_CONTROLWORD = (_K_CONTROLWORD,)
 
 
@@ -390,7 +391,7 @@ class PdoEngine:
 
     def send_sync_tpdos(self, t: float) -> None:
         """Send the synchronous TPDOs due at this SYNC (OPERATIONAL only)."""
-        if self.nmt_state is not NmtState.OPERATIONAL:
+        if self.nmt_state is not _OPERATIONAL:
             return
         send = self._send_tpdo
         for p in self._sync_tpdos_list:  # valid, transmission type 0..240
@@ -409,7 +410,7 @@ class PdoEngine:
 
     def send_event_tpdos(self, t: float) -> None:
         """Send event-driven TPDOs (254/255) whose payload changed, respecting the inhibit time."""
-        if not self.event_tpdos or self.nmt_state is not NmtState.OPERATIONAL:
+        if not self.event_tpdos or self.nmt_state is not _OPERATIONAL:
             return
         for p in self.event_tpdos:  # valid, transmission type 254/255
             payload = p.assemble()
@@ -421,7 +422,7 @@ class PdoEngine:
                 p.pending = True
 
     def send_timed_tpdos(self, t: float) -> None:
-        if self.nmt_state is not NmtState.OPERATIONAL:
+        if self.nmt_state is not _OPERATIONAL:
             return
         for p in self._timed_tpdos_list:  # valid, 254/255, event timer > 0
             if p.last_sent_t is None or t - p.last_sent_t >= p.event_timer_s - TIME_EPS_S:
@@ -433,7 +434,7 @@ class PdoEngine:
     def on_rpdo(self, pdos: list[Pdo], frame: Frame, t: float) -> None:
         """An RPDO frame for ``pdos`` (the node's valid RPDOs of its COB-ID): latch or apply."""
         self.now_s = t
-        if self.nmt_state is not NmtState.OPERATIONAL:
+        if self.nmt_state is not _OPERATIONAL:
             self.counters.rpdos_dropped += 1
             return
         n = len(frame.data)
