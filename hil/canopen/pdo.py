@@ -3,9 +3,12 @@
 A :class:`PdoLayout` is the cyclic process data of one node: which objects sit
 where in which PDO, with which COB-ID and transmission type. Layouts are
 planned from the rig's signal map and each node's EDS
-(:mod:`hil.canopen.plan`); this module holds the vocabulary, the
-little-endian codec of a PDO (:class:`PdoSpec.pack`, :class:`PdoSpec.unpack`)
-and the SDO write list that configures a layout in a node (CiA 301 7.5.2.35/36).
+(:mod:`hil.canopen.plan`); this module holds the vocabulary, the one
+little-endian codec of PDO payloads (:func:`pdo_codec`, held by each
+:class:`PdoSpec`: :meth:`PdoSpec.pack`, :meth:`PdoSpec.unpack`; the simulated
+drives' PDO engine uses it too), the one round-and-clip of a value into an
+integer object (:func:`encode_raw`, :func:`raw_encoder`) and the SDO write
+list that configures a layout in a node (CiA 301 7.5.2.35/36).
 Unit scaling is :class:`hil.canopen.signalmap.Scale`, the bus load
 :mod:`hil.canopen.busload`. Nothing here touches a bus, a clock or a file.
 
@@ -127,10 +130,11 @@ def raw_encoder(data_type: int) -> Callable[[float], int | float]:
 class PdoCodec:
     """The codec of one PDO payload: its raw values <-> its little-endian bytes, compiled once.
 
-    The one encoding path of process data: :meth:`PdoSpec.pack` / :meth:`PdoSpec.unpack` (the master's
-    :class:`~hil.canopen.cycle.SetpointEncoder` and :class:`~hil.canopen.cycle.CycleDecoder`, the CAN-log
-    reader) and the simulated drives' PDO engine (:mod:`sim.drives.pdo_engine`) all pack and unpack
-    through the codec :func:`pdo_codec` gives for the payload's ``struct`` codes.
+    The one encoding path of process data: :meth:`PdoSpec.pack` / :meth:`PdoSpec.unpack` and their
+    users (the master's :class:`~hil.canopen.cycle.SetpointEncoder`, the CAN-log reader; the
+    :class:`~hil.canopen.cycle.CycleDecoder` calls its PDO's ``codec.unpack`` and ``PdoSpec.unpack`` only
+    for the error of a wrong length) and the simulated drives' PDO engine (:mod:`sim.drives.pdo_engine`)
+    all pack and unpack through the codec :func:`pdo_codec` gives for the payload's ``struct`` codes.
 
     Attributes
     ----------

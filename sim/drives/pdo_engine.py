@@ -324,7 +324,7 @@ class PdoEngine:
         self._sync_rpdos = tuple(p for p in self._rpdos if p.valid and p.sync)
 
     def _compile_pdo(self, p: Pdo) -> None:
-        """Precompile ``p``'s entries into one struct (see :class:`Pdo`); generic path otherwise."""
+        """Compile ``p``'s entries into its codec (see :class:`Pdo`); entry by entry otherwise."""
         p.sync = p.trans_type <= 240
         p.event = p.trans_type >= 254
         p.unpack = None
