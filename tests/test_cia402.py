@@ -141,6 +141,9 @@ def test_decode_command_only_reads_command_bits(cw):
 def test_decode_rejects_non_words():
     with pytest.raises(CanopenInputError, match="0x10000"):
         decode_state(0x10000)
+    for bad in (-1, -0x10000, 1.0, "0x0237", True, None):  # (a negative index would read the table backwards)
+        with pytest.raises(CanopenInputError, match="^sw "):
+            decode_state(bad)
     with pytest.raises(CanopenInputError):
         decode_command(-1)
 
@@ -148,15 +151,16 @@ def test_decode_rejects_non_words():
 def test_decode_state_all_words(monkeypatch):
     import hil.canopen.cia402 as cia402
 
-    # decode_state remembers the words it decoded: from an empty memo each word is decoded (first call) and
-    # then answered from the memo (second call); both must give the state
-    monkeypatch.setattr(cia402, "_DECODED", {})
+    # decode_state reads a table of every word built at import: built afresh here (what the module's
+    # builder gives now, not what it gave at import) and read through decode_state
+    table = cia402._decoded_words()
+    assert len(table) == 0x10000 and table == cia402._DECODED
+    monkeypatch.setattr(cia402, "_DECODED", table)
     unmatched = 0
     for sw in range(0x10000):
         hits = [s for s, mask, value in MASKS if sw & mask == value]
         assert len(hits) <= 1  # the patterns are disjoint
         got = decode_state(sw)
-        assert decode_state(sw) is got
         if hits:
             assert got is hits[0] and match_state(sw) is hits[0]
         else:

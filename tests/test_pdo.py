@@ -18,7 +18,19 @@ from hil.canopen.busload import bus_load, frame_bits
 from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.frame import Frame, FrameError, sync_frame
 from hil.canopen.od import load_eds
-from hil.canopen.pdo import Direction, MappedObject, PdoError, PdoLayout, PdoLengthError, PdoSpec, predefined_cob_id
+from hil.canopen.pdo import (
+    TYPE_RANGE,
+    Direction,
+    MappedObject,
+    PdoError,
+    PdoLayout,
+    PdoLengthError,
+    PdoSpec,
+    encode_raw,
+    pdo_codec,
+    predefined_cob_id,
+    raw_encoder,
+)
 from hil.canopen.sdo import SdoClient, SdoEvent
 from hil.canopen.units import (
     force_dN_to_newton,
@@ -114,6 +126,41 @@ def test_real32_and_integer_entries_pack_together(x, y):
                                                         MappedObject("b", 0x6401, 1, 0x0003)))
     a, b = p.unpack(p.pack((x, y)))
     assert b == y and a == pytest.approx(x, rel=1e-7, abs=1e-30)
+
+
+def test_one_codec_per_mapping_shared_by_every_pdo_of_it():
+    # the master's PdoSpec of each drive and any other user of the same struct codes hold one codec
+    a, b = layout(1)["TPDO1"], layout(2)["TPDO1"]
+    assert a.codec is b.codec is pdo_codec("Hib")
+    assert (a.codec.codes, a.codec.size) == ("Hib", 7)
+    assert a.codec is not layout(1)["RPDO1"].codec and layout(1)["RPDO1"].codec.codes == "Hih"
+    assert a.codec.pack(0x0237, -5, 8) == bytes.fromhex("3702FBFFFFFF08")
+    assert a.codec.unpack(bytes.fromhex("3702FBFFFFFF08")) == (0x0237, -5, 8)
+    with pytest.raises(struct.error):
+        a.codec.unpack(bytes(6))
+
+
+@pytest.mark.parametrize("x,raw", [(2.5, 2), (3.5, 4), (-2.5, -2), (-0.5, 0), (0.49, 0), (1e12, 2**31 - 1),
+                                   (-1e12, -(2**31)), (2**31 - 0.5, 2**31 - 1), (-(2**31) - 0.5, -(2**31))])
+def test_encode_raw_rounds_ties_to_even_and_clips_i32(x, raw):
+    assert encode_raw(0x0004, x) == raw and raw_encoder(0x0004)(x) == raw
+    assert type(encode_raw(0x0004, x)) is int
+
+
+@pytest.mark.parametrize("data_type", sorted(TYPE_RANGE))
+def test_encode_raw_clips_to_each_integer_type(data_type):
+    lo, hi = TYPE_RANGE[data_type]
+    enc = raw_encoder(data_type)
+    assert enc is raw_encoder(data_type)  # built once per type
+    assert encode_raw(data_type, lo - 1.0e3) == lo and encode_raw(data_type, hi + 1.0e3) == hi
+    assert enc(lo - 0.75) == lo and enc(hi + 0.75) == hi
+    assert enc(lo) == lo and enc(hi) == hi and enc(lo + 1) == lo + 1 and enc(hi - 1) == hi - 1
+    if hi < 2**53:  # (a float holds these exactly)
+        assert enc(lo + 1.4) == lo + 1 and enc(hi - 1.4) == hi - 1 and enc(lo + 0.5) == lo + (lo % 2)
+
+
+def test_encode_raw_leaves_real32_as_it_is():
+    assert encode_raw(0x0008, 2.75) == 2.75 and raw_encoder(0x0008)(-1e30) == -1e30
 
 
 # ---------------------------------------------------------------------------- errors

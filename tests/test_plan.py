@@ -12,6 +12,7 @@ import pytest
 
 from hil.canopen.cycle import CycleDecoder, SetpointEncoder, from_image, image_of
 from hil.canopen.frame import Frame
+from hil.canopen.pdo import PdoError, PdoLengthError
 from hil.canopen.plan import PlanError
 from hil.canopen.signalmap import ForceControl, Scale, ScaleSource, Signal, parse_object
 from hil.cli import main
@@ -310,6 +311,20 @@ def test_the_setpoint_encoder_and_its_inverse():
     assert back.target_position_rad == pytest.approx(2 * math.pi)
     assert back.target_torque_N == pytest.approx(1989 * 5.026548245743669)
     assert enc.decode(Frame(0x302, b"\x08")).mode == 8 and enc.decode(Frame(0x181, b"")) is None
+    (f,) = enc.frames(1, 0x000F, -1e12, -1e9)  # both clipped to their types' lower ends
+    assert f == Frame(0x201, bytes.fromhex("0F 00 00 00 00 80 00 80"))
+    with pytest.raises(PdoError, match=r"^RPDO1 COB-ID 0x201: cannot encode \(65536, 0, 0\)"):
+        enc.frames(1, 0x10000, 0.0, 0.0)  # a controlword is not clipped: refused, naming the PDO
+
+
+def test_the_decoder_refuses_a_tpdo_of_another_length_naming_it():
+    plan = shipped_rig().plan
+    dec = CycleDecoder(plan.tx_pdos, [c for c in plan.channels if c.signal.direction.value == "tx"])
+    dec.reset()
+    for n in (0, 6, 8):
+        with pytest.raises(PdoLengthError, match=f"^TPDO1 COB-ID 0x182: expected 7 data bytes, got {n}$"):
+            dec.feed(Frame(0x182, bytes(n)))
+    assert dec.missing() == [0x181, 0x182, 0x281, 0x282] and dec.statusword == [None, None]
 
 
 def test_the_process_image_reads_back_as_the_same_codec():

@@ -15,7 +15,9 @@ signal of each EMA sits in which PDO) with every scale resolved:
 
 Scaling is :class:`hil.canopen.signalmap.Scale` (``si = raw / k + offset``);
 encoded values are rounded to nearest (ties to even) and clipped to their data
-type's range. No IO, no clock.
+type's range (:func:`hil.canopen.pdo.encode_raw`), and every payload goes
+through its PDO's codec (:meth:`PdoSpec.pack <hil.canopen.pdo.PdoSpec.pack>`,
+:meth:`PdoSpec.unpack <hil.canopen.pdo.PdoSpec.unpack>`). No IO, no clock.
 """
 
 from __future__ import annotations
@@ -26,20 +28,17 @@ from dataclasses import dataclass
 
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
-from hil.canopen.pdo import TYPE_RANGE, Direction, PdoSpec
+from hil.canopen.pdo import Direction, PdoSpec, encode_raw, raw_encoder
 from hil.canopen.plan import Channel
 from hil.canopen.process import Sample
 from hil.canopen.signalmap import Scale, Signal
 
-__all__ = ["CycleDecoder", "RxValues", "SAMPLE_SLOTS", "SetpointEncoder", "SyncSchedule", "encode_raw"]
+__all__ = ["CycleDecoder", "RxValues", "SAMPLE_SLOTS", "SetpointEncoder", "SyncSchedule"]
 
 #: Slot of each physical input in :attr:`CycleDecoder.values` (the order of :class:`Sample` after ``t_s``).
 SAMPLE_SLOTS: dict[tuple[int, Signal], int] = {
     (1, Signal.MOTOR_ANGLE): 0, (2, Signal.MOTOR_ANGLE): 1, (1, Signal.LVDT): 2, (2, Signal.LVDT): 3,
     (1, Signal.FORCE): 4, (2, Signal.FORCE): 5}
-
-_trusted = Frame.trusted
-
 
 def _resolved(ch: Channel) -> Scale | None:
     if ch.signal in (Signal.MOTOR_ANGLE, Signal.LVDT, Signal.FORCE, Signal.TARGET_POSITION, Signal.TARGET_TORQUE):
@@ -103,10 +102,8 @@ class CycleDecoder:
                          for slot, pos, sc in sorted(items))
             status_emas = tuple(slot - 5 for slot, _, _, _ in rows if slot in (6, 7))
             self._pdos[cob] = (by_cob[cob], rows, status_emas)
-        #: :meth:`feed`'s hot path: COB-ID -> (PdoSpec, payload size, struct unpack, rows, status EMAs)
-        self._feed = {cob: (spec, st.size, st.unpack, rows, emas)
-                      for cob, (spec, rows, emas) in self._pdos.items()
-                      for st in (struct.Struct(spec.struct_format),)}
+        #: :meth:`feed`'s: COB-ID -> (the PdoSpec's codec unpack, PdoSpec, rows, status EMAs)
+        self._feed = {cob: (spec.codec.unpack, spec, rows, emas) for cob, (spec, rows, emas) in self._pdos.items()}
         self._others = frozenset(c for c in by_cob if c not in self._pdos)
         self._expected = frozenset(self._pdos)
         self._n_expected = len(self._expected)
@@ -130,10 +127,11 @@ class CycleDecoder:
             if cob in self._others:
                 return ()
             return None
-        spec, size, unpack, rows, status_emas = hit
-        data = frame.data
-        # (PdoSpec.unpack inlined, which raises PdoLengthError for a wrong length)
-        vals = unpack(data) if len(data) == size else spec.unpack(frame)
+        unpack, spec, rows, status_emas = hit
+        try:
+            vals = unpack(frame.data)  # the PDO's codec (PdoSpec.unpack but for the message of its error)
+        except struct.error:
+            vals = spec.unpack(frame)  # raises PdoLengthError naming the PDO, its COB-ID and both lengths
         for slot, pos, k, off in rows:
             v = vals[pos]
             if slot < 6:
@@ -186,16 +184,6 @@ class CycleDecoder:
             if key in changes and k is not None:
                 vals[pos] = encode_raw(spec.entries[pos].data_type, (changes[key] - off) * k)
         return spec.pack(vals)
-
-
-def encode_raw(data_type: int, x: float) -> int | float:
-    """``x`` rounded (ties to even) and clipped to the data type's range; REAL32 as it is."""
-    rng = TYPE_RANGE.get(data_type)
-    if rng is None:
-        return x
-    v = round(x)
-    lo, hi = rng
-    return lo if v < lo else hi if v > hi else v
 
 
 @dataclass(frozen=True, slots=True)
@@ -253,12 +241,11 @@ class SetpointEncoder:
                              for pos, sig, sc in sorted(items, key=lambda x: x[0]))
                 out.append((spec, rows))
             self._sync[ema] = tuple(out)
-        #: :meth:`frames`' hot path per EMA: ((PdoSpec, COB-ID, struct pack, ((kind, units per SI, (lo, hi) of
-        #: the integer type or None), ...)), ...), kind 0 the controlword, 1 the target position, 2 the torque
+        #: :meth:`frames`' plan per EMA: ((PdoSpec, ((kind, units per SI, raw encoder of the data type),
+        #: ...)), ...), kind 0 the controlword, 1 the target position, 2 the target torque
         self._fast: dict[int, tuple] = {
-            ema: tuple((spec, spec.cob_id, struct.Struct(spec.struct_format).pack,
-                        tuple((0 if sig is Signal.CONTROLWORD else 1 if sig is Signal.TARGET_POSITION else 2, k,
-                               TYPE_RANGE.get(t)) for _, sig, k, t in rows))
+            ema: tuple((spec, tuple((0 if sig is Signal.CONTROLWORD else 1 if sig is Signal.TARGET_POSITION else 2,
+                                     k, raw_encoder(t)) for _, sig, k, t in rows))
                        for spec, rows in per_ema)
             for ema, per_ema in self._sync.items()}
 
@@ -274,22 +261,12 @@ class SetpointEncoder:
         to its type.
         """
         out = []
-        for spec, cob, pack, rows in self._fast[ema]:  # (encode_raw and PdoSpec.pack inlined: every SYNC cycle)
+        for spec, rows in self._fast[ema]:  # (loops, not comprehensions: each of those is a call, every cycle)
             vals = []
-            for kind, k, rng in rows:
-                if kind == 0:
-                    vals.append(controlword)
-                    continue
-                x = (target_position_rad if kind == 1 else target_torque_N) * k
-                if rng is not None:
-                    v = round(x)
-                    lo, hi = rng
-                    x = lo if v < lo else hi if v > hi else v
-                vals.append(x)
-            try:
-                out.append(_trusted(cob, pack(*vals)))
-            except struct.error:
-                out.append(spec.pack(vals))  # raises PdoError naming the PDO and the values
+            for kind, k, encode in rows:
+                vals.append(controlword if kind == 0 else
+                            encode((target_position_rad if kind == 1 else target_torque_N) * k))
+            out.append(spec.pack(vals))
         return out
 
     def mode_frame(self, ema: int, mode: int) -> Frame | None:

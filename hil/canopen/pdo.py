@@ -3,9 +3,12 @@
 A :class:`PdoLayout` is the cyclic process data of one node: which objects sit
 where in which PDO, with which COB-ID and transmission type. Layouts are
 planned from the rig's signal map and each node's EDS
-(:mod:`hil.canopen.plan`); this module holds the vocabulary, the
-little-endian codec of a PDO (:class:`PdoSpec.pack`, :class:`PdoSpec.unpack`)
-and the SDO write list that configures a layout in a node (CiA 301 7.5.2.35/36).
+(:mod:`hil.canopen.plan`); this module holds the vocabulary, the one
+little-endian codec of PDO payloads (:func:`pdo_codec`, held by each
+:class:`PdoSpec`: :meth:`PdoSpec.pack`, :meth:`PdoSpec.unpack`; the simulated
+drives' PDO engine uses it too), the one round-and-clip of a value into an
+integer object (:func:`encode_raw`, :func:`raw_encoder`) and the SDO write
+list that configures a layout in a node (CiA 301 7.5.2.35/36).
 Unit scaling is :class:`hil.canopen.signalmap.Scale`, the bus load
 :mod:`hil.canopen.busload`. Nothing here touches a bus, a clock or a file.
 
@@ -28,16 +31,19 @@ TPDO2    0x280 + n   1 (sent on every SYNC)     0x2100 LVDT stroke i32 [0.001 mm
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import cache
 
 from canopen.objectdictionary import datatypes as dt
 
 from hil.canopen.errors import CanopenError, CanopenInputError
 from hil.canopen.frame import Frame
 
-__all__ = ["COB_ID_INVALID", "COB_ID_NO_RTR", "Direction", "MappedObject", "PdoError", "PdoLayout",
-           "PdoLengthError", "PdoSpec", "SdoWrite", "TYPE_BITS", "predefined_cob_id"]
+__all__ = ["COB_ID_INVALID", "COB_ID_NO_RTR", "Direction", "MappedObject", "PdoCodec", "PdoError", "PdoLayout",
+           "PdoLengthError", "PdoSpec", "SdoWrite", "TYPE_BITS", "TYPE_RANGE", "encode_raw", "pdo_codec", "raw_encoder",
+           "predefined_cob_id"]
 
 # --------------------------------------------------------------------------- layout
 
@@ -81,6 +87,83 @@ TYPE_RANGE: dict[int, tuple[int, int]] = {
     dt.INTEGER64: (-(2**63), 2**63 - 1),
     dt.UNSIGNED64: (0, 2**64 - 1),
 }
+
+
+def encode_raw(data_type: int, x: float) -> int | float:
+    """The raw value of ``x`` for an entry of ``data_type``: rounded to nearest (ties to even) and clipped
+    to the integer type's range (:data:`TYPE_RANGE`); a type without a range (REAL32) as it is.
+
+    .. math:: r = \\min(\\max(\\mathrm{round}(x),\\ lo),\\ hi)
+
+    ``x`` is the value in the object's unit (increments, per mille, 0.001 mm, ...): finite (``round``
+    raises ValueError for NaN and OverflowError for an infinity). The hot paths hold
+    :func:`raw_encoder` of their data type instead.
+    """
+    return raw_encoder(data_type)(x)
+
+
+def _as_is(x: float) -> float:
+    return x
+
+
+@cache
+def raw_encoder(data_type: int) -> Callable[[float], int | float]:
+    """:func:`encode_raw` for one data type, its range bound once: ``raw_encoder(t)(x) == encode_raw(t, x)``
+    (the one round-and-clip; the unit kernels of :mod:`hil.canopen.units`, the master's setpoints and the
+    simulated drives' inputs call it per value)."""
+    rng = TYPE_RANGE.get(data_type)
+    if rng is None:
+        return _as_is
+    lo, hi = rng
+
+    def round_clip(x: float) -> int:
+        v = round(x)
+        return lo if v < lo else hi if v > hi else v
+
+    return round_clip
+
+
+# --------------------------------------------------------------------------- codec
+
+
+@dataclass(frozen=True, slots=True)
+class PdoCodec:
+    """The codec of one PDO payload: its raw values <-> its little-endian bytes, compiled once.
+
+    The one encoding path of process data: :meth:`PdoSpec.pack` / :meth:`PdoSpec.unpack` and their
+    users (the master's :class:`~hil.canopen.cycle.SetpointEncoder`, the CAN-log reader; the
+    :class:`~hil.canopen.cycle.CycleDecoder` calls its PDO's ``codec.unpack`` and ``PdoSpec.unpack`` only
+    for the error of a wrong length) and the simulated drives' PDO engine (:mod:`sim.drives.pdo_engine`)
+    all pack and unpack through the codec :func:`pdo_codec` gives for the payload's ``struct`` codes.
+
+    Attributes
+    ----------
+    codes : str
+        One ``struct`` code per mapped entry, in payload order (``"Hih"``: u16, i32, i16); little endian.
+    size : int
+        Payload length [bytes].
+    pack : callable
+        ``pack(*values) -> bytes``: the raw values (in range of their types) as the payload; raises
+        ``struct.error`` for a value out of range or of the wrong kind, or the wrong number of values.
+    unpack : callable
+        ``unpack(data) -> tuple``: the raw values of a payload of exactly :attr:`size` bytes; raises
+        ``struct.error`` for another length.
+    """
+
+    codes: str
+    size: int
+    pack: Callable[..., bytes] = field(repr=False, compare=False)
+    unpack: Callable[[bytes], tuple] = field(repr=False, compare=False)
+
+
+@cache
+def pdo_codec(codes: str) -> PdoCodec:
+    """The codec of a payload of these ``struct`` codes (built once per distinct mapping, then shared)."""
+    st = struct.Struct("<" + codes)
+    return PdoCodec(codes, st.size, st.pack, st.unpack)
+
+
+# --------------------------------------------------------------------------- layout (continued)
 
 
 @dataclass(frozen=True, slots=True)
@@ -168,14 +251,14 @@ class PdoSpec:
     write_cob_id: bool = True
     write_transmission: bool = True
     rtr_bit: int = 0
-    _struct: struct.Struct = field(init=False, repr=False, compare=False)
+    codec: PdoCodec = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not 0 <= self.cob_id <= 0x7FF:
             raise CanopenInputError(f"{self.name}: COB-ID 0x{self.cob_id:X} is not an 11-bit identifier")
-        object.__setattr__(self, "_struct", struct.Struct(self.struct_format))
-        if self._struct.size > 8:
-            raise CanopenInputError(f"{self.name}: {self._struct.size * 8} mapped bits exceed the 64 of a CAN frame")
+        object.__setattr__(self, "codec", pdo_codec(self.struct_format[1:]))
+        if self.codec.size > 8:
+            raise CanopenInputError(f"{self.name}: {self.codec.size * 8} mapped bits exceed the 64 of a CAN frame")
 
     @property
     def comm_index(self) -> int:
@@ -204,16 +287,17 @@ class PdoSpec:
 
     def unpack(self, frame: Frame) -> tuple:
         """The mapped values of a frame of this PDO; PdoLengthError unless its length is exact."""
-        data = frame.data
-        if len(data) != self._struct.size:
+        try:
+            return self.codec.unpack(frame.data)  # (struct.error only for another length: data is bytes)
+        except struct.error:
             raise PdoLengthError(f"{self.name} COB-ID 0x{frame.arbitration_id:03X}: expected "
-                                 f"{self._struct.size} data bytes, got {len(data)}")
-        return self._struct.unpack(data)
+                                 f"{self.codec.size} data bytes, got {len(frame.data)}") from None
 
     def pack(self, values) -> Frame:
-        """The frame of this PDO with ``values`` (in entry order, in range of their types)."""
+        """The frame of this PDO with ``values`` (raw, in entry order, in range of their types: see
+        :func:`encode_raw`)."""
         try:
-            return Frame.trusted(self.cob_id, self._struct.pack(*values))
+            return _trusted(self.cob_id, self.codec.pack(*values))
         except struct.error as exc:
             raise PdoError(f"{self.name} COB-ID 0x{self.cob_id:03X}: cannot encode {tuple(values)!r}: {exc}") \
                 from None
@@ -241,6 +325,9 @@ class PdoSpec:
         if self.write_cob_id:
             writes.append(SdoWrite(c, 1, _u32(cob), f"{self.name} enable"))
         return writes
+
+
+_trusted = Frame.trusted  # (an 11-bit COB-ID and at most 8 packed bytes: checked in __post_init__)
 
 
 @dataclass(frozen=True, slots=True)

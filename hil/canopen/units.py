@@ -21,18 +21,15 @@ from __future__ import annotations
 
 import math
 
+from canopen.objectdictionary import datatypes as dt
+
+from hil.canopen.pdo import raw_encoder
 from hil.canopen.validate import finite, positive
 
-I16 = (-(2**15), 2**15 - 1)
-I32 = (-(2**31), 2**31 - 1)
-_I32_LO, _I32_HI = I32
-_I16_LO, _I16_HI = I16
-
-
-def _round_clip_i32(x: float) -> int:
-    """``round(x)`` (ties to even) clipped to i32; ``x`` finite."""
-    v = round(x)
-    return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
+#: ``round(x)`` (ties to even) clipped to i32 / i16, ``x`` finite: the PDO codec's round-and-clip
+#: (:func:`hil.canopen.pdo.encode_raw`) of an INTEGER32 / INTEGER16 object
+_round_clip_i32 = raw_encoder(dt.INTEGER32)
+_round_clip_i16 = raw_encoder(dt.INTEGER16)
 
 
 # --------------------------------------------------------------------------- kernels (unchecked)
@@ -40,8 +37,7 @@ def _round_clip_i32(x: float) -> int:
 
 def rad_to_increments_unchecked(angle_rad: float, inc_per_rad: float) -> int:
     """Kernel of :func:`rad_to_increments`: ``round(phi k)`` clipped to i32."""
-    v = round(angle_rad * inc_per_rad)  # (_round_clip_i32 written out: this runs twice per drive and SYNC)
-    return _I32_LO if v < _I32_LO else _I32_HI if v > _I32_HI else v
+    return _round_clip_i32(angle_rad * inc_per_rad)
 
 
 def increments_to_rad_unchecked(position_inc: float, inc_per_rad: float) -> float:
@@ -58,8 +54,7 @@ def permille_to_force_N_unchecked(torque_permille: float, i_total_rad_per_mm: fl
 def torque_to_permille_unchecked(torque_Nm: float, rated_torque_Nm: float) -> int:
     """Kernel of :func:`force_to_permille` after the gear: motor torque [N m] in per mille of the rated
     torque (0x6077), rounded (ties to even), clipped to i16."""
-    v = round(1000.0 * torque_Nm / rated_torque_Nm)
-    return _I16_LO if v < _I16_LO else _I16_HI if v > _I16_HI else v
+    return _round_clip_i16(1000.0 * torque_Nm / rated_torque_Nm)
 
 
 # --------------------------------------------------------------------------- validated

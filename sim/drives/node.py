@@ -46,11 +46,11 @@ from typing import TYPE_CHECKING
 
 import canopen.objectdictionary as cod
 
-from hil.canopen.cycle import encode_raw
 from hil.canopen.errors import CanopenInputError
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtState
 from hil.canopen.od import lookup
+from hil.canopen.pdo import raw_encoder
 from hil.canopen.signalmap import Scale, Signal
 from sim.drives.nmt_slave import NmtSlave
 from sim.drives.pdo_engine import PdoEngine
@@ -187,14 +187,14 @@ class SimNode(PdoEngine, NmtSlave):
             raise CanopenInputError(f"node {self.node_id}: {inp.signal.value} of EMA {inp.ema} at "
                              f"0x{inp.key[0]:04X}:{inp.key[1]:02X} needs a scaling the profile states")
         slot = SAMPLE_SLOT[inp.signal] + inp.ema - 1
-        units, off, dtype = inp.scale.units_per_si, inp.scale.offset, inp.data_type
+        units, off, encode = inp.scale.units_per_si, inp.scale.offset, raw_encoder(inp.data_type)
         memo = self.input_memo
 
         def get() -> int | float:
             v = memo[k]
             if v is None:
                 x = self.raw_sample[slot]
-                v = memo[k] = encode_raw(dtype, (x - off) * units if off else x * units)
+                v = memo[k] = encode((x - off) * units if off else x * units)
             return v
 
         return get

@@ -3,8 +3,9 @@
 The PDOs are those of the EDS (communication records 0x1400.. / 0x1800..
 with their mapping records 0x1600.. / 0x1A00..). Their configuration is
 re-read from the data store whenever a communication object is written
-and compiled into one ``struct`` per PDO (:class:`Pdo`): a TPDO of live
-values is one pack of their getters, an RPDO of numbers one unpack.
+and compiled into the PDO's codec (:class:`Pdo`; the master's one,
+:func:`hil.canopen.pdo.pdo_codec`): a TPDO of live values is one pack of
+their getters, an RPDO of numbers one unpack.
 
 Choices (CiA 301 leaves them open or this drive restricts them)
 ---------------------------------------------------------------
@@ -45,15 +46,15 @@ Choices (CiA 301 leaves them open or this drive restricts them)
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import canopen.objectdictionary as cod
 
 from hil.canopen.frame import Frame
 from hil.canopen.nmt import NmtState
-from hil.canopen.pdo import COB_ID_INVALID
+from hil.canopen.pdo import COB_ID_INVALID, pdo_codec
 from hil.canopen.sdo import SdoAbortCode
 from sim.drives.nmt_slave import (
     EMCY_NO_ERROR,
@@ -69,7 +70,21 @@ __all__ = ["RESTRICTED_CAN_IDS", "Pdo", "PdoEngine"]
 RESTRICTED_CAN_IDS = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x5FF),
                       (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x77F), (0x780, 0x7FF))
 _K_CONTROLWORD = (0x6040, 0)
+_trusted = Frame.trusted
+_OPERATIONAL = NmtState.OPERATIONAL  # (a module constant: an Enum member read off its class is a Python lookup)
 _ONLY_CONTROLWORD = (_K_CONTROLWORD,)
+
+
+def _packed(pack: Callable[..., bytes], getters: tuple[Callable[[], int | float], ...]) -> Callable[[], bytes]:
+    """The payload of a TPDO of live numbers: ``pack`` (its codec's) of its getters' values, read in
+    mapping order (two and three entries, the drives' TPDOs, without building an argument list)."""
+    if len(getters) == 3:
+        g0, g1, g2 = getters
+        return lambda: pack(g0(), g1(), g2())
+    if len(getters) == 2:
+        g0, g1 = getters
+        return lambda: pack(g0(), g1())
+    return lambda: pack(*[f() for f in getters])
 
 
 @dataclass(eq=False, slots=True)
@@ -77,11 +92,12 @@ class Pdo:
     """One PDO of a node: configuration (from the data store) and runtime state.
 
     The fields after ``key`` are compiled from the configuration by
-    :meth:`PdoEngine._compile_pdo` whenever it is (re-)read: a TPDO whose
-    entries are all live numeric objects is assembled by one ``struct`` pack
-    of its getters (``pack``, ``getters``); an RPDO of numeric objects is
-    decoded by one unpack (``unpack``, ``plan``: index, subindex, byte slice
-    per entry).
+    :meth:`PdoEngine._compile_pdo` whenever it is (re-)read: a TPDO's payload
+    is ``assemble()`` (whose entries are all live numeric objects: one pack of
+    its getters' values by the PDO's codec, :func:`hil.canopen.pdo.pdo_codec`;
+    else entry by entry from the data store); an RPDO of numeric objects is
+    decoded by its codec's unpack (``unpack``, ``plan``: index, subindex, byte
+    slice per entry).
     """
 
     rx: bool
@@ -106,8 +122,7 @@ class Pdo:
     key: tuple = field(default=())
     sync: bool = False  # trans_type <= 240
     event: bool = False  # trans_type >= 254
-    pack: Callable[..., bytes] | None = None
-    getters: tuple[Callable[[], int | float], ...] = ()
+    assemble: Callable[[], bytes] | None = None  # a TPDO's payload now
     unpack: Callable[[bytes], tuple] | None = None
     plan: tuple[tuple[int, int, int, int], ...] = ()
     keys: tuple[tuple[int, int], ...] = ()
@@ -309,11 +324,12 @@ class PdoEngine:
         self._sync_rpdos = tuple(p for p in self._rpdos if p.valid and p.sync)
 
     def _compile_pdo(self, p: Pdo) -> None:
-        """Precompile ``p``'s entries into one struct (see :class:`Pdo`); generic path otherwise."""
+        """Compile ``p``'s entries into its codec (see :class:`Pdo`); entry by entry otherwise."""
         p.sync = p.trans_type <= 240
         p.event = p.trans_type >= 254
-        p.pack = p.unpack = None
-        p.getters = p.plan = p.cache_ok = ()
+        p.unpack = None
+        p.assemble = None if p.rx else partial(self._entries_payload, p.entries)
+        p.plan = p.cache_ok = ()
         p.all_cache_ok = False
         p.keys = tuple((i, s) for i, s, _ in p.entries)
         p.touches_cpr = any(i == 0x608F for i, _ in p.keys)
@@ -322,10 +338,10 @@ class PdoEngine:
         for i, s, nbytes in p.entries:
             var = self.store.var(i, s)
             code = STRUCT_CODES.get(var.data_type) if var is not None else None
-            if code is None or struct.calcsize("<" + code) != nbytes:
+            if code is None or pdo_codec(code).size != nbytes:
                 return
             codes.append(code)
-        st = struct.Struct("<" + "".join(codes))
+        codec = pdo_codec("".join(codes))
         live = self.live_objects
         if p.rx:
             plan, off = [], 0
@@ -335,10 +351,9 @@ class PdoEngine:
             p.plan = tuple(plan)
             p.cache_ok = tuple(c in INT_CODES and k not in live for c, k in zip(codes, p.keys, strict=True))
             p.all_cache_ok = all(p.cache_ok)
-            p.unpack = st.unpack
+            p.unpack = codec.unpack
         elif all(k in live for k in p.keys):
-            p.getters = tuple(live[k] for k in p.keys)
-            p.pack = st.pack
+            p.assemble = _packed(codec.pack, tuple(live[k] for k in p.keys))
 
     def restart_pdos(self) -> None:
         """Entering OPERATIONAL: every PDO starts afresh."""
@@ -351,17 +366,10 @@ class PdoEngine:
 
     # ------------------------------------------------------------------ TPDOs
 
-    def _assemble(self, p: Pdo) -> bytes:
-        pack = p.pack
-        if pack is not None:  # all entries live numbers: one struct pack of the getters
-            g = p.getters
-            n = len(g)
-            if n == 3:
-                return pack(g[0](), g[1](), g[2]())
-            if n == 2:
-                return pack(g[0](), g[1]())
-            return pack(*[f() for f in g])
-        return b"".join(self._entry_bytes(i, s, n) for i, s, n in p.entries)
+    def _entries_payload(self, entries: tuple[tuple[int, int, int], ...]) -> bytes:
+        """A TPDO's payload entry by entry (:meth:`_entry_bytes`): the mapping has an entry that is no live
+        number (a stored value, a dummy entry, an object this node lacks)."""
+        return b"".join(self._entry_bytes(i, s, n) for i, s, n in entries)
 
     def _entry_bytes(self, index: int, subindex: int, nbytes: int) -> bytes:
         """One mapped entry's bytes for a TPDO: its value cut or zero-padded to the mapped length;
@@ -373,9 +381,9 @@ class PdoEngine:
 
     def _send_tpdo(self, p: Pdo, t: float, payload: bytes | None = None) -> None:
         if payload is None:
-            payload = self._assemble(p)
+            payload = p.assemble()
         # 11-bit COB-ID (cob & 0x7FF) and at most 64 mapped bits: a valid frame by construction
-        self.outbox.append(Frame.trusted(p.cob_id, payload))
+        self.outbox.append(_trusted(p.cob_id, payload))
         p.last_payload = payload
         p.last_sent_t = t
         p.pending = False
@@ -383,10 +391,9 @@ class PdoEngine:
 
     def send_sync_tpdos(self, t: float) -> None:
         """Send the synchronous TPDOs due at this SYNC (OPERATIONAL only)."""
-        if self.nmt_state is not NmtState.OPERATIONAL:
+        if self.nmt_state is not _OPERATIONAL:
             return
-        out = self.outbox
-        counters = self.counters
+        send = self._send_tpdo
         for p in self._sync_tpdos_list:  # valid, transmission type 0..240
             tt = p.trans_type
             if tt:
@@ -395,32 +402,18 @@ class PdoEngine:
                     p.sync_count = count
                     continue
                 p.sync_count = 0
-                pack = p.pack
-                if pack is not None and len(p.getters) == 3:  # (_assemble inlined)
-                    g0, g1, g2 = p.getters
-                    payload = pack(g0(), g1(), g2())
-                elif pack is not None and len(p.getters) == 2:
-                    g0, g1 = p.getters
-                    payload = pack(g0(), g1())
-                else:
-                    payload = self._assemble(p)
+                send(p, t, p.assemble())
             else:
-                payload = self._assemble(p)
-                if payload == p.last_payload:
-                    continue
-            # (_send_tpdo inlined)
-            out.append(Frame.trusted(p.cob_id, payload))
-            p.last_payload = payload
-            p.last_sent_t = t
-            p.pending = False
-            counters.tpdos_sent += 1
+                payload = p.assemble()
+                if payload != p.last_payload:
+                    send(p, t, payload)
 
     def send_event_tpdos(self, t: float) -> None:
         """Send event-driven TPDOs (254/255) whose payload changed, respecting the inhibit time."""
-        if not self.event_tpdos or self.nmt_state is not NmtState.OPERATIONAL:
+        if not self.event_tpdos or self.nmt_state is not _OPERATIONAL:
             return
         for p in self.event_tpdos:  # valid, transmission type 254/255
-            payload = self._assemble(p)
+            payload = p.assemble()
             if payload == p.last_payload and not p.pending:
                 continue
             if p.last_sent_t is None or t - p.last_sent_t >= p.inhibit_s - TIME_EPS_S:
@@ -429,7 +422,7 @@ class PdoEngine:
                 p.pending = True
 
     def send_timed_tpdos(self, t: float) -> None:
-        if self.nmt_state is not NmtState.OPERATIONAL:
+        if self.nmt_state is not _OPERATIONAL:
             return
         for p in self._timed_tpdos_list:  # valid, 254/255, event timer > 0
             if p.last_sent_t is None or t - p.last_sent_t >= p.event_timer_s - TIME_EPS_S:
@@ -441,7 +434,7 @@ class PdoEngine:
     def on_rpdo(self, pdos: list[Pdo], frame: Frame, t: float) -> None:
         """An RPDO frame for ``pdos`` (the node's valid RPDOs of its COB-ID): latch or apply."""
         self.now_s = t
-        if self.nmt_state is not NmtState.OPERATIONAL:
+        if self.nmt_state is not _OPERATIONAL:
             self.counters.rpdos_dropped += 1
             return
         n = len(frame.data)

@@ -57,6 +57,7 @@ from canopen.sdo import SdoAbortedError, SdoServer
 
 from hil.canopen.frame import SDO_RX_COB_ID_BASE, SDO_TX_COB_ID_BASE, Frame
 from hil.canopen.od import lookup
+from hil.canopen.pdo import PdoCodec, pdo_codec
 from hil.canopen.sdo import SdoAbortCode, server_abort_frame
 
 __all__ = ["INT_CODES", "STRUCT_CODES", "ObjectStore", "SdoEndpoint", "abort"]
@@ -222,13 +223,14 @@ class ObjectStore:
         self.data.setdefault(index, {})[subindex] = bytes(data)
         self.icache.pop((index, subindex), None)
 
-    def packer(self, index: int, subindex: int) -> Any:
-        """``struct.Struct`` of a numeric object (cached), or None for other types."""
+    def packer(self, index: int, subindex: int) -> PdoCodec | None:
+        """The PDO codec of a numeric object mapped alone (:func:`hil.canopen.pdo.pdo_codec`), or None for
+        other types (cached)."""
         key = (index, subindex)
         if key not in self._packers:
             var = self.var(index, subindex)
             code = STRUCT_CODES.get(var.data_type) if var is not None else None
-            self._packers[key] = struct.Struct("<" + code) if code else None
+            self._packers[key] = pdo_codec(code) if code else None
         return self._packers[key]
 
     def raw(self, index: int, subindex: int) -> bytes:
