@@ -172,6 +172,7 @@ def test_the_figure_prints_B_plus_minus_U_and_the_sigma_labelled(fights):
 
 
 def _assert_legends_clear_of_data(fig) -> int:
+    shell.laid_out(fig, 90)  # as the report lays it out and draws it
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     checked = 0
