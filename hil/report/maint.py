@@ -58,6 +58,8 @@ def figure_time(sig: Signals, an: Analysis, act: Actuation):
     t = sig.t[ff]
     sl = thin(t.size)
     fig, axes = pyplot().subplots(2, 3, figsize=(13, 5.5), sharex=True)
+    # the layout's start near where it ends for a check's data (its ticks then stay: one pass, not two)
+    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.11, top=0.88, wspace=0.23, hspace=0.1)
     for j, ch in enumerate(CHANNELS):
         d, f = _channel_data(sig, an, ch)
         fl, dl = _LABEL[ch]
@@ -143,6 +145,7 @@ def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
     """Paper Figure 9: LVDT stroke versus motor angle referred to the ram, and residuals."""
     i = act.mechanics.i_total_rad_per_mm
     fig, axes = pyplot().subplots(2, 2, figsize=(12, 6), sharex="col")
+    fig.subplots_adjust(left=0.075, right=0.99, bottom=0.1, top=0.94, wspace=0.18, hspace=0.16)  # (as above)
     for j, (k, mask, phi, s) in enumerate((("ema1", an.segments.cal1, sig.phi1, sig.s1),
                                            ("ema2", an.segments.cal2, sig.phi2, sig.s2))):
         c = an.calibration[k]
