@@ -143,15 +143,19 @@ def reap_fork(pid: int) -> None:
         os.waitpid(pid, 0)
 
 
-def run_in_two(jobs: dict[int, Callable[[], Any]]) -> dict[int, Any]:
+def run_in_two(jobs: dict[int, Callable[[], Any]], order: Iterable[int] | None = None) -> dict[int, Any]:
     """What the ``jobs`` (index 0-255: callable) return, run by this process and a fork of it at once:
-    each takes the next index not yet taken, in increasing order, from a pipe holding them (one byte
-    each; a read of one byte from a pipe is atomic); the fork's share pickled back. A job the fork did
-    not return (it died, or was stopped by the interrupt that stops this process) is missing from the
-    answer: the caller runs it. Nothing run where there is no fork (:func:`start`); the caller runs them all.
+    each takes the next index not yet taken, in the ``order`` given (every index once, else ValueError;
+    default increasing), from a pipe holding them (one byte each; a read of one byte from a pipe is
+    atomic); the fork's share pickled back. A job the fork did not return (it died, or was stopped by the
+    interrupt that stops this process) is missing from the answer: the caller runs it. Nothing run where
+    there is no fork (:func:`start`); the caller runs them all.
     """
+    todo = sorted(jobs) if order is None else list(order)
+    if sorted(todo) != sorted(jobs):
+        raise ValueError(f"run_in_two: the order {todo} is not the jobs' indices {sorted(jobs)}, each once")
     todo_r, todo_w = os.pipe()
-    os.write(todo_w, bytes(sorted(jobs)))  # at most 256 indices: less than a pipe's buffer
+    os.write(todo_w, bytes(todo))  # at most 256 indices: less than a pipe's buffer
     os.close(todo_w)  # the pipe empty: a read returns b"", no job left
 
     def take() -> dict[int, Any]:

@@ -44,6 +44,30 @@ def test_one_process_draws_the_same():
     assert drawn(parts, processes=1) == drawn(parts) == ["a", "1", "b23", "c"]
 
 
+def test_the_figures_with_more_axes_are_taken_first(monkeypatch):
+    """Two processes take the costliest figures first (a Drawing's axes; 1 for a bare callable), ties in
+    the order of the parts, so that no process is left drawing the costliest figure alone at the end."""
+    from hil.report import shell
+
+    taken = []
+    monkeypatch.setattr(shell, "can_fork", lambda: True)
+    monkeypatch.setattr(shell, "run_in_two", lambda jobs, order: taken.extend(order) or {})
+    parts = ["h", shell.Drawing(lambda: "6", axes=6), (shell.Drawing(lambda: "2a", axes=2), lambda: "1a"),
+             (shell.Drawing(lambda: "2b", axes=2), lambda: "1b"), shell.Drawing(lambda: "4", axes=4)]
+    assert drawn(parts) == ["h", "6", "2a1a", "2b1b", "4"]  # (drawn here: run_in_two returned nothing)
+    assert taken == [1, 6, 2, 4, 3, 5]
+
+
+@needs_fork
+def test_run_in_two_takes_the_order_given_and_refuses_another_set():
+    from hil.forks import run_in_two
+
+    jobs = {i: (lambda i=i: i * i) for i in range(5)}
+    assert run_in_two(jobs, order=[4, 0, 3, 1, 2]) == {i: i * i for i in range(5)}
+    with pytest.raises(ValueError, match="not the jobs' indices"):
+        run_in_two(jobs, order=[4, 0, 3, 1])
+
+
 @needs_fork
 def test_what_the_fork_did_not_return_is_drawn_here():
     me = os.getpid()

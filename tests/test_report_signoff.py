@@ -172,6 +172,7 @@ def test_the_figure_prints_B_plus_minus_U_and_the_sigma_labelled(fights):
 
 
 def _assert_legends_clear_of_data(fig) -> int:
+    shell.laid_out(fig, 90)  # as the report lays it out and draws it
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     checked = 0
@@ -199,6 +200,28 @@ def test_no_legend_or_reading_covers_the_data(fights, ch, which):
     try:
         assert all(ax.get_legend() is not None for ax in fig.axes)
         assert _assert_legends_clear_of_data(fig) > 1000
+    finally:
+        shell.pyplot().close(fig)
+
+
+@pytest.mark.parametrize("ch, which", [("int2", "dfdd"), ("ext", "lines")])
+def test_laid_out_figure_fits_its_picture(fights, ch, which):
+    """The report's layout (shell.laid_out, no crop after it): everything drawn lies inside the picture,
+    with the layout's margin, and the layout is a fixed point (laying it out again moves its margins by
+    less than 0.003 of the figure, 2.4 px)."""
+    d, f, r = fights[ch]
+    fig = figure_dfdd(ch, d, f, r) if which == "dfdd" else figure_lines(ch, d, f, r, None, 0.0058)
+    try:
+        shell.laid_out(fig, 90)
+        params = dict(vars(fig.subplotpars))
+        fig.canvas.draw()
+        box = fig.get_tightbbox(fig.canvas.get_renderer())  # inches
+        w, h = fig.get_size_inches()
+        pad = 5 / 90  # inches: 5 px at 90 dpi (the layout's pad is 1.08 font sizes, ~13 px)
+        assert box.x0 >= pad and box.y0 >= pad and box.x1 <= w - pad and box.y1 <= h - pad, (box, w, h)
+        shell.laid_out(fig, 90)
+        # (the legend beside the axes is placed at 1.01 axes widths: a pass moves it ~1 px, 0.0013)
+        assert dict(vars(fig.subplotpars)) == pytest.approx(params, abs=0.003)
     finally:
         shell.pyplot().close(fig)
 

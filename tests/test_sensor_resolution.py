@@ -47,6 +47,17 @@ def test_the_bound_holds_where_the_rate_can_be_counted():
     assert _false_stops(2 * q, sigma, m, n, 100, rng) > 5 * alpha
 
 
+@pytest.mark.parametrize("p", [1e-6, 4e-6, 1e-3, 0.01, 0.14139, 0.48, 0.5, 0.9, 0.999, 1 - 1e-9, 1 - 1e-12])
+def test_the_inverse_error_function_is_scipys(p):
+    """The standard library's quantile (hil.check.resolution._erfinv, no scipy before the loop) gives
+    scipy.special.erfinv: within 6e-15 relative from 0.01 up, 6e-11 down to 1e-6 (checked on dense grids)."""
+    from scipy.special import erfinv
+
+    from hil.check.resolution import _erfinv
+
+    assert _erfinv(p) == pytest.approx(float(erfinv(p)), rel=1e-10 if p < 0.01 else 1e-14, abs=0)
+
+
 def test_the_shipped_rig_and_its_numbers():
     act = load_actuation()
     check = load_check(None, act)

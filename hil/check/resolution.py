@@ -40,8 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
-from scipy.special import erfinv
+from statistics import NormalDist
 
 from hil.canopen.plan import Problem, RigPlan
 from hil.canopen.signalmap import Signal
@@ -84,7 +83,15 @@ def largest_step(sigma: float, max_frozen_cycles: int, cycles: float, false_stop
         raise ValueError(f"max_frozen_cycles = {max_frozen_cycles}, cycles = {cycles}, false_stops = "
                          f"{false_stops}: need >= 1, >= 1 and in (0, 1)")
     p0 = (false_stops / cycles) ** (1.0 / (max_frozen_cycles + 1))
-    return 2.0 * math.sqrt(2.0) * sigma * float(erfinv(p0))
+    return 2.0 * math.sqrt(2.0) * sigma * _erfinv(p0)
+
+
+def _erfinv(p: float) -> float:
+    """:math:`\\operatorname{erf}^{-1}(p) = -\\Phi^{-1}\\big((1 - p)/2\\big)/\\sqrt2` for p in (0, 1), with the
+    standard library's normal quantile (scipy.special, 0.13 s to import, is not needed before the check's
+    loop): within 6e-15 (relative) of ``scipy.special.erfinv`` from p = 0.01 to 1 - 1e-12 and within 6e-11
+    down to p = 1e-6 (the rule's p is at least sqrt(alpha / N): 1e-6 for N = 1e9 cycles, 23 days at 2 ms)."""
+    return -NormalDist().inv_cdf((1.0 - p) / 2.0) / math.sqrt(2.0)
 
 
 @dataclass(frozen=True)

@@ -128,6 +128,26 @@ def main(argv: list[str] | None = None) -> int:
         return _internal_error(exc)
 
 
+def entry() -> NoReturn:
+    """The process's entry point (``emacheck``, ``python -m hil``): :func:`main` with the process's own
+    arguments, then exit with its status.
+
+    Before the interpreter exits, the heap is frozen (``gc.freeze``): the interpreter's final garbage
+    collections then skip it, and its reference cycles are left to the end of the process, which
+    returns all its memory at once. They took ~0.25 s after a dry-run (~140 000 objects with numba's,
+    scipy's and matplotlib's modules; 0.03 s frozen). Everything else of the exit is as before: the
+    atexit handlers run, objects freed by reference counting are freed (a file closed by its last
+    reference is flushed), the console's streams are flushed; every record file is closed by its
+    writer before :func:`main` returns. Only here: :func:`main` called in a process that goes on (the
+    tests) leaves the collector as it was.
+    """
+    import gc
+
+    status = main()
+    gc.freeze()
+    sys.exit(status)
+
+
 #: the arguments that name files a command reads (never one it writes: --out, --timing-json)
 INPUT_ARGS = ("recording", "profile", "check", "sim", "eds", "calibration", "folders", "sync_profile")
 #: the files of a run folder a command reads (its run record is read by hil.record.runfolder.read_record, which

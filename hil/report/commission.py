@@ -45,7 +45,6 @@ def figure_movements(traces: dict, T: float):
                 a.plot(t, step[f"F{e}"] - step[f"F{e}"][0], lw=1, label=f"load cell {e}")
         a.set(title=f"force step in EMA {k}'s turn", xlabel="t [s]", ylabel="force change [N]")
         a.legend(fontsize=8)
-    fig.tight_layout()
     return fig
 
 

@@ -53,7 +53,6 @@ def figure_overlay(model, d, channel: str):
     ax[1].axhline(0, color="k", lw=0.5)
     ax[1].set_xlabel("t [s]")
     ax[1].legend(fontsize=7)
-    fig.tight_layout()
     return fig
 
 
@@ -78,7 +77,6 @@ def figure_residuals_pair(t, measured, valid, before, after, channel: str, label
     ax[1].set_ylabel(f"residual [{unit}]")
     ax[1].set_xlabel("t [s]")
     ax[1].legend(fontsize=7)
-    fig.tight_layout()
     return fig
 
 
@@ -105,7 +103,6 @@ def figure_regime(d, channel: str):
     ax.set_ylabel("cell score, held-out half")
     ax.set_title(f"{channel}: regime cells", fontsize=9)
     ax.legend(fontsize=7)
-    fig.tight_layout()
     return fig
 
 

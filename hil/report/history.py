@@ -74,7 +74,6 @@ def figure_series(s: Series):
     ax.set_title(s.title(), fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
     return fig
 
 

@@ -19,6 +19,7 @@ from hil.profile.config import Actuation
 from hil.record.runfolder import Signals
 from hil.record.runrecord import RunRecord, Timing
 from hil.report.shell import (
+    Drawing,
     column,
     drawn,
     esc,
@@ -57,6 +58,8 @@ def figure_time(sig: Signals, an: Analysis, act: Actuation):
     t = sig.t[ff]
     sl = thin(t.size)
     fig, axes = pyplot().subplots(2, 3, figsize=(13, 5.5), sharex=True)
+    # the layout's start near where it ends for a check's data (its ticks then stay: one pass, not two)
+    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.11, top=0.88, wspace=0.23, hspace=0.1)
     for j, ch in enumerate(CHANNELS):
         d, f = _channel_data(sig, an, ch)
         fl, dl = _LABEL[ch]
@@ -69,7 +72,6 @@ def figure_time(sig: Signals, an: Analysis, act: Actuation):
         for a in axes[:, j]:
             a.grid(alpha=0.3)
     fig.suptitle(f"Force fight: forces and position differences (F_limit = {act.mechanics.limit_load_N / 1e3:g} kN)")
-    fig.tight_layout()
     return fig
 
 
@@ -93,7 +95,6 @@ def figure_dfdd(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult):
     a1.set_ylabel("dF/dD [kN/mm]")
     a1.set_xlabel(f"${dl}$ [mm]   (dashed verticals: D_lc = {r.d_lc_mm:.4f}, D_rc = {r.d_rc_mm:.4f})")
     a0.set_title(f"{ch}: F versus D and its derivative (paper Fig. 4)")
-    fig.tight_layout()
     return fig
 
 
@@ -137,7 +138,6 @@ def figure_lines(ch: str, d: np.ndarray, f: np.ndarray, r: BlfMaintResult, truth
     ax.set_title(f"{ch}: backlash and stiffness (paper Fig. {'6' if ch == 'ext' else '5'})")
     ax.grid(alpha=0.3)
     outside_legend(ax)
-    fig.tight_layout()
     return fig
 
 
@@ -145,6 +145,7 @@ def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
     """Paper Figure 9: LVDT stroke versus motor angle referred to the ram, and residuals."""
     i = act.mechanics.i_total_rad_per_mm
     fig, axes = pyplot().subplots(2, 2, figsize=(12, 6), sharex="col")
+    fig.subplots_adjust(left=0.075, right=0.99, bottom=0.1, top=0.94, wspace=0.18, hspace=0.16)  # (as above)
     for j, (k, mask, phi, s) in enumerate((("ema1", an.segments.cal1, sig.phi1, sig.s1),
                                            ("ema2", an.segments.cal2, sig.phi2, sig.s2))):
         c = an.calibration[k]
@@ -167,7 +168,6 @@ def figure_calibration(sig: Signals, an: Analysis, act: Actuation):
         axr.set_title(f"rmse {c.rmse_mm:.4f} mm, nonlinearity {c.nonlinearity_mm:.4f} mm", fontsize=9)
         for a in (ax, axr):
             a.grid(alpha=0.3)
-    fig.tight_layout()
     return fig
 
 
@@ -305,7 +305,7 @@ def timing_section(timing: Timing) -> str:
     note = (f"<p>{s.cycles} SYNC cycles, {s.late} answered after a period, "
             f"{s.unanswered} unanswered, {s.syncs_missing} SYNC periods missing "
             f"(SYNC {esc(timing.sync)}).</p>")
-    return tab + note + img(figure_timing(timing), dpi=90, tight=True)
+    return tab + note + img(figure_timing(timing), dpi=90)
 
 
 def write_report(path: Path, sig: Signals, an: Analysis, result: dict, act: Actuation, meta: RunRecord | None, *,
@@ -329,7 +329,8 @@ def report_html(sig: Signals, an: Analysis, result: dict, act: Actuation, meta: 
     parts: list = head_parts(result, intro)
     parts.append(trace_lines(result.get("trace")))
     parts.append(uncertainty_section(result))
-    parts.append(("<h2>Force fight (paper Fig. 3)</h2>", lambda: img(figure_time(sig, an, act), dpi=90, tight=True)))
+    parts.append(("<h2>Force fight (paper Fig. 3)</h2>",
+                  Drawing(lambda: img(figure_time(sig, an, act), dpi=90), axes=6)))
     truth = result.get("truth")
     for ch in CHANNELS:
         r = an.maint[ch]
@@ -339,10 +340,10 @@ def report_html(sig: Signals, an: Analysis, result: dict, act: Actuation, meta: 
             continue
         d, f = _channel_data(sig, an, ch)
         u_mm = (result.get("verdict", {}).get(ch) or {}).get("uncertainty_mm")
-        parts.append((lambda ch=ch, d=d, f=f, r=r: img(figure_dfdd(ch, d, f, r), dpi=90, tight=True),
-                      lambda ch=ch, d=d, f=f, r=r, u_mm=u_mm: img(figure_lines(ch, d, f, r, truth, u_mm), dpi=90,
-                                                                  tight=True)))
-    parts.append(("<h2>LVDT calibration</h2>", lambda: img(figure_calibration(sig, an, act), dpi=90, tight=True)))
+        parts.append((Drawing(lambda ch=ch, d=d, f=f, r=r: img(figure_dfdd(ch, d, f, r), dpi=90), axes=2),
+                      lambda ch=ch, d=d, f=f, r=r, u_mm=u_mm: img(figure_lines(ch, d, f, r, truth, u_mm), dpi=90)))
+    parts.append(("<h2>LVDT calibration</h2>",
+                  Drawing(lambda: img(figure_calibration(sig, an, act), dpi=90), axes=4)))
     timing = meta.timing if meta is not None else None
     if timing is not None and timing.summary.reaction.n:
         parts.append(("<h2>Loop timing (master)</h2>", lambda: timing_section(timing)))

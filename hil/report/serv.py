@@ -80,7 +80,6 @@ def figure_serv(ch: str, t: np.ndarray, d: np.ndarray, r: BlfServResult, truth_b
     tb = "" if truth_b is None else f", truth {truth_b:.4f} mm"
     axes[0, 0].set_title(f"{ch}: BLFserv ({r.method}) {b}{tb} (paper Fig. 8)")
     axes[0, 1].set_title("zoom: " + ("largest counted jump" if acc else "first event" if r.jumps else "start"))
-    fig.tight_layout()
     return fig
 
 
@@ -113,7 +112,6 @@ def figure_over_time(an: ServAnalysis, truth: dict | None):
         a.set_ylim(bottom=0)
     axes[0].set_ylabel("backlash [mm]")
     axes[0].legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
     return fig
 
 

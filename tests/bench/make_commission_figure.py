@@ -20,6 +20,7 @@ from hil.cli.check import master_setup  # noqa: E402
 from hil.cli.commission import commission, simulated_transport, wiring_fault  # noqa: E402
 from hil.profile.load import load_actuation, load_check, load_simrig  # noqa: E402
 from hil.report.commission import figure_movements  # noqa: E402
+from hil.report.shell import laid_out  # noqa: E402
 
 
 def main() -> None:
@@ -35,7 +36,7 @@ def main() -> None:
     i = act.mechanics.i_total_rad_per_mm
     traces = {n: {**x, "x1": x["phi1"] / i, "x2": x["phi2"] / i} for n, x in run.core.traces.items()}
     fig = figure_movements(traces, act.timing.sync_period_s)
-    fig.savefig(args.out, dpi=70)
+    laid_out(fig, 70).savefig(args.out, dpi=70)
     print(f"exit {run.exit_code}: {[f['key'] for f in run.report['findings']]}; wrote {args.out}")
 
 

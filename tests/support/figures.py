@@ -1,8 +1,8 @@
 """Reports written without rasterising their figures, for tests that assert files, names and text.
 
 A report's figures are built as in the product (every plotting call runs, each figure is closed), but
-not laid out and drawn to PNG: ``Figure.tight_layout`` does nothing and ``figure_uri`` returns an
-empty PNG data URI. The eight figures of a
+not laid out and drawn to PNG: ``figure_uri`` (which lays a figure out and draws it,
+:func:`hil.report.shell.laid_out`) returns an empty PNG data URI. The eight figures of a
 maintenance report take ~2 s to draw on an idle machine, about 90 % of ``emacheck analyze`` on a short
 check, and tests of which files a command writes never look at them. The drawn figures are tested
 where they are asserted (test_report_signoff.py) and in the end-to-end tests (test_dry_run.py,
@@ -22,9 +22,9 @@ from hil.report import shell
 EMPTY_PNG_URI = "data:image/png;base64,"
 
 
-def _built_not_drawn(fig: Any, *, dpi: int = 80, tight: bool = False) -> str:
+def _built_not_drawn(fig: Any, *, dpi: int = 80) -> str:
     """:func:`hil.report.shell.figure_uri` without ``savefig``: closes the figure, returns an empty PNG."""
-    del dpi, tight
+    del dpi
     shell.pyplot().close(fig)
     return EMPTY_PNG_URI
 
@@ -32,9 +32,6 @@ def _built_not_drawn(fig: Any, *, dpi: int = 80, tight: bool = False) -> str:
 @contextmanager
 def figures_unrendered() -> Iterator[None]:
     """Within it, reports build their figures but do not draw them (see the module)."""
-    from matplotlib.figure import Figure
-
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(shell, "figure_uri", _built_not_drawn)
-        mp.setattr(Figure, "tight_layout", lambda self, *args, **kwargs: None)
         yield
