@@ -40,6 +40,7 @@ from hil.canopen.od import lookup
 from hil.canopen.plan import CSP_BIT, CST_BIT, RigPlan
 from hil.canopen.signalmap import ForceControl, NodeRole, NodeSpec, ScaleSource, Signal
 from sim.drives.node import LiveInput
+from sim.drives.store import INT_CODES, STRUCT_CODES
 
 __all__ = ["DEVICE_TYPE", "live_inputs", "own_data"]
 
@@ -72,8 +73,8 @@ def own_data(od: cod.ObjectDictionary, spec: NodeSpec, force_control: ForceContr
         var = lookup(od, index, sub)
         if var is None or (var.default is not None and not (zero_too and var.default == 0)):
             return
-        code = _CODES.get(var.data_type)
-        if code is not None:
+        code = STRUCT_CODES.get(var.data_type)
+        if code in INT_CODES:
             own[(index, sub)] = struct.pack("<" + code, value)
 
     put(0x1000, 0, DEVICE_TYPE.get(spec.device_profile, spec.device_profile))
@@ -92,5 +93,3 @@ def own_data(od: cod.ObjectDictionary, spec: NodeSpec, force_control: ForceContr
     return own
 
 
-_CODES = {cod.UNSIGNED8: "B", cod.UNSIGNED16: "H", cod.UNSIGNED32: "I", cod.INTEGER8: "b", cod.INTEGER16: "h",
-          cod.INTEGER32: "i"}

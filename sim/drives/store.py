@@ -57,17 +57,13 @@ from canopen.sdo import SdoAbortedError, SdoServer
 
 from hil.canopen.frame import SDO_RX_COB_ID_BASE, SDO_TX_COB_ID_BASE, Frame
 from hil.canopen.od import lookup
-from hil.canopen.pdo import PdoCodec, pdo_codec
+from hil.canopen.pdo import TYPE_BITS, PdoCodec, pdo_codec
 from hil.canopen.sdo import SdoAbortCode, server_abort_frame
 
 __all__ = ["INT_CODES", "STRUCT_CODES", "ObjectStore", "SdoEndpoint", "abort"]
 
 #: ``struct`` format character of each number data type (little endian).
-STRUCT_CODES = {
-    cod.BOOLEAN: "?", cod.INTEGER8: "b", cod.INTEGER16: "h", cod.INTEGER32: "i", cod.INTEGER64: "q",
-    cod.UNSIGNED8: "B", cod.UNSIGNED16: "H", cod.UNSIGNED32: "I", cod.UNSIGNED64: "Q",
-    cod.REAL32: "f", cod.REAL64: "d",
-}
+STRUCT_CODES = {**{t: code for t, (_, code) in TYPE_BITS.items()}, cod.BOOLEAN: "?", cod.REAL64: "d"}
 #: The integer ones among :data:`STRUCT_CODES` (decoded values that may be cached).
 INT_CODES = frozenset("bBhHiIqQ")
 
