@@ -90,3 +90,17 @@ def test_python_dash_m_runs_the_command_line():
     for mod in ("hil.cli", "hil"):
         r = subprocess.run([sys.executable, "-m", mod, "--version"], capture_output=True, text=True, timeout=120)
         assert r.returncode == 0 and r.stdout.startswith("emacheck "), (mod, r.stdout, r.stderr)
+
+
+def test_the_entry_point_exits_with_the_commands_status(tmp_path):
+    """``python -m hil`` and ``python -m hil.cli`` go through :func:`hil.cli.entry` (main, then the heap
+    frozen before exit): a command's documented status reaches the shell, its error one line, no traceback."""
+    import subprocess
+    import sys
+
+    missing = tmp_path / "absent.csv"
+    for mod in ("hil", "hil.cli"):
+        r = subprocess.run([sys.executable, "-m", mod, "analyze", str(missing)], capture_output=True, text=True,
+                           timeout=120)
+        assert r.returncode == 3, (mod, r.returncode, r.stderr)
+        assert "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0 and str(missing) in r.stderr

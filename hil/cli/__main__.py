@@ -1,7 +1,5 @@
-"""``python -m hil.cli ARGS`` is ``emacheck ARGS``."""
+"""``python -m hil.cli ARGS`` is ``emacheck ARGS`` (the one entry point, :func:`hil.cli.entry`)."""
 
-import sys
+from hil.cli import entry
 
-from hil.cli import main
-
-sys.exit(main())
+entry()
