@@ -101,12 +101,14 @@ from blf.diagnose_fit import (
     screen,
 )
 from blf.diagnose_model import (
+    EIGEN_FLOOR,
     Candidate,
     DiagnoseConfig,
     Diagnosis,
     DiagnosisVerdict,
     FittedEffect,
     Location,
+    NominalCovariance,
     Param,
     ParamVector,
     Reference,
@@ -136,11 +138,12 @@ from blf.validate import positive_scalar
 
 #: the model's vocabulary and the result (:mod:`blf.diagnose_model`) are imported from here
 __all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
-           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "diagnose", "fit_effect", "place_of"]
+           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "NominalCovariance", "EIGEN_FLOOR",
+           "diagnose", "fit_effect", "place_of"]
 
 
-def _band(model: ReplayModel, sample_period_s: float, cfg: DiagnoseConfig) -> Comparison:
-    """Step 0: the band the model claims, the kept samples and the halves."""
+def band_comparison(model: ReplayModel, sample_period_s: float, cfg: DiagnoseConfig) -> Comparison:
+    """Step 0: the band the model claims, the kept samples and the halves (also for blf.diagnose_cov)."""
     T = positive_scalar(sample_period_s, "sample_period_s", "s")
     places = dict(getattr(model, "places", None) or {})
     band = make_band(1.0 / T, getattr(model, "band_hz", None))
@@ -622,7 +625,7 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
     """
     cfg = config or DiagnoseConfig()
     say = progress or (lambda s: None)
-    cmp = _band(model, sample_period_s, cfg)
+    cmp = band_comparison(model, sample_period_s, cfg)
     nom = _nominal_fit(cmp, say)
     floor = _noise_floor(cmp, nom)
     frame = _test_frame(cmp, nom)
@@ -666,7 +669,7 @@ def fit_effect(model: ReplayModel, sample_period_s: float, nominal: dict, candid
         ``active`` (no penalty); None if the replay fails.
     """
     cfg = config or DiagnoseConfig()
-    cmp = _band(model, sample_period_s, cfg)
+    cmp = band_comparison(model, sample_period_s, cfg)
     p = cmp.problem
     theta = np.array([float(nominal[q.name]) for q in model.nominal])
     pred = safe_predict(model, theta, list(active))

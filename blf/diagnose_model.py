@@ -188,6 +188,36 @@ class FittedEffect:
 
 
 @dataclass(frozen=True)
+class NominalCovariance:
+    """The shape of the nominal parameters' covariance at a fit (:func:`blf.diagnose_cov.nominal_covariance`).
+
+    ``covariance`` (physical units, in the order of ``names``) is the white-noise one,
+    :math:`(J^T J)^{-1}` of the weighted residual: its scale is far below the spread between checks,
+    so only its shape is used: ``vif`` (each parameter's variance inflation factor,
+    :math:`\\mathrm{VIF}_j = (F_n^{-1})_{jj}` of the information matrix normalised to a unit
+    diagonal; :math:`\\sqrt{\\mathrm{VIF}_j}` is how many times the parameter's standard uncertainty
+    exceeds what it would be were the others known) and ratios of its entries. A direction the
+    recording does not determine at all (eigenvalue of :math:`F_n` below :data:`EIGEN_FLOOR` times the
+    largest) is given that floor: its VIF is then about :math:`10^{12}`, not infinite."""
+
+    names: tuple
+    covariance: np.ndarray
+    vif: np.ndarray
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    def correlation(self, a: str, b: str) -> float:
+        i, j = self.index(a), self.index(b)
+        c = self.covariance
+        return float(c[i, j] / np.sqrt(c[i, i] * c[j, j]))
+
+
+#: eigenvalues of the normalised information matrix below this times the largest are taken as this
+EIGEN_FLOOR = 1e-12
+
+
+@dataclass(frozen=True)
 class Diagnosis:
     """Result of :func:`blf.diagnose.diagnose` (plain dicts inside: JSON-ready, treat as read-only).
 

@@ -16,13 +16,40 @@ from support.independent_rig import DATA
 pytestmark = pytest.mark.slow
 
 
-def test_the_play_stiffness_and_gain_floors_cover_three_sqrt2_times_the_identification_spread():
+def test_the_play_stiffness_compliance_and_gain_floors_cover_three_sqrt2_times_the_identification_spread():
     if not (DATA / "keys.json").exists():
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
     from bench.bench_diagnose_floors import independent
 
     from hil.analysis.diagnose_floors import DUAL_FLOORS
     ind = independent()
-    for kind in ("play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
+    for kind in ("play_um", "external_play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
         assert ind[kind]["floor_3sqrt2_sd"] <= DUAL_FLOORS[kind], kind
         assert abs(ind[kind]["mean"]) < 3 * ind[kind]["sd"]  # no bias beyond the spread: the fit is right
+    # the compliance's truth is one external stiffness, the same in every recording: its scatter is the error
+    assert ind["compliance_pct"]["true_same_in_all"]
+    assert ind["compliance_pct"]["floor_3sqrt2_sd"] <= DUAL_FLOORS["compliance_pct"]
+
+
+def test_pairs_of_the_independent_rig_name_their_keyed_changes_and_nothing_unseparable():
+    """Ten pairs of the independent rig's effect-free draws (tests/bench/bench_diagnose_independent_pairs.py):
+    every keyed change (internal play, contact stiffness, LVDT pitch and offset per EMA, external play; the
+    compliance, whose truth is the same in all) judged right by its rule; the bearing plays one by one never
+    named; the frictions at the check's speed have no key: their changes, within 0.45 N in these ten pairs, are
+    asserted under the friction floor (a change of fit, not of behaviour, would show here)."""
+    if not (DATA / "keys.json").exists():
+        skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
+    from bench.bench_diagnose_independent_pairs import run_pairs
+
+    from hil.analysis.diagnose_floors import DUAL_FLOORS
+    pairs = run_pairs()
+    assert len(pairs) == 10
+    wrong = [(p["new"], p["ref"], r) for p in pairs for r in p["rows"] if r["ok"] is False]
+    assert not wrong
+    judged = sum(r["ok"] is not None for p in pairs for r in p["rows"])
+    assert judged == 130
+    named = {(p["new"], p["ref"]): {n for n, _ in p["named"]} for p in pairs}
+    assert all("bearing_play_change" not in n and "compliance_change" not in n for n in named.values())
+    assert all("external_play_change" in n for n in named.values())  # every pair's external play differs > 2 floors
+    fr = [abs(r["change"]) for p in pairs for r in p["rows"] if r["parameter"].endswith("friction_N")]
+    assert len(fr) == 20 and max(fr) < DUAL_FLOORS["friction_N"]

@@ -3,8 +3,12 @@
 ``emacheck diagnose NEW --reference HEALTHY`` (dual-EMA model): the nominal model
 (:class:`sim.replay_model.DualEmaReplay`, :func:`blf.diagnose.diagnose`) is identified on the
 reference and on the new recording alike; each nominal parameter with a floor (per EMA internal play,
-bearing play, contact stiffness, compliance, LVDT pitch and offset; hinge and drive Coulomb friction)
-is compared with its reference value in its floor's unit (um, %, N).
+contact stiffness, compliance, LVDT pitch and offset) is compared with its reference value in its floor's
+unit (um, %, N), and so are what a check determines where it cannot tell two parameters apart: the
+external play (the two bearing plays' sum: the force fight loads the bearings equally and oppositely) and
+the drives' and the hinge's friction at the check's speed (Coulomb + viscous x speed: one speed). A
+parameter the recordings do not determine alone (variance inflation of the nominal fit at least
+:data:`VIF_MAX`, :func:`blf.diagnose_cov.nominal_covariance`) is listed, not separable, never named.
 
 Uncertainty of a change: the measured repeatability of the nominal fit
 (:mod:`hil.analysis.diagnose_floors`: the floor is :math:`3\\sqrt2\\,\\sigma`, so a change carries
@@ -27,14 +31,34 @@ from pathlib import Path
 
 import numpy as np
 
-#: nominal parameter name prefix -> (floor key of DUAL_FLOORS, unit, words)
+#: nominal parameter name prefix -> (floor key of DUAL_FLOORS, unit, words); the Coulomb frictions are not
+#: compared alone but as the force at the recording's best-determined speed (:data:`_FRICTIONS`), the bearing
+#: plays also as their sum (:data:`_SUMS`)
 _KINDS = {"backlash_int": ("play_um", "um", "internal play"), "backlash_bearing": ("play_um", "um", "bearing play"),
           "stiffness_int": ("stiffness_pct", "%", "contact stiffness"),
-          "compliance_ext": ("stiffness_pct", "%", "bearing-plus-housing compliance"),
+          "compliance_ext": ("compliance_pct", "%", "bearing-plus-housing compliance"),
           "lvdt_pitch": ("sensor_gain_pct", "%", "LVDT pitch (gain)"),
-          "lvdt_offset": ("play_um", "um", "LVDT offset"),
-          "hinge_coulomb_N": ("friction_N", "N", "hinge Coulomb friction"),
-          "drive_coulomb_N": ("friction_N", "N", "drives' Coulomb friction")}
+          "lvdt_offset": ("play_um", "um", "LVDT offset")}
+
+#: derived parameter -> (the nominal parameters summed, floor key, unit, words): the check's force fight loads the
+#: two EMAs' bearings with equal and opposite forces, so only their sum is in the recording (docs/diagnose.md)
+_SUMS = {"external_play_mm": (("backlash_bearing1_mm", "backlash_bearing2_mm"), "external_play_um", "um",
+                              "external play (both bearings)")}
+
+#: derived parameter -> (Coulomb parameter N, viscous parameter N s/mm, words): the friction force
+#: F(v) = F_c + b v at the check's speed v (mm/s; :func:`check_speed`): a check that moves at one speed
+#: determines the friction there, not F_c and b apart (on the independent rig their fitted split moves by
+#: 16 N between recordings while F at 2 mm/s stays within 0.5 N; docs/diagnose.md)
+_FRICTIONS = {"drive_friction_N": ("drive_coulomb_N", "drive_viscous_N_s_per_mm", "drives' friction"),
+              "hinge_friction_N": ("hinge_coulomb_N", "hinge_viscous_N_s_per_mm", "hinge friction")}
+
+#: a nominal parameter whose variance inflation factor (:func:`blf.diagnose_cov.nominal_covariance`) reaches this on
+#: either recording is not compared alone: its white-noise uncertainty is then at least 1000 times what it would
+#: be were the others known, 25-100 times the spread between checks the floors measure (the white-noise one is
+#: 10-40 times below it): the recording does not determine it and its fitted value is where the fit started.
+#: Measured: the bearing plays 2e9-9e10 (exactly one direction, their difference, not in the data), every other
+#: parameter at most 1.1e4 (docs/diagnose.md, "What a check can separate")
+VIF_MAX = 1e6
 
 
 def _where(name: str) -> str:
@@ -44,8 +68,8 @@ def _where(name: str) -> str:
     return f"ema{m.group(1)}" if m else "external"
 
 
-def _change(name: str, new: float, ref: float, floors: dict) -> dict | None:
-    kind = next((v for k, v in _KINDS.items() if name.startswith(k)), None)
+def _change(name: str, new: float, ref: float, floors: dict, kind: tuple | None = None) -> dict | None:
+    kind = kind or next((v for k, v in _KINDS.items() if name.startswith(k)), None)
     if kind is None:
         return None
     key, unit, words = kind
@@ -62,7 +86,64 @@ def _change(name: str, new: float, ref: float, floors: dict) -> dict | None:
     how = f"named: above its floor of {floor:g} {unit}" if named else f"under its floor of {floor:g} {unit}: not named"
     return {"parameter": name, "where": _where(name), "value": new, "reference": ref, "change": ch, "unit": unit,
             "uncertainty": u, "z": ch / u, "floor": floor, "supported": named, "above_floor": named, "named": named,
-            "words": f"{words} {verb} by {abs(ch):.3g} ± {u:.2g} {unit}; {how}"}
+            "separable": True, "floor_key": key, "words": f"{words} {verb} by {abs(ch):.3g} ± {u:.2g} {unit}; {how}"}
+
+
+def _not_separable(c: dict, vif: float, cov) -> dict:
+    """A compared parameter the recordings do not determine alone: listed with why, never named."""
+    i = cov.index(c["parameter"])
+    r = cov.covariance[i] / np.sqrt(cov.covariance[i, i] * np.diag(cov.covariance))
+    r[i] = 0.0
+    other = cov.names[int(np.argmax(np.abs(r)))]
+    summed = next((k for k, v in _SUMS.items() if c["parameter"] in v[0]), None)
+    tail = f"; their sum is compared ({summed})" if summed else ""
+    return c | {"supported": False, "above_floor": False, "named": False, "separable": False, "vif": vif,
+                "words": (f"{c['words'].split(';')[0]}; not separable by this check (variance inflation "
+                          f"{vif:.2g} >= {VIF_MAX:g}: the recording determines it only together with "
+                          f"{other}{tail}): not named")}
+
+
+def check_speed(model) -> float:
+    """The speed a recording's check moves at, mm/s: the median of the replay's velocity
+    (``regimes["velocity"]``, the mean of the two rams') over the samples moving faster than 5 % of its
+    99th percentile; 0 where nothing moves."""
+    v = np.abs(np.asarray(model.regimes["velocity"], dtype=float))
+    moving = v > 0.05 * float(np.percentile(v, 99)) if v.size else v.astype(bool)
+    return float(np.median(v[moving])) if moving.any() else 0.0
+
+
+def nominal_changes(new: dict, ref: dict, cov_new, cov_ref, floors: dict, speed_mm_per_s: float) -> list:
+    """Every nominal comparison of a new recording's fit against its reference's (diagnosis.json ``changes``).
+
+    ``new``, ``ref``: {name: value} of the two nominal fits; ``cov_new``, ``cov_ref``: their
+    :class:`blf.diagnose.NominalCovariance`. Per parameter of :data:`_KINDS` the change in its floor's unit,
+    not separable (never named) where its variance inflation reaches :data:`VIF_MAX` on either recording; the
+    sums of :data:`_SUMS`; the frictions of :data:`_FRICTIONS` at ``speed_mm_per_s`` (the reference's
+    :func:`check_speed`)."""
+    out = []
+    for n in new:
+        if n not in ref:
+            continue
+        c = _change(n, float(new[n]), float(ref[n]), floors)
+        if c is None:
+            continue
+        vif = max(float(cov_new.vif[cov_new.index(n)]), float(cov_ref.vif[cov_ref.index(n)]))
+        out.append(c if vif < VIF_MAX else _not_separable(c, vif, cov_ref))
+    for name, (parts, key, unit, words) in _SUMS.items():
+        if all(q in new and q in ref for q in parts):
+            c = _change(name, sum(float(new[q]) for q in parts), sum(float(ref[q]) for q in parts), floors,
+                        (key, unit, words))
+            out.append(c | {"of": list(parts)})
+    for name, (fc, b, words) in _FRICTIONS.items():
+        if not all(q in new and q in ref for q in (fc, b)):
+            continue
+        v = float(speed_mm_per_s)
+        c = _change(name, float(new[fc]) + v * float(new[b]), float(ref[fc]) + v * float(ref[b]), floors,
+                    ("friction_N", "N", f"{words} at {v:.3g} mm/s"))
+        out.append(c | {"of": [fc, b], "speed_mm_per_s": v,
+                        "words": c["words"] + f" (Coulomb + viscous x {v:.3g} mm/s, the speed the reference "
+                                              f"check moves at: one speed does not tell the two apart)"})
+    return out
 
 
 #: library candidate parameter -> (floor key of DUAL_FLOORS, unit, scale to the unit, words); a candidate's
@@ -145,7 +226,7 @@ class ReferenceFits:
 def _fits(m_new, d_ref, d_new, changes: list, pairs: dict) -> ReferenceFits | None:
     """Replays of the new recording by the reference's model, and by it with the named changes."""
     from blf.diagnose_fit import safe_predict
-    named = {c["parameter"] for c in changes if c["named"]}
+    named = {p for c in changes if c["named"] for p in (c["parameter"], *c.get("of", ()))}
     th_ref = np.array([float(d_ref.nominal[q.name]) for q in m_new.nominal])
     th_after = np.array([float((d_new if q.name in named else d_ref).nominal[q.name]) for q in m_new.nominal])
     act_ref, act_after = [], []
@@ -198,29 +279,36 @@ def floors_for(new_path: Path, profile: Path | None, check_path: Path | None) ->
 
 
 def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | None,
-                             floors: dict | None = None, floors_source: str = "the measured defaults") -> tuple:
+                             floors: dict | None = None, floors_source: str = "the measured defaults",
+                             cache: dict | None = None) -> tuple:
     """(diagnosis.json, :class:`ReferenceFits` or None) of a dual-EMA recording against a reference
-    recording (nothing written here)."""
+    recording (nothing written here). ``cache`` (a dict the caller keeps, for many pairs of few recordings):
+    each recording's fit is looked up there by its path and the profile, and put there."""
     from blf.diagnose import diagnose
     from hil.analysis.diagnose import load_dual
     from hil.analysis.diagnose_floors import DUAL_FLOORS
     floors = dict(DUAL_FLOORS) | dict(floors or {})
+    from blf.diagnose_cov import nominal_covariance
     from blf.errors import AnalysisError, InputError
     from hil.errors import RecordingError
-    loaded = [load_dual(Path(path), profile) for path in (ref_path, new_path)]
+    cache = {} if cache is None else cache
+    keys = [(str(Path(path).resolve()), str(profile)) for path in (ref_path, new_path)]
+    loaded = [cache[k][:2] if k in cache else load_dual(Path(path), profile)
+              for k, path in zip(keys, (ref_path, new_path), strict=True)]
     (_, t_ref), (_, t_new) = loaded
     if abs(t_ref / t_new - 1.0) > 0.01:
         raise RecordingError(f"--reference {ref_path}: another sample rate: {1 / t_ref:.6g} Hz, this recording "
                              f"{1 / t_new:.6g} Hz (more than 1 % apart)")
-    fits = []
-    for path, (model, period) in zip((ref_path, new_path), loaded, strict=True):
-        try:
-            fits.append((model, period, diagnose(model, period)))
-        except (InputError, AnalysisError) as exc:
-            raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
-    ref, new = fits[0][2], fits[1][2]
-    changes = [c for c in (_change(n, float(new.nominal[n]), float(ref.nominal[n]), floors)
-                           for n in new.nominal if n in ref.nominal) if c is not None]
+    for k, path, (model, period) in zip(keys, (ref_path, new_path), loaded, strict=True):
+        if k not in cache:
+            try:
+                d = diagnose(model, period)
+                cache[k] = (model, period, d, nominal_covariance(model, period, d.nominal))
+            except (InputError, AnalysisError) as exc:
+                raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
+    fits = [cache[k][:3] for k in keys]
+    (ref, cov_ref), (new, cov_new) = (cache[k][2:] for k in keys)
+    changes = nominal_changes(new.nominal, ref.nominal, cov_new, cov_ref, floors, check_speed(fits[0][0]))
     lib, pairs = _library_changes(fits, floors)
     changes += lib
     effects = [_effect_of(c) for c in changes if c["named"]]
@@ -264,5 +352,6 @@ def _effect_name(parameter: str) -> str:
             return {"backlash_int": "internal_play_change", "backlash_bearing": "bearing_play_change",
                     "stiffness_int": "stiffness_change", "compliance_ext": "compliance_change",
                     "lvdt_pitch": "lvdt_pitch_change", "lvdt_offset": "lvdt_offset_change",
-                    "hinge_coulomb_N": "hinge_friction_change", "drive_coulomb_N": "drive_friction_change"}[k]
-    return parameter + "_change"
+                    }[k]
+    return {"external_play_mm": "external_play_change", "drive_friction_N": "drive_friction_change",
+            "hinge_friction_N": "hinge_friction_change"}.get(parameter, parameter + "_change")

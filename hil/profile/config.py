@@ -221,10 +221,12 @@ class DiagnosisFloors:
     ``[diagnosis]``): a change is named only above its floor. Defaults: measured on simulated rigs
     (:data:`hil.analysis.diagnose_floors.DUAL_FLOORS`, docs/diagnose.md); a real rig states its own."""
 
-    play_um: float = _floor("play_um")  #: internal, bearing play and LVDT offset, um
-    stiffness_pct: float = _floor("stiffness_pct")  #: contact stiffness and compliance, %
+    play_um: float = _floor("play_um")  #: internal play and LVDT offset, um
+    external_play_um: float = _floor("external_play_um")  #: external play (both bearings' sum), um
+    stiffness_pct: float = _floor("stiffness_pct")  #: contact stiffness, %
+    compliance_pct: float = _floor("compliance_pct")  #: bearing-plus-housing compliance, %
     sensor_gain_pct: float = _floor("sensor_gain_pct")  #: LVDT pitch, %
-    friction_N: float = _floor("friction_N")  #: hinge and drive Coulomb friction, N
+    friction_N: float = _floor("friction_N")  #: hinge and drives' friction at the check's speed, N
     loadcell_gain_pct: float = _floor("loadcell_gain_pct")  #: load cell gain, %
 
 

@@ -28,6 +28,8 @@ def _g(x, nd: int = 4) -> str:
 def _status(c: dict) -> str:
     if c["named"]:
         return "<b>named</b>"
+    if c.get("separable") is False:
+        return "not separable by this check: not named"
     if c["floor"] is None:
         return "no floor measured: not named"
     return "supported, under its floor" if c["supported"] else "not supported (|z| ≤ 3)"

@@ -37,31 +37,32 @@ sys.path[:0] = [str(TESTS.parent), str(TESTS)]
 
 from support.independent_rig import DATA, KEYS, diagnose_file  # noqa: E402
 
-#: nominal parameter prefix -> (floor key of hil.analysis.diagnose_floors.DUAL_FLOORS, unit)
-KINDS = {"backlash_int": ("play_um", "um"), "backlash_bearing": ("play_um", "um"),
-         "stiffness_int": ("stiffness_pct", "%"), "compliance_ext": ("stiffness_pct", "%"),
-         "lvdt_pitch": ("sensor_gain_pct", "%"), "lvdt_offset": ("play_um", "um"),
-         "hinge_coulomb_N": ("friction_N", "N"), "drive_coulomb_N": ("friction_N", "N")}
 SEEDS = (11, 12, 13)
 #: library candidates (name, variant) fitted on every healthy recording for the floors of their changes
 CANDIDATES = (("coulomb_friction", "drive"), ("loadcell_gain", ""))
 
 
-def _kind(name: str):
-    return next((v for k, v in KINDS.items() if name.startswith(k)), None)
+def compared(runs_or_models) -> list:
+    """Per recording (its Diagnosis, its NominalCovariance, its check speed mm/s), for the product's own comparison
+    (:func:`hil.analysis.diagnose_dual_ref.nominal_changes`: the parameters, sums and frictions it compares)."""
+    from blf.diagnose import diagnose
+    from blf.diagnose_cov import nominal_covariance
+    from hil.analysis.diagnose_dual_ref import check_speed
+    out = []
+    for model, period in runs_or_models:
+        d = diagnose(model, period)
+        out.append((d, nominal_covariance(model, period, d.nominal), check_speed(model)))
+    return out
 
 
-def change_in_unit(name: str, new: float, ref: float) -> float:
-    """A nominal parameter's change in its floor's unit: um for a play or an offset (values in mm), % of
-    the reference for a stiffness, a compliance or a pitch, N for a friction."""
-    kind = _kind(name)
-    if kind is None:
-        return float("nan")
-    if kind[1] == "um":
-        return 1000.0 * (new - ref)
-    if kind[1] == "%":
-        return 100.0 * (new / ref - 1.0)
-    return new - ref
+def changes(new, ref) -> dict:
+    """{parameter: (floor key, change in the floor's unit)} of every comparison the product makes and could
+    name (a parameter it does not separate is left out: it is never named)."""
+    from hil.analysis.diagnose_dual_ref import nominal_changes
+    from hil.analysis.diagnose_floors import DUAL_FLOORS
+    return {c["parameter"]: (c["floor_key"], c["change"])
+            for c in nominal_changes(new[0].nominal, ref[0].nominal, new[1], ref[1], DUAL_FLOORS, ref[2])
+            if c["separable"]}
 
 
 def candidate_values(model, period: float, d) -> dict:
@@ -83,10 +84,15 @@ def independent() -> dict:
     """Fitted minus true internal play (um) and contact stiffness (%), per effect-free recording and EMA."""
     from hil.analysis.diagnose import load_model
     from support.independent_rig import rig_profile
-    rows, gains = [], []
+    rows, gains, ext = [], [], []
     for name in sorted(n for n, k in KEYS.items() if not k["expect"]):
         d, secs = diagnose_file(DATA / f"{name}.csv.gz")
         model, period = load_model(DATA / f"{name}.csv.gz", "dual-ema", rig_profile())
+        ext.append({"recording": name, "play_fit_um": 1000 * (d.nominal["backlash_bearing1_mm"]
+                                                              + d.nominal["backlash_bearing2_mm"]),
+                    "play_true_um": 1000 * KEYS[name]["truth"]["backlash_mm"]["ext"],
+                    "compliance_mm_per_N": [d.nominal[f"compliance_ext{e}_mm_per_N"] for e in (1, 2)],
+                    "stiffness_true_N_per_mm": KEYS[name]["truth"]["stiffness_N_per_mm"]["ext"]["approx"]})
         gains += [{"recording": name, "candidate": k, "value": v}
                   for k, (kind, v) in candidate_values(model, period, d).items() if kind == "loadcell_gain_pct"]
         truth = KEYS[name]["truth"]
@@ -103,7 +109,19 @@ def independent() -> dict:
         r["play_error_um"] = r["play_fit_um"] - r["play_true_um"]
         r["stiffness_error_pct"] = 100 * (r["stiffness_fit_N_per_mm"] / r["stiffness_true_N_per_mm"] - 1)
         r["pitch_error_pct"] = 100 * (r["pitch_fit"] / r["pitch_true"] - 1)
-    out = {"rows": rows, "loadcell_gain_rows": gains}
+    out = {"rows": rows, "loadcell_gain_rows": gains, "external_rows": ext}
+    # external play: the two bearings' sum against the key's one external play (the split is not in the data)
+    x = np.array([r["play_fit_um"] - r["play_true_um"] for r in ext])
+    sd = float(np.std(x, ddof=1))
+    out["external_play_um"] = {"mean": float(x.mean()), "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd,
+                               "n": int(x.size)}
+    # compliance per EMA: the keys give one external stiffness, the same in every recording, and no split: the
+    # scatter of each EMA's fitted compliance about its mean over the recordings (% of it) is its error's
+    c = np.array([r["compliance_mm_per_N"] for r in ext])
+    dev = 100 * (c / c.mean(axis=0) - 1)
+    sd = float(np.sqrt(np.sum(dev ** 2) / (dev.size - 2)))
+    out["compliance_pct"] = {"mean": 0.0, "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd, "n": int(dev.size),
+                             "true_same_in_all": len({r["stiffness_true_N_per_mm"] for r in ext}) == 1}
     x = np.array([g["value"] for g in gains])  # fitted gain error, %; true 0 (no load cell gain in these)
     sd = float(np.std(x, ddof=1))
     out["loadcell_gain_pct"] = {"mean": float(x.mean()), "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd,
@@ -117,21 +135,19 @@ def independent() -> dict:
 
 
 def simulated(runs) -> dict:
-    """The change of every nominal parameter between each pair of healthy simulated checks, and per floor
-    kind 3 x the RMS of those changes."""
+    """The change of every comparison the product makes (:func:`changes`) between each pair of healthy
+    simulated checks, and per floor kind 3 x the RMS of those changes."""
     from itertools import combinations
 
-    from blf.diagnose import diagnose
     from hil.analysis.diagnose import load_model
-    nom, cand = [], []
-    for run in runs:
-        model, period = load_model(run, "dual-ema", None)
-        d = diagnose(model, period)
-        nom.append(d.nominal)
-        cand.append(candidate_values(model, period, d))
-    pairs, kind_of = {}, {n: _kind(n)[0] for n in nom[0] if _kind(n)} | {k: v[0] for k, v in cand[0].items()}
+    models = [load_model(run, "dual-ema", None) for run in runs]
+    fits = compared(models)
+    cand = [candidate_values(m, T, f[0]) for (m, T), f in zip(models, fits, strict=True)]
+    pairs, kind_of = {}, {}
     for i, j in combinations(range(len(runs)), 2):
-        pairs[f"{SEEDS[j]} vs {SEEDS[i]}"] = {n: change_in_unit(n, nom[j][n], nom[i][n]) for n in nom[0] if _kind(n)} \
+        ch = changes(fits[j], fits[i])
+        kind_of |= {n: k for n, (k, _) in ch.items()} | {k: v[0] for k, v in cand[0].items()}
+        pairs[f"{SEEDS[j]} vs {SEEDS[i]}"] = {n: v for n, (_, v) in ch.items()} \
             | {k: cand[j][k][1] - cand[i][k][1] for k in cand[0]}
     kinds = {}
     for ch in pairs.values():
@@ -166,7 +182,14 @@ def main(argv: list[str]) -> int:
                   f"| {r['play_error_um']:+.2f} | {r['stiffness_fit_N_per_mm']:.0f} "
                   f"| {r['stiffness_true_N_per_mm']:.0f} | {r['stiffness_error_pct']:+.2f} "
                   f"| {r['pitch_error_pct']:+.4f} |")
-        for kind in ("play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
+        print("| recording | external play fit um (bearing 1 + 2) | true um | error um | compliance 1, 2 mm/N |")
+        print("|---|---|---|---|---|")
+        for r in ind["external_rows"]:
+            print(f"| {r['recording']} | {r['play_fit_um']:.2f} | {r['play_true_um']:.2f} "
+                  f"| {r['play_fit_um'] - r['play_true_um']:+.2f} "
+                  f"| {r['compliance_mm_per_N'][0]:.4g}, {r['compliance_mm_per_N'][1]:.4g} |")
+        for kind in ("play_um", "external_play_um", "stiffness_pct", "compliance_pct", "sensor_gain_pct",
+                     "loadcell_gain_pct"):
             s = ind[kind]
             print(f"{kind}: error mean {s['mean']:+.3g}, sd {s['sd']:.3g} over {s['n']}; "
                   f"floor 3 sqrt(2) sd = {s['floor_3sqrt2_sd']:.3g}")
@@ -184,7 +207,7 @@ def main(argv: list[str]) -> int:
     print("| nominal parameter | unit | " + " | ".join(sim["pairs"]) + " |")
     print("|---|---|" + "---|" * len(sim["pairs"]))
     for n in names:
-        unit = {"friction_N": "N", "loadcell_gain_pct": "%"}.get(sim["kind_of"][n]) if not _kind(n) else _kind(n)[1]
+        unit = sim["kind_of"][n].rsplit("_", 1)[-1].replace("pct", "%")
         print(f"| {n} | {unit} | " + " | ".join(f"{ch[n]:+.3g}" for ch in sim["pairs"].values()) + " |")
     for k, v in sim["floor_3rms"].items():
         ind = result.get("independent", {}).get(k.replace("_N", "_N"), {}).get("floor_3sqrt2_sd")

@@ -1,0 +1,126 @@
+"""Benchmark: ``emacheck diagnose NEW --reference HEALTHY`` on pairs of the independent rig's recordings vs keys.
+
+The independent rig's effect-free recordings (../shared/data/independent-rig: ``null-a/b/c``,
+``pitch-a/b``) are five draws of one rig model written independently of sim/, each with its own
+internal play and contact stiffness per EMA, its own external play and LVDT pitch and offset, all in
+``keys.json``. Compared two at a time (each pair once, the later name against the earlier as reference),
+the true change of every keyed parameter is known; the rig model's external stiffness is one number,
+the same in every recording (so the true compliance change is 0), and its external play one number (so
+only the sum of our model's two bearing plays has a truth).
+
+A keyed change is judged (:func:`judge`): at least twice its floor, it must be named, with the right
+sign and within 30 % of the truth (or within the floor, where that is larger); at most half its floor, it
+must not be named; in between either is right. The bearing plays one by one must never be named (not
+separable: their split is not in the data). The frictions have no key and are reported, not judged.
+
+    python tests/bench/bench_diagnose_independent_pairs.py /tmp/indep-pairs.json
+
+(about 1 min on one core: five diagnoses, then ten comparisons). Prints a table per pair.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from itertools import combinations
+from pathlib import Path
+
+TESTS = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(TESTS.parent), str(TESTS)]
+
+from support.independent_rig import DATA, KEYS, rig_profile  # noqa: E402
+
+RECORDINGS = ("null-a", "null-b", "null-c", "pitch-a", "pitch-b")
+
+
+def truth_changes(new: str, ref: str) -> dict:
+    """{parameter of diagnosis.json ``changes``: true change in its unit} from the keys."""
+    kn, kr = KEYS[new], KEYS[ref]
+    tn, tr = kn["truth"], kr["truth"]
+    out = {"external_play_mm": 1000 * (tn["backlash_mm"]["ext"] - tr["backlash_mm"]["ext"])}
+    for e in (1, 2):
+        out[f"backlash_int{e}_mm"] = 1000 * (tn["backlash_mm"][f"int{e}"] - tr["backlash_mm"][f"int{e}"])
+        out[f"stiffness_int{e}_N_per_mm"] = 100 * (tn["stiffness_N_per_mm"][f"int{e}"]["compression"]
+                                                   / tr["stiffness_N_per_mm"][f"int{e}"]["compression"] - 1)
+        out[f"lvdt_pitch{e}"] = 100 * (kn["lvdt_pitch"][e - 1] / kr["lvdt_pitch"][e - 1] - 1)
+        out[f"lvdt_offset{e}_mm"] = 1000 * (kn["lvdt_offset_mm"][e - 1] - kr["lvdt_offset_mm"][e - 1])
+        same = tn["stiffness_N_per_mm"]["ext"]["approx"] == tr["stiffness_N_per_mm"]["ext"]["approx"]
+        if same:
+            out[f"compliance_ext{e}_mm_per_N"] = 0.0
+    return out
+
+
+def judge(change: dict, truth: float | None) -> tuple[bool | None, str]:
+    """(right?, why) of one comparison against its true change (None: no key, not judged)."""
+    p = change["parameter"]
+    if p.startswith("backlash_bearing"):
+        return (not change["named"] and not change.get("separable", True),
+                "one bearing's play: must be listed not separable, never named")
+    if truth is None:
+        return None, "no key"
+    floor, est, named = change["floor"], change["change"], change["named"]
+    if abs(truth) >= 2 * floor:
+        ok = named and est * truth > 0 and abs(est - truth) <= max(0.3 * abs(truth), floor)
+        return ok, f"true {truth:+.4g} >= 2 x floor: named, right sign, within 30 % (or the floor)"
+    if abs(truth) <= floor / 2:
+        return not named, f"true {truth:+.4g} <= floor/2: not named"
+    return True, f"true {truth:+.4g} near the floor: either"
+
+
+def run_pairs(recordings=RECORDINGS) -> list:
+    """Every pair's comparison with its judgement: [{"new", "ref", "verdict", "rows": [...]}]."""
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    cache: dict = {}
+    out = []
+    for ref, new in combinations(recordings, 2):
+        t0 = time.process_time()
+        data, _ = dual_reference_diagnosis(DATA / f"{new}.csv.gz", DATA / f"{ref}.csv.gz", rig_profile(),
+                                           cache=cache)
+        truth = truth_changes(new, ref)
+        rows = []
+        for c in data["changes"]:
+            if c.get("source") == "library":
+                continue
+            ok, why = judge(c, truth.get(c["parameter"]))
+            rows.append({"parameter": c["parameter"], "where": c["where"], "unit": c["unit"],
+                         "change": c["change"], "truth": truth.get(c["parameter"]), "floor": c["floor"],
+                         "named": c["named"], "separable": c.get("separable", True), "ok": ok, "why": why})
+        lib = [{"parameter": c["parameter"], "where": c["where"], "change": c["change"], "named": c["named"]}
+               for c in data["changes"] if c.get("source") == "library"]
+        out.append({"new": new, "ref": ref, "verdict": data["verdict"], "rows": rows, "library": lib,
+                    "named": [(e["name"], e["where"]) for e in data["effects"]], "cpu_s": time.process_time() - t0})
+    return out
+
+
+def main(argv: list[str]) -> int:
+    out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_independent_pairs.json"))
+    if not (DATA / "keys.json").exists():
+        print(f"independent-rig recordings not present at {DATA}")
+        return 0
+    pairs = run_pairs()
+    judged = right = 0
+    for p in pairs:
+        print(f"\n{p['new']} against {p['ref']}: {p['verdict']} ({p['cpu_s']:.0f} s CPU)")
+        print("| parameter | where | change | true | unit | floor | named | judged |")
+        print("|---|---|---|---|---|---|---|---|")
+        for r in p["rows"]:
+            t = "-" if r["truth"] is None else f"{r['truth']:+.4g}"
+            j = "-" if r["ok"] is None else ("right" if r["ok"] else "WRONG")
+            name = "not separable" if not r["separable"] else ("named" if r["named"] else "no")
+            print(f"| {r['parameter']} | {r['where']} | {r['change']:+.4g} | {t} | {r['unit']} | {r['floor']:g} "
+                  f"| {name} | {j} |")
+            if r["ok"] is not None:
+                judged += 1
+                right += bool(r["ok"])
+        for r in p["library"]:
+            print(f"| {r['parameter']} (library) | {r['where']} | {r['change']:+.4g} | - | | | "
+                  f"{'named' if r['named'] else 'no'} | - |")
+    print(f"\njudged comparisons right: {right} of {judged} over {len(pairs)} pairs")
+    out.write_text(json.dumps({"pairs": pairs, "right": right, "judged": judged}, indent=1) + "\n")
+    print(f"written {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
