@@ -653,7 +653,8 @@ def diagnose(model: ReplayModel, sample_period_s: float, config: DiagnoseConfig 
 
 
 def fit_effect(model: ReplayModel, sample_period_s: float, nominal: dict, candidate: Candidate,
-               active: tuple = (), config: DiagnoseConfig | None = None) -> FittedEffect | None:
+               active: tuple = (), config: DiagnoseConfig | None = None,
+               fixed: dict | None = None) -> FittedEffect | None:
     """One candidate fitted on a recording whether or not it would be accepted there.
 
     For a comparison of two recordings (:mod:`hil.analysis.diagnose_dual_ref`): the candidate a
@@ -661,6 +662,9 @@ def fit_effect(model: ReplayModel, sample_period_s: float, nominal: dict, candid
     ``nominal`` ({name: value}) with its accepted effects ``active`` ((Candidate, parameters), ...),
     nominal and candidate refitted together on the fit half (:func:`blf.diagnose_fit.fit_joint`,
     standard uncertainties from its Jacobian, scaled by the reduced chi-square where above 1).
+
+    ``fixed`` ({parameter name: value}, e.g. a shape parameter at the value the other recording found):
+    those are held, not fitted (uncertainty 0).
 
     Returns
     -------
@@ -677,7 +681,10 @@ def fit_effect(model: ReplayModel, sample_period_s: float, nominal: dict, candid
         return None
     p.set_floor(model.measured, pred)
     w0 = p.weighted(pred)
-    joint = fit_joint(p, theta, list(active), candidate, np.array([q.x0 for q in candidate.params]))
+    fixed = dict(fixed or {})
+    x0 = np.array([float(fixed.get(q.name, q.x0)) for q in candidate.params])
+    free = np.array([q.name not in fixed for q in candidate.params])
+    joint = fit_joint(p, theta, list(active), candidate, x0, free=free)
     if joint is None:
         return None
     return FittedEffect(candidate.name, candidate.where, candidate.words, _named(candidate.params, joint.x),

@@ -354,18 +354,27 @@ def reference_test(p: Problem, theta: np.ndarray, active: list, Jn: dict, j: int
 
 
 def fit_joint(p: Problem, theta: np.ndarray, active: list, cand, x: np.ndarray,
-              max_nfev: int = 8) -> JointFit | None:
+              max_nfev: int = 8, free: np.ndarray | None = None) -> JointFit | None:
     """Nonlinear refit of the nominal parameters and one candidate together, from (theta, x); None if
-    the replay fails."""
+    the replay fails. ``free`` (bool per candidate parameter, default all): the others are held at ``x``
+    (their uncertainty 0)."""
     sn, _, lon, hin = _bounds(p.m.nominal)
-    sc, _, loc, hic = _bounds(cand.params)
+    sc_all, _, loc_all, hic_all = _bounds(cand.params)
+    free = np.ones(sc_all.size, bool) if free is None else np.asarray(free, bool)
+    x_all = np.clip(np.asarray(x, dtype=float) / sc_all, loc_all, hic_all)
+    sc, loc, hic = sc_all[free], loc_all[free], hic_all[free]
     k = sn.size
-    z0 = np.r_[np.clip(theta / sn, lon, hin), np.clip(np.asarray(x, dtype=float) / sc, loc, hic)]
+    z0 = np.r_[np.clip(theta / sn, lon, hin), x_all[free]]
     lo, hi = np.r_[lon, loc], np.r_[hin, hic]
     fail = None
 
+    def cand_x(zc):
+        out = x_all.copy()
+        out[free] = zc
+        return out * sc_all
+
     def pred_of(z):
-        return safe_predict(p.m, z[:k] * sn, active + [(cand, z[k:] * sc)])
+        return safe_predict(p.m, z[:k] * sn, active + [(cand, cand_x(z[k:]))])
 
     def fun(z):
         nonlocal fail
@@ -391,9 +400,10 @@ def fit_joint(p: Problem, theta: np.ndarray, active: list, cand, x: np.ndarray,
     w = p.weighted(pr)
     rf, rv = p.vec(w, p.fit), p.vec(w, ~p.fit)
     J = sol.jac
+    unc = np.zeros(sc_all.size)
     try:
         cov = np.linalg.pinv(J.T @ J) * max(float(rf @ rf) / max(rf.size - J.shape[1], 1), 1.0)
-        unc = np.sqrt(np.maximum(np.diag(cov)[k:], 0.0)) * sc
+        unc[free] = np.sqrt(np.maximum(np.diag(cov)[k:], 0.0)) * sc
     except np.linalg.LinAlgError:
-        unc = np.full(sc.size, np.nan)
-    return JointFit(z[:k] * sn, z[k:] * sc, unc, float(rf @ rf), float(rv @ rv))
+        unc[free] = np.nan
+    return JointFit(z[:k] * sn, cand_x(z[k:]), unc, float(rf @ rf), float(rv @ rv))

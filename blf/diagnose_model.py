@@ -92,13 +92,16 @@ class ParamVector:
 class Candidate:
     """A candidate physics term: machine name, place, engineer's words, parameters; ``variant`` tells
     apart two forms of the same physics at the same place (e.g. friction in the drive or in the load
-    path): at most one of them is accepted."""
+    path): at most one of them is accepted. ``shape``: the names of parameters that set the term's form,
+    not its size (a Stribeck velocity, a time constant): meaningless where the size is 0, so a comparison
+    of two recordings holds them at the value of the recording that has the term and compares the size."""
 
     name: str
     where: str
     words: str
     params: tuple
     variant: str = ""
+    shape: tuple = ()
 
 
 @dataclass(frozen=True)

@@ -61,8 +61,8 @@ RATIO = ("transmission_ratio", "external",
          "rig's ratio in the actuation profile", "gain_error")
 
 
-def _cand(name, where, words, *params, variant=""):
-    return Candidate(name, where, words, tuple(Param(*q) for q in params), variant)
+def _cand(name, where, words, *params, variant="", shape=()):
+    return Candidate(name, where, words, tuple(Param(*q) for q in params), variant, shape)
 
 
 def _friction(where: str, n: str, variant: str, place: str) -> list:
@@ -73,7 +73,7 @@ def _friction(where: str, n: str, variant: str, place: str) -> list:
               ("coeff_N_s_per_mm", 2.0, 2.0, 0.0, 1e4), variant=variant),
         _cand("stribeck_friction", where, f"Stribeck friction (static above Coulomb) {place} of EMA {n}",
               ("extra_force_N", 5.0, 5.0, 0.0, 1e4), ("stribeck_velocity_mm_per_s", 1.0, 1.0, 0.05, 20.0),
-              variant=variant),
+              variant=variant, shape=("stribeck_velocity_mm_per_s",)),
         _cand("asymmetric_friction", where,
               f"extra friction {place} of EMA {n} that differs with the direction of motion",
               ("force_extend_N", 5.0, 5.0, 0.0, 1e4), ("force_retract_N", 1.0, 5.0, 0.0, 1e4), variant=variant),
@@ -99,7 +99,8 @@ def dual_ema_candidates(drive: tuple = (True, True)) -> tuple:
                   f"contact stiffness of the EMA {n} load path rises with its deflection",
                   ("progressive_per_mm", 1.0, 1.0, -5.0, 50.0)),
             _cand("viscoelastic", where, f"visco-elastic creep/relaxation in the EMA {n} load path",
-                  ("stiffness_N_per_mm", 5000.0, 5000.0, 0.0, 1e6), ("time_constant_s", 0.3, 0.3, 0.01, 30.0)),
+                  ("stiffness_N_per_mm", 5000.0, 5000.0, 0.0, 1e6), ("time_constant_s", 0.3, 0.3, 0.01, 30.0),
+                  shape=("time_constant_s",)),
         ]
         out += _friction(where, n, "load path", "between ram and housing (in the load path)")
         if drive[e]:

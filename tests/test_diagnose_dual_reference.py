@@ -148,22 +148,22 @@ def test_bad_history_reference_exits_3_and_writes_nothing(history_runs, tmp_path
 
 
 def test_the_check_profile_sets_the_floors_and_diagnosis_json_states_them(history_runs, tmp_path, capsys):
-    """``[diagnosis] friction_N = 20`` in the check profile given with --check: the 10 N drive friction is
+    """``[diagnosis] ema_friction_N = 20`` in the check profile given with --check: the 10 N drive friction is
     supported but under that floor, not named; the source and the floors are in diagnosis.json. A floor
     that is not > 0 is refused (exit 3) naming the field, nothing written."""
     h = history_runs
-    check = write_profile_variant("check.toml", tmp_path / "check.toml", add={"diagnosis": {"friction_N": 20.0}})
+    check = write_profile_variant("check.toml", tmp_path / "check.toml", add={"diagnosis": {"ema_friction_N": 20.0}})
     out = tmp_path / "o"
     assert main(["diagnose", str(h["later"]), "--reference", str(h["healthy"]), "--check", str(check),
                  "--out", str(out), "--quiet", "--no-report"]) == 0
     data = json.loads((out / "diagnosis.json").read_text())
-    assert data["floor"]["by_kind"]["friction_N"] == 20.0 and str(check) in data["floor"]["source"]
+    assert data["floor"]["by_kind"]["ema_friction_N"] == 20.0 and str(check) in data["floor"]["source"]
     assert data["floor"]["by_kind"]["play_um"] == data["floor"]["defaults"]["play_um"] == 0.6
     (c,) = [c for c in data["changes"] if c["parameter"] == "coulomb_friction.force_N"]
     assert 5.0 < c["change"] < 20.0 and c["supported"] and not c["named"] and c["floor"] == 20.0
     assert not any("coulomb_friction.force_N" in e["change"] for e in data["effects"])
-    bad = write_profile_variant("check.toml", tmp_path / "bad.toml", add={"diagnosis": {"friction_N": 0.0}})
+    bad = write_profile_variant("check.toml", tmp_path / "bad.toml", add={"diagnosis": {"ema_friction_N": 0.0}})
     out2 = tmp_path / "o2"
     assert main(["diagnose", str(h["later"]), "--reference", str(h["healthy"]), "--check", str(bad),
                  "--out", str(out2), "--quiet"]) == 3
-    assert not out2.exists() and "diagnosis.friction_N" in capsys.readouterr().err
+    assert not out2.exists() and "diagnosis.ema_friction_N" in capsys.readouterr().err

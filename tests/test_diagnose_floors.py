@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from support.ci import skip_or_fail
-from support.independent_rig import DATA
+from support.independent_rig import DATA, KEYS
 
 pytestmark = pytest.mark.slow
 
@@ -26,6 +26,8 @@ def test_the_play_stiffness_compliance_and_gain_floors_cover_three_sqrt2_times_t
     for kind in ("play_um", "external_play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
         assert ind[kind]["floor_3sqrt2_sd"] <= DUAL_FLOORS[kind], kind
         assert abs(ind[kind]["mean"]) < 3 * ind[kind]["sd"]  # no bias beyond the spread: the fit is right
+    for kind, lib in ind["library"].items():  # the quick set's library candidates (true 0)
+        assert lib["floor_3sqrt2_sd"] <= DUAL_FLOORS[kind], kind
     # the compliance's truth is one external stiffness, the same in every recording: its scatter is the error
     assert ind["compliance_pct"]["true_same_in_all"]
     assert ind["compliance_pct"]["floor_3sqrt2_sd"] <= DUAL_FLOORS["compliance_pct"]
@@ -53,3 +55,19 @@ def test_pairs_of_the_independent_rig_name_their_keyed_changes_and_nothing_unsep
     assert all("external_play_change" in n for n in named.values())  # every pair's external play differs > 2 floors
     fr = [abs(r["change"]) for p in pairs for r in p["rows"] if r["parameter"].endswith("friction_N")]
     assert len(fr) == 20 and max(fr) < DUAL_FLOORS["friction_N"]
+
+
+def test_effects_that_appear_between_two_checks_are_named_at_their_ema_and_nothing_else_is():
+    """Recordings of the independent rig with one library effect (a friction increase at one EMA as Coulomb,
+    viscous or direction-dependent friction, a load cell gain error, visco-elastic creep) against its
+    effect-free null-a (tests/bench/bench_diagnose_independent_pairs.py, all twelve there): the effect's change
+    named at the EMA its key says, no library change named anywhere else, every keyed nominal change right."""
+    if not (DATA / "keys.json").exists():
+        skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
+    from bench.bench_diagnose_independent_pairs import run_effect_pairs
+    only = ("coulomb-1", "viscous-2", "asymfric-1", "loadgain-1", "viscoelastic-2")
+    rows = run_effect_pairs("null-a", only)
+    assert [r["new"] for r in rows] == [n for n in KEYS if n in only]
+    for r in rows:
+        assert r["ok"] and not r["keyed_wrong"], r
+        assert all(f"{n}_change" in {e for e, _ in r["named"]} for n, _ in r["expect"]), r

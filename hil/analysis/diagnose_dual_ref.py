@@ -147,28 +147,49 @@ def nominal_changes(new: dict, ref: dict, cov_new, cov_ref, floors: dict, speed_
 
 
 #: library candidate parameter -> (floor key of DUAL_FLOORS, unit, scale to the unit, words); a candidate's
-#: null value is 0 (no such physics). The library effects compared are those accepted on either recording,
-#: fitted on the other too; the candidates measured for the floors (tests/bench/bench_diagnose_floors.py)
-#: are the drives' Coulomb friction and the load cells' gain
-LIBRARY_FLOORS = {("coulomb_friction", "force_N"): ("friction_N", "N", 1.0, "Coulomb friction"),
-            ("loadcell_gain", "gain_error"): ("loadcell_gain_pct", "%", 100.0, "load cell gain")}
+#: null value is 0 (no such physics); scale "speed": times the check's speed (a viscous coefficient compared as
+#: its force at the speed the check moves at). Every size parameter of the library has one (measured by
+#: tests/bench/bench_diagnose_floors.py); a shape parameter (:attr:`blf.diagnose.Candidate.shape`) has none
+LIBRARY_FLOORS = {
+    ("coulomb_friction", "force_N"): ("ema_friction_N", "N", 1.0, "extra Coulomb friction"),
+    ("viscous_friction", "coeff_N_s_per_mm"): ("ema_friction_N", "N", "speed",
+                                               "extra viscous friction (its force at the check's speed)"),
+    ("asymmetric_friction", "force_extend_N"): ("ema_friction_N", "N", 1.0, "extra friction extending"),
+    ("asymmetric_friction", "force_retract_N"): ("ema_friction_N", "N", 1.0, "extra friction retracting"),
+    ("stribeck_friction", "extra_force_N"): ("stribeck_N", "N", 1.0, "static friction above Coulomb (Stribeck)"),
+    ("loadcell_gain", "gain_error"): ("loadcell_gain_pct", "%", 100.0, "load cell gain"),
+    ("lvdt_nonlinearity", "quadratic_mm"): ("lvdt_linearity_um", "um", 1000.0, "LVDT bow over the stroke"),
+    ("lvdt_nonlinearity", "nonlinearity_mm"): ("lvdt_linearity_um", "um", 1000.0, "LVDT S over the stroke"),
+    ("lvdt_drift", "gain_drift_per_s"): ("lvdt_drift_pct_per_h", "%/h", 360000.0, "LVDT gain drift"),
+    ("time_skew", "delay_s"): ("time_skew_ms", "ms", 1000.0, "time skew between resolver and LVDT"),
+    ("stiffness_asymmetry", "tension_over_compression_minus_1"): ("stiffness_pct", "%", 100.0,
+                                                                  "tension against compression stiffness"),
+    ("progressive_stiffness", "progressive_per_mm"): ("progressive_pct_per_mm", "%/mm", 100.0,
+                                                      "progressive stiffness"),
+    ("viscoelastic", "stiffness_N_per_mm"): ("viscoelastic_N_per_mm", "N/mm", 1.0, "visco-elastic stiffness"),
+}
 
 
-def library_change(e_new, e_ref, floors: dict) -> list:
+def library_change(e_new, e_ref, floors: dict, speed_mm_per_s: float = 0.0, shape: tuple = (),
+                   held: str | None = None) -> list:
     """The changes of one library effect's parameters between the reference and the new recording, each
-    fitted on both (:func:`blf.diagnose.fit_effect` where not accepted): change = new - reference with
-    u = sqrt(u_new^2 + u_ref^2) from the fits; named when |z| > 3 and |change| > its floor; a parameter
-    with no measured floor is listed, never named."""
+    fitted on both (:func:`blf.diagnose.fit_effect` where not accepted): change = new - reference in the
+    floor's unit with u = sqrt(u_new^2 + u_ref^2) from the fits; named when |z| > 3 and |change| > its floor.
+    A shape parameter (``shape``) is listed, never named; ``held``: the recording whose value it was held
+    at on the other (the effect is on one recording only)."""
     out = []
     for k, v in e_new.parameters.items():
-        key, unit, scale, words = LIBRARY_FLOORS.get((e_new.name, k), (None, "", 1.0, e_new.name))
+        key, unit, scale, words = LIBRARY_FLOORS.get((e_new.name, k), (None, "", 1.0, f"{e_new.name} {k}"))
+        scale = float(speed_mm_per_s) if scale == "speed" else scale
         ch = scale * (v - e_ref.parameters[k])
         u = scale * float(np.hypot(e_new.uncertainty[k], e_ref.uncertainty[k]))
-        floor = None if key is None else float(floors[key])
-        z = ch / u if u > 0 else float("inf") * np.sign(ch)
+        floor = None if key is None or k in shape else float(floors[key])
+        z = ch / u if u > 0 else (float("inf") * np.sign(ch) if ch else 0.0)
         sup, above = bool(abs(z) > 3.0), floor is not None and abs(ch) > floor
-        verb = "increased" if ch > 0 else "decreased"
-        how = ("no floor measured for it: not named" if floor is None else
+        verb = "increased" if ch > 0 else "decreased" if ch < 0 else "unchanged"
+        how = (("a shape parameter (the term's form, not its size)" + (f", held at the value of the {held}"
+                                                                        if held else "") + ": not named")
+               if k in shape else "no floor measured for it: not named" if floor is None else
                f"named: supported and above its floor of {floor:g} {unit}" if sup and above else
                f"under its floor of {floor:g} {unit}: not named" if sup else "not supported (|z| <= 3): not named")
         where = f" ({e_new.variant})" if e_new.variant else ""
@@ -176,13 +197,22 @@ def library_change(e_new, e_ref, floors: dict) -> list:
                     "where": e_new.where, "value": float(v), "reference": float(e_ref.parameters[k]),
                     "change": ch, "unit": unit or "", "uncertainty": u, "z": z, "floor": floor, "supported": sup,
                     "above_floor": bool(above), "named": bool(sup and above), "source": "library",
+                    "floor_key": None if floor is None else key, "shape": k in shape,
                     "words": f"{words}{where} at {e_new.where} {verb} by {abs(ch):.3g} ± {u:.2g} {unit}; {how}"})
     return out
 
 
-def _library_changes(fits: list, floors: dict) -> tuple:
+def _active(model, d) -> tuple:
+    """A diagnosis's accepted library effects as (Candidate, parameters) of ``model``."""
+    return tuple((c, np.array([e.parameters[q.name] for q in c.params])) for e in d.effects
+                 if e.source == "library" for c in model.candidates
+                 if (c.name, c.where, c.variant) == (e.name, e.where, e.variant))
+
+
+def _library_changes(fits: list, floors: dict, speed_mm_per_s: float) -> tuple:
     """Every library effect accepted on either recording, fitted on both, compared parameter by parameter:
-    (changes, {(name, where, variant): (effect on the new recording, on the reference)})."""
+    (changes, {(name, where, variant): (effect on the new recording, on the reference)}). Where only one
+    recording has the effect, it is fitted on the other with its shape parameters held at that one's."""
     from blf.diagnose import fit_effect
     (m_ref, T_ref, d_ref), (m_new, T_new, d_new) = fits
     keys = []
@@ -190,19 +220,21 @@ def _library_changes(fits: list, floors: dict) -> tuple:
         keys += [(e.name, e.where, e.variant) for e in d.effects
                  if e.source == "library" and (e.name, e.where, e.variant) not in keys]
     out, pairs = [], {}
+    sides = ((m_new, T_new, d_new, "new recording"), (m_ref, T_ref, d_ref, "reference"))
     for key in keys:
+        own = [next((e for e in d.effects if (e.name, e.where, e.variant) == key), None) for _, _, d, _ in sides]
+        cand = next(c for c in m_new.candidates if (c.name, c.where, c.variant) == key)
+        having = next(e for e in own if e is not None)
+        held = None if None not in own else sides[own.index(having)][3]
         pair = []
-        for model, T, d in ((m_new, T_new, d_new), (m_ref, T_ref, d_ref)):
-            own = next((e for e in d.effects if (e.name, e.where, e.variant) == key), None)
-            if own is None:
-                cand = next(c for c in model.candidates if (c.name, c.where, c.variant) == key)
-                active = tuple((c, np.array([e.parameters[q.name] for q in c.params])) for e in d.effects
-                               if e.source == "library" for c in model.candidates
-                               if (c.name, c.where, c.variant) == (e.name, e.where, e.variant))
-                own = fit_effect(model, T, d.nominal, cand, active)
-            pair.append(own)
+        for (model, T, d, _), e in zip(sides, own, strict=True):
+            if e is None:
+                c = next(c for c in model.candidates if (c.name, c.where, c.variant) == key)
+                e = fit_effect(model, T, d.nominal, c, _active(model, d),
+                               fixed={q: having.parameters[q] for q in c.shape})
+            pair.append(e)
         if None not in pair:
-            out += library_change(pair[0], pair[1], floors)
+            out += library_change(pair[0], pair[1], floors, speed_mm_per_s, cand.shape, held)
             pairs[key] = tuple(pair)
     return out, pairs
 
@@ -309,7 +341,7 @@ def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | Non
     fits = [cache[k][:3] for k in keys]
     (ref, cov_ref), (new, cov_new) = (cache[k][2:] for k in keys)
     changes = nominal_changes(new.nominal, ref.nominal, cov_new, cov_ref, floors, check_speed(fits[0][0]))
-    lib, pairs = _library_changes(fits, floors)
+    lib, pairs = _library_changes(fits, floors, check_speed(fits[0][0]))
     changes += lib
     effects = [_effect_of(c) for c in changes if c["named"]]
     rf = _fits(fits[1][0], ref, new, changes, pairs)

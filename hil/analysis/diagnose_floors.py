@@ -21,21 +21,33 @@ Measured by ``python tests/bench/bench_diagnose_floors.py /tmp/floors.json`` (do
   seeds 11, 12, 13), the change of every comparison the reference mode makes
   (:func:`hil.analysis.diagnose_dual_ref.nominal_changes`) between each pair, 3 x RMS per kind: play
   (internal, LVDT offset) 0.53 um, external play 0.80 um, contact stiffness 1.43 %, compliance 0.36 %,
-  LVDT pitch 0.00096 %, friction (hinge and drives' at the check's speed, and the library's Coulomb
-  friction in the drive of each EMA; the independent rig's keys give no true friction) 0.62 N, load cell
-  gain (the library's ``loadcell_gain`` at each EMA) 0.019 %.
+  LVDT pitch 0.00096 %, friction (hinge and drives' at the check's speed; the independent rig's keys
+  give no true friction) 0.34 N.
 
-Defaults: play 0.6 um, external play 1.3 um, contact stiffness 1.5 %, compliance 12 %, sensor gain
-0.002 %, friction 0.9 N (kept from the first measurement, 0.88 N of the Coulomb frictions alone; the
-frictions at the check's speed now give 0.62 N: not lowered on one simulator's three checks), load cell
-gain 0.04 %. All from rig models, which have no session-to-session change (temperature, re-assembly):
-on a real rig the spread between checks is larger (the Cranfield actuator: 50 N between sessions
-against a statistical uncertainty of 3-8 N), so these are lower bounds; a rig's own repeatability is to
-be stated.
+* **the library's effects at one EMA** (:data:`hil.analysis.diagnose_dual_ref.LIBRARY_FLOORS`): each
+  candidate's size parameters fitted at each EMA (and variant) where there is none (true 0), on the
+  independent rig's five effect-free recordings (pooled sd about each series' mean, 3 sqrt(2) sd) and on
+  the three simulated checks (3 x RMS of the pair changes): extra friction (Coulomb, viscous at the check's
+  speed, asymmetric; 16 series) 2.05 / 0.56 N, Stribeck static force 43.3 / 7.4 N, LVDT bow and S
+  0.58 / 1.25 um, LVDT gain drift 0.19 / 0.34 %/h, time skew 0.078 / 0.105 ms, stiffness asymmetry
+  0.40 / 0.15 % (under the contact stiffness's 1.5 %), progressive stiffness 18.4 / 15.6 %/mm,
+  visco-elastic stiffness 3960 / 1400 N/mm, load cell gain 0.034 / 0.019 %.
+
+Defaults: play 0.6 um, external play 1.3 um, contact stiffness 1.5 %, compliance 12 %, sensor gain 0.002
+%, friction 0.9 N (kept from the first measurement, 0.88 N of the Coulomb frictions alone; the frictions
+at the check's speed now give 0.34 N: not lowered on one simulator's three checks), load cell gain 0.04
+%; the library's: extra friction at one EMA 2.1 N, Stribeck 44 N, LVDT bow and S 1.3 um, LVDT drift 0.35
+%/h, time skew 0.11 ms, progressive stiffness 19 %/mm, visco-elastic stiffness 4000 N/mm. All from rig
+models, which have no session-to-session change (temperature, re-assembly): on a real rig the spread
+between checks is larger (the Cranfield actuator: 50 N between sessions against a statistical uncertainty
+of 3-8 N), so these are lower bounds; a rig's own repeatability is to be stated.
 """
 
 from __future__ import annotations
 
 #: kind -> default floor in its unit (play um, stiffness and compliance %, sensor gain %, friction N)
 DUAL_FLOORS = {"play_um": 0.6, "external_play_um": 1.3, "stiffness_pct": 1.5, "compliance_pct": 12.0,
-               "sensor_gain_pct": 0.002, "friction_N": 0.9, "loadcell_gain_pct": 0.04}
+               "sensor_gain_pct": 0.002, "friction_N": 0.9, "loadcell_gain_pct": 0.04,
+               # the library's effects at one EMA (hil.analysis.diagnose_dual_ref.LIBRARY_FLOORS)
+               "ema_friction_N": 2.1, "stribeck_N": 44.0, "lvdt_linearity_um": 1.3, "lvdt_drift_pct_per_h": 0.35,
+               "time_skew_ms": 0.11, "progressive_pct_per_mm": 19.0, "viscoelastic_N_per_mm": 4000.0}

@@ -228,6 +228,13 @@ class DiagnosisFloors:
     sensor_gain_pct: float = _floor("sensor_gain_pct")  #: LVDT pitch, %
     friction_N: float = _floor("friction_N")  #: hinge and drives' friction at the check's speed, N
     loadcell_gain_pct: float = _floor("loadcell_gain_pct")  #: load cell gain, %
+    ema_friction_N: float = _floor("ema_friction_N")  #: extra friction at one EMA (Coulomb, viscous, asymmetric), N
+    stribeck_N: float = _floor("stribeck_N")  #: static friction above Coulomb at one EMA, N
+    lvdt_linearity_um: float = _floor("lvdt_linearity_um")  #: LVDT bow and S over the stroke, um
+    lvdt_drift_pct_per_h: float = _floor("lvdt_drift_pct_per_h")  #: LVDT gain drift, %/h
+    time_skew_ms: float = _floor("time_skew_ms")  #: resolver-LVDT time skew, ms
+    progressive_pct_per_mm: float = _floor("progressive_pct_per_mm")  #: progressive stiffness, %/mm
+    viscoelastic_N_per_mm: float = _floor("viscoelastic_N_per_mm")  #: visco-elastic stiffness, N/mm
 
 
 @dataclass(frozen=True)

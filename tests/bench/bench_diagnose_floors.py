@@ -15,7 +15,7 @@ the floors' data in each parameter's unit (play in um, stiffness and LVDT pitch 
 
 The default floor of a kind is the larger of the two, rounded up.
 
-    python tests/bench/bench_diagnose_floors.py /tmp/floors.json [--sim RUN_A RUN_B RUN_C | --no-sim]
+    python tests/bench/bench_diagnose_floors.py /tmp/floors.json [--library] [--sim RUN_A RUN_B RUN_C | --no-sim]
 
 ``--sim`` takes three run folders already simulated (``emacheck simulate --seed 11 --out RUN_A``, and
 ``--seed 12``, ``--seed 13``); without it they are simulated here (about 30 s). About 2 min on one core.
@@ -39,7 +39,7 @@ from support.independent_rig import DATA, KEYS, diagnose_file  # noqa: E402
 
 SEEDS = (11, 12, 13)
 #: library candidates (name, variant) fitted on every healthy recording for the floors of their changes
-CANDIDATES = (("coulomb_friction", "drive"), ("loadcell_gain", ""))
+CANDIDATES = (("coulomb_friction", "drive"), ("loadcell_gain", ""))  # the quick set (the slow test's)
 
 
 def compared(runs_or_models) -> list:
@@ -65,22 +65,45 @@ def changes(new, ref) -> dict:
             if c["separable"]}
 
 
-def candidate_values(model, period: float, d) -> dict:
-    """Each candidate of :data:`CANDIDATES` at each EMA fitted on a healthy recording (whose diagnosis is
-    ``d``), in its floor's unit: {"name.param@where": (floor key, value)}."""
+def candidate_values(model, period: float, d, everything: bool = False) -> dict:
+    """Each candidate of :data:`CANDIDATES` (``everything``: of the whole library) at each EMA fitted on a
+    healthy recording (whose diagnosis is ``d``), each size parameter in its floor's unit
+    (:data:`hil.analysis.diagnose_dual_ref.LIBRARY_FLOORS`; a viscous coefficient as its force at the
+    check's speed): {"name.param@where/variant": (floor key, value)}."""
     from blf.diagnose import fit_effect
-    from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS
+    from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS, check_speed
     out = {}
+    v = check_speed(model)
     for c in model.candidates:
-        if (c.name, c.variant) in CANDIDATES:
+        if everything or (c.name, c.variant) in CANDIDATES:
             e = fit_effect(model, period, d.nominal, c, ())
-            for k, v in e.parameters.items():
+            for k, x in e.parameters.items():
+                if k in c.shape:
+                    continue
                 key, _, scale, _ = LIBRARY_FLOORS[(c.name, k)]
-                out[f"{c.name}.{k}@{c.where}"] = (key, scale * v)
+                out[f"{c.name}.{k}@{c.where}" + (f"/{c.variant}" if c.variant else "")] = \
+                    (key, (v if scale == "speed" else scale) * x)
     return out
 
 
-def independent() -> dict:
+def _pooled(series: dict) -> dict:
+    """Per floor key, from {series: (key, [values, one per recording])} whose truth is the same in every
+    recording (0: no such effect): the pooled standard deviation about each series' mean and 3 sqrt(2) of it."""
+    by: dict = {}
+    for key, vals in series.values():
+        by.setdefault(key, []).append(np.asarray(vals, dtype=float))
+    out = {}
+    for key, ss in by.items():
+        dev = sum(float(((x - x.mean()) ** 2).sum()) for x in ss)
+        dof = sum(x.size - 1 for x in ss)
+        sd = math.sqrt(dev / dof)
+        allx = np.concatenate(ss)
+        out[key] = {"mean": float(allx.mean()), "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd, "n": int(allx.size),
+                    "series": len(ss)}
+    return out
+
+
+def independent(everything: bool = False) -> dict:
     """Fitted minus true internal play (um) and contact stiffness (%), per effect-free recording and EMA."""
     from hil.analysis.diagnose import load_model
     from support.independent_rig import rig_profile
@@ -93,8 +116,8 @@ def independent() -> dict:
                     "play_true_um": 1000 * KEYS[name]["truth"]["backlash_mm"]["ext"],
                     "compliance_mm_per_N": [d.nominal[f"compliance_ext{e}_mm_per_N"] for e in (1, 2)],
                     "stiffness_true_N_per_mm": KEYS[name]["truth"]["stiffness_N_per_mm"]["ext"]["approx"]})
-        gains += [{"recording": name, "candidate": k, "value": v}
-                  for k, (kind, v) in candidate_values(model, period, d).items() if kind == "loadcell_gain_pct"]
+        gains += [{"recording": name, "candidate": k, "kind": kind, "value": v}
+                  for k, (kind, v) in candidate_values(model, period, d, everything).items()]
         truth = KEYS[name]["truth"]
         for e in (1, 2):
             play = d.nominal[f"backlash_int{e}_mm"]
@@ -122,10 +145,12 @@ def independent() -> dict:
     sd = float(np.sqrt(np.sum(dev ** 2) / (dev.size - 2)))
     out["compliance_pct"] = {"mean": 0.0, "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd, "n": int(dev.size),
                              "true_same_in_all": len({r["stiffness_true_N_per_mm"] for r in ext}) == 1}
-    x = np.array([g["value"] for g in gains])  # fitted gain error, %; true 0 (no load cell gain in these)
-    sd = float(np.std(x, ddof=1))
-    out["loadcell_gain_pct"] = {"mean": float(x.mean()), "sd": sd, "floor_3sqrt2_sd": 3 * math.sqrt(2) * sd,
-                                "n": int(x.size)}
+    # the library's candidates, fitted at each EMA where none is (true 0), pooled per floor key
+    series: dict = {}
+    for g in gains:
+        series.setdefault(g["candidate"], (g["kind"], []))[1].append(g["value"])
+    out["library"] = _pooled(series)
+    out["loadcell_gain_pct"] = out["library"]["loadcell_gain_pct"]
     for key, kind in (("play_error_um", "play_um"), ("stiffness_error_pct", "stiffness_pct"),
                       ("pitch_error_pct", "sensor_gain_pct")):
         x = np.array([r[key] for r in rows])
@@ -134,7 +159,7 @@ def independent() -> dict:
     return out
 
 
-def simulated(runs) -> dict:
+def simulated(runs, everything: bool = False) -> dict:
     """The change of every comparison the product makes (:func:`changes`) between each pair of healthy
     simulated checks, and per floor kind 3 x the RMS of those changes."""
     from itertools import combinations
@@ -142,11 +167,11 @@ def simulated(runs) -> dict:
     from hil.analysis.diagnose import load_model
     models = [load_model(run, "dual-ema", None) for run in runs]
     fits = compared(models)
-    cand = [candidate_values(m, T, f[0]) for (m, T), f in zip(models, fits, strict=True)]
+    cand = [candidate_values(m, T, f[0], everything) for (m, T), f in zip(models, fits, strict=True)]
     pairs, kind_of = {}, {}
     for i, j in combinations(range(len(runs)), 2):
         ch = changes(fits[j], fits[i])
-        kind_of |= {n: k for n, (k, _) in ch.items()} | {k: v[0] for k, v in cand[0].items()}
+        kind_of |= {n: k for n, (k, _) in ch.items()} | {k: f"{v[0]} (library)" for k, v in cand[0].items()}
         pairs[f"{SEEDS[j]} vs {SEEDS[i]}"] = {n: v for n, (_, v) in ch.items()} \
             | {k: cand[j][k][1] - cand[i][k][1] for k in cand[0]}
     kinds = {}
@@ -172,7 +197,7 @@ def main(argv: list[str]) -> int:
     out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_floors.json"))
     result = {}
     if (DATA / "keys.json").exists():
-        ind = independent()
+        ind = independent("--library" in argv)
         result["independent"] = ind
         print("| recording | EMA | play fit um | play true um | error um | stiffness fit N/mm | true N/mm | error % "
               "| LVDT pitch error % |")
@@ -193,6 +218,9 @@ def main(argv: list[str]) -> int:
             s = ind[kind]
             print(f"{kind}: error mean {s['mean']:+.3g}, sd {s['sd']:.3g} over {s['n']}; "
                   f"floor 3 sqrt(2) sd = {s['floor_3sqrt2_sd']:.3g}")
+        for kind, s in ind["library"].items():
+            print(f"{kind} (library, true 0): mean {s['mean']:+.3g}, pooled sd {s['sd']:.3g} over {s['n']} values in "
+                  f"{s['series']} series; floor 3 sqrt(2) sd = {s['floor_3sqrt2_sd']:.3g}")
     else:
         print(f"independent-rig recordings not present at {DATA}")
     if "--no-sim" in argv:
@@ -201,16 +229,21 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         runs = tuple(Path(a) for a in argv[argv.index("--sim") + 1:argv.index("--sim") + 1 + len(SEEDS)]) \
             if "--sim" in argv else _simulate(Path(tmp))
-        sim = simulated(runs)
+        sim = simulated(runs, "--library" in argv)
     result["simulated"] = sim
+    from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS
+    units = {"play_um": "um", "external_play_um": "um", "stiffness_pct": "%", "compliance_pct": "%",
+             "sensor_gain_pct": "%", "friction_N": "N"} | {v[0]: v[1] for v in LIBRARY_FLOORS.values()}
     names = list(next(iter(sim["pairs"].values())))
     print("| nominal parameter | unit | " + " | ".join(sim["pairs"]) + " |")
     print("|---|---|" + "---|" * len(sim["pairs"]))
     for n in names:
-        unit = sim["kind_of"][n].rsplit("_", 1)[-1].replace("pct", "%")
+        unit = units[sim["kind_of"][n].split(" ")[0]]
         print(f"| {n} | {unit} | " + " | ".join(f"{ch[n]:+.3g}" for ch in sim["pairs"].values()) + " |")
     for k, v in sim["floor_3rms"].items():
-        ind = result.get("independent", {}).get(k.replace("_N", "_N"), {}).get("floor_3sqrt2_sd")
+        src = result.get("independent", {})
+        lib = src.get("library", {}) if k.endswith(" (library)") else src
+        ind = lib.get(k.split(" ")[0], {}).get("floor_3sqrt2_sd")
         print(f"{k}: simulated pairs 3 x RMS = {v:.3g} over {sim['n'][k]}"
               + (f"; independent rig 3 sqrt(2) sd = {ind:.3g}" if ind is not None else ""))
     out.write_text(json.dumps(result, indent=1) + "\n")

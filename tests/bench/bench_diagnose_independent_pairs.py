@@ -15,7 +15,8 @@ separable: their split is not in the data). The frictions have no key and are re
 
     python tests/bench/bench_diagnose_independent_pairs.py /tmp/indep-pairs.json
 
-(about 1 min on one core: five diagnoses, then ten comparisons). Prints a table per pair.
+(about 2 min on one core: five diagnoses, then ten comparisons; then each of the twelve recordings with
+library effects against null-a, judged by :func:`judge_effect`). Prints a table per pair.
 """
 
 from __future__ import annotations
@@ -93,6 +94,50 @@ def run_pairs(recordings=RECORDINGS) -> list:
     return out
 
 
+def judge_effect(expect: list, changes: list) -> tuple[bool, str]:
+    """An effect recording against an effect-free one: every expected library effect ``[name, where]`` has
+    its change named at that place, or supported and under its floor (the words say which); no library
+    change named anywhere else. (The recordings' nominal parameters differ too: judged by :func:`judge`.)"""
+    lib = [c for c in changes if c.get("source") == "library" and not c.get("shape")]
+    named = {(c["effect"], c["where"]) for c in lib if c["named"]}
+    why = []
+    for name, where in (tuple(e) for e in expect):
+        mine = [c for c in lib if (c["effect"], c["where"]) == (name, where)]
+        if (name, where) in named:
+            why.append(f"{name} at {where} named")
+        elif mine and any(c["supported"] and not c["above_floor"] and c["change"] > 0 for c in mine):
+            why.append(f"{name} at {where} supported, under its floor")
+        else:
+            return False, f"{name} at {where} neither named nor supported under its floor"
+    extra = named - {tuple(e) for e in expect}
+    if extra:
+        return False, f"named where no key has it: {sorted(extra)}"
+    return True, "; ".join(why)
+
+
+def run_effect_pairs(reference: str = "null-a", only: tuple | None = None) -> list:
+    """Each effect recording of the library (keys' ``expect`` without ``unexplained``; ``only`` these) against
+    ``reference``: [{"new", "ref", "expect", "named", "ok", "why", "keyed_wrong"}]."""
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    cache: dict = {}
+    out = []
+    for new, k in KEYS.items():
+        if not k["expect"] or k["expect"][0][0] == "unexplained" or (only is not None and new not in only):
+            continue
+        data, _ = dual_reference_diagnosis(DATA / f"{new}.csv.gz", DATA / f"{reference}.csv.gz", rig_profile(),
+                                           cache=cache)
+        ok, why = judge_effect(k["expect"], data["changes"])
+        truth = truth_changes(new, reference)
+        keyed_wrong = [c["parameter"] for c in data["changes"] if c.get("source") != "library"
+                       and judge(c, truth.get(c["parameter"]))[0] is False]
+        lib = [(c["parameter"], c["where"], c["change"], c["unit"], c["floor"], c["z"], c["named"])
+               for c in data["changes"] if c.get("source") == "library" and not c.get("shape")]
+        out.append({"new": new, "ref": reference, "expect": k["expect"], "library": lib,
+                    "named": [(e["name"], e["where"]) for e in data["effects"]], "ok": ok, "why": why,
+                    "keyed_wrong": keyed_wrong})
+    return out
+
+
 def main(argv: list[str]) -> int:
     out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_independent_pairs.json"))
     if not (DATA / "keys.json").exists():
@@ -117,7 +162,18 @@ def main(argv: list[str]) -> int:
             print(f"| {r['parameter']} (library) | {r['where']} | {r['change']:+.4g} | - | | | "
                   f"{'named' if r['named'] else 'no'} | - |")
     print(f"\njudged comparisons right: {right} of {judged} over {len(pairs)} pairs")
-    out.write_text(json.dumps({"pairs": pairs, "right": right, "judged": judged}, indent=1) + "\n")
+    eff = run_effect_pairs()
+    print("\n| recording against null-a | expected | library changes (change unit, floor, z) | named | right |")
+    print("|---|---|---|---|---|")
+    for p in eff:
+        lib = "; ".join(f"{n} at {w} {c:+.3g} {u} (floor {f:g}, z {z:.1f}){' NAMED' if nm else ''}"
+                        for n, w, c, u, f, z, nm in p["library"])
+        exp = ", ".join(f"{n} at {w}" for n, w in p["expect"])
+        print(f"| {p['new']} | {exp} | {lib} | {p['why']} | {'yes' if p['ok'] and not p['keyed_wrong'] else 'NO'} |")
+    right_e = sum(p["ok"] and not p["keyed_wrong"] for p in eff)
+    print(f"\neffect recordings right: {right_e} of {len(eff)}")
+    out.write_text(json.dumps({"pairs": pairs, "right": right, "judged": judged, "effect_pairs": eff,
+                               "effect_right": right_e}, indent=1) + "\n")
     print(f"written {out}")
     return 0
 
