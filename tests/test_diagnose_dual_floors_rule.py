@@ -24,8 +24,8 @@ def test_a_friction_change_is_named_only_above_its_floor(floor, named):
 
 @pytest.mark.parametrize("u_new, named", [(0.9999, True), (1.0, False)])
 def test_a_change_above_its_floor_is_named_only_when_z_is_above_3(u_new, named):
-    """u = hypot(u_new, 0) and change 3 N: z = 3 / u_new; the floor (0.9 N) is not what decides."""
-    (c,) = library_change(_eff("coulomb_friction", "force_N", 3.0, u_new),
+    """u = hypot(u_new, 0) and change 6 N: z = 6 / (2 u_new); the floor (3.7 N) is not what decides."""
+    (c,) = library_change(_eff("coulomb_friction", "force_N", 6.0, 2.0 * u_new),
                           _eff("coulomb_friction", "force_N", 0.0, 0.0), DUAL_FLOORS)
     assert c["above_floor"] and c["supported"] is named and c["named"] is named
 
@@ -37,22 +37,22 @@ def test_a_load_cell_gain_change_is_in_percent():
     assert c["named"]
 
 
-@pytest.mark.parametrize("coeff, named", [(2.1001 / 2.0, True), (2.0999 / 2.0, False)])
+@pytest.mark.parametrize("coeff, named", [(3.7001 / 2.0, True), (3.6999 / 2.0, False)])
 def test_a_viscous_friction_change_is_compared_as_its_force_at_the_check_speed(coeff, named):
-    """b N s/mm at 2 mm/s is 2 b N, against the EMA friction floor (2.1 N)."""
-    assert DUAL_FLOORS["ema_friction_N"] == 2.1
+    """b N s/mm at 2 mm/s is 2 b N, against the EMA friction floor (3.7 N)."""
+    assert DUAL_FLOORS["ema_friction_N"] == 3.7
     (c,) = library_change(_eff("viscous_friction", "coeff_N_s_per_mm", coeff, 1e-3),
                           _eff("viscous_friction", "coeff_N_s_per_mm", 0.0, 1e-3), DUAL_FLOORS, 2.0)
     assert c["change"] == pytest.approx(2.0 * coeff) and c["unit"] == "N" and c["named"] is named
 
 
 def test_a_shape_parameter_is_listed_never_named_and_every_size_parameter_has_a_floor():
-    new = FittedEffect("stribeck_friction", "ema1", "", {"extra_force_N": 90.0, "stribeck_velocity_mm_per_s": 3.0},
+    new = FittedEffect("stribeck_friction", "ema1", "", {"extra_force_N": 900.0, "stribeck_velocity_mm_per_s": 3.0},
                        {"extra_force_N": 1.0, "stribeck_velocity_mm_per_s": 0.01}, 0.0, 0.0, "", variant="drive")
     ref = FittedEffect("stribeck_friction", "ema1", "", {"extra_force_N": 0.0, "stribeck_velocity_mm_per_s": 3.0},
                        {"extra_force_N": 1.0, "stribeck_velocity_mm_per_s": 0.0}, 0.0, 0.0, "", variant="drive")
     size, vs = library_change(new, ref, DUAL_FLOORS, 2.0, ("stribeck_velocity_mm_per_s",), "new recording")
-    assert size["named"] and size["floor"] == DUAL_FLOORS["stribeck_N"] == 44.0 and size["change"] == 90.0
+    assert size["named"] and size["floor"] == DUAL_FLOORS["stribeck_N"] == 860.0 and size["change"] == 900.0
     assert vs["shape"] and vs["floor"] is None and not vs["named"]
     assert "held at the value of the new recording" in vs["words"]
     from sim.replay_model import dual_ema_candidates

@@ -75,6 +75,30 @@ def test_two_healthy_checks_with_different_noise_name_nothing(healthy, tmp_path)
     assert all(abs(c["change"]) <= c["floor"] for c in data["changes"] if c["floor"] is not None)
 
 
+def test_in_the_independent_rigs_layout_a_change_is_named_and_healthy_checks_name_nothing(healthy, tmp_path):
+    """The checks as bare CSVs in the independent rig's layout (t,phi1,phi2,s1,s2,F1,F2 only: no run folder, no
+    step or mode columns, the phases found from the data): EMA 2's internal play up 30 um is named there within
+    30 %; seed 14 against seed 11 names nothing (tests/bench/bench_diagnose_reference_pairs.py --bare: all nine)."""
+    from bench.bench_diagnose_reference_pairs import bare
+    rig = write_profile_variant("simrig.toml", tmp_path / "rig.toml", overrides={"ema2": {"backlash_int_mm": 0.15}})
+    runs = {"play": tmp_path / "play", "h14": tmp_path / "h14"}
+    assert main(["simulate", "--sim", str(rig), "--seed", "13", "--out", str(runs["play"]), "--quiet"]) == 0
+    assert main(["simulate", "--seed", "14", "--out", str(runs["h14"]), "--quiet"]) == 0
+    ref = bare(healthy, tmp_path / "healthy.csv")
+    assert ref.read_text().splitlines()[0] == "t,phi1,phi2,s1,s2,F1,F2"
+    for name, run in runs.items():
+        out = tmp_path / f"o-{name}"
+        assert main(["diagnose", str(bare(run, tmp_path / f"{name}.csv")), "--reference", str(ref), "--out", str(out),
+                     "--quiet", "--no-report"]) == 0
+        data = json.loads((out / "diagnosis.json").read_text())
+        if name == "play":
+            (e,) = [e for e in data["effects"] if "backlash_int2_mm" in e["change"]]
+            assert e["where"] == "ema2" and e["change"]["backlash_int2_mm"] == pytest.approx(30.0, rel=0.3)
+            assert {e["name"] for e in data["effects"]} == {"internal_play_change"}
+        else:
+            assert data["verdict"] == "no_mismatch" and data["effects"] == []
+
+
 # --reference history (the wear history's last check of the same actuator serials) and the serial rule
 
 

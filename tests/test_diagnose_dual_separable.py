@@ -53,10 +53,10 @@ def test_the_external_play_is_named_above_its_own_floor(extra_um, named):
     assert ext["change"] == pytest.approx(extra_um) and ext["unit"] == "um" and ext["named"] is named
 
 
-@pytest.mark.parametrize("dc, named", [(0.9001, True), (0.8999, False)])
+@pytest.mark.parametrize("dc, named", [(1.1001, True), (1.0999, False)])
 def test_friction_is_compared_at_the_check_speed_not_coulomb_alone(dc, named):
     """Coulomb -16 N and viscous +8 N s/mm: at 2 mm/s that is 0 (the fits' usual trade at one speed), then
-    dc more: named only above the friction floor (0.9 N). Coulomb alone is not a comparison any more."""
+    dc more: named only above the friction floor (1.1 N). Coulomb alone is not a comparison any more."""
     new = REF | {"drive_coulomb_N": 8.0 - 16.0 + dc, "drive_viscous_N_s_per_mm": 96.0 + 8.0}
     c = _by(nominal_changes(new, REF, _cov(), _cov(), DUAL_FLOORS, 2.0))
     f = c["drive_friction_N"]

@@ -33,21 +33,26 @@ Measured by ``python tests/bench/bench_diagnose_floors.py /tmp/floors.json`` (do
   0.40 / 0.15 % (under the contact stiffness's 1.5 %), progressive stiffness 18.4 / 15.6 %/mm,
   visco-elastic stiffness 3960 / 1400 N/mm, load cell gain 0.034 / 0.019 %.
 
-Defaults: play 0.6 um, external play 1.3 um, contact stiffness 1.5 %, compliance 12 %, sensor gain 0.002
-%, friction 0.9 N (kept from the first measurement, 0.88 N of the Coulomb frictions alone; the frictions
-at the check's speed now give 0.34 N: not lowered on one simulator's three checks), load cell gain 0.04
-%; the library's: extra friction at one EMA 2.1 N, Stribeck 44 N, LVDT bow and S 1.3 um, LVDT drift 0.35
-%/h, time skew 0.11 ms, progressive stiffness 19 %/mm, visco-elastic stiffness 4000 N/mm. All from rig
-models, which have no session-to-session change (temperature, re-assembly): on a real rig the spread
-between checks is larger (the Cranfield actuator: 50 N between sessions against a statistical uncertainty
-of 3-8 N), so these are lower bounds; a rig's own repeatability is to be stated.
+* **own simulator in the independent rig's layout** (``--bare``: the same three checks as CSVs of
+  t,phi1,phi2,s1,s2,F1,F2 only, the phases found from the data): the same comparisons vary more there:
+  LVDT pitch 0.0036 %, friction at the check's speed 1.01 N, load cell gain 0.103 %, extra friction at one
+  EMA 3.64 N, Stribeck 856 N, time skew 0.119 ms, progressive stiffness 24.2 %/mm, visco-elastic stiffness
+  3290 N/mm (the others under the defaults below).
+
+Defaults, the largest of the three rounded up: play 0.6 um, external play 1.3 um, contact stiffness 1.5 %,
+compliance 12 %, sensor gain 0.004 %, friction 1.1 N, load cell gain 0.11 %; the library's: extra friction
+at one EMA 3.7 N, Stribeck 860 N (a check at one speed barely determines it), LVDT bow and S 1.3 um, LVDT
+drift 0.35 %/h, time skew 0.12 ms, progressive stiffness 25 %/mm, visco-elastic stiffness 4000 N/mm. All
+from rig models, which have no session-to-session change (temperature, re-assembly): on a real rig the
+spread between checks is larger (the Cranfield actuator: 50 N between sessions against a statistical
+uncertainty of 3-8 N), so these are lower bounds; a rig's own repeatability is to be stated.
 """
 
 from __future__ import annotations
 
 #: kind -> default floor in its unit (play um, stiffness and compliance %, sensor gain %, friction N)
 DUAL_FLOORS = {"play_um": 0.6, "external_play_um": 1.3, "stiffness_pct": 1.5, "compliance_pct": 12.0,
-               "sensor_gain_pct": 0.002, "friction_N": 0.9, "loadcell_gain_pct": 0.04,
+               "sensor_gain_pct": 0.004, "friction_N": 1.1, "loadcell_gain_pct": 0.11,
                # the library's effects at one EMA (hil.analysis.diagnose_dual_ref.LIBRARY_FLOORS)
-               "ema_friction_N": 2.1, "stribeck_N": 44.0, "lvdt_linearity_um": 1.3, "lvdt_drift_pct_per_h": 0.35,
-               "time_skew_ms": 0.11, "progressive_pct_per_mm": 19.0, "viscoelastic_N_per_mm": 4000.0}
+               "ema_friction_N": 3.7, "stribeck_N": 860.0, "lvdt_linearity_um": 1.3, "lvdt_drift_pct_per_h": 0.35,
+               "time_skew_ms": 0.12, "progressive_pct_per_mm": 25.0, "viscoelastic_N_per_mm": 4000.0}

@@ -15,7 +15,12 @@ the floors' data in each parameter's unit (play in um, stiffness and LVDT pitch 
 
 The default floor of a kind is the larger of the two, rounded up.
 
-    python tests/bench/bench_diagnose_floors.py /tmp/floors.json [--library] [--sim RUN_A RUN_B RUN_C | --no-sim]
+    python tests/bench/bench_diagnose_floors.py /tmp/floors.json [--library] [--bare] [--no-ind]
+        [--sim RUN_A RUN_B RUN_C | --no-sim]
+
+``--library``: every candidate of the library (else the drives' Coulomb friction and the load cells' gain);
+``--bare``: the simulated checks in the independent rig's layout (t,phi1,phi2,s1,s2,F1,F2 only);
+``--no-ind``: without the independent rig's part.
 
 ``--sim`` takes three run folders already simulated (``emacheck simulate --seed 11 --out RUN_A``, and
 ``--seed 12``, ``--seed 13``); without it they are simulated here (about 30 s). About 2 min on one core.
@@ -196,7 +201,9 @@ def _simulate(folder: Path) -> tuple:
 def main(argv: list[str]) -> int:
     out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_floors.json"))
     result = {}
-    if (DATA / "keys.json").exists():
+    if "--no-ind" in argv:
+        pass
+    elif (DATA / "keys.json").exists():
         ind = independent("--library" in argv)
         result["independent"] = ind
         print("| recording | EMA | play fit um | play true um | error um | stiffness fit N/mm | true N/mm | error % "
@@ -229,6 +236,9 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         runs = tuple(Path(a) for a in argv[argv.index("--sim") + 1:argv.index("--sim") + 1 + len(SEEDS)]) \
             if "--sim" in argv else _simulate(Path(tmp))
+        if "--bare" in argv:  # each check as the independent rig's recordings are: t,phi1,phi2,s1,s2,F1,F2 only
+            from bench.bench_diagnose_reference_pairs import bare
+            runs = tuple(bare(run, Path(tmp) / f"bare{i}.csv") for i, run in enumerate(runs))
         sim = simulated(runs, "--library" in argv)
     result["simulated"] = sim
     from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS

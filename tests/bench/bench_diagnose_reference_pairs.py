@@ -9,9 +9,11 @@ not among the floors' measurements, tests/bench/bench_diagnose_floors.py).
 Prints a table (verdict, what is named, the target parameter's change
 and whether it is within 30 % of the truth; for healthy pairs whether nothing is named) and writes JSON.
 
-    python tests/bench/bench_diagnose_reference_pairs.py /tmp/pairs.json
+    python tests/bench/bench_diagnose_reference_pairs.py /tmp/pairs.json [--bare]
 
-About 4 min on one core (nine simulations, nine pairs, each pair fits both checks).
+About 2 min on one core (nine simulations, then each check's fit once and the nine comparisons). ``--bare``:
+each check as the independent rig's recordings are (../shared/data/independent-rig/README.md): a CSV of
+``t,phi1,phi2,s1,s2,F1,F2`` only, no run folder, no step or mode columns, the phases found from the data.
 """
 
 from __future__ import annotations
@@ -86,14 +88,27 @@ def row(new: str, ref: str, data: dict) -> dict:
     return out
 
 
+BARE_COLUMNS = 7  #: t,phi1,phi2,s1,s2,F1,F2: the independent rig's layout
+
+
+def bare(run: Path, out: Path) -> Path:
+    """The run folder's signals in the independent rig's layout (its first seven columns, nothing else)."""
+    with (run / "signals.csv").open() as src, out.open("w") as dst:
+        for line in src:
+            dst.write(",".join(line.rstrip("\n").split(",")[:BARE_COLUMNS]) + "\n")
+    return out
+
+
 def main(argv: list[str]) -> int:
     from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
     out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_reference_pairs.json"))
-    rows = []
+    rows, cache = [], {}
     with tempfile.TemporaryDirectory() as tmp:
         runs = {name: simulate(Path(tmp), name) for name in CHECKS}
+        if "--bare" in argv:
+            runs = {name: bare(run, Path(tmp) / f"{name}.csv") for name, run in runs.items()}
         for new, ref in PAIRS:
-            rows.append(row(new, ref, dual_reference_diagnosis(runs[new], runs[ref], None)[0]))
+            rows.append(row(new, ref, dual_reference_diagnosis(runs[new], runs[ref], None, cache=cache)[0]))
     print("| pair | truth | verdict | named (change) | target parameter: change | right | residual RMS before -> "
           "after (the channel improved most) |")
     print("|---|---|---|---|---|---|---|")
