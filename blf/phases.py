@@ -43,6 +43,11 @@ __all__ = ["Holding", "slack", "change_mask", "mode_changes", "segment_changes",
 _MEAN_S = 0.1  #: averaging time of the force for the slack test
 _SLACK_SE = 6.0  #: slack: |mean force| within this many standard errors of zero
 _SETTLE_FORCE_S = 0.3  #: a drive's first samples in FORCE mode (the flight across its play) are not compared
+#: from the design: a held part ends before its last stretch whose force changes faster than this fraction of
+#: the unload ramp's rate (|F_opp| / force_ramp_s), in means over _RATE_WINDOW_S on each side of a sample
+#: (longer than a ramp's setpoint steps): a sweep's end found from the motion can lie inside the unload ramp
+_RAMP_FRACTION = 0.25
+_RATE_WINDOW_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -172,6 +177,21 @@ def segment_changes(seg: Segments, f1_N, f2_N, sample_period_s: float) -> np.nda
     return np.unique(np.asarray(out, dtype=np.int64))
 
 
+def _before_ramp(f: np.ndarray, T: float, rate_N_per_s: float) -> int:
+    """Samples of a held part ``f`` before its trailing stretch changing faster than ``rate_N_per_s``."""
+    w = max(1, int(round(_RATE_WINDOW_S / T)))
+    if f.size <= 2 * w:
+        return int(f.size)
+    c = np.concatenate(([0.0], np.cumsum(f)))
+    k = np.arange(w, f.size - w + 1)
+    rate = np.abs((c[k + w] - c[k]) - (c[k] - c[k - w])) / (w * w * T)
+    fast = rate > rate_N_per_s
+    if not fast[-1]:
+        return int(f.size)
+    slow = np.flatnonzero(~fast)
+    return int(k[slow[-1]]) - w if slow.size else 0
+
+
 def holding(n: int, sample_period_s: float, *, mode1=None, sp1=None, mode2=None, sp2=None,
             segments: Segments | None = None, f1_N=None, f2_N=None,
             opposing_force_N: float | None = None, force_ramp_s: float = 0.0) -> Holding:
@@ -212,7 +232,11 @@ def holding(n: int, sample_period_s: float, *, mode1=None, sp1=None, mode2=None,
     time order alternate EMA 2, EMA 1 as the holding drive (a check
     calibrates EMA 1 first); the target is
     :math:`\\mathrm{sign}(\\bar F_h)\\,|F_{opp}|` [N] with :math:`\\bar F_h` the
-    holding EMA's mean force over the part, less its first 0.3 s.
+    holding EMA's mean force over the part, less its first 0.3 s. A part
+    ends before its trailing stretch in which the holding EMA's force changes
+    faster than a quarter of the unload ramp's rate (|F_opp| /
+    ``force_ramp_s``; the difference of 0.05 s means on either side of each
+    sample): a sweep's end found from the motion may lie inside that ramp.
     """
     T = positive_scalar(sample_period_s, "sample_period_s", "s")
     hold = [np.zeros(n, bool), np.zeros(n, bool)]
@@ -241,6 +265,10 @@ def holding(n: int, sample_period_s: float, *, mode1=None, sp1=None, mode2=None,
         e = 1 if j % 2 == 0 else 0  # first sweep: EMA 2 holds while EMA 1 sweeps
         a2 = a + settle
         b = b - ramp
+        if b - a2 < 10:
+            continue
+        if ramp > 0:
+            b = a2 + _before_ramp(f[e][a2:b], T, _RAMP_FRACTION * mag / (ramp * T))
         if b - a2 < 10:
             continue
         sign = np.sign(np.mean(f[e][a2:b]))

@@ -120,3 +120,14 @@ def test_nominal_covariance_finds_a_direction_the_data_does_not_hold():
     r2 = np.corrcoef(A[:, 0], A[:, 3])[0, 1] ** 2
     assert cov.vif[0] == pytest.approx(1 / (1 - r2), rel=0.05) and cov.vif[3] == pytest.approx(1 / (1 - r2), rel=0.05)
     assert cov.correlation("p1", "p2") == pytest.approx(-1.0, abs=1e-6)
+
+
+def test_the_report_says_why_each_comparison_is_or_is_not_named():
+    from hil.report.diagnose_ref import _status
+    base = {"named": False, "floor": 1.0, "supported": True}
+    assert _status(base | {"named": True}) == "<b>named</b>"
+    assert _status(base | {"separable": False}) == "not separable by this check: not named"
+    assert _status(base | {"shape": True, "floor": None}) == "shape parameter (form, not size): not named"
+    assert _status(base | {"floor": None}) == "no floor measured: not named"
+    assert _status(base) == "supported, under its floor"
+    assert _status(base | {"supported": False}) == "not supported (|z| ≤ 3)"

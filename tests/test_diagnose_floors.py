@@ -71,3 +71,14 @@ def test_effects_that_appear_between_two_checks_are_named_at_their_ema_and_nothi
     for r in rows:
         assert r["ok"] and not r["keyed_wrong"], r
         assert all(f"{n}_change" in {e for e, _ in r["named"]} for n, _ in r["expect"]), r
+
+
+def test_physics_outside_the_library_that_appears_is_reported_unexplained_at_its_ema():
+    """spall-2 and leaderror-1 (keys: unexplained at ema2, ema1) against null-a: the comparison's verdict is
+    unexplained, located first at that EMA, whatever nominal changes it also names."""
+    if not (DATA / "keys.json").exists():
+        skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
+    from bench.bench_diagnose_independent_pairs import run_unexplained_pairs
+    rows = run_unexplained_pairs("null-a")
+    assert {r["new"] for r in rows} == {"spall-2", "leaderror-1"}
+    assert all(r["ok"] for r in rows), rows

@@ -346,13 +346,23 @@ def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | Non
     effects = [_effect_of(c) for c in changes if c["named"]]
     rf = _fits(fits[1][0], ref, new, changes, pairs)
     eff = lambda d: [{"name": e.name, "where": e.where} for e in d.effects]  # noqa: E731
+    appeared = new.verdict == "unexplained" and ref.verdict != "unexplained"
     return {
-        "verdict": "explained" if effects else "no_mismatch", "model": "dual-ema", "mode": "reference",
+        "verdict": "unexplained" if appeared else "explained" if effects else "no_mismatch",
+        "model": "dual-ema", "mode": "reference",
+        "unexplained": {"recording": new.verdict == "unexplained", "reference": ref.verdict == "unexplained",
+                        "where": list(new.where) if new.verdict == "unexplained" else [], "words": (
+            f"this recording's own diagnosis leaves a mismatch the library does not explain, first at "
+            f"{new.where[0] if new.where else 'no one place'}, and the reference's does not: physics outside the "
+            f"library appeared (the named changes, if any, are what the nominal model and the library can say)"
+            if appeared else "both recordings' own diagnoses leave a mismatch the library does not explain: the "
+            "named changes are between two imperfect fits" if new.verdict == ref.verdict == "unexplained" else
+            "no mismatch outside the library appeared")},
         "fits": None if rf is None else {**fits_rms(rf), "words": (
             "residual RMS of the new recording (raw band, channel units), before: the reference's model (its "
             "nominal parameters and library effects) replayed with this recording's motor angles; after: the same "
             "with the named changes only")},
-        "effects": effects, "where": [], "locations": [],
+        "effects": effects, "where": list(new.where) if appeared else [], "locations": [],
         "band": {"cutoff_hz": None, "step": 1, "words": "each recording's nominal fit (emacheck diagnose)"},
         "reference": {"recording": str(ref_path), "nominal": dict(ref.nominal), "uncertainty": {},
                       "words": "no per-fit uncertainty of the nominal parameters: each nominal change's is the "

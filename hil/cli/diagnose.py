@@ -191,6 +191,8 @@ def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
             p, data, fits, json_name=outputs.path("diagnosis.json").name))
     console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
                   f"{ref} ({data['diagnosis_s']:.1f} s)" + (f"; {hist['words']}" if hist else ""))
+    if data["verdict"] == "unexplained":
+        console.print(f"  [bold]unexplained[/bold]: {data['unexplained']['words']}")
     for c in data["changes"]:
         console.print(f"  {c['parameter']} ({c['where']}): {c['words']}")
     console.print(f"  written {outputs.path('diagnosis.json')}")

@@ -30,6 +30,8 @@ def _status(c: dict) -> str:
         return "<b>named</b>"
     if c.get("separable") is False:
         return "not separable by this check: not named"
+    if c.get("shape"):
+        return "shape parameter (form, not size): not named"
     if c["floor"] is None:
         return "no floor measured: not named"
     return "supported, under its floor" if c["supported"] else "not supported (|z| ≤ 3)"

@@ -138,6 +138,25 @@ def run_effect_pairs(reference: str = "null-a", only: tuple | None = None) -> li
     return out
 
 
+def run_unexplained_pairs(reference: str = "null-a") -> list:
+    """Each recording with physics outside the library (keys' ``["unexplained", "emaN"]``) against ``reference``:
+    right when the comparison's verdict is ``unexplained`` located first at emaN (its own diagnosis has the
+    mismatch, the reference's not)."""
+    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    cache: dict = {}
+    out = []
+    for new, k in KEYS.items():
+        if not k["expect"] or k["expect"][0][0] != "unexplained":
+            continue
+        data, _ = dual_reference_diagnosis(DATA / f"{new}.csv.gz", DATA / f"{reference}.csv.gz", rig_profile(),
+                                           cache=cache)
+        ema = k["expect"][0][1]
+        ok = data["verdict"] == "unexplained" and data["where"][:1] == [ema]
+        out.append({"new": new, "ref": reference, "expect": ema, "verdict": data["verdict"], "where": data["where"],
+                    "named": [(e["name"], e["where"]) for e in data["effects"]], "ok": ok})
+    return out
+
+
 def main(argv: list[str]) -> int:
     out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_independent_pairs.json"))
     if not (DATA / "keys.json").exists():
@@ -172,8 +191,12 @@ def main(argv: list[str]) -> int:
         print(f"| {p['new']} | {exp} | {lib} | {p['why']} | {'yes' if p['ok'] and not p['keyed_wrong'] else 'NO'} |")
     right_e = sum(p["ok"] and not p["keyed_wrong"] for p in eff)
     print(f"\neffect recordings right: {right_e} of {len(eff)}")
+    une = run_unexplained_pairs()
+    for p in une:
+        print(f"{p['new']} against null-a: {p['verdict']} at {p['where']} (expected unexplained at {p['expect']}); "
+              f"named {p['named']}: {'right' if p['ok'] else 'WRONG'}")
     out.write_text(json.dumps({"pairs": pairs, "right": right, "judged": judged, "effect_pairs": eff,
-                               "effect_right": right_e}, indent=1) + "\n")
+                               "effect_right": right_e, "unexplained_pairs": une}, indent=1) + "\n")
     print(f"written {out}")
     return 0
 
