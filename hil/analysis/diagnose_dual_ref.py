@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 #: nominal parameter name prefix -> (floor key of DUAL_FLOORS, unit, words); the Coulomb frictions are not
-#: compared alone but as the force at the recording's best-determined speed (:data:`_FRICTIONS`), the bearing
-#: plays also as their sum (:data:`_SUMS`)
+#: compared alone but as the force at the check's speed (:data:`_FRICTIONS`), the bearing plays also as their
+#: sum (:data:`_SUMS`)
 _KINDS = {"backlash_int": ("play_um", "um", "internal play"), "backlash_bearing": ("play_um", "um", "bearing play"),
           "stiffness_int": ("stiffness_pct", "%", "contact stiffness"),
           "compliance_ext": ("compliance_pct", "%", "bearing-plus-housing compliance"),
@@ -127,8 +127,8 @@ def nominal_changes(new: dict, ref: dict, cov_new, cov_ref, floors: dict, speed_
         c = _change(n, float(new[n]), float(ref[n]), floors)
         if c is None:
             continue
-        vif = max(float(cov_new.vif[cov_new.index(n)]), float(cov_ref.vif[cov_ref.index(n)]))
-        out.append(c if vif < VIF_MAX else _not_separable(c, vif, cov_ref))
+        vif, cov = max(((float(cv.vif[cv.index(n)]), cv) for cv in (cov_new, cov_ref)), key=lambda t: t[0])
+        out.append(c if vif < VIF_MAX else _not_separable(c, vif, cov))
     for name, (parts, key, unit, words) in _SUMS.items():
         if all(q in new and q in ref for q in parts):
             c = _change(name, sum(float(new[q]) for q in parts), sum(float(ref[q]) for q in parts), floors,
@@ -223,7 +223,7 @@ def _library_changes(fits: list, floors: dict, speed_mm_per_s: float) -> tuple:
     sides = ((m_new, T_new, d_new, "new recording"), (m_ref, T_ref, d_ref, "reference"))
     for key in keys:
         own = [next((e for e in d.effects if (e.name, e.where, e.variant) == key), None) for _, _, d, _ in sides]
-        cand = next(c for c in m_new.candidates if (c.name, c.where, c.variant) == key)
+        cand = next(c for m in (m_new, m_ref) for c in m.candidates if (c.name, c.where, c.variant) == key)
         having = next(e for e in own if e is not None)
         held = None if None not in own else sides[own.index(having)][3]
         pair = []
