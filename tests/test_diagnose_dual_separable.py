@@ -131,3 +131,18 @@ def test_the_report_says_why_each_comparison_is_or_is_not_named():
     assert _status(base | {"floor": None}) == "no floor measured: not named"
     assert _status(base) == "supported, under its floor"
     assert _status(base | {"supported": False}) == "not supported (|z| ≤ 3)"
+
+
+@pytest.mark.parametrize("new, ref, where, words", [
+    ("unexplained", "explained", ["ema2", "ema1"], "physics outside the library appeared"),
+    ("unexplained", "unexplained", ["ema2", "ema1"], "between two imperfect fits"),
+    ("explained", "unexplained", [], "against an imperfect fit of the reference"),
+    ("no_mismatch", "explained", [], "neither recording"),
+])
+def test_which_recording_leaves_a_mismatch_outside_the_library(new, ref, where, words):
+    from types import SimpleNamespace
+
+    from hil.analysis.diagnose_dual_ref import _unexplained
+    u = _unexplained(SimpleNamespace(verdict=new, where=("ema2", "ema1")), SimpleNamespace(verdict=ref, where=()))
+    assert u["recording"] is (new == "unexplained") and u["reference"] is (ref == "unexplained")
+    assert u["where"] == where and words in u["words"]

@@ -16,6 +16,12 @@ from support.independent_rig import DATA, KEYS
 pytestmark = pytest.mark.slow
 
 
+@pytest.fixture(scope="module")
+def fits() -> dict:
+    """Each independent-rig recording's fit, made once for the comparisons below (in one test process)."""
+    return {}
+
+
 def test_the_play_stiffness_compliance_and_gain_floors_cover_three_sqrt2_times_the_identification_spread():
     if not (DATA / "keys.json").exists():
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
@@ -33,7 +39,7 @@ def test_the_play_stiffness_compliance_and_gain_floors_cover_three_sqrt2_times_t
     assert ind["compliance_pct"]["floor_3sqrt2_sd"] <= DUAL_FLOORS["compliance_pct"]
 
 
-def test_pairs_of_the_independent_rig_name_their_keyed_changes_and_nothing_unseparable():
+def test_pairs_of_the_independent_rig_name_their_keyed_changes_and_nothing_unseparable(fits):
     """Ten pairs of the independent rig's effect-free draws (tests/bench/bench_diagnose_independent_pairs.py):
     every keyed change (internal play, contact stiffness, LVDT pitch and offset per EMA, external play; the
     compliance, whose truth is the same in all) judged right by its rule; the bearing plays one by one never
@@ -44,7 +50,7 @@ def test_pairs_of_the_independent_rig_name_their_keyed_changes_and_nothing_unsep
     from bench.bench_diagnose_independent_pairs import run_pairs
 
     from hil.analysis.diagnose_floors import DUAL_FLOORS
-    pairs = run_pairs()
+    pairs = run_pairs(cache=fits)
     assert len(pairs) == 10
     wrong = [(p["new"], p["ref"], r) for p in pairs for r in p["rows"] if r["ok"] is False]
     assert not wrong
@@ -57,7 +63,7 @@ def test_pairs_of_the_independent_rig_name_their_keyed_changes_and_nothing_unsep
     assert len(fr) == 20 and max(fr) < DUAL_FLOORS["friction_N"]
 
 
-def test_effects_that_appear_between_two_checks_are_named_at_their_ema_and_nothing_else_is():
+def test_effects_that_appear_between_two_checks_are_named_at_their_ema_and_nothing_else_is(fits):
     """Recordings of the independent rig with one library effect (a friction increase at one EMA as Coulomb,
     viscous or direction-dependent friction, a load cell gain error, visco-elastic creep) against its
     effect-free null-a (tests/bench/bench_diagnose_independent_pairs.py, all twelve there): the effect's change
@@ -66,19 +72,19 @@ def test_effects_that_appear_between_two_checks_are_named_at_their_ema_and_nothi
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
     from bench.bench_diagnose_independent_pairs import run_effect_pairs
     only = ("coulomb-1", "viscous-2", "asymfric-1", "loadgain-1", "viscoelastic-2")
-    rows = run_effect_pairs("null-a", only)
+    rows = run_effect_pairs("null-a", only, cache=fits)
     assert [r["new"] for r in rows] == [n for n in KEYS if n in only]
     for r in rows:
         assert r["ok"] and not r["keyed_wrong"], r
         assert all(f"{n}_change" in {e for e, _ in r["named"]} for n, _ in r["expect"]), r
 
 
-def test_physics_outside_the_library_that_appears_is_reported_unexplained_at_its_ema():
+def test_physics_outside_the_library_that_appears_is_reported_unexplained_at_its_ema(fits):
     """spall-2 and leaderror-1 (keys: unexplained at ema2, ema1) against null-a: the comparison's verdict is
     unexplained, located first at that EMA, whatever nominal changes it also names."""
     if not (DATA / "keys.json").exists():
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
     from bench.bench_diagnose_independent_pairs import run_unexplained_pairs
-    rows = run_unexplained_pairs("null-a")
+    rows = run_unexplained_pairs("null-a", cache=fits)
     assert {r["new"] for r in rows} == {"spall-2", "leaderror-1"}
     assert all(r["ok"] for r in rows), rows

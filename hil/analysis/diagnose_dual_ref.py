@@ -340,24 +340,18 @@ def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | Non
                 raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
     fits = [cache[k][:3] for k in keys]
     (ref, cov_ref), (new, cov_new) = (cache[k][2:] for k in keys)
-    changes = nominal_changes(new.nominal, ref.nominal, cov_new, cov_ref, floors, check_speed(fits[0][0]))
-    lib, pairs = _library_changes(fits, floors, check_speed(fits[0][0]))
+    speed = check_speed(fits[0][0])
+    changes = nominal_changes(new.nominal, ref.nominal, cov_new, cov_ref, floors, speed)
+    lib, pairs = _library_changes(fits, floors, speed)
     changes += lib
     effects = [_effect_of(c) for c in changes if c["named"]]
     rf = _fits(fits[1][0], ref, new, changes, pairs)
     eff = lambda d: [{"name": e.name, "where": e.where} for e in d.effects]  # noqa: E731
-    appeared = new.verdict == "unexplained" and ref.verdict != "unexplained"
+    unexplained = _unexplained(new, ref)
+    appeared = unexplained["recording"] and not unexplained["reference"]
     return {
         "verdict": "unexplained" if appeared else "explained" if effects else "no_mismatch",
-        "model": "dual-ema", "mode": "reference",
-        "unexplained": {"recording": new.verdict == "unexplained", "reference": ref.verdict == "unexplained",
-                        "where": list(new.where) if new.verdict == "unexplained" else [], "words": (
-            f"this recording's own diagnosis leaves a mismatch the library does not explain, first at "
-            f"{new.where[0] if new.where else 'no one place'}, and the reference's does not: physics outside the "
-            f"library appeared (the named changes, if any, are what the nominal model and the library can say)"
-            if appeared else "both recordings' own diagnoses leave a mismatch the library does not explain: the "
-            "named changes are between two imperfect fits" if new.verdict == ref.verdict == "unexplained" else
-            "no mismatch outside the library appeared")},
+        "model": "dual-ema", "mode": "reference", "unexplained": unexplained,
         "fits": None if rf is None else {**fits_rms(rf), "words": (
             "residual RMS of the new recording (raw band, channel units), before: the reference's model (its "
             "nominal parameters and library effects) replayed with this recording's motor angles; after: the same "
@@ -375,6 +369,26 @@ def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | Non
             "nominal fit and its u = floor/3 (hil/analysis/diagnose_floors.py, docs/diagnose.md)")},
         "effects_recording": eff(new), "effects_reference": eff(ref),
     }, rf
+
+
+def _unexplained(new, ref) -> dict:
+    """diagnosis.json ``unexplained``: which recording's own diagnosis leaves a mismatch the library does not
+    explain, where the new one's is, and what that means for the comparison."""
+    n, r = new.verdict == "unexplained", ref.verdict == "unexplained"
+    if n and not r:
+        words = (f"this recording's own diagnosis leaves a mismatch the library does not explain, first at "
+                 f"{new.where[0] if new.where else 'no one place'}, and the reference's does not: physics outside "
+                 f"the library appeared (the named changes, if any, are what the nominal model and the library "
+                 f"can say)")
+    elif n and r:
+        words = ("both recordings' own diagnoses leave a mismatch the library does not explain: the named changes "
+                 "are between two imperfect fits")
+    elif r:
+        words = ("the reference's own diagnosis leaves a mismatch the library does not explain and this "
+                 "recording's does not: the named changes are against an imperfect fit of the reference")
+    else:
+        words = "neither recording's own diagnosis leaves a mismatch the library does not explain"
+    return {"recording": n, "reference": r, "where": list(new.where) if n else [], "words": words}
 
 
 def _effect_of(c: dict) -> dict:

@@ -76,10 +76,12 @@ class DriveLimits:
         The motor's inertia J [kg m^2] (the plant's), the CST speed limit's gain J / T.
     following_error_cycles : int
         Drive cycles in a row with the following error beyond the window.
-    speed_history : list
-        ``[phi_k, phi_k-1, phi_k-2, tau_k-1, tau_k-2]``: the motor angles sampled at this and the last two
-        drive cycles [rad] (None before they exist) and the motor torques the drive commanded in CST in
-        the last two [N m] (0 in another mode); :meth:`cycle_angle` shifts it.
+    angles_rad : tuple
+        ``(phi_k, phi_k-1, phi_k-2)``: the motor angles sampled at this and the last two drive cycles [rad]
+        (None before they exist); :meth:`cycle_angle` shifts them.
+    cst_torques_Nm : tuple
+        ``(tau_k-1, tau_k-2)``: the motor torques the drive commanded in CST in the last two cycles [N m]
+        (0 in another mode).
     cst_torque_Nm : float
         The torque commanded in CST in this cycle [N m] (0 until :meth:`speed_held`).
     """
@@ -93,17 +95,15 @@ class DriveLimits:
 
     def reset_speed_estimate(self) -> None:
         """No motor angles of earlier cycles (power-on, reset node): the CST speed limit waits a cycle."""
-        self.speed_history: list = [None, None, None, 0.0, 0.0]
+        self.angles_rad: tuple = (None, None, None)
+        self.cst_torques_Nm: tuple = (0.0, 0.0)
         self.cst_torque_Nm = 0.0
 
     def cycle_angle(self, phi_rad: float) -> None:
         """A drive cycle begins with the motor angle ``phi_rad`` [rad] sampled now (every mode)."""
-        h = self.speed_history
-        h[2] = h[1]
-        h[1] = h[0]
-        h[0] = phi_rad
-        h[4] = h[3]
-        h[3] = self.cst_torque_Nm
+        a = self.angles_rad
+        self.angles_rad = (phi_rad, a[0], a[1])
+        self.cst_torques_Nm = (self.cst_torque_Nm, self.cst_torques_Nm[0])
         self.cst_torque_Nm = 0.0
 
     def speed_held(self, force_N: float, force_max_N: float, i_total_rad_per_mm: float) -> float:
@@ -111,7 +111,8 @@ class DriveLimits:
         (the target torque after 0x6072, as a ram force [N]) clipped to the range whose predicted speed
         at the cycle's end lies within +-0x6080, then to +-``force_max_N`` (0x6072 as a ram force [N]).
         Called once per drive cycle in CST, after :meth:`cycle_angle`."""
-        phi, phi1, phi2, tau1, tau2 = self.speed_history
+        phi, phi1, phi2 = self.angles_rad
+        tau1, tau2 = self.cst_torques_Nm
         gear = i_total_rad_per_mm * 1000.0  # rad/m: motor torque [N m] = force [N] / gear
         rpm = self.store.int_or(0x6080, 0, 0)
         f = force_N

@@ -69,10 +69,10 @@ def judge(change: dict, truth: float | None) -> tuple[bool | None, str]:
     return True, f"true {truth:+.4g} near the floor: either"
 
 
-def run_pairs(recordings=RECORDINGS) -> list:
+def run_pairs(recordings=RECORDINGS, cache: dict | None = None) -> list:
     """Every pair's comparison with its judgement: [{"new", "ref", "verdict", "rows": [...]}]."""
     from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
-    cache: dict = {}
+    cache = {} if cache is None else cache  # each recording's fit, by path (dual_reference_diagnosis)
     out = []
     for ref, new in combinations(recordings, 2):
         t0 = time.process_time()
@@ -115,11 +115,11 @@ def judge_effect(expect: list, changes: list) -> tuple[bool, str]:
     return True, "; ".join(why)
 
 
-def run_effect_pairs(reference: str = "null-a", only: tuple | None = None) -> list:
+def run_effect_pairs(reference: str = "null-a", only: tuple | None = None, cache: dict | None = None) -> list:
     """Each effect recording of the library (keys' ``expect`` without ``unexplained``; ``only`` these) against
     ``reference``: [{"new", "ref", "expect", "named", "ok", "why", "keyed_wrong"}]."""
     from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
-    cache: dict = {}
+    cache = {} if cache is None else cache  # each recording's fit, by path (dual_reference_diagnosis)
     out = []
     for new, k in KEYS.items():
         if not k["expect"] or k["expect"][0][0] == "unexplained" or (only is not None and new not in only):
@@ -138,12 +138,12 @@ def run_effect_pairs(reference: str = "null-a", only: tuple | None = None) -> li
     return out
 
 
-def run_unexplained_pairs(reference: str = "null-a") -> list:
+def run_unexplained_pairs(reference: str = "null-a", cache: dict | None = None) -> list:
     """Each recording with physics outside the library (keys' ``["unexplained", "emaN"]``) against ``reference``:
     right when the comparison's verdict is ``unexplained`` located first at emaN (its own diagnosis has the
     mismatch, the reference's not)."""
     from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
-    cache: dict = {}
+    cache = {} if cache is None else cache  # each recording's fit, by path (dual_reference_diagnosis)
     out = []
     for new, k in KEYS.items():
         if not k["expect"] or k["expect"][0][0] != "unexplained":
@@ -162,7 +162,8 @@ def main(argv: list[str]) -> int:
     if not (DATA / "keys.json").exists():
         print(f"independent-rig recordings not present at {DATA}")
         return 0
-    pairs = run_pairs()
+    cache: dict = {}  # one fit per recording for all three parts
+    pairs = run_pairs(cache=cache)
     judged = right = 0
     for p in pairs:
         print(f"\n{p['new']} against {p['ref']}: {p['verdict']} ({p['cpu_s']:.0f} s CPU)")
@@ -181,7 +182,7 @@ def main(argv: list[str]) -> int:
             print(f"| {r['parameter']} (library) | {r['where']} | {r['change']:+.4g} | - | | | "
                   f"{'named' if r['named'] else 'no'} | - |")
     print(f"\njudged comparisons right: {right} of {judged} over {len(pairs)} pairs")
-    eff = run_effect_pairs()
+    eff = run_effect_pairs(cache=cache)
     print("\n| recording against null-a | expected | library changes (change unit, floor, z) | named | right |")
     print("|---|---|---|---|---|")
     for p in eff:
@@ -191,7 +192,7 @@ def main(argv: list[str]) -> int:
         print(f"| {p['new']} | {exp} | {lib} | {p['why']} | {'yes' if p['ok'] and not p['keyed_wrong'] else 'NO'} |")
     right_e = sum(p["ok"] and not p["keyed_wrong"] for p in eff)
     print(f"\neffect recordings right: {right_e} of {len(eff)}")
-    une = run_unexplained_pairs()
+    une = run_unexplained_pairs(cache=cache)
     for p in une:
         print(f"{p['new']} against null-a: {p['verdict']} at {p['where']} (expected unexplained at {p['expect']}); "
               f"named {p['named']}: {'right' if p['ok'] else 'WRONG'}")
