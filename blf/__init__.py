@@ -1,63 +1,26 @@
-"""Pure backlash analysis: BLFmaint, BLFserv, LVDT calibration, error budget (paper 2.1-2.3).
+"""Pure backlash analysis (paper 2.1-2.3): arrays and explicit sample rates in, frozen dataclasses out.
 
-Everything here is pure: arrays and explicit sample rates in, frozen
-dataclasses out; no plotting, logging, file IO or clocks.
+No plotting, logging, file IO or clocks. Three wings, one per method, each behind its door (its
+``__init__``, which lists what it offers):
+
+* :mod:`blf.maint`: BLFmaint, the ground check (paper 2.1): the force-fight F-D analysis, the LVDT
+  calibration, the check's segments, the error budget (paper 2.3) and the verdict against B_spec;
+* :mod:`blf.serv`: BLFserv, backlash in service from motor angle and LVDT only (paper 2.2): the
+  detector and its filters;
+* :mod:`blf.diagnose`: a model against a recording: where they differ, which physics was left out,
+  its fit; the dual-EMA engine and the single-axis reference comparison.
+
+Under all three, five modules: :mod:`blf.errors`, :mod:`blf.validate` (argument checks naming the
+bad value and its unit), :mod:`blf.signals` (the position differences, paper eq. 1),
+:mod:`blf.continuity` (jumps in a recording) and :mod:`blf.wear` (backlash against flight hours).
+
+Wings use one another downward only: diagnose may use maint and serv, maint may use serv, serv
+neither; the five modules use no wing (``tests/test_layers.py``). Wings are imported on first use
+(``lazy_loader``, SPEC 1): ``import blf`` costs nothing, and the master's process, which takes
+only the five modules, never loads python-control, scipy.signal or numba.
 """
 
-import importlib
+import lazy_loader as lazy
 
-#: Public name -> submodule. Imported on first use (PEP 562): ``from blf.calibration import ...``
-#: in the master's process does not pull in python-control, scipy.signal and numba (BLFserv),
-#: which cost seconds at start-up where page faults are expensive (user-mode-linux).
-_WHERE = {
-    "AccuracyBudget": "accuracy", "MethodErrors": "accuracy", "backlash_error_budget": "accuracy",
-    "LvdtCalibration": "calibration", "correct_linear": "calibration", "fit_lvdt_calibration": "calibration",
-    "BinnedCurve": "maint", "BlfMaintResult": "maint", "CentreLine": "maint", "ContactLine": "maint",
-    "FdLines": "maint", "blf_maint": "maint",
-    "BlfServMonitor": "serv", "BlfServResult": "serv", "ServJump": "serv", "blf_serv": "serv",
-    "ServFilters": "serv_filters", "design_serv_filters": "serv_filters", "estimate_noise_std_mm": "serv_filters",
-    "Segments": "segments", "find_segments": "segments", "find_sweep": "segments",
-    "PositionDifferences": "signals", "position_differences": "signals",
-}
-
-
-def __getattr__(name: str):
-    try:
-        mod = _WHERE[name]
-    except KeyError:
-        raise AttributeError(f"module 'blf' has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(f"blf.{mod}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
-
-
-__all__ = [
-    "AccuracyBudget",
-    "BinnedCurve",
-    "BlfServMonitor",
-    "BlfServResult",
-    "MethodErrors",
-    "ServFilters",
-    "ServJump",
-    "backlash_error_budget",
-    "blf_serv",
-    "design_serv_filters",
-    "estimate_noise_std_mm",
-    "BlfMaintResult",
-    "CentreLine",
-    "ContactLine",
-    "FdLines",
-    "LvdtCalibration",
-    "PositionDifferences",
-    "blf_maint",
-    "correct_linear",
-    "fit_lvdt_calibration",
-    "position_differences",
-    "Segments",
-    "find_segments",
-    "find_sweep",
-]
+__getattr__, __dir__, __all__ = lazy.attach(
+    __name__, submodules=["maint", "serv", "diagnose", "errors", "validate", "signals", "continuity", "wear"])

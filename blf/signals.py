@@ -51,7 +51,7 @@ def position_differences(
         Motor angles of EMA 1 and 2 in rad (positive = ram extends).
     s1_mm, s2_mm : array_like, shape (n,)
         LVDT strokes of EMA 1 and 2 in mm (calibrated, i.e. on the motor-angle
-        scale, see :meth:`blf.calibration.LvdtCalibration.correct`).
+        scale, see :meth:`blf.maint.calibration.LvdtCalibration.correct`).
     i_total_rad_per_mm : float
         Total gear ratio motor angle per ram stroke in rad/mm (> 0), e.g.
         ``2*pi*4/5 = 5.0265`` for a 4:1 gearbox and a 5 mm ballscrew lead.

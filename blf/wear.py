@@ -32,7 +32,7 @@ from blf.validate import as_1d_finite, readonly, same_shape, scalar
 __all__ = ["WearFit", "LimitCrossing", "fit_wear", "trend_band", "limit_crossing", "wear_segments",
            "COVERAGE_FACTOR", "CONFIDENCE"]
 
-COVERAGE_FACTOR = 2.0  #: k of the readings' expanded uncertainties U (as in blf.verdict)
+COVERAGE_FACTOR = 2.0  #: k of the readings' expanded uncertainties U (as in blf.maint.verdict)
 CONFIDENCE = 0.95  #: two-sided confidence of the bands and intervals
 STEP_THRESHOLD = 3.0  #: a drop of more than this many combined standard uncertainties is a step
 
@@ -203,7 +203,7 @@ def fit_wear(x, backlash_mm, uncertainty_mm, *, coverage_factor: float = COVERAG
     with ``absolute_sigma=False``); where they scatter less, the stated
     uncertainties stand (``absolute_sigma=True``) and the normal quantile
     applies. It is never scaled below 1: a part of each U is a bound on the
-    method's error (blf.verdict), which a small scatter does not disprove.
+    method's error (blf.maint.verdict), which a small scatter does not disprove.
     """
     x, y, u = _inputs(x, backlash_mm, uncertainty_mm, 2)
     k = scalar(coverage_factor, "coverage_factor", "(dimensionless)", lo=0.0, lo_open=True)

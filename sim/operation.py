@@ -102,7 +102,7 @@ class CalibrationSweep:
         The measured samples of both EMAs during the sweep (run-folder
         columns), with ``t_s`` from 0.
 
-    Feed ``x_mm, s_mm`` to :func:`blf.calibration.fit_lvdt_calibration`.
+    Feed ``x_mm, s_mm`` to :func:`blf.maint.calibration.fit_lvdt_calibration`.
     Arrays are read-only.
     """
 

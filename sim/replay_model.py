@@ -1,8 +1,8 @@
-r"""The dual-EMA recording and its position-driven replay, as a model for :func:`blf.diagnose.diagnose`.
+r"""The dual-EMA recording and its position-driven replay, as a model for :func:`blf.diagnose.engine.diagnose`.
 
 Pure: arrays in, predicted channels out. The replay itself (load paths,
 surface, sensors) is :mod:`sim.replay`; the phases (which drive holds force,
-what is not compared) come from :mod:`blf.phases`.
+what is not compared) come from :mod:`blf.diagnose.phases`.
 
 Channels
 --------
@@ -42,8 +42,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import savgol_filter
 
-from blf.diagnose import Candidate, Param, ParamVector, Reference
-from blf.phases import holding, mode_changes, segment_changes, transients
+from blf.diagnose import Candidate, Param, ParamVector, Reference, holding, mode_changes, segment_changes, transients
 from blf.validate import as_1d_finite, positive_scalar, same_shape
 from sim.replay import ChainParams, friction_force, lvdt_model, replay_chains
 
@@ -54,7 +53,7 @@ _FULL_SCALE_MM = 20.0
 _SIM_SURFACE_DAMPING = 0.5  #: N s/mm, the simulator's surface (profiles/simrig.toml)
 _SURFACE_MASS = 300.0  #: kg
 #: both LVDT pitches off their references by the same relative amount: one physics shared by the two
-#: EMAs (blf.diagnose.Reference.common), named once at "external" (neither EMA on its own)
+#: EMAs (blf.diagnose.model.Reference.common), named once at "external" (neither EMA on its own)
 RATIO = ("transmission_ratio", "external",
          "both LVDTs read alike against the motor angles: the motor-to-ram ratio differs from the profile's "
          "i_total (the rig's is i_total / (1 + gain_error)), or both LVDTs share that pitch error; state the "
@@ -160,7 +159,7 @@ def _references(names: tuple, sens: list, damping: float) -> tuple:
 
 
 class DualEmaReplay:
-    """The dual-EMA recording and its position-driven replay, for :func:`blf.diagnose.diagnose`.
+    """The dual-EMA recording and its position-driven replay, for :func:`blf.diagnose.engine.diagnose`.
 
     Parameters
     ----------
@@ -170,8 +169,8 @@ class DualEmaReplay:
     sample_period_s : float
     mode1, sp1, mode2, sp2 : ndarray or None
         Drive modes (0, 8, 10) and setpoints (rad or N) per sample, when recorded.
-    segments : blf.segments.Segments, optional
-        The phases found in the data (:func:`blf.segments.find_segments`), used
+    segments : blf.maint.segments.Segments, optional
+        The phases found in the data (:func:`blf.maint.segments.find_segments`), used
         when the modes are not recorded.
     opposing_force_N : float, optional
         The check profile's opposing force (the held target without recorded setpoints), N.

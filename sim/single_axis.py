@@ -14,7 +14,7 @@ controller from the comparison.
 
 The comparison band (``band_hz``) is 20 Hz (at most 80 % of the Nyquist
 frequency of a slower recording), as in the dataset authors'
-IDIM-LS (low-pass without phase shift, then decimation, :mod:`blf.band`):
+IDIM-LS (low-pass without phase shift, then decimation, :mod:`blf.diagnose.band`):
 above it lie the controller's reaction to encoder quantisation and the
 noise of the twice-differentiated position, which a rigid-body model does
 not claim.
@@ -65,7 +65,7 @@ def single_axis_candidates() -> tuple:
 
 
 class SingleAxisReplay:
-    """Recording of one axis and its inverse-dynamics replay, for :func:`blf.diagnose.diagnose`.
+    """Recording of one axis and its inverse-dynamics replay, for :func:`blf.diagnose.engine.diagnose`.
 
     Parameters
     ----------
@@ -101,12 +101,12 @@ class SingleAxisReplay:
         if ok.shape != (n,) or not ok.any():
             raise InputError(f"valid must be a bool array of shape ({n},) with a sample compared; got {ok.shape}")
         self.valid = {"force": ok}
-        #: the loader's record of the samples masked and why (blf.axis_reference.EffortMask), or None
+        #: the loader's record of the samples masked and why (blf.diagnose.axis_reference.EffortMask), or None
         self.effort_mask = None
         full = (Param("mass_kg", 50.0, 10.0, 0.0, 1e5), Param("viscous_N_s_per_m", 100.0, 50.0, 0.0, 1e6),
                 Param("coulomb_N", 20.0, 5.0, 0.0, 1e4), Param("offset_N", 0.0, 5.0, -1e4, 1e4))
         self.qc = self.q - np.median(self.q)
-        #: what this recording can separate (blf.axis_reference.identifiability over the samples compared)
+        #: what this recording can separate (blf.diagnose.axis_reference.identifiability over the samples compared)
         # judged away from masked samples by the derivative filter's half-width: its span there carries them
         from scipy.ndimage import binary_erosion
         ok_far = binary_erosion(ok, np.ones(21, bool), border_value=1) if not ok.all() else ok
@@ -124,7 +124,7 @@ class SingleAxisReplay:
     def _identify(self, T: float, ok: np.ndarray):
         from scipy.signal import savgol_coeffs
 
-        from blf.axis_reference import identifiability
+        from blf.diagnose import identifiability
         sq = float(np.sqrt(np.mean(np.diff(self.q, 2) ** 2) / 6))  # position noise, m
         noise = sq * float(np.linalg.norm(savgol_coeffs(21, 3, deriv=2, delta=T)))
         return identifiability(self.v, self.a, np.gradient(self.q_ref, self.t_s), ok, noise)
@@ -133,7 +133,7 @@ class SingleAxisReplay:
         """The library less the terms this recording cannot tell apart from the nominal model."""
         from scipy.signal import savgol_filter
 
-        from blf.axis_reference import design_columns, separable
+        from blf.diagnose import design_columns, separable
         # on the commanded motion: what the recording excites, not the noise of the measured derivatives
         T = float(np.median(np.diff(self.t_s)))
         vr = savgol_filter(self.q_ref, 21, 3, deriv=1, delta=T, mode="interp")

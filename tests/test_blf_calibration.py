@@ -1,13 +1,14 @@
-"""Tests of blf.calibration (LVDT calibration against the motor angle, paper 2.3)."""
+"""Tests of blf.maint.calibration (LVDT calibration against the motor angle, paper 2.3)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from blf import LvdtCalibration, fit_lvdt_calibration, position_differences
-from blf.calibration import correct_linear
 from blf.errors import AnalysisError, InputError
+from blf.maint import LvdtCalibration, fit_lvdt_calibration
+from blf.maint.calibration import correct_linear
+from blf.signals import position_differences
 
 # The simulator's LVDT law (sim/params.py SensorParams), paper values:
 GAIN = 1.075  # 7.5 % pitch error
@@ -190,7 +191,7 @@ def test_linear_correction_inverts_pitch_and_offset():
 def test_correct_chunked_equals_one_pass(monkeypatch):
     """Issue 34: the inversion solved chunk by chunk gives the same bits as over all readings at once
     (chunks of 1 and 7 readings: the common step count reconstructed from the chunks' records)."""
-    import blf.calibration as cal_mod
+    import blf.maint.calibration as cal_mod
 
     rng = np.random.default_rng(34)
     x = np.linspace(-40.0, 40.0, 2001)

@@ -1,4 +1,4 @@
-"""Tests of blf.maint.blf_maint (BLFmaint, paper 2.1) on synthetic force-fight data.
+"""Tests of blf.maint.blfmaint.blf_maint (BLFmaint, paper 2.1) on synthetic force-fight data.
 
 The generator (tests/support/blfmaint_data.py) builds the F-D relation of a
 quasi-static force fight with known backlash and stiffness; the analysis must
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from conftest import simulate_run
 
-from blf import BlfMaintResult, blf_maint
 from blf.errors import AnalysisError, InputError
+from blf.maint import BlfMaintResult, blf_maint
 from support.blfmaint_data import FS_HZ, make_force_fight
 from support.profiles import write_profile_variant
 

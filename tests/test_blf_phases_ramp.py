@@ -1,4 +1,4 @@
-"""blf.phases: a held part found from the check's design ends before the unload ramp it may run into.
+"""blf.diagnose.phases: a held part found from the check's design ends before the unload ramp it may run into.
 
 A sweep's end found from the motion can lie up to about a second after the motion stops, inside the
 unload ramp of the drive that held the opposing force (seen on a simulated check in the bare
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blf.phases import _RAMP_FRACTION, _RATE_WINDOW_S, _before_ramp
+from blf.diagnose.phases import _RAMP_FRACTION, _RATE_WINDOW_S, _before_ramp
 
 T = 0.002
 

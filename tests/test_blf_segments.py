@@ -1,4 +1,4 @@
-"""Segments of a recording (blf.segments): runs, smoothed speed, trimming, phase segmentation, sweep finder.
+"""Segments of a recording (blf.maint.segments): runs, smoothed speed, trimming, phase segmentation, sweep finder.
 
 Known answers on synthetic recordings at 500 Hz: two calibration sweeps
 (triangles at 5 mm/s over +-15 mm, one EMA at a time) and a force fight
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from blf.errors import AnalysisError, InputError
-from blf.segments import Segments, find_segments, find_sweep, runs, smooth_speed, trim
+from blf.maint.segments import Segments, find_segments, find_sweep, runs, smooth_speed, trim
 
 T = 0.002  # s
 LIMIT = 20.0  # mm

@@ -1,4 +1,4 @@
-"""BLFserv (blf.serv) and the error budget (blf.accuracy) on synthetic signals with known answers.
+"""BLFserv (blf.serv.blfserv) and the error budget (blf.maint.accuracy) on synthetic signals with known answers.
 
 Known answers: closed-form Tustin/ZOH coefficients and noise gains of first-order
 sections, Monte-Carlo noise levels, noise-free steps (exact heights), an
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from blf.accuracy import AccuracyBudget, backlash_error_budget
 from blf.errors import AnalysisError, InputError
+from blf.maint.accuracy import AccuracyBudget, backlash_error_budget
 from blf.serv import BlfServMonitor, BlfServResult, blf_serv, design_serv_filters, estimate_noise_std_mm
 
 FS = 500.0

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blf import PositionDifferences, position_differences
 from blf.errors import InputError
+from blf.signals import PositionDifferences, position_differences
 
 I_TOTAL = 2 * np.pi * 4 / 5  # 5.0265 rad/mm
 

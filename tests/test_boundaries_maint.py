@@ -1,6 +1,6 @@
 """BLFmaint's refusals pinned at their boundaries, and the contact fit on the low-passed force.
 
-* "a soft spring, not free play" (blf/maint.py ``_FLAT_TO_STEEP_MAX`` = 25 %): a record whose gap is
+* "a soft spring, not free play" (blf/maint/blfmaint.py ``_FLAT_TO_STEEP_MAX`` = 25 %): a record whose gap is
   a spring at 35 % and 45 % of the contact stiffness is refused (at twice the limit both would pass),
   one at 15 % and 20 % is measured; and on the limit itself, for a measured record, the refusal's
   statistic (slope - 3 sigma) equal to the limit times the softer stiffness passes while one float
@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-import blf.maint
+import blf.maint.blfmaint
 from blf.errors import AnalysisError, InputError
-from blf.maint import blf_maint
-from blf.maint_regions import CONTACT_NOISE_MULT, CONTACT_SHARE_MIN, contact_extremes
+from blf.maint.blfmaint import blf_maint
+from blf.maint.regions import CONTACT_NOISE_MULT, CONTACT_SHARE_MIN, contact_extremes
 from support.blfmaint_data import FS_HZ, SIGMA_D_MM, make_force_fight
 from support.boundary import around
 
@@ -62,7 +62,7 @@ def test_a_soft_spring_in_the_gap_is_refused(ratio, sign, monkeypatch):
     pct = int(re.search(r"N/mm, (\d+) % of the softer contact stiffness", msg).group(1))
     assert 25 < pct < 50  # measured below the true ratio (the margins), above the 25 % limit
     # the numbers of the message are the backlash line's slope and the softer contact stiffness
-    monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", 10.0)
+    monkeypatch.setattr(blf.maint.blfmaint, "_FLAT_TO_STEEP_MAX", 10.0)
     r = blf_maint(d, f, FS_HZ, centre_slope=True)
     slope, k_soft = abs(r.lines.centre.slope_N_per_mm), min(r.stiffness_left_N_per_mm, r.stiffness_right_N_per_mm)
     assert msg == ("no distinct backlash region: between the contact lines F still changes with D at "
@@ -82,7 +82,7 @@ def test_a_stiffer_gap_below_the_limit_is_measured(ratio):
 def _flatness(d, f, monkeypatch):
     """(slope - 3 sigma of the backlash line, softer contact stiffness) of a record, as BLFmaint
     computes them: the paper's centre line (centre_slope=True) is the line the refusal tests."""
-    monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", 10.0)
+    monkeypatch.setattr(blf.maint.blfmaint, "_FLAT_TO_STEEP_MAX", 10.0)
     r = blf_maint(d, f, FS_HZ, centre_slope=True)
     lhs = abs(r.lines.centre.slope_N_per_mm) - 3.0 * float(np.sqrt(r.lines.centre.cov[1, 1]))
     return lhs, min(r.stiffness_left_N_per_mm, r.stiffness_right_N_per_mm)
@@ -118,7 +118,7 @@ def test_soft_spring_refusal_on_its_limit_and_one_step_below(monkeypatch):
 def _limit_sides(d, f, below, at, above, monkeypatch):
     assert 0.25 < at < 0.3
     for limit, refused in ((above, False), (at, False), (below, True)):
-        monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", limit)
+        monkeypatch.setattr(blf.maint.blfmaint, "_FLAT_TO_STEEP_MAX", limit)
         if refused:
             with pytest.raises(AnalysisError, match=r"\(a soft spring, not free play\)$"):
                 blf_maint(d, f, FS_HZ)
@@ -383,7 +383,7 @@ def test_regressions_and_sigmas_match_an_independent_newey_west(centre_slope, si
     if kw == "spring":  # a gap spring at 20 % of the contacts: 1 - b c1 ~ 0.8, the intersections' slope terms count;
         d, f = spring_fight(np.random.default_rng(12), 0.2, sign=sign)  # D offset 0.3 mm: the level at D = 0 too
         d = d + 0.3
-        monkeypatch.setattr(blf.maint, "_FLAT_TO_STEEP_MAX", 10.0)
+        monkeypatch.setattr(blf.maint.blfmaint, "_FLAT_TO_STEEP_MAX", 10.0)
     elif kw == "three":  # the fewest samples a line may have: 3 in the backlash (small-sample factors n - 1, n - 2)
         d, f, _, _ = make_force_fight(np.random.default_rng(0), n_cycles=1)
         opts = dict(centre_margin_frac=0.496, min_centre_points=3)

@@ -1,4 +1,4 @@
-"""BLFserv's refusals pinned at their boundaries (blf/serv.py, the detector of blf/serv_detect.py).
+"""BLFserv's refusals pinned at their boundaries (blf/serv/blfserv.py, the detector of blf/serv/detect.py).
 
 A traversal counts when both plateaus are long enough (``min_plateau_s``), quiet (fit residual at
 most ``max_residual_factor`` x the noise level), the event not too long (``max_event_s``) and the
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from blf.errors import AnalysisError, InputError
-from blf.serv import BlfServMonitor, blf_serv
+from blf.serv.blfserv import BlfServMonitor, blf_serv
 
 FS = 500.0
 SIGMA = 2.0 ** -8  # noise level passed to BLFserv [mm] (~ the shipped LVDT's 0.025/6 mm), a power of two

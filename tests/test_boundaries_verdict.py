@@ -1,4 +1,4 @@
-"""The verdict's rules pinned at their boundaries (ISO 14253-1 guard band, blf/verdict.py).
+"""The verdict's rules pinned at their boundaries (ISO 14253-1 guard band, blf/maint/verdict.py).
 
 Every rule is tested exactly on its limit and one float step either side (tests/support/boundary.py:
 the inputs are walked by nextafter until ``B + U`` or ``B - U`` *is* the limit in floats), asserting
@@ -16,7 +16,7 @@ import math
 import pytest
 
 from blf.errors import InputError
-from blf.verdict import (
+from blf.maint.verdict import (
     COVERAGE_FACTOR,
     METHOD_BOUND_MM,
     METHOD_BOUND_REL,

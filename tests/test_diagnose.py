@@ -1,4 +1,4 @@
-"""Tests of ``emacheck diagnose`` (blf.diagnose, sim.replay, sim.single_axis, hil.cli.diagnose).
+"""Tests of ``emacheck diagnose`` (blf.diagnose.engine, sim.replay, sim.single_axis, hil.cli.diagnose).
 
 Recordings are short simulated checks (~40 s, see ``support.diagnose_cases.short_check``)
 with concealed effects generated as in the benchmark (``support.diagnose_cases``), with
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from test_verdict import validate
 
-from blf.diagnose import diagnose
+from blf.diagnose.engine import diagnose
 from blf.errors import InputError
 from hil.cli import main
 from sim.replay import ChainParams, replay_chains
@@ -63,7 +63,6 @@ def test_replay_refuses_bad_input():
         replay_chains(np.zeros(5), np.zeros(4), c, c, 0.002)
     with pytest.raises(InputError, match="> 0"):
         replay_chains(np.zeros(5), np.zeros(5), ChainParams(0.1, -1.0, 8e4, 0.05, 5e-5), c, 0.002)
-
 
 
 @pytest.mark.parametrize("progressive_per_mm", [0.0, 0.4])
@@ -181,7 +180,7 @@ def test_cli_bad_recording(tmp_path):
 
 def test_noise_floor_on_a_sparse_grid():
     """A channel valid every 50th sample (block means) gets its white-noise sigma from its own grid."""
-    from blf.mismatch import noise_floor
+    from blf.diagnose.mismatch import noise_floor
     rng = np.random.default_rng(7)
     n = 50_000
     valid = np.zeros(n, bool)
@@ -252,7 +251,7 @@ def test_block_means_is_the_trapezoid_over_the_block():
 def _regime_setup(n=60000, force=None):
     """Cells of triangle sweeps (mm, not in step with the 2 s blocks) x velocity sign x the sign of
     ``force`` (default a slow sine), the blocks and the fit half."""
-    from blf.mismatch import regime_cells
+    from blf.diagnose.mismatch import regime_cells
     t = np.arange(n) * 0.002
     pos = 10.0 * np.abs(((t / 4.3) % 2.0) - 1.0) - 5.0
     regimes = {"position along the stroke": pos, "velocity": np.gradient(pos, t),
@@ -267,7 +266,7 @@ def test_regime_score_is_standard_under_white_and_correlated_noise():
     correlated (AR(1), a = 0.8: sums 9x wider than white) -- the over-dispersion is estimated."""
     from scipy.signal import lfilter
 
-    from blf.mismatch import regime_score
+    from blf.diagnose.mismatch import regime_score
     cells, labels, block, fit = _regime_setup()
     rng = np.random.default_rng(5)
     valid = np.ones(cells.size, bool)
@@ -286,7 +285,7 @@ def test_regime_score_sees_a_mismatch_repeated_in_a_cell_and_not_one_that_flips(
     """An offset of 0.15 sigma in the samples of a few cells (invisible per sample; a 1 s
     window holds at most 0.43 s of it: below 1.5 sigma) is found when it repeats in both halves; one whose sign flips
     between the halves (not a property of the regime) scores negative."""
-    from blf.mismatch import regime_score
+    from blf.diagnose.mismatch import regime_score
     cells, labels, block, fit = _regime_setup()
     rng = np.random.default_rng(6)
     e = rng.normal(size=cells.size)
@@ -305,7 +304,7 @@ def test_regime_cells_chosen_by_the_measured_force_would_bias_its_residual():
     """Why diagnose forms the force cells from the model's force: a cell chosen by the sign
     of a noisy measurement selects that measurement's noise, and pure noise then scores as a
     repeated mismatch; cells from the noise-free force do not."""
-    from blf.mismatch import regime_score
+    from blf.diagnose.mismatch import regime_score
     n = 60000
     t = np.arange(n) * 0.002
     rng = np.random.default_rng(7)
@@ -364,8 +363,9 @@ def test_regime_test_localises_a_mismatch_the_window_test_misses():
 def test_both_lvdt_pitches_alike_are_one_ratio_named_once():
     # two references of one common physics: folded when both are named and agree (relative to their
     # references) within 3 combined standard uncertainties, else named each at its place
-    from blf.diagnose import Param, Reference, _reference_effects
-    from blf.diagnose_records import NamedReference
+    from blf.diagnose import Param, Reference
+    from blf.diagnose.records import NamedReference
+    from blf.diagnose.selection import _reference_effects
     from sim.replay_model import RATIO
 
     nominal = tuple(Param(f"gain{k}", 1.0, 1.0, 0.5, 1.5) for k in range(2))
@@ -432,9 +432,10 @@ def test_forms_of_one_physics_within_two_bic_units_name_the_simpler():
     form with the fewest parameters is named, then the library's first; beyond it the better BIC
     decides. A simpler form not yet refitted is refitted for the comparison; another place or
     variant never takes part."""
-    from blf.diagnose import Candidate, DiagnoseConfig, Param, _prefer_simpler_law
-    from blf.diagnose_fit import CandidateFit
-    from blf.diagnose_records import Refit
+    from blf.diagnose import Candidate, DiagnoseConfig, Param
+    from blf.diagnose.fit import CandidateFit
+    from blf.diagnose.records import Refit
+    from blf.diagnose.selection import _prefer_simpler_law
 
     def cand(name, n, where="ema1", variant="drive"):
         return Candidate(name, where, name, tuple(Param(f"p{k}", 1.0, 1.0) for k in range(n)), variant)

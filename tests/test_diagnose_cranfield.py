@@ -50,7 +50,7 @@ def test_the_default_floor_is_three_times_the_rms_of_the_healthy_session_changes
     cranfield.require()
     from bench.bench_diagnose_cranfield import repeatability
 
-    from hil.analysis.diagnose_axis import FORCE_FLOOR_N
+    from hil.analysis.diagnose.single_axis import FORCE_FLOOR_N
     rep = repeatability(tmp_path)
     assert rep["floor_3rms_N"] <= FORCE_FLOOR_N <= rep["floor_3rms_N"] + 5.0  # rounded up to 5 N
 

@@ -1,13 +1,13 @@
-"""The naming rule of a library effect's change against a reference (hil.analysis.diagnose_dual_ref.library_change),
+"""The naming rule of a library effect's change against a reference (hil.analysis.diagnose.floors.library_change),
 at its boundaries: named only when |z| > 3 and |change| > its floor; a parameter with no floor is never named."""
 
 from __future__ import annotations
 
 import pytest
 
-from blf.diagnose import FittedEffect
-from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS, library_change
-from hil.analysis.diagnose_floors import DUAL_FLOORS
+from blf.diagnose.model import FittedEffect
+from hil.analysis.diagnose.floors import LIBRARY_FLOORS, library_change
+from hil.profile.floors import DUAL_FLOORS
 
 
 def _eff(name: str, param: str, value: float, u: float) -> FittedEffect:

@@ -1,4 +1,5 @@
-"""What a dual-EMA check can separate (diagnose_dual_ref.nominal_changes, blf.diagnose_cov.nominal_covariance).
+"""What a dual-EMA check can separate (hil.analysis.diagnose.floors.nominal_changes,
+blf.diagnose.covariance.nominal_covariance).
 
 Pinned at their boundaries: a nominal parameter is compared alone only while its variance inflation is below
 VIF_MAX on both recordings; the two bearing plays are compared as their sum (external play); the drives' and
@@ -12,8 +13,8 @@ import numpy as np
 import pytest
 
 from blf.diagnose import EIGEN_FLOOR, NominalCovariance
-from hil.analysis.diagnose_dual_ref import VIF_MAX, check_speed, nominal_changes
-from hil.analysis.diagnose_floors import DUAL_FLOORS
+from hil.analysis.diagnose.floors import VIF_MAX, check_speed, nominal_changes
+from hil.profile.floors import DUAL_FLOORS
 
 NAMES = ("backlash_int1_mm", "backlash_bearing1_mm", "backlash_bearing2_mm", "compliance_ext1_mm_per_N",
          "drive_coulomb_N", "drive_viscous_N_s_per_mm", "hinge_coulomb_N", "hinge_viscous_N_s_per_mm")
@@ -109,7 +110,7 @@ class _Linear:
 def test_nominal_covariance_finds_a_direction_the_data_does_not_hold():
     """Columns 1 and 2 equal (only their sum acts): both get a VIF at the eigenvalue floor (~1e12), the others
     their known VIF: column 3 = column 0 + small independent part gives VIF = 1/(1 - r^2)."""
-    from blf.diagnose_cov import nominal_covariance
+    from blf.diagnose.covariance import nominal_covariance
     rng = np.random.default_rng(7)
     n = 4000
     a, b, e = rng.normal(size=n), rng.normal(size=n), rng.normal(size=n)
@@ -142,7 +143,7 @@ def test_the_report_says_why_each_comparison_is_or_is_not_named():
 def test_which_recording_leaves_a_mismatch_outside_the_library(new, ref, where, words):
     from types import SimpleNamespace
 
-    from hil.analysis.diagnose_dual_ref import _unexplained
+    from hil.analysis.diagnose.dual_reference import _unexplained
     u = _unexplained(SimpleNamespace(verdict=new, where=("ema2", "ema1")), SimpleNamespace(verdict=ref, where=()))
     assert u["recording"] is (new == "unexplained") and u["reference"] is (ref == "unexplained")
     assert u["where"] == where and words in u["words"]

@@ -1,4 +1,4 @@
-"""The dual-EMA model's default floors (hil.analysis.diagnose_floors) against their measurement (issue 35, part 2).
+"""The dual-EMA model's default floors (hil.profile.floors) against their measurement (issue 35, part 2).
 
 Slow (about 30 s CPU): diagnoses the independent rig's effect-free recordings (../shared, skipped with the
 reason where absent) and checks that each default floor covers 3 sqrt(2) times the standard deviation of
@@ -27,7 +27,7 @@ def test_the_play_stiffness_compliance_and_gain_floors_cover_three_sqrt2_times_t
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
     from bench.bench_diagnose_floors import independent
 
-    from hil.analysis.diagnose_floors import DUAL_FLOORS
+    from hil.profile.floors import DUAL_FLOORS
     ind = independent()
     for kind in ("play_um", "external_play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
         assert ind[kind]["floor_3sqrt2_sd"] <= DUAL_FLOORS[kind], kind
@@ -49,7 +49,7 @@ def test_pairs_of_the_independent_rig_name_their_keyed_changes_and_nothing_unsep
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
     from bench.bench_diagnose_independent_pairs import run_pairs
 
-    from hil.analysis.diagnose_floors import DUAL_FLOORS
+    from hil.profile.floors import DUAL_FLOORS
     pairs = run_pairs(cache=fits)
     assert len(pairs) == 10
     wrong = [(p["new"], p["ref"], r) for p in pairs for r in p["rows"] if r["ok"] is False]

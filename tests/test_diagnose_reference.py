@@ -16,7 +16,7 @@ import jsonschema
 import numpy as np
 import pytest
 
-from blf.axis_reference import (
+from blf.diagnose import (
     AxisFit,
     compare_fits,
     effort_mask,
@@ -100,7 +100,7 @@ def test_dwell_and_catch_up_masked_and_counted():
 
 def _ident(speeds, accel_noise=1.0):
     t, qr, q, d = trapezoid(6, speeds=speeds)
-    from blf.axis_reference import axis_kinematics
+    from blf.diagnose.axis_reference import axis_kinematics
     v, a = axis_kinematics(q, FS)
     m = effort_mask(t, q, qr, FS, dwell_says_nothing=True, mask_transients=True)
     return identifiability(v, a, np.gradient(qr, t), m.used, accel_noise)
@@ -252,7 +252,7 @@ def test_without_a_reference_a_stated_current_gain_is_used_and_the_masks_reporte
 
 def test_without_a_reference_the_recording_is_read_once(tmp_path, monkeypatch):
     """The effort check against the load column and the model are made of the same arrays, read once."""
-    import hil.analysis.diagnose_axis as axis
+    import hil.analysis.diagnose.single_axis as axis
 
     reads = []
     read_axis = axis.read_axis
@@ -279,7 +279,7 @@ def test_a_term_the_recording_cannot_separate_is_no_candidate(tmp_path, speeds, 
     held (no acceleration in the samples compared) and Coulomb and viscous are one friction. Two speed levels
     separate Coulomb from viscous and |v| from an offset, not yet a two-parameter Stribeck curve from
     Coulomb plus viscous (two speeds per direction, four odd terms); four levels do."""
-    from hil.analysis.diagnose_axis import AxisOptions, read_axis, single_axis_model
+    from hil.analysis.diagnose.single_axis import AxisOptions, read_axis, single_axis_model
     rng = np.random.default_rng(5)
     t, qr, q, d = trapezoid(8, speeds=speeds, rng=rng)
     i = power_current(qr, q, d, 1600.0, 196.0, rng)
@@ -298,7 +298,7 @@ def test_a_term_the_recording_cannot_separate_is_no_candidate(tmp_path, speeds, 
     ({"a": 30.0, "b": 100.0}, "explained", ["b"]), ({"a": 75.0, "b": 75.1}, "explained", ["b"]),
     ({"a": 30.0, "b": 75.0}, "no_mismatch", [])])
 def test_without_a_reference_a_stated_floor_keeps_an_effect_under_it_from_being_named(sizes, verdict, named):
-    from hil.analysis.diagnose_axis import apply_force_floor
+    from hil.analysis.diagnose.against_model import apply_force_floor
     data = {"verdict": "explained", "effects": [{"name": "a"}, {"name": "b"}]}
     out = apply_force_floor(data, sizes, 75.0)
     assert out["verdict"] == verdict and [e["name"] for e in out["effects"]] == named
@@ -320,7 +320,8 @@ def test_without_a_reference_the_floor_is_stated_in_diagnosis_json(tmp_path):
 
 def test_a_torque_column_is_a_force_through_the_screw_lead(tmp_path):
     """The same recording as force (N) and as torque (N m) with a 5 mm lead gives the same nominal fit."""
-    from hil.analysis.diagnose_axis import AxisOptions, reference_diagnosis
+    from hil.analysis.diagnose.axis_reference import reference_diagnosis
+    from hil.analysis.diagnose.single_axis import AxisOptions
     rng = np.random.default_rng(9)
     t, qr, q, d = trapezoid(6, rng=rng)
     force = 400.0 * d - 196.0 + rng.normal(0, 20.0, t.size)
@@ -404,7 +405,7 @@ def test_without_a_load_column_the_effort_check_is_not_made_and_said_so(tmp_path
     (0.0, 50.0, False, None, "too small"),  # within 3 u + the 75 N floor
 ])
 def test_the_effort_must_see_the_known_load_with_its_sign(offset, load, made, trusted, says):
-    from blf.axis_reference import effort_load_check
+    from blf.diagnose import effort_load_check
     fit = AxisFit({"friction_N": 1600.0, "offset_N": offset}, {"friction_N": 5.0, "offset_N": 5.0}, 1.0, 100, 10,
                   0.024)
     c = effort_load_check(fit, np.full(50, load), np.ones(50, bool), 75.0)

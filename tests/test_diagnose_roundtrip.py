@@ -84,7 +84,7 @@ def _same_model(a: Path, b: Path) -> None:
     """``diagnose`` builds the same replay model from both files (what it then does depends only on it)."""
     import numpy as np
 
-    from hil.analysis.diagnose import load_model
+    from hil.analysis.diagnose.load import load_model
     (ma, pa), (mb, pb) = load_model(a, "dual-ema", None), load_model(b, "dual-ema", None)
     assert pa == pb and ma.channels == mb.channels
     for ch in ma.channels:

@@ -15,8 +15,8 @@ import re
 import numpy as np
 import pytest
 
-from blf import blf_maint
-from blf.verdict import decide, maint_uncertainty, overall
+from blf.maint import blf_maint
+from blf.maint.verdict import decide, maint_uncertainty, overall
 from hil.analysis.maint import verdict_entry
 from hil.report import shell
 from hil.report.maint import figure_dfdd, figure_lines, head_parts, reading_text, uncertainty_section
@@ -36,7 +36,7 @@ NOT_MEASURED = "the force fight never reached contact on the tension side"
 def make_result(*, backlash=None, limits=None, mode="run", operator="A. Inspector", work_order="WO-4711",
                 run_id="f89b331810fb45fe8eae7d854c1eeafe", recording="/runs/ail-left/signals.csv",
                 files=None, truth=None) -> dict:
-    """A result.json as analyze_and_report writes it, with verdicts and U from blf.verdict."""
+    """A result.json as analyze_and_report writes it, with verdicts and U from blf.maint.verdict."""
     backlash = backlash or {"int1": 0.1002, "int2": 0.1196, "ext": 0.1002}
     limits = limits or {"int1": 0.2, "int2": 0.2, "ext": 0.2}
     verdict, decided = {}, {}

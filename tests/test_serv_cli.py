@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from blf.calibration import fit_lvdt_calibration
+from blf.maint.calibration import fit_lvdt_calibration
 from hil.canopen.frame import sync_frame
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main

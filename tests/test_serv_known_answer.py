@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blf.calibration import fit_lvdt_calibration
 from blf.errors import InputError
+from blf.maint.calibration import fit_lvdt_calibration
 from blf.serv import BlfServMonitor, blf_serv, estimate_noise_std_mm
 from sim import operation as op
 from sim import scenarios as sc

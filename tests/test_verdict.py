@@ -11,7 +11,7 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from blf.verdict import COVERAGE_FACTOR, combine, decide, maint_uncertainty, overall, serv_uncertainty
+from blf.maint.verdict import COVERAGE_FACTOR, combine, decide, maint_uncertainty, overall, serv_uncertainty
 from hil.cli import main
 from hil.cli.common import ExitCode
 from hil.record.runfolder import read_record
@@ -82,7 +82,6 @@ def test_uncertainty_budget_known_answer():
 
 
 # ---------------------------------------------------------------------------- the commands
-
 
 
 @pytest.fixture(scope="module")

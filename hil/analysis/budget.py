@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from blf.accuracy import AccuracyBudget
+from blf.maint import AccuracyBudget
 
 PAPER_PITCH_ERROR = 0.075  #: the paper's uncompensated pitch error, used when no calibration says otherwise
 

@@ -12,14 +12,25 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from blf.accuracy import AccuracyBudget, backlash_error_budget
-from blf.calibration import LvdtCalibration, fit_lvdt_calibration
 from blf.errors import AnalysisError
-from blf.maint import MIN_SAMPLES, BlfMaintResult, blf_maint
-from blf.segments import Segments, trim
-from blf.segments import find_segments as blf_find_segments
+from blf.maint import (
+    MIN_SAMPLES,
+    AccuracyBudget,
+    BlfMaintResult,
+    ChannelVerdict,
+    LvdtCalibration,
+    Segments,
+    UncertaintyBudget,
+    backlash_error_budget,
+    blf_maint,
+    decide,
+    fit_lvdt_calibration,
+    maint_uncertainty,
+    overall,
+    trim,
+)
+from blf.maint import find_segments as blf_find_segments
 from blf.signals import CHANNELS, position_differences
-from blf.verdict import ChannelVerdict, UncertaintyBudget, decide, maint_uncertainty, overall
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
@@ -41,12 +52,12 @@ class Analysis:
     uncertainty: dict  #: "int1"/"int2"/"ext" -> UncertaintyBudget (None where not measured)
     verdicts: dict  #: "int1"/"int2"/"ext" -> ChannelVerdict
     budget: AccuracyBudget  #: the error budget of paper 2.3 for this check's profile and calibration
-    status: str  #: "pass" | "fail" | "inconclusive" (blf.verdict.overall)
+    status: str  #: "pass" | "fail" | "inconclusive" (blf.maint.verdict.overall)
     notes: tuple[str, ...] = field(default_factory=tuple)
 
 
 def find_segments(sig: Signals, act: Actuation) -> Segments:
-    """Calibration sweeps and force-fight samples of a recording (:func:`blf.segments.find_segments`).
+    """Calibration sweeps and force-fight samples of a recording (:func:`blf.maint.segments.find_segments`).
 
     From the step column when the recording has one, else detected from the
     ram motion (motor angles) and the force fight ``|F1 - F2|/2``.
@@ -164,8 +175,9 @@ def _f(x: float) -> float:
 
 
 def verdict_entry(v, u) -> dict:
-    """result.json's ``verdict`` entry of one channel: its decision ``v`` (:class:`blf.verdict.Verdict`) and
-    the uncertainty budget ``u`` behind it (None where the channel was not measured)."""
+    """result.json's ``verdict`` entry of one channel: its decision ``v``
+    (:class:`blf.maint.verdict.ChannelVerdict`) and the uncertainty budget ``u`` behind it (None where the
+    channel was not measured)."""
     return {"status": v.status, "backlash_mm": v.backlash_mm, "uncertainty_mm": v.uncertainty_mm,
             "limit_mm": v.limit_mm, "margin_mm": v.margin_mm, "reason": v.reason,
             "uncertainty_budget_mm": None if u is None else {

@@ -10,11 +10,11 @@ LVDT calibration, first that applies:
    maintenance check's result.json (a linear correction);
 2. a run folder whose signals carry the check's calibration sweeps (step
    column ``cal1_sweep``/``cal2_sweep``): the full cubic calibration is fitted
-   again from them (:func:`blf.calibration.fit_lvdt_calibration`);
+   again from them (:func:`blf.maint.calibration.fit_lvdt_calibration`);
 3. the run folder's ``result.json`` calibration (pitch and offset, linear);
 4. a slow sweep under load found in the recording itself (per EMA: ram
    speed 0.3 to 10 mm/s over at least half the stroke limit, its force of
-   one sign, mean above 200 N, :func:`blf.segments.find_sweep`): cubic fit on it;
+   one sign, mean above 200 N, :func:`blf.maint.segments.find_sweep`): cubic fit on it;
 5. none: the LVDT data are used uncorrected, and serv.json and the report
    say so (a pitch error then shows as spurious jumps, paper 2.3).
 
@@ -31,13 +31,20 @@ from pathlib import Path
 
 import numpy as np
 
-from blf.accuracy import AccuracyBudget, backlash_error_budget
-from blf.calibration import correct_linear, fit_lvdt_calibration
 from blf.errors import AnalysisError, InputError
-from blf.segments import find_sweep, runs
+from blf.maint import (
+    AccuracyBudget,
+    backlash_error_budget,
+    correct_linear,
+    decide,
+    find_sweep,
+    fit_lvdt_calibration,
+    overall,
+    runs,
+    serv_uncertainty,
+)
 from blf.serv import blf_serv, estimate_noise_std_mm
 from blf.signals import CHANNELS, position_differences
-from blf.verdict import decide, overall, serv_uncertainty
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.analysis.maint import spec_mm
 from hil.errors import RecordingError
@@ -262,7 +269,7 @@ MIN_TRAVERSALS = 5
 
 
 def serv_verdicts(an: ServAnalysis) -> tuple[dict, list[str]]:
-    """Per channel the decision against B_spec (:mod:`blf.verdict`) and warnings about thin readings."""
+    """Per channel the decision against B_spec (:mod:`blf.maint.verdict`) and warnings about thin readings."""
     notes = []
     verdicts = {}
     b = an.budget

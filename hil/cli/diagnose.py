@@ -14,8 +14,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
     from blf.diagnose import diagnose
     from blf.errors import AnalysisError, InputError
-    from hil.analysis.diagnose import diagnosis_dict, load_model
-    from hil.analysis.diagnose_axis import single_axis_model
+    from hil.analysis.diagnose.load import load_model
+    from hil.analysis.diagnose.results import diagnosis_dict
+    from hil.analysis.diagnose.single_axis import single_axis_model
     from hil.errors import RecordingError
     from hil.report.diagnose import write_report
     console = make_console()
@@ -28,7 +29,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     read_s = time.perf_counter() - t0
     effort = _model_effort(args, axis, opts)
     if effort is not None and not effort["trusted"]:
-        from hil.analysis.diagnose_axis import untrusted_dict
+        from hil.analysis.diagnose.results import untrusted_dict
         outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
                               ("diagnosis.json", "diagnosis_report.html"))
         outputs.write_json("diagnosis.json", untrusted_dict(effort))
@@ -47,10 +48,10 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
                           ("diagnosis.json", "diagnosis_report.html"))
     data = diagnosis_dict(d, args.model, secs)
-    from hil.analysis.diagnose_axis import identifiability_dict
+    from hil.analysis.diagnose.results import identifiability_dict
     ident = identifiability_dict(model)
     if args.model == "single-axis" and args.force_floor_N is not None:
-        from hil.analysis.diagnose_axis import apply_force_floor, effect_sizes_N
+        from hil.analysis.diagnose.against_model import apply_force_floor, effect_sizes_N
         data = apply_force_floor(data, effect_sizes_N(model, d), args.force_floor_N)
     if ident is not None:
         mask = ident.pop("mask", None)
@@ -97,11 +98,11 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
 
 
 def _single_axis(args: argparse.Namespace, path: Path):
-    """The single-axis recording (:func:`hil.analysis.diagnose_axis.read_axis`), read once for the effort
+    """The single-axis recording (:func:`hil.analysis.diagnose.single_axis.read_axis`), read once for the effort
     check and the model; None for the dual-EMA model."""
     if args.model != "single-axis":
         return None
-    from hil.analysis.diagnose_axis import read_axis
+    from hil.analysis.diagnose.single_axis import read_axis
     return read_axis(path)
 
 
@@ -110,14 +111,14 @@ def _model_effort(args: argparse.Namespace, axis, opts):
     load (None otherwise: no load column, an EMPS ``.mat`` has none)."""
     if axis is None:
         return None
-    from hil.analysis.diagnose_axis import AxisOptions, model_effort_check
+    from hil.analysis.diagnose.single_axis import AxisOptions, model_effort_check
     floor = args.force_floor_N if args.force_floor_N is not None else AxisOptions().force_floor_N
     import dataclasses
     return model_effort_check(axis, dataclasses.replace(opts, force_floor_N=floor))
 
 
 def _axis_options(args: argparse.Namespace):
-    from hil.analysis.diagnose_axis import FORCE_FLOOR_N, AxisOptions
+    from hil.analysis.diagnose.single_axis import FORCE_FLOOR_N, AxisOptions
     from hil.errors import RecordingError
     for name in ("current_per_force", "screw_lead_m", "force_floor_N"):
         val = getattr(args, name)
@@ -130,7 +131,7 @@ def _axis_options(args: argparse.Namespace):
 
 def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
     """``--reference``: single axis against a healthy recording; everything checked before anything is written."""
-    from hil.analysis.diagnose_axis import reference_diagnosis
+    from hil.analysis.diagnose.axis_reference import reference_diagnosis
     from hil.errors import RecordingError
     if str(args.reference) == "history":
         if args.model != "dual-ema":
@@ -167,8 +168,9 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
 
 def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
     """``--reference`` with the dual-EMA model: each nominal parameter and library effect against the reference's."""
-    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis, floors_for
-    from hil.analysis.diagnose_history import reference_from_history, refuse_other_serials
+    from hil.analysis.diagnose.dual_reference import dual_reference_diagnosis
+    from hil.analysis.diagnose.floors import floors_for
+    from hil.analysis.diagnose.history_reference import reference_from_history, refuse_other_serials
     t0 = time.perf_counter()
     hist = None
     if str(args.reference) == "history":

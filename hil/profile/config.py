@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from hil.canopen.signalmap import SignalMap
+from hil.profile.floors import DUAL_FLOORS
 
 
 def _rng(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
@@ -211,7 +212,6 @@ class Safety:
 
 
 def _floor(kind: str) -> float:
-    from hil.analysis.diagnose_floors import DUAL_FLOORS
     return field(default=DUAL_FLOORS[kind], metadata=_rng(0.0, lo_open=True))
 
 
@@ -219,7 +219,7 @@ def _floor(kind: str) -> float:
 class DiagnosisFloors:
     """Relevance floors of ``emacheck diagnose --reference`` with the dual-EMA model (check profile
     ``[diagnosis]``): a change is named only above its floor. Defaults: measured on simulated rigs
-    (:data:`hil.analysis.diagnose_floors.DUAL_FLOORS`, docs/diagnose.md); a real rig states its own."""
+    (:data:`hil.profile.floors.DUAL_FLOORS`, docs/diagnose.md); a real rig states its own."""
 
     play_um: float = _floor("play_um")  #: internal play and LVDT offset, um
     external_play_um: float = _floor("external_play_um")  #: external play (both bearings' sum), um

@@ -177,7 +177,7 @@ def write_report(path: Path, model, d, data: dict, *, json_name: str = "diagnosi
 def write_reference_report(path: Path, data: dict, *, json_name: str = "diagnosis.json") -> None:
     """The report of ``diagnose --reference`` (single axis): each nominal parameter against its reference
     value, the floors, what this recording cannot tell apart, the masked samples."""
-    from blf.axis_reference import NOMINAL_UNITS
+    from blf.diagnose import NOMINAL_UNITS
     verdict = ("effort not trusted: not diagnosed" if data["verdict"] == "untrusted_effort" else
                "changes named" if data["effects"] else "no change above its floor")
     g = lambda x: "—" if x is None else f"{x:.4g}"  # noqa: E731

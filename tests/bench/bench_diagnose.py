@@ -102,7 +102,6 @@ REPORT_SETS = 3
 FIRST_DEV_SEED = 20001
 
 
-
 def score_issue13(kind: str, truths: list, verdict: str, named: list, where: list) -> bool:
     """Right by issue 13's rules (:func:`support.independent_rig.judge`): extras at ``external`` and one
     other allowed beside the expected effects; out of library located at the right EMA."""
@@ -215,8 +214,8 @@ def run_emps() -> dict | None:
     """The single-axis diagnosis of the EMPS recording (None when ../shared is absent)."""
     if not EMPS.exists():
         return None
-    from blf.diagnose import diagnose
-    from hil.analysis.diagnose import load_model
+    from blf.diagnose.engine import diagnose
+    from hil.analysis.diagnose.load import load_model
     model, period = load_model(EMPS, "single-axis", None)
     t0 = time.perf_counter()
     d = diagnose(model, period)
@@ -231,7 +230,6 @@ def run_emps() -> dict | None:
             "rms_holdout_before": d.residual_rms_holdout_before["force"],
             "rms_holdout_after": d.residual_rms_holdout_after["force"],
             "noise_floor": d.noise_floor["force"], "nominal": d.nominal}
-
 
 
 def _frac(x) -> str:
@@ -306,7 +304,6 @@ def tables(summ: dict, results: list, emps: dict | None, argv_line: str) -> str:
                  f"{errs} | {ratio} | {r['seconds']} |")
     L += [""]
     return "\n".join(L)
-
 
 
 def main(argv: list[str]) -> int:

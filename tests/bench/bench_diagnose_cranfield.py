@@ -14,7 +14,7 @@ divided by the current per newton from the reference's half-difference and its l
 
     python tests/bench/bench_diagnose_cranfield.py /tmp/cranfield.json [--repeatability]
 
-``--repeatability`` prints how the default floor (``hil.analysis.diagnose_axis.FORCE_FLOOR_N``) was
+``--repeatability`` prints how the default floor (``hil.analysis.diagnose.single_axis.FORCE_FLOOR_N``) was
 measured: the changes of the force parameters (friction, direction-dependent force) of ``normal``
 runs 6-10 against runs 1-5 at +20 and +40 kgf, their RMS, x 3.
 """
@@ -52,7 +52,8 @@ def raw_friction_change(name: str, ref_name: str, load_kgf: float, runs=ALL_RUNS
 
 def diagnose_pair(folder: Path, name: str, load_kgf: float, runs, ref_runs, **opts) -> dict:
     """diagnosis.json (as a dict) of one condition against normal at the same load."""
-    from hil.analysis.diagnose_axis import AxisOptions, reference_diagnosis
+    from hil.analysis.diagnose.axis_reference import reference_diagnosis
+    from hil.analysis.diagnose.single_axis import AxisOptions
     new = write_single_axis(folder / f"{name}_{load_kgf}_{min(runs)}.csv", name, load_kgf, runs)
     ref = write_single_axis(folder / f"normal_{load_kgf}_{min(ref_runs)}-{max(ref_runs)}.csv", "normal",
                             load_kgf, ref_runs)

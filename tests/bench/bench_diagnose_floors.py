@@ -49,10 +49,10 @@ CANDIDATES = (("coulomb_friction", "drive"), ("loadcell_gain", ""))  # the quick
 
 def compared(runs_or_models) -> list:
     """Per recording (its Diagnosis, its NominalCovariance, its check speed mm/s), for the product's own comparison
-    (:func:`hil.analysis.diagnose_dual_ref.nominal_changes`: the parameters, sums and frictions it compares)."""
-    from blf.diagnose import diagnose
-    from blf.diagnose_cov import nominal_covariance
-    from hil.analysis.diagnose_dual_ref import check_speed
+    (:func:`hil.analysis.diagnose.floors.nominal_changes`: the parameters, sums and frictions it compares)."""
+    from blf.diagnose.covariance import nominal_covariance
+    from blf.diagnose.engine import diagnose
+    from hil.analysis.diagnose.floors import check_speed
     out = []
     for model, period in runs_or_models:
         d = diagnose(model, period)
@@ -63,8 +63,8 @@ def compared(runs_or_models) -> list:
 def changes(new, ref) -> dict:
     """{parameter: (floor key, change in the floor's unit)} of every comparison the product makes and could
     name (a parameter it does not separate is left out: it is never named)."""
-    from hil.analysis.diagnose_dual_ref import nominal_changes
-    from hil.analysis.diagnose_floors import DUAL_FLOORS
+    from hil.analysis.diagnose.floors import nominal_changes
+    from hil.profile.floors import DUAL_FLOORS
     return {c["parameter"]: (c["floor_key"], c["change"])
             for c in nominal_changes(new[0].nominal, ref[0].nominal, new[1], ref[1], DUAL_FLOORS, ref[2])
             if c["separable"]}
@@ -73,10 +73,10 @@ def changes(new, ref) -> dict:
 def candidate_values(model, period: float, d, everything: bool = False) -> dict:
     """Each candidate of :data:`CANDIDATES` (``everything``: of the whole library) at each EMA fitted on a
     healthy recording (whose diagnosis is ``d``), each size parameter in its floor's unit
-    (:data:`hil.analysis.diagnose_dual_ref.LIBRARY_FLOORS`; a viscous coefficient as its force at the
+    (:data:`hil.analysis.diagnose.floors.LIBRARY_FLOORS`; a viscous coefficient as its force at the
     check's speed): {"name.param@where/variant": (floor key, value)}."""
-    from blf.diagnose import fit_effect
-    from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS, check_speed
+    from blf.diagnose.engine import fit_effect
+    from hil.analysis.diagnose.floors import LIBRARY_FLOORS, check_speed
     out = {}
     v = check_speed(model)
     for c in model.candidates:
@@ -110,7 +110,7 @@ def _pooled(series: dict) -> dict:
 
 def independent(everything: bool = False) -> dict:
     """Fitted minus true internal play (um) and contact stiffness (%), per effect-free recording and EMA."""
-    from hil.analysis.diagnose import load_model
+    from hil.analysis.diagnose.load import load_model
     from support.independent_rig import rig_profile
     rows, gains, ext = [], [], []
     for name in sorted(n for n, k in KEYS.items() if not k["expect"]):
@@ -169,7 +169,7 @@ def simulated(runs, everything: bool = False) -> dict:
     simulated checks, and per floor kind 3 x the RMS of those changes."""
     from itertools import combinations
 
-    from hil.analysis.diagnose import load_model
+    from hil.analysis.diagnose.load import load_model
     models = [load_model(run, "dual-ema", None) for run in runs]
     fits = compared(models)
     cand = [candidate_values(m, T, f[0], everything) for (m, T), f in zip(models, fits, strict=True)]
@@ -241,7 +241,7 @@ def main(argv: list[str]) -> int:
             runs = tuple(bare(run, Path(tmp) / f"bare{i}.csv") for i, run in enumerate(runs))
         sim = simulated(runs, "--library" in argv)
     result["simulated"] = sim
-    from hil.analysis.diagnose_dual_ref import LIBRARY_FLOORS
+    from hil.analysis.diagnose.floors import LIBRARY_FLOORS
     units = {"play_um": "um", "external_play_um": "um", "stiffness_pct": "%", "compliance_pct": "%",
              "sensor_gain_pct": "%", "friction_N": "N"} | {v[0]: v[1] for v in LIBRARY_FLOORS.values()}
     names = list(next(iter(sim["pairs"].values())))

@@ -71,7 +71,7 @@ def judge(change: dict, truth: float | None) -> tuple[bool | None, str]:
 
 def run_pairs(recordings=RECORDINGS, cache: dict | None = None) -> list:
     """Every pair's comparison with its judgement: [{"new", "ref", "verdict", "rows": [...]}]."""
-    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    from hil.analysis.diagnose.dual_reference import dual_reference_diagnosis
     cache = {} if cache is None else cache  # each recording's fit, by path (dual_reference_diagnosis)
     out = []
     for ref, new in combinations(recordings, 2):
@@ -118,7 +118,7 @@ def judge_effect(expect: list, changes: list) -> tuple[bool, str]:
 def run_effect_pairs(reference: str = "null-a", only: tuple | None = None, cache: dict | None = None) -> list:
     """Each effect recording of the library (keys' ``expect`` without ``unexplained``; ``only`` these) against
     ``reference``: [{"new", "ref", "expect", "named", "ok", "why", "keyed_wrong"}]."""
-    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    from hil.analysis.diagnose.dual_reference import dual_reference_diagnosis
     cache = {} if cache is None else cache  # each recording's fit, by path (dual_reference_diagnosis)
     out = []
     for new, k in KEYS.items():
@@ -142,7 +142,7 @@ def run_unexplained_pairs(reference: str = "null-a", cache: dict | None = None) 
     """Each recording with physics outside the library (keys' ``["unexplained", "emaN"]``) against ``reference``:
     right when the comparison's verdict is ``unexplained`` located first at emaN (its own diagnosis has the
     mismatch, the reference's not)."""
-    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    from hil.analysis.diagnose.dual_reference import dual_reference_diagnosis
     cache = {} if cache is None else cache  # each recording's fit, by path (dual_reference_diagnosis)
     out = []
     for new, k in KEYS.items():

@@ -100,7 +100,7 @@ def bare(run: Path, out: Path) -> Path:
 
 
 def main(argv: list[str]) -> int:
-    from hil.analysis.diagnose_dual_ref import dual_reference_diagnosis
+    from hil.analysis.diagnose.dual_reference import dual_reference_diagnosis
     out = Path(next((a for a in argv if a.endswith(".json")), "bench_diagnose_reference_pairs.json"))
     rows, cache = [], {}
     with tempfile.TemporaryDirectory() as tmp:

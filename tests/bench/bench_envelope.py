@@ -1,4 +1,4 @@
-"""Benchmark (not a test): BLFmaint (blf.maint.blf_maint) across its envelope.
+"""Benchmark (not a test): BLFmaint (blf.maint.blfmaint.blf_maint) across its envelope.
 
 Part 1, synthetic F-D records (tests/support/blfmaint_data.py: piecewise
 linear contact with backlash, tension/compression stiffnesses that may
@@ -34,7 +34,7 @@ Usage: python tests/bench/bench_envelope.py [--seeds 5] [--sim-seeds 2] [--no-si
 the level (``blf_maint(..., centre_slope=True)``).
 
 ``--impl FILE`` runs another implementation of ``blf_maint`` (a copy of
-blf/maint.py, e.g. ``git show <commit>:blf/maint.py > /tmp/maint_old.py``)
+blf/maint/blfmaint.py, e.g. ``git show <commit>:blf/maint/blfmaint.py > /tmp/maint_old.py``)
 through the same grid and simulator variants, for a before/after comparison.
 """
 
@@ -98,10 +98,10 @@ def tolerance_mm(backlash_mm: float) -> float:
 
 
 def _impl(path: str | None):
-    """The module holding blf_maint and BlfMaintResult: blf.maint, or the module file ``path``."""
+    """The module holding blf_maint and BlfMaintResult: blf.maint.blfmaint, or the module file ``path``."""
     if path is None:
-        import blf.maint
-        return blf.maint
+        import blf.maint.blfmaint
+        return blf.maint.blfmaint
     name = "blf_maint_impl"
     if name not in sys.modules:
         spec = importlib.util.spec_from_file_location(name, path)
@@ -299,7 +299,7 @@ def main() -> int:
         worst_err_over_target=float(max(ratios)) if ratios else None,
         worst_abs_err_mm=float(max(r["worst_abs_err_mm"] or 0.0 for r in grid)),
         worst_stiffness_rel=float(max(r["worst_stiffness_rel"] or 0.0 for r in grid)),
-        grid_s=round(t_grid, 1), seeds=args.seeds, impl=args.impl or "blf.maint", options=kwargs,
+        grid_s=round(t_grid, 1), seeds=args.seeds, impl=args.impl or "blf.maint.blfmaint", options=kwargs,
     )
     print(f"\n{n_ok}/{len(grid)} cells within target; {measured}/{records} records measured; worst error "
           f"{summary['worst_err_over_target']:.2f} x the target; worst stiffness error "

@@ -14,7 +14,7 @@ never ends, so it is detected, as mutmut's own score counts it; it is listed apa
 
     pip install -e '.[test,mutation]'
     python tests/bench/bench_mutation.py                       # supervisor, verdict, maint (~15 min)
-    python tests/bench/bench_mutation.py --module blf/verdict.py
+    python tests/bench/bench_mutation.py --module blf/maint/verdict.py
     python tests/bench/bench_mutation.py --module hil/canopen/cia402.py --module hil/canopen/od.py \\
         --module sim/drives/nmt_slave.py                       # the CANopen modules (~10 min)
 
@@ -40,15 +40,15 @@ ROOT = Path(__file__).resolve().parents[2]
 EQUIVALENT = Path(__file__).with_name("mutation_equivalent.toml")
 
 #: module -> the tests that exercise it (pytest arguments; the slow tests are deselected with -m "not slow").
-#: blf/maint.py leaves out the 110-record acceptance fixture and the 60-record seed spreads of
+#: blf/maint/blfmaint.py leaves out the 110-record acceptance fixture and the 60-record seed spreads of
 #: tests/test_blf_maint.py (20 s of every mutant's run); tests/test_boundaries_maint.py has the
 #: known answers that stand in for them
 TESTS: dict[str, list[str]] = {
     # test_boundaries_staleness: the freshness limit in force (kept limits, its name and reason; issue 37)
     "hil/check/supervisor.py": ["tests/test_boundaries_supervisor.py", "tests/test_boundaries_staleness.py",
                                 "tests/test_faults_bad_input.py"],
-    "blf/verdict.py": ["tests/test_boundaries_verdict.py", "tests/test_verdict.py"],
-    "blf/maint.py": ["tests/test_boundaries_maint.py", "tests/test_blf_maint.py",
+    "blf/maint/verdict.py": ["tests/test_boundaries_verdict.py", "tests/test_verdict.py"],
+    "blf/maint/blfmaint.py": ["tests/test_boundaries_maint.py", "tests/test_blf_maint.py",
                      "-k", "not acceptance and not sigmas_match_seed_spread and not slope_sign_corners"],
     # the CANopen modules (issue 23's rewrite): the tests that pin them by mutation (issue 26) are in these files
     "hil/canopen/cia402.py": ["tests/test_cia402.py", "tests/test_sim_slave.py", "tests/test_master.py"],
@@ -57,7 +57,7 @@ TESTS: dict[str, list[str]] = {
                           "tests/test_bad_recordings.py"],
     "sim/drives/nmt_slave.py": ["tests/test_boundaries_nmt_slave.py", "tests/test_sim_slave.py"],
 }
-DEFAULT = ["hil/check/supervisor.py", "blf/verdict.py", "blf/maint.py"]
+DEFAULT = ["hil/check/supervisor.py", "blf/maint/verdict.py", "blf/maint/blfmaint.py"]
 #: statuses of mutmut's mutant runs; DETECTED: the ones the score counts as killed
 KILLED, SURVIVED, TIMEOUT = "killed", "survived", "timeout"
 DETECTED = (KILLED, TIMEOUT)

@@ -1,7 +1,7 @@
 """BLFserv accuracy over seeds, and its cost (not a test: ``python tests/bench/bench_serv.py``).
 
 1. Accuracy: for every seed, the LVDTs are calibrated from simulated slow
-   sweeps under an opposing force (blf.calibration), then the normal-operation
+   sweeps under an opposing force (blf.maint.calibration), then the normal-operation
    scenarios of sim.scenarios are simulated (sim.operation) (default rig: noise, 7.5 % pitch
    error on LVDT 1, ...) and BLFserv (improved and paper method) runs on
    D_int,1, D_int,2 and D_ext. Per scenario and channel: bias and standard
@@ -30,8 +30,9 @@ from scipy import signal
 TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (support)
 
-from blf.calibration import fit_lvdt_calibration  # noqa: E402
-from blf.serv import BlfServMonitor, blf_serv, design_serv_filters  # noqa: E402
+from blf.maint.calibration import fit_lvdt_calibration  # noqa: E402
+from blf.serv.blfserv import BlfServMonitor, blf_serv  # noqa: E402
+from blf.serv.filters import design_serv_filters  # noqa: E402
 from hil.profile.load import load_simrig  # noqa: E402
 from sim import operation as op  # noqa: E402
 from sim import scenarios as sc  # noqa: E402

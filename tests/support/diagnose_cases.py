@@ -145,7 +145,6 @@ LIBRARY = ("coulomb_friction", "stribeck_friction", "asymmetric_friction", "visc
 OUT_OF_LIBRARY = ("lead_error", "stiffness_bump")
 
 
-
 def case_list(first_seed: int) -> list[dict]:
     """The >= 30 labelled cases on consecutive seeds from ``first_seed``."""
     cases = []
@@ -169,7 +168,6 @@ def case_list(first_seed: int) -> list[dict]:
                           "seed": seed})
             seed += 1
     return cases
-
 
 
 NOISE = {"s1": 0.025 / 6, "s2": 0.025 / 6, "F1": 10.0, "F2": 10.0,
@@ -353,7 +351,7 @@ def generate(case: dict, work: Path, check=None, size: float = 1.0):
 
 
 def diagnose_signals(sig):
-    from blf.diagnose import diagnose
+    from blf.diagnose.engine import diagnose
     from sim.replay_model import DualEmaReplay
     m = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2, I_TOTAL, 0.002,
                       sig.mode1, sig.sp1, sig.mode2, sig.sp2)

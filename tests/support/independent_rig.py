@@ -61,8 +61,8 @@ def rig_profile() -> Path | None:
 def diagnose_file(path: Path, profile: Path | None = None):
     """(Diagnosis, seconds) of one recording, through the CLI's loader (no files written), with
     ``profile`` (default :func:`rig_profile`) as ``--profile``."""
-    from blf.diagnose import diagnose
-    from hil.analysis.diagnose import load_model
+    from blf.diagnose.engine import diagnose
+    from hil.analysis.diagnose.load import load_model
     model, period = load_model(path, "dual-ema", profile or rig_profile())
     t0 = time.process_time()
     d = diagnose(model, period)

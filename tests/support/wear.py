@@ -16,7 +16,7 @@ import uuid
 
 import numpy as np
 
-from blf.verdict import decide, overall
+from blf.maint.verdict import decide, overall
 from hil.profile.load import load_actuation, load_simrig
 from sim.params import WearParams
 from sim.truth import apply_wear, rig_truth, wear_line_mm

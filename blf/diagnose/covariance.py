@@ -1,17 +1,17 @@
 """Which nominal parameters a recording determines: the shape of the nominal fit's covariance.
 
-For the comparison of two recordings (:mod:`hil.analysis.diagnose_dual_ref`): a parameter the
+For the comparison of two recordings (:mod:`hil.analysis.diagnose.dual_reference`): a parameter the
 recording does not determine alone is not compared alone. Pure: a model and its sample period in,
-a :class:`blf.diagnose_model.NominalCovariance` out.
+a :class:`blf.diagnose.model.NominalCovariance` out.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from blf.diagnose import band_comparison
-from blf.diagnose_fit import nominal_jacobian, safe_predict
-from blf.diagnose_model import EIGEN_FLOOR, DiagnoseConfig, NominalCovariance, ReplayModel
+from blf.diagnose.engine import band_comparison
+from blf.diagnose.fit import nominal_jacobian, safe_predict
+from blf.diagnose.model import EIGEN_FLOOR, DiagnoseConfig, NominalCovariance, ReplayModel
 from blf.errors import AnalysisError
 
 __all__ = ["nominal_covariance"]

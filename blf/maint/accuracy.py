@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from blf.serv_filters import design_serv_filters
+from blf.serv.filters import design_serv_filters
 from blf.validate import positive_scalar, scalar
 
 __all__ = ["MethodErrors", "AccuracyBudget", "backlash_error_budget"]
@@ -139,9 +139,9 @@ def backlash_error_budget(stroke_mm: float, pitch_error: float, lvdt_noise_std_m
         Largest D jump BLFserv reads, mm (default ``stroke_mm / 10``: the
         paper's "a tenth of the full mechanical stroke, i.e. 2 mm").
     lowpass_rad_s, dt1_rad_s : float, optional
-        BLFserv filters (:func:`blf.serv_filters.design_serv_filters`).
+        BLFserv filters (:func:`blf.serv.filters.design_serv_filters`).
     plateau_s, guard_before_s, guard_after_s : float, optional
-        Plateau fits of the improved BLFserv (:func:`blf.serv.blf_serv`).
+        Plateau fits of the improved BLFserv (:func:`blf.serv.blfserv.blf_serv`).
     event_s : float, optional
         Duration of a detected event, s (default 0.1, typical on the rig).
 
@@ -169,7 +169,7 @@ def backlash_error_budget(stroke_mm: float, pitch_error: float, lvdt_noise_std_m
     calibrated).
 
     **Noise.** :math:`g_0` = RMS of the low-pass impulse response
-    (:attr:`blf.serv_filters.ServFilters.noise_gain`), :math:`\\sigma_f = g_0\\sigma`.
+    (:attr:`blf.serv.filters.ServFilters.noise_gain`), :math:`\\sigma_f = g_0\\sigma`.
     A difference of two low-passed readings far apart (the paper's
     :math:`\\Delta D`; BLFmaint's corner readings before regression
     averaging, an upper bound) has :math:`\\sqrt 2\\,\\sigma_f`. The improved

@@ -1,4 +1,4 @@
-"""Mismatch tests of the diagnosis: noise floor, window test and regime test (:mod:`blf.diagnose`).
+"""Mismatch tests of the diagnosis: noise floor, window test and regime test (:mod:`blf.diagnose.engine`).
 
 Given the residual ``r`` of a model against a recording, in the units of the
 channel:
@@ -130,7 +130,7 @@ class RegimeScore:
 
 def regime_score(w: np.ndarray, valid: np.ndarray, fit: np.ndarray, block: np.ndarray,
                  cell: np.ndarray, ncell: int) -> RegimeScore:
-    """Cross-validated regime statistic of a weighted residual (see :func:`blf.diagnose.diagnose`, step 3).
+    """Cross-validated regime statistic of a weighted residual (see :func:`blf.diagnose.engine.diagnose`, step 3).
 
     Parameters
     ----------

@@ -3,7 +3,7 @@
 :func:`design_serv_filters` designs the filters in continuous time with
 python-control and discretises them at the sample rate; their exact noise
 gains turn the white-noise level of D (:func:`estimate_noise_std_mm`) into
-the detection thresholds of :func:`blf.serv.blf_serv`.
+the detection thresholds of :func:`blf.serv.blfserv.blf_serv`.
 
 Pure: arrays and an explicit sample rate in, frozen dataclasses out; no
 plotting, logging, file IO or clocks.

@@ -1,9 +1,12 @@
-"""Default relevance floors of the dual-EMA model's nominal parameters (issue 35, part 2), and how measured.
+"""Default relevance floors of ``emacheck diagnose --reference`` with the dual-EMA model, and how measured.
+
+The check profile's ``[diagnosis]`` table (:class:`hil.profile.config.DiagnosisFloors`) takes these as its
+defaults; the diagnosis reads the floors from the profile (:mod:`hil.analysis.diagnose.floors`).
 
 A change of a nominal parameter between two checks of one rig is to be named only when it is
-statistically supported and above its floor (as :data:`hil.analysis.diagnose_axis.FORCE_FLOOR_N` for
+statistically supported and above its floor (as :data:`hil.analysis.diagnose.single_axis.FORCE_FLOOR_N` for
 a single axis). These are the defaults of the dual-EMA reference mode
-(:mod:`hil.analysis.diagnose_dual_ref`; diagnosis.json ``floor.by_kind`` states the floors used); the
+(:mod:`hil.analysis.diagnose.dual_reference`; diagnosis.json ``floor.by_kind`` states the floors used); the
 check profile's ``[diagnosis]`` keys set a rig's own (:class:`hil.profile.config.DiagnosisFloors`).
 
 Measured by ``python tests/bench/bench_diagnose_floors.py /tmp/floors.json`` (docs/diagnose.md,
@@ -19,12 +22,12 @@ Measured by ``python tests/bench/bench_diagnose_floors.py /tmp/floors.json`` (do
   0.0078 %, 3 sqrt(2) sd = 0.033 %;
 * **own simulator**: three healthy checks of the shipped simulated rig (``emacheck simulate``, noise
   seeds 11, 12, 13), the change of every comparison the reference mode makes
-  (:func:`hil.analysis.diagnose_dual_ref.nominal_changes`) between each pair, 3 x RMS per kind: play
+  (:func:`hil.analysis.diagnose.floors.nominal_changes`) between each pair, 3 x RMS per kind: play
   (internal, LVDT offset) 0.53 um, external play 0.80 um, contact stiffness 1.43 %, compliance 0.36 %,
   LVDT pitch 0.00096 %, friction (hinge and drives' at the check's speed; the independent rig's keys
   give no true friction) 0.34 N.
 
-* **the library's effects at one EMA** (:data:`hil.analysis.diagnose_dual_ref.LIBRARY_FLOORS`): each
+* **the library's effects at one EMA** (:data:`hil.analysis.diagnose.floors.LIBRARY_FLOORS`): each
   candidate's size parameters fitted at each EMA (and variant) where there is none (true 0), on the
   independent rig's five effect-free recordings (pooled sd about each series' mean, 3 sqrt(2) sd) and on
   the three simulated checks (3 x RMS of the pair changes): extra friction (Coulomb, viscous at the check's
@@ -53,6 +56,6 @@ from __future__ import annotations
 #: kind -> default floor in its unit (play um, stiffness and compliance %, sensor gain %, friction N)
 DUAL_FLOORS = {"play_um": 0.6, "external_play_um": 1.3, "stiffness_pct": 1.5, "compliance_pct": 12.0,
                "sensor_gain_pct": 0.004, "friction_N": 1.1, "loadcell_gain_pct": 0.11,
-               # the library's effects at one EMA (hil.analysis.diagnose_dual_ref.LIBRARY_FLOORS)
+               # the library's effects at one EMA (hil.analysis.diagnose.floors.LIBRARY_FLOORS)
                "ema_friction_N": 3.7, "stribeck_N": 860.0, "lvdt_linearity_um": 1.3, "lvdt_drift_pct_per_h": 0.35,
                "time_skew_ms": 0.12, "progressive_pct_per_mm": 25.0, "viscoelastic_N_per_mm": 4000.0}

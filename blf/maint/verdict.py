@@ -11,7 +11,7 @@ The uncertainty of a BLFmaint backlash (paper 2.3, for this check's profile
 and measured calibration) combines, as standard uncertainties in mm:
 
 * the regression's own scatter (``backlash_sigma_mm`` of
-  :class:`blf.maint.BlfMaintResult`: LVDT and load-cell noise after the
+  :class:`blf.maint.results.BlfMaintResult`: LVDT and load-cell noise after the
   regression's averaging, Newey-West);
 * the LVDT pitch left after calibration, over the LVDT travel that enters the
   reading (the backlash itself): ``B * p_r`` with ``p_r`` the calibration's
@@ -45,7 +45,6 @@ METHOD_BOUND_REL = 0.05  #: ... and relative part (the larger of the two applies
 #: BLFserv's method bound, relative: the improved method read within +-7.3 % of truth over 20 seeds and five
 #: scenarios (docs/blfserv.md), taken as 10 %; the paper's Delta D reads 21-39 % low, taken as 40 %.
 SERV_METHOD_REL = {"improved": 0.10, "paper": 0.40}
-
 
 
 class Status(StrEnum):
@@ -172,7 +171,7 @@ def serv_uncertainty(backlash_mm: float, sigma_mm: float, pitch_mm: float, tempe
         The reading (median of the counted jumps) and its standard error [mm].
     pitch_mm : float
         LVDT pitch left after calibration over the stroke the surface moved
-        (:attr:`blf.accuracy.MethodErrors.pitch_compensated_mm`) [mm].
+        (:attr:`blf.maint.accuracy.MethodErrors.pitch_compensated_mm`) [mm].
     temperature_bound_mm : float
         The temperature-induced LVDT error bound over the jump read (paper 2.3:
         1 % of 2 mm), rectangular [mm].

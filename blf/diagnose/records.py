@@ -1,5 +1,5 @@
-"""The records the steps of the diagnosis (:func:`blf.diagnose.diagnose`) hand on: one frozen
-dataclass per step result (the module docstring of :mod:`blf.diagnose` lists them by step).
+"""The records the steps of the diagnosis (:func:`blf.diagnose.engine.diagnose`) hand on: one frozen
+dataclass per step result (the module docstring of :mod:`blf.diagnose.engine` lists them by step).
 
 Pure: frozen dataclasses, no IO.
 """
@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from blf.band import Band
-from blf.diagnose_fit import CandidateFit, JointFit, Problem, Projector
-from blf.diagnose_model import Candidate, DiagnoseConfig, DiagnosisVerdict, Reference, ReplayModel, place_of
+from blf.diagnose.band import Band
+from blf.diagnose.fit import CandidateFit, JointFit, Problem, Projector
+from blf.diagnose.model import Candidate, DiagnoseConfig, DiagnosisVerdict, Reference, ReplayModel, place_of
 
 __all__ = ["Comparison", "NominalFit", "NoiseFloor", "TestFrame", "ChannelTests", "Standing", "Screened",
            "Screening", "Refit", "Accepted", "Selection", "NamedReference", "ResidualRms", "Verdict"]
@@ -22,7 +22,7 @@ __all__ = ["Comparison", "NominalFit", "NoiseFloor", "TestFrame", "ChannelTests"
 class Comparison:
     """Step 0, the band: the recording as the diagnosis compares it.
 
-    ``problem`` (:class:`blf.diagnose_fit.Problem`) holds the kept samples of the band, the fit and
+    ``problem`` (:class:`blf.diagnose.fit.Problem`) holds the kept samples of the band, the fit and
     held-out halves, the validity per channel and the noise floors (set by steps 1 and 2);
     ``places`` the model's own channel -> place map (:func:`place_of` where it has none)."""
 
@@ -82,7 +82,7 @@ class TestFrame:
 class ChannelTests:
     """Step 3 for one prediction (channels, derived included): per reported channel the band
     residual in noise sigmas scaled for the window sums (``weighted``), the window excess E and the
-    regime test (:class:`blf.mismatch.RegimeScore`)."""
+    regime test (:class:`blf.diagnose.mismatch.RegimeScore`)."""
 
     predicted: dict = field(repr=False)
     weighted: dict = field(repr=False)
@@ -124,7 +124,7 @@ class Screened:
 @dataclass(frozen=True)
 class Screening:
     """Step 4, one round: the candidates best first, the BIC penalty of each (:math:`k \\ln N_j`)
-    and the round's entry of :attr:`blf.diagnose_model.Diagnosis.screening`."""
+    and the round's entry of :attr:`blf.diagnose.model.Diagnosis.screening`."""
 
     ranked: tuple
     penalty: dict
@@ -133,7 +133,7 @@ class Screening:
 
 @dataclass(frozen=True)
 class Refit:
-    """Step 5, one candidate refitted (:class:`blf.diagnose_fit.CandidateFit`), judged on the
+    """Step 5, one candidate refitted (:class:`blf.diagnose.fit.CandidateFit`), judged on the
     linearisation: BIC change on the fit half and chi-square change on the held-out half."""
 
     delta_bic: float
@@ -156,7 +156,7 @@ class Accepted:
 @dataclass(frozen=True)
 class Selection:
     """Steps 4-6 over every round: the nominal parameters and accepted terms at the end, the library
-    effects named, the screening of each round (:attr:`blf.diagnose_model.Diagnosis.screening`), and the BIC of the
+    effects named, the screening of each round (:attr:`blf.diagnose.model.Diagnosis.screening`), and the BIC of the
     nominal fit and of the final model."""
 
     theta: np.ndarray

@@ -1,12 +1,12 @@
-"""The fitting machinery of the diagnosis (:mod:`blf.diagnose`): the problem in the band, the nominal
+"""The fitting machinery of the diagnosis (:mod:`blf.diagnose.engine`): the problem in the band, the nominal
 fit, its linear re-adjustment (variable projection), candidate screening and refits, and the test of a
 nominal parameter against its reference value.
 
-Every residual is formed in the model's band (:class:`blf.band.Band`): the raw residual
+Every residual is formed in the model's band (:class:`blf.diagnose.band.Band`): the raw residual
 :math:`r = y - \\hat y` of a channel (zero where the channel is not compared) is low-passed and
 decimated, and weighted by its noise floor in that band,
 :math:`w_j = (B r)_j / (\\sigma_j \\|h\\|_2)`, with :math:`\\sigma` the white-noise floor of the raw
-residual (:func:`blf.mismatch.noise_floor`) and :math:`\\|h\\|_2` the band's noise gain.
+residual (:func:`blf.diagnose.mismatch.noise_floor`) and :math:`\\|h\\|_2` the band's noise gain.
 
 Pure: arrays in, arrays out; the model is called, never changed.
 """
@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from blf.band import Band
+from blf.diagnose.band import Band
+from blf.diagnose.mismatch import noise_floor
 from blf.errors import BlfError
-from blf.mismatch import noise_floor
 
 __all__ = ["Problem", "fit_nominal", "nominal_jacobian", "Projector", "screen", "CandidateFit", "fit_candidate",
            "ReferenceTest", "reference_test", "JointFit", "fit_joint", "safe_predict"]

@@ -6,7 +6,7 @@ the same segmentation the maintenance analysis uses
 (:func:`hil.analysis.maint.find_segments`); the held force target from the
 check profile (the run folder's snapshot, else the shipped one); and, when
 the run folder records the simulated rig it was made with (meta.json
-``simrig``), that rig as the nominal. The core is :func:`blf.diagnose.diagnose` (pure).
+``simrig``), that rig as the nominal. The core is :func:`blf.diagnose.engine.diagnose` (pure).
 """
 
 from __future__ import annotations
@@ -70,55 +70,10 @@ def load_dual(path: Path, profile: Path | None):
 
 def load_model(path: Path, model: str, profile: Path | None, axis_options=None):
     """Replay model and sample period of a recording (run folder, CSV, CAN log, .mat); a single axis is
-    read with ``axis_options`` (:class:`hil.analysis.diagnose_axis.AxisOptions`, how to read its effort)."""
-    from hil.analysis.diagnose_axis import AxisOptions, read_axis, single_axis_model
+    read with ``axis_options`` (:class:`hil.analysis.diagnose.single_axis.AxisOptions`, how to read its effort)."""
+    from hil.analysis.diagnose.single_axis import AxisOptions, read_axis, single_axis_model
     if not Path(path).exists():
         raise RecordingError(f"{path}: no such file or folder")
     if model == "single-axis":
         return single_axis_model(read_axis(Path(path)), axis_options or AxisOptions())
     return load_dual(Path(path), profile)
-
-
-def _r(x, nd=6):
-    return None if x is None else float(f"{x:.{nd}g}")
-
-
-def _rd(d: dict) -> dict:
-    return {k: _r(v) for k, v in d.items()}
-
-
-def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
-    """JSON shape of diagnosis.json (hil/schemas/diagnosis.schema.json): ``effects`` lists every
-    effect accepted whatever the verdict; RMS figures in the compared band, ``raw`` ones beside."""
-    eff = lambda e: {"name": e.name, "where": e.where, "words": e.words, "source": e.source,  # noqa: E731
-                     "parameters": _rd(e.parameters), "uncertainty": _rd(e.uncertainty),
-                     "delta_bic": _r(e.delta_bic), "delta_chi2_holdout": _r(e.delta_chi2_holdout),
-                     "evidence": e.evidence}
-    b = d.band
-    return {
-        "verdict": d.verdict, "model": model_name,
-        "effects": [eff(e) for e in d.effects],
-        "where": list(d.where),
-        "band": {"cutoff_hz": _r(b.cutoff_hz), "step": int(b.step), "words": b.words},
-        "locations": [{"channel": loc.channel, "where": loc.where, "t_start_s": _r(loc.t_start_s),
-                       "t_end_s": _r(loc.t_end_s), "regime": loc.regime, "score": _r(loc.score), "test": loc.test}
-                      for loc in d.locations],
-        "residual_rms_before": _rd(d.residual_rms_before),
-        "residual_rms_after": _rd(d.residual_rms_after),
-        "residual_rms_holdout_before": _rd(d.residual_rms_holdout_before),
-        "residual_rms_holdout_after": _rd(d.residual_rms_holdout_after),
-        "residual_rms_raw_before": _rd(d.residual_rms_raw_before),
-        "residual_rms_raw_after": _rd(d.residual_rms_raw_after),
-        "residual_rms_raw_holdout_before": _rd(d.residual_rms_raw_holdout_before),
-        "residual_rms_raw_holdout_after": _rd(d.residual_rms_raw_holdout_after),
-        "noise_floor": _rd(d.noise_floor),
-        "noise_floor_raw": _rd(d.noise_floor_raw),
-        "excess_before": _rd(d.excess_before),
-        "excess_after": _rd(d.excess_after),
-        "regime_score_before": _rd(d.regime_before),
-        "regime_score_after": _rd(d.regime_after),
-        "ic": "BIC", "ic_before": _r(d.ic_before, 9), "ic_after": _r(d.ic_after, 9),
-        "nominal": _rd(d.nominal),
-        "screening": list(d.screening),
-        "diagnosis_s": round(seconds, 2),
-    }

@@ -1,4 +1,4 @@
-"""What the diagnosis (:func:`blf.diagnose.diagnose`) is given and what it gives.
+"""What the diagnosis (:func:`blf.diagnose.engine.diagnose`) is given and what it gives.
 
 Given: a replay model (:class:`ReplayModel`: the recording, its channels and
 their validity, the nominal parameters (:class:`Param`, read by name through
@@ -19,12 +19,13 @@ from typing import Protocol
 
 import numpy as np
 
-from blf.band import Band
+from blf.diagnose.band import Band
+from blf.diagnose.mismatch import RegimeScore
 from blf.errors import InputError
-from blf.mismatch import RegimeScore
 
 __all__ = ["Param", "ParamVector", "Candidate", "Reference", "ReplayModel", "DiagnoseConfig", "Location",
-           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "place_of"]
+           "FittedEffect", "Diagnosis", "DiagnosisVerdict", "RegimeScore", "NominalCovariance", "EIGEN_FLOOR",
+           "place_of"]
 
 
 class DiagnosisVerdict(StrEnum):
@@ -123,7 +124,7 @@ class Reference:
 
 
 class ReplayModel(Protocol):
-    """What :func:`blf.diagnose.diagnose` needs from a model of the recording."""
+    """What :func:`blf.diagnose.engine.diagnose` needs from a model of the recording."""
 
     t_s: np.ndarray
     channels: tuple
@@ -146,7 +147,7 @@ class ReplayModel(Protocol):
 
 @dataclass(frozen=True)
 class DiagnoseConfig:
-    """Tuning of :func:`blf.diagnose.diagnose` (seconds, chi-square units)."""
+    """Tuning of :func:`blf.diagnose.engine.diagnose` (seconds, chi-square units)."""
 
     block_s: float = 2.0
     window_s: float = 1.0
@@ -192,7 +193,7 @@ class FittedEffect:
 
 @dataclass(frozen=True)
 class NominalCovariance:
-    """The shape of the nominal parameters' covariance at a fit (:func:`blf.diagnose_cov.nominal_covariance`).
+    """The shape of the nominal parameters' covariance at a fit (:func:`blf.diagnose.covariance.nominal_covariance`).
 
     ``covariance`` (physical units, in the order of ``names``) is the white-noise one,
     :math:`(J^T J)^{-1}` of the weighted residual: its scale is far below the spread between checks,
@@ -222,7 +223,7 @@ EIGEN_FLOOR = 1e-12
 
 @dataclass(frozen=True)
 class Diagnosis:
-    """Result of :func:`blf.diagnose.diagnose` (plain dicts inside: JSON-ready, treat as read-only).
+    """Result of :func:`blf.diagnose.engine.diagnose` (plain dicts inside: JSON-ready, treat as read-only).
 
     RMS figures without ``raw`` are in the band (:attr:`band`); ``holdout`` ones
     over the held-out half only (never fitted)."""

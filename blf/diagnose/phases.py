@@ -15,7 +15,7 @@ not compared (:func:`transients`):
   across its backlash and hits the far flank. With the modes recorded, the
   ``after_s`` following each change are skipped; without them the changes
   are found from the data with the same segmentation the maintenance
-  analysis uses (:func:`blf.segments.find_segments`): the ends of each
+  analysis uses (:func:`blf.maint.segments.find_segments`): the ends of each
   calibration sweep and of the force fight, and the hand-over inside a sweep
   where both forces change sign (two sweeps run back to back).
 
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from blf.segments import Segments, runs
+from blf.maint.segments import Segments, runs
 from blf.validate import as_1d_finite, positive_scalar, same_shape
 
 __all__ = ["Holding", "slack", "change_mask", "mode_changes", "segment_changes", "holding", "transients"]
@@ -207,7 +207,7 @@ def holding(n: int, sample_period_s: float, *, mode1=None, sp1=None, mode2=None,
         Recorded drive modes (CiA 402: 10 = cyclic torque, i.e. FORCE) and
         setpoints (N in FORCE mode). Used when all four are given.
     segments : Segments, optional
-        The phases found by :func:`blf.segments.find_segments` (used when
+        The phases found by :func:`blf.maint.segments.find_segments` (used when
         the modes are not recorded).
     f1_N, f2_N : array_like, shape (n,), optional
         Load-cell forces, N (the sign of the held force, the hand-overs).

@@ -1,11 +1,11 @@
-"""The compiled BLFserv detector: state layout and numba kernels (used by :mod:`blf.serv`).
+"""The compiled BLFserv detector: state layout and numba kernels (used by :mod:`blf.serv.blfserv`).
 
 Each channel's detector keeps an integer state row (``I_*``), a float state
 row (``F_*``) and a ring buffer of raw D; the parameters shared by all
 channels are one float vector (``P_*``); a finished event is one output row
 (``O_*``). :func:`detect` runs the detector over a block of samples,
 :func:`flush` closes the open events at the end of the data. The detection
-and measurement rules are documented in :func:`blf.serv.blf_serv`.
+and measurement rules are documented in :func:`blf.serv.blfserv.blf_serv`.
 
 Pure: arrays in, arrays out (the state arrays passed in are updated in place).
 """

@@ -179,7 +179,7 @@ def locate_regions(d: np.ndarray, d_f: np.ndarray, g_f: np.ndarray, g_lo: float,
     sign : int
         Global slope sign, for the messages.
     contact_margin_frac, centre_margin_frac : float
-        Margins of :func:`blf.maint.blf_maint` (fractions).
+        Margins of :func:`blf.maint.blfmaint.blf_maint` (fractions).
     min_contact, min_centre : int
         Fewest samples in each contact region and in the backlash region.
 
