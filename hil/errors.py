@@ -92,5 +92,36 @@ class SequenceError(EmacheckError, RuntimeError):
     """The check sequence reached a state it cannot continue from."""
 
 
+# ---- the wear history (hil/history): a database that cannot be used says so in one line.
+# Both derive from :class:`hil.errors.EmacheckError`. ``bad_input`` tells the
+# command layer the exit status (3 for bad input, else 2; docs/history.md):
+#
+# * :class:`HistoryInputError`: the URL, file or login given cannot be used
+#   (not a database URL, not an SQLite database or corrupt, login refused, a
+#   schema newer than this emacheck): exit 3;
+# * :class:`HistoryUnavailableError`: the database is there but cannot be used
+#   now (server down or unreachable, SQLite file locked by another program):
+#   exit 2, try again later.
+#
+# After a check, neither changes the check's exit status: the recording says
+# on one line that the result was not recorded and how to record it later.
+
+
+class HistoryError(EmacheckError):
+    """Base of the history's errors."""
+
+    bad_input = False
+
+
+class HistoryInputError(HistoryError, ValueError):
+    """The history URL, file or login cannot be used (exit 3)."""
+
+    bad_input = True
+
+
+class HistoryUnavailableError(HistoryError, ConnectionError):
+    """The history database cannot be reached or is locked now (exit 2)."""
+
+
 #: Every error raised on purpose, whichever package raised it.
 KNOWN_ERRORS: tuple[type[Exception], ...] = (EmacheckError, CanopenError, BlfError)

@@ -89,7 +89,7 @@ def test_the_fork_analyses_as_the_dry_run_does(dry_run, actuation):
     """The result and report the fork sends back are those of the analysis in process (but the time of
     the analysis and what it took)."""
     from hil.cli.analysis_fork import AnalysisFork
-    from hil.cli.check import analysed
+    from hil.cli.result import analysed
     from hil.record.runfolder import read_record
     from hil.report.maint import report_html
 

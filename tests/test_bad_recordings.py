@@ -23,7 +23,7 @@ from hil.canopen.frame import sync_frame
 from hil.canopen.od import default_eds_path, load_eds
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main
-from hil.cli.common import ExitCode
+from hil.cli.args import ExitCode
 from hil.profile.load import default_profile_path, load_actuation
 from hil.record.canlog import CanLogWriter, decode_can_log
 from hil.record.runfolder import read_signals

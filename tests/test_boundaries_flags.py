@@ -1,5 +1,5 @@
 """Every numeric option of every command on its boundaries: the last value taken and the first refused on
-both sides (exit 3, the option named with its range, no traceback; hil/cli/common.py).
+both sides (exit 3, the option named with its range, no traceback; hil/cli/args.py).
 
 ``run``'s flags go through :func:`support.run_flags.assert_run_flag` (run refuses to move anything without
 --arm after parsing: the message tells a value taken from one refused); flags of commands that would run
@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from hil.cli import main
-from hil.cli.common import (
+from hil.cli.args import (
     BITRATE_MAX,
     BITRATE_MIN,
     CPU_LATENCY_MAX_US,

@@ -8,8 +8,9 @@ import pytest
 
 from hil.canopen.process import MEASURED_CHANNELS, Sample
 from hil.cli import COMMANDS, build_parser, main
-from hil.cli.common import ExitCode
-from hil.record.runfolder import COLUMN_UNITS, SIGNAL_COLUMNS, Signals
+from hil.cli.args import ExitCode
+from hil.record.runfolder import Signals
+from hil.record.signals_csv import COLUMN_UNITS, SIGNAL_COLUMNS
 
 
 def test_every_command_registers_a_handler():

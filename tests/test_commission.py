@@ -22,9 +22,9 @@ import tomli_w
 from hil.canopen.frame import Frame
 from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.cli import main
+from hil.cli.args import ExitCode
 from hil.cli.check import master_setup
 from hil.cli.commission import commission, simulated_transport, wiring_fault
-from hil.cli.common import ExitCode
 from hil.master.commission import TRANSITIONS, Commission, CommissionMaster, CommissionStop, Scan
 from hil.master.commission_rules import (
     DEAD_FRACTION,

@@ -16,7 +16,7 @@ import re
 import pytest
 from rich.console import Console
 
-from hil.cli.check import print_master_loss
+from hil.cli.console import print_master_loss
 from hil.cli.dry_run import dry_run
 from hil.master.core import MasterCore
 from hil.record.runfolder import read_record

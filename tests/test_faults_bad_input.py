@@ -219,7 +219,8 @@ def test_a_gzipped_can_log_decodes_as_the_plain_one(tmp_path, short_run, actuati
     import gzip
 
     from hil.record.canlog import decode_can_log
-    from hil.record.runfolder import EXTRA_COLUMNS, SIGNAL_COLUMNS, is_can_log
+    from hil.record.runfolder import is_can_log
+    from hil.record.signals_csv import EXTRA_COLUMNS, SIGNAL_COLUMNS
 
     gz = tmp_path / "can.log.gz"
     with gzip.open(gz, "wb") as fh:

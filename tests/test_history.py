@@ -250,7 +250,8 @@ def test_a_newer_schema_is_refused(tmp_path, capsys):
 def test_recording_after_a_check_never_changes_its_outcome_and_sync_records_it_later(url, tmp_path, capsys):
     """The hook the commands call after writing a result: a database that is down prints one line; the
     result stays; `history sync` records it exactly once. A simulated result is recorded only when asked."""
-    from hil.cli.common import make_console, record_history
+    from hil.cli.console import make_console
+    from hil.cli.history_glue import record_history
 
     real, sim = wear_results(n=1, seed=10, simulated=False)[0], wear_results(n=1, seed=11)[0]
     [run_real, run_sim] = write_runs(tmp_path, [real]) + write_runs(tmp_path, [sim], name="sim")
@@ -314,7 +315,7 @@ def test_a_lock_the_busy_timeout_does_not_cover_is_retried_within_it(tmp_path):
     finally:
         store.close()
     # always refused: given up after the URL's own busy timeout, as one HistoryUnavailableError
-    from hil.history.errors import HistoryUnavailableError
+    from hil.errors import HistoryUnavailableError
     store = HistoryStore.open(f"sqlite:///{path}?timeout=0.3")
     assert store.timeout_s == 0.3
     sa.event.listen(store._engine, "connect",

@@ -15,8 +15,8 @@ import sqlite3
 import pytest
 
 from hil.cli import main
-from hil.cli.common import ExitCode
-from hil.history.errors import HistoryInputError
+from hil.cli.args import ExitCode
+from hil.errors import HistoryInputError
 from hil.history.store import HistoryStore
 from support.wear import wear_results
 

@@ -11,7 +11,7 @@ import json
 import pytest
 
 from hil.cli import main
-from hil.cli.common import ExitCode
+from hil.cli.args import ExitCode
 from hil.history.record import record_from_result
 from hil.history.store import HistoryStore
 from support import postgres

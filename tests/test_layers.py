@@ -201,9 +201,9 @@ FOREIGN_PRIVATE_OK = {
     ("hil/transport.py", "_send_periodic_internal"): "python-can's can.BusABC hook an interface overrides when "
     "it has a kernel- or hardware-timed periodic send: the one way to tell that send_periodic would be a "
     "thread in this process",
-    ("hil/cli/common.py", "_multicast"): "python-can's udp_multicast bus keeps its one socket there, with no public "
+    ("hil/cli/bus.py", "_multicast"): "python-can's udp_multicast bus keeps its one socket there, with no public "
     "way to set IP_MULTICAST_ALL off on it (open_bus fails closed if it is gone)",
-    ("hil/cli/common.py", "_socket"): "the socket of python-can's udp_multicast bus (see _multicast)",
+    ("hil/cli/bus.py", "_socket"): "the socket of python-can's udp_multicast bus (see _multicast)",
     ("hil/forks.py", "_exit"): "os._exit, the documented way for a fork to end without the parent's "
     "cleanup (atexit, buffered files)",
 }

@@ -13,7 +13,7 @@ import socket
 import pytest
 
 from hil.cli import main
-from hil.cli.common import MULTICAST_HOPS_DEFAULT, open_bus
+from hil.cli.bus import MULTICAST_HOPS_DEFAULT, open_bus
 from hil.errors import InterfaceError
 from support.run_flags import assert_run_flag
 

@@ -7,7 +7,6 @@ empty ``--out`` folder is used, one holding a single file is not.
 
 from __future__ import annotations
 
-import argparse
 import gzip
 import hashlib
 import json
@@ -19,8 +18,9 @@ from pathlib import Path
 import pytest
 
 from hil.cli import main
-from hil.cli.common import ExitCode, Outputs, default_out, out_dir, outputs_for
+from hil.cli.args import ExitCode
 from hil.errors import OutputError
+from hil.record.outputs import Outputs, default_out, out_dir, outputs_for
 from hil.record.runfolder import create_json, create_with
 from support.diagnose_cases import base_params, record, short_check
 from support.figures import figures_unrendered
@@ -36,8 +36,8 @@ def tree(folder: Path) -> dict[str, str]:
 def short_run(tmp_path_factory):
     """A run folder of a short simulated check (~1 s) with its own result.json and report.html, as the
     check writes them at its end (its figures not drawn: support/figures.py)."""
-    from hil.cli.check import analyze_and_report
-    from hil.cli.common import make_console
+    from hil.cli.console import make_console
+    from hil.cli.result import analyze_and_report
     from hil.profile.load import load_actuation
     from hil.record.runfolder import read_record
 
@@ -91,12 +91,12 @@ def test_a_check_refuses_an_out_that_is_a_file(command, tmp_path, capsys):
 def test_an_empty_out_folder_is_the_run_folder_and_one_with_a_file_is_not(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
-    assert out_dir(argparse.Namespace(out=empty), "dry-run") == empty
+    assert out_dir(empty, "dry-run") == empty
     new = tmp_path / "a" / "b"
-    assert out_dir(argparse.Namespace(out=new), "dry-run") == new and new.is_dir()
+    assert out_dir(new, "dry-run") == new and new.is_dir()
     (empty / ".keep").write_bytes(b"")  # a hidden file is a file
     with pytest.raises(OutputError, match="holds files already"):
-        out_dir(argparse.Namespace(out=empty), "dry-run")
+        out_dir(empty, "dry-run")
 
 
 def test_the_default_run_folder_is_new_even_twice_in_one_second(tmp_path, monkeypatch):
@@ -197,7 +197,7 @@ def test_analyze_out_a_folder_with_files_writes_a_new_sub_folder(run_copy, tmp_p
 
 
 def test_a_derived_out_folder_is_used_while_empty_and_gets_a_sub_folder_with_one_file(tmp_path):
-    from hil.cli.common import fresh_outputs
+    from hil.record.outputs import fresh_outputs
 
     out = tmp_path / "empty"
     out.mkdir()
@@ -216,10 +216,10 @@ def test_a_bare_csv_analysed_twice_keeps_the_first_and_gz_gets_its_own_names(run
 
     The two analyses are given analysis times a minute apart: the history keeps a result once by its
     content, and two analyses within one second give the same content (test_the_same_result_twice_...)."""
-    import hil.cli.check
+    import hil.cli.result
 
     stamps = iter(["2026-11-26T10:00:00+00:00", "2026-11-26T10:01:00+00:00", "2026-11-26T10:02:00+00:00"])
-    monkeypatch.setattr(hil.cli.check, "utc_iso", lambda: next(stamps))
+    monkeypatch.setattr(hil.cli.result, "utc_iso", lambda: next(stamps))
     with figures_unrendered():
         _bare_csv_analysed_twice(run_copy, tmp_path, capsys)
 
@@ -228,10 +228,10 @@ def test_the_same_result_twice_is_one_history_record_and_both_files_stay(run_cop
     """Two analyses within one second that took as long (to the ms) write byte-identical results: both
     files stay (the second under its new name), the history holds that content once and says the second
     was already recorded."""
-    import hil.cli.check
+    import hil.cli.result
 
-    monkeypatch.setattr(hil.cli.check, "utc_iso", lambda: "2026-11-26T10:00:00+00:00")
-    monkeypatch.setattr(hil.cli.check, "time", types.SimpleNamespace(perf_counter=lambda: 0.0))  # analysis_s 0
+    monkeypatch.setattr(hil.cli.result, "utc_iso", lambda: "2026-11-26T10:00:00+00:00")
+    monkeypatch.setattr(hil.cli.result, "time", types.SimpleNamespace(perf_counter=lambda: 0.0))  # analysis_s 0
     csv = tmp_path / "f.csv"
     csv.write_bytes((run_copy / "signals.csv").read_bytes())
     url = f"sqlite:///{tmp_path / 'h.sqlite'}"

@@ -308,7 +308,7 @@ def test_a_bare_recording_is_named_with_its_sha256():
 
 
 def test_trace_of_a_bare_recording_carries_its_sha256(tmp_path):
-    from hil.cli.check import trace_of
+    from hil.cli.result import trace_of
 
     rec = tmp_path / "flight-042.csv"
     rec.write_text("t,phi1,phi2,s1,s2,F1,F2\n0,0,0,0,0,0,0\n")

@@ -8,7 +8,7 @@ import json
 import pytest
 
 from hil.cli import main
-from hil.cli.common import ExitCode
+from hil.cli.args import ExitCode
 from hil.record.runrecord import shared_serial
 from hil.report.shell import trace_lines
 from support.profiles import write_profile_variant

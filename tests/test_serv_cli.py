@@ -12,7 +12,7 @@ from blf.maint.calibration import fit_lvdt_calibration
 from hil.canopen.frame import sync_frame
 from hil.canopen.units import mm_to_lvdt_um, newton_to_force_dN, rad_to_increments
 from hil.cli import main
-from hil.cli.common import ExitCode
+from hil.cli.args import ExitCode
 from hil.record.canlog import CanLogWriter
 from sim import operation as op
 from sim import scenarios as sc

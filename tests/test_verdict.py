@@ -13,7 +13,7 @@ import pytest
 
 from blf.maint.verdict import COVERAGE_FACTOR, combine, decide, maint_uncertainty, overall, serv_uncertainty
 from hil.cli import main
-from hil.cli.common import ExitCode
+from hil.cli.args import ExitCode
 from hil.record.runfolder import read_record
 from support.figures import figures_unrendered
 from support.profiles import write_profile_variant

@@ -1,7 +1,7 @@
 """CAN bus load of the cyclic CANopen traffic (frame lengths with and without bit stuffing).
 
 The master refuses a profile whose worst-case load reaches 50 %
-(:mod:`hil.cli.common`). Sans-IO.
+(:mod:`hil.cli.bus`). Sans-IO.
 """
 
 from __future__ import annotations

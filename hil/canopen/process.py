@@ -49,6 +49,6 @@ class Sample:
 
 #: The seven measured channels of a recording, in file order: (column name, unit). The fields of
 #: :class:`Sample` are ``f"{name}_{unit}"``; the first seven columns of a run folder's
-#: signals.csv are the names (:data:`hil.record.runfolder.SIGNAL_COLUMNS`).
+#: signals.csv are the names (:data:`hil.record.signals_csv.SIGNAL_COLUMNS`).
 MEASURED_CHANNELS: tuple[tuple[str, str], ...] = (
     ("t", "s"), ("phi1", "rad"), ("phi2", "rad"), ("s1", "mm"), ("s2", "mm"), ("F1", "N"), ("F2", "N"))

@@ -4,11 +4,14 @@ Each command module (``dry_run``, ``run``, ``profile``, ``simulate``,
 ``analyze``, ``serv``, ``diagnose``, ``history``, ``sim_serve``) registers its sub-parser with a
 ``register(sub)`` function and keeps its heavy imports (analysis, plotting,
 python-control, numba) inside the command, so ``emacheck run`` loads no more
-than its cyclic loop needs before the first SYNC. Shared pieces are in
-:mod:`hil.cli.common` (exit codes, output folders, loaders) and
-:mod:`hil.cli.check` (running a check and turning it into a result).
+than its cyclic loop needs before the first SYNC. Shared pieces, one module per concern:
+:mod:`hil.cli.args` (exit codes, the options and their types), :mod:`hil.cli.bus` (opening a
+CAN bus), :mod:`hil.cli.console` (the terminal, progress, the result table),
+:mod:`hil.cli.history_glue` (the wear history from the command line) and :mod:`hil.cli.check`
+(running a check and turning it into a result); where outputs go and loading a recording are
+below, in :mod:`hil.record.outputs` and :mod:`hil.record.recording`.
 
-Exit status (:class:`hil.cli.common.ExitCode`): 0 pass, 1 fail (backlash
+Exit status (:class:`hil.cli.args.ExitCode`): 0 pass, 1 fail (backlash
 above B_spec), 2 aborted, 3 bad input (profile, recording, EDS, arguments,
 a history database URL, file or login that cannot be used), 4 internal error,
 5 inconclusive, 6 not ready (commission). Any error, expected or not, is one line on the console;
@@ -23,7 +26,7 @@ from typing import NoReturn
 
 from hil import __version__
 from hil.cli import analyze, commission, diagnose, dry_run, history, profile, run, serv, sim_serve, simulate
-from hil.cli.common import EPILOG, ExitCode
+from hil.cli.args import EPILOG, ExitCode
 
 #: The commands in the order ``--help`` lists them.
 COMMANDS = (dry_run, run, commission, profile, simulate, analyze, serv, diagnose, history, sim_serve)

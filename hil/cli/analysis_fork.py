@@ -4,10 +4,10 @@ The loop keeps one core busy; the analysis and report import scipy.signal, pytho
 matplotlib (about 0.8 s of CPU) before they compute anything. :class:`AnalysisFork` forks the
 dry-run before its loop; the fork imports them on the other core and waits. When the check has
 finished, the fork gets the finished run record, analyses the run folder's signals.csv as it is
-on disk (the same function as in process, :func:`hil.cli.check.analysed`) and draws the report
+on disk (the same function as in process, :func:`hil.cli.result.analysed`) and draws the report
 (its figures by two processes, :func:`hil.report.shell.drawn`); it sends back the result and the
 report's HTML and writes nothing: result.json and report.html are written by the dry-run itself
-(:func:`hil.cli.check.analyze_and_report`). Whatever goes wrong in the fork (an analysis error, a
+(:func:`hil.cli.result.analyze_and_report`). Whatever goes wrong in the fork (an analysis error, a
 crash, an interrupt, no answer within :data:`hil.forks.FORK_TIMEOUT_S`) ends it without an answer, and
 the dry-run analyses in process as before: an error is then raised there, as it always was. The fork
 itself (when to fork, its setup and end, the wait, the reaping) is :mod:`hil.forks`; this module is
@@ -74,8 +74,8 @@ class AnalysisFork:
 def _serve(req_r: int, act, out: Path) -> tuple[dict, str] | None:
     """In the fork: import, wait for the finished check's record, analyse and draw; the result and the
     report's HTML (sent back by :func:`hil.forks.start`), None if the dry-run did not ask."""
-    from hil.cli.check import analysed
-    from hil.cli.common import Outputs
+    from hil.cli.result import analysed
+    from hil.record.outputs import Outputs
     from hil.report.maint import report_html
     from hil.report.shell import pyplot
 

@@ -6,21 +6,13 @@ import argparse
 from pathlib import Path
 
 from blf.errors import AnalysisError
-from hil.cli.check import INCOMPLETE_REASON, analyze_and_report, exit_for, print_summary, trace_of
-from hil.cli.common import (
-    ExitCode,
-    actuation_for,
-    add_history_args,
-    add_parser,
-    add_recording_args,
-    add_trace_args,
-    installation,
-    make_console,
-    outputs_for,
-    record_history,
-    refuse_foreign_history,
-)
+from hil.cli.args import ExitCode, add_history_args, add_parser, add_recording_args, add_trace_args
+from hil.cli.console import make_console, print_summary
+from hil.cli.history_glue import installation, record_history, refuse_foreign_history
+from hil.cli.result import INCOMPLETE_REASON, analyze_and_report, exit_for, trace_of
 from hil.errors import IncompleteRecordingError, RecordingError
+from hil.record.outputs import outputs_for
+from hil.record.recording import actuation_for
 from hil.record.runfolder import has_record, read_record, resolve_recording
 from hil.record.runrecord import RunStatus
 

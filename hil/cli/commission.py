@@ -14,22 +14,12 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from hil.cli.args import ExitCode, add_bus_args, add_parser, add_profile_args
+from hil.cli.bus import multicast_hops_for, open_bus
 from hil.cli.check import master_setup, rig_nodes_text
-from hil.cli.common import (
-    ExitCode,
-    Outputs,
-    add_bus_args,
-    add_parser,
-    add_profile_args,
-    check_new_run_folder,
-    file_hashes,
-    make_console,
-    multicast_hops_for,
-    open_bus,
-    out_dir,
-    utc_iso,
-)
+from hil.cli.console import make_console
 from hil.profile.load import load_actuation, load_check, load_simrig
+from hil.record.outputs import Outputs, check_new_run_folder, file_hashes, out_dir, utc_iso
 
 #: The report's file names in the commissioning's folder.
 REPORT_JSON, REPORT_HTML = "commission.json", "commission.html"
@@ -248,7 +238,7 @@ def cmd_commission(args: argparse.Namespace) -> int:
                                                 "bitrate_bps": bitrate,
                                                 "multicast_hops": multicast_hops_for(args.interface,
                                                                                      args.multicast_hops)}}
-    out = out_dir(args, "commission")
+    out = out_dir(args.out, "commission")
     console.print(f"emacheck commission: {rig_nodes_text(rig)} on {context['bus']['interface']}:"
                   f"{context['bus']['channel']}; folder {out}")
     try:

@@ -6,7 +6,9 @@ import argparse
 import time
 from pathlib import Path
 
-from hil.cli.common import add_parser, add_recording_args, history_url_type, make_console, outputs_for
+from hil.cli.args import add_parser, add_recording_args, history_url_type
+from hil.cli.console import make_console
+from hil.record.outputs import outputs_for
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
@@ -174,7 +176,7 @@ def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
     t0 = time.perf_counter()
     hist = None
     if str(args.reference) == "history":
-        from hil.cli.history import history_url_for
+        from hil.cli.history_glue import history_url_for
         ref, hist = reference_from_history(path, history_url_for(args.history, args.profile), args.allow_other_serials)
     else:
         ref = Path(args.reference)

@@ -12,32 +12,23 @@ from pathlib import Path
 from rich.console import Console
 
 from hil.cli.analysis_fork import AnalysisFork
+from hil.cli.args import add_history_args, add_parser, add_profile_args, add_trace_args
 from hil.cli.check import (
     canopen_check,
     master_setup,
     record_can_stats,
-    result_after,
     rig_hashes,
     rig_meta,
     rig_nodes_text,
     truth_dict,
     worn_simrig,
 )
-from hil.cli.common import (
-    add_history_args,
-    add_parser,
-    add_profile_args,
-    add_trace_args,
-    check_new_run_folder,
-    file_hashes,
-    installation,
-    make_console,
-    out_dir,
-    record_history,
-    refuse_foreign_history,
-)
+from hil.cli.console import make_console
+from hil.cli.history_glue import installation, record_history, refuse_foreign_history
+from hil.cli.result import result_after
 from hil.master.stalls import EVERY_S_MAX, EVERY_S_MIN, STALL_MS_MAX
 from hil.profile.load import load_actuation, load_check, load_simrig, snapshot
+from hil.record.outputs import check_new_run_folder, file_hashes, out_dir
 from hil.record.runfolder import MetaWriter
 from hil.record.runrecord import Attribution, BusLoad, RunMode, start_record
 
@@ -161,7 +152,7 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     refuse_foreign_history(args, act, simulated=True)
     check_new_run_folder(args.out)
     rig = master_setup(act, args.profile, args.eds, check)  # a bad EDS, map or sensor: refused before a run folder
-    out = out_dir(args, "dry-run")
+    out = out_dir(args.out, "dry-run")
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
     trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),
              "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim), "wear": wear}

@@ -8,15 +8,10 @@ import json
 import sys
 from pathlib import Path
 
-from hil.cli.common import (
-    EPILOG,
-    ExitCode,
-    add_parser,
-    fresh_outputs,
-    history_url,
-    history_url_type,
-    make_console,
-)
+from hil.cli.args import EPILOG, ExitCode, add_parser, history_url_type
+from hil.cli.console import make_console
+from hil.cli.history_glue import history_url_for
+from hil.record.outputs import fresh_outputs
 
 
 def _serial(text: str) -> int:
@@ -29,20 +24,11 @@ def _serial(text: str) -> int:
     return v
 
 
-def history_url_for(url: str | None, profile: Path | None) -> str:
-    """``--history``, else the actuation profile's ``history.url``, else the user's SQLite file."""
-    if url:
-        return url  # no profile to read
-    from hil.profile.load import load_actuation
-
-    return history_url(None, load_actuation(profile))
-
-
 def cmd_history(args: argparse.Namespace) -> int:
     """``emacheck history [--history URL] [--actuator SERIAL] [--aircraft REG] [--json] [--out DIR]``."""
     from hil.history.store import HistoryStore
     from hil.history.trends import build_series, history_document
-    from hil.history.url import masked
+    from hil.profile.history_url import masked
 
     url = history_url_for(args.history, args.profile)
     filters = {"actuator": args.actuator, "aircraft": args.aircraft}
@@ -147,9 +133,9 @@ def cmd_sync(args: argparse.Namespace) -> int:
     """``emacheck history sync RUN_FOLDER...``: record their results (each exactly once)."""
     from rich.markup import escape
 
-    from hil.history.record import sync
     from hil.history.store import HistoryStore
-    from hil.history.url import masked
+    from hil.history.sync import sync
+    from hil.profile.history_url import masked
 
     console = make_console()
     url = history_url_for(getattr(args, "sync_history", None) or args.history,

@@ -18,7 +18,8 @@ from rich import box
 from rich.markup import escape
 from rich.table import Table
 
-from hil.cli.common import ExitCode, add_eds_arg, add_parser, make_console
+from hil.cli.args import ExitCode, add_eds_arg, add_parser
+from hil.cli.console import make_console
 
 
 def _layout_rows(rig) -> list[dict]:

@@ -5,17 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hil.cli.check import (
-    canopen_check,
-    master_setup,
-    page_faults,
-    record_can_stats,
-    result_after,
-    rig_hashes,
-    rig_meta,
-    rig_nodes_text,
-)
-from hil.cli.common import (
+from hil.cli.args import (
     ExitCode,
     add_bus_args,
     add_cpu_latency_arg,
@@ -23,18 +13,23 @@ from hil.cli.common import (
     add_parser,
     add_profile_args,
     add_trace_args,
-    check_new_run_folder,
-    file_hashes,
-    installation,
-    make_console,
-    multicast_hops_for,
-    open_bus,
-    out_dir,
-    record_history,
-    refuse_foreign_history,
     rt_priority_arg,
 )
+from hil.cli.bus import multicast_hops_for, open_bus
+from hil.cli.check import (
+    canopen_check,
+    master_setup,
+    page_faults,
+    record_can_stats,
+    rig_hashes,
+    rig_meta,
+    rig_nodes_text,
+)
+from hil.cli.console import make_console
+from hil.cli.history_glue import installation, record_history, refuse_foreign_history
+from hil.cli.result import result_after
 from hil.profile.load import load_actuation, load_check
+from hil.record.outputs import check_new_run_folder, file_hashes, out_dir
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -62,7 +57,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     # (virtual: the SYNC task's frames are part of the traffic the master follows)
     bus = open_bus(args.interface, args.channel, bitrate, receive_own_messages=args.interface == "virtual",
                    multicast_hops=args.multicast_hops)
-    out = out_dir(args, "run")
+    out = out_dir(args.out, "run")
     out.mkdir(parents=True, exist_ok=True)
     transport = BusTransport(bus, act.timing.sync_period_s)
     master = MasterCore(act, rig.plan, forces=(check.calibration.opposing_force_N, check.safety.max_force_N),

@@ -11,29 +11,20 @@ from rich.console import Console
 from rich.table import Table
 
 from blf.signals import CHANNELS
-from hil.cli.check import exit_for, trace_of
-from hil.cli.common import (
-    Outputs,
-    actuation_for,
-    add_history_args,
-    add_parser,
-    add_recording_args,
-    add_trace_args,
-    installation,
-    load_recording,
-    make_console,
-    outputs_for,
-    record_history,
-    refuse_foreign_history,
-)
+from hil.cli.args import add_history_args, add_parser, add_recording_args, add_trace_args
+from hil.cli.console import make_console
+from hil.cli.history_glue import installation, record_history, refuse_foreign_history
+from hil.cli.result import exit_for, trace_of
 from hil.errors import RecordingError
+from hil.record.outputs import Outputs, outputs_for
+from hil.record.recording import actuation_for, load_recording
 from hil.record.runfolder import read_record, resolve_recording
 
 
 def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) -> None:
     """The BLFserv result as a table on the console: per channel the reading with U, its traversals,
     the limit, margin and verdict (truth beside it when known)."""
-    from hil.cli.check import styled
+    from hil.cli.console import styled
     from hil.report.shell import fmt
 
     truth = data.get("truth")

@@ -6,16 +6,9 @@ import argparse
 import signal
 from pathlib import Path
 
+from hil.cli.args import add_bus_args, add_cpu_latency_arg, add_eds_arg, add_parser, add_seed_arg, rt_priority_arg
+from hil.cli.bus import open_bus
 from hil.cli.check import rig_nodes_text
-from hil.cli.common import (
-    add_bus_args,
-    add_cpu_latency_arg,
-    add_eds_arg,
-    add_parser,
-    add_seed_arg,
-    open_bus,
-    rt_priority_arg,
-)
 from hil.cli.realtime import prepare_realtime
 from hil.record.runfolder import create_json
 

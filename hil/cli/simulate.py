@@ -6,27 +6,13 @@ import argparse
 import time
 from pathlib import Path
 
-from hil.cli.check import (
-    LiveProgress,
-    refuse_shared_serial,
-    result_after,
-    simulated_identity,
-    truth_dict,
-    worn_simrig,
-)
-from hil.cli.common import (
-    add_history_args,
-    add_parser,
-    add_profile_args,
-    add_trace_args,
-    file_hashes,
-    installation,
-    make_console,
-    out_dir,
-    record_history,
-    refuse_foreign_history,
-)
+from hil.cli.args import add_history_args, add_parser, add_profile_args, add_trace_args
+from hil.cli.check import refuse_shared_serial, simulated_identity, truth_dict, worn_simrig
+from hil.cli.console import LiveProgress, make_console
+from hil.cli.history_glue import installation, record_history, refuse_foreign_history
+from hil.cli.result import result_after
 from hil.profile.load import load_actuation, load_check, load_simrig, snapshot
+from hil.record.outputs import file_hashes, out_dir
 from hil.record.runfolder import MetaWriter, open_new
 from hil.record.runrecord import Attribution, RunMode, RunStatus, start_record
 
@@ -49,7 +35,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     refuse_shared_serial(act, simrig, args.sim)
     refuse_foreign_history(args, act, simulated=True)
     seed = simrig.seed if args.seed is None else args.seed
-    out = out_dir(args, "simulate")
+    out = out_dir(args.out, "simulate")
     simrig, wear = worn_simrig(simrig, args.flight_hours, seed)
     rng = np.random.default_rng(seed)
     plant = RigPlant(simrig.params, rng)
@@ -89,7 +75,7 @@ def simulate_scenario(args: argparse.Namespace) -> int:
     simrig = load_simrig(args.sim)
     refuse_shared_serial(act, simrig, args.sim)
     seed = simrig.seed if args.seed is None else args.seed
-    out = out_dir(args, f"simulate-{args.scenario}")
+    out = out_dir(args.out, f"simulate-{args.scenario}")
     rng = np.random.default_rng(seed)
     params = simrig.params
     console.print(f"emacheck simulate --scenario {args.scenario}: {SCENARIOS[args.scenario]}; seed {seed}")

@@ -9,11 +9,13 @@ docs/history.md.
 
 Modules:
 
-* :mod:`hil.history.errors`: the typed errors (no database library imported);
-* :mod:`hil.history.url`: ``--history`` URLs, the default file (no database library);
+* the typed errors: :class:`hil.errors.HistoryError` and its two kinds (no database library imported);
+* :mod:`hil.profile.history_url`: ``--history`` URLs (the profile's ``history.url``), the default file (no
+  database library);
 * :mod:`hil.history.schema`: the tables (SQLAlchemy Core) and the versioned migrations;
 * :mod:`hil.history.store`: :class:`~hil.history.store.HistoryStore`: open, migrate, add, query;
-* :mod:`hil.history.record`: a result.json / serv.json -> a record; recording after a check; sync;
+* :mod:`hil.history.record`: a result.json / serv.json -> a record (:class:`~hil.history.record.CheckRecord`);
+* :mod:`hil.history.sync`: records into a store: after a check (never raises), ``emacheck history sync``;
 * :mod:`hil.history.trends`: series per actuator and channel, steps, fits -> the history document.
 
 Nothing here is imported by ``emacheck run`` before its cyclic loop ends: the

@@ -1,7 +1,7 @@
 """Whose database a history file is, looked at before anything is written to it.
 
 The history writes only to its own database: an SQLite file that holds another program's tables and no
-``emacheck_schema`` is refused (:class:`~hil.history.errors.HistoryInputError`, exit status 3), by a
+``emacheck_schema`` is refused (:class:`~hil.errors.HistoryInputError`, exit status 3), by a
 command that records and by ``emacheck history`` alike, and is left exactly as it was. The file is read
 with the standard library's sqlite3, read-only and immutable (no lock, no journal, no side file), so
 ``run``, ``analyze`` and ``serv`` can refuse a foreign ``--history`` before the check, without importing
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hil.history.errors import HistoryInputError
-from hil.history.url import dialect, masked, sqlite_path
+from hil.errors import HistoryInputError
+from hil.profile.history_url import dialect, masked, sqlite_path
 
 #: the version table: a database holding it is an emacheck history
 SCHEMA_TABLE = "emacheck_schema"

@@ -9,9 +9,9 @@ PostgreSQL serialises the unique result key), and a writer killed mid-insert
 leaves the database as it was before that check. A result already recorded
 (same SHA-256) is not recorded again.
 
-Errors come out as :class:`hil.history.errors.HistoryInputError` (exit 3: a
+Errors come out as :class:`hil.errors.HistoryInputError` (exit 3: a
 corrupt or foreign SQLite file, a refused login, a schema newer than this
-emacheck) or :class:`hil.history.errors.HistoryUnavailableError` (exit 2:
+emacheck) or :class:`hil.errors.HistoryUnavailableError` (exit 2:
 server down or unreachable, SQLite file locked), each one line naming the
 database with its password hidden.
 """
@@ -28,11 +28,11 @@ import sqlalchemy as sa
 from sqlalchemy import exc as sa_exc
 
 from hil import __version__
+from hil.errors import HistoryError, HistoryInputError, HistoryUnavailableError
 from hil.history import guard
 from hil.history import schema as S
-from hil.history.errors import HistoryError, HistoryInputError, HistoryUnavailableError
 from hil.history.record import rank
-from hil.history.url import check_url, dialect, masked, sqlite_path
+from hil.profile.history_url import check_url, dialect, masked, sqlite_path
 
 if TYPE_CHECKING:  # (record imports no store)
     from hil.history.record import CheckRecord
@@ -54,7 +54,7 @@ class HistoryStore:
     Parameters
     ----------
     url : str
-        ``sqlite:///PATH`` or ``postgresql://...`` (:func:`hil.history.url.check_url`).
+        ``sqlite:///PATH`` or ``postgresql://...`` (:func:`hil.profile.history_url.check_url`).
     timeout_s : float, optional
         SQLite busy timeout and PostgreSQL connect timeout [s], unless the URL
         sets its own (``?timeout=`` for SQLite, ``?connect_timeout=`` for PostgreSQL).

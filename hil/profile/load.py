@@ -114,8 +114,8 @@ def _consumer_time(act: Actuation, fname: str) -> None:
 
 def _history_url(act: Actuation, fname: str) -> None:
     if act.history.url:
-        from hil.history.errors import HistoryInputError
-        from hil.history.url import check_url
+        from hil.errors import HistoryInputError
+        from hil.profile.history_url import check_url
 
         try:
             check_url(act.history.url)

@@ -25,13 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from hil.canopen.process import MEASURED_CHANNELS, Sample, Setpoint
+from hil.canopen.process import Sample, Setpoint
 from hil.errors import IncompleteRecordingError, OutputError, RecordingError
 from hil.record.runrecord import META_NAME, RunRecord
-
-SIGNAL_COLUMNS = tuple(name for name, _ in MEASURED_CHANNELS)
-EXTRA_COLUMNS = ("mode1", "sp1", "mode2", "sp2", "step")
-COLUMN_UNITS = dict(MEASURED_CHANNELS)
+from hil.record.signals_csv import EXTRA_COLUMNS, SIGNAL_COLUMNS
 
 
 def write_json_atomic(path: Path, obj: Any) -> None:

@@ -29,7 +29,15 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.canopen.process import MEASURED_CHANNELS
 from hil.errors import IncompleteRecordingError, RecordingError, UnusableRecordingError
+
+#: the measured channels of signals.csv, in the order written (units: :data:`COLUMN_UNITS`)
+SIGNAL_COLUMNS = tuple(name for name, _ in MEASURED_CHANNELS)
+#: the columns a run's signals.csv holds after them: the drives' modes and set points, the check's step
+EXTRA_COLUMNS = ("mode1", "sp1", "mode2", "sp2", "step")
+#: column -> unit
+COLUMN_UNITS = dict(MEASURED_CHANNELS)
 
 #: lines parsed at a time (about 7 MB of text for the 7-column CSV)
 CHUNK_LINES = 100_000
@@ -95,7 +103,6 @@ class _Columns:
 
 def _line_errors(path: Path, lines: list[str], first_line: int, ncol: int, cols: dict[str, int]) -> None:
     """Parse ``lines`` one by one as the numbers of ``cols``; raise naming the first bad line."""
-    from hil.record.runfolder import COLUMN_UNITS
 
     for ln, line in enumerate(lines, start=first_line):
         cells = line.rstrip("\n").split(",")
@@ -139,7 +146,6 @@ def _parse_chunk(path: Path, lines: list[str], first_line: int, ncol: int, cols:
 
 
 def _header(path: Path, first: str):
-    from hil.record.runfolder import COLUMN_UNITS, SIGNAL_COLUMNS
 
     header = [h.strip() for h in next(csv.reader(io.StringIO(first)))] if first.strip() else []
     missing = [c for c in SIGNAL_COLUMNS if c not in header]
@@ -250,7 +256,6 @@ def refuse_unusable(sig, *, channels: tuple[str, ...], min_rows: int, what: str)
     the signal, the caller the file."""
     if sig.n < min_rows:
         raise IncompleteRecordingError(f"recording too short for {what}: {sig.n} samples (need >= {min_rows})")
-    from hil.record.runfolder import COLUMN_UNITS
 
     flat = [c for c in channels if np.ptp(getattr(sig, c)) == 0.0]
     if flat:

@@ -94,8 +94,9 @@ def fill(url: str, pairs: int, checks: int) -> float:
 
 def speed(url: str, pairs: int, checks: int) -> dict:
     from hil.cli import main as cli
-    from hil.history.record import record_after_check, record_from_result
+    from hil.history.record import record_from_result
     from hil.history.store import HistoryStore
+    from hil.history.sync import record_after_check
     from support.wear import wear_results
 
     res = {"fill_s": round(fill(url, pairs, checks), 1)}
@@ -160,7 +161,8 @@ def e2e_seed(seed: int) -> dict:
     """12 checks of one pair over 3000 FH through the plant and BLFmaint, recorded; the trends' coverage."""
     from hil.analysis.maint import analyze_signals, result_dict
     from hil.check.runner import PlantLink, run_check
-    from hil.cli.check import simulated_identity, trace_of, truth_dict
+    from hil.cli.check import simulated_identity, truth_dict
+    from hil.cli.result import trace_of
     from hil.history.record import record_from_result
     from hil.history.store import HistoryStore
     from hil.history.trends import build_series, history_document

@@ -37,8 +37,8 @@ def main(argv: list[str] | None = None) -> int:
 
     import hil.report.maint as rm
     import hil.report.shell as shell
-    from hil.cli.check import analysed
-    from hil.cli.common import actuation_for
+    from hil.cli.result import analysed
+    from hil.record.recording import actuation_for
     from hil.record.runfolder import read_record
 
     meta = read_record(args.run_dir)

@@ -197,8 +197,8 @@ def floors_for(new_path: Path, profile: Path | None, check_path: Path | None) ->
     import dataclasses
 
     from hil.analysis.diagnose.load import check_for
-    from hil.cli.common import actuation_for
     from hil.profile.load import load_check
+    from hil.record.recording import actuation_for
     from hil.record.runfolder import read_record, resolve_recording
     _, run_dir = resolve_recording(new_path)
     meta = read_record(run_dir)

@@ -64,7 +64,7 @@ def reference_from_history(new: Path, url: str, allow: bool) -> tuple[Path, dict
     """
     from hil.history.record import load_result, record_from_result
     from hil.history.store import HistoryStore
-    from hil.history.url import masked
+    from hil.profile.history_url import masked
     res = Path(new) / "result.json"
     if not Path(new).is_dir() or not res.is_file():
         raise RecordingError(f"--reference history: {new} is not a run folder with a result.json (the actuators' "

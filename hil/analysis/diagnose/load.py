@@ -35,8 +35,8 @@ def load_dual(path: Path, profile: Path | None):
     (``.log``, ``.log.gz``), and its sample period (s)."""
     from blf.errors import AnalysisError
     from hil.analysis.maint import check_units, find_segments
-    from hil.cli.common import actuation_for
     from hil.record.canlog import decode_can_log
+    from hil.record.recording import actuation_for
     from hil.record.runfolder import is_can_log, read_record, read_signals, resolve_recording
     from hil.record.signals_csv import CHECK_CHANNELS, refuse_jumps, refuse_unusable
     from sim.replay_model import DualEmaReplay

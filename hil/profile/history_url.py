@@ -13,7 +13,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from hil.history.errors import HistoryInputError
+from hil.errors import HistoryInputError
 
 #: the file name of the default history in the user's data directory
 DEFAULT_FILE = "history.sqlite"

@@ -1,0 +1,61 @@
+"""A recording loaded for an analysis: its signals (a signals CSV, or a CAN log decoded with the run's step
+times), refused when unusable, and the actuation profile it is analysed with.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hil.profile.config import Actuation
+from hil.profile.load import actuation_from_snapshot, load_actuation
+from hil.record.runfolder import is_can_log, read_signals
+from hil.record.runrecord import RunRecord
+
+
+def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None, *,
+                   channels: tuple[str, ...] = (), min_rows: int = 2, what: str = "the analysis",
+                   jumps: bool = True):
+    """Signals from a CSV, or decoded from a raw CAN log (``*.log``, ``*.log.gz``), step labels from
+    the run record's step times. Refused with a jump in time or position (a RecordingError naming the
+    file and the line or sample), with fewer than ``min_rows`` rows or a constant signal among
+    ``channels`` (an IncompleteRecordingError naming the signal; :mod:`hil.record.signals_csv`). ``jumps``
+    False: not checked for jumps (a run that aborted: the sensor fault that stopped it may be one)."""
+    from hil.record.signals_csv import refuse_jumps, refuse_unusable
+
+    sig = read_signals(sig_path) if not is_can_log(sig_path) else _decoded(sig_path, act, meta)
+    refuse_unusable(sig, channels=channels, min_rows=min_rows, what=what)
+    if jumps:
+        refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta,
+                     sync_period_s=act.timing.sync_period_s)
+    return sig
+
+
+def _decoded(sig_path: Path, act: Actuation, meta: RunRecord | None):
+    import dataclasses
+
+    import numpy as np
+
+    from hil.record.canlog import decode_can_log
+
+    dec = decode_can_log(sig_path, act, meta)
+    sig = dec.signals
+    steps = meta.steps if meta is not None else None
+    if steps:
+        label = np.full(sig.n, "", dtype=object)
+        for s in steps:
+            t1 = s.t_end_s if s.t_end_s is not None else np.inf
+            label[(sig.t >= s.t_start_s - 1e-9) & (sig.t < t1 - 1e-9)] = s.name
+        sig = dataclasses.replace(sig, step=label.astype(str),
+                                  notes=sig.notes + ("step labels from meta.json step times",))
+    return sig
+
+
+def actuation_for(profile: Path | None, meta: RunRecord | None) -> Actuation:
+    """The actuation to analyse a recording with: ``--profile`` if given, else the run folder's
+    snapshot (what the run used), else the shipped profile."""
+    if profile is not None:
+        return load_actuation(profile)
+    snap = meta.profiles.actuation if meta is not None and meta.profiles is not None else None
+    if snap is not None:
+        return actuation_from_snapshot(snap)
+    return load_actuation(None)
