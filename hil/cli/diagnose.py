@@ -1,74 +1,87 @@
-"""``emacheck diagnose``: simulation versus recording; locate the mismatch, name the missing physics, fit it."""
+"""``emacheck diagnose``: simulation versus recording; locate the mismatch, name the missing physics, fit it.
+
+The arguments become one request (:class:`hil.analysis.diagnose.request.DiagnoseRequest`), the analysis
+answers it in one call (:func:`hil.analysis.diagnose.request.diagnose_recording`; everything is checked
+before anything is written); here its outcome is written (diagnosis.json, the report) and said.
+"""
 
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 from hil.cli.args import add_parser, add_recording_args, history_url_type
 from hil.cli.console import make_console
 from hil.record.outputs import outputs_for
 
+#: exit status of a diagnosis whose effort is not trusted: inconclusive, the reason in diagnosis.json
+UNTRUSTED_EXIT = 5
+_NAMES = ("diagnosis.json", "diagnosis_report.html")
+
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    """``emacheck diagnose RECORDING [--profile] [--out] [--model]``."""
-
-    from blf.diagnose import diagnose
-    from blf.errors import AnalysisError, InputError
-    from hil.analysis.diagnose.load import load_model
-    from hil.analysis.diagnose.results import diagnosis_dict
-    from hil.analysis.diagnose.single_axis import single_axis_model
-    from hil.errors import RecordingError
-    from hil.report.diagnose import write_report
+    """``emacheck diagnose RECORDING [--profile] [--out] [--model] [--reference HEALTHY|history]``."""
+    from hil.analysis.diagnose.request import diagnose_recording
     console = make_console()
-    path = Path(args.recording)
-    opts = _axis_options(args)
-    if args.reference is not None:
-        return _cmd_reference(args, path, opts, console)
-    t0 = time.perf_counter()
-    axis = _single_axis(args, path)  # read once: the effort check and the model are made of the same arrays
-    read_s = time.perf_counter() - t0
-    effort = _model_effort(args, axis, opts)
-    if effort is not None and not effort["trusted"]:
-        from hil.analysis.diagnose.results import untrusted_dict
-        outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
-                              ("diagnosis.json", "diagnosis_report.html"))
-        outputs.write_json("diagnosis.json", untrusted_dict(effort))
-        console.print(f"[bold]effort not trusted, not diagnosed[/bold]: {effort['words']}; written "
-                      f"{outputs.path('diagnosis.json')}")
-        return 5  # inconclusive: the reason is in diagnosis.json (README, Exit status)
-    t0 = time.perf_counter() - read_s  # (the diagnosis's time includes reading the recording, as it did)
-    try:
-        model, period = single_axis_model(axis, opts) if axis is not None else \
-            load_model(path, args.model, args.profile, opts)
-        d = diagnose(model, period, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
-    except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input
-        raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
-    secs = time.perf_counter() - t0
+    req = _request(args)
+    out = diagnose_recording(req, progress=None if args.quiet else (lambda s: console.print(f"  {s}")))
     # the folder only once there is something to write into it (a refused recording leaves none)
-    outputs = outputs_for(args.out, path, path if path.is_dir() else None, "diagnose",
-                          ("diagnosis.json", "diagnosis_report.html"))
-    data = diagnosis_dict(d, args.model, secs)
-    from hil.analysis.diagnose.results import identifiability_dict
-    ident = identifiability_dict(model)
-    if args.model == "single-axis" and args.force_floor_N is not None:
-        from hil.analysis.diagnose.against_model import apply_force_floor, effect_sizes_N
-        data = apply_force_floor(data, effect_sizes_N(model, d), args.force_floor_N)
-    if ident is not None:
-        mask = ident.pop("mask", None)
-        data["identifiability"] = ident
-        if mask is not None:
-            data["mask"] = mask
-    if effort is not None:
-        data["effort"] = effort
-    outputs.write_json("diagnosis.json", data)
+    run_dir = req.recording if out.kind == "model" and req.recording.is_dir() else None
+    outputs = outputs_for(args.out, req.recording, run_dir, "diagnose", _NAMES)
+    outputs.write_json("diagnosis.json", out.data)
+    written = outputs.path("diagnosis.json")
+    if out.untrusted and out.kind == "model":
+        console.print(f"[bold]effort not trusted, not diagnosed[/bold]: {out.data['effort']['words']}; written "
+                      f"{written}")
+        return UNTRUSTED_EXIT
     if not args.no_report:
-        outputs.write_with("diagnosis_report.html", lambda p: write_report(
-            p, model, d, data, json_name=outputs.path("diagnosis.json").name))
+        outputs.write_with("diagnosis_report.html", lambda p: _write_report(p, out, written.name))
+    {"model": _say_model, "axis_reference": _say_axis_reference, "dual_reference": _say_dual_reference}[out.kind](
+        console, out, args, written)
+    return UNTRUSTED_EXIT if out.untrusted else 0
+
+
+def _request(args: argparse.Namespace):
+    """The request of the arguments; a number that cannot be is refused (exit 3) naming its option."""
+    from hil.analysis.diagnose.request import DiagnoseRequest
+    from hil.analysis.diagnose.single_axis import FORCE_FLOOR_N, AxisOptions
+    from hil.errors import RecordingError
+    for name in ("current_per_force", "screw_lead_m", "force_floor_N"):
+        val = getattr(args, name)
+        if val is not None and not val > 0:
+            raise RecordingError(f"--{name.replace('_', '-')}: must be > 0; got {val}")
+    axis = AxisOptions(current_law=args.current_law, current_a_per_N=args.current_per_force,
+                       screw_lead_m=args.screw_lead_m,
+                       force_floor_N=FORCE_FLOOR_N if args.force_floor_N is None else args.force_floor_N)
+    from_history = str(args.reference) == "history"
+    url = None
+    if from_history and args.model == "dual-ema":
+        from hil.cli.history_glue import history_url_for
+        url = history_url_for(args.history, args.profile)
+    return DiagnoseRequest(Path(args.recording), args.model, args.profile, axis, args.force_floor_N is not None,
+                           None if args.reference is None or from_history else args.reference, from_history, url,
+                           args.check, args.allow_other_serials)
+
+
+def _write_report(path: Path, out, json_name: str) -> None:
+    if out.kind == "dual_reference":
+        from hil.report.diagnose_ref import write_dual_reference_report
+        write_dual_reference_report(path, out.data, out.fits, json_name=json_name)
+    elif out.kind == "axis_reference":
+        from hil.report.diagnose import write_reference_report
+        write_reference_report(path, out.data, json_name=json_name)
+    else:
+        from hil.report.diagnose import write_report
+        write_report(path, out.model, out.diagnosis, out.data, json_name=json_name)
+
+
+def _say_model(console, out, args: argparse.Namespace, written: Path) -> None:
+    """The console's account of a diagnosis against the simulation."""
+    data, d = out.data, out.diagnosis
+    ident = data.get("identifiability") or {}
     words = {"no_mismatch": "no significant mismatch between simulation and recording",
              "explained": "mismatch explained", "unexplained": "mismatch NOT explained by the candidate library"}
-    console.print(f"[bold]{words[d.verdict]}[/bold] ({secs:.1f} s)")
+    console.print(f"[bold]{words[d.verdict]}[/bold] ({data['diagnosis_s']:.1f} s)")
     for e in data["effects"]:
         console.print(f"  {e['words']} ({e['name']} at {e['where']}): " + ", ".join(
             f"{k} = {v} ± {e['uncertainty'][k]}" for k, v in e["parameters"].items()))
@@ -76,9 +89,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         console.print(f"  under the floor of {args.force_floor_N:g} N, not named: {e['name']} ({e['size_N']} N)")
     if data["where"]:
         console.print("  the rest lies at: " + ", ".join(data["where"]))
-    for m in (ident or {}).get("cannot_tell_apart", []):
+    for m in ident.get("cannot_tell_apart", []):
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
-    for m in (ident or {}).get("not_candidates", []):
+    for m in ident.get("not_candidates", []):
         console.print(f"  not a candidate: {m['name']}: {m['why']}")
     if "mask" in data:
         console.print(f"  masked: {data['mask']['words']}")
@@ -86,75 +99,20 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         console.print(f"  where: {loc['channel']} {loc['t_start_s']}-{loc['t_end_s']} s ({loc['test']} test), "
                       f"{loc['regime']}")
     console.print(f"  compared in the band: {d.band.words}")
-    console.print("  residual RMS before -> after (band): " + ", ".join(
-        f"{c} {data['residual_rms_before'][c]} -> {data['residual_rms_after'][c]}"
-        for c in d.measured if d.valid[c].any()))
-    console.print("  on the held-out half (never fitted): " + ", ".join(
-        f"{c} {data['residual_rms_holdout_before'][c]} -> {data['residual_rms_holdout_after'][c]}"
-        for c in d.measured if d.valid[c].any()))
-    console.print("  held-out, raw band: " + ", ".join(
-        f"{c} {data['residual_rms_raw_holdout_before'][c]} -> {data['residual_rms_raw_holdout_after'][c]}"
-        for c in d.measured if d.valid[c].any()))
-    console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {outputs.path('diagnosis.json')}")
-    return 0
+    shown = [c for c in d.measured if d.valid[c].any()]
+    for head, before, after in (("residual RMS before -> after (band)", "residual_rms_before", "residual_rms_after"),
+                                ("on the held-out half (never fitted)", "residual_rms_holdout_before",
+                                 "residual_rms_holdout_after"),
+                                ("held-out, raw band", "residual_rms_raw_holdout_before",
+                                 "residual_rms_raw_holdout_after")):
+        console.print(f"  {head}: " + ", ".join(f"{c} {data[before][c]} -> {data[after][c]}" for c in shown))
+    console.print(f"  BIC {data['ic_before']} -> {data['ic_after']}; written {written}")
 
 
-def _single_axis(args: argparse.Namespace, path: Path):
-    """The single-axis recording (:func:`hil.analysis.diagnose.single_axis.read_axis`), read once for the effort
-    check and the model; None for the dual-EMA model."""
-    if args.model != "single-axis":
-        return None
-    from hil.analysis.diagnose.single_axis import read_axis
-    return read_axis(path)
-
-
-def _model_effort(args: argparse.Namespace, axis, opts):
-    """Single axis (``axis``: its recording) with a load column, no reference: whether its effort sees the
-    load (None otherwise: no load column, an EMPS ``.mat`` has none)."""
-    if axis is None:
-        return None
-    from hil.analysis.diagnose.single_axis import AxisOptions, model_effort_check
-    floor = args.force_floor_N if args.force_floor_N is not None else AxisOptions().force_floor_N
-    import dataclasses
-    return model_effort_check(axis, dataclasses.replace(opts, force_floor_N=floor))
-
-
-def _axis_options(args: argparse.Namespace):
-    from hil.analysis.diagnose.single_axis import FORCE_FLOOR_N, AxisOptions
-    from hil.errors import RecordingError
-    for name in ("current_per_force", "screw_lead_m", "force_floor_N"):
-        val = getattr(args, name)
-        if val is not None and not val > 0:
-            raise RecordingError(f"--{name.replace('_', '-')}: must be > 0; got {val}")
-    return AxisOptions(current_law=args.current_law, current_a_per_N=args.current_per_force,
-                       screw_lead_m=args.screw_lead_m,
-                       force_floor_N=FORCE_FLOOR_N if args.force_floor_N is None else args.force_floor_N)
-
-
-def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
-    """``--reference``: single axis against a healthy recording; everything checked before anything is written."""
-    from hil.analysis.diagnose.axis_reference import reference_diagnosis
-    from hil.errors import RecordingError
-    if str(args.reference) == "history":
-        if args.model != "dual-ema":
-            raise RecordingError("--reference history: the wear history holds dual-EMA checks; a single axis needs "
-                                 "its reference recording")
-        return _cmd_dual_reference(args, path, console)
-    if not Path(args.reference).exists():
-        raise RecordingError(f"--reference {args.reference}: no such file")
-    if args.model != "single-axis":
-        return _cmd_dual_reference(args, path, console)
-    t0 = time.perf_counter()
-    data = reference_diagnosis(path, Path(args.reference), opts)
-    data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
-    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json", "diagnosis_report.html"))
-    outputs.write_json("diagnosis.json", data)
-    if not args.no_report:
-        from hil.report.diagnose import write_reference_report
-        outputs.write_with("diagnosis_report.html", lambda p: write_reference_report(
-            p, data, json_name=outputs.path("diagnosis.json").name))
-    untrusted = data["verdict"] == "untrusted_effort"
-    head = ("effort not trusted, not diagnosed" if untrusted else
+def _say_axis_reference(console, out, args: argparse.Namespace, written: Path) -> None:
+    """The console's account of a single axis against a reference recording."""
+    data = out.data
+    head = ("effort not trusted, not diagnosed" if out.untrusted else
             "changes named" if data["effects"] else "no change above its floor")
     console.print(f"[bold]{head}[/bold] against {args.reference} ({data['diagnosis_s']:.1f} s); effort: "
                   f"{data['conversion']}")
@@ -164,43 +122,21 @@ def _cmd_reference(args: argparse.Namespace, path: Path, opts, console) -> int:
     for m in data["identifiability"]["cannot_tell_apart"]:
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
     console.print(f"  masked: {data['mask']['words']}")
-    console.print(f"  written {outputs.path('diagnosis.json')}")
-    return 5 if untrusted else 0  # inconclusive: the reason is in diagnosis.json (README, Exit status)
+    console.print(f"  written {written}")
 
 
-def _cmd_dual_reference(args: argparse.Namespace, path: Path, console) -> int:
-    """``--reference`` with the dual-EMA model: each nominal parameter and library effect against the reference's."""
-    from hil.analysis.diagnose.dual_reference import dual_reference_diagnosis
-    from hil.analysis.diagnose.floors import floors_for
-    from hil.analysis.diagnose.history_reference import reference_from_history, refuse_other_serials
-    t0 = time.perf_counter()
-    hist = None
-    if str(args.reference) == "history":
-        from hil.cli.history_glue import history_url_for
-        ref, hist = reference_from_history(path, history_url_for(args.history, args.profile), args.allow_other_serials)
-    else:
-        ref = Path(args.reference)
-    serials = refuse_other_serials(path, ref, args.allow_other_serials)
-    floors, source = floors_for(path, args.profile, args.check)
-    data, fits = dual_reference_diagnosis(path, ref, args.profile, floors, source)
-    data["serials"] = serials
-    if hist is not None:
-        data["reference_history"] = hist
-    data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
-    outputs = outputs_for(args.out, path, None, "diagnose", ("diagnosis.json", "diagnosis_report.html"))
-    outputs.write_json("diagnosis.json", data)
-    if not args.no_report:
-        from hil.report.diagnose_ref import write_dual_reference_report
-        outputs.write_with("diagnosis_report.html", lambda p: write_dual_reference_report(
-            p, data, fits, json_name=outputs.path("diagnosis.json").name))
+def _say_dual_reference(console, out, args: argparse.Namespace, written: Path) -> None:
+    """The console's account of a dual-EMA check against a reference."""
+    data = out.data
+    hist = data.get("reference_history")
     console.print(f"[bold]{'changes named' if data['effects'] else 'no change above its floor'}[/bold] against "
-                  f"{ref} ({data['diagnosis_s']:.1f} s)" + (f"; {hist['words']}" if hist else ""))
+                  f"{data['reference']['recording']} ({data['diagnosis_s']:.1f} s)"
+                  + (f"; {hist['words']}" if hist else ""))
     if data["verdict"] == "unexplained":
         console.print(f"  [bold]unexplained[/bold]: {data['unexplained']['words']}")
     for c in data["changes"]:
         console.print(f"  {c['parameter']} ({c['where']}): {c['words']}")
-    console.print(f"  written {outputs.path('diagnosis.json')}")
-    return 0
+    console.print(f"  written {written}")
 
 
 def register(sub) -> None:

@@ -1,10 +1,65 @@
-"""A recording against the simulation (``emacheck diagnose RECORDING``, no reference): its diagnosis.json."""
+"""A recording against the simulation (``emacheck diagnose RECORDING``, no reference): its diagnosis.
+
+The dual-EMA model replays the recording (:mod:`hil.analysis.diagnose.load`); a single axis is read and,
+with a known load, its effort checked against it first (:mod:`hil.analysis.diagnose.single_axis`): an
+effort that does not see its load is not diagnosed. The core is :func:`blf.diagnose.diagnose`; with a
+stated force floor a single axis's effects under it are named no more (:func:`apply_force_floor`).
+"""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+from pathlib import Path
+
 import numpy as np
 
-from hil.analysis.diagnose.results import rounded
+from hil.analysis.diagnose.results import (
+    DiagnoseOutcome,
+    diagnosis_dict,
+    identifiability_dict,
+    rounded,
+    untrusted_dict,
+)
+from hil.analysis.diagnose.single_axis import AxisOptions, model_effort_check, read_axis, single_axis_model
+from hil.errors import RecordingError
+
+
+def diagnose_against_model(path: Path, model_name: str, profile: Path | None, opts: AxisOptions,
+                           force_floor_stated: bool = False,
+                           progress: Callable[[str], None] | None = None) -> DiagnoseOutcome:
+    """diagnosis.json of a recording against the simulation, with the replay model and the diagnosis its
+    report draws; a single axis whose effort does not see its known load: the reason, nothing diagnosed
+    (verdict ``untrusted_effort``). ``force_floor_stated``: a single axis's ``opts.force_floor_N`` was
+    stated (``--force-floor-N``) and applies to its effects too."""
+    from blf.diagnose import diagnose
+    from blf.errors import AnalysisError, InputError
+    from hil.analysis.diagnose.load import load_model
+    t0 = time.perf_counter()
+    axis = read_axis(path) if model_name == "single-axis" else None  # read once: effort check and model
+    read_s = time.perf_counter() - t0
+    effort = model_effort_check(axis, opts) if axis is not None else None
+    if effort is not None and not effort["trusted"]:
+        return DiagnoseOutcome("model", untrusted_dict(effort))
+    t0 = time.perf_counter() - read_s  # (the diagnosis's time includes reading the recording)
+    try:
+        model, period = single_axis_model(axis, opts) if axis is not None else \
+            load_model(path, model_name, profile, opts)
+        d = diagnose(model, period, progress=progress)
+    except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input
+        raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
+    data = diagnosis_dict(d, model_name, time.perf_counter() - t0)
+    ident = identifiability_dict(model)
+    if model_name == "single-axis" and force_floor_stated:
+        data = apply_force_floor(data, effect_sizes_N(model, d), opts.force_floor_N)
+    if ident is not None:
+        mask = ident.pop("mask", None)
+        data["identifiability"] = ident
+        if mask is not None:
+            data["mask"] = mask
+    if effort is not None:
+        data["effort"] = effort
+    return DiagnoseOutcome("model", data, model=model, diagnosis=d)
 
 
 def effect_sizes_N(model, d) -> dict:

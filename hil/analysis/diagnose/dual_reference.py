@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.analysis.diagnose.floors import KINDS, check_speed, library_change, nominal_changes
+from hil.analysis.diagnose.floors import KINDS, check_speed, floors_for, library_change, nominal_changes
 
 
 def _active(model, d) -> tuple:
@@ -117,6 +117,30 @@ def fits_rms(f: ReferenceFits) -> dict:
         r = (f.measured[c] - pred[c])[f.valid[c]]
         return float(np.sqrt(np.mean(r ** 2)))
     return {"before": {c: rms(f.before, c) for c in f.channels}, "after": {c: rms(f.after, c) for c in f.channels}}
+
+
+def dual_reference(new_path: Path, reference: Path | None, profile: Path | None, check: Path | None = None,
+                   history_url: str | None = None, allow_other_serials: bool = False) -> tuple:
+    """``emacheck diagnose NEW --reference HEALTHY|history`` with the dual-EMA model: (diagnosis.json,
+    :class:`ReferenceFits` or None).
+
+    The reference is ``reference``, or with ``history_url`` the wear history's last check of the same
+    actuators (:func:`hil.analysis.diagnose.history_reference.reference_from_history`); a reference of other
+    actuators is refused unless ``allow_other_serials``; the floors are the check profile's
+    (:func:`hil.analysis.diagnose.floors.floors_for`, ``check``: ``--check``)."""
+    from hil.analysis.diagnose.history_reference import reference_from_history, refuse_other_serials
+    hist = None
+    if history_url is not None:
+        ref, hist = reference_from_history(new_path, history_url, allow_other_serials)
+    else:
+        ref = Path(reference)
+    serials = refuse_other_serials(new_path, ref, allow_other_serials)
+    floors, source = floors_for(new_path, profile, check)
+    data, fits = dual_reference_diagnosis(new_path, ref, profile, floors, source)
+    data["serials"] = serials
+    if hist is not None:
+        data["reference_history"] = hist
+    return data, fits
 
 
 def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | None,

@@ -1,8 +1,32 @@
 """diagnosis.json's parts (hil/schemas/diagnosis.schema.json): what a diagnosis, an identifiability and an
-effort mask are in JSON, and the figures' rounding.
+effort mask are in JSON, and the figures' rounding; the outcome of a diagnosis (its JSON and what its report
+is drawn from).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class DiagnoseOutcome:
+    """diagnosis.json (``data``) and what its report is drawn from.
+
+    ``kind``: ``"model"`` (against the simulation: ``model``, the replay model, and ``diagnosis``, its
+    :class:`blf.diagnose.Diagnosis`), ``"axis_reference"`` (a single axis against a reference recording) or
+    ``"dual_reference"`` (a dual-EMA check against a reference: ``fits``, its
+    :class:`hil.analysis.diagnose.dual_reference.ReferenceFits` or None)."""
+
+    kind: str
+    data: dict
+    model: object | None = None
+    diagnosis: object | None = None
+    fits: object | None = None
+
+    @property
+    def untrusted(self) -> bool:
+        """The effort is not trusted: nothing diagnosed (exit status 5)."""
+        return self.data["verdict"] == "untrusted_effort"
 
 
 def identifiability_dict(model) -> dict | None:
