@@ -8,7 +8,14 @@
   check sequence, the supervisor, the freshness limit) import no IO module (a bus, a thread, a clock,
   a file, a process) and of ``hil`` only the vocabulary, the errors, the profiles' dataclasses and
   one another;
-* no module of the product is longer than 700 lines;
+* the house's floors (:data:`FLOORS`): a room of ``hil`` (a sub-package or a top module), ``sim`` and ``blf``
+  imports only rooms on lower floors, never a room above it nor a sibling beside it (no import runs back up);
+* blf's wings (:data:`BLF_WINGS`): diagnose may use maint and serv, maint serv, serv neither; blf's top
+  modules (errors, validate, signals, continuity, wear) use no wing;
+* no two modules import each other, directly or round a circle;
+* no command module of ``hil.cli`` imports another command (they share the shared modules);
+* no module of the product is longer than 700 lines; none of ``blf`` and ``hil/analysis`` longer than 600, none
+  of ``hil/cli`` longer than 300;
 * no function or method of the product is longer than 100 lines, counted as the source lines of
   its body without its docstring: from the first statement after the docstring to the function's
   last line, blank and comment lines inside included (the signature, decorators and docstring are
@@ -268,3 +275,157 @@ def test_no_module_uses_another_modules_underscore_names():
     bad = [b for path in _modules() for b in _foreign_private(path.read_text(), str(path.relative_to(ROOT)))]
     assert not bad, ("underscore names used outside the module that defines them (make them documented "
                      "public hooks):\n" + "\n".join(bad))
+
+
+#: The house's floors, top down (docs/design.md): a room imports only rooms on lower floors. A module's room is
+#: the longest name here that it is or lies in; ``hil`` itself (``__version__``) is on the ground floor.
+FLOORS = (
+    ("hil.__main__",),
+    ("hil.cli",),
+    ("hil.report",),
+    ("hil.analysis", "hil.master"),
+    ("hil.history", "hil.check", "hil.sim_server"),
+    ("hil.record",),
+    ("hil.profile",),
+    ("hil.errors", "hil.transport", "sim"),
+    ("blf", "hil.forks", "hil.canopen", "hil"),
+)
+#: blf's wings, top down: a wing uses only the wings below it and blf's top modules
+BLF_WINGS = ("blf.diagnose", "blf.maint", "blf.serv")
+#: line limits stricter than MAX_LINES, by folder (issue 46)
+FOLDER_MAX_LINES = {"blf/": 600, "hil/analysis/": 600, "hil/cli/": 300}
+
+
+def _room(module: str) -> tuple[int, str] | None:
+    """(floor from the top, room) of a module of the product, None for another package's."""
+    best = None
+    for floor, rooms in enumerate(FLOORS):
+        for room in rooms:
+            if (module == room or module.startswith(room + ".")) and (best is None or len(room) > len(best[1])):
+                best = (floor, room)
+    return best
+
+
+def _runs_up(importer: str, imported: str) -> str | None:
+    """Why ``importer`` may not import ``imported`` by the floors and blf's wings, or None."""
+    a, b = _room(importer), _room(imported)
+    if a is None or b is None or a[1] == b[1]:
+        return _across_wings(importer, imported)
+    if b[0] < a[0]:
+        return f"runs back up: {a[1]} (floor {len(FLOORS) - a[0]}) imports {b[1]} (floor {len(FLOORS) - b[0]})"
+    if b[0] == a[0]:
+        return f"runs sideways: {a[1]} imports {b[1]}, a room on its own floor"
+    return _across_wings(importer, imported)
+
+
+def _wing(module: str) -> int | None:
+    return next((i for i, w in enumerate(BLF_WINGS) if module == w or module.startswith(w + ".")), None)
+
+
+def _across_wings(importer: str, imported: str) -> str | None:
+    if not (importer.startswith("blf.") and imported.startswith("blf.")):
+        return None
+    a, b = _wing(importer), _wing(imported)
+    if b is None or a == b:
+        return None
+    if a is None:
+        return f"blf's top module {importer} uses the wing {BLF_WINGS[b]}"
+    if b < a:
+        return f"blf's wing {BLF_WINGS[a]} uses {BLF_WINGS[b]}, a wing above it"
+    return None
+
+
+def test_the_floor_rule_sees_what_it_is_meant_to():
+    """The checker itself, on the imports issue 46 removed: the analysis reaching into the command line for a
+    recording's actuation, the profile into the analysis for the floors' defaults, the profile into the
+    history for its URL; a sibling; blf's wings upward and its top modules into a wing."""
+    assert _runs_up("hil.analysis.diagnose.load", "hil.cli.common")
+    assert _runs_up("hil.profile.config", "hil.analysis.diagnose.floors")
+    assert _runs_up("hil.profile.load", "hil.history.url")
+    assert _runs_up("hil.analysis.maint", "hil.master.core")
+    assert _runs_up("hil.record.runfolder", "hil.history.record")
+    assert not _runs_up("hil.analysis.diagnose.load", "hil.record.recording")
+    assert not _runs_up("hil.analysis.diagnose.dual_reference", "hil.profile.floors")
+    assert not _runs_up("hil.record.runfolder", "hil.record.signals_csv") and not _runs_up("hil.cli.run", "hil")
+    assert _runs_up("blf.serv.blfserv", "blf.maint.segments") and _runs_up("blf.maint.accuracy", "blf.diagnose.band")
+    assert _runs_up("blf.wear", "blf.maint.verdict")
+    assert not _runs_up("blf.diagnose.phases", "blf.maint.segments")
+    assert not _runs_up("blf.maint.accuracy", "blf.serv.filters") and not _runs_up("blf.maint.blfmaint", "blf.errors")
+
+
+def test_no_import_runs_back_up_or_sideways():
+    bad = []
+    for path in _modules():
+        me = _module_name(path)
+        for line, imported in _imports(path):
+            why = _runs_up(me, imported)
+            if why:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {imported}: {why}")
+    assert not bad, "\n".join(bad)
+
+
+def _is_module(name: str) -> bool:
+    rel = ROOT / Path(*name.split("."))
+    return rel.with_suffix(".py").is_file() or (rel / "__init__.py").is_file()
+
+
+def _graph() -> dict[str, set[str]]:
+    """module -> the modules of the product it imports (at its top or inside a function)."""
+    return {_module_name(p): {m for _, m in _imports(p) if m.split(".")[0] in PACKAGES and _is_module(m)
+                              and m != _module_name(p)} for p in _modules()}
+
+
+def _circle(graph: dict[str, set[str]]) -> list[str] | None:
+    """A circle of imports in ``graph``, or None."""
+    import graphlib
+    try:
+        tuple(graphlib.TopologicalSorter(graph).static_order())
+    except graphlib.CycleError as exc:
+        return list(exc.args[1])
+    return None
+
+
+def test_the_circle_finder_sees_the_two_circles_issue_46_cut():
+    assert _circle({"hil.history.record": {"hil.history.store"}, "hil.history.store": {"hil.history.schema",
+                    "hil.history.record"}, "hil.history.schema": {"hil.history.record"}})
+    assert _circle({"hil.record.runfolder": {"hil.record.signals_csv"},
+                    "hil.record.signals_csv": {"hil.record.runfolder"}})
+    assert _circle({"a": {"b"}, "b": set()}) is None
+
+
+def test_no_import_circle():
+    circle = _circle(_graph())
+    assert circle is None, "modules that import each other: " + " -> ".join(circle or ())
+
+
+def _commands() -> set[str]:
+    """The command modules of hil.cli: those that register a sub-command."""
+    return {_module_name(p) for p in (ROOT / "hil" / "cli").glob("*.py")
+            if any(isinstance(n, ast.FunctionDef) and n.name == "register" for n in _parse(p.read_text()).body)}
+
+
+def test_no_command_imports_another():
+    cmds = _commands()
+    assert {"hil.cli.diagnose", "hil.cli.run", "hil.cli.history"} <= cmds and "hil.cli.args" not in cmds
+    bad = [f"{c} imports {m}" for c in sorted(cmds) for _, m in _imports(ROOT / Path(*c.split(".")).with_suffix(".py"))
+           if m in cmds and m != c]
+    assert not bad, "a command takes what it shares from the shared modules, never from another command:\n" + \
+        "\n".join(bad)
+
+
+def _folder_limit(rel: str) -> int:
+    """The line limit of a module (path from the root, / separated)."""
+    return min([MAX_LINES] + [n for folder, n in FOLDER_MAX_LINES.items() if rel.startswith(folder)])
+
+
+def test_folder_limits_apply_where_they_say():
+    assert _folder_limit("blf/maint/blfmaint.py") == 600 and _folder_limit("hil/analysis/diagnose/load.py") == 600
+    assert _folder_limit("hil/cli/args.py") == 300 and _folder_limit("hil/record/runrecord.py") == MAX_LINES
+
+
+@pytest.mark.parametrize("path", [p for p in _modules() if _folder_limit(p.relative_to(ROOT).as_posix()) < MAX_LINES],
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_module_over_its_folders_limit(path):
+    n = len(path.read_text().splitlines())
+    limit = _folder_limit(path.relative_to(ROOT).as_posix())
+    assert n <= limit, f"{path.relative_to(ROOT)} has {n} lines (at most {limit} in its folder)"
