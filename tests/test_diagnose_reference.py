@@ -252,11 +252,11 @@ def test_without_a_reference_a_stated_current_gain_is_used_and_the_masks_reporte
 
 def test_without_a_reference_the_recording_is_read_once(tmp_path, monkeypatch):
     """The effort check against the load column and the model are made of the same arrays, read once."""
-    import hil.analysis.diagnose.against_model as against_model
+    import hil.analysis.diagnose.single_axis as axis
 
     reads = []
-    read_axis = against_model.read_axis
-    monkeypatch.setattr(against_model, "read_axis", lambda path: reads.append(path) or read_axis(path))
+    read_axis = axis.read_axis
+    monkeypatch.setattr(axis, "read_axis", lambda path: reads.append(path) or read_axis(path))
     new = write_csv(tmp_path / "new.csv")
     out = tmp_path / "o"
     assert main(["diagnose", str(new), "--model", "single-axis", "--current-law", "power", "--current-per-force",

@@ -18,7 +18,8 @@ Offers, by module:
 * :mod:`~blf.diagnose.axis_reference`: a single axis against a reference recording (:func:`effort_mask`,
   :func:`identifiability`, :func:`fit_axis`, :func:`compare_fits`, ...); its effort as a force in
   :mod:`~blf.diagnose.axis_effort` (:func:`effort_to_force`, :func:`identify_current_per_force`,
-  :func:`effort_load_check`).
+  :func:`effort_load_check`); the whole comparison of two recordings in one step in
+  :mod:`~blf.diagnose.axis_compare` (:func:`compare_axis`, :class:`AxisSamples`, :class:`AxisComparison`).
 
 Uses :mod:`blf.maint` (the check's segments) and blf's five modules.
 """
@@ -38,4 +39,6 @@ __getattr__, __dir__, __all__ = lazy.attach(__name__, submod_attrs={
                        "separable", "stroke_terms", "STROKE_TERMS", "NOMINAL_UNITS"],
     "axis_effort": ["CurrentGain", "EffortCheck", "effort_to_force", "identify_current_per_force",
                     "effort_load_check", "LAWS"],
+    "axis_compare": ["AxisSamples", "AxisComparison", "compare_axis", "common_terms", "stroke_candidates",
+                     "axis_floors"],
 })

@@ -197,6 +197,25 @@ def actuation_from_snapshot(snap: dict, fname: str = "meta.json (actuation snaps
     return actuation_from_tables(snap, fname)
 
 
+def profiles_from(path: str | Path | None, actuation_snapshot: dict | None,
+                  check_snapshot: dict | None) -> tuple[Actuation, Check]:
+    """The actuation and check profiles a recording is analysed with: the actuation ``path`` (``--profile``),
+    else meta.json's snapshot, else the shipped one; the check profile of meta.json's snapshot, else the
+    shipped one (an old or foreign snapshot that no longer loads: the shipped one too)."""
+    if path is not None:
+        act = load_actuation(path)
+    elif actuation_snapshot is not None:
+        act = actuation_from_snapshot(actuation_snapshot)
+    else:
+        act = load_actuation(None)
+    if check_snapshot is not None:
+        try:
+            return act, build_dataclass(Check, check_snapshot, "meta.json (check snapshot)")
+        except ProfileError:
+            pass
+    return act, load_check(None, act)
+
+
 def load_check(path: str | Path | None = None, actuation: Actuation | None = None) -> Check:
     """Load and validate a check profile; with ``actuation``, also cross-check limits."""
     path = Path(path) if path is not None else default_profile_path("check.toml")

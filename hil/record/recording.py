@@ -1,15 +1,39 @@
-"""A recording loaded for an analysis: its signals (a signals CSV, or a CAN log decoded with the run's step
+"""A recording loaded for an analysis: where it is and what it was made with (:func:`recording_source`: its
+run folder, run record and profiles), its signals (a signals CSV, or a CAN log decoded with the run's step
 times), refused when unusable, and the actuation profile it is analysed with.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
-from hil.profile.config import Actuation
-from hil.profile.load import actuation_from_snapshot, load_actuation
-from hil.record.runfolder import is_can_log, read_signals
+from hil.profile.config import Actuation, Check
+from hil.profile.load import actuation_from_snapshot, load_actuation, profiles_from
+from hil.record.runfolder import is_can_log, read_record, read_signals, resolve_recording
 from hil.record.runrecord import RunRecord
+
+
+@dataclass(frozen=True)
+class RecordingSource:
+    """Where a recording is and what it was made with (:func:`recording_source`)."""
+
+    signals_path: Path  #: signals.csv, a bare signals CSV or a CAN log
+    run_dir: Path | None  #: its run folder (None for a bare file)
+    meta: RunRecord | None  #: the run folder's record (None without one)
+    act: Actuation  #: ``--profile``, else the run's snapshot, else the shipped one
+    check: Check  #: the run's snapshot, else the shipped one
+
+
+def recording_source(path: Path, profile: Path | None) -> RecordingSource:
+    """A run folder, signals CSV or CAN log argument resolved (:func:`hil.record.runfolder.resolve_recording`),
+    its run record read and the profiles it is analysed with loaded, in one step."""
+    sig_path, run_dir = resolve_recording(path)
+    meta = read_record(run_dir)
+    snaps = meta.profiles if meta is not None else None
+    act, check = profiles_from(profile, snaps.actuation if snaps is not None else None,
+                               snaps.check if snaps is not None else None)
+    return RecordingSource(sig_path, run_dir, meta, act, check)
 
 
 def load_recording(sig_path: Path, act: Actuation, meta: RunRecord | None, *,

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.analysis.diagnose.load import load_dual
 from hil.analysis.diagnose.results import (
     DiagnoseOutcome,
     diagnosis_dict,
@@ -21,7 +22,7 @@ from hil.analysis.diagnose.results import (
     rounded,
     untrusted_dict,
 )
-from hil.analysis.diagnose.single_axis import AxisOptions, model_effort_check, read_axis, single_axis_model
+from hil.analysis.diagnose.single_axis import AxisOptions, axis_model
 from hil.errors import RecordingError
 
 
@@ -34,17 +35,18 @@ def diagnose_against_model(path: Path, model_name: str, profile: Path | None, op
     stated (``--force-floor-N``) and applies to its effects too."""
     from blf.diagnose import diagnose
     from blf.errors import AnalysisError, InputError
-    from hil.analysis.diagnose.load import load_model
     t0 = time.perf_counter()
-    axis = read_axis(path) if model_name == "single-axis" else None  # read once: effort check and model
-    read_s = time.perf_counter() - t0
-    effort = model_effort_check(axis, opts) if axis is not None else None
-    if effort is not None and not effort["trusted"]:
-        return DiagnoseOutcome("model", untrusted_dict(effort))
-    t0 = time.perf_counter() - read_s  # (the diagnosis's time includes reading the recording)
+    effort = None
     try:
-        model, period = single_axis_model(axis, opts) if axis is not None else \
-            load_model(path, model_name, profile, opts)
+        if model_name == "single-axis":
+            effort, model, period = axis_model(path, opts)  # read once: the effort check and the model
+            if model is None:
+                return DiagnoseOutcome("model", untrusted_dict(effort))
+        else:
+            if not Path(path).exists():
+                raise RecordingError(f"{path}: no such file or folder")
+            rec = load_dual(Path(path), profile)
+            model, period = rec.model, rec.period_s
         d = diagnose(model, period, progress=progress)
     except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input
         raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None

@@ -1,29 +1,19 @@
 """A single-axis recording against a reference recording (``emacheck diagnose NEW --model single-axis
 --reference HEALTHY``): which nominal parameter changed.
 
-The nominal model is identified on the reference and on the new recording alike
-(:mod:`blf.diagnose.axis_reference`: masks, identifiability, cluster-robust fit) and each nominal parameter
-is compared with its reference value; a change is named only above its relevance floor
-(:data:`hil.analysis.diagnose.single_axis.FORCE_FLOOR_N`, ``--force-floor-N``), and only when each
-recording's effort sees its known load (:func:`effort_checks`).
+Both recordings are read and prepared alike (:func:`hil.analysis.diagnose.single_axis.prepared_pair`), then
+compared in one pure step (:func:`blf.diagnose.axis_compare.compare_axis`: the nominal model identified on
+both, each nominal parameter against its reference value, named only above its relevance floor,
+:data:`hil.analysis.diagnose.single_axis.FORCE_FLOOR_N` or ``--force-floor-N``, and only when each
+recording's effort sees its known load); here that comparison becomes diagnosis.json.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from hil.analysis.diagnose.results import ident_dict, mask_dict, rounded, rounded_dict
-from hil.analysis.diagnose.single_axis import (
-    FORCE_FLOOR_N,
-    AxisOptions,
-    AxisRecording,
-    Prepared,
-    conversion,
-    prepare,
-    read_axis,
-)
+from hil.analysis.diagnose.single_axis import FORCE_FLOOR_N, AxisOptions, prepared_pair
 from hil.errors import RecordingError
 
 _EFFECT = {"position_dependent_friction_N_per_m": "position_dependent_friction_change",
@@ -34,96 +24,23 @@ _EFFECT = {"position_dependent_friction_N_per_m": "position_dependent_friction_c
            "mass_kg": "mass_change"}
 
 
-def _check_pair(new: AxisRecording, ref: AxisRecording) -> None:
-    if new.kind != ref.kind or (new.load is None) != (ref.load is None):
-        what = lambda r: r.kind + (",load" if r.load is not None else "")  # noqa: E731
-        raise RecordingError(f"{ref.path}: reference with other columns ({what(ref)}) than {new.path} ({what(new)})")
-    if abs(new.sample_rate_hz / ref.sample_rate_hz - 1) > 0.01:
-        raise RecordingError(f"{ref.path}: reference sampled at {ref.sample_rate_hz:.6g} Hz, {new.path} at "
-                             f"{new.sample_rate_hz:.6g} Hz: not comparable")
-
-
-def _common(ref, new, ref_path: Path):
-    """The terms both recordings are fitted with: those both can separate.
-
-    The reference must run in every direction and at every speed level of the recording diagnosed
-    (else it is too short to identify the nominal model: :class:`RecordingError`); a term only one
-    of them can separate (the mass, where only one has acceleration content) is fixed in both, and
-    said so."""
-    import dataclasses
-    lacks = [f"direction {'+' if d > 0 else '-'}" for d in new.directions if d not in ref.directions]
-    lacks += [f"speed {s:.4g} m/s" for s in new.speed_levels_m_per_s
-              if not any(abs(s / r - 1) <= 0.1 for r in ref.speed_levels_m_per_s)]
-    if lacks or not ref.columns:
-        raise RecordingError(f"{ref_path}: reference too short to identify the nominal model: no motion in "
-                             f"{', '.join(lacks) or 'any direction'} of the recording diagnosed")
-    cols = tuple(c for c in new.columns if c in ref.columns)
-    dropped = [c for c in new.columns + ref.columns if c not in cols]
-    merged = list(new.merged) + [((c,), "", "separable in only one of the two recordings: held in both",
-                                  "the same motion in both") for c in dict.fromkeys(dropped)]
-    fixed = dict(new.fixed) | dict(ref.fixed) | {c: 0.0 for c in dropped}
-    return dataclasses.replace(new, columns=cols, fixed=fixed, merged=tuple(merged))
-
-
-def _floors(opts: AxisOptions, speed: float, half_stroke: float) -> dict:
-    """Floors in each parameter's unit: the force floor at the running speed, or at the end of the stroke."""
-    f = opts.force_floor_N
-    out = {"friction_N": f, "coulomb_N": f, "offset_N": f}
-    if speed > 0:
-        out["viscous_N_s_per_m"] = f / speed
-    if half_stroke > 0:
-        out |= {"position_dependent_friction_N_per_m": f / half_stroke,
-                "position_dependent_force_N_per_m": f / half_stroke,
-                "position_dependent_force_N_per_m2": f / half_stroke ** 2}
-    return out
-
-
-def _stroke_candidates(pr: Prepared, pn: Prepared, ref: AxisRecording, new: AxisRecording, ident) -> tuple:
-    """The terms along the stroke both recordings can separate from the nominal ones: (origin, half stroke,
-    columns of the reference, columns of the new recording, not separable [(name, why)])."""
-    from blf.diagnose import design_columns, separable, stroke_terms
-    q_used = ref.q[pr.mask.used]
-    origin, half = float(np.median(q_used)), float(np.ptp(q_used)) / 2
-    tr, tn = stroke_terms(ref.q, pr.v, origin), stroke_terms(new.q, pn.v, origin)
-    keep, drop = [], []
-    for name in tr:
-        ok = all(separable(design_columns(ident.columns, p.v, p.a)[p.mask.used], t[name][p.mask.used])
-                 for p, t in ((pr, tr), (pn, tn)))
-        (keep if ok else drop).append(name)
-    # the two force terms are one candidate: both or neither
-    return (origin, half, {k: tr[k] for k in keep}, {k: tn[k] for k in keep},
-            [(n, "not separable from the nominal terms in both recordings") for n in drop])
-
-
 def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> dict:
     """diagnosis.json of a single-axis recording against a reference (nothing written here).
 
     :class:`RecordingError` (exit 3) for a reference of the other model, other sample rate or other
     columns, a current with no way to convert it, a reference too short to identify the nominal model.
     """
-    from blf.diagnose import compare_fits, fit_axis
+    from blf.diagnose import compare_axis
     from blf.errors import AnalysisError
-    new = read_axis(new_path)
+    pair = prepared_pair(new_path, ref_path, opts)
+    new, ref, pn, pr = pair.new, pair.ref, pair.prepared_new, pair.prepared_ref
     try:
-        ref = read_axis(ref_path)
-    except RecordingError as exc:
-        raise RecordingError(f"--reference: {exc} (a single-axis recording is needed)") from None
-    _check_pair(new, ref)
-    k, conv_words, k_rel_u = conversion(new, opts, ref)
-    pn, pr = prepare(new, opts, k), prepare(ref, opts, k)
-    ident = _common(pr.ident, pn.ident, ref.path)
-    origin, half, xr, xn, not_cand = _stroke_candidates(pr, pn, ref, new, ident)
-    try:
-        fr = fit_axis(pr.force, pr.v, pr.a, pr.mask.used, ident, ref.load, extra=xr)
+        cmp = compare_axis(pn, pr, opts.force_floor_N, opts.z_min, pair.gain_rel_u)
     except AnalysisError as exc:
-        raise RecordingError(f"{ref.path}: reference too short to identify the nominal model ({exc})") from None
-    try:
-        fn = fit_axis(pn.force, pn.v, pn.a, pn.mask.used, ident, new.load, extra=xn)
-    except AnalysisError as exc:
-        raise RecordingError(f"{new.path}: {exc}") from None
-    floors = _floors(opts, fr.running_speed_m_per_s, half)
-    changes = compare_fits(fn, fr, floors, opts.z_min)
-    effort = effort_checks(fn, fr, new, ref, pn, pr, opts, k_rel_u)
+        raise RecordingError(str(exc)) from None
+    fn, fr, ident, changes = cmp.recording, cmp.reference, cmp.ident, cmp.changes
+    origin, half, not_cand, conv_words = cmp.origin_m, cmp.half_stroke_m, cmp.not_candidates, pair.conversion_words
+    effort = effort_checks(cmp, pair, opts)
     effects = [_effect(c) for c in changes if c.named] if effort["trusted"] else []
     verdict = "untrusted_effort" if not effort["trusted"] else "explained" if effects else "no_mismatch"
     return {
@@ -152,15 +69,14 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     }
 
 
-def effort_checks(fn, fr, new: AxisRecording, ref: AxisRecording, pn, pr, opts: AxisOptions, k_rel_u: float) -> dict:
+def effort_checks(cmp, pair, opts: AxisOptions) -> dict:
     """diagnosis.json's ``effort``: does each recording's effort see its known load
-    (:func:`blf.diagnose.axis_effort.effort_load_check`, allowance the force floor)? ``trusted`` is False when
-    either does not: its force content is contradicted by the load, nothing is diagnosed from it."""
-    from blf.diagnose import effort_load_check
+    (:func:`blf.diagnose.axis_effort.effort_load_check`, allowance the force floor; ``cmp``:
+    :class:`blf.diagnose.axis_compare.AxisComparison`)? ``trusted`` is False when either does not: its force
+    content is contradicted by the load, nothing is diagnosed from it."""
     out, bad = {}, []
-    identified_on_ref = opts.current_a_per_N is None and new.kind == "current"
-    for key, fit, rec, p in (("recording", fn, new, pn), ("reference", fr, ref, pr)):
-        c = effort_load_check(fit, rec.load, p.mask.used, opts.force_floor_N, opts.z_min, k_rel_u)
+    identified_on_ref = opts.current_a_per_N is None and pair.new.kind == "current"
+    for key, c, rec in (("recording", cmp.effort_recording, pair.new), ("reference", cmp.effort_reference, pair.ref)):
         words = c.words + ("; the conversion was identified on this load (consistent by construction)"
                            if key == "reference" and identified_on_ref and c.made else "")
         out[key] = {"path": str(rec.path), "checked": c.made, "trusted": c.trusted, "load_N": rounded(c.load_N),

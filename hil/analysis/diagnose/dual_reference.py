@@ -131,48 +131,77 @@ def dual_reference(new_path: Path, reference: Path | None, profile: Path | None,
     from hil.analysis.diagnose.history_reference import reference_from_history, refuse_other_serials
     hist = None
     if history_url is not None:
-        ref, hist = reference_from_history(new_path, history_url, allow_other_serials)
+        ref_path, hist = reference_from_history(new_path, history_url, allow_other_serials)
     else:
-        ref = Path(reference)
-    serials = refuse_other_serials(new_path, ref, allow_other_serials)
-    floors, source = floors_for(new_path, profile, check)
-    data, fits = dual_reference_diagnosis(new_path, ref, profile, floors, source)
+        ref_path = Path(reference)
+    serials = refuse_other_serials(new_path, ref_path, allow_other_serials)
+    cache: dict = {}
+    new, ref = load_pair(new_path, ref_path, profile, cache)
+    floors, source = floors_for(new, check)
+    data, fits = compare_pair(new, ref, floors, source, cache)
     data["serials"] = serials
     if hist is not None:
         data["reference_history"] = hist
     return data, fits
 
 
+def _key(path: Path, profile: Path | None) -> tuple:
+    return str(Path(path).resolve()), str(profile)
+
+
+def load_pair(new_path: Path, ref_path: Path, profile: Path | None, cache: dict) -> tuple:
+    """(new, reference) :class:`hil.analysis.diagnose.load.DualRecording`, each read once per ``cache`` (a dict
+    the caller keeps); a reference at another sample rate (more than 1 % apart) is refused (exit 3)."""
+    from hil.analysis.diagnose.load import load_dual
+    from hil.errors import RecordingError
+    out = []
+    for path in (new_path, ref_path):
+        k = ("loaded", *_key(path, profile))
+        if k not in cache:
+            cache[k] = load_dual(Path(path), profile)
+        out.append(cache[k])
+    new, ref = out
+    if abs(ref.period_s / new.period_s - 1.0) > 0.01:
+        raise RecordingError(f"--reference {ref_path}: another sample rate: {1 / ref.period_s:.6g} Hz, this "
+                             f"recording {1 / new.period_s:.6g} Hz (more than 1 % apart)")
+    return new, ref
+
+
+def _fitted(rec, cache: dict) -> tuple:
+    """(diagnosis, nominal covariance) of a loaded recording, once per ``cache``."""
+    from blf.diagnose import diagnose, nominal_covariance
+    from blf.errors import AnalysisError, InputError
+    from hil.errors import RecordingError
+    k = ("fitted", id(rec))
+    if k not in cache:
+        try:
+            d = diagnose(rec.model, rec.period_s)
+            cache[k] = (d, nominal_covariance(rec.model, rec.period_s, d.nominal))
+        except (InputError, AnalysisError) as exc:
+            raise RecordingError(f"{rec.path}: cannot be diagnosed: {exc}") from None
+    return cache[k]
+
+
 def dual_reference_diagnosis(new_path: Path, ref_path: Path, profile: Path | None,
                              floors: dict | None = None, floors_source: str = "the measured defaults",
                              cache: dict | None = None) -> tuple:
     """(diagnosis.json, :class:`ReferenceFits` or None) of a dual-EMA recording against a reference
-    recording (nothing written here). ``cache`` (a dict the caller keeps, for many pairs of few recordings):
-    each recording's fit is looked up there by its path and the profile, and put there."""
-    from blf.diagnose import diagnose
-    from hil.analysis.diagnose.load import load_dual
+    recording with the floors given (nothing written here). ``cache`` (a dict the caller keeps, for many pairs
+    of few recordings): each recording's fit is looked up there by its path and the profile, and put there."""
+    cache = {} if cache is None else cache
+    new, ref = load_pair(new_path, ref_path, profile, cache)
+    return compare_pair(new, ref, floors, floors_source, cache)
+
+
+def compare_pair(rec_new, rec_ref, floors: dict | None, floors_source: str, cache: dict) -> tuple:
+    """(diagnosis.json, :class:`ReferenceFits` or None) of two loaded recordings (:func:`load_pair`): each
+    diagnosed (once per ``cache``), every nominal parameter and library effect compared against its floor."""
     from hil.profile.floors import DUAL_FLOORS
     floors = dict(DUAL_FLOORS) | dict(floors or {})
-    from blf.diagnose import nominal_covariance
-    from blf.errors import AnalysisError, InputError
-    from hil.errors import RecordingError
-    cache = {} if cache is None else cache
-    keys = [(str(Path(path).resolve()), str(profile)) for path in (ref_path, new_path)]
-    loaded = [cache[k][:2] if k in cache else load_dual(Path(path), profile)
-              for k, path in zip(keys, (ref_path, new_path), strict=True)]
-    (_, t_ref), (_, t_new) = loaded
-    if abs(t_ref / t_new - 1.0) > 0.01:
-        raise RecordingError(f"--reference {ref_path}: another sample rate: {1 / t_ref:.6g} Hz, this recording "
-                             f"{1 / t_new:.6g} Hz (more than 1 % apart)")
-    for k, path, (model, period) in zip(keys, (ref_path, new_path), loaded, strict=True):
-        if k not in cache:
-            try:
-                d = diagnose(model, period)
-                cache[k] = (model, period, d, nominal_covariance(model, period, d.nominal))
-            except (InputError, AnalysisError) as exc:
-                raise RecordingError(f"{path}: cannot be diagnosed: {exc}") from None
-    fits = [cache[k][:3] for k in keys]
-    (ref, cov_ref), (new, cov_new) = (cache[k][2:] for k in keys)
+    ref, cov_ref = _fitted(rec_ref, cache)
+    new, cov_new = _fitted(rec_new, cache)
+    fits = [(rec_ref.model, rec_ref.period_s, ref), (rec_new.model, rec_new.period_s, new)]
+    ref_path = rec_ref.path
     speed = check_speed(fits[0][0])
     changes = nominal_changes(new.nominal, ref.nominal, cov_new, cov_ref, floors, speed)
     lib, pairs = _library_changes(fits, floors, speed)

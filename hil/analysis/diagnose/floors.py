@@ -190,24 +190,20 @@ def library_change(e_new, e_ref, floors: dict, speed_mm_per_s: float = 0.0, shap
     return out
 
 
-def floors_for(new_path: Path, profile: Path | None, check_path: Path | None) -> tuple[dict, str]:
-    """(floors by kind, where they came from): the check profile's ``[diagnosis]`` table (``--check``, else
-    the new recording's run folder's snapshot in meta.json, else the shipped check.toml); a key not given
-    there is the measured default (:data:`hil.profile.floors.DUAL_FLOORS`)."""
+def floors_for(new, check_path: Path | None) -> tuple[dict, str]:
+    """(floors by kind, where they came from) of a comparison of the recording ``new``
+    (:class:`hil.analysis.diagnose.load.DualRecording`): the check profile's ``[diagnosis]`` table
+    (``--check``, else the one it was made with: its run folder's snapshot in meta.json, else the shipped
+    check.toml); a key not given there is the measured default (:data:`hil.profile.floors.DUAL_FLOORS`)."""
     import dataclasses
 
-    from hil.analysis.diagnose.load import check_for
     from hil.profile.load import load_check
-    from hil.record.recording import actuation_for
-    from hil.record.runfolder import read_record, resolve_recording
-    _, run_dir = resolve_recording(new_path)
-    meta = read_record(run_dir)
-    act = actuation_for(profile, meta)
     if check_path is not None:
-        check, src = load_check(check_path, act), f"check profile {check_path} [diagnosis]"
+        check, src = load_check(check_path, new.act), f"check profile {check_path} [diagnosis]"
     else:
+        meta = new.meta
         snap = meta is not None and meta.profiles is not None and meta.profiles.check is not None
-        check = check_for(meta, act)
-        src = (f"the check profile of {run_dir} (meta.json snapshot) [diagnosis]" if snap
+        check = new.check
+        src = (f"the check profile of {new.run_dir} (meta.json snapshot) [diagnosis]" if snap
                else "the shipped check profile [diagnosis]")
     return dataclasses.asdict(check.diagnosis), src

@@ -1,4 +1,5 @@
-"""From a recording to a diagnosis: load it, build the replay model, and the JSON of the result.
+"""A dual-EMA recording loaded for the diagnosis: read once, with the profiles it was made with, into its
+replay model (:class:`DualRecording`).
 
 The dual-EMA model (:class:`sim.replay_model.DualEmaReplay`) gets the phases
 from the recorded drive modes when the recording has them, otherwise from
@@ -11,39 +12,43 @@ the run folder records the simulated rig it was made with (meta.json
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from hil.errors import RecordingError
+from hil.profile.config import Actuation, Check
+from hil.record.runrecord import RunRecord
 
 
-def check_for(meta, act):
-    """The check profile a recording was made with (meta.json's snapshot), else the shipped one."""
-    from hil.profile.config import Check
-    from hil.profile.load import load_check
-    from hil.profile.tables import build_dataclass
-    snap = meta.profiles.check if meta is not None and meta.profiles is not None else None
-    if snap is not None:
-        try:
-            return build_dataclass(Check, snap, "meta.json (check snapshot)")
-        except ValueError:  # ProfileError: an old or foreign snapshot; the shipped check then
-            pass
-    return load_check(None, act)
+@dataclass(frozen=True)
+class DualRecording:
+    """A dual-EMA recording read for the diagnosis (:func:`load_dual`): its replay model and sample period, and
+    what it was read with: the actuation profile (``--profile``, else the run folder's snapshot, else the
+    shipped one), the check profile (the snapshot, else the shipped one), its run record and run folder (None
+    for a bare file)."""
+
+    path: Path  #: as given
+    model: object  #: :class:`sim.replay_model.DualEmaReplay`
+    period_s: float
+    act: Actuation
+    check: Check
+    meta: RunRecord | None
+    run_dir: Path | None
 
 
-def load_dual(path: Path, profile: Path | None):
-    """The dual-EMA replay model of a run folder, signals CSV (``.csv``, ``.csv.gz``) or CAN log
-    (``.log``, ``.log.gz``), and its sample period (s)."""
+def load_dual(path: Path, profile: Path | None) -> DualRecording:
+    """A run folder, signals CSV (``.csv``, ``.csv.gz``) or CAN log (``.log``, ``.log.gz``) read into its
+    dual-EMA replay model; refused (:class:`hil.errors.RecordingError`) when it cannot be diagnosed."""
     from blf.errors import AnalysisError
     from hil.analysis.maint import check_units, find_segments
     from hil.record.canlog import decode_can_log
-    from hil.record.recording import actuation_for
-    from hil.record.runfolder import is_can_log, read_record, read_signals, resolve_recording
+    from hil.record.recording import recording_source
+    from hil.record.runfolder import is_can_log, read_signals
     from hil.record.signals_csv import CHECK_CHANNELS, refuse_jumps, refuse_unusable
     from sim.replay_model import DualEmaReplay
 
-    sig_path, run_dir = resolve_recording(path)
-    meta = read_record(run_dir)
-    act = actuation_for(profile, meta)
+    src = recording_source(path, profile)
+    sig_path, run_dir, meta, act, check = src.signals_path, src.run_dir, src.meta, src.act, src.check
     sig = decode_can_log(sig_path, act).signals if is_can_log(sig_path) else read_signals(sig_path)
     if sig.n < 1000:
         raise RecordingError(f"{sig_path}: recording too short to diagnose: {sig.n} samples (need >= 1000)")
@@ -52,9 +57,8 @@ def load_dual(path: Path, profile: Path | None):
     except RecordingError as exc:
         raise RecordingError(f"{sig_path}: {exc}") from None
     refuse_jumps(sig, sig_path, act.mechanics.i_total_rad_per_mm, lines=not is_can_log(sig_path), meta=meta,
-                     sync_period_s=act.timing.sync_period_s)
+                 sync_period_s=act.timing.sync_period_s)
     check_units(sig, act)
-    check = check_for(meta, act)
     try:
         seg = find_segments(sig, act)
     except AnalysisError:
@@ -65,7 +69,7 @@ def load_dual(path: Path, profile: Path | None):
                           segments=seg, opposing_force_N=check.calibration.opposing_force_N,
                           force_ramp_s=check.calibration.force_ramp_s,
                           nominal_rig=meta.simrig if meta is not None else None)
-    return model, period
+    return DualRecording(Path(path), model, period, act, check, meta, run_dir)
 
 
 def load_model(path: Path, model: str, profile: Path | None, axis_options=None):
@@ -76,4 +80,5 @@ def load_model(path: Path, model: str, profile: Path | None, axis_options=None):
         raise RecordingError(f"{path}: no such file or folder")
     if model == "single-axis":
         return single_axis_model(read_axis(Path(path)), axis_options or AxisOptions())
-    return load_dual(Path(path), profile)
+    rec = load_dual(Path(path), profile)
+    return rec.model, rec.period_s

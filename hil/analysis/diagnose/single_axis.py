@@ -180,26 +180,15 @@ def _accel_noise(q: np.ndarray, fs: float) -> float:
     return sq * float(np.linalg.norm(savgol_coeffs(w, 3, deriv=2, delta=1 / fs)))
 
 
-@dataclass(frozen=True)
-class Prepared:
-    """A single-axis recording ready for a fit (:func:`prepare`)."""
-
-    force: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    mask: object
-    ident: object
-
-
-def prepare(rec: AxisRecording, opts: AxisOptions, k: float | None) -> Prepared:
-    """The recording ready for a fit: its force (N), Savitzky-Golay speed and acceleration, the effort mask and
-    what the samples kept can separate."""
-    from blf.diagnose import axis_kinematics, identifiability
+def prepare(rec: AxisRecording, opts: AxisOptions, k: float | None):
+    """The recording ready for a fit (:class:`blf.diagnose.axis_compare.AxisSamples`): its force (N),
+    Savitzky-Golay speed and acceleration, the effort mask and what the samples kept can separate."""
+    from blf.diagnose import AxisSamples, axis_kinematics, identifiability
     m = _mask(rec, opts, reference_mode=True)
     v, a = axis_kinematics(rec.q, rec.sample_rate_hz)
     vr = np.gradient(rec.q_ref, rec.t)
     ident = identifiability(v, a, vr, m.used, _accel_noise(rec.q, rec.sample_rate_hz))
-    return Prepared(axis_force(rec, opts, k, m.moving), v, a, m, ident)
+    return AxisSamples(str(rec.path), rec.q, axis_force(rec, opts, k, m.moving), v, a, m, ident, rec.load)
 
 
 def model_effort_check(rec: AxisRecording, opts: AxisOptions) -> dict | None:
@@ -213,7 +202,7 @@ def model_effort_check(rec: AxisRecording, opts: AxisOptions) -> dict | None:
     k, _, rel = conversion(rec, opts)
     p = prepare(rec, opts, k)
     try:
-        fit = fit_axis(p.force, p.v, p.a, p.mask.used, p.ident, rec.load)
+        fit = fit_axis(p.force_N, p.v_m_per_s, p.a_m_per_s2, p.mask.used, p.ident, rec.load)
     except AnalysisError as exc:
         return {"trusted": True, "words": f"the effort could not be checked against the load ({exc})"}
     c = effort_load_check(fit, rec.load, p.mask.used, opts.force_floor_N, opts.z_min, rel)
@@ -238,3 +227,51 @@ def single_axis_model(rec: AxisRecording, opts: AxisOptions):
     return model, 1.0 / rec.sample_rate_hz
 
 
+
+
+def axis_model(path: Path, opts: AxisOptions) -> tuple:
+    """A single-axis recording read once and made ready for the diagnosis against the simulation: (its
+    effort against its known load, :func:`model_effort_check`, or None; the replay model and its sample period,
+    :func:`single_axis_model`, or None, None where the effort does not see its load)."""
+    rec = read_axis(path)
+    effort = model_effort_check(rec, opts)
+    if effort is not None and not effort["trusted"]:
+        return effort, None, None
+    model, period = single_axis_model(rec, opts)
+    return effort, model, period
+
+
+def _check_pair(new: AxisRecording, ref: AxisRecording) -> None:
+    if new.kind != ref.kind or (new.load is None) != (ref.load is None):
+        what = lambda r: r.kind + (",load" if r.load is not None else "")  # noqa: E731
+        raise RecordingError(f"{ref.path}: reference with other columns ({what(ref)}) than {new.path} ({what(new)})")
+    if abs(new.sample_rate_hz / ref.sample_rate_hz - 1) > 0.01:
+        raise RecordingError(f"{ref.path}: reference sampled at {ref.sample_rate_hz:.6g} Hz, {new.path} at "
+                             f"{new.sample_rate_hz:.6g} Hz: not comparable")
+
+
+@dataclass(frozen=True)
+class AxisPair:
+    """A single-axis recording and its reference, read, checked alike (columns, sample rate) and prepared with
+    one effort conversion (:func:`prepared_pair`)."""
+
+    new: AxisRecording
+    ref: AxisRecording
+    current_a_per_N: float | None  #: the conversion's gain (None: a force or torque)
+    conversion_words: str
+    gain_rel_u: float  #: relative standard uncertainty of the gain
+    prepared_new: object  #: :class:`blf.diagnose.axis_compare.AxisSamples`
+    prepared_ref: object
+
+
+def prepared_pair(new_path: Path, ref_path: Path, opts: AxisOptions) -> AxisPair:
+    """Both recordings of ``emacheck diagnose NEW --model single-axis --reference HEALTHY`` read, checked alike
+    and prepared for their fits; :class:`RecordingError` (exit 3) names what does not fit."""
+    new = read_axis(new_path)
+    try:
+        ref = read_axis(ref_path)
+    except RecordingError as exc:
+        raise RecordingError(f"--reference: {exc} (a single-axis recording is needed)") from None
+    _check_pair(new, ref)
+    k, words, rel_u = conversion(new, opts, ref)
+    return AxisPair(new, ref, k, words, rel_u, prepare(new, opts, k), prepare(ref, opts, k))
