@@ -429,3 +429,31 @@ def test_no_module_over_its_folders_limit(path):
     n = len(path.read_text().splitlines())
     limit = _folder_limit(path.relative_to(ROOT).as_posix())
     assert n <= limit, f"{path.relative_to(ROOT)} has {n} lines (at most {limit} in its folder)"
+
+
+#: door modules that offer only part of their module's public names (the rest is the wing's own machinery)
+DOOR_PARTIAL = {"blf.diagnose.fit": "the fitting machinery: the door offers safe_predict only"}
+
+
+def _door_map(wing: str) -> dict[str, list[str]]:
+    """{module: [names]} of a wing's door (the ``submod_attrs`` literal of its ``lazy.attach``)."""
+    tree = _parse((ROOT / Path(*wing.split(".")) / "__init__.py").read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == "submod_attrs":
+            return {f"{wing}.{k}": v for k, v in ast.literal_eval(node.value).items()}
+    raise AssertionError(f"{wing}/__init__.py has no lazy door (submod_attrs)")
+
+
+@pytest.mark.parametrize("wing", BLF_WINGS)
+def test_each_wing_door_offers_its_modules_public_names(wing):
+    """A wing's door lists exactly the public names (``__all__``) of the modules it opens (some partly, said
+    why), and each name resolves through it."""
+    import importlib
+    door = importlib.import_module(wing)
+    for module, names in _door_map(wing).items():
+        public = importlib.import_module(module).__all__
+        assert set(names) <= set(public), f"{wing}'s door offers {set(names) - set(public)}, not public in {module}"
+        if module not in DOOR_PARTIAL:
+            assert set(names) == set(public), f"{wing}'s door lacks {set(public) - set(names)} of {module}"
+        for name in names:
+            assert getattr(door, name) is getattr(importlib.import_module(module), name)
