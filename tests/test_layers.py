@@ -149,14 +149,14 @@ def _imports_at(path: Path, root: Path) -> list[tuple[int, str]]:
         ROOT = saved
 
 
+def _broken(rule) -> list[str]:
+    """Every import of the product that ``rule(importer, imported)`` gives a reason against."""
+    return [f"{path.relative_to(ROOT)}:{line} imports {imported} ({why})" for path in _modules()
+            for line, imported in _imports(path) if (why := rule(_module_name(path), imported))]
+
+
 def test_import_rules():
-    bad = []
-    for path in _modules():
-        me = _module_name(path)
-        for line, imported in _imports(path):
-            why = _violation(me, imported)
-            if why:
-                bad.append(f"{path.relative_to(ROOT)}:{line} imports {imported} ({why})")
+    bad = _broken(_violation)
     assert not bad, "\n".join(bad)
 
 
@@ -354,13 +354,7 @@ def test_the_floor_rule_sees_what_it_is_meant_to():
 
 
 def test_no_import_runs_back_up_or_sideways():
-    bad = []
-    for path in _modules():
-        me = _module_name(path)
-        for line, imported in _imports(path):
-            why = _runs_up(me, imported)
-            if why:
-                bad.append(f"{path.relative_to(ROOT)}:{line} imports {imported}: {why}")
+    bad = _broken(_runs_up)
     assert not bad, "\n".join(bad)
 
 
