@@ -11,7 +11,9 @@ rows: 561 MB of arrays, 708 MB peak for ``read_signals`` with its time checks). 
 name the first bad line.
 
 Rules (docs/files.md, "Reading a recording"): UTF-8 with or without a byte-order mark; ``.gz`` read through
-gzip; the header on line 1 must hold ``t,phi1,phi2,s1,s2,F1,F2``; every line the header's number of
+gzip; the header on line 1 must hold ``t,phi1,phi2,s1,s2,F1,F2`` in any order, each column once: columns are
+read by their name, never by their position, and a column not known is not read (and said so in a note);
+every line the header's number of
 fields; every cell of those columns (and of ``mode1,sp1,mode2,sp2``) a finite number; the time strictly
 increasing. A last line without its newline (a recording cut short by a crash) is dropped and noted.
 Every refusal is a :class:`hil.errors.RecordingError` naming the file and the line (1-based, the header
@@ -128,7 +130,9 @@ def _parse_chunk(path: Path, lines: list[str], first_line: int, ncol: int, cols:
             if len(cells) != ncol:
                 raise RecordingError(f"{path}: line {ln}: {len(cells)} fields, header has {ncol}")
             steps.append(cells[step_col].strip())
-    use = tuple(cols.values()) if step_col is not None or len(cols) != ncol else None
+    # columns by their header name, in any order: usecols in the order of ``cols`` (all columns in the file's
+    # own order where that is already ``cols``'s: loadtxt's faster path)
+    use = None if step_col is None and list(cols.values()) == list(range(ncol)) else tuple(cols.values())
     if use is not None and step_col is None and any(ln.count(",") != ncol - 1 for ln in lines):
         _line_errors(path, lines, first_line, ncol, cols)
     try:
@@ -146,14 +150,25 @@ def _parse_chunk(path: Path, lines: list[str], first_line: int, ncol: int, cols:
 
 
 def _header(path: Path, first: str):
-
+    """The header's column names; refused (exit 3) when it does not name every channel of
+    :data:`SIGNAL_COLUMNS` or names one column twice."""
     header = [h.strip() for h in next(csv.reader(io.StringIO(first)))] if first.strip() else []
     missing = [c for c in SIGNAL_COLUMNS if c not in header]
     if missing:
         raise RecordingError(
             f"{path}: line 1: missing column(s) {', '.join(missing)}; expected at least "
-            + ",".join(f"{c} [{COLUMN_UNITS[c]}]" for c in SIGNAL_COLUMNS))
+            + ",".join(f"{c} [{COLUMN_UNITS[c]}]" for c in SIGNAL_COLUMNS) + " (in any order)")
+    twice = sorted({h for h in header if h and header.count(h) > 1})
+    if twice:
+        raise RecordingError(f"{path}: line 1: column(s) {', '.join(twice)} named more than once; each column "
+                             f"once, read by its name")
     return header
+
+
+def ignored_columns(header: list[str]) -> list[str]:
+    """The columns of a signals CSV's header that are not read (neither a numeric column nor ``step``)."""
+    known = set(NUMERIC_COLUMNS) | {"step"}
+    return [h for h in header if h not in known]
 
 
 #: a gzip'd CSV's text is taken as at most this many times the file (numbers compress 3-5 times): a
@@ -210,6 +225,9 @@ def _read(fh, path: Path, allow_truncated_last_line: bool):
     store: _Columns | None = None
     steps: list[str] = []
     notes: list[str] = []
+    extra = ignored_columns(header)
+    if extra:
+        notes.append(f"column(s) {', '.join(repr(h) for h in extra)} not read (columns are read by name)")
     line_no = 2
     while True:
         chunk = [ln for _, ln in zip(range(CHUNK_LINES), fh, strict=False)]

@@ -21,6 +21,7 @@ from hil.analysis.diagnose.results import (
     identifiability_dict,
     rounded,
     untrusted_dict,
+    with_notes,
 )
 from hil.analysis.diagnose.single_axis import AxisOptions, axis_model
 from hil.errors import RecordingError
@@ -39,9 +40,9 @@ def diagnose_against_model(path: Path, model_name: str, profile: Path | None, op
     effort = None
     try:
         if model_name == "single-axis":
-            effort, model, period = axis_model(path, opts)  # read once: the effort check and the model
+            rec, effort, model, period = axis_model(path, opts)  # read once: the effort check and the model
             if model is None:
-                return DiagnoseOutcome("model", untrusted_dict(effort))
+                return DiagnoseOutcome("model", with_notes(untrusted_dict(effort), rec.notes))
         else:
             if not Path(path).exists():
                 raise RecordingError(f"{path}: no such file or folder")
@@ -61,7 +62,7 @@ def diagnose_against_model(path: Path, model_name: str, profile: Path | None, op
             data["mask"] = mask
     if effort is not None:
         data["effort"] = effort
-    return DiagnoseOutcome("model", data, model=model, diagnosis=d)
+    return DiagnoseOutcome("model", with_notes(data, rec.notes), model=model, diagnosis=d)
 
 
 def effect_sizes_N(model, d) -> dict:

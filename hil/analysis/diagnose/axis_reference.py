@@ -66,7 +66,7 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
             "their floors: the force floor at the end of the stroke, half_stroke_m from the origin")},
         "conversion": conv_words, "sample_rate_hz": rounded(new.sample_rate_hz),
         "running_speed_m_per_s": rounded(fn.running_speed_m_per_s),
-    }
+    } | ({"notes": list(new.notes + ref.notes)} if new.notes + ref.notes else {})
 
 
 def effort_checks(cmp, pair, opts: AxisOptions) -> dict:

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.analysis.diagnose.floors import KINDS, check_speed, floors_for, library_change, nominal_changes
+from hil.analysis.diagnose.results import with_notes
 
 
 def _active(model, d) -> tuple:
@@ -211,7 +212,7 @@ def compare_pair(rec_new, rec_ref, floors: dict | None, floors_source: str, cach
     eff = lambda d: [{"name": e.name, "where": e.where} for e in d.effects]  # noqa: E731
     unexplained = _unexplained(new, ref)
     appeared = unexplained["recording"] and not unexplained["reference"]
-    return {
+    return with_notes({
         "verdict": "unexplained" if appeared else "explained" if effects else "no_mismatch",
         "model": "dual-ema", "mode": "reference", "unexplained": unexplained,
         "fits": None if rf is None else {**fits_rms(rf), "words": (
@@ -230,7 +231,7 @@ def compare_pair(rec_new, rec_ref, floors: dict | None, floors_source: str, cach
             "load cell gain %, friction N); a nominal parameter's floor is 3 sqrt(2) x the measured spread of the "
             "nominal fit and its u = floor/3 (hil/profile/floors.py, docs/diagnose.md)")},
         "effects_recording": eff(new), "effects_reference": eff(ref),
-    }, rf
+    }, rec_new.notes + rec_ref.notes), rf
 
 
 def _unexplained(new, ref) -> dict:

@@ -34,6 +34,7 @@ class DualRecording:
     check: Check
     meta: RunRecord | None
     run_dir: Path | None
+    notes: tuple = ()  #: what was noted while reading it (columns not read, a last line dropped ...)
 
 
 def load_dual(path: Path, profile: Path | None) -> DualRecording:
@@ -69,7 +70,8 @@ def load_dual(path: Path, profile: Path | None) -> DualRecording:
                           segments=seg, opposing_force_N=check.calibration.opposing_force_N,
                           force_ramp_s=check.calibration.force_ramp_s,
                           nominal_rig=meta.simrig if meta is not None else None)
-    return DualRecording(Path(path), model, period, act, check, meta, run_dir)
+    return DualRecording(Path(path), model, period, act, check, meta, run_dir,
+                         tuple(f"{Path(sig_path).name}: {n}" for n in sig.notes))
 
 
 def load_model(path: Path, model: str, profile: Path | None, axis_options=None):

@@ -109,3 +109,10 @@ def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
         "screening": list(d.screening),
         "diagnosis_s": round(seconds, 2),
     }
+
+
+def with_notes(data: dict, notes) -> dict:
+    """diagnosis.json ``data`` with what was noted while reading the recordings (``notes``; none: unchanged)."""
+    if notes:
+        data["notes"] = list(dict.fromkeys(list(data.get("notes", [])) + list(notes)))
+    return data

@@ -14,6 +14,7 @@ model without a reference (:func:`single_axis_model`) and its effort against its
 
 from __future__ import annotations
 
+import dataclasses
 import io
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,7 @@ class AxisRecording:
     kind: str  #: force, torque or current
     load: np.ndarray | None
     sample_rate_hz: float
+    notes: tuple = ()  #: what was noted while reading it (columns not read)
 
 
 @dataclass(frozen=True)
@@ -67,12 +69,18 @@ def read_axis(path: Path) -> AxisRecording:
     text = read_text(path, "a text CSV file (columns t,q,q_ref and force, torque or current)")
     if not text.strip():
         raise RecordingError(f"{path}: empty file; need columns t,q,q_ref (s, m, m) and force, torque or current")
+    header = [h.strip() for h in text.lstrip("\ufeff").splitlines()[0].split(",")]
+    twice = sorted({h for h in header if h and header.count(h) > 1})
+    if twice:
+        raise RecordingError(f"{path}: line 1: column(s) {', '.join(twice)} named more than once; each column "
+                             f"once, read by its name")
     try:
         arr = np.genfromtxt(io.StringIO(text), delimiter=",", names=True)
     except (ValueError, IndexError, TypeError) as exc:
         raise RecordingError(f"{path}: not a readable CSV ({type(exc).__name__}: {exc})") from None
     names = arr.dtype.names or ()
     efforts = [c for c in EFFORTS if c in names]
+    unread = [h for h in header if h not in ("t", "q", "q_ref", "load", *EFFORTS)]
     if any(c not in names for c in ("t", "q", "q_ref")) or len(efforts) != 1:
         raise RecordingError(f"{path}: line 1: need columns t,q,q_ref (s, m, m) and exactly one of force (N), "
                              f"torque (N m), current (A), optionally load (N); got {','.join(names) or 'none'}")
@@ -80,7 +88,11 @@ def read_axis(path: Path) -> AxisRecording:
             + (("load",) if "load" in names else ())}
     if not all(np.all(np.isfinite(x)) for x in cols.values()) or np.any(np.diff(cols["t"]) <= 0):
         raise RecordingError(f"{path}: NaN, empty cells or non-increasing time")
-    return _recording(path, cols["t"], cols["q"], cols["q_ref"], cols[efforts[0]], efforts[0], cols.get("load"))
+    rec = _recording(path, cols["t"], cols["q"], cols["q_ref"], cols[efforts[0]], efforts[0], cols.get("load"))
+    if unread:
+        rec = dataclasses.replace(rec, notes=(f"{path.name}: column(s) {', '.join(repr(h) for h in unread)} not "
+                                              f"read (columns are read by name)",))
+    return rec
 
 
 def _read_mat(path: Path) -> AxisRecording:
@@ -230,15 +242,15 @@ def single_axis_model(rec: AxisRecording, opts: AxisOptions):
 
 
 def axis_model(path: Path, opts: AxisOptions) -> tuple:
-    """A single-axis recording read once and made ready for the diagnosis against the simulation: (its
-    effort against its known load, :func:`model_effort_check`, or None; the replay model and its sample period,
-    :func:`single_axis_model`, or None, None where the effort does not see its load)."""
+    """A single-axis recording read once and made ready for the diagnosis against the simulation: (the
+    recording; its effort against its known load, :func:`model_effort_check`, or None; the replay model and its
+    sample period, :func:`single_axis_model`, or None, None where the effort does not see its load)."""
     rec = read_axis(path)
     effort = model_effort_check(rec, opts)
     if effort is not None and not effort["trusted"]:
-        return effort, None, None
+        return rec, effort, None, None
     model, period = single_axis_model(rec, opts)
-    return effort, model, period
+    return rec, effort, model, period
 
 
 def _check_pair(new: AxisRecording, ref: AxisRecording) -> None:
