@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 
 import pytest
@@ -105,3 +106,14 @@ def test_the_entry_point_exits_with_the_commands_status(tmp_path):
                            timeout=120)
         assert r.returncode == 3, (mod, r.returncode, r.stderr)
         assert "Traceback" not in r.stderr and r.stderr.strip().count("\n") == 0 and str(missing) in r.stderr
+
+
+def test_no_help_prints_a_doubled_percent_sign():
+    """argparse formats ``help=`` strings (``%%`` is a percent sign there) but not descriptions: every command's
+    ``--help`` and the top-level one print ``%`` once."""
+    parser = build_parser()
+    texts = {"emacheck": parser.format_help()}
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    texts |= {name: p.format_help() for name, p in sub.choices.items()}
+    assert "+-15 % of limit load" in texts["emacheck"] and "95 % interval" in texts["history"]
+    assert not [name for name, text in texts.items() if "%%" in text]

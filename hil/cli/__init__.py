@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(
         prog="emacheck",
         description="Maintenance check of a dual-EMA flight-control actuation: LVDT calibration "
-                    "under opposing force, force-fight excursions to +-15 %% of limit load, then "
+                    "under opposing force, force-fight excursions to +-15 % of limit load, then "
                     "backlash and stiffness by BLFmaint (Schallert et al.).",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--version", action="version", version=f"emacheck {__version__}")

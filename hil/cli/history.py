@@ -152,7 +152,7 @@ def register(sub) -> None:
                    description="Every recorded check per actuator and channel, in order; the wear trend over "
                                "flight hours (calendar time where hours are missing), weighted by each reading's "
                                "uncertainty, with its band; the flight hours (and date) at which the backlash "
-                               "reaches B_spec, with a 95 %% interval. A step down (repair) or a new actuator at a "
+                               "reaches B_spec, with a 95 % interval. A step down (repair) or a new actuator at a "
                                "position starts a new trend. `emacheck history sync RUN_FOLDER...` records "
                                "results that could not be recorded when they were made.")
     p.add_argument("--history", metavar="URL", type=history_url_type,
