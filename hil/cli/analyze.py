@@ -31,7 +31,6 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     act = actuation_for(args.profile, meta)
     refuse_foreign_history(args, act)
     outputs = outputs_for(args.out, sig_path, run_dir, "analysis", ("result.json", "report.html"))
-    out = outputs.folder
     truth = meta.truth if meta is not None else None
     status = meta.status if meta is not None else None
     incomplete = status is RunStatus.RUNNING
@@ -61,7 +60,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         return ExitCode.ABORTED
     if incomplete:
         console.print(f"[yellow]incomplete:[/yellow] {INCOMPLETE_REASON}")
-    print_summary(console, result, out)
+    print_summary(console, result, outputs.path("report.html"))
     record_history(console, args, act, outputs.path("result.json"), run_folder=run_dir, recording=sig_path)
     return exit_for(result)
 

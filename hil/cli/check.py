@@ -13,7 +13,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from hil.cli.console import LiveProgress
+from hil.cli.console import check_progress
 from hil.errors import KNOWN_ERRORS
 from hil.record.runfolder import MetaWriter
 from hil.record.runrecord import (
@@ -116,7 +116,7 @@ def canopen_check(console: Console, act, check, link, meta: MetaWriter, quiet: b
 
     t0 = time.perf_counter()
     try:
-        with LiveProgress(console, 0.0, not quiet) as live:
+        with check_progress(console, quiet) as live:
             # (no progress display: no progress computed either, a Progress per cycle for nothing)
             outcome = run_check(link, act, check, meta, on_cycle=live if live.enabled else None)
     except (*KNOWN_ERRORS, KeyboardInterrupt) as exc:

@@ -4,6 +4,7 @@ the drives were left doing.
 
 from __future__ import annotations
 
+import collections
 from pathlib import Path
 
 from rich import box
@@ -55,15 +56,86 @@ class LiveProgress:
         self._p.update(self._task, completed=prog.total_fraction, step=prog.step.value, values=vals)
 
 
+class LogProgress:
+    """Progress of a running check where the output is a log or a pipe (no terminal): a line at each step and
+    every :data:`LOG_EVERY_S` seconds, with the time elapsed, the step and the check's time.
+
+    The check loop only notes where it stands (one assignment per cycle, no IO on its thread); a thread of
+    this object's own prints, so a slow pipe or disk never holds the loop."""
+
+    def __init__(self, console: Console, every_s: float | None = None, clock=None) -> None:
+        import threading
+        import time
+
+        self.enabled = True
+        self._console = console
+        self._every_s = LOG_EVERY_S if every_s is None else every_s
+        self._clock = clock or time.monotonic
+        self._latest: tuple | None = None  #: (step, fraction of the check, check time s), from the loop
+        self._entered: collections.deque = collections.deque()  #: each step as the loop entered it
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="emacheck-progress", daemon=True)
+        self._t0 = self._clock()
+
+    def __enter__(self) -> LogProgress:
+        self._t0 = self._clock()
+        self._console.print("check started")
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        while self._entered:  # steps entered since the thread last looked
+            self._console.print(self.line(self._entered.popleft()), highlight=False)
+
+    def __call__(self, prog, smp) -> None:
+        latest = (prog.step.value, prog.total_fraction, smp.t_s)  # the loop's only work here: a note
+        if self._latest is None or latest[0] != self._latest[0]:
+            self._entered.append((*latest, self._clock()))  # (a deque's append: no lock, no IO)
+        self._latest = latest
+
+    def line(self, latest: tuple) -> str:
+        """One progress line of ``latest`` (step, fraction, check time s[, clock when noted])."""
+        step, frac, t_s, *at = latest
+        return (f"[{(at[0] if at else self._clock()) - self._t0:7.1f} s] {step} ({100.0 * frac:3.0f} % of the "
+                f"check, check time {t_s:.1f} s)")
+
+    def _run(self) -> None:
+        shown_at = self._clock()
+        while not self._stop.wait(0.2):
+            now = self._clock()
+            if self._entered:
+                while self._entered:
+                    self._console.print(self.line(self._entered.popleft()), highlight=False)
+                shown_at = now
+            elif self._latest is not None and now - shown_at >= self._every_s:
+                self._console.print(self.line(self._latest), highlight=False)
+                shown_at = now
+
+
+#: a running check's progress line, where the output is no terminal, at least this often [s]
+LOG_EVERY_S = 10.0
+
+
+def check_progress(console: Console, quiet: bool):
+    """The progress display of a running check: live on a terminal (:class:`LiveProgress`), lines in a log or
+    a pipe (:class:`LogProgress`), none with ``--quiet``."""
+    if console.is_terminal or quiet:
+        return LiveProgress(console, 0.0, not quiet)
+    return LogProgress(console)
+
+
 def styled(text: str, status: str, bold: bool = False) -> str:
     """``text`` in the console colour of a verdict or run status (plain when it has none)."""
     style = (("bold " if bold else "") + _STATUS_STYLE.get(status, "")).strip()
     return f"[{style}]{text}[/]" if style else text
 
 
-def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
+def print_summary(console: Console, result: dict, report: Path | None) -> None:
     """The result as a table: per channel the decision against its limit with the expanded
-    uncertainty and the margin, then stiffness; truth beside it when known."""
+    uncertainty and the margin, then stiffness; truth beside it when known; last, the report to open
+    (``report``, its result.json beside it)."""
     truth = result.get("truth")
     status = result["status"]
     tab = Table(title=f"BLFmaint result: {styled(status.upper(), status, bold=True)}",
@@ -108,8 +180,9 @@ def print_summary(console: Console, result: dict, out_dir: Path | None) -> None:
         console.print(f"[yellow]note:[/yellow] {n}")
     if result.get("reason"):
         console.print(f"[red]{status}:[/red] {result['reason']}")
-    if out_dir is not None:
-        console.print(f"written to: {out_dir}")
+    if report is not None:
+        console.print(f"written to: {report.parent}; open [bold]{report}[/bold] to read and sign the result"
+                      if report.exists() else f"written to: {report.parent}", soft_wrap=True)
 
 
 def print_drives_final(console: Console, meta: RunRecord) -> None:

@@ -160,10 +160,10 @@ def result_after(out: Path, act, truth, meta: MetaWriter, outcome, console: Cons
             run.write_with("report.html", lambda path: write_stopped_report(path, result))
             console.print(f"no analysis: {exc}")
             return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
-        print_summary(console, result, out)
+        print_summary(console, result, out / "report.html")
         return ExitCode.INPUT if outcome.bad_input else ExitCode.ABORTED
     print_master_loss(console, rec)
     result = analyze_and_report(out / "signals.csv", act, run, truth, rec, console,
                                 prepared=prepare(rec) if prepare is not None else None)
-    print_summary(console, result, out)
+    print_summary(console, result, out / "report.html")
     return exit_for(result)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from hil.cli.args import add_history_args, add_parser, add_profile_args, add_trace_args
 from hil.cli.check import refuse_shared_serial, simulated_identity, truth_dict, worn_simrig
-from hil.cli.console import LiveProgress, make_console
+from hil.cli.console import check_progress, make_console
 from hil.cli.history_glue import installation, record_history, refuse_foreign_history
 from hil.cli.result import result_after
 from hil.profile.load import load_actuation, load_check, load_simrig, snapshot
@@ -50,7 +50,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                                         identity=simulated_identity(act, simrig), wear=wear), new=True)
     console.print(f"emacheck simulate: seed {seed}, run folder {out}")
     t0 = time.perf_counter()
-    with LiveProgress(console, 0.0, not args.quiet) as live:
+    with check_progress(console, args.quiet) as live:
         outcome = run_check(PlantLink(plant), act, check, meta, on_cycle=live if live.enabled else None)
     wall = time.perf_counter() - t0
     console.print(f"check {outcome.status} after {outcome.duration_s:.1f} s simulated "
