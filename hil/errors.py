@@ -125,3 +125,8 @@ class HistoryUnavailableError(HistoryError, ConnectionError):
 
 #: Every error raised on purpose, whichever package raised it.
 KNOWN_ERRORS: tuple[type[Exception], ...] = (EmacheckError, CanopenError, BlfError)
+
+
+class StopRequest(KeyboardInterrupt):
+    """A request to stop a running check as Ctrl-C does (a SIGTERM from a service manager, a SIGHUP of a
+    closed session: :mod:`hil.cli.stopping`); its message is the reason the record gives."""

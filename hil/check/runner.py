@@ -149,7 +149,8 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
         rec, stop_note = _record_safe_state(link, rec)
     except BaseException as exc:
         # fail closed: stop both drives, keep the log, record why, re-raise
-        reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"error: {type(exc).__name__}: {exc}"
+        reason = (str(exc) or INTERRUPTED) if isinstance(exc, KeyboardInterrupt) else \
+            f"error: {type(exc).__name__}: {exc}"
         secondary = ""
         try:
             seq.abort(smp.t_s if smp is not None else 0.0, reason)

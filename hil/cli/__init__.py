@@ -27,6 +27,7 @@ from typing import NoReturn
 from hil import __version__
 from hil.cli import analyze, commission, diagnose, dry_run, history, profile, run, serv, sim_serve, simulate
 from hil.cli.args import EPILOG, ExitCode
+from hil.cli.stopping import CHECK_COMMANDS, StopOnSignals
 
 #: The commands in the order ``--help`` lists them.
 COMMANDS = (dry_run, run, commission, profile, simulate, analyze, serv, diagnose, history, sim_serve)
@@ -110,6 +111,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.print_help()
         return ExitCode.INPUT
     try:
+        if args.cmd in CHECK_COMMANDS:
+            with StopOnSignals():
+                return int(_current(args.handler)(args))
         return int(_current(args.handler)(args))
     except (ProfileError, RecordingError, EdsError, InterfaceError) as exc:
         print(f"emacheck: error: {exc}", file=sys.stderr)

@@ -120,7 +120,7 @@ def canopen_check(console: Console, act, check, link, meta: MetaWriter, quiet: b
             # (no progress display: no progress computed either, a Progress per cycle for nothing)
             outcome = run_check(link, act, check, meta, on_cycle=live if live.enabled else None)
     except (*KNOWN_ERRORS, KeyboardInterrupt) as exc:
-        reason = INTERRUPTED if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
+        reason = (str(exc) or INTERRUPTED) if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
         rec = meta.record
         outcome = LoopOutcome(RunStatus.ABORTED, reason, rec.samples if rec.samples is not None else 0,
                               rec.duration_s if rec.duration_s is not None else 0.0, rec.steps or (),

@@ -256,7 +256,7 @@ class Commission:
         elif isinstance(exc, MasterLossReactionError):
             self.findings.append(Finding(Stage.PREFLIGHT, Kind.DRILL, "canopen.external_watchdog", str(exc)))
         elif isinstance(exc, KeyboardInterrupt):
-            self.findings.append(Finding(self.stage, Kind.STOP, "", "interrupted by the operator"))
+            self.findings.append(Finding(self.stage, Kind.STOP, "", str(exc) or "interrupted by the operator"))
         else:
             stage = self.stage if self.stage is not Stage.STOPPED else Stage.PREFLIGHT
             kind = Kind.PREFLIGHT if stage in (Stage.SCAN, Stage.PREFLIGHT) else Kind.STOP
