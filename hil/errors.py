@@ -130,3 +130,9 @@ KNOWN_ERRORS: tuple[type[Exception], ...] = (EmacheckError, CanopenError, BlfErr
 class StopRequest(KeyboardInterrupt):
     """A request to stop a running check as Ctrl-C does (a SIGTERM from a service manager, a SIGHUP of a
     closed session: :mod:`hil.cli.stopping`); its message is the reason the record gives."""
+
+
+class RecordWriteError(EmacheckError, OSError):
+    """A check's record could not be written any more (a full disk, an IO error, a file system gone
+    read-only) while the drives were running: they were brought to their safe stop first; the message names
+    the file and the cause (exit status 2)."""

@@ -15,9 +15,11 @@ from typing import Protocol
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.check.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.check.supervisor import Supervisor
+from hil.errors import KNOWN_ERRORS, OutputError, RecordWriteError
 from hil.profile.config import Actuation, Check
 from hil.record.runfolder import MetaWriter, SignalsWriter
 from hil.record.runrecord import RunRecord, RunStatus, SafetyViolation, Stalls, StepTime
+from hil.record.space import EndReserve, check_free_space, record_bytes
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
 #: The reason recorded when the operator stops the check (Ctrl-C, SIGINT).
@@ -84,20 +86,24 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
 
     The record is written to meta.json at the start and updated at each step change and at the end
     (``meta.record`` is the run's record then, also when this raises). Any exception aborts the
-    sequence, stops both drives (DISABLED), closes the log and is re-raised. ``meta``'s DiskSync
-    writes the record and fsyncs (unless one was given: in the background on a real bus, at once on
-    simulated time); it is closed here.
+    sequence, stops both drives (DISABLED), closes the log and is re-raised; a record that can no longer be
+    written (a full disk, an IO error) is such an exception, raised as :class:`hil.errors.RecordWriteError`
+    after the drives' stop (exit 2). Before anything moves, the run folder's disk must hold the longest
+    record the check may make (:func:`hil.record.space.check_free_space`, exit 3), and space for the record's
+    end is kept (:class:`hil.record.space.EndReserve`). ``meta``'s DiskSync writes the record and fsyncs
+    (unless one was given: in the background on a real bus, at once on simulated time); it is closed here.
     """
     meta.run_dir.mkdir(parents=True, exist_ok=True)
     # a drive without CST holds the calibration's opposing force by the sequence's position-mode loop
     seq = CheckSequence(act, check, force_by_position=getattr(link, "force_by_position", (False, False)))
     sup = Supervisor(act, check)
     rec = meta.write()
+    limit = max_duration_s if max_duration_s is not None else 3.0 * seq.planned_duration_s() + 60.0
+    reserve = _space_for(link, act, meta, rec, limit)
     # on a real bus, the signals' writes, fsync and the JSON files written in the loop: off the loop's
     # thread (the caller may have made the thread before it went real-time); on simulated time, at once
     meta.open_disk(background=getattr(link, "timing", None) is not None)
     writer = SignalsWriter(meta.run_dir / "signals.csv", disk=meta.disk)
-    limit = max_duration_s if max_duration_s is not None else 3.0 * seq.planned_duration_s() + 60.0
     sp1 = sp2 = DISABLED
     smp: Sample | None = None
     t_start = 0.0
@@ -131,6 +137,7 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
             writer.write(smp, out.sp1, out.sp2, out.step.value)
             if smp.t_s - writer.flushed_t_s >= FLUSH_PERIOD_S:
                 writer.flush(smp.t_s)
+                _still_writing(meta)
             if out.events:
                 for ev in out.events:
                     rec = rec.with_step(ev.step.value, ev.t_s)
@@ -147,47 +154,80 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
             smp = link.exchange(sp1, sp2)
         link.close()
         rec, stop_note = _record_safe_state(link, rec)
+        # the cyclic loop touches no new memory (a page fault costs ~0.9 ms in user-mode-linux)
+        loop_page_faults = _page_faults() - faults0
+        reserve.release()
+        meta.close_disk()
+        writer.close()
     except BaseException as exc:
-        # fail closed: stop both drives, keep the log, record why, re-raise
-        reason = (str(exc) or INTERRUPTED) if isinstance(exc, KeyboardInterrupt) else \
-            f"error: {type(exc).__name__}: {exc}"
-        secondary = ""
-        try:
-            seq.abort(smp.t_s if smp is not None else 0.0, reason)
-            link.abort()
-            if smp is not None:
-                link.exchange(DISABLED, DISABLED)
-        except Exception as exc2:  # the original error is re-raised; this one is recorded
-            secondary = f"; while stopping: {type(exc2).__name__}: {exc2}"
-        finally:
-            try:
-                link.close()
-            except Exception as exc3:
-                secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
-            rec, note = _record_safe_state(link, rec)
-            secondary += note
-            if record is not None and rec.master_loss is None:  # the preflight stopped: what it got to, the drill's
-                try:                                            # outcome and the identities read included
-                    rec = rec.with_preflight(record())
-                except Exception as exc5:
-                    secondary += f"; while recording the preflight: {type(exc5).__name__}: {exc5}"
-            try:
-                meta.close_disk()
-            except OSError as exc4:
-                secondary += f"; while writing the run folder: {type(exc4).__name__}: {exc4}"
-            writer.close()
-            meta.write(rec.ended(RunStatus.ABORTED, reason + secondary, writer.rows,
-                                 (smp.t_s - t_start) if smp is not None else 0.0, stalls=_stalls(link)))
+        reserve.release()  # first: the space the record's end needs
+        reason = _stop_after(exc, seq, link, smp, rec, record, meta, writer, t_start)
+        if isinstance(exc, OSError) and not isinstance(exc, KNOWN_ERRORS):
+            raise RecordWriteError(f"{reason}; the drives were stopped first") from exc
         raise
-    # the cyclic loop touches no new memory (a page fault costs ~0.9 ms in user-mode-linux)
-    loop_page_faults = _page_faults() - faults0
-    meta.close_disk()
-    writer.close()
     status = RunStatus.DONE if seq.step_now == Step.DONE else RunStatus.ABORTED
     reason = (seq.abort_reason + stop_note) if seq.abort_reason else stop_note.lstrip("; ")
     rec = meta.write(rec.ended(status, reason, writer.rows, smp.t_s - t_start, loop_page_faults=loop_page_faults,
                                stalls=_stalls(link)))
     return LoopOutcome(status, reason, writer.rows, smp.t_s - t_start, rec.steps)
+
+
+def _space_for(link, act: Actuation, meta: MetaWriter, rec: RunRecord, limit_s: float) -> EndReserve:
+    """Before anything moves: the run folder's disk holds the longest record the check may make (else its
+    record says aborted and why, :class:`hil.errors.OutputError`, exit 3), and the space for the record's
+    end is kept."""
+    fpc = float(getattr(link, "frames_per_cycle", 0.0))
+    try:
+        check_free_space(meta.run_dir, record_bytes(limit_s, act.timing.sync_period_s, fpc),
+                         f"{limit_s:.0f} s at most, one row of signals.csv and {fpc:.1f} frames of can.log every "
+                         f"{act.timing.sync_period_s * 1e3:g} ms, and the record's end")
+    except OutputError as exc:
+        meta.write(rec.ended(RunStatus.ABORTED, f"not started: {exc}", 0, 0.0))
+        raise
+    return EndReserve(meta.run_dir)
+
+
+def _still_writing(meta: MetaWriter) -> None:
+    """A write the disk's thread could not make (a full disk, an IO error): stop the check now."""
+    disk = meta.disk
+    err = disk.error if disk is not None else None
+    if err is not None:
+        raise RecordWriteError(f"the record cannot be written any more: {type(err).__name__}: {err}")
+
+
+def _stop_after(exc: BaseException, seq, link, smp, rec: RunRecord, record, meta: MetaWriter, writer,
+                t_start: float) -> str:
+    """Fail closed after ``exc``: stop both drives, keep what can be kept of the log, record why; the reason."""
+    reason = (str(exc) or INTERRUPTED) if isinstance(exc, KeyboardInterrupt) else \
+        f"error: {type(exc).__name__}: {exc}"
+    secondary = ""
+    try:
+        seq.abort(smp.t_s if smp is not None else 0.0, reason)
+        link.abort()
+        if smp is not None:
+            link.exchange(DISABLED, DISABLED)
+    except Exception as exc2:  # the original error is re-raised; this one is recorded
+        secondary = f"; while stopping: {type(exc2).__name__}: {exc2}"
+    finally:
+        try:
+            link.close()
+        except Exception as exc3:
+            secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
+        rec, note = _record_safe_state(link, rec)
+        secondary += note
+        if record is not None and rec.master_loss is None:  # the preflight stopped: what it got to, the drill's
+            try:                                            # outcome and the identities read included
+                rec = rec.with_preflight(record())
+            except Exception as exc5:
+                secondary += f"; while recording the preflight: {type(exc5).__name__}: {exc5}"
+        for what, close in (("the run folder", meta.close_disk), ("signals.csv", writer.close)):
+            try:
+                close()
+            except OSError as exc4:
+                secondary += f"; while writing {what}: {type(exc4).__name__}: {exc4}"
+        meta.write(rec.ended(RunStatus.ABORTED, reason + secondary, writer.rows,
+                             (smp.t_s - t_start) if smp is not None else 0.0, stalls=_stalls(link)))
+    return reason + secondary
 
 
 def _stalls(link) -> Stalls | None:

@@ -319,6 +319,11 @@ class CanopenLink:
         """Per EMA: its drive holds forces by the master's loop in CSP (no CST in the plan)."""
         return tuple(d.force_control is ForceControl.CSP for d in self.m.plan.drives)
 
+    @property
+    def frames_per_cycle(self) -> float:
+        """CAN frames per SYNC cycle the check logs: SYNC, every PDO and the heartbeats of its bus-load plan."""
+        return float(sum(i.frames_per_cycle for i in self.m.plan.load.items))
+
     def preflight_record(self) -> dict:
         """What meta.json records of the preflight, as far as it got (also when it stopped): the process image
         (PDOs, scalings as the drives reported them) once the drives are up, how each drive is protected against

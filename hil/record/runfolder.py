@@ -32,14 +32,20 @@ from hil.record.signals_csv import EXTRA_COLUMNS, SIGNAL_COLUMNS
 
 
 def write_json_atomic(path: Path, obj: Any) -> None:
-    """Write JSON via a temporary file and rename, so a crash never leaves half a file."""
+    """Write JSON via a temporary file and rename, so a crash never leaves half a file; an OSError (a full
+    disk) leaves the file as it was and is raised as :class:`hil.errors.OutputError` naming ``path``."""
     tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w") as fh:
-        json.dump(obj, fh, indent=2, sort_keys=False, default=json_default)
-        fh.write("\n")
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w") as fh:
+            json.dump(obj, fh, indent=2, sort_keys=False, default=json_default)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:  # a full disk, an IO error: the file as it was, the path and the cause named
+        with _suppress_os():
+            os.unlink(tmp)
+        raise output_error(path, exc) from None
 
 
 def output_error(path: Path, exc: OSError) -> OutputError:
@@ -96,9 +102,11 @@ def create_with(path: Path, write) -> Path:
         raise output_error(path, exc) from None
     try:
         write(Path(tmp))
-    except BaseException:
+    except BaseException as exc:
         with _suppress_os():
             os.unlink(tmp)
+        if isinstance(exc, OSError) and not isinstance(exc, OutputError):  # a full disk, an IO error
+            raise output_error(path, exc) from None
         raise
     _link_new(Path(tmp), path)
     return path
@@ -187,7 +195,9 @@ class DiskSync:
                 return
             try:
                 _do(job)
-            except BaseException as exc:  # recorded, raised by close()
+            except OSError as exc:  # recorded (naming the file where the job does), raised by close()
+                self._errors.append(_naming(exc, job[3] if len(job) > 3 else None))
+            except BaseException as exc:
                 self._errors.append(exc)
 
     def _job(self, *job) -> None:
@@ -207,14 +217,22 @@ class DiskSync:
         """fsync the open file ``fd`` in the background (it must stay open until :meth:`close`)."""
         self._job("fsync", fd)
 
-    def append(self, fd: int, data: bytes) -> None:
-        """Write ``data`` at the end of the open file ``fd`` (opened with ``O_APPEND``) in the background,
-        in order with this DiskSync's other jobs."""
-        self._job("append", fd, data)
+    def append(self, fd: int, data: bytes, path: Path | None = None) -> None:
+        """Write ``data`` at the end of the open file ``fd`` (opened with ``O_APPEND``; ``path``: its name, for
+        an error) in the background, in order with this DiskSync's other jobs."""
+        try:
+            self._job("append", fd, data, path)
+        except OSError as exc:
+            raise _naming(exc, path) from None
 
     def close_file(self, fd: int, sync: bool) -> None:
         """Close the file ``fd`` (``sync``: fsync it first) after every job given before."""
         self._job("close_synced" if sync else "close", fd)
+
+    @property
+    def error(self) -> BaseException | None:
+        """The first error the thread met so far (None: every job done or pending); :meth:`close` raises it."""
+        return self._errors[0] if self._errors else None
 
     def close(self) -> None:
         """Wait for every job; raise the first error met. Jobs given later are done at once."""
@@ -224,6 +242,13 @@ class DiskSync:
         self.background = False
         if self._errors:
             raise self._errors[0]
+
+
+def _naming(exc: OSError, path: Path | None) -> OSError:
+    """``exc`` naming ``path`` where it names no file (a write to a descriptor names none)."""
+    if path is None or exc.filename:
+        return exc
+    return type(exc)(exc.errno, exc.strerror, str(path))
 
 
 def _do(job: tuple) -> None:
@@ -273,7 +298,7 @@ class LoopFile:
         if self._parts:
             data = "".join(self._parts).encode()
             self._parts.clear()
-            self.disk.append(self._fd, data)
+            self.disk.append(self._fd, data, self.path)
 
     def fsync(self) -> None:
         """After what was flushed: to the disk itself (survives a power cut)."""
