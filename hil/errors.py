@@ -132,6 +132,12 @@ class StopRequest(KeyboardInterrupt):
     closed session: :mod:`hil.cli.stopping`); its message is the reason the record gives."""
 
 
+class LinkLostError(EmacheckError, ConnectionError):
+    """The CAN interface went away during a check (an USB adapter unplugged, the interface taken down): the
+    master can no longer reach the drives; their own heartbeat consumers stop them (0x1016, configured and
+    drilled before the check). The message names the interface and the cause (exit status 2)."""
+
+
 class RecordWriteError(EmacheckError, OSError):
     """A check's record could not be written any more (a full disk, an IO error, a file system gone
     read-only) while the drives were running: they were brought to their safe stop first; the message names

@@ -35,6 +35,7 @@ from typing import Protocol
 import can
 
 from hil.canopen.frame import SYNC_COB_ID, Frame, sync_frame
+from hil.errors import LinkLostError
 
 
 class Transport(Protocol):
@@ -342,14 +343,36 @@ class BusTransport:
         return t if now - 1.0 < t <= now else now
 
     def send(self, frames: list[Frame], t: float) -> None:
-        if self._raw is not None:
+        try:
+            if self._raw is not None:
+                for f in frames:
+                    self._raw.send(f)
+                return
             for f in frames:
-                self._raw.send(f)
-            return
-        for f in frames:
-            self.bus.send(_to_msg(f, t))
+                self.bus.send(_to_msg(f, t))
+        except (OSError, can.CanError) as exc:
+            raise self.lost(exc) from exc
+
+    def lost(self, exc: BaseException) -> LinkLostError:
+        """The CAN interface gone (an adapter unplugged, the interface taken down: ENETDOWN, ENODEV ...), as
+        :class:`hil.errors.LinkLostError` naming it and the cause."""
+        import errno
+
+        code = getattr(exc, "errno", None)
+        if not isinstance(code, int):
+            code = getattr(exc, "error_code", None)
+        name = errno.errorcode.get(code, "") if isinstance(code, int) else ""
+        return LinkLostError(f"the CAN interface {self.bus.channel_info!r} went away: {type(exc).__name__}: {exc}"
+                             + (f" ({name})" if name else "") + "; the master can no longer reach the drives, "
+                             "they stop by their own reaction to losing the master (meta.json master_loss)")
 
     def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message | None]]:
+        try:
+            return self._receive(deadline)
+        except (OSError, can.CanError) as exc:
+            raise self.lost(exc) from exc
+
+    def _receive(self, deadline: float) -> list[tuple[Frame, float, can.Message | None]]:
         if self._raw is not None:
             while True:
                 # one system call per frame, queued or waited for; the clock is read only when
@@ -417,7 +440,10 @@ class BusTransport:
         counted in :attr:`sync_skipped`; the next is due one period after the
         slot taken.
         """
-        self.bus.send(can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False, check=False))
+        try:
+            self.bus.send(can.Message(arbitration_id=SYNC_COB_ID, data=b"", is_extended_id=False, check=False))
+        except (OSError, can.CanError) as exc:
+            raise self.lost(exc) from exc
         t = self.clock()
         due = self._due
         late = t - due

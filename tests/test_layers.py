@@ -286,8 +286,8 @@ FLOORS = (
     ("hil.analysis", "hil.master"),
     ("hil.history", "hil.check", "hil.sim_server"),
     ("hil.record",),
-    ("hil.profile",),
-    ("hil.errors", "hil.transport", "sim"),
+    ("hil.profile", "hil.transport"),
+    ("hil.errors", "sim"),
     ("blf", "hil.forks", "hil.canopen", "hil"),
 )
 #: blf's wings, top down: a wing uses only the wings below it and blf's top modules

@@ -15,7 +15,7 @@ from typing import Protocol
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.check.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.check.supervisor import Supervisor
-from hil.errors import KNOWN_ERRORS, OutputError, RecordWriteError
+from hil.errors import KNOWN_ERRORS, LinkLostError, OutputError, RecordWriteError
 from hil.profile.config import Actuation, Check
 from hil.record.runfolder import MetaWriter, SignalsWriter
 from hil.record.runrecord import RunRecord, RunStatus, SafetyViolation, Stalls, StepTime
@@ -206,6 +206,8 @@ def _stop_after(exc: BaseException, seq, link, smp, rec: RunRecord, record, meta
         link.abort()
         if smp is not None:
             link.exchange(DISABLED, DISABLED)
+    except LinkLostError:  # the interface is gone: no quick stop can be sent, the drives stop by themselves
+        secondary = "; while stopping: the CAN interface still gone, no quick stop sent"
     except Exception as exc2:  # the original error is re-raised; this one is recorded
         secondary = f"; while stopping: {type(exc2).__name__}: {exc2}"
     finally:

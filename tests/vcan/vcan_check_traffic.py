@@ -72,6 +72,8 @@ READY_TIMEOUT_S = 60.0
 #: sim-serve is killed once the master logged this much of the check [s] (the first calibration sweep
 #: starts at 2.6 s: both drives enabled, one moving, the other in force mode)
 KILL_AFTER_S = 3.0
+#: check time after which the CAN interface is taken down (issue 47: the adapter unplugged mid-check) [s]
+LINK_DOWN_AFTER_S = 3.0
 #: run is killed mid force fight, once its signals.csv shows this force-fight level |F1 - F2| / 2 [N]
 #: (the fight of tests/vcan/check.toml peaks at 6 kN about 34 s into the check; with the sweeps of
 #: FIGHT_SWEEP_MM, about 14 s: the in-process dry-run with the same profiles)
@@ -328,6 +330,43 @@ def _master_kill_scenario(base: Path) -> dict:
     return res
 
 
+def _link_down_scenario(base: Path) -> dict:
+    """sim-serve, run; ``ip link set CHANNEL down`` once the check has run LINK_DOWN_AFTER_S, then up again."""
+    base.mkdir(parents=True, exist_ok=True)
+    out = base / "run"
+    procs = Procs()
+    res: dict = {"out": out}
+    try:
+        serve = procs.start(_cli("sim-serve", "--interface", "socketcan", "--channel", CHANNEL,
+                                 "--rt-priority", RT_PRIORITY, *_profile_args(sim=True)),
+                            subprocess.PIPE, text=True, bufsize=1)
+        serve_lines = Lines(serve.stdout)
+        serve_lines.wait_for("ready", READY_TIMEOUT_S, serve)
+        with open(base / "run.out", "w") as run_log:
+            run = procs.start(_cli("run", "--interface", "socketcan", "--channel", CHANNEL, "--arm", "--quiet",
+                                   "--rt-priority", MASTER_RT_PRIORITY, "--check", str(CHECK), "--out", str(out),
+                                   *_profile_args(sim=False)), run_log)
+        rows = int(LINK_DOWN_AFTER_S / load_actuation(ACT).timing.sync_period_s)
+        csv = out / "signals.csv"
+        deadline = time.monotonic() + RUN_TIMEOUT_S
+        while time.monotonic() < deadline and run.poll() is None:
+            if csv.exists() and csv.read_text().count("\n") > rows:
+                break
+            time.sleep(0.05)
+        assert run.poll() is None, "run ended before the interface could be taken down"
+        subprocess.run(["ip", "link", "set", CHANNEL, "down"], check=True)
+        res["down_rows"] = csv.read_text().count("\n") - 1
+        try:
+            res["rc"] = run.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            pytest.fail("`emacheck run` did not end within 60 s of its CAN interface going down")
+    finally:
+        subprocess.run(["ip", "link", "set", CHANNEL, "up"], check=False)
+        procs.close()
+    res["run_out"] = (base / "run.out").read_text(errors="replace")
+    return res
+
+
 @pytest.fixture(scope="module")
 def actuation():
     return load_actuation(ACT)
@@ -346,6 +385,11 @@ def killed_check(tmp_path_factory, full_check):
 @pytest.fixture(scope="module")
 def killed_master(tmp_path_factory, killed_check):
     return _master_kill_scenario(tmp_path_factory.mktemp("vcan-kill-run"))
+
+
+@pytest.fixture(scope="module")
+def link_down(tmp_path_factory, killed_master):
+    return _link_down_scenario(tmp_path_factory.mktemp("vcan-link-down"))
 
 
 def _capture_frames(path: Path) -> list[tuple[float, int, bytes]]:
@@ -558,3 +602,22 @@ def test_killed_master_run_folder_keeps_the_data_up_to_the_loss(killed_master, a
     assert csv.t[-1] >= cap.t[-1] - 0.5 - 2 * T and own.t[-1] >= cap.t[-1] - 0.5 - 2 * T
     k = _match_by_time(cap, csv)
     _assert_same_signals(cap, csv, k)
+
+
+# ----------------------------------------------------------------------------- the interface gone
+
+
+def test_the_interface_taken_down_mid_check_stops_it_as_aborted_and_says_so(link_down):
+    """``ip link set vcan0 down`` mid-check (an USB adapter unplugged): exit 2, never 4; meta.json and
+    result.json aborted, the reason naming the interface going away (or the drives falling silent, where the
+    loop's reads timed out first) and what each drive was last seen doing."""
+    out = link_down["out"]
+    assert link_down["rc"] == 2, link_down["run_out"]
+    assert "internal error" not in link_down["run_out"] and "Traceback" not in link_down["run_out"]
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["status"] == "aborted", meta.get("reason")
+    assert "went away" in meta["reason"] or "heartbeat" in meta["reason"] or "stale" in meta["reason"], meta["reason"]
+    assert set(meta["drives_final"]) == {"ema1", "ema2"}
+    result = json.loads((out / "result.json").read_text())
+    assert result["status"] == "aborted" and (out / "report.html").exists()
+    assert link_down["down_rows"] > 0
