@@ -356,3 +356,18 @@ def test_sim_serve_refuses_an_existing_timing_json_before_it_serves(tmp_path, ca
     assert main(["sim-serve", "--interface", "virtual", "--channel", "x", "--timing-json", str(existing)]) == 3
     assert f"--timing-json {existing}: exists; never overwritten" in capsys.readouterr().err
     assert existing.read_bytes() == before
+
+
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_an_output_file_gets_the_users_umask_not_mkstemps_0600(tmp_path, umask, mode):
+    """An output created once (temporary name, then linked) is readable as any file the user makes: its mode
+    is 0666 under the umask, as ``open`` gives it (mkstemp made it 0600)."""
+    from hil.record.runfolder import create_json, new_file_mode
+
+    old = os.umask(umask)
+    try:
+        assert new_file_mode() == mode
+        path = create_json(tmp_path / "result.json", {"status": "pass"})
+    finally:
+        os.umask(old)
+    assert (path.stat().st_mode & 0o777) == mode

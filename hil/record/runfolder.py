@@ -88,6 +88,17 @@ def _suppress_os():
     return contextlib.suppress(OSError)
 
 
+def new_file_mode() -> int:
+    """The mode a new file gets under this process's umask (0o644 under the usual 022), as ``open`` gives it."""
+    try:
+        with open("/proc/self/status") as fh:  # Linux: read without changing it (os.umask would, process-wide)
+            mask = next(int(line.split()[1], 8) for line in fh if line.startswith("Umask:"))
+    except (OSError, StopIteration, ValueError, IndexError):
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return 0o666 & ~mask
+
+
 def create_with(path: Path, write) -> Path:
     """Create the file ``path`` by ``write(tmp)`` (any writer taking a path: a report) without ever
     replacing a file: written complete under a temporary name beside it, then linked to ``path`` only if
@@ -97,7 +108,10 @@ def create_with(path: Path, write) -> Path:
     path = Path(path)
     try:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-        os.close(fd)
+        try:
+            os.fchmod(fd, new_file_mode())  # (mkstemp makes it 0600: an output is readable as the user's others)
+        finally:
+            os.close(fd)
     except OSError as exc:
         raise output_error(path, exc) from None
     try:
