@@ -19,6 +19,7 @@ from hil.errors import KNOWN_ERRORS, LinkLostError, OutputError, RecordWriteErro
 from hil.profile.config import Actuation, Check
 from hil.record.runfolder import MetaWriter, SignalsWriter
 from hil.record.runrecord import RunRecord, RunStatus, SafetyViolation, Stalls, StepTime
+from hil.record.seal import seal_of
 from hil.record.space import EndReserve, check_free_space, record_bytes
 
 DISABLED = Setpoint(DriveMode.DISABLED, 0.0)
@@ -159,6 +160,7 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
         reserve.release()
         meta.close_disk()
         writer.close()
+        rec = replace(rec, recording_sha256=seal_of(meta.run_dir))  # the recording as the check left it
     except BaseException as exc:
         reserve.release()  # first: the space the record's end needs
         reason = _stop_after(exc, seq, link, smp, rec, record, meta, writer, t_start)
@@ -228,7 +230,8 @@ def _stop_after(exc: BaseException, seq, link, smp, rec: RunRecord, record, meta
             except OSError as exc4:
                 secondary += f"; while writing {what}: {type(exc4).__name__}: {exc4}"
         meta.write(rec.ended(RunStatus.ABORTED, reason + secondary, writer.rows,
-                             (smp.t_s - t_start) if smp is not None else 0.0, stalls=_stalls(link)))
+                             (smp.t_s - t_start) if smp is not None else 0.0, stalls=_stalls(link),
+                             recording_sha256=seal_of(meta.run_dir)))
     return reason + secondary
 
 

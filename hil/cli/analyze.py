@@ -15,6 +15,7 @@ from hil.record.outputs import outputs_for
 from hil.record.recording import actuation_for
 from hil.record.runfolder import has_record, read_record, resolve_recording
 from hil.record.runrecord import RunStatus
+from hil.record.seal import check_seal
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
@@ -28,13 +29,15 @@ def cmd_analyze(args: argparse.Namespace) -> int:
             raise
         sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = read_record(run_dir)
+    modified = check_seal(sig_path, meta, args.accept_modified)  # before anything is written
     act = actuation_for(args.profile, meta)
     refuse_foreign_history(args, act)
     outputs = outputs_for(args.out, sig_path, run_dir, "analysis", ("result.json", "report.html"))
     truth = meta.truth if meta is not None else None
     status = meta.status if meta is not None else None
     incomplete = status is RunStatus.RUNNING
-    extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta).as_json()}
+    extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta).as_json(),
+             "modified": modified}
     try:
         result = analyze_and_report(sig_path, act, outputs, truth, meta, console, trace_extra=extra)
     except BaseException as exc:

@@ -81,6 +81,9 @@ def add_recording_args(
     p.add_argument("--out", metavar="DIR", type=Path,
                    help=f"where {writes} go (default: a new sub-folder of the run folder, or files named after "
                         f"the recording next to it: nothing is overwritten)")
+    p.add_argument("--accept-modified", action="store_true",
+                   help="analyse a run folder whose recording changed after its check (its SHA-256 in meta.json "
+                        "no longer matches: refused otherwise, exit 3); the result then says so")
 
 
 def add_bus_args(p: argparse.ArgumentParser, interfaces: str, *, required: bool = True) -> None:

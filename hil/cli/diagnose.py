@@ -60,7 +60,7 @@ def _request(args: argparse.Namespace):
         url = history_url_for(args.history, args.profile)
     return DiagnoseRequest(Path(args.recording), args.model, args.profile, axis, args.force_floor_N is not None,
                            None if args.reference is None or from_history else args.reference, from_history, url,
-                           args.check, args.allow_other_serials)
+                           args.check, args.allow_other_serials, args.accept_modified)
 
 
 def _write_report(path: Path, out, json_name: str) -> None:

@@ -66,6 +66,8 @@ def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) 
         # where and when in the aircraft's life (the wear history's keys): aircraft, position, rig,
         # flight hours and cycles
         **place,
+        # a run folder's recording changed after its check, analysed at the user's request (hil.record.seal)
+        **({"modified": extra["modified"]} if extra.get("modified") else {}),
     }
 
 
@@ -96,6 +98,8 @@ def analysed(sig_path: Path, act: Actuation, truth: dict | None, meta: RunRecord
         result.setdefault("notes", [])
         result["notes"] = list(result["notes"]) + [n for n in sig.notes if n not in result["notes"]]
     result["trace"] = trace_of(meta, sig_path, trace_extra)
+    if "modified" in result["trace"]:  # said first among the notes: on the console and in the report
+        result["notes"] = [result["trace"]["modified"]["words"]] + list(result.get("notes", []))
     result["analysis_s"] = round(time.perf_counter() - t0, 3)
     return sig, an, result
 

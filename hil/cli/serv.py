@@ -19,6 +19,7 @@ from hil.errors import RecordingError
 from hil.record.outputs import Outputs, outputs_for
 from hil.record.recording import actuation_for, load_recording
 from hil.record.runfolder import read_record, resolve_recording
+from hil.record.seal import check_seal
 
 
 def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) -> None:
@@ -72,6 +73,7 @@ def cmd_serv(args: argparse.Namespace) -> int:
         raise RecordingError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
     sig_path, run_dir = resolve_recording(args.recording)
     meta = read_record(run_dir)
+    modified = check_seal(sig_path, meta, args.accept_modified)  # before anything is written
     act = actuation_for(args.profile, meta)
     refuse_foreign_history(args, act)
     try:
@@ -89,7 +91,9 @@ def cmd_serv(args: argparse.Namespace) -> int:
     outputs = outputs_for(args.out, sig_path, run_dir, "serv", ("serv.json", "serv_report.html"))
     data = serv_dict(an, truth, str(sig_path))
     data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order,
-                                              **installation(args, act, meta).as_json()})
+                                              **installation(args, act, meta).as_json(), "modified": modified})
+    if modified:  # said first among the notes: on the console and in the report
+        data["notes"] = [modified["words"]] + list(data["notes"])
     data["analysis_s"] = round(time.perf_counter() - t0, 3)
     outputs.write_json("serv.json", data)
     if report:

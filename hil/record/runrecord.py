@@ -553,6 +553,7 @@ class RunRecord:
     attribution: Attribution | None = None
     installation: Installation | None = None
     files_sha256: dict[str, str] | None = None  #: file name -> SHA-256
+    recording_sha256: dict[str, str] | None = None  #: signals.csv, can.log -> SHA-256 when the check ended
     wear: Wear | None = None
     process_image: dict | None = None  #: :func:`hil.canopen.cycle.image_of`
     master_loss: dict[str, dict] | None = None  #: EMA -> :meth:`hil.master.drill.MasterLossRecord.as_json`
@@ -665,8 +666,9 @@ _PARTS = {"software": Software, "profiles": Profiles, "bus_load": BusLoad, "wear
 _FLAT_PARTS = {"bus": Bus, "attribution": Attribution, "installation": Installation}
 _PLAIN = {"run_id": "text", "started_utc": "text", "scenario": "text", "seed": "int", "realtime": "bool",
           "simrig": "object", "truth": "object", "eds": "text", "eds_nodes": "text map", "force_control": "text map",
-          "files_sha256": "text map", "process_image": "object", "master_loss": "object", "reason": "text",
-          "ended_utc": "text", "samples": "int", "duration_s": "number", "wall_s": "number"}
+          "files_sha256": "text map", "recording_sha256": "text map", "process_image": "object",
+          "master_loss": "object", "reason": "text", "ended_utc": "text", "samples": "int", "duration_s": "number",
+          "wall_s": "number"}
 
 
 def _json_of(name: str, v: Any) -> dict:

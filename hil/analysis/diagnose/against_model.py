@@ -29,7 +29,8 @@ from hil.errors import RecordingError
 
 def diagnose_against_model(path: Path, model_name: str, profile: Path | None, opts: AxisOptions,
                            force_floor_stated: bool = False,
-                           progress: Callable[[str], None] | None = None) -> DiagnoseOutcome:
+                           progress: Callable[[str], None] | None = None, *,
+                           accept_modified: bool = False) -> DiagnoseOutcome:
     """diagnosis.json of a recording against the simulation, with the replay model and the diagnosis its
     report draws; a single axis whose effort does not see its known load: the reason, nothing diagnosed
     (verdict ``untrusted_effort``). ``force_floor_stated``: a single axis's ``opts.force_floor_N`` was
@@ -46,7 +47,7 @@ def diagnose_against_model(path: Path, model_name: str, profile: Path | None, op
         else:
             if not Path(path).exists():
                 raise RecordingError(f"{path}: no such file or folder")
-            rec = load_dual(Path(path), profile)
+            rec = load_dual(Path(path), profile, accept_modified)
             model, period = rec.model, rec.period_s
         d = diagnose(model, period, progress=progress)
     except (InputError, AnalysisError) as exc:  # the recording does not support a diagnosis: bad input

@@ -121,7 +121,8 @@ def fits_rms(f: ReferenceFits) -> dict:
 
 
 def dual_reference(new_path: Path, reference: Path | None, profile: Path | None, check: Path | None = None,
-                   history_url: str | None = None, allow_other_serials: bool = False) -> tuple:
+                   history_url: str | None = None, allow_other_serials: bool = False, *,
+                   accept_modified: bool = False) -> tuple:
     """``emacheck diagnose NEW --reference HEALTHY|history`` with the dual-EMA model: (diagnosis.json,
     :class:`ReferenceFits` or None).
 
@@ -137,7 +138,7 @@ def dual_reference(new_path: Path, reference: Path | None, profile: Path | None,
         ref_path = Path(reference)
     serials = refuse_other_serials(new_path, ref_path, allow_other_serials)
     cache: dict = {}
-    new, ref = load_pair(new_path, ref_path, profile, cache)
+    new, ref = load_pair(new_path, ref_path, profile, cache, accept_modified)
     floors, source = floors_for(new, check)
     data, fits = compare_pair(new, ref, floors, source, cache)
     data["serials"] = serials
@@ -150,7 +151,8 @@ def _key(path: Path, profile: Path | None) -> tuple:
     return str(Path(path).resolve()), str(profile)
 
 
-def load_pair(new_path: Path, ref_path: Path, profile: Path | None, cache: dict) -> tuple:
+def load_pair(new_path: Path, ref_path: Path, profile: Path | None, cache: dict,
+              accept_modified: bool = False) -> tuple:
     """(new, reference) :class:`hil.analysis.diagnose.load.DualRecording`, each read once per ``cache`` (a dict
     the caller keeps); a reference at another sample rate (more than 1 % apart) is refused (exit 3)."""
     from hil.analysis.diagnose.load import load_dual
@@ -159,7 +161,7 @@ def load_pair(new_path: Path, ref_path: Path, profile: Path | None, cache: dict)
     for path in (new_path, ref_path):
         k = ("loaded", *_key(path, profile))
         if k not in cache:
-            cache[k] = load_dual(Path(path), profile)
+            cache[k] = load_dual(Path(path), profile, accept_modified)
         out.append(cache[k])
     new, ref = out
     if abs(ref.period_s / new.period_s - 1.0) > 0.01:

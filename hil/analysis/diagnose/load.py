@@ -35,21 +35,25 @@ class DualRecording:
     meta: RunRecord | None
     run_dir: Path | None
     notes: tuple = ()  #: what was noted while reading it (columns not read, a last line dropped ...)
+    modified: dict | None = None  #: changed after its check, read at the user's request (hil.record.seal)
 
 
-def load_dual(path: Path, profile: Path | None) -> DualRecording:
+def load_dual(path: Path, profile: Path | None, accept_modified: bool = False) -> DualRecording:
     """A run folder, signals CSV (``.csv``, ``.csv.gz``) or CAN log (``.log``, ``.log.gz``) read into its
-    dual-EMA replay model; refused (:class:`hil.errors.RecordingError`) when it cannot be diagnosed."""
+    dual-EMA replay model; refused (:class:`hil.errors.RecordingError`) when it cannot be diagnosed, or when
+    a run folder's recording changed after its check unless ``accept_modified`` (:mod:`hil.record.seal`)."""
     from blf.errors import AnalysisError
     from hil.analysis.maint import check_units, find_segments
     from hil.record.canlog import decode_can_log
     from hil.record.recording import recording_source
     from hil.record.runfolder import is_can_log, read_signals
+    from hil.record.seal import check_seal
     from hil.record.signals_csv import CHECK_CHANNELS, refuse_jumps, refuse_unusable
     from sim.replay_model import DualEmaReplay
 
     src = recording_source(path, profile)
     sig_path, run_dir, meta, act, check = src.signals_path, src.run_dir, src.meta, src.act, src.check
+    modified = check_seal(sig_path, meta, accept_modified)
     sig = decode_can_log(sig_path, act).signals if is_can_log(sig_path) else read_signals(sig_path)
     if sig.n < 1000:
         raise RecordingError(f"{sig_path}: recording too short to diagnose: {sig.n} samples (need >= 1000)")
@@ -71,7 +75,8 @@ def load_dual(path: Path, profile: Path | None) -> DualRecording:
                           force_ramp_s=check.calibration.force_ramp_s,
                           nominal_rig=meta.simrig if meta is not None else None)
     return DualRecording(Path(path), model, period, act, check, meta, run_dir,
-                         tuple(f"{Path(sig_path).name}: {n}" for n in sig.notes))
+                         ((modified["words"],) if modified else ()) + tuple(f"{Path(sig_path).name}: {n}"
+                                                                             for n in sig.notes), modified)
 
 
 def load_model(path: Path, model: str, profile: Path | None, axis_options=None):

@@ -39,6 +39,7 @@ class DiagnoseRequest:
     history_url: str | None = None  #: ... in this database (dual-EMA)
     check: Path | None = None  #: dual-EMA reference: the check profile whose ``[diagnosis]`` floors apply
     allow_other_serials: bool = False
+    accept_modified: bool = False  #: a run folder's recording changed after its check: diagnosed anyway, said so
 
 
 def diagnose_recording(req: DiagnoseRequest, progress: Callable[[str], None] | None = None) -> DiagnoseOutcome:
@@ -47,7 +48,7 @@ def diagnose_recording(req: DiagnoseRequest, progress: Callable[[str], None] | N
     if req.reference is None and not req.from_history:
         from hil.analysis.diagnose.against_model import diagnose_against_model
         return diagnose_against_model(req.recording, req.model, req.profile, req.axis, req.force_floor_stated,
-                                      progress)
+                                      progress, accept_modified=req.accept_modified)
     if req.from_history and req.model != "dual-ema":
         raise RecordingError("--reference history: the wear history holds dual-EMA checks; a single axis needs "
                              "its reference recording")
@@ -60,7 +61,8 @@ def diagnose_recording(req: DiagnoseRequest, progress: Callable[[str], None] | N
     else:
         from hil.analysis.diagnose.dual_reference import dual_reference
         data, fits = dual_reference(req.recording, req.reference, req.profile, req.check,
-                                    req.history_url if req.from_history else None, req.allow_other_serials)
+                                    req.history_url if req.from_history else None, req.allow_other_serials,
+                                    accept_modified=req.accept_modified)
         out = DiagnoseOutcome("dual_reference", data, fits=fits)
     out.data["diagnosis_s"] = round(time.perf_counter() - t0, 2)
     return out
