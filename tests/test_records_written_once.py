@@ -327,7 +327,9 @@ def test_a_run_folder_that_cannot_be_analysed_gets_no_empty_sub_folder(run_copy,
     bad = run_copy / "signals.csv"
     bad.write_text(bad.read_text().replace("\n", "\nnot,a,number,row,here,at,all,0,0,0,0,x\n", 1))
     before = tree(run_copy)
-    assert main(["analyze", str(run_copy), "--no-history"]) == ExitCode.INPUT
+    assert main(["analyze", str(run_copy), "--no-history"]) == ExitCode.INPUT  # changed after its check
+    assert "signals.csv: changed after the check" in capsys.readouterr().err
+    assert main(["analyze", str(run_copy), "--no-history", "--accept-modified"]) == ExitCode.INPUT
     assert "line 2" in capsys.readouterr().err
     assert tree(run_copy) == before and not [p for p in run_copy.iterdir() if p.is_dir()]
 
