@@ -128,7 +128,8 @@ def test_run_cut_just_after_the_force_fight_began_is_incomplete_not_a_crash(defa
     step = lines[0].split(",").index("step")
     first_ff = next(k for k, ln in enumerate(lines) if k and ln.split(",")[step] == "force_fight")
     (out / "signals.csv").write_text("\n".join(lines[: first_ff + 5]) + "\n")
-    MetaWriter(out, dataclasses.replace(read_record(src), status="running")).write()
+    # the record as a killed master leaves it: still running, never sealed (the seal is written as the loop ends)
+    MetaWriter(out, dataclasses.replace(read_record(src), status="running", recording_sha256=None)).write()
     assert main(["analyze", str(out), "--out", str(out)]) == 2
     (made,) = out.glob("analysis-*/result.json")  # a new sub-folder: the run folder's files stay
     res = json.loads(made.read_text())

@@ -19,13 +19,20 @@ from hil.errors import RecordingError
 SEALED = ("signals.csv", "can.log")
 
 
+#: bytes read at a time: one small buffer, reused (a real-time master has locked its memory, MCL_FUTURE: every
+#: new page is faulted in at once, ~0.9 ms each inside user-mode-linux; 16 pages, once)
+_CHUNK = 1 << 16
+
+
 def sha256_file(path: Path) -> str | None:
     """SHA-256 of a file's bytes (hex), None if it cannot be read."""
     h = hashlib.sha256()
+    buf = bytearray(_CHUNK)
+    view = memoryview(buf)
     try:
-        with open(path, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
+        with open(path, "rb", buffering=0) as fh:
+            while n := fh.readinto(buf):
+                h.update(view[:n])
     except OSError:
         return None
     return h.hexdigest()
