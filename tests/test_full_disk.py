@@ -40,6 +40,17 @@ def small_fs(tmp_path):
         subprocess.run(["umount", "-l", str(where)], capture_output=True)
 
 
+def _fill(folder: Path) -> None:
+    """Another program fills the disk: a file written until no space is left."""
+    with open(folder / "filler", "wb") as fh:
+        try:
+            while True:
+                fh.write(bytes(1 << 16))
+                fh.flush()
+        except OSError:
+            pass
+
+
 def test_the_record_size_is_the_longest_check_at_the_measured_sizes():
     """406 s at 2 ms with 7.08 frames a cycle (the shipped plan): 203 000 rows and 1.44 million frames."""
     n = record_bytes(406.0, 0.002, 7.08)
@@ -76,13 +87,7 @@ def test_a_disk_that_fills_mid_check_stops_the_drives_then_closes_the_record(sma
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     for line in proc.stdout:
         if "] cal1_sweep" in line:  # the check runs: another program fills the disk
-            with open(fs / "filler", "wb") as fh:
-                try:
-                    while True:
-                        fh.write(bytes(1 << 20))
-                        fh.flush()
-                except OSError:
-                    pass
+            _fill(fs)
             break
     rest, _ = proc.communicate(timeout=120)
     assert proc.returncode == 2, rest
@@ -94,16 +99,6 @@ def test_a_disk_that_fills_mid_check_stops_the_drives_then_closes_the_record(sma
     assert all(d["state"] != "OPERATION_ENABLED" for d in meta["drives_final"].values())
     assert "internal error" not in rest and not (out / ".emacheck-end-reserve").exists()
     os.remove(fs / "filler")
-
-
-def _fill(folder: Path) -> None:
-    with open(folder / "filler", "wb") as fh:
-        try:
-            while True:
-                fh.write(bytes(1 << 16))
-                fh.flush()
-        except OSError:
-            pass
 
 
 @pytest.mark.slow
