@@ -22,9 +22,9 @@ from hil.record.runrecord import INSTALLATION_KEYS, RunRecord, RunStatus
 
 
 def _recording_hash(path: Path) -> dict:
-    from hil.history.record import file_sha256
+    from hil.record.seal import sha256_file
 
-    h = file_sha256(path)
+    h = sha256_file(path)
     return {"recording": h} if h else {}
 
 

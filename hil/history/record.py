@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from hil.record.runrecord import shared_serial
+from hil.record.seal import sha256_file
 
 #: modes of simulated checks (meta.json ``mode``): never mixed into a real actuator's trend
 SIMULATED_MODES = ("dry-run", "simulate", "simulate-scenario")
@@ -46,18 +47,6 @@ def result_sha256(result: dict) -> str:
 
     text = json.dumps(result, sort_keys=True, separators=(",", ":"), default=json_default, allow_nan=True)
     return hashlib.sha256(text.encode()).hexdigest()
-
-
-def file_sha256(path: Path) -> str | None:
-    """SHA-256 of a file's bytes, None if it cannot be read."""
-    h = hashlib.sha256()
-    try:
-        with open(path, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-    except OSError:
-        return None
-    return h.hexdigest()
 
 
 def parse_utc(text: Any) -> _dt.datetime | None:
@@ -126,7 +115,7 @@ def record_from_result(result: dict, *, result_path: Path | None = None, run_fol
         run_key = f"recording:{recording_sha256}"
     else:
         rec = trace.get("recording")
-        h = file_sha256(Path(rec)) if rec else None
+        h = sha256_file(Path(rec)) if rec else None
         run_key = f"recording:{h}" if h else f"result:{sha}"
     t = (parse_utc(trace.get("started_utc")) or parse_utc(trace.get("analysed_utc"))
          or _dt.datetime.now(_dt.UTC).replace(tzinfo=None, microsecond=0))

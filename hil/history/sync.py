@@ -7,13 +7,14 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from hil.history.record import file_sha256, load_result, record_from_result
+from hil.history.record import load_result, record_from_result
+from hil.record.seal import sha256_file
 
 
 def record_file(store, path: Path, *, run_folder: Path | None = None, recording: Path | None = None) -> bool:
     """Record one result file into an open store; True if new, False if already recorded."""
     result = load_result(path)
-    rec_sha = file_sha256(recording) if recording is not None and not (result.get("trace") or {}).get("run_id") \
+    rec_sha = sha256_file(recording) if recording is not None and not (result.get("trace") or {}).get("run_id") \
         else None
     return store.add(record_from_result(result, result_path=path, run_folder=run_folder, recording_sha256=rec_sha))
 

@@ -197,17 +197,20 @@ def actuation_from_snapshot(snap: dict, fname: str = "meta.json (actuation snaps
     return actuation_from_tables(snap, fname)
 
 
+def actuation_of_recording(path: str | Path | None, snapshot: dict | None) -> Actuation:
+    """The actuation profile a recording is analysed with: ``path`` (``--profile``), else its run's snapshot
+    (meta.json: what the run used), else the shipped one."""
+    if path is not None:
+        return load_actuation(path)
+    return actuation_from_snapshot(snapshot) if snapshot is not None else load_actuation(None)
+
+
 def profiles_from(path: str | Path | None, actuation_snapshot: dict | None,
                   check_snapshot: dict | None) -> tuple[Actuation, Check]:
     """The actuation and check profiles a recording is analysed with: the actuation ``path`` (``--profile``),
     else meta.json's snapshot, else the shipped one; the check profile of meta.json's snapshot, else the
     shipped one (an old or foreign snapshot that no longer loads: the shipped one too)."""
-    if path is not None:
-        act = load_actuation(path)
-    elif actuation_snapshot is not None:
-        act = actuation_from_snapshot(actuation_snapshot)
-    else:
-        act = load_actuation(None)
+    act = actuation_of_recording(path, actuation_snapshot)
     if check_snapshot is not None:
         try:
             return act, build_dataclass(Check, check_snapshot, "meta.json (check snapshot)")

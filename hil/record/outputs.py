@@ -157,9 +157,8 @@ def outputs_for(out: Path | None, recording: Path, run_dir: Path | None, kind: s
 
 def file_hashes(**paths: Path | None) -> dict[str, str]:
     """SHA-256 of each named file (a profile given as None: the shipped one), for traceability."""
-    import hashlib
-
     from hil.profile.load import default_profile_path
+    from hil.record.seal import sha256_file
 
     defaults = {"actuation": "actuation.toml", "check": "check.toml", "simrig": "simrig.toml"}
     out = {}
@@ -168,10 +167,7 @@ def file_hashes(**paths: Path | None) -> dict[str, str]:
             if name not in defaults:
                 continue
             path = default_profile_path(defaults[name])
-        try:
-            out[name] = hashlib.sha256(Path(path).read_bytes()).hexdigest()
-        except OSError:
-            out[name] = ""
+        out[name] = sha256_file(Path(path)) or ""
     return out
 
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hil.profile.config import Actuation, Check
-from hil.profile.load import actuation_from_snapshot, load_actuation, profiles_from
+from hil.profile.load import actuation_of_recording, profiles_from
 from hil.record.runfolder import is_can_log, read_record, read_signals, resolve_recording
 from hil.record.runrecord import RunRecord
 
@@ -77,9 +77,5 @@ def _decoded(sig_path: Path, act: Actuation, meta: RunRecord | None):
 def actuation_for(profile: Path | None, meta: RunRecord | None) -> Actuation:
     """The actuation to analyse a recording with: ``--profile`` if given, else the run folder's
     snapshot (what the run used), else the shipped profile."""
-    if profile is not None:
-        return load_actuation(profile)
-    snap = meta.profiles.actuation if meta is not None and meta.profiles is not None else None
-    if snap is not None:
-        return actuation_from_snapshot(snap)
-    return load_actuation(None)
+    return actuation_of_recording(profile, meta.profiles.actuation if meta is not None and meta.profiles is not None
+                                  else None)
