@@ -135,7 +135,8 @@ class StopRequest(KeyboardInterrupt):
 class LinkLostError(EmacheckError, ConnectionError):
     """The CAN interface went away during a check (an USB adapter unplugged, the interface taken down): the
     master can no longer reach the drives; they are left to their own reaction to losing the master (as the
-    preflight configured and drilled it: their heartbeat consumers, 0x1016, or the stated external watchdog). The message names the interface and the cause (exit status 2)."""
+    preflight configured and drilled it: their heartbeat consumers, 0x1016, or the stated external
+    watchdog). The message names the interface and the cause (exit status 2)."""
 
 
 class RecordWriteError(EmacheckError, OSError):

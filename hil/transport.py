@@ -364,8 +364,8 @@ class BusTransport:
         name = errno.errorcode.get(code, "") if isinstance(code, int) else ""
         return LinkLostError(f"the CAN interface {self.bus.channel_info!r} went away: {type(exc).__name__}: {exc}"
                              + (f" ({name})" if name else "") + "; the master can no longer reach the drives, "
-                             "they are left to their own reaction to losing the master, as configured and drilled before the "
-                             "check (meta.json master_loss)")
+                             "they are left to their own reaction to losing the master, as configured and drilled "
+                             "before the check (meta.json master_loss)")
 
     def receive(self, deadline: float) -> list[tuple[Frame, float, can.Message | None]]:
         try:
