@@ -31,6 +31,7 @@ from blf.maint import (
 )
 from blf.maint import find_segments as blf_find_segments
 from blf.signals import CHANNELS, position_differences
+from hil.analysis import plausible
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.errors import IncompleteRecordingError, RecordingError
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
@@ -95,12 +96,45 @@ def check_units(sig: Signals, act: Actuation) -> None:
                                  f"{act.mechanics.limit_load_N:g} N (force in another unit?)")
 
 
+def refuse_implausible(sig: Signals, act: Actuation, seg: Segments | None,
+                       force_fight_fraction: float | None = None) -> None:
+    """Refuse (:class:`hil.errors.RecordingError`) a recording that cannot belong to this actuation
+    (:mod:`hil.analysis.plausible`): an LVDT off its motor's stroke by more than a factor 2, a force fight
+    below a tenth of its level, load cells that disagree in it. For the diagnosis, whose library holds LVDT
+    and load-cell gain errors of tens of per cent, but not units."""
+    i = act.mechanics.i_total_rad_per_mm
+    problems = []
+    for k, (mask, phi, s) in enumerate(((None if seg is None else seg.cal1, sig.phi1, sig.s1),
+                                        (None if seg is None else seg.cal2, sig.phi2, sig.s2)), start=1):
+        if mask is not None:
+            m = trim(mask)
+            pitch, how = fit_lvdt_calibration(phi[m] / i, s[m]).pitch, "its calibration sweep"
+        else:
+            pitch, how = plausible.slope_pitch(phi / i, s), "the slope over the whole recording"
+        words, gross = ("", False) if pitch is None else plausible.pitch_problem(k, pitch, how)
+        if gross:
+            problems.append(words)
+    if seg is not None and np.count_nonzero(seg.force_fight) >= MIN_SAMPLES:
+        F1, F2 = sig.F1[seg.force_fight], sig.F2[seg.force_fight]
+        commanded = plausible.commanded_force_fight_N(act, force_fight_fraction)
+        problems += [w for w in (plausible.force_fight_problem(F1, F2, commanded),
+                                 plausible.load_cells_problem(F1, F2)) if w][:1]
+    if problems:
+        raise RecordingError("; ".join(problems) + ": the recording cannot belong to this actuation")
+
+
 #: the fewest samples a recording of the check must hold to be analysed
 MIN_SAMPLES_CHECK = 1000
 
 
-def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
-    """Calibrate the LVDTs, form the D signals and run BLFmaint on all three channels."""
+def analyze_signals(sig: Signals, act: Actuation, force_fight_fraction: float | None = None) -> Analysis:
+    """Calibrate the LVDTs, form the D signals and run BLFmaint on all three channels.
+
+    ``force_fight_fraction``: the check's ``force_fight.amplitude_fraction_of_limit`` (a run folder's check
+    profile); None, a bare recording: the paper's 15 %. The recording is checked against the actuation in
+    physical units (:mod:`hil.analysis.plausible`): a gross unit error refused, a channel that cannot be
+    this actuation's not measured (inconclusive), never a PASS.
+    """
     if sig.n < MIN_SAMPLES_CHECK:
         raise IncompleteRecordingError(f"recording too short for the check: {sig.n} samples "
                                        f"(need >= {MIN_SAMPLES_CHECK})")
@@ -110,16 +144,28 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
     notes = list(sig.notes)
     cal: dict[str, LvdtCalibration | None] = {}
     s_corr = {}
+    implausible = {1: "", 2: ""}  #: per EMA: why its LVDT's scale is not this actuation's ("" plausible)
+    gross = {1: False, 2: False}  #: ... by more than a factor 2: the recording refused
     for k, (mask, phi, s) in enumerate(((seg.cal1, sig.phi1, sig.s1), (seg.cal2, sig.phi2, sig.s2)), start=1):
         if mask is None:
             cal[f"ema{k}"] = None
             s_corr[k] = s
             notes.append(f"no calibration sweep for EMA {k}: LVDT {k} used uncorrected")
+            slope = plausible.slope_pitch(phi / i, s)
+            if slope is None:
+                notes.append(f"the scale of LVDT {k} against motor angle {k} is not verifiable: the ram travelled "
+                             f"less than {plausible.MIN_TRAVEL_FOR_SCALE_MM:g} mm")
+            else:
+                implausible[k], gross[k] = plausible.pitch_problem(k, slope, "the slope over the whole recording")
             continue
         m = trim(mask)
         c = fit_lvdt_calibration(phi[m] / i, s[m])
+        implausible[k], gross[k] = plausible.pitch_problem(k, c.pitch, "its calibration sweep")
         cal[f"ema{k}"] = c
         s_corr[k] = c.correct(s)
+    if any(gross.values()):
+        raise RecordingError("; ".join(implausible[k] for k in (1, 2) if gross[k])
+                             + ": the recording cannot belong to this actuation")
     # the corrected strokes are needed only for D: handed over, freed as soon as used (issue 34)
     d = position_differences(sig.phi1, sig.phi2, s_corr.pop(1), s_corr.pop(2), i)
     ff = seg.force_fight
@@ -134,13 +180,26 @@ def analyze_signals(sig: Signals, act: Actuation) -> Analysis:
         "ext": (d.d_ext_mm, None),
     }
     maint: dict[str, BlfMaintResult | str] = {}
+    commanded = plausible.commanded_force_fight_N(act, force_fight_fraction)
+    weak_fight = (plausible.force_fight_problem(sig.F1[ff], sig.F2[ff], commanded)
+                  or plausible.load_cells_problem(sig.F1[ff], sig.F2[ff]))
     for ch, (dd, ff_force) in pairs.items():
+        emas = (1, 2) if ch == "ext" else (int(ch[-1]),)
+        why = weak_fight or "; ".join(implausible[k] for k in emas if implausible[k])
+        if why:  # not this actuation's: not measured, never a reading (nor a trend point)
+            maint[ch] = why
+            continue
         try:
             # F2 - F1 formed on the force fight only (elementwise: the same values as masking the difference)
             f_ff = sig.F2[ff] - sig.F1[ff] if ff_force is None else ff_force[ff]
-            maint[ch] = blf_maint(dd[ff], f_ff, rate)
+            r = blf_maint(dd[ff], f_ff, rate)
         except AnalysisError as exc:  # the channel's verdict says why (its reason), once
             maint[ch] = str(exc)
+            continue
+        cols = "'s2', 's1', 'F2', 'F1'" if ch == "ext" else f"'s{ch[-1]}', 'phi{ch[-1]}', 'F{ch[-1]}'"
+        maint[ch] = plausible.stiffness_problem(
+            ch, {"left": r.stiffness_left_N_per_mm, "right": r.stiffness_right_N_per_mm},
+            plausible.stiffness_range(act, ch, commanded), cols) or r
     p_rel = {k: (UNCALIBRATED_PITCH_UNCERTAINTY if c is None else abs(c.coefficient_sigmas[1] / c.pitch))
              for k, c in cal.items()}
     p_ch = {"int1": p_rel["ema1"], "int2": p_rel["ema2"], "ext": (p_rel["ema1"] ** 2 + p_rel["ema2"] ** 2) ** 0.5}

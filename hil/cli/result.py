@@ -85,7 +85,7 @@ def analysed(sig_path: Path, act: Actuation, truth: dict | None, meta: RunRecord
     cut_short = meta is not None and meta.status in (RunStatus.ABORTED, RunStatus.RUNNING)
     sig = load_recording(sig_path, act, meta, channels=() if cut_short else CHECK_CHANNELS,
                          min_rows=MIN_SAMPLES_CHECK, what="the check", jumps=not cut_short)
-    an = analyze_signals(sig, act)
+    an = analyze_signals(sig, act, force_fight_fraction(meta))
     result = result_dict(an, act, truth)
     status = meta.status if meta is not None else None
     if status is RunStatus.ABORTED:
@@ -102,6 +102,13 @@ def analysed(sig_path: Path, act: Actuation, truth: dict | None, meta: RunRecord
         result["notes"] = [result["trace"]["modified"]["words"]] + list(result.get("notes", []))
     result["analysis_s"] = round(time.perf_counter() - t0, 3)
     return sig, an, result
+
+
+def force_fight_fraction(meta: RunRecord | None) -> float | None:
+    """The force-fight level the run's check profile commanded, as a fraction of F_limit (None: not known)."""
+    check = meta.profiles.check if meta is not None and meta.profiles is not None else None
+    value = ((check or {}).get("force_fight") or {}).get("amplitude_fraction_of_limit")
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0 else None
 
 
 def analyze_and_report(sig_path: Path, act: Actuation, outputs: Outputs, truth: dict | None,

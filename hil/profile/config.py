@@ -30,6 +30,13 @@ class Mechanics:
     limit_load_N: float = field(metadata=_rng(0.0, 1e6, lo_open=True))
     backlash_spec_int_mm: float = field(metadata=_rng(0.0, 5.0, lo_open=True))
     backlash_spec_ext_mm: float = field(metadata=_rng(0.0, 5.0, lo_open=True))
+    #: the stiffness [N/mm] the internal chain (motor to ram, int1/int2) and the external one (ext) can have:
+    #: a channel measured outside is not this actuation's (hil.analysis.plausible); 0 (the default): derived,
+    #: limit_load_N / stroke_limit_mm .. force-fight level / sensors.lvdt_noise_pp_mm
+    stiffness_int_min_N_per_mm: float = field(default=0.0, metadata=_rng(0.0, 1e9))
+    stiffness_int_max_N_per_mm: float = field(default=0.0, metadata=_rng(0.0, 1e9))
+    stiffness_ext_min_N_per_mm: float = field(default=0.0, metadata=_rng(0.0, 1e9))
+    stiffness_ext_max_N_per_mm: float = field(default=0.0, metadata=_rng(0.0, 1e9))
 
 
 @dataclass(frozen=True)

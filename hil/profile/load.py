@@ -83,7 +83,7 @@ def actuation_from_tables(data: dict, fname: str) -> Actuation:
         if signals is None:
             problems.add(NO_SIGNALS.format(fname=fname))
         problems.raise_any()
-    for rule in (_distinct_node_ids, _consumer_time, _history_url, _one_line_texts):
+    for rule in (_distinct_node_ids, _consumer_time, _history_url, _one_line_texts, _stiffness_ranges):
         with problems.collect():
             rule(act, fname)
     smap = None
@@ -130,6 +130,20 @@ def _one_line_texts(act: Actuation, fname: str) -> None:
         if text != text.strip() or "\n" in text:
             problems.add(f"{fname}: field 'canopen.{name}' must be one line without "
                          f"leading or trailing blanks (it is quoted in the run folder)")
+    problems.raise_any()
+
+
+def _stiffness_ranges(act: Actuation, fname: str) -> None:
+    """A stated stiffness range is stated whole (both bounds) and not empty."""
+    m, problems = act.mechanics, Problems()
+    for part in ("int", "ext"):
+        lo, hi = getattr(m, f"stiffness_{part}_min_N_per_mm"), getattr(m, f"stiffness_{part}_max_N_per_mm")
+        if bool(lo) != bool(hi):
+            problems.add(f"{fname}: fields 'mechanics.stiffness_{part}_min_N_per_mm' and "
+                         f"'mechanics.stiffness_{part}_max_N_per_mm': give both or neither (0: derived)")
+        elif lo and lo >= hi:
+            problems.add(f"{fname}: field 'mechanics.stiffness_{part}_min_N_per_mm' = {lo:g} is not below "
+                         f"'mechanics.stiffness_{part}_max_N_per_mm' = {hi:g}")
     problems.raise_any()
 
 

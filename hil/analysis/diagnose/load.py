@@ -43,7 +43,7 @@ def load_dual(path: Path, profile: Path | None, accept_modified: bool = False) -
     dual-EMA replay model; refused (:class:`hil.errors.RecordingError`) when it cannot be diagnosed, or when
     a run folder's recording changed after its check unless ``accept_modified`` (:mod:`hil.record.seal`)."""
     from blf.errors import AnalysisError
-    from hil.analysis.maint import check_units, find_segments
+    from hil.analysis.maint import check_units, find_segments, refuse_implausible
     from hil.record.canlog import decode_can_log
     from hil.record.recording import recording_source
     from hil.record.runfolder import is_can_log, read_signals
@@ -68,6 +68,11 @@ def load_dual(path: Path, profile: Path | None, accept_modified: bool = False) -
         seg = find_segments(sig, act)
     except AnalysisError:
         seg = None  # no check phases (e.g. normal operation): nothing held, only slack paths skipped
+    try:
+        refuse_implausible(sig, act, seg, check.force_fight.amplitude_fraction_of_limit if meta is not None
+                           else None)
+    except RecordingError as exc:
+        raise RecordingError(f"{sig_path}: {exc}") from None
     period = sig.sample_period_s
     model = DualEmaReplay(sig.t, sig.phi1, sig.phi2, sig.s1, sig.s2, sig.F1, sig.F2,
                           act.mechanics.i_total_rad_per_mm, period, sig.mode1, sig.sp1, sig.mode2, sig.sp2,
