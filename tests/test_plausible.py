@@ -165,9 +165,9 @@ def test_a_recording_whose_strokes_are_in_other_units_is_refused_naming_the_colu
 
 @pytest.mark.slow
 def test_the_cli_says_why_and_exits_5_or_3(dry_run, tmp_path, capsys):
-    from hil.cli import main
     from test_columns_by_name import write_columns
 
+    from hil.cli import main
     from hil.record.signals_csv import SIGNAL_COLUMNS
     sig = read_signals(dry_run[0] / "signals.csv")
     kn = _scaled(sig, {"F1": 1e-3, "F2": 1e-3})

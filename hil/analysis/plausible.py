@@ -45,7 +45,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.errors import RecordingError
 from hil.profile.config import HARD_FORCE_FIGHT_FRACTION, HARD_LVDT_GAIN_TOLERANCE, Actuation
 
 #: the force fight must reach this fraction of its commanded level (issue 47: "a tenth")
