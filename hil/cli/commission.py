@@ -9,7 +9,6 @@ The report (``commission.json``, ``commission.html``) and the CAN log go into a 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -80,6 +79,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     from hil.errors import KNOWN_ERRORS
     from hil.master.commission import Commission, CommissionMaster
     from hil.master.commission_rules import Finding, Kind, Stage
+    from hil.master.jog_rules import commissioning_safety
     from hil.master.link import CanopenLink
     from hil.record.canlog import CanLogWriter
     from hil.transport import InProcessTransport
@@ -91,7 +91,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     core = Commission(act, check, rig.plan)
     lim = core.lim
     # during commissioning the drives keep the commissioning's force limit as their max torque themselves
-    safety = dataclasses.replace(check.safety, max_force_N=lim.max_force_N)
+    safety = commissioning_safety(check.safety, lim, core.jog_plan)  # (docs/commission.md: the drives' limits)
     # every frame the master is fed is heard by the scan too (any node id); the scan runs before the preflight
     master = CommissionMaster(core, act, rig.plan, forces=(2.0 * lim.force_N, lim.max_force_N), safety=safety)
     # wall-clock stamps on a real bus, as candump writes them (run does the same)

@@ -41,6 +41,7 @@ class Stage(Enum):
     SCAN = "scan"
     PREFLIGHT = "preflight"
     AT_REST = "at rest"
+    JOG = "jog"  #: the force-free jog (:mod:`hil.master.jog`)
     LOAD = "load"
     MOVE = "move"
     STEP = "force step"
