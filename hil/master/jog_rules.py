@@ -51,9 +51,9 @@ from hil.canopen.signalmap import ScaleSource, Signal
 from hil.master.commission_rules import Finding, Kind, Limits, Stage, ema_key, slope
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation, Safety
 
-__all__ = ["DRIVE_SPEED_FACTOR", "JOG_FORCE_FRACTION", "JOG_GROWTH_S", "JOG_HOLD_S", "JOG_RAMP_S", "JOG_SEED_MM", "JOG_SPEED_FRACTION",
-           "Hypothesis", "JogGain", "JogPlan", "JogVerdict", "commissioning_safety", "explain", "jog_gain",
-           "unit_error"]
+__all__ = ["DRIVE_SPEED_FACTOR", "JOG_FORCE_FRACTION", "JOG_GROWTH_S", "JOG_HOLD_S", "JOG_RAMP_S", "JOG_SEED_MM",
+           "JOG_SPEED_FRACTION", "Hypothesis", "JogGain", "JogPlan", "JogVerdict", "commissioning_safety", "explain",
+           "jog_gain", "unit_error"]
 
 #: The jog's speed: this fraction of the commissioning speed (0.5 mm/s for the shipped check).
 JOG_SPEED_FRACTION = 1.0
@@ -192,7 +192,7 @@ def commissioning_safety(safety: Safety, lim: Limits, plan: JogPlan) -> Safety:
 
 @dataclass(frozen=True, slots=True)
 class JogGain:
-    """One EMA's jog gain (None: its LVDT did not move past :attr:`JogPlan.engaged_mm`).
+    r"""One EMA's jog gain (None: its LVDT did not move past :attr:`JogPlan.engaged_mm`).
 
     ``tolerance`` is :math:`\varepsilon_a` (absolute, on :math:`g - 1`); ``rel_tolerance`` the same bound on
     the gain itself relative to its value, :math:`\varepsilon_0 + \delta_a / |\Delta s|` (the LVDT's own
