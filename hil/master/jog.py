@@ -33,7 +33,7 @@ import numpy as np
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.signalmap import Signal
 from hil.master.commission_rules import ema_key
-from hil.master.jog_rules import JogGain, JogPlan, JogVerdict, explain, jog_gain
+from hil.master.jog_rules import JogGain, JogPlan, JogVerdict, explain, jog_gain, lvdt_ahead
 
 __all__ = ["Jog", "JogPhase", "outward_s", "outward_travel", "smooth_travel"]
 
@@ -232,7 +232,7 @@ class Jog:
             if a in self._engaged:
                 x0, s0 = self._engaged[a]
                 dx, dsa = x_meas[a - 1] - x0, s - s0
-                if abs(dsa) > (1.0 + p.gain_tolerance) * abs(dx) + p.delta_mm[a - 1]:
+                if lvdt_ahead(dx, dsa, p, a):
                     return ema_key(rig, a, Signal.LVDT), (
                         f"LVDT {a} moved {dsa:+.4f} mm while its motor moved {dx:+.4f} mm over the gear ratio (more "
                         f"than (1 + {p.gain_tolerance:g}) x {abs(dx):.4f} + {p.delta_mm[a - 1]:.4f} mm): the ram "

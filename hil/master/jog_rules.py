@@ -53,7 +53,7 @@ from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation, Safety
 
 __all__ = ["DRIVE_SPEED_FACTOR", "JOG_FORCE_FRACTION", "JOG_GROWTH_S", "JOG_HOLD_S", "JOG_RAMP_S", "JOG_SEED_MM",
            "JOG_SPEED_FRACTION", "Hypothesis", "JogGain", "JogPlan", "JogVerdict", "commissioning_safety", "explain",
-           "jog_gain", "unit_error"]
+           "jog_gain", "lvdt_ahead", "unit_error"]
 
 #: The jog's speed: this fraction of the commissioning speed (0.5 mm/s for the shipped check).
 JOG_SPEED_FRACTION = 1.0
@@ -168,6 +168,13 @@ class JogPlan:
                 ((f.name, getattr(self, f.name)) for f in dataclasses.fields(self))}
 
 
+def lvdt_ahead(dx_mm: float, ds_mm: float, plan: JogPlan, ema: int) -> bool:
+    r"""The on-line rule: since its LVDT started to move, EMA ``ema``'s LVDT moved ``ds_mm`` while its motor
+    moved ``dx_mm`` over the gear ratio; ahead when :math:`|\Delta s| > (1 + \varepsilon_0)|\Delta x| + \delta_a`
+    (the ram moves farther than the profile's scale says by more than the pitch tolerance and the noise)."""
+    return abs(ds_mm) > (1.0 + plan.gain_tolerance) * abs(dx_mm) + plan.delta_mm[ema - 1]
+
+
 def commissioning_safety(safety: Safety, lim: Limits, plan: JogPlan) -> Safety:
     r"""The safety profile the preflight writes the drives' own limits from during commissioning.
 
@@ -276,17 +283,14 @@ class JogVerdict:
 
 
 def unit_error(factor: float, tol: float) -> str | None:
-    """The unit error ``factor`` (the profile's value over the one that fits) is, within ``tol`` relative:
-    degrees for radians, revolutions for radians, ..., a power of ten; None: none."""
+    """The unit error ``factor`` (the profile's value over the one that fits) is, the nearest of degrees for
+    radians, revolutions for radians, ..., a power of ten, if within ``tol`` relative of it; None: none."""
     if not (math.isfinite(factor) and factor > 0):
         return None
-    for f, words in _UNIT_ERRORS:
-        if abs(factor / f - 1.0) <= tol:
-            return words
     k = round(math.log10(factor))
-    if k != 0 and abs(factor / 10.0 ** k - 1.0) <= tol:
-        return f"a unit error by a factor 10^{k}"
-    return None
+    known = (*_UNIT_ERRORS, (10.0 ** k, f"a unit error by a factor 10^{k}")) if k else _UNIT_ERRORS
+    f, words = min(known, key=lambda fw: abs(math.log(factor / fw[0])))  # the nearest
+    return words if abs(factor / f - 1.0) <= tol else None
 
 
 def _encoder(plan, ema: int) -> tuple[str, str | None]:
@@ -334,6 +338,8 @@ def explain(gains: tuple[JogGain, JogGain], plan, jog: JogPlan, *, stopped: str 
     if len(bad) == 2 and len(judged) == 2 and _same(g[1], g[2]):
         r = math.copysign(math.sqrt(abs(g[1].gain * g[2].gain)), g[1].gain)
         findings.append(_shared(plan, i, r, g, hyps))
+    elif not judged and min(x.motor_mm for x in gains) > jog.min_range_mm:
+        findings.append(_still(plan, i, g, jog, hyps))
     else:
         for a in bad:
             findings.append(_one(plan, a, g, hyps))
@@ -383,6 +389,22 @@ def _shared(plan, i: float, r: float, g: dict, hyps: list) -> Finding:
     return Finding(Stage.JOG, Kind.SCALE, ", ".join(first.keys), f"{seen}; not the gear ratio ({gear.why}); fits "
                    "equally: " + " or ".join(f"{h.name} ({', '.join(h.keys)})" for h in also), r, "mm/mm",
                    first.fits)
+
+
+def _still(plan, i: float, g: dict, jog: JogPlan, hyps: list) -> Finding:
+    """Neither LVDT left its noise while both motors moved: one shared factor below the LVDTs' travel over the
+    motors' (the gear ratio, or both LVDT scales), no value fits."""
+    bound = max(g[a].lvdt_mm / g[a].motor_mm for a in (1, 2))
+    gear = _gear(plan, i, bound)
+    gear = dataclasses.replace(gear, factor=None, fits=None)
+    lv = tuple(f"{ema_key(plan, a, Signal.LVDT)}.mm_per_unit" for a in (1, 2))
+    hyps += [gear, Hypothesis("both LVDT scales", lv, None, None, True, "two keys wrong by the same factor")]
+    key = gear.keys[0] if gear.kept else ", ".join(lv)
+    return Finding(Stage.JOG, Kind.STILL, key, f"{key}: neither LVDT moved more than {jog.engaged_mm:g} mm (its "
+                   f"noise) while both motors moved {min(g[a].motor_mm for a in (1, 2)):.3f} mm over the gear "
+                   f"ratio: the rams moved at most {bound:.3g} times as far as the profile's scale says "
+                   f"({'the gear ratio' if gear.kept else 'not the gear ratio: ' + gear.why}; or both LVDT scales, "
+                   f"or dead LVDTs); no value fits", bound, "mm/mm")
 
 
 def _one(plan, a: int, g: dict, hyps: list) -> Finding:
