@@ -15,6 +15,9 @@ bus, a clock or a file (the IO shell is :mod:`hil.cli.commission`, over :mod:`hi
    cell alive (not one value repeated for more than ``safety.max_frozen_cycles``), within range, its
    noise within :data:`NOISE_FACTOR` times the declared noise, the load cells near zero. A finding
    stops here: nothing moves.
+3a. **The force-free jog** (:class:`hil.master.jog.Jog`): both EMAs out and back together in CSP, no force
+   commanded; the motor angles over the gear ratio and the LVDTs must agree on how far the rams moved
+   (:mod:`hil.master.jog_rules`). A disagreement stops here, naming the scale that fits: nothing is loaded.
 4. **Movement**, EMA k in turn (j the other): j holds a small force in CST (:class:`Limits`: a
    quarter of the check's opposing force), k moves ``travel_mm`` out and back at a quarter of the
    check's sweep speed: each LVDT regressed on its motor angle over the gear ratio (slope 1 within

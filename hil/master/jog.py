@@ -15,10 +15,12 @@ and holds, then the jog ends; the judgement and the reason are :meth:`Jog.verdic
 
 * each load cell within :attr:`~hil.master.jog_rules.JogPlan.max_force_change_N` of its mean at rest;
 * each LVDT within :attr:`~hil.master.jog_rules.JogPlan.max_lvdt_mm` of its mean at rest;
-* on the way out, once an LVDT moved (:attr:`~hil.master.jog_rules.JogPlan.engaged_mm`), it is not ahead of
-  its motor: :math:`|\Delta s| \le (1 + \varepsilon_0)|\Delta x| + \delta` from that sample on (a ram that
-  moves more than the profile's scale says: the gear ratio x57 is stopped within a few hundredths of a mm
-  of motor travel).
+* on the way out until it decelerates (where the gains are taken), once an LVDT moved
+  (:attr:`~hil.master.jog_rules.JogPlan.engaged_mm`), it is not ahead of its motor:
+  :math:`|\Delta s| \le (1 + \varepsilon_0)|\Delta x| + \delta` from that sample on
+  (:func:`~hil.master.jog_rules.lvdt_ahead`; a ram that moves 57 times as far as the profile's scale says is
+  seen within 0.3 mm of its travel). A ram ahead goes on at the speed it had until an LVDT moved
+  :attr:`~hil.master.jog_rules.JogPlan.fit_mm` (for a slope), then stops; the other rules stop at once.
 
 The gains and which scale fits are :mod:`hil.master.jog_rules`.
 """
@@ -122,7 +124,10 @@ class Jog:
         self.stopped: str | None = None  #: why the jog was stopped (None: it ran its course)
         self.stop_key = ""  #: the key of the signal that stopped it
         self.rows: list[tuple] = []  #: t, x (commanded), phi1, phi2, s1, s2, F1, F2
-        self.out_end: int | None = None  #: rows of the outward stroke (its farthest point included)
+        #: rows the gains are taken over: the way out up to where it decelerates (the surface, unloaded, runs on
+        #: and drags the rams across their internal play as the motors slow down: over a real bus, whose
+        #: setpoints jitter, by the whole play, 0.1 mm)
+        self.fit_end: int | None = None
         self._x = 0.0  #: commanded travel [mm]
         self._v = 0.0  #: commanded speed [mm/s]
         self._engaged: dict[int, tuple[float, float]] = {}  #: EMA -> (x, s) where its LVDT started to move
@@ -144,6 +149,8 @@ class Jog:
             key, text, ahead = why
             if self.stopped is None:
                 self.stop_key, self.stopped = key, text
+            if not ahead and self.fit_end is None:
+                self.fit_end = len(self.rows)
             if ahead:  # on at the speed it had, for a slope (the deceleration after it is still outward)
                 self._enter(JogPhase.CREEP, smp.t_s)
             else:
@@ -165,8 +172,9 @@ class Jog:
         if self.phase is JogPhase.OUT:
             out = (p.travel_mm, p.speed_mm_per_s, p.ramp_s, p.growth_s, p.seed_mm)
             self._x, self._v = outward_travel(*out, tau)
+            if tau >= outward_s(*out) - p.ramp_s and self.fit_end is None:
+                self.fit_end = len(self.rows)
             if tau >= outward_s(*out):
-                self.out_end = len(self.rows)
                 self._enter(JogPhase.HOLD, t)
         elif self.phase is JogPhase.HOLD:
             if tau >= p.hold_s:
@@ -182,6 +190,7 @@ class Jog:
         elif self.phase is JogPhase.CREEP:
             far = max(abs(self.rows[-1][4] - self.rest["s1"]), abs(self.rows[-1][5] - self.rest["s2"]))
             if far >= p.fit_mm or self._x >= p.travel_mm:
+                self.fit_end = len(self.rows) if self.fit_end is None else self.fit_end
                 self._stop_from = (self._x, self._v)
                 self._enter(JogPhase.STOPPING, t)
             else:
@@ -193,8 +202,6 @@ class Jog:
             ts = self.stop_s(v0)  # v(t) = v0 / 2 (1 + cos pi t / t_s): down to 0 at the planned deceleration
             tr = min(tau, ts)
             self._x = x0 + 0.5 * v0 * (tr + ts / math.pi * math.sin(math.pi * tr / ts))
-            if tau >= ts and self.out_end is None:
-                self.out_end = len(self.rows)
             if tau >= ts + p.hold_s:
                 self._enter(JogPhase.DONE, t)
         dt = t - self.rows[-2][0] if len(self.rows) > 1 else 0.0
@@ -225,8 +232,8 @@ class Jog:
                                                       f"the travel, the internal play and the noise) while the "
                                                       f"motors moved {x_meas[a - 1]:+.4f} mm over the gear "
                                                       f"ratio"), False
-            if self.phase is not JogPhase.OUT:
-                continue
+            if self.phase is not JogPhase.OUT or self.fit_end is not None:
+                continue  # (on the way out at the speed it had: where the gains are taken)
             if a not in self._engaged and abs(ds) >= p.engaged_mm:
                 self._engaged[a] = (x_meas[a - 1], s)
             if a in self._engaged:
@@ -251,14 +258,15 @@ class Jog:
         return out
 
     def gains(self) -> tuple[JogGain, JogGain]:
-        """Both EMAs' gains over the outward stroke (a stopped jog: over what it moved, however little)."""
+        """Both EMAs' gains over the way out up to where it decelerates (a stopped jog: over what it moved at the
+        speed it had, however little)."""
         x = self.arrays()
-        n = self.out_end if self.out_end is not None else len(self.rows)
+        n = self.fit_end if self.fit_end is not None else len(self.rows)
         return tuple(jog_gain(x[f"x{a}"][:n], x[f"s{a}"][:n], self.rest[f"s{a}"], a, self.plan) for a in (1, 2))
 
     def verdict(self) -> JogVerdict:
         """The jog judged (:func:`hil.master.jog_rules.explain`)."""
-        return explain(self.gains(), self.rig, self.plan, stopped=self.stopped)
+        return explain(self.gains(), self.rig, self.plan, stopped=self.stopped, stopped_key=self.stop_key)
 
     def peak_force_change_N(self) -> float:
         """The largest change of either load cell from its mean at rest during the jog [N]."""

@@ -12,11 +12,13 @@ ratio :math:`x_a = \Delta\varphi_a / i` [mm] (the resolver through the encoder r
 
 must be 1 within :math:`\varepsilon_a = \varepsilon_0 + \delta_a / R_a`, where :math:`\varepsilon_0` =
 ``HARD_LVDT_GAIN_TOLERANCE`` (0.10: the LVDT pitch error the supervisor allows; the paper's LVDT has
-7.5 %), :math:`\delta_a` = the declared LVDT noise peak to peak plus one motor-angle unit in mm (how far
-two readings may differ with nothing wrong) and :math:`R_a` the motor travel the slope was taken over
-[mm] (0.1 + 0.025 / 0.775 = 0.133 for the shipped profiles). The same bound on the two ends of the stroke
-so far is the on-line rule of :mod:`hil.master.jog`: an LVDT ahead of its motor by more than
-:math:`\varepsilon_0 |x| + \delta` stops the jog at once.
+7.5 %), :math:`\delta_a` how far the ram's travel by LVDT and by motor may differ with nothing wrong (the
+declared LVDT noise peak to peak, one motor-angle unit, and the internal play: unloaded, the ram may sit
+anywhere in it; :attr:`JogPlan.delta_mm`, 0.2253 mm for the shipped profiles) and :math:`R_a` the motor
+travel the slope was taken over, at least :attr:`JogPlan.min_range_mm` (0.65 mm) for a gain to confirm the
+scale: :math:`\varepsilon` = 0.1 + 0.2253 / 0.65 = 0.447 at the widest, 0.38 for the clean simulated rig.
+The same bound on the two ends of the stroke so far is the on-line rule (:func:`lvdt_ahead`): an LVDT ahead
+of its motor by more than :math:`\varepsilon_0 |\Delta x| + \delta_a` stops the jog at once.
 
 Which scale fits every observation (:func:`explain`), each hypothesis one profile key times a factor r:
 
@@ -100,19 +102,23 @@ class JogPlan:
     gain_tolerance : float
         :math:`\\varepsilon_0` = ``HARD_LVDT_GAIN_TOLERANCE``.
     delta_mm : (float, float)
-        :math:`\\delta_a` per EMA: ``sensors.lvdt_noise_pp_mm`` plus one motor-angle unit over the gear ratio
-        (0 where the drive gives the scale) [mm].
+        :math:`\\delta_a` per EMA, how far the ram's travel by LVDT and by motor angle may differ with nothing
+        wrong: ``sensors.lvdt_noise_pp_mm``, one motor-angle unit over the gear ratio (0 where the drive gives
+        the scale) and the internal play ``mechanics.backlash_spec_int_mm`` (unloaded, the ram may sit anywhere
+        in it, and the surface running on drags it across: over a real bus, whose setpoints jitter, seen by
+        0.07 mm in 0.4 mm) [mm].
     engaged_mm : float
         An LVDT this far from its mean at rest has started to move (the ram is past its internal play):
         ``sensors.lvdt_noise_pp_mm`` (noise alone stays within half of it of the mean) [mm].
     min_range_mm : float
-        The least motor travel after engagement that a gain is judged over: the travel less the internal
-        play ``mechanics.backlash_spec_int_mm`` and ``engaged_mm`` [mm].
+        The least motor travel after engagement that a gain confirms the scale over: the travel less the
+        deceleration (:math:`v t_r / 2`: the gain is taken before it), the internal play
+        ``mechanics.backlash_spec_int_mm`` and ``engaged_mm`` [mm].
     max_force_change_N : float
         :data:`JOG_FORCE_FRACTION` of the commissioning's force limit [N].
     max_lvdt_mm : float
-        An LVDT farther than this from its mean at rest stops the jog: the travel, the internal play and the
-        noise [mm].
+        An LVDT farther than this from its mean at rest stops the jog: beyond anything a passing jog accepts,
+        the travel times :math:`1 + \\varepsilon_{max}` (:attr:`widest_tolerance`) plus :math:`\\delta` [mm].
     fit_mm : float
         Once an LVDT ran ahead of its motor, the jog goes on at the speed it had until an LVDT moved this far
         from rest, then stops: half the travel (a slope over 0.5 mm of LVDT: the factor that fits to a few
@@ -138,21 +144,27 @@ class JogPlan:
 
     @classmethod
     def of(cls, act: Actuation, lim: Limits, plan) -> JogPlan:
+        p = cls._of(act, lim, plan)
+        return dataclasses.replace(p, max_lvdt_mm=p.travel_mm * (1.0 + p.widest_tolerance) + max(p.delta_mm))
+
+    @classmethod
+    def _of(cls, act: Actuation, lim: Limits, plan) -> JogPlan:
         i = act.mechanics.i_total_rad_per_mm
         noise = act.sensors.lvdt_noise_pp_mm
+        play = act.mechanics.backlash_spec_int_mm
         delta = []
         for ema in (1, 2):
             ch = plan.channel(ema, Signal.MOTOR_ANGLE)
             k = ch.scale.units_per_si if ch is not None and ch.scale is not None else math.inf
-            delta.append(noise + 1.0 / (abs(k) * i))
-        play = act.mechanics.backlash_spec_int_mm
-        return cls(travel_mm=lim.travel_mm, speed_mm_per_s=JOG_SPEED_FRACTION * lim.speed_mm_per_s,
+            delta.append(noise + 1.0 / (abs(k) * i) + play)
+        speed = JOG_SPEED_FRACTION * lim.speed_mm_per_s
+        return cls(travel_mm=lim.travel_mm, speed_mm_per_s=speed,
                    ramp_s=JOG_RAMP_S, hold_s=JOG_HOLD_S, growth_s=JOG_GROWTH_S, seed_mm=JOG_SEED_MM,
                    gain_tolerance=HARD_LVDT_GAIN_TOLERANCE,
                    delta_mm=(delta[0], delta[1]), engaged_mm=noise,
-                   min_range_mm=max(lim.travel_mm - play - noise, 0.25 * lim.travel_mm),
+                   min_range_mm=max(lim.travel_mm - 0.5 * speed * JOG_RAMP_S - play - noise, 0.25 * lim.travel_mm),
                    max_force_change_N=JOG_FORCE_FRACTION * lim.max_force_N,
-                   max_lvdt_mm=lim.travel_mm + play + noise, fit_mm=0.5 * lim.travel_mm, i_total_rad_per_mm=i)
+                   max_lvdt_mm=math.inf, fit_mm=0.5 * lim.travel_mm, i_total_rad_per_mm=i)
 
     def tolerance(self, ema: int, range_mm: float) -> float:
         """:math:`\\varepsilon_a = \\varepsilon_0 + \\delta_a / R` for a gain taken over ``range_mm`` [mm]."""
@@ -320,10 +332,12 @@ def _gear(plan, act_i: float, r: float) -> Hypothesis:
                       "lead: i = 2 pi N / lead)")
 
 
-def explain(gains: tuple[JogGain, JogGain], plan, jog: JogPlan, *, stopped: str | None = None) -> JogVerdict:
+def explain(gains: tuple[JogGain, JogGain], plan, jog: JogPlan, *, stopped: str | None = None,
+            stopped_key: str = "") -> JogVerdict:
     """Which scale fits the jog's gains (module docstring), as findings.
 
-    ``stopped``: why the jog was stopped on line (None: it ran its course). The motion scale is confirmed when
+    ``stopped``: why the jog was stopped on line (None: it ran its course), ``stopped_key`` the key of the
+    signal that stopped it. The motion scale is confirmed when
     both gains agree; it is also when only one EMA's LVDT disagrees and that EMA's encoder resolution was
     checked against its drive (the other LVDT and both motors agree: the LVDT alone is wrong, judged again in
     the move, no finding here) -- unless the jog was stopped. Anything else stops the commissioning."""
@@ -347,7 +361,7 @@ def explain(gains: tuple[JogGain, JogGain], plan, jog: JogPlan, *, stopped: str 
                 _encoder(plan, bad[0])[1] is not None and g[3 - bad[0]].agrees:
             return JogVerdict(gains, tuple(hyps), (), False)  # the LVDT alone: judged in the move
     if stopped and not findings:
-        findings.append(Finding(Stage.JOG, Kind.LIMIT, "", stopped))
+        findings.append(Finding(Stage.JOG, Kind.LIMIT, stopped_key, stopped))
     texts = "; ".join(f"EMA {x.ema}: " + (f"gain {x.gain:.4g} (1 +- {x.tolerance:.3f})" if x.gain is not None else
                                          f"LVDT moved {x.lvdt_mm:.3f} mm, motor {x.motor_mm:.3f} mm")
                       for x in gains)
@@ -357,8 +371,10 @@ def explain(gains: tuple[JogGain, JogGain], plan, jog: JogPlan, *, stopped: str 
 
 
 def _same(a: JogGain, b: JogGain) -> bool:
-    """Two gains of one factor: their ratio 1 within the sum of their tolerances."""
-    return a.gain * b.gain > 0 and abs(a.gain / b.gain - 1.0) <= a.rel_tolerance + b.rel_tolerance
+    r"""Two gains of one factor: their ratio within the product of their relative bands,
+    :math:`|\ln(g_1/g_2)| \le \ln(1 + e_1) + \ln(1 + e_2)` (symmetric in the two)."""
+    return a.gain * b.gain > 0 and \
+        abs(math.log(a.gain / b.gain)) <= math.log1p(a.rel_tolerance) + math.log1p(b.rel_tolerance)
 
 
 def _shared(plan, i: float, r: float, g: dict, hyps: list) -> Finding:
