@@ -13,9 +13,12 @@ run.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+from importlib import resources
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 
@@ -53,6 +56,7 @@ I_TOTAL = ACT.mechanics.i_total_rad_per_mm
 G_LVDT = {1: SIMRIG.params.sensors1.lvdt_gain, 2: SIMRIG.params.sensors2.lvdt_gain}
 DEG = 180.0 / math.pi  # degrees for radians
 REV = 1.0 / (2.0 * math.pi)  # revolutions for radians
+SCHEMA = json.loads(resources.files("hil.schemas").joinpath("commission.schema.json").read_text())
 
 
 # ------------------------------------------------------------------ the plan and its limits (fast)
@@ -335,6 +339,8 @@ def test_a_wrong_gear_ratio_is_stopped_in_the_force_free_jog_and_named(gear_runs
     assert np.max(np.abs(injector.truth.F_N)) < limit
     for ema in ("ema1", "ema2"):
         assert run.report["drives_final"][ema]["state"] == "SWITCH_ON_DISABLED"
+    jsonschema.validate(json.loads((run.out / "commission.json").read_text()), SCHEMA)
+    assert [h["name"] for h in jog["hypotheses"] if h["kept"]] == ["gear ratio", "both LVDT scales"]
 
 
 @pytest.mark.slow

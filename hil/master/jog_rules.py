@@ -393,8 +393,8 @@ def _shared(plan, i: float, r: float, g: dict, hyps: list) -> Finding:
     tol = max(g[1].rel_tolerance, g[2].rel_tolerance)
     unit = unit_error(r, tol)
     seen = (f"the rams moved {r:.4g} times as far as the motors' angles over the profile's gear ratio say "
-            f"(LVDT 1: {g[1].gain:.4g}, LVDT 2: {g[2].gain:.4g} mm per mm, each +- {100 * tol:.0f} %; 1 +- "
-            f"{max(g[1].tolerance, g[2].tolerance):.3f} expected)")
+            f"(LVDT 1: {g[1].gain:.4g}, LVDT 2: {g[2].gain:.4g} mm per mm of motor travel, each to +- "
+            f"{100 * tol:.0f} %)")
     if unit:
         seen += f": {unit}"
     also = [h for h in hyps[1:] if h.kept]
