@@ -204,6 +204,13 @@ def test_where_the_drives_report_the_gear_ratio_the_lvdt_scales_are_named_instea
 def test_one_lvdt_alone_goes_on_to_the_move_where_the_encoder_was_checked(plans):
     v = explain(_gains(0.1 * G_LVDT[1], G_LVDT[2]), plans["no_object"], JOG)
     assert not v.stop and v.findings == ()  # (the move names it, under load, with its better slope)
+    assert [(h.name, h.kept) for h in v.hypotheses] == [("LVDT 1 scale", True), ("encoder resolution of EMA 1", False)]
+    v = explain(_gains(0.001, G_LVDT[2]), plans["no_object"], JOG)  # LVDT 1 never left its noise: the same
+    assert not v.stop and v.gains[0].gain is None
+    # where the encoder was not checked against the drive, the same stops: the motion scale of EMA 1 is open
+    v = explain(_gains(0.001, G_LVDT[2]), plans["no_608f"], JOG)
+    assert v.stop and [(f.kind, f.key) for f in v.findings] == [
+        (Kind.STILL, "signals.ema1.lvdt.mm_per_unit, signals.ema1.motor_angle.counts_per_rev"), (Kind.STOP, "")]
     # ... but stopped on line: named here
     v = explain(_gains(10 * G_LVDT[1], G_LVDT[2]), plans["no_object"], JOG, stopped="LVDT 1 ran ahead")
     assert v.stop and [(f.kind, f.key) for f in v.findings] == [

@@ -357,8 +357,7 @@ def explain(gains: tuple[JogGain, JogGain], plan, jog: JogPlan, *, stopped: str 
     else:
         for a in bad:
             findings.append(_one(plan, a, g, hyps))
-        if len(bad) == 1 and not stopped and g[bad[0]].gain is not None and \
-                _encoder(plan, bad[0])[1] is not None and g[3 - bad[0]].agrees:
+        if len(bad) == 1 and not stopped and _encoder(plan, bad[0])[1] is not None and g[3 - bad[0]].agrees:
             return JogVerdict(gains, tuple(hyps), (), False)  # the LVDT alone: judged in the move
     if stopped and not findings:
         findings.append(Finding(Stage.JOG, Kind.LIMIT, stopped_key, stopped))
@@ -432,8 +431,10 @@ def _one(plan, a: int, g: dict, hyps: list) -> Finding:
         text = (f"EMA {a}: its LVDT moved {x.lvdt_mm:.3f} mm while its motor moved {x.motor_mm:.3f} mm over the "
                 f"gear ratio: too little to judge the scale (at least {x.range_mm:.3f} mm of motor travel after "
                 f"the LVDT moved {x.lvdt_mm:.3f} mm)")
-        hyps.append(Hypothesis(f"LVDT {a} or the motion scale", (lv, enc), None, None, True, text))
-        return Finding(Stage.JOG, Kind.STILL, f"{lv}, {enc}", text, x.lvdt_mm, "mm")
+        keys = (lv,) if why is not None else (lv, enc)
+        hyps.append(Hypothesis(f"LVDT {a}" + ("" if why is not None else " or its encoder resolution"), keys, None,
+                               None, True, text if why is None else f"{text}; not the encoder resolution ({why})"))
+        return Finding(Stage.JOG, Kind.STILL, ", ".join(keys), hyps[-1].why, x.lvdt_mm, "mm")
     r = x.gain
     per = _per_unit(plan, a)
     lv_fit = float(f"{per / r:.4g}") if per else None
