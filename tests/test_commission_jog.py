@@ -218,6 +218,16 @@ def test_one_lvdt_alone_goes_on_to_the_move_where_the_encoder_was_checked(plans)
     assert v.findings[0].fits == pytest.approx(0.001 / (10 * G_LVDT[1]), rel=1e-3)
 
 
+def test_a_jog_stopped_by_a_load_cell_names_it_and_confirms_nothing(plans):
+    x = np.linspace(0.0, 0.3, 150)  # stopped after 0.3 mm: gains within the tolerance, too little to confirm
+    gains = tuple(jog_gain(x, 0.3 + G_LVDT[a] * x, 0.3, a, JOG) for a in (1, 2))
+    assert all(g.agrees is None and not g.confirms for g in gains)
+    v = explain(gains, plans["no_object"], JOG, stopped="load cell 1 changed by +250 N",
+                stopped_key="signals.ema1.force")
+    assert v.stop and [(f.kind, f.key) for f in v.findings] == [(Kind.LIMIT, "signals.ema1.force"), (Kind.STOP, "")]
+    assert explain(gains, plans["no_object"], JOG).stop  # not stopped, still not confirmed: no load
+
+
 def test_where_the_encoder_is_not_reported_the_lvdt_and_the_encoder_fit_equally(plans):
     v = explain(_gains(0.5, 1.0), plans["no_608f"], JOG)
     assert v.stop

@@ -337,24 +337,27 @@ def explain(gains: tuple[JogGain, JogGain], plan, jog: JogPlan, *, stopped: str 
     """Which scale fits the jog's gains (module docstring), as findings.
 
     ``stopped``: why the jog was stopped on line (None: it ran its course), ``stopped_key`` the key of the
-    signal that stopped it. The motion scale is confirmed when
-    both gains agree; it is also when only one EMA's LVDT disagrees and that EMA's encoder resolution was
-    checked against its drive (the other LVDT and both motors agree: the LVDT alone is wrong, judged again in
-    the move, no finding here) -- unless the jog was stopped. Anything else stops the commissioning."""
+    signal that stopped it. The motion scale is confirmed when both gains agree over enough travel
+    (:attr:`JogGain.agrees`); it is also when only one EMA's LVDT disagrees (or never moved) and that EMA's
+    encoder resolution was checked against its drive (the other LVDT and both motors agree: the LVDT alone is
+    wrong, judged again in the move, no finding here) -- unless the jog was stopped. Anything else stops the
+    commissioning: a gain outside its tolerance is explained, a jog stopped with no gain outside names what
+    stopped it, and a gain within its tolerance over too little travel confirms nothing."""
     i = jog.i_total_rad_per_mm
     g = {x.ema: x for x in gains}
-    bad = [a for a in (1, 2) if g[a].agrees is not True]
-    if not bad and stopped is None:
+    off = [a for a in (1, 2) if g[a].agrees is False]  # outside the tolerance
+    still = [a for a in (1, 2) if g[a].gain is None and g[a].motor_mm > jog.min_range_mm]  # never moved
+    if not off and not still and stopped is None and all(g[a].agrees for a in (1, 2)):
         return JogVerdict(gains, (), (), False)
     hyps: list[Hypothesis] = []
     findings: list[Finding] = []
-    judged = [a for a in (1, 2) if g[a].gain is not None]
-    if len(bad) == 2 and len(judged) == 2 and _same(g[1], g[2]):
+    if len(off) == 2 and _same(g[1], g[2]):
         r = math.copysign(math.sqrt(abs(g[1].gain * g[2].gain)), g[1].gain)
         findings.append(_shared(plan, i, r, g, hyps))
-    elif not judged and min(x.motor_mm for x in gains) > jog.min_range_mm:
+    elif len(still) == 2:
         findings.append(_still(plan, i, g, jog, hyps))
     else:
+        bad = sorted(off + still)
         for a in bad:
             findings.append(_one(plan, a, g, hyps))
         if len(bad) == 1 and not stopped and _encoder(plan, bad[0])[1] is not None and g[3 - bad[0]].agrees:
