@@ -9,7 +9,6 @@ The report (``commission.json``, ``commission.html``) and the CAN log go into a 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -80,6 +79,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     from hil.errors import KNOWN_ERRORS
     from hil.master.commission import Commission, CommissionMaster
     from hil.master.commission_rules import Finding, Kind, Stage
+    from hil.master.jog_rules import commissioning_safety
     from hil.master.link import CanopenLink
     from hil.record.canlog import CanLogWriter
     from hil.transport import InProcessTransport
@@ -91,7 +91,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     core = Commission(act, check, rig.plan)
     lim = core.lim
     # during commissioning the drives keep the commissioning's force limit as their max torque themselves
-    safety = dataclasses.replace(check.safety, max_force_N=lim.max_force_N)
+    safety = commissioning_safety(check.safety, lim, core.jog_plan)  # (docs/commission.md: the drives' limits)
     # every frame the master is fed is heard by the scan too (any node id); the scan runs before the preflight
     master = CommissionMaster(core, act, rig.plan, forces=(2.0 * lim.force_N, lim.max_force_N), safety=safety)
     # wall-clock stamps on a real bus, as candump writes them (run does the same)
@@ -267,20 +267,19 @@ def register(sub) -> None:
             "  1. scan: NMT reset node, which node ids answer (boot-up, heartbeat, SDO 0x1000), identity\n"
             "     0x1018 and device type against the profile (nothing is powered);\n"
             "  2. the check's preflight: configuration, the drives' own limits (max torque: the\n"
-            "     commissioning's force limit), the master's-death drill (before anything moves);\n"
-            "  3. at rest (0.5 s, drives holding): each LVDT and load cell alive (not one value for more\n"
-            "     than safety.max_frozen_cycles), in range, noise within 4x the declared, load cells\n"
-            "     within the commissioning force of zero (nothing moves yet);\n"
-            "  4. each EMA in turn, the other holding 1/4 of the check's opposing force in CST: out and\n"
-            "     back min(1 mm, 1/10 of the sweep amplitude) at 1/4 of the sweep speed: each LVDT against\n"
-            "     its motor angle over the gear ratio (gain 1 +- 0.10); then the holding force stepped up\n"
-            "     once more: each load cell against that drive's torque (+1 / -1 within 0.25), and the\n"
-            "     LVDT that follows the pushing motor must be its own (else: swapped). Below 2 % of the\n"
-            "     expected change a channel is dead. Any load cell beyond 4x the force, or a motor angle\n"
-            "     0.5 mm beyond the travel from its start, stops the movement. Drives without CST: the\n"
-            "     other EMA follows the move; then each EMA pushes against the other held until a load\n"
-            "     cell changed by that force: signs, and the two load cells against each other.\n"
-            "  5. both drives to Switch on disabled, confirmed.\n"
+            "     commissioning's force limit / 1.45, motor speed 4x its speed), the master's-death drill;\n"
+            "  3. at rest (0.5 s, drives holding): each LVDT and load cell alive, in range, noise within\n"
+            "     4x the declared, load cells within the commissioning force of zero (nothing moves yet);\n"
+            "  4. a force-free jog: both EMAs out by the travel and back together in CSP, no force\n"
+            "     commanded: motor angle over the gear ratio and LVDT agree, 0.10 + (noise+play)/travel;\n"
+            "     a ram ahead of its motor, a load cell changed by 1/10 of the force limit: stopped; a\n"
+            "     disagreement names the scale that fits (gear ratio, LVDT, encoder), nothing is loaded;\n"
+            "  5. each EMA in turn, the other holding 1/4 of the opposing force in CST: out and back by\n"
+            "     min(1 mm, 1/10 sweep amplitude) at 1/4 sweep speed: LVDT gains (1 +- 0.10); the force\n"
+            "     stepped up: load cells against the torque (+1 / -1 within 0.25), LVDT swaps; below 2 %\n"
+            "     dead; a load cell beyond 4x the force or a motor 0.5 mm past the travel stops. Without\n"
+            "     CST: the other EMA follows, then each pushes against the other held (load-cell signs).\n"
+            "  6. both drives to Switch on disabled, confirmed.\n"
             "Exit 0: ready for its first check; 6: not ready (every problem named); 2: Ctrl-C;\n"
             "3: bad input. Writes commission.json, commission.html and can.log into a new folder.\n\n"
             "  emacheck commission my-rig.toml --interface socketcan --channel can0 --arm\n"

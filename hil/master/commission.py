@@ -15,6 +15,9 @@ bus, a clock or a file (the IO shell is :mod:`hil.cli.commission`, over :mod:`hi
    cell alive (not one value repeated for more than ``safety.max_frozen_cycles``), within range, its
    noise within :data:`NOISE_FACTOR` times the declared noise, the load cells near zero. A finding
    stops here: nothing moves.
+3a. **The force-free jog** (:class:`hil.master.jog.Jog`): both EMAs out and back together in CSP, no force
+   commanded; the motor angles over the gear ratio and the LVDTs must agree on how far the rams moved
+   (:mod:`hil.master.jog_rules`). A disagreement stops here, naming the scale that fits: nothing is loaded.
 4. **Movement**, EMA k in turn (j the other): j holds a small force in CST (:class:`Limits`: a
    quarter of the check's opposing force), k moves ``travel_mm`` out and back at a quarter of the
    check's sweep speed: each LVDT regressed on its motor angle over the gear ratio (slope 1 within
@@ -58,6 +61,8 @@ from hil.master.commission_rules import (
     swap_findings,
 )
 from hil.master.core import MasterCore
+from hil.master.jog import Jog
+from hil.master.jog_rules import JogPlan
 from hil.master.preflight import MasterLossReactionError, Nmt, Now, PreflightError, SdoRead, Wait, identity_problems
 from hil.profile.config import Actuation, Check
 
@@ -67,7 +72,8 @@ __all__ = ["Commission", "CommissionMaster", "CommissionStop", "Scan", "TRANSITI
 TRANSITIONS: dict[Stage, frozenset[Stage]] = {
     Stage.SCAN: frozenset({Stage.PREFLIGHT, Stage.STOPPED}),
     Stage.PREFLIGHT: frozenset({Stage.AT_REST, Stage.STOPPED}),
-    Stage.AT_REST: frozenset({Stage.LOAD, Stage.STOPPED}),
+    Stage.AT_REST: frozenset({Stage.JOG, Stage.STOPPED}),
+    Stage.JOG: frozenset({Stage.LOAD, Stage.STOPPED}),
     Stage.LOAD: frozenset({Stage.MOVE, Stage.STOPPED}),
     Stage.MOVE: frozenset({Stage.STEP, Stage.STOPPED}),
     Stage.STEP: frozenset({Stage.UNLOAD, Stage.STOPPED}),
@@ -195,6 +201,8 @@ class Commission:
     def __init__(self, actuation: Actuation, check: Check, plan) -> None:
         self.act, self.check, self.plan = actuation, check, plan
         self.lim = Limits.of(check)
+        self.jog_plan = JogPlan.of(actuation, self.lim, plan)  #: the force-free jog before anything is loaded
+        self.jog: Jog | None = None
         self.i = actuation.mechanics.i_total_rad_per_mm
         self.T = actuation.timing.sync_period_s
         c = actuation.canopen
@@ -278,6 +286,8 @@ class Commission:
             self.stage = Stage.STOPPED
             return _DISABLED, _DISABLED
         self._rec.add(smp)
+        if self.stage is Stage.JOG:
+            return self._jog_step(smp)
         tau = t - self._t0
         if tau >= self._duration():
             self._end_of_stage(smp)
@@ -285,6 +295,22 @@ class Commission:
                 return _DISABLED, _DISABLED
             tau = 0.0
         return self._setpoints(tau, smp)
+
+    def _jog_step(self, smp: Sample) -> tuple[Setpoint, Setpoint]:
+        """The force-free jog (:mod:`hil.master.jog`); once it is done, its verdict: the commissioning stops
+        (the motion scale not confirmed) or goes on to load."""
+        sp = self.jog.step(smp)
+        if not self.jog.done:
+            return sp
+        verdict = self.jog.verdict()
+        self.measured["jog"] = verdict.as_json() | {"stopped": self.jog.stopped, "plan": self.jog_plan.as_json(),
+                                                    "peak_force_change_N": self.jog.peak_force_change_N()}
+        if verdict.stop:
+            self.findings += list(verdict.findings)
+            self.stage = Stage.STOPPED
+            return _DISABLED, _DISABLED
+        self._goto(Stage.LOAD, smp.t_s)
+        return self._setpoints(0.0, smp)
 
     def _duration(self) -> float:
         lim = self.lim
@@ -387,7 +413,9 @@ class Commission:
                                              "is wrong"))
                 self.stage = Stage.STOPPED
                 return
-            self._goto(Stage.LOAD, t)
+            self._goto(Stage.JOG, t)
+            self.jog = Jog(self.jog_plan, self.plan, self._start,
+                           {n: self.measured["at_rest"][n]["mean"] for n in ("s1", "s2", "F1", "F2")}, t)
         elif self.stage is Stage.LOAD:
             self._goto(Stage.MOVE, t)
         elif self.stage is Stage.MOVE:

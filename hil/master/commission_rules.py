@@ -41,6 +41,7 @@ class Stage(Enum):
     SCAN = "scan"
     PREFLIGHT = "preflight"
     AT_REST = "at rest"
+    JOG = "jog"  #: the force-free jog (:mod:`hil.master.jog`)
     LOAD = "load"
     MOVE = "move"
     STEP = "force step"
@@ -110,7 +111,8 @@ class Limits:
         damped: a shorter hold biased the load-cell gains by 3 %).
     max_force_N : float
         Any load cell beyond this stops the movement: four times ``force_N`` (at most the check's
-        ``safety.max_force_N``); also the drives' own max torque 0x6072 during commissioning [N].
+        ``safety.max_force_N``); over 1 + the jog's widest tolerance, the drives' own max torque 0x6072
+        during commissioning (:func:`hil.master.jog_rules.commissioning_safety`) [N].
     max_travel_mm : float
         A motor angle farther than this from where it started stops the movement [mm].
     max_following_error_mm : float
