@@ -253,7 +253,7 @@ def _candidates(obs: tuple[Observation, ...]) -> list[Cause]:
     out: list[Cause] = []
     gains = [o for o in obs if o.kind in (ObsKind.LVDT_GAIN, ObsKind.FORCE_GAIN)]
     off = [o for o in gains if abs(o.measured / _want(o) - 1.0) > o.tolerance]
-    if len(off) >= 2 and any(o.kind is ObsKind.LVDT_GAIN for o in gains):
+    if off and any(o.kind is ObsKind.LVDT_GAIN for o in gains):
         out.append(Cause(CauseKind.GEAR))
     for o in off:
         rel = o.measured / _want(o)
