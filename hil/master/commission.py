@@ -53,6 +53,7 @@ from hil.master.commission_rules import (
     ema_key,
     force_findings,
     gain_se,
+    key_of,
     lvdt_findings,
     push_findings,
     rest_findings,
@@ -263,7 +264,10 @@ class Commission:
         else:
             stage = self.stage if self.stage is not Stage.STOPPED else Stage.PREFLIGHT
             kind = Kind.PREFLIGHT if stage in (Stage.SCAN, Stage.PREFLIGHT) else Kind.STOP
-            self.findings.append(Finding(stage, kind, "", f"{type(exc).__name__}: {exc}"))
+            text = f"{type(exc).__name__}: {exc}"
+            # the key the error names, else the table it concerns: the drives' configuration, or the link's limits
+            self.findings.append(Finding(stage, kind, key_of(text, "canopen" if kind is Kind.PREFLIGHT else "safety"),
+                                         text))
         self.stage = Stage.STOPPED
 
     # ------------------------------------------------------------ the cyclic phase

@@ -7,6 +7,7 @@ arrays (samples in SI units) and the rig plan returning findings. The sequence t
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from enum import Enum
 
@@ -17,7 +18,7 @@ from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation, Check
 
 __all__ = ["DEAD_FRACTION", "FORCE_GAIN_TOLERANCE", "MIN_MOTION_FRACTION", "MIN_STEP_MOTION_MM", "NOISE_FACTOR",
            "REST_S", "Finding", "Kind", "Limits", "Stage", "drives_swapped", "ema_key", "force_findings", "gain_se",
-           "lvdt_findings", "push_findings", "rest_findings", "slope", "slope_se", "swap_findings"]
+           "key_of", "lvdt_findings", "push_findings", "rest_findings", "slope", "slope_se", "swap_findings"]
 
 #: Time both drives hold still while every signal is read at rest [s].
 REST_S = 0.5
@@ -148,6 +149,18 @@ class Limits:
 
 
 # ------------------------------------------------------------------ the rules
+
+
+#: The profile tables a key of an error's message may start with.
+_KEY = re.compile(r"\b((?:canopen|signals|safety|mechanics|sensors|timing|calibration|nodes)\.[A-Za-z0-9_]+"
+                  r"(?:\.[A-Za-z0-9_]+)*)")
+
+
+def key_of(text: str, default: str) -> str:
+    """The first profile key an error's ``text`` names (``canopen.heartbeat_period_s``, ``safety.max_stale_cycles``),
+    else ``default``: an error of the preflight or of the link still names the table it concerns."""
+    m = _KEY.search(text)
+    return m.group(1) if m else default
 
 
 def ema_key(plan, ema: int, signal: Signal) -> str:

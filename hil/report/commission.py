@@ -74,10 +74,12 @@ def _hypotheses(report: dict) -> list[str]:
         for o in obs:
             want = -1.0 if o["kind"] == "load-cell gain" and o["ema"] != o["mover"] else 1.0
             gain = o["kind"] in ("LVDT gain", "load-cell gain")
+            follows = o["kind"] == "LVDT follows"
             rows.append([o["kind"], f"{o['sensor']} {o['ema']}", o["mover"] or "at rest",
-                         f"{fmt(o['measured'], 4)} {o['unit']}", "" if o["se"] is None else fmt(o["se"], 2),
-                         fmt(want, 1) if gain else "", fmt(o["measured"] / want - 1.0, 3) if gain else "",
-                         f"{'+- ' if gain else '<= '}{o['tolerance']:g}", o["key"]])
+                         f"{fmt(o['measured'], 4)} {o['unit']}", "" if o["se"] is None else f"{o['se']:.2g}",
+                         fmt(want, 1) if gain else ("0 (its own LVDT)" if follows else ""),
+                         fmt(o["measured"] / want - 1.0, 3) if gain else "",
+                         "" if follows else f"{'+- ' if gain else '<= '}{o['tolerance']:g}", o["key"]])
         out.append(table(["observation", "channel", "EMA moving / pushing", "measured", "standard error", "expected",
                           "residual (relative)", "tolerance", "profile key"], rows))
     if tried := h.get("tried"):
