@@ -21,7 +21,8 @@ from hil.cli.check import master_setup
 from hil.cli.commission import commission, simulated_transport
 from hil.cli.dry_run import dry_run
 from hil.errors import ProfileError
-from hil.master.commission_rules import FORCE_GAIN_TOLERANCE, NOISE_FACTOR, Finding, Kind, Stage
+from hil.master.commission_explain import serial_findings, swap_patch
+from hil.master.commission_rules import FORCE_GAIN_TOLERANCE, NOISE_FACTOR, Finding, Kind, Stage, key_of
 from hil.master.hypotheses import UNIT_NOISE_BAND, CauseKind, Observation, ObsKind, explain
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
 from hil.profile.load import default_profile_path, load_actuation, load_check, load_simrig
@@ -150,6 +151,39 @@ def test_a_clean_rig_needs_no_hypothesis_and_drives_at_each_others_id_pass_throu
     assert e.findings == (merged,) and e.tried == ()
 
 
+def test_a_pinned_serial_is_compared_only_where_pinned_and_read(tmp_path):
+    pinned = write_profile_variant("actuation.toml", tmp_path / "p.toml", {}, add={"canopen": {
+        "serial_ema1": 0x5E000101, "serial_ema2": 0x5E000102}})
+    act = load_actuation(pinned)
+    nodes = {1: {"identity": {"serial": 0x5E000101}}, 2: {"identity": {"serial": 0x5E000103}}}
+    (f,) = serial_findings(act, nodes)
+    assert (f.kind, f.key, f.fits) == (Kind.SERIAL, "canopen.serial_ema2", "0x5E000103")
+    assert serial_findings(act, {1: nodes[1], 2: {"identity": {"serial": 0x5E000102}}}) == []
+    assert serial_findings(act, {1: nodes[1], 2: {"identity": {"serial": None}}}) == []  # not read: the scan says so
+    assert serial_findings(ACT, nodes) == []  # none pinned (0, the default)
+
+
+def test_an_error_of_the_preflight_or_the_link_names_its_key():
+    assert key_of("StaleData: no sample for 4 cycles (> safety.max_stale_cycles = 3)", "safety") == \
+        "safety.max_stale_cycles"
+    text = "ema1: 0x1017 read back 0, not canopen.heartbeat_period_s."
+    assert key_of(text, "canopen") == "canopen.heartbeat_period_s"
+    assert key_of("ema1: refused the mode", "canopen") == "canopen"
+
+
+def test_swaps_in_the_signal_map_move_objects_on_a_sensor_node_and_nodes_between_drives(tmp_path):
+    drive = master_setup(ACT, None).plan
+    assert swap_patch(drive, "lvdt") == {"signals.ema1.lvdt.object": "0x2100:00", "signals.ema1.lvdt.node": "ema2",
+                                         "signals.ema2.lvdt.object": "0x2100:00", "signals.ema2.lvdt.node": "ema1"}
+    data = read_toml(default_profile_path("actuation.toml"))
+    assert "no TPDO left" in patch_problem(data, swap_patch(drive, "lvdt"), None)
+    sensors = sensor_profile(tmp_path / "s.toml")
+    io = master_setup(load_actuation(sensors), sensors).plan
+    p = swap_patch(io, "force")
+    assert p == {"signals.ema1.force.object": "0x6401:04", "signals.ema2.force.object": "0x6401:02"}
+    assert patch_problem(read_toml(sensors), p, sensors) is None
+
+
 # ------------------------------------------------------------------ the patch (fast)
 
 
@@ -246,6 +280,8 @@ def test_one_cause_one_finding_and_the_patch_makes_the_rig_ready(cases, name, ki
     assert patch == first.report["patch"]["keys"] and patch
     judged = prof if prof is not None else default_profile_path("actuation.toml")  # a copy of the profile judged
     assert (first.out / "judged-actuation.toml").read_bytes() == judged.read_bytes()
+    html = (first.out / "commission.html").read_text()
+    assert "Hypotheses tried" in html and all(k in html for k in patch)
     assert second.exit_code == ExitCode.PASS and second.report["findings"] == []
     assert read_patch(second.out / "profile.patch.toml") == {}
 
@@ -257,7 +293,7 @@ def test_load_cells_swapped_say_what_would_tell_them_from_two_wrong_signs(cases)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["gear_1.25", "lvdt_x1000", "loadcells_swapped_io"])
+@pytest.mark.parametrize("name", list(CASES))
 def test_the_patched_profile_passes_the_dry_run_on_the_same_faulty_rig(cases, name, tmp_path):
     _, second, fixed, true, _ = cases[name]
     faults = CASES[name][1]
