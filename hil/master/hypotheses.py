@@ -447,15 +447,15 @@ def _explained(f: Finding, obs: tuple[Observation, ...]) -> bool:
 
 def _findings(best, obs, findings, scales, i_total, refuses, swaps, marked):
     """One finding per cause of ``best`` (the original finding kept where it names that cause already), the
-    profile patch and the wiring fixes."""
+    profile patch and the wiring fixes. The patch holds each cause's own value: a sign flipped or a power of
+    ten exactly (a pitch error within the tolerance, which the check's calibration corrects, stays out of it;
+    a finding's ``fits`` makes the measurement agree exactly), a fitted value where the cause has one."""
     keep = [f for f in findings if not _explained(f, obs)]
     old = {(f.kind, f.key): f for f in findings}
     out, patch, wiring = [], {}, []
     for c in best.causes:
         f, items = _cause_finding(c, best, obs, scales, i_total, swaps, marked)
         f = old.get((f.kind, f.key), f)
-        if len(items) == 1 and isinstance(f.fits, (int, float)) and f.key in items:
-            items = {f.key: f.fits}  # the finding as first named, its value in the patch
         if items:
             why = refuses(patch | items) if refuses is not None else None
             if why is not None:
@@ -480,8 +480,9 @@ def _cause_finding(c: Cause, best: Hypothesis, obs, scales, i_total, swaps, mark
     key = next((o.key for o in obs if (o.sensor, o.ema) == (c.sensor, c.ema)), "")
     unit_key = f"{key}.mm_per_unit" if c.sensor == "lvdt" else f"{key}.N_per_unit"
     per = scales.get((c.sensor, c.ema))
-    stage = Stage.AT_REST if all(o.kind in (ObsKind.NOISE, ObsKind.LEVEL) for o in obs) else Stage.MOVE
     mine = [o for o in obs if (o.sensor, o.ema) == (c.sensor, c.ema)]
+    stage = Stage.STEP if any(o.kind is ObsKind.FORCE_GAIN for o in mine) else (
+        Stage.MOVE if any(o.kind is ObsKind.LVDT_GAIN for o in mine or obs) else Stage.AT_REST)
     seen = ", ".join(f"{o.name} {o.measured:.4g} {o.unit}" for o in mine)
     alt = _others(c, marked)
     if c.kind is CauseKind.GEAR:
