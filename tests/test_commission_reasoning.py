@@ -10,9 +10,12 @@ load cells exact), never from a run.
 
 from __future__ import annotations
 
+import json
 import tomllib
+from importlib import resources
 from pathlib import Path
 
+import jsonschema
 import pytest
 
 from hil.cli import main
@@ -280,6 +283,9 @@ def test_one_cause_one_finding_and_the_patch_makes_the_rig_ready(cases, name, ki
     assert patch == first.report["patch"]["keys"] and patch
     judged = prof if prof is not None else default_profile_path("actuation.toml")  # a copy of the profile judged
     assert (first.out / "judged-actuation.toml").read_bytes() == judged.read_bytes()
+    schema = json.loads(resources.files("hil.schemas").joinpath("commission.schema.json").read_text())
+    for run in (first, second):
+        jsonschema.validate(json.loads((run.out / "commission.json").read_text()), schema)
     html = (first.out / "commission.html").read_text()
     assert "Hypotheses tried" in html and all(k in html for k in patch)
     assert second.exit_code == ExitCode.PASS and second.report["findings"] == []
