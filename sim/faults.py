@@ -70,6 +70,8 @@ whichever node carries it):
 ``loadcell_dead``       the load-cell input reads 0
 ``lvdts_swapped``       LVDT 1 reads EMA 2's stroke and LVDT 2 EMA 1's
                         (``ema`` ignored)
+``loadcells_swapped``   load cell 1 reads EMA 2's force and load cell 2
+                        EMA 1's (``ema`` ignored)
 ======================  =====================================================
 
 Drive faults (time base: bus time since power-on, see above; ``ema`` is the
@@ -174,6 +176,7 @@ class FaultKind(Enum):
     LOADCELL_SCALE = "loadcell_scale"
     LOADCELL_DEAD = "loadcell_dead"
     LVDTS_SWAPPED = "lvdts_swapped"
+    LOADCELLS_SWAPPED = "loadcells_swapped"
 
 
 #: Drive faults: they act from the drives' power-on, before SYNC starts (``start_s`` is the bus time
@@ -183,7 +186,8 @@ DRIVE_KINDS = frozenset((FaultKind.IGNORE_ABORT_CONNECTION, FaultKind.QUICK_STOP
                          FaultKind.MODE_NOT_CONFIRMED, FaultKind.NOT_READY_UNTIL_CONTROLWORD))
 #: Wiring faults: the rig's sensors wired wrongly (a sign, a scale, a dead input, two LVDTs swapped).
 WIRING_KINDS = frozenset((FaultKind.LVDT_SIGN, FaultKind.LVDT_SCALE, FaultKind.LVDT_DEAD, FaultKind.LOADCELL_SIGN,
-                          FaultKind.LOADCELL_SCALE, FaultKind.LOADCELL_DEAD, FaultKind.LVDTS_SWAPPED))
+                          FaultKind.LOADCELL_SCALE, FaultKind.LOADCELL_DEAD, FaultKind.LVDTS_SWAPPED,
+                          FaultKind.LOADCELLS_SWAPPED))
 #: Error code of a drive that boots into FAULT (``starts_in_fault``, ``fault_reset_ignored``).
 BOOT_FAULT_CODE = 0x5000
 
@@ -308,7 +312,7 @@ class FaultInjector:
         self._truth: list[tuple] = []
         self._held: list[tuple[int, Frame]] = []  # (due SYNC count, frame) of late TPDOs
         self._stuck: dict[int, float] = {}  # EMA -> frozen LVDT value [mm]
-        self._lvdt_now: dict[int, float] = {}  # EMA -> this SYNC's LVDT reading [mm] (lvdts_swapped)
+        self._now: dict[tuple[int, Signal], float] = {}  # this SYNC's LVDT [mm] and force [N] (the swaps)
         self._started: set[int] = set()  # indices of faults whose onset happened
         #: kind -> time of the onset: check time, bus time since power-on for the drive faults
         self.onset_s: dict[str, float] = {}
@@ -445,11 +449,10 @@ class FaultInjector:
             out += [self._sensor_faults(f) for k, f in self._held if k <= self.syncs]
             self._held = [(k, f) for k, f in self._held if k > self.syncs]
         drive_ids = self._drive_ids
-        if at_sync and self._active(FaultKind.LVDTS_SWAPPED):  # both LVDTs of this SYNC, before either is changed
-            for fr in frames:
+        if at_sync and (self._active(FaultKind.LVDTS_SWAPPED) or self._active(FaultKind.LOADCELLS_SWAPPED)):
+            for fr in frames:  # both readings of this SYNC, before either is changed
                 for (ema, sig), v in self._codec.scaled(fr).items():
-                    if sig is Signal.LVDT:
-                        self._lvdt_now[ema] = v
+                    self._now[(ema, sig)] = v
         silent = self._silent_sensors() if self._silent_sensor else ()
         for fr in frames:
             cid = fr.arbitration_id
@@ -533,7 +536,8 @@ class FaultInjector:
                 if x != v:
                     changes[(ema, sig)] = x
             elif sig is Signal.FORCE:
-                x = self._wired(v, node, FaultKind.LOADCELL_SIGN, FaultKind.LOADCELL_SCALE, FaultKind.LOADCELL_DEAD)
+                w = self._now.get((3 - ema, sig), v) if self._active(FaultKind.LOADCELLS_SWAPPED) else v
+                x = self._wired(w, node, FaultKind.LOADCELL_SIGN, FaultKind.LOADCELL_SCALE, FaultKind.LOADCELL_DEAD)
                 for f in self._active(FaultKind.LOADCELL_SATURATION, node):
                     if abs(x) > f.param:
                         x = math.copysign(f.param, x)
@@ -546,7 +550,7 @@ class FaultInjector:
     def _lvdt_wiring(self, ema: int, node: int, v: float) -> float:
         """The LVDT reading as the rig's wiring makes it (``lvdts_swapped``, then sign, scale, dead)."""
         if self._active(FaultKind.LVDTS_SWAPPED):
-            v = self._lvdt_now.get(3 - ema, v)
+            v = self._now.get((3 - ema, Signal.LVDT), v)
         return self._wired(v, node, FaultKind.LVDT_SIGN, FaultKind.LVDT_SCALE, FaultKind.LVDT_DEAD)
 
     def _wired(self, v: float, node: int, sign: FaultKind, scale: FaultKind, dead: FaultKind) -> float:

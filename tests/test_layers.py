@@ -90,8 +90,8 @@ def _imports(path: Path) -> list[tuple[int, str]]:
 #: The sans-IO cores: fed frames, samples and a time value; they return frames, setpoints and events.
 SANS_IO = ("hil.master.core", "hil.master.preflight", "hil.master.events", "hil.master.limits_setup",
            "hil.master.stalls", "hil.master.powerup", "hil.master.views", "hil.master.drill", "hil.master.commission",
-           "hil.master.commission_rules", "hil.master.jog", "hil.master.jog_rules", "hil.check.sequence",
-           "hil.check.supervisor", "hil.check.staleness")
+           "hil.master.commission_rules", "hil.master.jog", "hil.master.jog_rules", "hil.master.hypotheses",
+           "hil.check.sequence", "hil.check.supervisor", "hil.check.staleness")
 #: What a sans-IO core may import of hil: the vocabulary, the errors, the profiles' dataclasses, one another.
 SANS_IO_MAY = ("hil.canopen", "hil.errors", "hil.profile.config", *SANS_IO)
 #: Modules that touch a bus, a thread, a clock, a file or a process.

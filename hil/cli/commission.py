@@ -3,7 +3,8 @@
 
 Real drives: ``--interface``, ``--channel`` and ``--arm``. Simulated drives in process: ``--simulate``
 (the dry-run's simulated rig, with ``--wiring-fault`` or the simulated-rig profile's ``[[faults]]``).
-The report (``commission.json``, ``commission.html``) and the CAN log go into a new folder, written once.
+The report (``commission.json``, ``commission.html``), the profile patch, a copy of the profiles judged and the
+CAN log go into a new folder, written once (:mod:`hil.cli.commission_out`).
 """
 
 from __future__ import annotations
@@ -16,12 +17,10 @@ from pathlib import Path
 from hil.cli.args import ExitCode, add_bus_args, add_parser, add_profile_args
 from hil.cli.bus import multicast_hops_for, open_bus
 from hil.cli.check import master_setup, rig_nodes_text
+from hil.cli.commission_out import identities, print_summary, report_data, write_outputs
 from hil.cli.console import make_console
 from hil.profile.load import load_actuation, load_check, load_simrig
-from hil.record.outputs import Outputs, check_new_run_folder, file_hashes, out_dir, utc_iso
-
-#: The report's file names in the commissioning's folder.
-REPORT_JSON, REPORT_HTML = "commission.json", "commission.html"
+from hil.record.outputs import check_new_run_folder, file_hashes, out_dir
 
 
 @dataclass
@@ -70,8 +69,11 @@ def simulated_transport(act, rig, simrig, faults, seed: int | None):
     return InProcessTransport(injector, act.timing.sync_period_s)
 
 
-def commission(act, check, rig, transport, out: Path, *, console=None, context: dict | None = None) -> CommissionRun:
-    """Commission the rig over ``transport``; the report and the CAN log go into ``out`` (new or empty).
+def commission(act, check, rig, transport, out: Path, *, console=None, context: dict | None = None,
+               paths: dict | None = None, eds: Path | None = None) -> CommissionRun:
+    """Commission the rig over ``transport``; the report, the profile patch, a copy of each profile judged
+    (``paths``: ``{"actuation": file, "check": file}``, None: the shipped one) and the CAN log go into ``out``
+    (new or empty).
 
     Returns the exit status (0 ready, :attr:`ExitCode.NOT_READY` with every problem named) and the report.
     """
@@ -125,74 +127,31 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
         core.findings.append(Finding(Stage.DONE, Kind.NOT_SAFE, f"canopen.node_id_{ema}",
                                      f"{ema}: last known {d['state']}, confirmed {d['confirmed']}, reachable "
                                      f"{d['reachable']}"))
-    report = _report(core, master, link, final, context)
+    paths = {"actuation": None, "check": None} | (paths or {})
+    explanation = _explained(core, act, paths["actuation"], eds)
+    report = report_data(core, master, link, final, context, explanation, identities(act, rig, core.scan.nodes))
     rc = ExitCode.PASS if report["status"] == "ready" else ExitCode.NOT_READY
     rc = ExitCode.ABORTED if interrupted else rc  # Ctrl-C: the drives stopped, the report written, exit 2
     report["exit_code"] = int(rc)
-    outputs = Outputs(out)
-    outputs.write_json(REPORT_JSON, report)
-    from hil.report.commission import write_commission_report
-
     i = act.mechanics.i_total_rad_per_mm
     traces = {name: {**x, "x1": x["phi1"] / i, "x2": x["phi2"] / i} for name, x in core.traces.items()}
-    outputs.write_with(REPORT_HTML, lambda p: write_commission_report(p, report, traces, act.timing.sync_period_s))
-    _print(console, report, out)
+    write_outputs(out, report, traces, act.timing.sync_period_s, paths)
+    print_summary(console, report, out)
     return CommissionRun(rc, report, out, core, link)
 
 
-def _report(core, master, link, final: dict, context: dict) -> dict:
-    """The commissioning report as data (hil/schemas/commission.schema.json)."""
-    from hil import __version__
-    from hil.master.commission_rules import (
-        DEAD_FRACTION,
-        FORCE_GAIN_TOLERANCE,
-        MIN_MOTION_FRACTION,
-        MIN_STEP_MOTION_MM,
-        NOISE_FACTOR,
-        REST_S,
-    )
-    from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE
+def _explained(core, act, profile: Path | None, eds: Path | None):
+    """The findings explained jointly (:mod:`hil.master.hypotheses`), a pinned serial checked; the core's
+    findings replaced by the explanation's."""
+    from hil.master.commission_explain import explain_commission, serial_findings
+    from hil.profile.load import default_profile_path
+    from hil.profile.tables import read_toml
 
-    findings = [f.as_json() for f in core.findings]
-    measured = {k: v for k, v in core.measured.items() if not k.endswith("_raw")}
-    return {
-        "kind": "commission", "status": "not ready" if findings else "ready", "exit_code": None,
-        "created": utc_iso(), "software": {"emacheck": __version__}, **context,
-        "stage_reached": core.stage.value,
-        "limits": core.lim.as_json(),
-        "thresholds": {"rest_s": REST_S, "noise_factor": NOISE_FACTOR, "lvdt_gain_tolerance": HARD_LVDT_GAIN_TOLERANCE,
-                       "force_gain_tolerance": FORCE_GAIN_TOLERANCE, "dead_fraction": DEAD_FRACTION,
-                       "min_motion_fraction": MIN_MOTION_FRACTION, "min_step_motion_mm": MIN_STEP_MOTION_MM,
-                       "max_frozen_cycles": core.check.safety.max_frozen_cycles},
-        "scan": {"heard": sorted(core.scan.heard), "nodes": {str(k): v for k, v in core.scan.nodes.items()}},
-        "identity": {f"ema{d.ema}": ({"node": d.node_id, **d.identity} if d.identity else None)
-                     for d in master.drives.values()},
-        # from the preflight's own record: the drill's outcome also when it refused the drives
-        "master_loss": {f"ema{d.ema}": d.master_loss.as_json() for d in master.preflight.drives
-                        if d.master_loss is not None},
-        "measured": measured,
-        "drives_final": final,
-        "close_errors": list(link.close_errors),
-        "findings": findings,
-    }
-
-
-def _print(console, report: dict, out: Path) -> None:
-    from rich.markup import escape
-
-    for f in report["findings"]:
-        fits = f" -> fits: {f['fits']}" if f["fits"] is not None else ""
-        console.print(escape(f"  [{f['stage']}] {f['kind']}: {f['key'] or '-'}: {f['text']}{fits}"), soft_wrap=True)
-    ours = {v["node"] for v in report["scan"]["nodes"].values()}
-    if others := [n for n in report["scan"]["heard"] if n not in ours]:
-        console.print(f"  note: node id(s) {', '.join(map(str, others))} answered and are not in the profile")
-    for ema, d in report["drives_final"].items():
-        ident = (report["identity"].get(ema) or {}).get("serial")
-        serial = f", serial 0x{ident:08X} (0x1018:04)" if ident else ""
-        console.print(f"  {ema}: node {d['node']}{serial}, ended in {d['state']} (confirmed {d['confirmed']})")
-    word = "[green]READY[/green] for its first check" if report["status"] == "ready" else \
-        f"[red]NOT READY[/red]: {len(report['findings'])} problem(s)"
-    console.print(f"rig {word}; report {out / REPORT_HTML}")
+    core.findings[:0] = serial_findings(act, core.scan.nodes)
+    data = read_toml(Path(profile) if profile is not None else default_profile_path("actuation.toml"))
+    explanation = explain_commission(core, act, data, profile, eds)
+    core.findings[:] = list(explanation.findings)
+    return explanation
 
 
 def cmd_commission(args: argparse.Namespace) -> int:
@@ -242,7 +201,8 @@ def cmd_commission(args: argparse.Namespace) -> int:
     console.print(f"emacheck commission: {rig_nodes_text(rig)} on {context['bus']['interface']}:"
                   f"{context['bus']['channel']}; folder {out}")
     try:
-        run = commission(act, check, rig, transport, out, console=console, context=context)
+        run = commission(act, check, rig, transport, out, console=console, context=context,
+                         paths={"actuation": profile, "check": args.check}, eds=args.eds)
     finally:
         transport.close()
         if bus is not None:
@@ -280,8 +240,12 @@ def register(sub) -> None:
             "     dead; a load cell beyond 4x the force or a motor 0.5 mm past the travel stops. Without\n"
             "     CST: the other EMA follows, then each pushes against the other held (load-cell signs).\n"
             "  6. both drives to Switch on disabled, confirmed.\n"
+            "The findings are then explained jointly: one cause for several symptoms (the gear ratio for\n"
+            "all gains, a swap, a unit error by a power of ten), the simplest hypothesis that explains\n"
+            "every measurement within its tolerance; advice the profile loader refuses is a wiring fix.\n"
             "Exit 0: ready for its first check; 6: not ready (every problem named); 2: Ctrl-C;\n"
-            "3: bad input. Writes commission.json, commission.html and can.log into a new folder.\n\n"
+            "3: bad input. Writes commission.json, commission.html, profile.patch.toml (the keys that\n"
+            "make the rig ready: emacheck profile apply-patch), judged-*.toml and can.log into a new folder.\n\n"
             "  emacheck commission my-rig.toml --interface socketcan --channel can0 --arm\n"
             "  emacheck commission --simulate --wiring-fault lvdt_sign:2 --wiring-fault lvdts_swapped"))
     p.add_argument("profile_pos", nargs="?", metavar="PROFILE", type=Path,
@@ -291,7 +255,7 @@ def register(sub) -> None:
     p.add_argument("--wiring-fault", action="append", type=wiring_fault, metavar="KIND[:EMA[:VALUE]]",
                    help="with --simulate, wire the simulated rig wrongly (repeatable): lvdt_sign, lvdt_scale "
                         "(VALUE: reading / stroke, default 0.5), lvdt_dead, loadcell_sign, loadcell_scale, "
-                        "loadcell_dead, lvdts_swapped; e.g. lvdt_sign:2, loadcell_scale:1:0.1")
+                        "loadcell_dead, lvdts_swapped, loadcells_swapped; e.g. lvdt_sign:2, loadcell_scale:1:0.1")
     p.add_argument("--arm", action="store_true", help="confirm that the actuators may move (real drives)")
     p.add_argument("--out", metavar="DIR", type=Path,
                    help="new or empty folder for the report (default emacheck-runs/<time>-commission)")

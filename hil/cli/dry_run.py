@@ -49,7 +49,8 @@ class DryRun:
 
 def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=None, realtime: bool = False,
             quiet: bool = True, console: Console | None = None, profile_path=None,
-            trace: dict | None = None, eds=None, rig=None, stall: tuple[float, float] | None = None) -> DryRun:
+            trace: dict | None = None, eds=None, rig=None, stall: tuple[float, float] | None = None,
+            sim_rig=None) -> DryRun:
     """The check over CANopen against two simulated drives on an in-process virtual bus.
 
     ``faults`` (a :class:`sim.faults.Fault` sequence) replaces the simulated-rig profile's
@@ -59,19 +60,21 @@ def dry_run(act, check, simrig, out: Path, *, seed: int | None = None, faults=No
     ``rig``: the planned rig (:func:`hil.cli.check.master_setup` of the profile and ``eds``) if the caller
     has planned it already. ``stall``: (ms, mean interval s) of the master's injected stalls
     (:class:`hil.master.stalls.MasterStalls`, drawn from ``[seed, 37]``; meta.json ``stalls.injected``).
+    ``sim_rig``: the planned rig the simulated nodes are built as (default ``rig``: the profile under test); a
+    rig of another profile shows that profile's mistakes (a scaling the rig's wiring does not have).
     """
     console = console or make_console(quiet=quiet)
     rig = rig if rig is not None else master_setup(act, profile_path, eds, check)
     fork = AnalysisFork(act, out)  # imports the analysis on the other core while the loop runs
     try:
         return _dry_run(act, check, simrig, out, fork, seed=seed, faults=faults, realtime=realtime, quiet=quiet,
-                        console=console, rig=rig, trace=trace, stall=stall)
+                        console=console, rig=rig, trace=trace, stall=stall, sim_rig=sim_rig or rig)
     finally:
         fork.close()
 
 
 def _dry_run(act, check, simrig, out: Path, fork, *, seed, faults, realtime, quiet, console, rig, trace,
-             stall) -> DryRun:
+             stall, sim_rig) -> DryRun:
     """:func:`dry_run` with its console, planned rig and :class:`~hil.cli.analysis_fork.AnalysisFork`."""
     import numpy as np
 
@@ -92,7 +95,8 @@ def _dry_run(act, check, simrig, out: Path, fork, *, seed, faults, realtime, qui
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     plant = RigPlant(simrig.params, rng)
-    pair = SimDrivePair(plant, rig.plan, lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id),
+    eds_of = sim_rig.eds_paths
+    pair = SimDrivePair(plant, sim_rig.plan, lambda name, node_id: load_eds(eds_of[name], node_id=node_id),
                         serials=simrig.serials)
     injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]),
                              record_truth=bool(faults) or stall is not None)

@@ -92,6 +92,36 @@ def cmd_profile_check(args: argparse.Namespace) -> int:
     return ExitCode.PASS
 
 
+def cmd_profile_apply_patch(args: argparse.Namespace) -> int:
+    """``emacheck profile apply-patch PROFILE.toml PATCH.toml --out NEW.toml``: the profile with the patch's
+    keys set, written as a new file once the patched profile loads and plans (its EDS looked up next to NEW)."""
+    from hil.profile.patch import apply_patch, patch_problem, read_patch, toml_text
+    from hil.profile.tables import read_toml
+    from hil.record.outputs import utc_iso
+    from hil.record.runfolder import create_bytes
+
+    console = make_console()
+    src, out = args.profile_file, args.out
+    data, patch = read_toml(src), read_patch(args.patch_file)
+    new = apply_patch(data, patch, src.name)
+    if (why := patch_problem(data, patch, out, args.eds, out.name)) is not None:
+        console.print(f"[red]the patched profile is refused; nothing written:[/red] {escape(why)}", soft_wrap=True)
+        return ExitCode.INPUT
+    head = f"# {src.name} patched with {args.patch_file.name} by emacheck profile apply-patch, {utc_iso()}\n"
+    create_bytes(out, (head + toml_text(new)).encode())  # never over an existing file (OutputError, exit 3)
+    old = dict(_leaves(data))
+    for k, v in patch.items():
+        console.print(escape(f"  {k}: {old.get(k, '(not set)')} -> {v}"), soft_wrap=True)
+    console.print(f"[green]written[/green] {escape(str(out))} ({len(patch)} key(s) changed; it loads and plans)")
+    return ExitCode.PASS
+
+
+def _leaves(tables: dict):
+    from hil.profile.patch import dotted
+
+    return dotted(tables).items()
+
+
 def _step_json(s) -> dict:
     return {"key": s.key, "sensor": s.what, "unit": s.unit, "step": s.step, "noise_sigma": s.sigma,
             "noise_key": s.noise_key, "largest_step": s.largest, "ok": s.ok}
@@ -161,7 +191,7 @@ def register(sub) -> None:
                    help="check an actuation profile against its drives' EDS files (offline)",
                    description="Actuation profiles: `emacheck profile check PROFILE.toml [--eds PATH]` checks "
                                "the profile, its signal map and every node's EDS together, offline.")
-    ps = p.add_subparsers(dest="profile_cmd", metavar="check", parser_class=type(p))
+    ps = p.add_subparsers(dest="profile_cmd", metavar="check|apply-patch", parser_class=type(p))
     c = ps.add_parser("check", help="validate profile, signal map and EDS files together; print the PDO layout",
                       description="Validate an actuation profile, its signal map and every node's EDS together "
                                   "without touching a bus: print the nodes, how each EMA holds a force, the PDO "
@@ -175,3 +205,15 @@ def register(sub) -> None:
                         "a quantised LVDT or load cell the check would stop on as frozen is a problem")
     c.add_argument("--json", action="store_true", help="print the layout (or the problems) as JSON")
     c.set_defaults(handler=cmd_profile_check)
+    a = ps.add_parser("apply-patch", help="apply a profile patch (emacheck commission's profile.patch.toml)",
+                      description="Write PROFILE.toml with the keys of PATCH.toml set (the patch emacheck commission "
+                                  "writes: the keys and values that make the rig ready) as a new file --out, once "
+                                  "the patched profile loads and plans with its EDS files (looked up next to --out). "
+                                  "Comments are not kept. Exit 0 written, 3 refused (nothing written).\n\n"
+                                  "  emacheck profile apply-patch my-rig.toml runs/c1/profile.patch.toml "
+                                  "--out my-rig-2.toml")
+    a.add_argument("profile_file", metavar="PROFILE.toml", type=Path, help="the actuation profile judged")
+    a.add_argument("patch_file", metavar="PATCH.toml", type=Path, help="the patch (profile.patch.toml)")
+    a.add_argument("--out", required=True, type=Path, metavar="NEW.toml", help="the patched profile (a new file)")
+    add_eds_arg(a)
+    a.set_defaults(handler=cmd_profile_apply_patch)

@@ -55,6 +55,8 @@ from hil.master.commission_rules import (
     drives_swapped,
     ema_key,
     force_findings,
+    gain_se,
+    key_of,
     lvdt_findings,
     push_findings,
     rest_findings,
@@ -220,6 +222,8 @@ class Commission:
         self._hold: float | None = None  #: the holding EMA's angle once it is back in CSP [rad]
         self._rec = _Record()
         self._level: dict[str, float] = {}  #: mean forces / strokes / angles at the end of MOVE
+        self._level_sd: dict[str, float] = {}  #: and their standard deviations
+        self._move: dict[str, np.ndarray] = {}  #: the samples of the last MOVE
         self._t = 0.0
         self._push = 0.0  #: a CSP rig's push [mm of stroke] (the force step of a drive without CST)
         self._pushed = False  #: the push reached the commissioning force (or its travel)
@@ -268,7 +272,10 @@ class Commission:
         else:
             stage = self.stage if self.stage is not Stage.STOPPED else Stage.PREFLIGHT
             kind = Kind.PREFLIGHT if stage in (Stage.SCAN, Stage.PREFLIGHT) else Kind.STOP
-            self.findings.append(Finding(stage, kind, "", f"{type(exc).__name__}: {exc}"))
+            text = f"{type(exc).__name__}: {exc}"
+            # the key the error names, else the table it concerns: the drives' configuration, or the link's limits
+            self.findings.append(Finding(stage, kind, key_of(text, "canopen" if kind is Kind.PREFLIGHT else "safety"),
+                                         text))
         self.stage = Stage.STOPPED
 
     # ------------------------------------------------------------ the cyclic phase
@@ -423,6 +430,8 @@ class Commission:
             self._add(found)
             self.measured["lvdt_gain"][f"ema{k}_moving"] = gains
             self._level = {n: float(np.mean(v)) for n, v in self._rec.arrays(n_hold).items()}
+            self._level_sd = {n: float(np.std(v)) for n, v in self._rec.arrays(n_hold).items()}
+            self._move = self._rec.arrays()
             self._goto(Stage.STEP, t)
         elif self.stage is Stage.STEP:
             self._after_step(k, n_hold)
@@ -449,6 +458,9 @@ class Commission:
             mover = j
             found, gains = force_findings(self._level, after, j, self.lim.force_N, self.plan)
             self.measured["loadcell_gain"][f"ema{j}_pushing"] = gains
+            sd = {n: float(np.std(v)) for n, v in self._rec.arrays(n_hold).items()}
+            self.measured.setdefault("gain_se", {}).update(
+                gain_se(self._move, k, self.i, self._level_sd, sd, self.lim.force_N, n_hold))
         else:
             mover = k
             found, changes = push_findings(self._level, after, k, self.lim.force_N, self.plan)

@@ -7,6 +7,7 @@ arrays (samples in SI units) and the rig plan returning findings. The sequence t
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from enum import Enum
 
@@ -16,8 +17,8 @@ from hil.canopen.signalmap import Signal
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation, Check
 
 __all__ = ["DEAD_FRACTION", "FORCE_GAIN_TOLERANCE", "MIN_MOTION_FRACTION", "MIN_STEP_MOTION_MM", "NOISE_FACTOR",
-           "REST_S", "Finding", "Kind", "Limits", "Stage", "drives_swapped", "ema_key", "force_findings",
-           "lvdt_findings", "push_findings", "rest_findings", "slope", "swap_findings"]
+           "REST_S", "Finding", "Kind", "Limits", "Stage", "drives_swapped", "ema_key", "force_findings", "gain_se",
+           "key_of", "lvdt_findings", "push_findings", "rest_findings", "slope", "slope_se", "swap_findings"]
 
 #: Time both drives hold still while every signal is read at rest [s].
 REST_S = 0.5
@@ -66,6 +67,10 @@ class Kind(Enum):
     SIGN = "sign"
     SCALE = "scale"
     SWAPPED = "swapped"
+    GEAR = "gear ratio"
+    UNIT = "unit error"
+    WIRING = "wiring"
+    SERIAL = "serial number"
     LIMIT = "commissioning limit"
     STOP = "stopped"
     NOT_SAFE = "not in Switch on disabled"
@@ -148,6 +153,18 @@ class Limits:
 # ------------------------------------------------------------------ the rules
 
 
+#: The profile tables a key of an error's message may start with.
+_KEY = re.compile(r"\b((?:canopen|signals|safety|mechanics|sensors|timing|calibration|nodes)\.[A-Za-z0-9_]+"
+                  r"(?:\.[A-Za-z0-9_]+)*)")
+
+
+def key_of(text: str, default: str) -> str:
+    """The first profile key an error's ``text`` names (``canopen.heartbeat_period_s``, ``safety.max_stale_cycles``),
+    else ``default``: an error of the preflight or of the link still names the table it concerns."""
+    m = _KEY.search(text)
+    return m.group(1) if m else default
+
+
 def ema_key(plan, ema: int, signal: Signal) -> str:
     """The profile key of EMA ``ema``'s ``signal`` (``signals.ema1.lvdt``)."""
     e = plan.map.entry(ema, signal)
@@ -222,6 +239,30 @@ def slope(x: np.ndarray, y: np.ndarray) -> float:
     xc = x - x.mean()
     den = float(np.dot(xc, xc))
     return float(np.dot(xc, y - y.mean()) / den) if den > 0 else math.nan
+
+
+def slope_se(x: np.ndarray, y: np.ndarray) -> float:
+    r"""Standard error of :func:`slope`: :math:`\sqrt{\sum e^2 / (n - 2) / \sum (x - \bar x)^2}` (the residuals
+    taken as independent) [unit of y per unit of x]; NaN below 3 samples."""
+    xc = x - x.mean()
+    den = float(np.dot(xc, xc))
+    if x.size < 3 or den <= 0:
+        return math.nan
+    b = float(np.dot(xc, y - y.mean()) / den)
+    e = (y - y.mean()) - b * xc
+    return math.sqrt(float(np.dot(e, e)) / (x.size - 2) / den)
+
+
+def gain_se(x: dict[str, np.ndarray], k: int, i_total: float, before: dict, after: dict, dF: float,
+            n: int) -> dict[str, float]:
+    """Standard errors of the gains of EMA ``k``'s turn: each LVDT's slope on its motor's travel in the move
+    (``x``: the move's arrays), and each load cell's change over the force step ``dF`` [N] from the two
+    holds' standard deviations ``before``/``after`` over ``n`` samples each (as if independent: the ringing
+    left in the holds makes the true one larger)."""
+    out = {f"lvdt{a}_ema{k}_moving": slope_se(x[f"phi{a}"] / i_total, x[f"s{a}"]) for a in (1, 2)}
+    for a in (1, 2):
+        out[f"force{a}_ema{3 - k}_pushing"] = math.hypot(before[f"F{a}"], after[f"F{a}"]) / math.sqrt(n) / abs(dF)
+    return out
 
 
 def lvdt_findings(x: dict[str, np.ndarray], k: int, act: Actuation, lim: Limits, plan) -> tuple[list[Finding], dict]:

@@ -84,6 +84,10 @@ class Canopen:
     #: an object of the drives that reports the gear ratio i_total [rad/mm] (REAL32), compared in the
     #: preflight with mechanics.i_total_rad_per_mm; "" (the default): the drives report none
     gear_ratio_object: str = ""
+    #: the serial number (0x1018:04) of each EMA's drive, pinned to this rig's actuators; 0 (the default):
+    #: not pinned. ``emacheck commission`` names a drive that reports another one (docs/commission.md)
+    serial_ema1: int = field(default=0, metadata=_rng(0, 0xFFFF_FFFF))
+    serial_ema2: int = field(default=0, metadata=_rng(0, 0xFFFF_FFFF))
     #: a mode change (0x6060) must show in the modes display 0x6061 within this [s]
     mode_change_timeout_s: float = field(default=0.1, metadata=_rng(0.004, 10.0))
     #: fault resets tried on a drive found in FAULT at power-up before the check is refused
