@@ -332,7 +332,8 @@ def test_print_stylesheet_a4_and_nothing_split(tmp_path):
     shell.write_page(out, shell.page_title("emacheck maintenance check", result), head_parts(result, ""))
     doc = out.read_text()
     assert "@page{size:A4" in doc
-    assert "<title>emacheck maintenance check: PASS (SIMULATED, not a real actuator)</title>" in doc
+    assert ("<title>emacheck maintenance check: PASS (SIMULATED, not a real actuator) · run "
+            "f89b331810fb45fe8eae7d854c1eeafe</title>") in doc
 
 
 # ---------------------------------------------------------------------------- a whole report

@@ -178,3 +178,17 @@ class DriveLast(Part):
             out[f"ema{k}"] = cls(round(sample.t_s - t0_s, 6), phi / i_total_rad_per_mm, getattr(sample, f"s{k}_mm"),
                                  getattr(sample, f"F{k}_N"), kept, len(seen))
         return out
+
+
+def last_known(final: Mapping[str, DriveFinal] | None, last: Mapping[str, DriveLast] | None) -> dict:
+    """result.json's ``trace.drives_last``: per EMA what the record knows of where its drive was left, its
+    CiA 402 state (:class:`DriveFinal`: ``node``, ``state``, ``safe``, ``confirmed``, ``reachable``, ``seen``;
+    null where the run had no CANopen drives) and its last sample with its EMCYs (:class:`DriveLast`: ``t_s``,
+    ``position_mm``, ``stroke_mm``, ``force_N``, ``emcy``, ``emcy_count``; absent where none was taken)."""
+    out = {}
+    for k in sorted(set(final or {}) | set(last or {})):
+        fin, seen = (final or {}).get(k), (last or {}).get(k)
+        out[k] = {"node": None if fin is None else fin.node, "state": None if fin is None else fin.state,
+                  **{f: None if fin is None else getattr(fin, f) for f in ("safe", "confirmed", "reachable")},
+                  "seen": "" if fin is None else fin.seen, **({} if seen is None else seen.as_json())}
+    return out
