@@ -381,7 +381,8 @@ def test_the_serv_report_of_a_simulated_recording(tmp_path):
     data = json.loads((out / "serv.json").read_text())
     doc = (out / "serv_report.html").read_text()
     assert "<span class='badge pass'>PASS</span> <span class='simulated'>SIMULATED</span></h1>" in doc
-    assert "<title>emacheck serv: PASS (SIMULATED, not a real actuator)</title>" in doc
+    assert (f"<title>emacheck serv: PASS (SIMULATED, not a real actuator) · run {data['trace']['run_id']}</title>"
+            in doc)
     assert "0x5E000101" in doc and str(0x5E000101) not in doc
     decision = section(doc, "<h2>Decision</h2>")
     assert "<th>check run by (operator)</th><td>A. Inspector</td>" in decision
