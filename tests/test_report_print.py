@@ -91,7 +91,8 @@ def test_print_css_repeats_header_footer_and_table_headers_and_numbers_pages():
     assert '@bottom-right{content:"page " counter(page) " of " counter(pages)' in css
     # a table's header repeats where a long table is split; no table is split otherwise
     assert "thead{display:table-header-group}" in printed
-    assert re.search(r"table,\.signoff,figure,tr\{page-break-inside:avoid;break-inside:avoid\}", printed)
+    assert re.search(r"table,\.signoff,figure,tr,section\.keep\{page-break-inside:avoid;break-inside:avoid\}",
+                     printed)
     assert "table.long{page-break-inside:auto;break-inside:auto}" in printed
 
 
@@ -277,3 +278,55 @@ def test_an_incomplete_report_says_the_drives_state_was_not_recorded():
     result.update(status="incomplete", reason="the run did not finish")
     words = text_of(first_page(result))
     assert "Where the drives were leftNot recorded: the check was cut off before its stop was recorded" in words
+
+
+# ---------------------------------------------------------------------------- printed by real browsers
+
+
+def printed_report(tmp_path) -> tuple:
+    """A report of several pages: page 1, the traceability table, a 44-row table (moved whole) and a 70-row
+    one (split between rows), written as write_page writes every report."""
+    result = make_result()
+    near = shell.table(["row", "value"], [[f"near-{i:02d}", i] for i in range(shell.LONG_TABLE_ROWS - 1)])
+    long = shell.table(["long row", "value"], [[f"long-{i:02d}", i] for i in range(70)])
+    parts = [*head_parts(result, "<p>intro</p>"), shell.trace_lines(result["trace"]), "<h2>Near</h2>", near,
+             "<h2>Long</h2>", long]
+    out = tmp_path / "report.html"
+    shell.write_page(out, shell.page_title("emacheck maintenance check", result), parts,
+                     shell.running_head("emacheck maintenance check", result))
+    return out, result
+
+
+def page_of(pages: list[str], text: str) -> int:
+    (i,) = [i for i, p in enumerate(pages) if text in p]
+    return i
+
+
+def _print_or_skip(how, html, pdf):
+    from support.printing import Missing
+
+    try:
+        return how(html, pdf)
+    except Missing as exc:
+        pytest.skip(str(exc))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("browser", ["chromium", "firefox"])
+def test_printed_every_page_carries_the_run_id_and_no_short_table_splits(tmp_path, browser):
+    from support import printing
+
+    html, _ = printed_report(tmp_path)
+    pdf = tmp_path / f"{browser}.pdf"
+    _print_or_skip(printing.chromium_pdf if browser == "chromium" else printing.firefox_pdf, html, pdf)
+    pages = printing.pages(pdf)
+    assert len(pages) >= 3
+    for i, text in enumerate(pages, start=1):
+        assert text.count(f"run {RUN_ID}") >= 2, f"page {i}: running header and footer"  # (header, footer)
+        if browser == "chromium":  # the @page margin box; Firefox prints none (docs/report.md)
+            assert f"page {i} of {len(pages)}" in text, i
+    assert page_of(pages, "Traceability") == page_of(pages, "actuation (sha256)")
+    assert page_of(pages, "near-00") == page_of(pages, f"near-{shell.LONG_TABLE_ROWS - 2:02d}")
+    first, last = page_of(pages, "long-00"), page_of(pages, "long-69")
+    assert last > first and all("long row" in pages[p] for p in range(first, last + 1))  # its header repeated
+    assert page_of(pages, "check run by (operator)") == page_of(pages, "signature") == 0  # the sign-off, whole

@@ -43,7 +43,7 @@ table.sheet,.sheet>tbody,.sheet>tbody>tr,.sheet>tbody>tr>td{display:block;border
 @bottom-right{content:"page " counter(page) " of " counter(pages);font:8pt sans-serif;color:#555}}
 @media print{body{max-width:none;margin:0;font-size:9pt;-webkit-print-color-adjust:exact;print-color-adjust:exact}
 img{max-width:100%;height:auto;page-break-inside:avoid;break-inside:avoid}
-table,.signoff,figure,tr{page-break-inside:avoid;break-inside:avoid}td,th{padding:2px 4px}
+table,.signoff,figure,tr,section.keep{page-break-inside:avoid;break-inside:avoid}td,th{padding:2px 4px}
 table.long{page-break-inside:auto;break-inside:auto}thead{display:table-header-group}
 h1,h2,h3{page-break-after:avoid;break-after:avoid}details{display:block}summary{display:none}
 .signoff{page-break-before:auto}
@@ -175,11 +175,13 @@ def column(name: str, unit: str | None = None) -> str:
 
 
 #: Rows from which a table may split between pages when printed (``class='long'``), its header repeated on each:
-#: at 9 pt a row of one line is about 4.6 mm high (line height 1.35 x 9 pt = 4.3 mm, its padding and border),
-#: so 45 rows (207 mm) still fit the 267 mm of an A4 page within its 15 mm margins, with the table's heading;
-#: a shorter table moves whole to the next page rather than split (``break-inside: avoid``), a longer one could
-#: not (a table taller than a page is split by every browser whatever it asks).
-LONG_TABLE_ROWS = 45
+#: printed at 9 pt a row of one line is 5.4 mm high (measured in Chromium 156: a 4.3 mm line, its padding and
+#: border), and an A4 page leaves 253 mm for the content (297 mm less the 15 mm margins and the running header
+#: and footer, about 7 mm each): a heading (about 10 mm), the table's header row and 40 rows (221 mm) fit on a
+#: fresh page with some 20 mm to spare for a few cells wrapped on two lines. A shorter table moves whole to the
+#: next page rather than split (``break-inside: avoid``); a longer one may not fit any page, and a table taller
+#: than a page is split by every browser whatever it asks (docs/report.md, *Printing*).
+LONG_TABLE_ROWS = 40
 
 
 def table(columns: Sequence[str], rows: Iterable[Sequence[object]], *, raw: bool = False, css: str = "") -> str:
@@ -413,10 +415,10 @@ def drives_left(data: dict) -> str:
         return head + ("<p>Not recorded: the check was cut off before its stop was recorded (the master was killed "
                        "or lost power). The last row of signals.csv is the last sample that reached the disk.</p>")
     rows = [_drive_left_row(k, d) for k, d in sorted(left.items())]
-    return head + table([column("EMA"), column("CiA 402 state after the stop"), column("safe"),
-                         column("last sample t", "s"), column("position φ/i_total", "mm"),
-                         column("stroke (LVDT)", "mm"), column("force", "N"), column("EMCY (fault codes)")],
-                        rows, raw=True)
+    cols = [column("EMA"), column("CiA 402 state after the stop"), column("safe"), column("last sample t", "s"),
+            column("position φ/i_total", "mm"), column("stroke (LVDT)", "mm"), column("force", "N"),
+            column("EMCY (fault codes)")]
+    return "<section class='keep'>" + head + table(cols, rows, raw=True) + "</section>"
 
 
 def trace_lines(trace: dict | None) -> str:
@@ -446,8 +448,8 @@ def trace_lines(trace: dict | None) -> str:
                      "the master's force loop on the measured force in CSP (its drive has no CST)"])
     for k, h in (trace.get("files_sha256") or {}).items():
         rows.append([f"{k} (sha256)", h[:16] + "…" if h else "—"])
-    return ("<h2>Traceability</h2>" + identity_warning(trace.get("identity"))
-            + table(["item", "value"], rows, css="items"))
+    return ("<section class='keep'><h2>Traceability</h2>" + identity_warning(trace.get("identity"))
+            + table(["item", "value"], rows, css="items") + "</section>")
 
 
 def identity_warning(identity: dict | None) -> str:
