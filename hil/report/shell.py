@@ -34,7 +34,7 @@ p.simulated{padding:.3em .5em}
 .signoff table{width:100%;table-layout:fixed}.signoff td,.signoff th{text-align:left;border:none;padding:6px 8px}
 .signoff th{background:none;width:14em}.signoff td.line{border-bottom:1px solid #222;height:2em}
 .signoff .unknown{border:2px solid #b60;padding:.3em .5em;color:#222}
-.ident,.run{overflow-wrap:anywhere}table.items td{text-align:left}table.items td:first-child{width:15em}
+.ident,.run{overflow-wrap:anywhere}table.items td,table.items th{text-align:left}table.items td:first-child{width:15em}
 details{margin:1em 0}summary{cursor:pointer;color:#555}pre{font-size:85%;background:#f6f6f6;padding:.5em}
 small{color:#555}
 table.sheet,.sheet>tbody,.sheet>tbody>tr,.sheet>tbody>tr>td{display:block;border:none;margin:0;padding:0;text-align:left}
