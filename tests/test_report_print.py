@@ -330,3 +330,41 @@ def test_printed_every_page_carries_the_run_id_and_no_short_table_splits(tmp_pat
     first, last = page_of(pages, "long-00"), page_of(pages, "long-69")
     assert last > first and all("long row" in pages[p] for p in range(first, last + 1))  # its header repeated
     assert page_of(pages, "check run by (operator)") == page_of(pages, "signature") == 0  # the sign-off, whole
+
+
+# ---------------------------------------------------------------------------- the record of where drives were left
+
+
+@pytest.mark.parametrize("sent", [8, 9])
+def test_drive_last_from_a_sample_keeps_the_last_eight_emcys_and_counts_all(sent):
+    from hil.canopen.process import Sample
+    from hil.record.driveparts import EMCY_KEPT, DriveLast, last_known
+    from hil.record.runrecord import RunRecord
+
+    assert EMCY_KEPT == 8
+    smp = Sample(t_s=52.118, phi1_rad=6.5, phi2_rad=-1.3, s1_mm=3.41, s2_mm=-0.4, F1_N=1203.4, F2_N=-1187.0)
+    emcys = {"ema1": [{"t_s": 50.014 + 0.002 * i, "code": 0x2310, "error_register": 3, "text": "over current"}
+                      for i in range(sent)], "ema2": []}
+    last = DriveLast.of(smp, 0.014, 2.0, emcys)  # i_total 2 rad/mm
+    one = last["ema1"]
+    assert (one.t_s, one.position_mm, one.stroke_mm, one.force_N) == (52.104, 3.25, 3.41, 1203.4)
+    assert last["ema2"].position_mm == -0.65 and last["ema2"].emcy == () and last["ema2"].emcy_count == 0
+    assert len(one.emcy) == 8 and one.emcy_count == sent
+    assert one.emcy[-1].t_s == pytest.approx(50.0 + 0.002 * (sent - 1)) and one.emcy[0].t_s == pytest.approx(
+        50.0 + 0.002 * (sent - 8))
+    assert one.emcy[-1].words() == f"EMCY 0x2310 (over current) at t = {50.0 + 0.002 * (sent - 1):.3f} s"
+    # meta.json both ways; result.json's trace without CANopen drives (the plant): no state, the sample
+    rec = RunRecord(run_id="x", drives_last=last)
+    assert RunRecord.from_json(json.loads(json.dumps(rec.as_json()))) == rec
+    known = last_known(None, last)
+    assert known["ema1"]["state"] is None and known["ema1"]["safe"] is None and known["ema1"]["force_N"] == 1203.4
+    assert "no CANopen drive: simulated plant" in text_of(shell.drives_left({"trace": {"drives_last": known}}))
+
+
+def test_a_malformed_drives_last_is_refused_naming_its_field():
+    from hil.errors import RunRecordError
+    from hil.record.runrecord import RunRecord
+
+    bad = {"drives_last": {"ema1": {"t_s": 1.0, "position_mm": "3", "stroke_mm": 0.0, "force_N": 0.0}}}
+    with pytest.raises(RunRecordError, match=r"field 'drives_last.ema1.position_mm': expected a number"):
+        RunRecord.from_json(bad)
