@@ -332,7 +332,8 @@ def test_print_stylesheet_a4_and_nothing_split(tmp_path):
     shell.write_page(out, shell.page_title("emacheck maintenance check", result), head_parts(result, ""))
     doc = out.read_text()
     assert "@page{size:A4" in doc
-    assert "<title>emacheck maintenance check: PASS (SIMULATED, not a real actuator)</title>" in doc
+    assert ("<title>emacheck maintenance check: PASS (SIMULATED, not a real actuator) · run "
+            "f89b331810fb45fe8eae7d854c1eeafe</title>") in doc
 
 
 # ---------------------------------------------------------------------------- a whole report
@@ -380,7 +381,8 @@ def test_the_serv_report_of_a_simulated_recording(tmp_path):
     data = json.loads((out / "serv.json").read_text())
     doc = (out / "serv_report.html").read_text()
     assert "<span class='badge pass'>PASS</span> <span class='simulated'>SIMULATED</span></h1>" in doc
-    assert "<title>emacheck serv: PASS (SIMULATED, not a real actuator)</title>" in doc
+    assert (f"<title>emacheck serv: PASS (SIMULATED, not a real actuator) · run {data['trace']['run_id']}</title>"
+            in doc)
     assert "0x5E000101" in doc and str(0x5E000101) not in doc
     decision = section(doc, "<h2>Decision</h2>")
     assert "<th>check run by (operator)</th><td>A. Inspector</td>" in decision

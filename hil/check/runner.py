@@ -17,6 +17,7 @@ from hil.check.sequence import CheckSequence, CycleOutput, Progress, Step
 from hil.check.supervisor import Supervisor
 from hil.errors import KNOWN_ERRORS, LinkLostError, OutputError, RecordWriteError
 from hil.profile.config import Actuation, Check
+from hil.record.driveparts import DriveLast
 from hil.record.runfolder import MetaWriter, SignalsWriter
 from hil.record.runrecord import RunRecord, RunStatus, SafetyViolation, Stalls, StepTime
 from hil.record.seal import seal_of
@@ -155,6 +156,7 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
             smp = link.exchange(sp1, sp2)
         link.close()
         rec, stop_note = _record_safe_state(link, rec)
+        rec = _record_last_seen(link, smp, t_start, act, rec)
         # the cyclic loop touches no new memory (a page fault costs ~0.9 ms in user-mode-linux)
         loop_page_faults = _page_faults() - faults0
         reserve.release()
@@ -163,7 +165,7 @@ def run_check(link: Link, act: Actuation, check: Check, meta: MetaWriter,
         rec = replace(rec, recording_sha256=seal_of(meta.run_dir))  # the recording as the check left it
     except BaseException as exc:
         reserve.release()  # first: the space the record's end needs
-        reason = _stop_after(exc, seq, link, smp, rec, record, meta, writer, t_start)
+        reason = _stop_after(exc, seq, link, smp, rec, record, meta, writer, t_start, act)
         if isinstance(exc, OSError) and not isinstance(exc, KNOWN_ERRORS):
             raise RecordWriteError(f"{reason}; the drives were stopped first") from exc
         raise
@@ -198,7 +200,7 @@ def _still_writing(meta: MetaWriter) -> None:
 
 
 def _stop_after(exc: BaseException, seq, link, smp, rec: RunRecord, record, meta: MetaWriter, writer,
-                t_start: float) -> str:
+                t_start: float, act: Actuation) -> str:
     """Fail closed after ``exc``: stop both drives, keep what can be kept of the log, record why; the reason."""
     reason = (str(exc) or INTERRUPTED) if isinstance(exc, KeyboardInterrupt) else \
         f"error: {type(exc).__name__}: {exc}"
@@ -219,6 +221,10 @@ def _stop_after(exc: BaseException, seq, link, smp, rec: RunRecord, record, meta
             secondary += f"; while closing the link: {type(exc3).__name__}: {exc3}"
         rec, note = _record_safe_state(link, rec)
         secondary += note
+        try:
+            rec = _record_last_seen(link, smp, t_start, act, rec)
+        except Exception as exc6:  # (the stop is recorded without it)
+            secondary += f"; while recording where the drives were last seen: {type(exc6).__name__}: {exc6}"
         if record is not None and rec.master_loss is None:  # the preflight stopped: what it got to, the drill's
             try:                                            # outcome and the identities read included
                 rec = rec.with_preflight(record())
@@ -255,6 +261,18 @@ def _page_faults() -> int:
 #: The run folder's signals are flushed to the OS at least every this much check time [s]
 #: (and fsynced at every step change): a killed master loses at most this much.
 FLUSH_PERIOD_S = 0.5
+
+
+def _record_last_seen(link, smp: Sample | None, t_start: float, act: Actuation, rec: RunRecord) -> RunRecord:
+    """The record with where each drive was last seen (:class:`hil.record.driveparts.DriveLast`): the last
+    complete sample (the link's ``last_sample``, the safe stop's included; else the loop's last), its time from
+    the check's start, and the EMCYs each drive sent (the link's ``emcy_report()``; none for the plant)."""
+    sample = getattr(link, "last_sample", None) or smp
+    if sample is None:
+        return rec
+    report = getattr(link, "emcy_report", None)
+    last = DriveLast.of(sample, t_start, act.mechanics.i_total_rad_per_mm, report() if report is not None else None)
+    return replace(rec, drives_last=last)
 
 
 def _record_safe_state(link, rec: RunRecord) -> tuple[RunRecord, str]:

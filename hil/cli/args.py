@@ -190,10 +190,27 @@ _bitrate.__name__ = "CAN bit rate"
 _seed = _count("a seed", SEED_MAX)
 
 
+def identity_text(text: str) -> str:
+    """argparse type of an identity text (``--aircraft``, ``--position``, ``--rig``, ``--operator``,
+    ``--work-order``): at most :data:`hil.profile.config.IDENTITY_MAX_CHARS` characters (argparse names the
+    option: ``argument --aircraft: 65 characters; an identity text is at most 64``, exit 3)."""
+    from hil.profile.config import IDENTITY_MAX_CHARS
+
+    if len(text) > IDENTITY_MAX_CHARS:
+        raise argparse.ArgumentTypeError(f"{len(text)} characters; an identity text is at most {IDENTITY_MAX_CHARS} "
+                                         f"(a registration, part or serial number needs at most 32; docs/report.md)")
+    return text
+
+
+identity_text.__name__ = "identity text"
+
+
 def add_trace_args(p: argparse.ArgumentParser) -> None:
     """``--operator`` and ``--work-order``: who ran the check, for which work order (into result.json)."""
-    p.add_argument("--operator", metavar="NAME", help="who runs the check (recorded in meta.json and result.json)")
-    p.add_argument("--work-order", metavar="ID", help="the work order it is run for (recorded likewise)")
+    p.add_argument("--operator", metavar="NAME", type=identity_text,
+                   help="who runs the check (recorded in meta.json and result.json; at most 64 characters)")
+    p.add_argument("--work-order", metavar="ID", type=identity_text,
+                   help="the work order it is run for (recorded likewise; at most 64 characters)")
 
 
 def history_url_type(text: str) -> str:
@@ -238,10 +255,13 @@ def add_history_args(p: argparse.ArgumentParser, *, simulated: bool) -> None:
                        help="record the result into this database (sqlite:///PATH or postgresql://USER@HOST/DB) "
                             "instead of the actuation profile's history.url or the user's SQLite file")
         g.add_argument("--no-history", action="store_true", help="do not record this result in the wear history")
-    g.add_argument("--aircraft", metavar="REG", help="aircraft registration (default: the profile's history.aircraft)")
-    g.add_argument("--position", metavar="TEXT", help="where the actuation sits, e.g. 'left aileron' "
-                                                      "(default: the profile's history.position)")
-    g.add_argument("--rig", metavar="NAME", help="the rig or station (default: the profile's history.rig)")
+    g.add_argument("--aircraft", metavar="REG", type=identity_text,
+                   help="aircraft registration (default: the profile's history.aircraft); identity texts: at most "
+                        "64 characters")
+    g.add_argument("--position", metavar="TEXT", type=identity_text,
+                   help="where the actuation sits, e.g. 'left aileron' (default: the profile's history.position)")
+    g.add_argument("--rig", metavar="NAME", type=identity_text,
+                   help="the rig or station (default: the profile's history.rig)")
     g.add_argument("--flight-hours", type=_flight_hours, metavar="FH",
                    help="the aircraft's flight hours at the check (the wear trend's axis)"
                         + ("; with a simulated-rig [wear] table the backlash is worn to them" if simulated else ""))

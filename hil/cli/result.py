@@ -15,6 +15,7 @@ from hil.cli.args import ExitCode
 from hil.cli.console import print_drives_final, print_master_loss, print_summary
 from hil.errors import KNOWN_ERRORS
 from hil.profile.config import Actuation
+from hil.record.driveparts import last_known
 from hil.record.outputs import Outputs, utc_iso
 from hil.record.recording import load_recording
 from hil.record.runfolder import MetaWriter, write_json_atomic
@@ -61,6 +62,9 @@ def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) 
                          if d.drive_limits},
         # how each EMA held a force: its drive's CST, or the master's force loop in CSP
         "force_control": rec.force_control or {},
+        # where each drive was left: its CiA 402 state, its last sample (position, stroke, force), its EMCYs
+        **({"drives_last": last_known(rec.drives_final, rec.drives_last)}
+           if rec.drives_final or rec.drives_last else {}),
         # the master's stalls (a CANopen check): how many, the longest, when, the limit they were held to
         **({"master_stalls": rec.stalls.as_json()} if rec.stalls is not None else {}),
         # where and when in the aircraft's life (the wear history's keys): aircraft, position, rig,

@@ -51,7 +51,7 @@ from hil.canopen.cia402 import (
     master_command,
 )
 from hil.canopen.cycle import CycleDecoder, SetpointEncoder, SyncSchedule, image_of
-from hil.canopen.emcy import Emcy, EmcyCode, decode_emcy
+from hil.canopen.emcy import Emcy, EmcyCode, decode_emcy, describe_emcy
 from hil.canopen.frame import (
     EMCY_COB_ID_BASE,
     HEARTBEAT_COB_ID_BASE,
@@ -138,6 +138,8 @@ class MasterCore:
         self.phase = Phase.IDLE
         self.events: list[MasterEvent] = []
         self.emcy: list[Emcy] = []
+        #: the EMCYs of the cyclic phase (the check and its stop), each with its SYNC period's time [s]
+        self.emcy_in_check: list[tuple[float, Emcy]] = []
         self.cycle = 0  #: SYNC frames seen in the cyclic phase
         #: each SYNC's period (its sample's time), SYNC periods passed without one (``skipped``)
         self.sync_schedule = SyncSchedule(self.T)
@@ -395,6 +397,8 @@ class MasterCore:
             self.bad_frames += 1
             return
         self.emcy.append(e)
+        if self.phase is Phase.CYCLIC:
+            self.emcy_in_check.append((self.sync_schedule.t_s, e))
         self.events.append(event.EmcyReceived(t, node, e))
         if e.code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
             self._fail(DriveFault(str(e)), t, node)
@@ -656,6 +660,14 @@ class MasterCore:
                               "master_loss": ml.as_json() if ml is not None else {},
                               "drive_limits": [lim.as_json() for lim in d.limits]}
         return out
+
+    def emcy_report(self) -> dict:
+        """Per EMA: the EMCYs its drive sent in the cyclic phase (the check and its stop), in order, each with
+        the time of the SYNC period it arrived in [s, the samples' time], its code, error register and the
+        code in words (:func:`hil.canopen.emcy.describe_emcy`)."""
+        return {f"ema{k}": [{"t_s": t, "code": e.code, "error_register": e.error_register,
+                             "text": describe_emcy(e.code)} for t, e in self.emcy_in_check if e.node_id == n]
+                for k, n in enumerate(self.order, start=1)}
 
     def sensor_nodes_report(self) -> dict:
         """Per sensor node: node id and whether its heartbeat was heard to the end."""

@@ -360,6 +360,16 @@ class CanopenLink:
             self.timing.answered(t)
         return self._next_sample()
 
+    @property
+    def last_sample(self) -> Sample | None:
+        """The last complete sample the master took, the safe stop's included (None: none yet)."""
+        return self._last
+
+    def emcy_report(self) -> dict:
+        """Per EMA, the EMCYs its drive sent in the check and its stop
+        (:meth:`MasterCore.emcy_report <hil.master.core.MasterCore.emcy_report>`)."""
+        return self.m.emcy_report()
+
     def abort(self) -> None:
         """The check aborted: drives go down by quick stop."""
         self.m.quick_stop = True

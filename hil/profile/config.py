@@ -110,6 +110,18 @@ class Canopen:
         return round(self.master_heartbeat_consumer_factor * self.master_heartbeat_period_s * 1000.0) / 1000.0
 
 
+#: The most characters of an identity text a check records (``--aircraft``, ``--position``, ``--rig``,
+#: ``--operator``, ``--work-order``, the profile's ``history.aircraft``/``position``/``rig``): longer is refused.
+#: Derived from what the identifiers need: an aircraft registration is at most 7 characters (ICAO flight plan,
+#: item 7; 8 with the hyphen painted on the aircraft, D-EMAX), a part number at most 32 and a serial number at
+#: most 15 (ATA Spec 2000, chapter 9, text elements PNR and SER); free text (a position such as "left aileron,
+#: outboard actuator", a name) needs more than an identifier. 64 is twice the longest identifier, the line length
+#: of IATA's teletype messages, and one line of the sign-off box's value column printed on A4 at 9 pt (about 130
+#: mm, some 70 average characters): nothing a check records needs more, and a longer text is a mistake (a pasted
+#: paragraph, a path) rather than an identity (docs/report.md, *Identity texts*).
+IDENTITY_MAX_CHARS = 64
+
+
 @dataclass(frozen=True)
 class HistorySettings:
     """``[history]`` of an actuation profile (optional): where the checks are recorded and what

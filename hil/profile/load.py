@@ -27,6 +27,7 @@ from hil.profile.config import (
     HARD_MAX_FORCE_FIGHT_FRACTION,
     HARD_MAX_FORCE_FRACTION,
     HARD_MAX_FORCE_IMBALANCE_FRACTION,
+    IDENTITY_MAX_CHARS,
     Actuation,
     Check,
 )
@@ -125,6 +126,11 @@ def _history_url(act: Actuation, fname: str) -> None:
 
 def _one_line_texts(act: Actuation, fname: str) -> None:
     problems = Problems()
+    for name in ("aircraft", "position", "rig"):
+        text = getattr(act.history, name)
+        if len(text) > IDENTITY_MAX_CHARS:
+            problems.add(f"{fname}: field 'history.{name}' is {len(text)} characters long; an identity text is at "
+                         f"most {IDENTITY_MAX_CHARS} (docs/report.md, Identity texts)")
     for name in ("external_watchdog", "skip_master_loss_drill"):
         text = getattr(act.canopen, name)
         if text != text.strip() or "\n" in text:

@@ -24,15 +24,20 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
-import json
 import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
-from hil.errors import RunRecordError
 from hil.record.cycletiming import Distribution, TimingSummary, Worst
+from hil.record.driveparts import IDENTITY_KEYS as IDENTITY_KEYS
+from hil.record.driveparts import DriveFinal as DriveFinal
+from hil.record.driveparts import DriveLast as DriveLast
+from hil.record.driveparts import Identity as Identity
+from hil.record.driveparts import KeptLimit as KeptLimit
+from hil.record.recordjson import KINDS, Fields, Part, member, only, opt, req, show
+from hil.record.recordjson import part_keys as part_keys
 
 #: the record's file in a run folder (written by :class:`hil.record.runfolder.MetaWriter` only)
 META_NAME = "meta.json"
@@ -60,124 +65,19 @@ def utc_now_iso() -> str:
     return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
-# ------------------------------------------------------------------ reading JSON, field by field
-
-def _show(v: Any) -> str:
-    text = json.dumps(v, default=str) if not isinstance(v, str) else repr(v)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-_KINDS = {
-    "text": (lambda v: isinstance(v, str), "a string"),
-    "int": (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
-    "number": (lambda v: isinstance(v, int | float) and not isinstance(v, bool), "a number"),
-    "bool": (lambda v: isinstance(v, bool), "true or false"),
-    "object": (lambda v: isinstance(v, dict), "a JSON object"),
-    "list": (lambda v: isinstance(v, list), "a list"),
-    "texts": (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "a list of strings"),
-    "text map": (lambda v: isinstance(v, dict) and all(isinstance(x, str) for x in v.values()),
-                 "an object of strings"),
-}
-
-
-class _Fields:
-    """A JSON object read field by field; each problem a :class:`RunRecordError` naming the dotted field."""
-
-    def __init__(self, obj: Any, where: str, source: str) -> None:
-        if not isinstance(obj, dict):
-            raise RunRecordError(where or "(top level)", f"expected a JSON object, got {_show(obj)}", source)
-        self.obj, self.where, self.source = obj, where, source
-
-    def name(self, key: str) -> str:
-        return f"{self.where}.{key}" if self.where else key
-
-    def error(self, key: str, problem: str) -> RunRecordError:
-        return RunRecordError(self.name(key), problem, self.source)
-
-    def has(self, *keys: str) -> bool:
-        return any(k in self.obj for k in keys)
-
-    def get(self, key: str, kind: str, *, required: bool = False) -> Any:
-        """The field's value checked against ``kind``; None when absent or null (an error if ``required``)."""
-        v = self.obj.get(key)
-        if v is None:
-            if required:
-                raise self.error(key, "missing" if key not in self.obj else "null, expected a value")
-            return None
-        ok, what = _KINDS[kind]
-        if not ok(v):
-            raise self.error(key, f"expected {what}, got {_show(v)}")
-        return v
-
-    def sub(self, key: str) -> _Fields:
-        return _Fields(self.obj[key], self.name(key), self.source)
-
-    def enum(self, key: str, cls: type[StrEnum]) -> Any:
-        v = self.get(key, "text")
-        return None if v is None else _member(cls, v, self.name(key), self.source)
-
-
-def _only(obj: Mapping, known, where: str, source: str) -> None:
-    """At a seam where the record is built from another module's JSON (the link's preflight record,
-    the master's final states, a drive's identity): a key the record has no field for is refused, not
-    dropped (a field added there must be added here)."""
-    extra = [k for k in obj if k not in known]
-    if extra:
-        name = f"{where}.{extra[0]}" if where else extra[0]
-        raise RunRecordError(name, "no field of the run record holds it (hil/record/runrecord.py)", source)
-
-
-def _member(cls: type[StrEnum], v: Any, field: str, source: str) -> Any:
-    try:
-        return cls(v)
-    except ValueError:
-        allowed = ", ".join(m.value for m in cls)
-        raise RunRecordError(field, f"{_show(v)} is not one of {allowed}", source) from None
-
-
 # ------------------------------------------------------------------ the parts with a fixed shape
-
-def _req(kind: str) -> Any:
-    """A part's field that its JSON must hold, of JSON ``kind`` (a key of ``_KINDS``)."""
-    return dataclasses.field(metadata={"kind": kind, "required": True})
-
-
-def _opt(kind: str) -> Any:
-    """A part's field its JSON may leave out or null (None), of JSON ``kind``."""
-    return dataclasses.field(default=None, metadata={"kind": kind, "required": False})
-
-
-class _Part:
-    """A part of the record: ``as_json`` and ``read`` (from a :class:`_Fields`) each part has;
-    :meth:`from_json` reads one from its JSON.
-
-    The defaults serve a part whose JSON keys are its fields, in order, each declared with
-    :func:`_req` or :func:`_opt` (its JSON kind); a part of another shape overrides both."""
-
-    def as_json(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-
-    @classmethod
-    def read(cls, f: _Fields):
-        return cls(**{d.name: f.get(d.name, d.metadata["kind"], required=d.metadata["required"])
-                      for d in dataclasses.fields(cls)})
-
-    @classmethod
-    def from_json(cls, obj: Any, where: str = "", source: str = META_NAME):
-        """The part from its JSON ``obj`` (a malformed field: :class:`RunRecordError` naming ``where.field``)."""
-        return cls.read(_Fields(obj, where or cls.__name__, source))
-
+# (read with hil.record.recordjson; the drives' parts are in hil.record.driveparts)
 
 @dataclass(frozen=True)
-class Software(_Part):
+class Software(Part):
     """The software that made the run."""
 
-    name: str = _req("text")
-    version: str = _req("text")
+    name: str = req("text")
+    version: str = req("text")
 
 
 @dataclass(frozen=True)
-class Profiles(_Part):
+class Profiles(Part):
     """The snapshots of the profiles the run used (:func:`hil.profile.load.actuation_tables`, ``snapshot``)."""
 
     actuation: dict | None = None
@@ -187,7 +87,7 @@ class Profiles(_Part):
         return {k: v for k, v in (("actuation", self.actuation), ("check", self.check)) if v is not None}
 
     @classmethod
-    def read(cls, f: _Fields) -> Profiles:
+    def read(cls, f: Fields) -> Profiles:
         return cls(f.get("actuation", "object"), f.get("check", "object"))
 
 
@@ -203,24 +103,24 @@ class StepTime:
         return [self.t_start_s] if self.t_end_s is None else [self.t_start_s, self.t_end_s]
 
 
-def _read_steps(f: _Fields) -> tuple[StepTime, ...]:
+def _read_steps(f: Fields) -> tuple[StepTime, ...]:
     out = []
     for name, span in f.obj.items():
-        if not (isinstance(span, list) and 1 <= len(span) <= 2 and all(_KINDS["number"][0](t) for t in span)):
-            raise f.error(name, f"expected [t_start, t_end] or [t_start] in s, got {_show(span)}")
+        if not (isinstance(span, list) and 1 <= len(span) <= 2 and all(KINDS["number"][0](t) for t in span)):
+            raise f.error(name, f"expected [t_start, t_end] or [t_start] in s, got {show(span)}")
         out.append(StepTime(name, *span))
     return tuple(out)
 
 
 @dataclass(frozen=True)
-class Bus(_Part):
+class Bus(Part):
     """The CAN interface of a run on real drives (``emacheck run``)."""
 
-    interface: str = _req("text")
-    channel: str = _req("text")
-    bitrate_bps: int = _req("int")
+    interface: str = req("text")
+    channel: str = req("text")
+    bitrate_bps: int = req("int")
     #: udp_multicast's IP hop limit (0: the frames stayed on this host); None (not written) for other interfaces
-    multicast_hops: int | None = _opt("int")
+    multicast_hops: int | None = opt("int")
 
     def as_json(self) -> dict:
         out = super().as_json()
@@ -230,30 +130,30 @@ class Bus(_Part):
 
 
 @dataclass(frozen=True)
-class BusLoad(_Part):
+class BusLoad(Part):
     """The planned bus load (fractions of the bit rate)."""
 
-    nominal: float = _req("number")
-    worst: float = _req("number")
+    nominal: float = req("number")
+    worst: float = req("number")
 
 
 @dataclass(frozen=True)
-class Attribution(_Part):
+class Attribution(Part):
     """Who made the check and for which work order (None where nobody said)."""
 
-    operator: str | None = _opt("text")
-    work_order: str | None = _opt("text")
+    operator: str | None = opt("text")
+    work_order: str | None = opt("text")
 
 
 @dataclass(frozen=True)
-class Installation(_Part):
+class Installation(Part):
     """Where and when in the aircraft's life (the wear history's keys; None where nobody said)."""
 
-    aircraft: str | None = _opt("text")
-    position: str | None = _opt("text")
-    rig: str | None = _opt("text")
-    flight_hours: float | None = _opt("number")
-    flight_cycles: int | None = _opt("int")
+    aircraft: str | None = opt("text")
+    position: str | None = opt("text")
+    rig: str | None = opt("text")
+    flight_hours: float | None = opt("number")
+    flight_cycles: int | None = opt("int")
 
 
 #: the JSON keys of :class:`Installation`, in order
@@ -261,13 +161,13 @@ INSTALLATION_KEYS = tuple(f.name for f in dataclasses.fields(Installation))
 
 
 @dataclass(frozen=True)
-class Wear(_Part):
+class Wear(Part):
     """The simulated rig worn to ``flight_hours`` (``sim.truth.apply_wear``): its ``[wear]`` table and
     each channel's backlash on the wear line [mm]."""
 
-    flight_hours: float = _req("number")
-    params: dict = _req("object")
-    line_mm: dict = _req("object")
+    flight_hours: float = req("number")
+    params: dict = req("object")
+    line_mm: dict = req("object")
 
 
 def shared_serial(identity: Mapping | None) -> str | None:
@@ -285,56 +185,15 @@ def shared_serial(identity: Mapping | None) -> str | None:
 
 
 @dataclass(frozen=True)
-class Identity(_Part):
-    """A drive's identity object 0x1018 as it reported it, with its node id. ``product_code``, ``revision``,
-    ``serial`` None: the read was refused or not answered (optional sub-indices, CiA 301); ``serial_listed``
-    False: no serial was asked for (a record from before issue 36 of a drive whose EDS has no 0x1018:04;
-    no ``serial`` key in the JSON)."""
-
-    node: int
-    vendor_id: int
-    product_code: int | None
-    revision: int | None
-    serial: int | None = None
-    serial_listed: bool = True
-
-    def as_json(self) -> dict:
-        out = {"node": self.node, "vendor_id": self.vendor_id, "product_code": self.product_code,
-               "revision": self.revision}
-        if self.serial_listed:
-            out["serial"] = self.serial
-        return out
-
-    @classmethod
-    def read(cls, f: _Fields) -> Identity:
-        return cls(*(f.get(k, "int", required=True) for k in ("node", "vendor_id")),
-                   *(f.get(k, "int") for k in ("product_code", "revision")),
-                   serial=f.get("serial", "int"), serial_listed=f.has("serial"))
-
-    @classmethod
-    def of(cls, node: int, read: Mapping) -> Identity | None:
-        """From what the preflight read of 0x1018 (:attr:`hil.master.preflight.Preflight.identities`); None
-        if nothing."""
-        if not read:
-            return None
-        _only(read, IDENTITY_KEYS, f"identity (node {node})", "preflight")
-        return cls.from_json({"node": node, **read}, f"identity (node {node})", "preflight")
-
-
-#: the JSON keys of :class:`Identity`
-IDENTITY_KEYS = ("node", "vendor_id", "product_code", "revision", "serial")
-
-
-@dataclass(frozen=True)
-class SafetyViolation(_Part):
+class SafetyViolation(Part):
     """The supervisor's latched violation (:class:`hil.check.supervisor.Violation`): the limit, its value in
     force, the measured value (the limit's unit) and when [s, check time]."""
 
-    limit: str = _req("text")
-    detail: str = _req("text")
-    t_s: float = _req("number")
-    value: float = _req("number")
-    threshold: float = _req("number")
+    limit: str = req("text")
+    detail: str = req("text")
+    t_s: float = req("number")
+    value: float = req("number")
+    threshold: float = req("number")
 
     @classmethod
     def of(cls, viol) -> SafetyViolation:
@@ -342,72 +201,7 @@ class SafetyViolation(_Part):
 
 
 @dataclass(frozen=True)
-class KeptLimit(_Part):
-    """A limit of one drive (:class:`hil.canopen.drivelimits.DriveLimit`): its value in the drive's unit,
-    the profile's limit it stands for, and who keeps it: ``drive`` (written to ``object`` and read back)
-    or ``master`` (the drive's EDS has no such object: only the master's supervisor keeps it)."""
-
-    limit: str = _req("text")
-    object: str = _req("text")
-    value: int = _req("int")
-    unit: str = _req("text")
-    si_value: float = _req("number")
-    si_unit: str = _req("text")
-    kept_by: str = _req("text")
-
-    def __post_init__(self) -> None:
-        if self.kept_by not in ("drive", "master"):
-            raise RunRecordError("kept_by", f"{_show(self.kept_by)} is not one of drive, master", META_NAME)
-
-
-@dataclass(frozen=True)
-class DriveFinal(_Part):
-    """A drive's final CiA 402 state after the check (:meth:`hil.master.core.MasterCore.safe_state_report`):
-    the last state seen (None: its statusword never read) and when (``seen_t_s``, the master's time),
-    reachable (heartbeat), confirmed (read by SDO after the safe stop's last command), safe (Switch on
-    disabled, confirmed), ``seen`` in words ("read after the stop at t = ...", "statusword stale since
-    t = ... (why)", "statusword never read (why)"), and its protection against the master's death (the
-    preflight's record, JSON; ``{}`` if none). A record from before issue 36 has no ``seen_t_s``/``seen``."""
-
-    node: int
-    state: str | None
-    reachable: bool
-    confirmed: bool
-    safe: bool
-    master_loss: dict = dataclasses.field(default_factory=dict)
-    #: the limits the drive keeps itself, and those only the master keeps (the preflight's; () if none)
-    drive_limits: tuple[KeptLimit, ...] = ()
-    seen_t_s: float | None = None
-    seen: str = ""
-
-    def as_json(self) -> dict:
-        return {"node": self.node, "state": self.state, "seen_t_s": self.seen_t_s, "seen": self.seen,
-                "reachable": self.reachable, "confirmed": self.confirmed,
-                "safe": self.safe, "master_loss": self.master_loss,
-                "drive_limits": [lim.as_json() for lim in self.drive_limits]}
-
-    @classmethod
-    def read(cls, f: _Fields) -> DriveFinal:
-        lims = f.get("drive_limits", "list") or []
-        return cls(f.get("node", "int", required=True), f.get("state", "text"),
-                   *(f.get(k, "bool", required=True) for k in ("reachable", "confirmed", "safe")),
-                   master_loss=f.get("master_loss", "object") or {},
-                   drive_limits=tuple(KeptLimit.from_json(v, f.name(f"drive_limits[{j}]"), f.source)
-                                      for j, v in enumerate(lims)),
-                   seen_t_s=f.get("seen_t_s", "number"), seen=f.get("seen", "text") or "")
-
-    def unsafe_note(self, ema: str) -> str:
-        """``EMA 2 (node 2) unreachable (heartbeat lost), statusword stale since t = 1.204 s (...), last seen
-        FAULT``: for the abort reason, in words of what was seen."""
-        head = f"EMA {ema[-1]} (node {self.node}) " + ("unreachable (heartbeat lost), " if not self.reachable else "")
-        if self.confirmed:
-            return head + f"in {self.state}"
-        seen = self.seen or ("state not confirmed" if self.state is not None else "statusword never read")
-        return head + seen + (f", last seen {self.state}" if self.state is not None else "")
-
-
-@dataclass(frozen=True)
-class CanStats(_Part):
+class CanStats(Part):
     """The CAN side of a CANopen run: frames logged, SYNC cycles without a complete sample, frames the
     master refused or did not know, its largest lag behind the bus [ms] and the page faults of the
     check (``emacheck run``)."""
@@ -429,36 +223,36 @@ class CanStats(_Part):
         return out
 
     @classmethod
-    def read(cls, f: _Fields) -> CanStats:
+    def read(cls, f: Fields) -> CanStats:
         return cls(*(f.get(k, "int", required=True) for k in ("frames_logged", "missing_cycles", "bad_frames",
                                                                 "unknown_frames")),
                    max_lag_ms=f.get("max_lag_ms", "number"), page_faults=f.get("page_faults", "int"))
 
 
 @dataclass(frozen=True)
-class Stalls(_Part):
+class Stalls(Part):
     """The master's stalls in a CANopen check (:class:`hil.master.stalls.StallWatch`): how many, the longest [ms],
     each one's begin [s, check time] and length [ms]; the limit they were held to [ms] and its profile key;
     in a dry-run with ``--master-stall-ms``, the injection (``stall_ms``, ``every_s``, ``count``)."""
 
-    count: int = _req("int")
-    longest_ms: float = _req("number")
-    at: list = _req("list")
-    limit_ms: float = _req("number")
-    limit: str = _req("text")
-    injected: dict | None = _opt("object")
+    count: int = req("int")
+    longest_ms: float = req("number")
+    at: list = req("list")
+    limit_ms: float = req("number")
+    limit: str = req("text")
+    injected: dict | None = opt("object")
 
     def as_json(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         return out if self.injected is not None else {k: v for k, v in out.items() if k != "injected"}
 
 
-def _read_distribution(f: _Fields, histogram: bool) -> Distribution:
+def _read_distribution(f: Fields, histogram: bool) -> Distribution:
     """A :class:`hil.record.cycletiming.Distribution` from its JSON (``histogram`` False: none was recorded)."""
     nums = [f.get(k, "number", required=True) for k in ("p50_ms", "p90_ms", "p99_ms", "p99.9_ms", "max_ms", "mean_ms")]
     worst = tuple(Worst(g.get("ms", "number", required=True), g.get("t_s", "number", required=True),
                         g.get("cycle", "int", required=True))
-                  for g in (_Fields(w, f"{f.name('worst')}[{i}]", f.source)
+                  for g in (Fields(w, f"{f.name('worst')}[{i}]", f.source)
                             for i, w in enumerate(f.get("worst", "list", required=True))))
     bin_ms, bins = 0.0, ()
     if histogram:
@@ -466,14 +260,14 @@ def _read_distribution(f: _Fields, histogram: bool) -> Distribution:
         h = f.sub("histogram")
         bin_ms = h.get("bin_ms", "number", required=True)
         bins = tuple(tuple(b) for b in h.get("bins", "list", required=True))
-        if not all(len(b) == 2 and _KINDS["number"][0](b[0]) and _KINDS["int"][0](b[1]) for b in bins):
+        if not all(len(b) == 2 and KINDS["number"][0](b[0]) and KINDS["int"][0](b[1]) for b in bins):
             raise h.error("bins", "expected [[lower edge ms, count], ...]")
     return Distribution(f.get("n", "int", required=True), *nums, f.get("over_period", "int", required=True),
                         worst, bin_ms, bins)
 
 
 @dataclass(frozen=True)
-class Timing(_Part):
+class Timing(Part):
     """The master's loop per SYNC cycle on a real bus (:class:`hil.record.cycletiming.TimingSummary`), with the
     SYNC's source and its lateness. The CPU time's histogram is not recorded (as
     :meth:`~hil.record.cycletiming.TimingSummary.as_json` leaves it out): ``summary.work_cpu`` holds none."""
@@ -499,7 +293,7 @@ class Timing(_Part):
                 **({} if self.sync_periods_skipped is None else {"sync_periods_skipped": self.sync_periods_skipped})}
 
     @classmethod
-    def read(cls, f: _Fields) -> Timing:
+    def read(cls, f: Fields) -> Timing:
         for k in ("reaction", "work", "work_cpu", "gap"):
             f.get(k, "object", required=True)
         summary = TimingSummary(f.get("period_ms", "number", required=True), f.get("cycles", "int", required=True),
@@ -511,7 +305,7 @@ class Timing(_Part):
                    f.get("sync_periods_skipped", "int"))
 
 
-def _ema_map(f: _Fields, key: str, part: type, nullable: bool = False) -> dict | None:
+def _ema_map(f: Fields, key: str, part: type, nullable: bool = False) -> dict | None:
     """``{"ema1": part, ...}`` of the object at ``key`` (entries may be null if ``nullable``); None if absent."""
     if f.get(key, "object") is None:
         return None
@@ -527,8 +321,8 @@ class RunRecord:
 
     Built by :func:`start_record`; the fields after ``wear`` are added as the run goes: the preflight
     (``process_image``, ``master_loss``, ``identity``), the loop (``steps``, ``safety``, ``drives_final``,
-    ``stop_errors``, ``loop_page_faults``, ``stalls``, ``reason`` ... ``duration_s``), the command after it
-    (``wall_s``, ``can``, ``timing``).
+    ``drives_last``, ``stop_errors``, ``loop_page_faults``, ``stalls``, ``reason`` ... ``duration_s``), the
+    command after it (``wall_s``, ``can``, ``timing``).
     """
 
     run_id: str | None = None
@@ -560,6 +354,7 @@ class RunRecord:
     identity: dict[str, Identity | None] | None = None  #: EMA -> identity (None: not read)
     safety: SafetyViolation | None = None
     drives_final: dict[str, DriveFinal] | None = None  #: EMA -> its final state
+    drives_last: dict[str, DriveLast] | None = None  #: EMA -> where it was last seen (position, force, EMCYs)
     stop_errors: tuple[str, ...] | None = None  #: errors met while stopping the drives (at most 10)
     loop_page_faults: int | None = None  #: page faults of this process inside the cyclic loop
     stalls: Stalls | None = None  #: the master's stalls (a CANopen check)
@@ -573,9 +368,9 @@ class RunRecord:
 
     def __post_init__(self) -> None:  # an illegal status or mode is refused, as in from_json
         if self.status is not None and not isinstance(self.status, RunStatus):
-            object.__setattr__(self, "status", _member(RunStatus, self.status, "status", "run record"))
+            object.__setattr__(self, "status", member(RunStatus, self.status, "status", "run record"))
         if self.mode is not None and not isinstance(self.mode, RunMode):
-            object.__setattr__(self, "mode", _member(RunMode, self.mode, "mode", "run record"))
+            object.__setattr__(self, "mode", member(RunMode, self.mode, "mode", "run record"))
 
     # -------------------------------------------------------------- changes (each a new record)
 
@@ -589,9 +384,9 @@ class RunRecord:
     def with_preflight(self, preflight: Mapping) -> RunRecord:
         """``process_image``, ``master_loss`` and ``identity`` from the link's preflight record (JSON,
         :meth:`hil.master.link.CanopenLink.preflight_record`), read and checked as meta.json is."""
-        _only(preflight, ("process_image", "master_loss", "identity"), "", "preflight record")
+        only(preflight, ("process_image", "master_loss", "identity"), "", "preflight record")
         for k, v in (preflight.get("identity") or {}).items():
-            _only(v or {}, IDENTITY_KEYS, f"identity.{k}", "preflight record")
+            only(v or {}, IDENTITY_KEYS, f"identity.{k}", "preflight record")
         got = RunRecord.from_json(preflight, "preflight record")
         return dataclasses.replace(self, process_image=got.process_image, master_loss=got.master_loss,
                                    identity=got.identity)
@@ -600,7 +395,7 @@ class RunRecord:
         """``drives_final`` from the link's report after it closed (JSON,
         :meth:`hil.master.core.MasterCore.safe_state_report`) and the first 10 ``errors`` met while stopping."""
         for k, v in final.items():
-            _only(v, part_keys(DriveFinal), f"drives_final.{k}", "final states")
+            only(v, part_keys(DriveFinal), f"drives_final.{k}", "final states")
         got = RunRecord.from_json({"drives_final": final}, "final states")
         more = {"stop_errors": tuple(errors[:10])} if errors else {}
         return dataclasses.replace(self, drives_final=got.drives_final, **more)
@@ -635,7 +430,7 @@ class RunRecord:
     def from_json(cls, obj: Any, source: str = META_NAME) -> RunRecord:
         """The record of meta.json's content ``obj``: any subset of the fields (a killed run's, a folder
         made by hand); a malformed field raises :class:`RunRecordError` naming it (``source`` first)."""
-        f = _Fields(obj, "", source)
+        f = Fields(obj, "", source)
         parts = {name: part.read(f.sub(name)) for name, part in _PARTS.items() if f.get(name, "object") is not None}
         flat = {name: part.read(f) for name, part in _FLAT_PARTS.items() if f.has(*part_keys(part))}
         fields = {name: f.get(name, kind) for name, kind in _PLAIN.items()}
@@ -648,12 +443,8 @@ class RunRecord:
                    stop_errors=_tuple(f.get("stop_errors", "texts")),
                    loop_page_faults=lpf if lpf is not None else f.get("loop_page_faults", "int"),
                    identity=_ema_map(f, "identity", Identity, nullable=True),
-                   drives_final=_ema_map(f, "drives_final", DriveFinal))
-
-
-def part_keys(part: type) -> tuple[str, ...]:
-    """The JSON keys of a part whose fields are its keys (:class:`Bus`, :class:`Attribution`, ...)."""
-    return tuple(f.name for f in dataclasses.fields(part))
+                   drives_final=_ema_map(f, "drives_final", DriveFinal),
+                   drives_last=_ema_map(f, "drives_last", DriveLast))
 
 
 def _tuple(v: list | None) -> tuple | None:
@@ -677,7 +468,7 @@ def _json_of(name: str, v: Any) -> dict:
         return v.as_json()
     if name == "steps":
         return {name: {s.name: s.as_json() for s in v}}
-    if name in ("identity", "drives_final"):
+    if name in ("identity", "drives_final", "drives_last"):
         return {name: {k: None if p is None else p.as_json() for k, p in v.items()}}
     if isinstance(v, StrEnum):
         return {name: v.value}

@@ -22,6 +22,7 @@ from hil.report.shell import (
     Drawing,
     column,
     drawn,
+    drives_left,
     esc,
     file_link,
     fmt,
@@ -32,6 +33,7 @@ from hil.report.shell import (
     page_html,
     page_title,
     pyplot,
+    running_head,
     signoff_block,
     simulated_banner,
     table,
@@ -217,13 +219,16 @@ def calibration_table(result: dict) -> str:
 
 def head_parts(result: dict, intro: str) -> list[str]:
     """The report's first page: heading (verdict in its colour, SIMULATED for simulated data), what was
-    checked, ``intro`` (the actuation and the recording), why it stopped, and the decision section: each
+    checked, when, by which software and which run, ``intro`` (the actuation and the recording), why it stopped
+    and where the drives were left (an aborted or incomplete check), and the decision section: each
     channel's verdict and reason once, the notes, the sign-off block."""
     parts = [heading("emacheck maintenance check", result), simulated_banner(result), identification(result),
              intro]
     if result.get("reason"):
         st = result["status"]
         parts.append(f"<p class='{esc(st)}'>{esc(st.capitalize())}: {esc(result['reason'])}</p>")
+    if result.get("status") in ("aborted", "incomplete"):
+        parts.append(drives_left(result))
     parts.append("<h2>Decision</h2>" + decision_table(result) + notes(result.get("notes", []), css="")
                  + signoff_block(result))
     parts.append("<h3>LVDT calibration</h3>" + calibration_table(result))
@@ -348,18 +353,22 @@ def report_html(sig: Signals, an: Analysis, result: dict, act: Actuation, meta: 
     if timing is not None and timing.summary.reaction.n:
         parts.append(("<h2>Loop timing (master)</h2>", lambda: timing_section(timing)))
     parts.append(file_link(json_name))
-    return page_html(page_title("emacheck maintenance check", result), drawn(parts))
+    return page_html(page_title("emacheck maintenance check", result), drawn(parts),
+                     running_head("emacheck maintenance check", result))
 
 
 def write_stopped_report(path: Path, result: dict, *, json_name: str = "result.json") -> None:
     """The report of a check that stopped with nothing to analyse (a preflight that refused the drives): the
-    heading, why it stopped and why there is no analysis, and the traceability block (identity as read,
-    each drive's reaction to losing the master and its drill, limits), linked to ``json_name``."""
+    heading, why it stopped, where the drives were left, why there is no analysis, and the traceability block
+    (identity as read, each drive's reaction to losing the master and its drill, limits), linked to
+    ``json_name``."""
     parts = [heading("emacheck maintenance check", result), simulated_banner(result), identification(result)]
     st = str(result.get("status") or "")
     if result.get("reason"):
         parts.append(f"<p class='{esc(st)}'>{esc(st.capitalize())}: {esc(result['reason'])}</p>")
+    parts.append(drives_left(result))
     if result.get("analysis_error"):
         parts.append(f"<p>No analysis: {esc(result['analysis_error'])}</p>")
     parts += [trace_lines(result.get("trace")), file_link(json_name)]
-    write_page(path, page_title("emacheck maintenance check", result), parts)
+    write_page(path, page_title("emacheck maintenance check", result), parts,
+               running_head("emacheck maintenance check", result))

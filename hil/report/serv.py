@@ -21,6 +21,7 @@ from hil.report.shell import (
     notes,
     page_title,
     pyplot,
+    running_head,
     signoff_block,
     simulated_banner,
     table,
@@ -181,4 +182,4 @@ def write_serv_report(path: Path, an: ServAnalysis, data: dict, act: Actuation, 
                  + "<p>BLFmaint's temperature term is zero in practice: the calibration runs minutes before it "
                  "(paper 2.3); its noise term is the single-reading bound before regression averaging.</p>")
     parts.append(file_link(json_name))
-    write_page(path, page_title("emacheck serv", data), parts)
+    write_page(path, page_title("emacheck serv", data), parts, running_head("emacheck serv", data))

@@ -30,17 +30,29 @@ h1 .badge{color:#fff;padding:0 .35em;border-radius:3px}h1 .pass{background:#070}
 h1 .inconclusive{background:#d98a00}h1 .aborted,h1 .incomplete{background:#777}
 h1 .simulated,.simulated{color:#fff;background:#5a3d99;padding:0 .35em;border-radius:3px}
 p.simulated{padding:.3em .5em}
-.signoff{border:2px solid #222;padding:.5em 1em;margin:1.5em 0;max-width:60em}
-.signoff table{width:100%}.signoff td,.signoff th{text-align:left;border:none;padding:6px 8px}
+.signoff{border:2px solid #222;padding:.5em 1em;margin:1.5em 0;max-width:60em;overflow-wrap:anywhere}
+.signoff table{width:100%;table-layout:fixed}.signoff td,.signoff th{text-align:left;border:none;padding:6px 8px}
 .signoff th{background:none;width:14em}.signoff td.line{border-bottom:1px solid #222;height:2em}
+.signoff .unknown{border:2px solid #b60;padding:.3em .5em;color:#222}
+.ident,.run{overflow-wrap:anywhere}table.items td,table.items th{text-align:left}table.items td:first-child{width:15em}
 details{margin:1em 0}summary{cursor:pointer;color:#555}pre{font-size:85%;background:#f6f6f6;padding:.5em}
 small{color:#555}
-@page{size:A4;margin:15mm 12mm}
+table.sheet,.sheet>tbody,.sheet>tbody>tr,.sheet>tbody>tr>td{display:block;border:none;margin:0;padding:0;text-align:left}
+.sheet>thead,.sheet>tfoot{display:none}
+@page{size:A4;margin:15mm 12mm;
+@bottom-right{content:"page " counter(page) " of " counter(pages);font:8pt sans-serif;color:#555}}
 @media print{body{max-width:none;margin:0;font-size:9pt;-webkit-print-color-adjust:exact;print-color-adjust:exact}
 img{max-width:100%;height:auto;page-break-inside:avoid;break-inside:avoid}
-table,.signoff,figure,tr{page-break-inside:avoid;break-inside:avoid}td,th{padding:2px 4px}
+table,.signoff,figure,tr,section.keep{page-break-inside:avoid;break-inside:avoid}td,th{padding:2px 4px}
+table.long{page-break-inside:auto;break-inside:auto}thead{display:table-header-group}
 h1,h2,h3{page-break-after:avoid;break-after:avoid}details{display:block}summary{display:none}
-.signoff{page-break-before:auto}}"""
+.signoff{page-break-before:auto}
+table.sheet{display:table;width:100%;margin:0;border:none;page-break-inside:auto;break-inside:auto}.sheet>tbody{display:table-row-group}
+.sheet>thead{display:table-header-group}.sheet>tfoot{display:table-footer-group}
+.sheet>tbody>tr,.sheet>thead>tr,.sheet>tfoot>tr{display:table-row;page-break-inside:auto;break-inside:auto}
+.sheet>tbody>tr>td,.sheet>thead>tr>td,.sheet>tfoot>tr>td{display:table-cell;border:none;padding:0;text-align:left}
+.sheet>thead>tr>td{font-size:8pt;color:#555;border-bottom:1px solid #999;padding-bottom:1mm}
+.sheet>tfoot>tr>td{font-size:8pt;color:#555;border-top:1px solid #999;padding-top:1mm}}"""
 
 #: the verdict words of a report's heading, each with its CSS class (colour)
 STATUS_WORDS = {"pass": "PASS", "fail": "FAIL", "inconclusive": "INCONCLUSIVE", "aborted": "ABORTED",
@@ -162,12 +174,27 @@ def column(name: str, unit: str | None = None) -> str:
     return f"{name} [{unit}]" if unit else name
 
 
-def table(columns: Sequence[str], rows: Iterable[Sequence[object]], *, raw: bool = False) -> str:
-    """An HTML table; ``columns`` as from :func:`column`, cells escaped unless ``raw``."""
+#: Rows from which a table may split between pages when printed (``class='long'``), its header repeated on each:
+#: printed at 9 pt a row of one line is 5.4 mm high (measured in Chromium 156: a 4.3 mm line, its padding and
+#: border), and an A4 page leaves 253 mm for the content (297 mm less the 15 mm margins and the running header
+#: and footer, about 7 mm each): a heading (about 10 mm), the table's header row and 40 rows (221 mm) fit on a
+#: fresh page with some 20 mm to spare for a few cells wrapped on two lines. A shorter table moves whole to the
+#: next page rather than split (``break-inside: avoid``); a longer one may not fit any page, and a table taller
+#: than a page is split by every browser whatever it asks (docs/report.md, *Printing*).
+LONG_TABLE_ROWS = 40
+
+
+def table(columns: Sequence[str], rows: Iterable[Sequence[object]], *, raw: bool = False, css: str = "") -> str:
+    """An HTML table; ``columns`` as from :func:`column`, cells escaped unless ``raw``. Its header is a
+    ``<thead>`` (repeated on each printed page a table spans); printed, a table of fewer than
+    :data:`LONG_TABLE_ROWS` rows is never split over two pages, a longer one only between rows. ``css``: its
+    class (``items``: a list of items and their words, left-aligned)."""
     cell = (lambda c: str(c)) if raw else esc
     head = "".join(f"<th>{esc(c)}</th>" for c in columns)
-    body = "".join("<tr>" + "".join(f"<td>{cell(c)}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
+    body = ["<tr>" + "".join(f"<td>{cell(c)}</td>" for c in r) + "</tr>" for r in rows]
+    classes = " ".join(c for c in (css, "long" if len(body) >= LONG_TABLE_ROWS else "") if c)
+    kind = f" class='{classes}'" if classes else ""
+    return f"<table{kind}><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
 def notes(items: Iterable[str], *, css: str = "warn") -> str:
@@ -190,11 +217,13 @@ def heading(what: str, data: dict) -> str:
 
 
 def page_title(what: str, data: dict) -> str:
-    """The page's ``<title>`` (what a browser's tab and a printed page's header show): the verdict, and
-    SIMULATED for simulated data."""
+    """The page's ``<title>`` (what a browser's tab and the header it prints on every page show): the verdict,
+    SIMULATED for simulated data, and the run id."""
     status = str(data.get("status") or "")
+    run_id = (data.get("trace") or {}).get("run_id")
     return (f"{what}: {STATUS_WORDS.get(status, status.upper())}"
-            + (" (SIMULATED, not a real actuator)" if is_simulated(data) else ""))
+            + (" (SIMULATED, not a real actuator)" if is_simulated(data) else "")
+            + (f" · run {run_id}" if run_id else ""))
 
 
 _SIMULATED_WHAT = {"dry-run": "a dry-run: the check over CANopen against two simulated drives",
@@ -240,7 +269,8 @@ def recording_text(trace: dict) -> str:
 
 def identification(data: dict) -> str:
     """One paragraph under the heading naming what was checked: aircraft, position, flight hours,
-    each EMA's serial, work order, and the file for a bare recording."""
+    each EMA's serial, work order, and the file for a bare recording; then when, by which software and which
+    run (:func:`run_facts`)."""
     trace = data.get("trace") or {}
     fh = trace.get("flight_hours")
     items = [("aircraft", trace.get("aircraft")), ("position", trace.get("position")),
@@ -251,13 +281,40 @@ def identification(data: dict) -> str:
     if rec:
         text.append("analysed from the " + rec)
     line = "; ".join(text) or "no installation given"
-    return f"<p class='ident'>{line[0].upper() + line[1:]}.</p>"
+    return f"<p class='ident'>{line[0].upper() + line[1:]}.</p>" + run_facts(data)
+
+
+def unknown_identity(trace: dict) -> list[str]:
+    """What a result does not identify: "the serial number of EMA 1" (its drive's 0x1018 serial not read, or
+    0: none set; a bare recording has none), "... of EMA 2", "the aircraft" (no ``--aircraft`` nor the
+    profile's ``history.aircraft``); empty when all are known."""
+    ident = trace.get("identity") or {}
+    out = [f"the serial number of EMA {k}" for k in (1, 2) if not (ident.get(f"ema{k}") or {}).get("serial")]
+    return out + ([] if trace.get("aircraft") else ["the aircraft"])
+
+
+def _unknown_words(missing: list[str], trace: dict) -> str:
+    """The sign-off's box for a result that does not say which actuators it is of (""; all are known)."""
+    serials = [m for m in missing if m.startswith("the serial")]
+    if not serials:
+        return ""
+    bare = not trace.get("run_id")
+    why = (" It was analysed from a recording file alone (a CSV or CAN log without its run folder): nothing "
+           "read the actuators' identity from their drives." if bare else
+           " The drives did not report it when the check read their identity (object 0x1018).")
+    return ("<div class='unknown'><p><b>Actuators not identified.</b> This result does not say which actuators it "
+            f"is of: it records no {', '.join(m.removeprefix('the ') for m in missing)}.{why} Nothing in this "
+            "report ties the verdict to a particular actuator. Before signing, read each actuator's serial number "
+            "off its identification plate (and the aircraft and position off the work order) and write them in the "
+            "lines below; do not sign for an actuator that has not been identified.</p></div>")
 
 
 def signoff_block(data: dict, what: str = "maintenance check") -> str:
     """The block an inspector signs, at the end of the decision: the verdict signed for, who ran the
     check and for which work order (filled in where given), and lines for the inspector's name, the
-    date and the signature (printable: never split over two pages)."""
+    date and the signature (printable: never split over two pages). A result that does not identify its
+    actuators (:func:`unknown_identity`: a bare recording, a serial not read) says so in the block, in words,
+    with a line to fill in for each serial (and the aircraft) it lacks. Long words wrap inside the block."""
     trace = data.get("trace") or {}
     status = str(data.get("status") or "")
 
@@ -270,16 +327,98 @@ def signoff_block(data: dict, what: str = "maintenance check") -> str:
     sn = ", ".join(f"{k} {esc(v)}" for k, v in serials(trace))
     sim = ("<p class='simulated'><b>SIMULATED</b>: not a real actuator; not for release to service.</p>"
            if is_simulated(data) else "")
-    return (f"<div class='signoff'><h3>Sign-off</h3>{sim}"
+    missing = unknown_identity(trace)
+    fill = "".join(f"<tr><th>EMA {m[-1]} serial number (from its plate)</th><td class='line'></td></tr>"
+                   for m in missing if m.startswith("the serial"))
+    if "the aircraft" in missing:
+        fill += "<tr><th>aircraft and position</th><td class='line'></td></tr>"
+    return (f"<div class='signoff'><h3>Sign-off</h3>{sim}{_unknown_words(missing, trace)}"
             f"<p>The {esc(what)} above, verdict <b class='{esc(status)}'>"
             f"{esc(STATUS_WORDS.get(status, status.upper()))}</b>"
             + (f", run {esc(trace['run_id'])}" if trace.get("run_id") else "")
-            + (f"; {where}" if where else "") + (f"; {sn}" if sn else "") + ".</p><table>"
+            + (f"; {where}" if where else "") + (f"; {sn}" if sn else "") + ".</p><table>" + fill +
             f"<tr><th>check run by (operator)</th>{given(trace.get('operator'))}</tr>"
             f"<tr><th>work order</th>{given(trace.get('work_order'))}</tr>"
             "<tr><th>inspected by (name, licence)</th><td class='line'></td></tr>"
             "<tr><th>date</th><td class='line'></td></tr>"
             "<tr><th>signature</th><td class='line'></td></tr></table></div>")
+
+
+def run_facts(data: dict) -> str:
+    """Page 1's line of when and by what: the check's date and time (UTC), the software and its version (the
+    check's and the analysis', where they differ), and the run id; for a recording without run record, said."""
+    trace = data.get("trace") or {}
+    sw = trace.get("software") or {}
+    version = f"{sw.get('name') or 'emacheck'} {sw.get('version') or '?'}"
+    ran = sw.get("check_run_with")
+    if ran and ran != sw.get("version"):
+        version = f"{sw.get('name') or 'emacheck'} {ran} (the check), {sw.get('version')} (this analysis)"
+    started = trace.get("started_utc")
+    when = (f"check started <b>{esc(_utc(started))}</b>" if started else
+            "check date and time not recorded (a recording without its run folder)")
+    analysed = trace.get("analysed_utc")
+    run = (f"run <b><code>{esc(trace['run_id'])}</code></b>" if trace.get("run_id") else
+           "no run id (a recording without its run folder)")
+    return (f"<p class='run'>{when[0].upper() + when[1:]}"
+            + (f", analysed {esc(_utc(analysed))}" if analysed else "")
+            + f"; software <b>{esc(version)}</b>; {run}.</p>")
+
+
+def _utc(iso: str) -> str:
+    """``2026-11-26T13:55:58+00:00`` as ``2026-11-26 13:55:58 UTC`` (other text as it is)."""
+    return iso.replace("T", " ").replace("+00:00", " UTC") if iso.endswith("+00:00") else iso
+
+
+def running_head(what: str, data: dict) -> str:
+    """The line printed at the top of every page of a report: what it is, its verdict, its run id (or the
+    recording's file and SHA-256 for a recording without run folder), the software."""
+    trace = data.get("trace") or {}
+    status = str(data.get("status") or "")
+    sw = trace.get("software") or {}
+    if trace.get("run_id"):
+        run = f"run {trace['run_id']}"
+    else:
+        rec, sha = trace.get("recording"), (trace.get("files_sha256") or {}).get("recording")
+        run = ("no run id; file " + Path(rec).name + (f", sha256 {sha[:16]}…" if sha else "")) if rec else "no run id"
+    sim = " SIMULATED" if is_simulated(data) else ""
+    return (f"{what}: {STATUS_WORDS.get(status, status.upper())}{sim} · {run} · "
+            f"{sw.get('name') or 'emacheck'} {sw.get('version') or ''}").strip()
+
+
+def _state_words(state: str | None) -> str:
+    """A CiA 402 state as its name reads (``SWITCH_ON_DISABLED``: Switch on disabled); "not known" for None."""
+    return "not known" if not state else state.replace("_", " ").capitalize()
+
+
+def _drive_left_row(k: str, d: dict) -> list[str]:
+    state = _state_words(d.get("state")) if d.get("node") is not None else "— (no CANopen drive: simulated plant)"
+    safe = ("—" if d.get("safe") is None else "yes" if d["safe"] else
+            "<b class='fail'>NOT confirmed safe</b>" + ("" if d.get("reachable", True) else " (unreachable)"))
+    emcy = d.get("emcy") or []
+    codes = "; ".join(esc(f"EMCY 0x{e['code']:04X} ({e['text']}) at t = {e['t_s']:.3f} s") for e in emcy) or "none"
+    count = d.get("emcy_count") or 0
+    if count > len(emcy):
+        codes += f" (the last {len(emcy)} of {count})"
+    num = (lambda key, nd: "—" if d.get(key) is None else f"{d[key]:.{nd}f}")  # noqa: E731
+    return [f"EMA {k[-1]}" + ("" if d.get("node") is None else f" (node {d['node']})"),
+            esc(state) + (f"<br><small>{esc(d['seen'])}</small>" if d.get("seen") else ""), safe,
+            num("t_s", 3), num("position_mm", 3), num("stroke_mm", 3), num("force_N", 0), codes]
+
+
+def drives_left(data: dict) -> str:
+    """Where each drive was left when the check stopped (result.json ``trace.drives_last``): its CiA 402 state
+    after the stop and whether it was confirmed safe, its last complete sample (time, ram position from the
+    motor angle, LVDT stroke, force) and the EMCYs it sent; for a run cut off before its stop, said."""
+    left = (data.get("trace") or {}).get("drives_last")
+    head = "<h3>Where the drives were left</h3>"
+    if not left:
+        return head + ("<p>Not recorded: the check was cut off before its stop was recorded (the master was killed "
+                       "or lost power). The last row of signals.csv is the last sample that reached the disk.</p>")
+    rows = [_drive_left_row(k, d) for k, d in sorted(left.items())]
+    cols = [column("EMA"), column("CiA 402 state after the stop"), column("safe"), column("last sample t", "s"),
+            column("position φ/i_total", "mm"), column("stroke (LVDT)", "mm"), column("force", "N"),
+            column("EMCY (fault codes)")]
+    return "<section class='keep'>" + head + table(cols, rows, raw=True) + "</section>"
 
 
 def trace_lines(trace: dict | None) -> str:
@@ -309,7 +448,8 @@ def trace_lines(trace: dict | None) -> str:
                      "the master's force loop on the measured force in CSP (its drive has no CST)"])
     for k, h in (trace.get("files_sha256") or {}).items():
         rows.append([f"{k} (sha256)", h[:16] + "…" if h else "—"])
-    return "<h2>Traceability</h2>" + identity_warning(trace.get("identity")) + table(["item", "value"], rows)
+    return ("<section class='keep'><h2>Traceability</h2>" + identity_warning(trace.get("identity"))
+            + table(["item", "value"], rows, css="items") + "</section>")
 
 
 def identity_warning(identity: dict | None) -> str:
@@ -372,13 +512,18 @@ def master_loss_text(ml: dict) -> str:
     return text
 
 
-def write_page(path: Path, title: str, parts: Iterable[str]) -> None:
-    """Write a self-contained HTML page: the shell's style, then ``parts`` in order."""
-    Path(path).write_text(page_html(title, parts))
+def write_page(path: Path, title: str, parts: Iterable[str], running: str | None = None) -> None:
+    """Write a self-contained HTML page: the shell's style, then ``parts`` in order (:func:`page_html`)."""
+    Path(path).write_text(page_html(title, parts, running))
 
 
-def page_html(title: str, parts: Iterable[str]) -> str:
-    """The text of a self-contained HTML page (:func:`write_page`)."""
+def page_html(title: str, parts: Iterable[str], running: str | None = None) -> str:
+    """The text of a self-contained HTML page (:func:`write_page`): ``parts`` inside a sheet whose header and
+    footer (``running``, e.g. :func:`running_head`; else ``title``) the browser repeats on every printed page
+    (a table's ``<thead>``/``<tfoot>``; hidden on screen), page numbers in the ``@page`` margin box (docs/report.md,
+    *Printing*, says which browser prints what)."""
+    line = esc(running or title)
     head = (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}</title>"
-            f"<style>{CSS}</style></head><body>")
-    return "\n".join([head, *parts, "</body></html>"])
+            f"<style>{CSS}</style></head><body><table class='sheet'><thead><tr><td>{line}</td></tr></thead>"
+            f"<tfoot><tr><td>{line}</td></tr></tfoot><tbody><tr><td>")
+    return "\n".join([head, *parts, "</td></tr></tbody></table></body></html>"])
