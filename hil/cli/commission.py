@@ -197,10 +197,10 @@ def cmd_commission(args: argparse.Namespace) -> int:
                   f"{context['bus']['channel']}; folder {out}")
     from hil.cli.realtime import end_realtime, prepare_realtime
 
-    if bus is not None:  # a real bus: the loop set up as run's (memory locked, SCHED_FIFO on request)
-        rt = prepare_realtime(args.rt_priority, bounded=True, cpu_latency_us=args.cpu_latency_us)
-        console.print(f"real time: {rt}")
     try:
+        if bus is not None:  # a real bus: the loop set up as run's (memory locked, SCHED_FIFO on request)
+            rt = prepare_realtime(args.rt_priority, bounded=True, cpu_latency_us=args.cpu_latency_us)
+            console.print(f"real time: {rt}")
         run = commission(act, check, rig, transport, out, console=console, context=context,
                          rt_priority=args.rt_priority, loop_ended=end_realtime if bus is not None else None)
     finally:
