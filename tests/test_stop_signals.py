@@ -79,9 +79,10 @@ def test_a_signal_during_a_two_process_run_stops_it_safely_and_keeps_its_record(
     100 Hz profiles, the kill test's short check): the signal once the calibration's sweep began; the drives
     stopped and confirmed in Switch on disabled (read after the stop), meta.json and result.json aborted with
     the reason, report.html written, exit 2. (SIGKILL of the same pair: tests/test_master_loss.py.)"""
+    from test_kill import SHORT_CHECK
+
     from support.ci import skip_or_fail
     from support.netns import cannot_run, serve_and_master
-    from test_kill import SHORT_CHECK
 
     why = cannot_run()
     if why is not None:

@@ -70,7 +70,8 @@ def serve_and_master(serve: list[str], master: list[str], *, timeout_s: float = 
                        timeout=timeout_s + 2 * READY_TIMEOUT_S, check=False, cwd=ROOT)
     lines = r.stdout.strip().splitlines()
     if r.returncode != 0 or not lines:
-        raise RuntimeError(f"the two-process driver failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}")
+        raise RuntimeError(f"the two-process driver failed (exit {r.returncode}):\n{r.stdout[-3000:]}\n"
+                           f"{r.stderr[-3000:]}")
     return json.loads(lines[-1])
 
 
