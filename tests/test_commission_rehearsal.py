@@ -4,7 +4,8 @@ builds the simulated rig from its own actuation profile, so a mistake in the pro
 commissioning keeps the check's freshness rule and names the PC when it stops on stale data.
 
 The two-process cases run ``sim-serve`` and ``commission`` on udp_multicast in a private network namespace
-(tests/support/netns.py) and compare the findings with the same simulated rig commissioned in process: the same
+(tests/support/netns.py; both at SCHED_FIFO where permitted, a run the PC stopped on stale data repeated once)
+and compare the findings with the same simulated rig commissioned in process: the same
 keys, stages and kinds, each value within twice the tolerance the in-process tests hold against the simulator's
 truth (tests/test_commission.py: 0.5 % for an LVDT, the slope over 1 mm; 2 % for a load cell): each run within
 it of the truth, the two within twice it of each other (measured at 100 Hz on the shared 2-core machine at load
@@ -16,8 +17,10 @@ from __future__ import annotations
 
 import json
 import tomllib
+from importlib import resources
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 import tomli_w
@@ -41,6 +44,7 @@ from support.profiles import write_profile_variant
 # two processes on wall-clock SYNC in a private namespace: one such test at a time (docs/testing.md, "Parallel")
 pytestmark = pytest.mark.xdist_group("wall_clock")
 
+SCHEMA = json.loads(resources.files("hil.schemas").joinpath("commission.schema.json").read_text())
 ACT = load_actuation(None)
 CHECK = load_check(None, ACT)
 SIMRIG = load_simrig(None)
@@ -93,14 +97,27 @@ def _assert_same_findings(bus: list[dict], local: list[dict]) -> None:
                 assert b[name] == h[name], (h["key"], name)
 
 
-def _over_the_bus(simrig: Path, out: Path) -> dict:
+#: SCHED_FIFO priority of both processes on the bus (best effort: without the privilege, normal scheduling)
+RT_PRIORITY = "20"
+
+
+def _over_the_bus(simrig: Path, out: Path) -> tuple[dict, Path]:
+    """sim-serve (the simulated rig ``simrig``) and commission over the bus, both at :data:`RT_PRIORITY`: their
+    outputs and the commissioning's folder. A commissioning the PC stopped (``pc.stale_data``: the test run's
+    own workers and whatever else shares the 2 cores held a process past the freshness limit) is run once
+    more; the second one stands."""
     why = cannot_run()
     if why is not None:
         skip_or_fail(why)
-    r = serve_and_master(["--sim", str(simrig)], ["commission", "--arm", "--profile", str(VCAN / "actuation.toml"),
-                                                  "--out", str(out)], timeout_s=240.0)
-    assert r["serve_rc"] == 0, r["serve_out"][-2000:]
-    return r
+    for k in (1, 2):
+        folder = out.with_name(f"{out.name}{k}")
+        r = serve_and_master(["--sim", str(simrig), "--rt-priority", RT_PRIORITY],
+                             ["commission", "--arm", "--profile", str(VCAN / "actuation.toml"), "--rt-priority",
+                              RT_PRIORITY, "--out", str(folder)], timeout_s=240.0)
+        assert r["serve_rc"] == 0, r["serve_out"][-2000:]
+        if not any(f["key"] == STALE_KEY for f in _findings(folder)):
+            break
+    return r, folder
 
 
 def _in_process(simrig: Path, out: Path, capsys) -> int:
@@ -195,6 +212,7 @@ def test_a_scale_mistake_in_the_profile_under_test_shows_with_sim_and_not_withou
     assert report["simulated_rig"] == {"simrig": str(sim), "simulated_rig_actuation": str(
         default_profile_path("actuation.toml"))}
     assert set(report["files_sha256"]) >= {"actuation", "check", "simrig", "simulated_rig_actuation"}
+    jsonschema.validate(report, SCHEMA)
     assert main(["commission", str(wrong), "--simulate", "--out", str(tmp_path / "without")]) == 0
     capsys.readouterr()
     report = json.loads((tmp_path / "without" / "commission.json").read_text())
@@ -314,10 +332,10 @@ def test_two_wiring_faults_served_by_sim_serve_give_the_in_process_findings(tmp_
     sim-serve + commission over udp_multicast name both with the values of the same rig in process."""
     sim = _simrig(tmp_path / "rig.toml", WIRING["lvdt_sign"] + [{"kind": "loadcell_scale", "ema": 1, "value": 0.1}],
                   VCAN / "simrig.toml")
-    r = _over_the_bus(sim, tmp_path / "bus")
+    r, folder = _over_the_bus(sim, tmp_path / "bus")
     assert r["master_rc"] == 6, r["master_out"][-3000:]
     assert _in_process(sim, tmp_path / "local", capsys) == 6
-    bus, local = _findings(tmp_path / "bus"), _findings(tmp_path / "local")
+    bus, local = _findings(folder), _findings(tmp_path / "local")
     assert [f["key"] for f in local] == ["signals.ema2.lvdt.mm_per_unit", "signals.ema1.force.N_per_unit"]
     _assert_same_findings(bus, local)
     assert "2 fault(s): lvdt_sign (EMA 2), loadcell_scale 0.1 (EMA 1)" in r["serve_out"]
@@ -327,9 +345,9 @@ def test_two_wiring_faults_served_by_sim_serve_give_the_in_process_findings(tmp_
 @pytest.mark.parametrize("name", sorted(WIRING))
 def test_each_wiring_fault_served_by_sim_serve_gives_the_in_process_findings(name, tmp_path, capsys):
     sim = _simrig(tmp_path / "rig.toml", WIRING[name], VCAN / "simrig.toml")
-    r = _over_the_bus(sim, tmp_path / "bus")
+    r, folder = _over_the_bus(sim, tmp_path / "bus")
     assert _in_process(sim, tmp_path / "local", capsys) == 6
     assert r["master_rc"] == 6, r["master_out"][-3000:]
     local = _findings(tmp_path / "local")
     assert local and all(f["key"] for f in local if f["kind"] != "stopped")
-    _assert_same_findings(_findings(tmp_path / "bus"), local)
+    _assert_same_findings(_findings(folder), local)
