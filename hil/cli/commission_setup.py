@@ -48,7 +48,8 @@ def add_rig_args(p) -> None:
                    help="with --simulate, wire the simulated rig wrongly (repeatable): lvdt_sign, lvdt_scale "
                         "(VALUE: reading / stroke, default 0.5), lvdt_dead, loadcell_sign, loadcell_scale, "
                         "loadcell_dead, lvdts_swapped; e.g. lvdt_sign:2, loadcell_scale:1:0.1")
-    rt_priority_arg(p, "real drives: run the cyclic loop under SCHED_FIFO priority N (1-99, needs the privilege; "
+    rt_priority_arg(p, "on a bus (real drives, or sim-serve's): run the cyclic loop under SCHED_FIFO priority N (1-99, "
+                       "needs the privilege; "
                        "default 0: normal scheduling), as `emacheck run` does; the report is written at normal "
                        "priority after it. On a loaded PC the loop may fall behind the bus at normal priority "
                        "(a stop on stale data, finding pc.stale_data)")
