@@ -41,9 +41,6 @@ from support.ci import skip_or_fail
 from support.netns import cannot_run, serve_and_master
 from support.profiles import write_profile_variant
 
-# two processes on wall-clock SYNC in a private namespace: one such test at a time (docs/testing.md, "Parallel")
-pytestmark = pytest.mark.xdist_group("wall_clock")
-
 SCHEMA = json.loads(resources.files("hil.schemas").joinpath("commission.schema.json").read_text())
 ACT = load_actuation(None)
 CHECK = load_check(None, ACT)
@@ -327,6 +324,8 @@ def test_rt_priority_is_for_a_bus_and_reaches_the_real_time_set_up(tmp_path, mon
 # ------------------------------------------------------------------ over the bus (private network namespace)
 
 
+# two processes on wall-clock SYNC in a private namespace: one such test at a time (docs/testing.md, "Parallel")
+@pytest.mark.xdist_group("wall_clock")
 def test_two_wiring_faults_served_by_sim_serve_give_the_in_process_findings(tmp_path, capsys):
     """The docs' example (LVDT 2 of the wrong sign, load cell 1 read in kN), in the simulated rig's [[faults]]:
     sim-serve + commission over udp_multicast name both with the values of the same rig in process."""
@@ -342,6 +341,7 @@ def test_two_wiring_faults_served_by_sim_serve_give_the_in_process_findings(tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("wall_clock")
 @pytest.mark.parametrize("name", sorted(WIRING))
 def test_each_wiring_fault_served_by_sim_serve_gives_the_in_process_findings(name, tmp_path, capsys):
     sim = _simrig(tmp_path / "rig.toml", WIRING[name], VCAN / "simrig.toml")

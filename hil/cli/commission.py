@@ -1,8 +1,9 @@
 """``emacheck commission``: a rig brought up before its first check (the IO shell of
 :mod:`hil.master.commission`, over :mod:`hil.master.link` as the check runs).
 
-Real drives: ``--interface``, ``--channel`` and ``--arm``. Simulated drives in process: ``--simulate``
-(the dry-run's simulated rig, with ``--wiring-fault`` or the simulated-rig profile's ``[[faults]]``).
+Real drives: ``--interface``, ``--channel`` and ``--arm`` (``--rt-priority``). Simulated drives in process:
+``--simulate`` (the simulated rig sim-serve serves, with ``--wiring-fault`` or the simulated-rig profile's
+``[[faults]]``; with ``--sim`` built from that rig's own actuation profile): :mod:`hil.cli.commission_setup`.
 The report (``commission.json``, ``commission.html``) and the CAN log go into a new folder, written once.
 """
 
