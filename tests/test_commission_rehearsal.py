@@ -232,6 +232,25 @@ def test_a_preflight_refusal_is_a_finding_with_its_key(tmp_path, capsys):
     assert "encoder resolution 0x608F = 4096 increments per revolution" in f[0]["text"]
 
 
+def test_an_error_that_stops_the_preflight_is_named_with_its_key():
+    """The key of a stop in the preflight: the refusal's own, else the SDO timeout, else the EDS of the node
+    that refused an object its EDS offers; an error of no known kind keeps none."""
+    from hil.canopen.frame import Frame
+    from hil.canopen.sdo import SdoAbortError, SdoTimeout
+    from hil.master.commission import Commission
+    from hil.master.preflight import PreflightError
+
+    plan = master_setup(ACT, None).plan
+    for exc, key in ((PreflightError("x", "canopen.force_control"), "canopen.force_control"),
+                     (SdoTimeout(1, 0x6502, 0, 0.5, Frame(0x601, bytes(8))), "canopen.sdo_timeout_s"),
+                     (SdoAbortError(2, 0x6502, 0, 0x06020000), "canopen.eds"),
+                     (SdoAbortError(9, 0x6502, 0, 0x06020000), ""),  # no node of the plan
+                     (PreflightError("no key"), "")):
+        core = Commission(ACT, CHECK, plan)
+        core.failed(exc)
+        assert [(f.stage, f.kind, f.key) for f in core.findings] == [(Stage.SCAN, Kind.PREFLIGHT, key)], exc
+
+
 def test_the_console_says_where_each_drive_ended_after_a_scan_that_stopped(tmp_path, capsys):
     """EMA 2 expected at node 5 (it answers at 2): the scan stops before anything is powered; the console says
     where EMA 1 ended (read after the stop) and that EMA 2's state is unknown, and why (it said ``ended in
