@@ -276,13 +276,13 @@ def test_where_a_drive_ended_in_words():
 # ------------------------------------------------------------------ the PC: the check's freshness rule
 
 
-def _stalled(tmp_path: Path, stall_ms: float):
+def _stalled(tmp_path: Path, stall_ms: float, name: str = ""):
     """The clean simulated rig commissioned with the master stalling ``stall_ms`` every 1 s on average."""
     rig = master_setup(ACT, None)
     tr = simulated_transport(ACT, rig, SIMRIG, (), None)
     stalls = MasterStalls(stall_ms, 1.0, np.random.default_rng([SIMRIG.seed, 37]))
     transport = InProcessTransport(tr.pair, ACT.timing.sync_period_s, stalls=stalls)
-    out = tmp_path / f"stall{stall_ms:g}"
+    out = tmp_path / f"stall{stall_ms:g}{name}"
     out.mkdir()
     try:
         return commission(ACT, CHECK, rig, transport, out), stalls
@@ -306,6 +306,23 @@ def test_commission_keeps_the_checks_derived_freshness_limit_and_names_the_pc_be
     assert "the likely cause is the PC running emacheck (normal scheduling)" in f[0]["text"]
     assert "--rt-priority" in f[0]["text"]
     assert {d["state"] for d in bad.report["drives_final"].values()} == {"SWITCH_ON_DISABLED"}
+
+
+def test_the_45_ms_stalls_stopped_the_commissioning_under_its_old_limit(tmp_path, monkeypatch):
+    """The link as the commissioning made it before (no safety profile: ``safety.max_lag_s`` 20 ms and
+    ``safety.max_stale_cycles``, whatever the drives keep): the same 45 ms stalls stop it on stale data. (The
+    test above can fail: its READY is the derived limit's.)"""
+    import hil.master.link
+
+    class OldLink(hil.master.link.CanopenLink):
+        def __init__(self, *args, safety=None, **kw):
+            super().__init__(*args, **kw)
+
+    monkeypatch.setattr(hil.master.link, "CanopenLink", OldLink)
+    old, _ = _stalled(tmp_path, 45.0, "old")
+    assert old.link.stale is None and old.link.max_lag_s == CHECK.safety.max_lag_s == 0.02
+    assert old.exit_code == 6 and [f["key"] for f in old.report["findings"]] == [STALE_KEY]
+    assert "the master is 45 ms behind the bus" in old.report["findings"][0]["text"]
 
 
 def test_the_stale_finding_says_what_to_do_at_either_priority():
