@@ -11,6 +11,11 @@ paces the simulated rig exactly as it paces real drives.
 Time given to the pair is the monotonic clock relative to the start of
 :func:`serve` [s]. The loop ends when ``stop`` is set (the CLI sets it from
 SIGINT/SIGTERM) and shuts the bus down.
+
+:func:`simulated_rig` builds the simulated rig every command uses, served here or on the in-process bus of
+``dry-run`` and ``commission --simulate``: the drive pair on the simulated-rig profile's plant, inside the
+fault injector with that profile's ``[[faults]]`` (wiring faults among them), so a rig served by
+``sim-serve`` behaves as the same rig in process.
 """
 
 from __future__ import annotations
@@ -145,6 +150,60 @@ class _RawIO:
             return True
         except can.CanError:  # ENOBUFS: transmit queue full
             return False
+
+
+def simulated_rig(simrig, rig, faults=None, *, seed: int | None = None, record_truth: bool = False):
+    """The simulated rig: the drive pair of ``rig`` on the plant of ``simrig``, with its faults.
+
+    Parameters
+    ----------
+    simrig : hil.profile.load.SimRigProfile
+        The simulated-rig profile: the plant's parameters, the seed, the serial numbers, ``[[faults]]``.
+    rig : hil.profile.rig.Rig
+        The planned rig the simulated nodes are built as (their PDOs, signal map and scalings, the EDS
+        files they serve).
+    faults : sequence of sim.faults.Fault, optional
+        The faults to apply; default (None) the simulated-rig profile's ``[[faults]]``.
+    seed : int, optional
+        The seed; default the simulated-rig profile's. The plant's noise is drawn from
+        ``numpy.random.default_rng(seed)``, the random frame losses of ``bus_errors`` from
+        ``default_rng([seed, 7])``: the same rig, bit for bit, in process and served.
+    record_truth : bool
+        Record the plant's truth after every SYNC (:attr:`sim.faults.FaultInjector.truth`).
+
+    Returns
+    -------
+    sim.faults.FaultInjector
+        The pair inside its fault injector, with the sans-IO interface of the pair (``power_on``,
+        ``on_frame``, ``tick``; without faults it passes every frame through unchanged).
+    """
+    import numpy as np
+
+    from hil.canopen.od import load_eds
+    from sim.drives import SimDrivePair
+    from sim.faults import FaultInjector
+    from sim.plant import RigPlant
+
+    seed = simrig.seed if seed is None else seed
+    faults = tuple(simrig.faults if faults is None else faults)
+    pair = SimDrivePair(RigPlant(simrig.params, np.random.default_rng(seed)), rig.plan,
+                        lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id), serials=simrig.serials)
+    return FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=record_truth)
+
+
+def faults_text(faults) -> str:
+    """The faults a simulated rig applies, for the console: ``no faults`` or e.g.
+    ``2 fault(s): lvdt_sign (EMA 2), loadcell_scale 0.1 (EMA 1) from 3 s``."""
+    import math
+
+    if not faults:
+        return "no faults"
+    words = []
+    for f in faults:
+        value = f" {f.value:g}" if math.isfinite(f.value) else ""
+        start = f" from {f.start_s:g} s" if f.start_s else ""
+        words.append(f"{f.kind}{value} (EMA {f.ema}){start}")
+    return f"{len(faults)} fault(s): " + ", ".join(words)
 
 
 def _io_for(bus: can.BusABC):

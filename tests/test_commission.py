@@ -24,7 +24,8 @@ from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.cli import main
 from hil.cli.args import ExitCode
 from hil.cli.check import master_setup
-from hil.cli.commission import commission, simulated_transport, wiring_fault
+from hil.cli.commission import commission
+from hil.cli.commission_setup import simulated_transport, wiring_fault
 from hil.master.commission import TRANSITIONS, Commission, CommissionMaster, CommissionStop, Scan
 from hil.master.commission_rules import (
     DEAD_FRACTION,

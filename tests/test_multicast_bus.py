@@ -18,7 +18,7 @@ from hil.errors import InterfaceError
 from support.run_flags import assert_run_flag
 
 can = pytest.importorskip("can")
-pytest.importorskip("msgpack", reason="python-can's udp_multicast needs msgpack (the [test] extra)")
+pytest.importorskip("msgpack", reason="python-can's udp_multicast needs msgpack (a dependency of emacheck)")
 # one multicast test at a time on this host (docs/testing.md, "Parallel")
 pytestmark = pytest.mark.xdist_group("udp_multicast")
 

@@ -1,8 +1,9 @@
 """``emacheck commission``: a rig brought up before its first check (the IO shell of
 :mod:`hil.master.commission`, over :mod:`hil.master.link` as the check runs).
 
-Real drives: ``--interface``, ``--channel`` and ``--arm``. Simulated drives in process: ``--simulate``
-(the dry-run's simulated rig, with ``--wiring-fault`` or the simulated-rig profile's ``[[faults]]``).
+Real drives: ``--interface``, ``--channel`` and ``--arm`` (``--rt-priority``). Simulated drives in process:
+``--simulate`` (the simulated rig sim-serve serves, with ``--wiring-fault`` or the simulated-rig profile's
+``[[faults]]``; with ``--sim`` built from that rig's own actuation profile): :mod:`hil.cli.commission_setup`.
 The report (``commission.json``, ``commission.html``), the profile patch, a copy of the profiles judged and the
 CAN log go into a new folder, written once (:mod:`hil.cli.commission_out`).
 """
@@ -10,16 +11,15 @@ CAN log go into a new folder, written once (:mod:`hil.cli.commission_out`).
 from __future__ import annotations
 
 import argparse
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 from hil.cli.args import ExitCode, add_bus_args, add_parser, add_profile_args
-from hil.cli.bus import multicast_hops_for, open_bus
 from hil.cli.check import master_setup, rig_nodes_text
 from hil.cli.commission_out import identities, print_summary, report_data, write_outputs
+from hil.cli.commission_setup import add_rig_args, ended_in, open_rig, refused, stale_finding
 from hil.cli.console import make_console
-from hil.profile.load import load_actuation, load_check, load_simrig
+from hil.profile.load import load_actuation, load_check
 from hil.record.outputs import check_new_run_folder, file_hashes, out_dir
 
 
@@ -34,47 +34,16 @@ class CommissionRun:
     link: object
 
 
-def wiring_fault(text: str):
-    """``--wiring-fault KIND[:EMA[:VALUE]]`` -> a :class:`sim.faults.Fault` (argparse type)."""
-    from blf.errors import InputError
-    from sim.faults import WIRING_KINDS, Fault, FaultKind
-
-    parts = text.split(":")
-    kinds = sorted(k.value for k in WIRING_KINDS)
-    if parts[0] not in kinds:
-        raise argparse.ArgumentTypeError(f"{parts[0]!r} is not a wiring fault; known: {', '.join(kinds)}")
-    try:
-        ema = int(parts[1]) if len(parts) > 1 and parts[1] else 1
-        kw = {"value": float(parts[2])} if len(parts) > 2 else {}
-        return Fault(FaultKind(parts[0]).value, ema=ema, **kw)
-    except (ValueError, InputError) as exc:
-        raise argparse.ArgumentTypeError(f"{text!r}: {exc} (KIND[:EMA[:VALUE]], EMA 1 or 2)") from None
-
-
-def simulated_transport(act, rig, simrig, faults, seed: int | None):
-    """The dry-run's simulated rig on the in-process bus, with ``faults`` (wiring faults among them)."""
-    import numpy as np
-
-    from hil.canopen.od import load_eds
-    from hil.transport import InProcessTransport
-    from sim.drives import SimDrivePair
-    from sim.faults import FaultInjector
-    from sim.plant import RigPlant
-
-    seed = simrig.seed if seed is None else seed
-    rng = np.random.default_rng(seed)
-    pair = SimDrivePair(RigPlant(simrig.params, rng), rig.plan,
-                        lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id), serials=simrig.serials)
-    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]), record_truth=False)
-    return InProcessTransport(injector, act.timing.sync_period_s)
-
-
 def commission(act, check, rig, transport, out: Path, *, console=None, context: dict | None = None,
-               paths: dict | None = None, eds: Path | None = None) -> CommissionRun:
+               rt_priority: int | None = None, loop_ended=None, paths: dict | None = None,
+               eds: Path | None = None) -> CommissionRun:
     """Commission the rig over ``transport``; the report, the profile patch, a copy of each profile judged
     (``paths``: ``{"actuation": file, "check": file}``, None: the shipped one) and the CAN log go into ``out``
     (new or empty).
 
+    The link keeps the check's freshness rule (:func:`hil.check.staleness.stale_limit`: the derived stall budget
+    where both drives keep their limits); a stop on stale data names the PC (``rt_priority``: the loop's
+    SCHED_FIFO priority, for its words). ``loop_ended`` is called once the drives are stopped, before the report.
     Returns the exit status (0 ready, :attr:`ExitCode.NOT_READY` with every problem named) and the report.
     """
     from hil.canopen.errors import CanopenError
@@ -100,7 +69,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     log = CanLogWriter(out / "can.log", channel=str(context["bus"]["channel"]),
                        time_offset_s=0.0 if sim else transport.wall_clock_offset_s)
     link = CanopenLink(master, transport, log, max_missing_cycles=check.safety.max_stale_cycles,
-                       max_lag_s=check.safety.max_lag_s)
+                       max_lag_s=check.safety.max_lag_s, safety=safety)
     try:
         smp = link.first_sample()
         while True:
@@ -110,12 +79,15 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
             smp = link.exchange(sp1, sp2)
     except (*KNOWN_ERRORS, CanopenError, KeyboardInterrupt) as exc:
         core.failed(exc)
+        core.findings[-1:] = [stale_finding(f, exc, rt_priority) for f in core.findings[-1:]]
         link.abort()
         interrupted = isinstance(exc, KeyboardInterrupt)
     else:
         interrupted = False
     finally:
         link.close()
+        if loop_ended is not None:
+            loop_ended()
     final = link.final_states or {}
     for ema, d in final.items():
         scanned = core.scan.nodes.get(d["node"], {})
@@ -125,8 +97,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
                 scanned.get("answers") is False:
             continue
         core.findings.append(Finding(Stage.DONE, Kind.NOT_SAFE, f"canopen.node_id_{ema}",
-                                     f"{ema}: last known {d['state']}, confirmed {d['confirmed']}, reachable "
-                                     f"{d['reachable']}"))
+                                     f"{ema}: ended in {ended_in(d, scanned)}, reachable {d['reachable']}"))
     paths = {"actuation": None, "check": None} | (paths or {})
     explanation = _explained(core, act, paths["actuation"], eds)
     report = report_data(core, master, link, final, context, explanation, identities(act, rig, core.scan.nodes))
@@ -170,50 +141,34 @@ def cmd_commission(args: argparse.Namespace) -> int:
         console.print("[red]refusing to move anything:[/red] `emacheck commission` moves real actuators a little; "
                       "add --arm to confirm the rig is clear (profiles were checked, nothing was sent)")
         return ExitCode.INPUT
-    if args.wiring_fault and not args.simulate:
-        console.print("[red]--wiring-fault needs --simulate[/red]")
+    if why := refused(args):
+        console.print(f"[red]{why}[/red]")
         return ExitCode.INPUT
     rig = master_setup(act, profile, args.eds)
     check_new_run_folder(args.out)
     context = {"profiles": {"actuation": str(profile or "(shipped)"), "check": str(args.check or "(shipped)")},
                "files_sha256": file_hashes(actuation=profile, check=args.check)}
-    bus = None
-    if args.simulate:
-        simrig = load_simrig(args.sim)
-        faults = tuple(simrig.faults) + tuple(args.wiring_fault or ())
-        transport = simulated_transport(act, rig, simrig, faults, args.seed)
-        wiring = [{"kind": f.kind, "ema": f.ema, "value": f.param if math.isfinite(f.param) else None}
-                  for f in faults if f.kind in _wiring_kinds()]
-        context |= {"simulated": True, "seed": simrig.seed if args.seed is None else args.seed,
-                    "wiring_faults": wiring, "bus": {"interface": "in-process", "channel": "simulated"}}
-    else:
-        bitrate = args.bitrate or act.canopen.bitrate_bps
-        bus = open_bus(args.interface, args.channel, bitrate, receive_own_messages=args.interface == "virtual",
-                       multicast_hops=args.multicast_hops)
-        from hil.transport import BusTransport
-
-        transport = BusTransport(bus, act.timing.sync_period_s)
-        context |= {"simulated": False, "bus": {"interface": args.interface, "channel": args.channel,
-                                                "bitrate_bps": bitrate,
-                                                "multicast_hops": multicast_hops_for(args.interface,
-                                                                                     args.multicast_hops)}}
+    transport, bus, more = open_rig(args, act, rig, profile)
+    context["files_sha256"] |= more.pop("files_sha256", {})
+    context |= more
     out = out_dir(args.out, "commission")
     console.print(f"emacheck commission: {rig_nodes_text(rig)} on {context['bus']['interface']}:"
                   f"{context['bus']['channel']}; folder {out}")
+    from hil.cli.realtime import end_realtime, prepare_realtime
+
     try:
+        if bus is not None:  # a real bus: the loop set up as run's (memory locked, SCHED_FIFO on request)
+            rt = prepare_realtime(args.rt_priority, bounded=True, cpu_latency_us=args.cpu_latency_us)
+            console.print(f"real time: {rt}")
         run = commission(act, check, rig, transport, out, console=console, context=context,
+                         rt_priority=args.rt_priority, loop_ended=end_realtime if bus is not None else None,
                          paths={"actuation": profile, "check": args.check}, eds=args.eds)
     finally:
         transport.close()
         if bus is not None:
             bus.shutdown()
+            end_realtime()
     return run.exit_code
-
-
-def _wiring_kinds() -> set[str]:
-    from sim.faults import WIRING_KINDS
-
-    return {k.value for k in WIRING_KINDS}
 
 
 def register(sub) -> None:
@@ -252,12 +207,9 @@ def register(sub) -> None:
                    help="actuation profile (default: the shipped one; --profile says the same)")
     p.add_argument("--simulate", action="store_true",
                    help="the simulated drives on an in-process bus instead of --interface/--channel (no --arm)")
-    p.add_argument("--wiring-fault", action="append", type=wiring_fault, metavar="KIND[:EMA[:VALUE]]",
-                   help="with --simulate, wire the simulated rig wrongly (repeatable): lvdt_sign, lvdt_scale "
-                        "(VALUE: reading / stroke, default 0.5), lvdt_dead, loadcell_sign, loadcell_scale, "
-                        "loadcell_dead, lvdts_swapped, loadcells_swapped; e.g. lvdt_sign:2, loadcell_scale:1:0.1")
     p.add_argument("--arm", action="store_true", help="confirm that the actuators may move (real drives)")
     p.add_argument("--out", metavar="DIR", type=Path,
                    help="new or empty folder for the report (default emacheck-runs/<time>-commission)")
-    add_profile_args(p, sim=True)
+    add_profile_args(p)
+    add_rig_args(p)
     add_bus_args(p.add_argument_group("real drives (with --arm)"), "socketcan, pcan, kvaser", required=False)

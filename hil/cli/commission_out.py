@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hil.cli.commission_setup import ended_in
 from hil.record.outputs import Outputs, utc_iso
 
 __all__ = ["PATCH", "REPORT_HTML", "REPORT_JSON", "identities", "print_summary", "report_data", "write_outputs"]
@@ -111,8 +112,8 @@ def print_summary(console, report: dict, out: Path) -> None:
     for ema, d in report["drives_final"].items():
         ident = (report["identity"].get(ema) or {}).get("serial")
         serial = f", serial 0x{ident:08X} (0x1018:04)" if ident else ""
-        state = d["state"] if d["state"] is not None else "an unknown state"
-        console.print(f"  {ema}: node {d['node']}{serial}, ended in {state} (confirmed {d['confirmed']})")
+        scanned = report["scan"]["nodes"].get(str(d["node"]), {})
+        console.print(f"  {ema}: node {d['node']}{serial}, ended in {ended_in(d, scanned)}")
     word = "[green]READY[/green] for its first check" if report["status"] == "ready" else \
         f"[red]NOT READY[/red]: {len(report['findings'])} problem(s)"
     console.print(f"rig {word}; report {out / REPORT_HTML}")

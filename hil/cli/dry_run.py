@@ -78,28 +78,19 @@ def _dry_run(act, check, simrig, out: Path, fork, *, seed, faults, realtime, qui
     """:func:`dry_run` with its console, planned rig and :class:`~hil.cli.analysis_fork.AnalysisFork`."""
     import numpy as np
 
-    from hil.canopen.od import load_eds
     from hil.master.core import MasterCore
     from hil.master.link import CanopenLink
     from hil.master.stalls import MasterStalls
     from hil.record.canlog import CanLogWriter
+    from hil.sim_server import simulated_rig
     from hil.transport import InProcessTransport
-    from sim.drives import SimDrivePair
-    from sim.faults import FaultInjector
-    from sim.plant import RigPlant
     from sim.truth import rig_truth
 
     load = rig.plan.load
     seed = simrig.seed if seed is None else seed
     faults = tuple(simrig.faults if faults is None else faults)
     out.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(seed)
-    plant = RigPlant(simrig.params, rng)
-    eds_of = sim_rig.eds_paths
-    pair = SimDrivePair(plant, sim_rig.plan, lambda name, node_id: load_eds(eds_of[name], node_id=node_id),
-                        serials=simrig.serials)
-    injector = FaultInjector(pair, faults, rng=np.random.default_rng([seed, 7]),
-                             record_truth=bool(faults) or stall is not None)
+    injector = simulated_rig(simrig, sim_rig, faults, seed=seed, record_truth=bool(faults) or stall is not None)
     truth = truth_dict(rig_truth(simrig.params))
     record = start_record(act, check, mode=RunMode.DRY_RUN, seed=seed, realtime=bool(realtime),
                           simrig=snapshot(simrig.params), truth=truth, faults=tuple(snapshot(f) for f in faults),

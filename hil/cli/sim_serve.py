@@ -15,25 +15,20 @@ from hil.record.runfolder import create_json
 
 def cmd_sim_serve(args: argparse.Namespace) -> int:
     """``emacheck sim-serve``: the two simulated drives on a CAN bus until SIGINT/SIGTERM."""
-    import numpy as np
-
-    from hil.canopen.od import load_eds
     from hil.profile.load import load_actuation, load_simrig
     from hil.profile.rig import plan_for
-    from hil.sim_server import serve
-    from sim.drives import SimDrivePair
-    from sim.plant import RigPlant
+    from hil.sim_server import faults_text, serve, simulated_rig
 
     if args.timing_json is not None and Path(args.timing_json).exists():  # written at the end: refused now
         from hil.errors import OutputError
         raise OutputError(f"--timing-json {args.timing_json}: exists; never overwritten (name a new file)")
-    act = load_actuation(args.profile)
     simrig = load_simrig(args.sim)
-    rig = plan_for(act, args.profile, args.eds)  # the same profile, map and EDS files as the master's
+    # the nodes as --profile says (the master's profile), else as the simulated rig's own (`actuation = `)
+    profile = args.profile if args.profile is not None else simrig.actuation
+    act = load_actuation(profile)
+    rig = plan_for(act, profile, args.eds)
     seed = simrig.seed if args.seed is None else args.seed
-    plant = RigPlant(simrig.params, np.random.default_rng(seed))
-    pair = SimDrivePair(plant, rig.plan, lambda name, node_id: load_eds(rig.eds_paths[name], node_id=node_id),
-                        serials=simrig.serials)
+    pair = simulated_rig(simrig, rig, seed=seed)  # with the simulated rig's [[faults]], as in process
     bus = open_bus(args.interface, args.channel, args.bitrate or act.canopen.bitrate_bps,
                    multicast_hops=args.multicast_hops)
 
@@ -46,8 +41,8 @@ def cmd_sim_serve(args: argparse.Namespace) -> int:
     rt = prepare_realtime(args.rt_priority, cpu_latency_us=args.cpu_latency_us)
 
     def ready() -> None:
-        print(f"sim-serve: {rig_nodes_text(rig)} on {args.interface}:{args.channel}, seed {seed}, {rt}; ready",
-              flush=True)
+        print(f"sim-serve: {rig_nodes_text(rig)} on {args.interface}:{args.channel}, seed {seed}, "
+              f"{faults_text(pair.faults)}, {rt}; ready", flush=True)
 
     try:
         stats = serve(bus, pair, stop=stop, on_ready=ready, period_s=act.timing.sync_period_s)
@@ -82,9 +77,13 @@ def register(sub) -> None:
                                "SYNC received. SIGINT/SIGTERM end it cleanly.")
     add_bus_args(p, "socketcan, virtual")
     p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
-                   help="actuation profile (the drives, sensor nodes and signal map the master uses)")
+                   help="actuation profile the simulated nodes are built as (their node ids, EDS files, signal "
+                        "map and scalings); default: the simulated-rig profile's own (its `actuation`, else the "
+                        "shipped one)")
     add_eds_arg(p)
-    p.add_argument("--sim", metavar="SIMRIG.toml", type=Path, help="simulated-rig profile")
+    p.add_argument("--sim", metavar="SIMRIG.toml", type=Path,
+                   help="simulated-rig profile (the plant, the seed, the serial numbers; its [[faults]], wiring "
+                        "faults included, are applied as in `dry-run` and `commission --simulate`)")
     add_seed_arg(p)
     rt_priority_arg(p, "run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")
     add_cpu_latency_arg(p)

@@ -273,10 +273,21 @@ class Commission:
             stage = self.stage if self.stage is not Stage.STOPPED else Stage.PREFLIGHT
             kind = Kind.PREFLIGHT if stage in (Stage.SCAN, Stage.PREFLIGHT) else Kind.STOP
             text = f"{type(exc).__name__}: {exc}"
-            # the key the error names, else the table it concerns: the drives' configuration, or the link's limits
-            self.findings.append(Finding(stage, kind, key_of(text, "canopen" if kind is Kind.PREFLIGHT else "safety"),
-                                         text))
+            # the key the error carries or names, else the table it concerns: the drives' configuration, or the
+            # link's limits
+            key = self._key_of(exc) or key_of(text, "canopen" if kind is Kind.PREFLIGHT else "safety")
+            self.findings.append(Finding(stage, kind, key, text))
         self.stage = Stage.STOPPED
+
+    def _key_of(self, exc: BaseException) -> str:
+        """The profile key an error that stopped the commissioning concerns: its own (a preflight's), the SDO
+        timeout, or the EDS of a node that refused an object its EDS offers; "" where none is known."""
+        if key := getattr(exc, "key", ""):
+            return key
+        if isinstance(exc, SdoTimeout):
+            return "canopen.sdo_timeout_s"
+        spec = next((n.spec for n in self.plan.nodes if n.spec.node_id == getattr(exc, "node_id", None)), None)
+        return f"{spec.key}.eds" if isinstance(exc, SdoAbortError) and spec is not None else ""
 
     # ------------------------------------------------------------ the cyclic phase
 

@@ -430,7 +430,8 @@ class MasterCore:
             if isinstance(self._pending, WaitBoot) and t > self._boot_deadline:
                 missing = [v.label for v in self.nodes.values() if not v.booted]
                 raise PreflightError(f"{', '.join(missing)}: no boot-up within "
-                                     f"canopen.boot_timeout_s = {self.act.canopen.boot_timeout_s} s of NMT reset")
+                                     f"canopen.boot_timeout_s = {self.act.canopen.boot_timeout_s} s of NMT reset",
+                                     "canopen.boot_timeout_s")
             for n, c in self._sdo.items():
                 try:
                     c.poll(t)  # raises SdoTimeout (its abort frame is in the exception)

@@ -228,7 +228,7 @@ class CanopenLink:
                 now = self.tr.now()
                 if now > limit:
                     raise PreflightError("preflight did not complete within "
-                                         f"{limit - t0:.0f} s")
+                                         f"{limit - t0:.0f} s", "canopen.boot_timeout_s")
                 self._feed(self.tr.receive(now + 0.01))
                 self._send(self.m.poll(self.tr.now()))
         except (SdoAbortError, SdoTimeout) as exc:
@@ -308,7 +308,7 @@ class CanopenLink:
                 states = {n: d.state.name if d.last_tpdo_s is not None else "statusword never read"
                           for n, d in self.m.drives.items()}
                 raise PreflightError(f"drives not in OPERATION_ENABLED within canopen.enable_timeout_s = "
-                                     f"{self.m.act.canopen.enable_timeout_s} s: {states}")
+                                     f"{self.m.act.canopen.enable_timeout_s} s: {states}", "canopen.enable_timeout_s")
             hold = (Setpoint(DriveMode.POSITION, smp.phi1_rad), Setpoint(DriveMode.POSITION, smp.phi2_rad))
             self._send(self.m.setpoint_frames(*hold, smp))
             smp = self._next_sample()

@@ -71,7 +71,12 @@ __all__ = ["DrillOutcome", "DrillResult", "MasterLossRecord", "Preflight", "Pref
 
 
 class PreflightError(EmacheckError, RuntimeError):
-    """A node does not match the profile or did not come up."""
+    """A node does not match the profile or did not come up; ``key``: the profile key it concerns ("" where
+    none is known), as the commissioning names its findings."""
+
+    def __init__(self, message: str = "", key: str = "") -> None:
+        super().__init__(message)
+        self.key = key
 
 
 class SameSerialError(PreflightError):
@@ -302,11 +307,12 @@ class Preflight:
             self.events.append((spec.node_id, f"identity {'; '.join(unread)} not read: not compared with the "
                                               f"profile's {spec.key}.product_code / revision_min"))
         for problem in identity_problems(spec, ident):
-            raise PreflightError(problem)
+            raise PreflightError(problem, f"{spec.key}.revision_min" if " revision " in problem
+                                 else f"{spec.key}.product_code")
         self._distinct_serial(spec)
         devtype = int((yield from self._read(node, 0x1000, 0, "device type")))
         for problem in identity_problems(spec, None, devtype):
-            raise PreflightError(problem)
+            raise PreflightError(problem, f"{spec.key}.device_profile")
 
     def _distinct_serial(self, spec) -> None:
         """The drive ``spec`` must not report the serial number (0x1018:04, with vendor and product) of the
@@ -325,7 +331,8 @@ class Preflight:
                 raise SameSerialError(
                     f"{other.label} and {spec.label} both report serial number 0x{key[2]:08X} (0x1018:04, "
                     f"vendor 0x{key[0]:08X}, product 0x{key[1]:08X}): two actuators of one serial cannot be "
-                    f"traced; check each drive's identity (a copied parameter set?) before the check")
+                    f"traced; check each drive's identity (a copied parameter set?) before the check",
+                    "canopen.node_id_ema1, canopen.node_id_ema2")
 
     def _common(self, node: NodePlan) -> Generator:
         hb_ms = int(round(node.spec.heartbeat_period_s * 1000))
@@ -339,17 +346,18 @@ class Preflight:
         d.modes = modes
         if not modes >> CSP_BIT & 1:
             raise PreflightError(f"{spec.label}: does not support CSP (0x6502 = 0x{modes:08X}); the check "
-                                 f"commands positions in cyclic synchronous position mode")
+                                 f"commands positions in cyclic synchronous position mode", f"{spec.key}.eds")
         if plan.force_control is ForceControl.CST and not modes >> CST_BIT & 1:
             raise PreflightError(f"{spec.label}: does not support CST (0x6502 = 0x{modes:08X}); set "
-                                 f"canopen.force_control = \"csp\" (the master's force loop) or check the drive")
+                                 f"canopen.force_control = \"csp\" (the master's force loop) or check the drive",
+                                 "canopen.force_control")
         if self.plan.gear_ratio_object is not None:
             gi, gs = self.plan.gear_ratio_object
             ratio = float((yield from self._read(node, gi, gs, "gear ratio")))
             want = self.act.mechanics.i_total_rad_per_mm
             if not math.isclose(ratio, want, rel_tol=1e-5):
                 raise PreflightError(f"{spec.label}: gear ratio {object_name(gi, gs)} = {ratio:.6f} rad/mm, profile "
-                                     f"mechanics.i_total_rad_per_mm = {want:.6f}")
+                                     f"mechanics.i_total_rad_per_mm = {want:.6f}", "mechanics.i_total_rad_per_mm")
         yield from self._scales(d)
         yield from self._limits(d)
         if node.can_write(0x60C2, 1) and node.can_write(0x60C2, 2):
@@ -378,7 +386,8 @@ class Preflight:
             inc = yield from self._read(node, 0x608F, 1, "encoder increments")
             revs = yield from self._read(node, 0x608F, 2, "motor revolutions")
             if revs <= 0 or inc <= 0:
-                raise PreflightError(f"{spec.label}: encoder resolution 0x608F = {inc}/{revs} is not a resolution")
+                raise PreflightError(f"{spec.label}: encoder resolution 0x608F = {inc}/{revs} is not a resolution",
+                                     f"signals.ema{d.ema}.motor_angle")
             counts = inc / revs
         if angle.source is ScaleSource.ENCODER:
             d.scales[Signal.MOTOR_ANGLE] = angle_scale_counts(counts)
@@ -389,13 +398,14 @@ class Preflight:
                 vals.append(int((yield from self._read(node, i, s, what))))
             if min(vals) <= 0:
                 raise PreflightError(f"{spec.label}: position factor 0x6091 = {vals[0]}/{vals[1]}, 0x6092 = "
-                                     f"{vals[2]}/{vals[3]} is not a scaling")
+                                     f"{vals[2]}/{vals[3]} is not a scaling", f"signals.ema{d.ema}.motor_angle")
             d.scales[Signal.MOTOR_ANGLE] = angle_scale_factor_group(*vals)
         elif counts is not None and angle.node_id == spec.node_id and \
                 not math.isclose(angle.scale.units_per_si, angle_scale_counts(counts).units_per_si, rel_tol=1e-9):
             want = angle.scale.units_per_si * 2 * math.pi
             raise PreflightError(f"{spec.label}: encoder resolution 0x608F = {counts:g} increments per revolution, "
-                                 f"profile signals.ema{d.ema}.motor_angle.counts_per_rev = {want:.6g}")
+                                 f"profile signals.ema{d.ema}.motor_angle.counts_per_rev = {want:.6g}",
+                                 f"signals.ema{d.ema}.motor_angle.counts_per_rev")
         if Signal.MOTOR_ANGLE in d.scales:
             d.scales[Signal.TARGET_POSITION] = d.scales[Signal.MOTOR_ANGLE]
         torque = self.plan.channel(d.ema, Signal.TARGET_TORQUE)
@@ -403,6 +413,7 @@ class Preflight:
             rated_mNm = int((yield from self._read(node, 0x6076, 0, "rated torque")))
             if rated_mNm <= 0:
                 raise PreflightError(f"{spec.label}: rated torque 0x6076 is {rated_mNm} mN m; give "
+                                     f"signals.ema{d.ema}.target_torque.rated_torque_Nm",
                                      f"signals.ema{d.ema}.target_torque.rated_torque_Nm")
             d.rated_torque_Nm = rated_mNm / 1000.0
             d.scales[Signal.TARGET_TORQUE] = torque_scale(d.rated_torque_Nm, self.act.mechanics.i_total_rad_per_mm)
@@ -426,7 +437,7 @@ class Preflight:
                 yield from self._write(node, o.index, o.sub, lim.value, lim.kind.value)
                 got = yield from self._read(node, o.index, o.sub, lim.kind.value, soft=True)
                 if problem := readback_problem(spec.label, lim, got):
-                    raise PreflightError(problem)
+                    raise PreflightError(problem, f"{spec.key}.eds")
                 max_torque = got if lim.kind is LimitKind.MAX_TORQUE else max_torque
         if self.forces is None or d.plan.force_control is not ForceControl.CST or torque is None:
             return
@@ -438,7 +449,7 @@ class Preflight:
                 f"{spec.label}: max torque 0x6072 = {int(max_torque)} per mille of the rated torque allows "
                 f"{max_torque / k:.0f} N at the ram; the calibration's opposing force needs {opposing_N:g} N "
                 f"(check profile calibration.opposing_force_N): set 0x6072 in the drive, or hold forces in CSP "
-                f"(canopen.force_control = \"csp\")")
+                f"(canopen.force_control = \"csp\")", "calibration.opposing_force_N")
 
     def _set_mode_by_sdo(self, d: DriveSetup, mode: OperationMode) -> Generator:
         """0x6060 = ``mode`` by SDO, confirmed by 0x6061 within ``canopen.mode_change_timeout_s``."""
@@ -455,7 +466,7 @@ class Preflight:
             if t > deadline:
                 raise PreflightError(f"{spec.label}: modes of operation {int(mode)} ({mode.name}) not confirmed by "
                                      f"0x6061 within canopen.mode_change_timeout_s = {self.c.mode_change_timeout_s} s "
-                                     f"(0x6061 = {shown})")
+                                     f"(0x6061 = {shown})", "canopen.mode_change_timeout_s")
             yield Wait(t + self.T)
 
     def _reaction(self, d: DriveSetup) -> Generator:
@@ -625,7 +636,9 @@ class Preflight:
                     code = yield from self._read(node, 0x603F, 0, "error code", soft=True)
                     if not isinstance(code, (SdoAbortError, SdoTimeout)):
                         err = f", error code 0x603F = 0x{int(code):04X}"
-                raise PreflightError(step.failed + err)
+                key = "canopen.fault_reset_attempts" if "fault_reset_attempts" in step.failed else \
+                    "canopen.enable_timeout_s"
+                raise PreflightError(step.failed + err, key)
             for cw in step.controlwords:
                 yield from self._write(node, 0x6040, 0, cw, f"controlword ({step.what})")
             if step.controlwords:

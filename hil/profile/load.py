@@ -339,6 +339,11 @@ class SimRigProfile:
     serials: tuple[int, int] | None = None
     #: backlash growth with flight hours from ``[wear]`` (applied by ``--flight-hours``); None: no wear
     wear: WearParams | None = None
+    #: ``actuation = "FILE"``: the actuation profile the simulated rig is built as (its nodes, EDS files, signal
+    #: map and scalings), resolved next to this profile, else as given, else among the shipped ones; None: not
+    #: named (the shipped actuation profile). Used by ``commission --simulate --sim`` and by ``sim-serve``
+    #: without ``--profile`` (docs/commission.md, *A rehearsal*).
+    actuation: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -357,10 +362,13 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     required = ["seed", "rig", "ema1", "ema2", "drive", "surface", "sensors1", "sensors2"]
     problems = Problems()
     with problems.collect():
-        check_keys(data, required + ["effects", "faults", "identity", "wear"], "", fname)
+        check_keys(data, required + ["actuation", "effects", "faults", "identity", "wear"], "", fname)
     for key in required:
         if key not in data:
             problems.add(f"{fname}: missing {'field' if key == 'seed' else 'table'} '{key}'")
+    actuation = None
+    with problems.collect():
+        actuation = _sim_actuation(data.get("actuation"), path)
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         problems.add(f"{fname}: field 'seed' must be a non-negative integer, got {seed!r}")
@@ -382,7 +390,22 @@ def load_simrig(path: str | Path | None = None) -> SimRigProfile:
     problems.raise_any()
     params = RigParams(**rig, effects=effects, **parts)
     serials = (ident.serial_ema1, ident.serial_ema2) if ident is not None else None
-    return SimRigProfile(params=params, seed=seed, faults=faults, serials=serials, wear=wear)
+    return SimRigProfile(params=params, seed=seed, faults=faults, serials=serials, wear=wear, actuation=actuation)
+
+
+def _sim_actuation(name: Any, path: Path) -> Path | None:
+    """``actuation = "FILE"`` of a simulated-rig profile at ``path``: the file, next to the profile first (as an
+    EDS is found), else the path as given, else a shipped profile of that name; None where the key is absent."""
+    if name is None:
+        return None
+    if not isinstance(name, str) or not name.strip():
+        raise ProfileError(f"{path.name}: field 'actuation' must be the file name of an actuation profile, "
+                           f"got {name!r}")
+    for p in (path.parent / name, Path(name), default_profile_path(name)):
+        if p.is_file():
+            return p
+    raise ProfileError(f"{path.name}: field 'actuation' = {name!r}: no such file (looked next to {path} and among "
+                       f"the shipped profiles)")
 
 
 def _sim_rig_table(rig: Any, fname: str) -> dict:

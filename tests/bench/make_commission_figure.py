@@ -17,7 +17,8 @@ TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]  # the repository (hil, blf, sim) and tests/ (support)
 
 from hil.cli.check import master_setup  # noqa: E402
-from hil.cli.commission import commission, simulated_transport, wiring_fault  # noqa: E402
+from hil.cli.commission import commission  # noqa: E402
+from hil.cli.commission_setup import simulated_transport, wiring_fault  # noqa: E402
 from hil.profile.load import load_actuation, load_check, load_simrig  # noqa: E402
 from hil.report.commission import figure_movements  # noqa: E402
 from hil.report.shell import laid_out  # noqa: E402
