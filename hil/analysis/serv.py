@@ -43,12 +43,12 @@ from blf.maint import (
     runs,
     serv_uncertainty,
 )
-from blf.serv import blf_serv, estimate_noise_std_mm
+from blf.serv import blf_serv, estimate_noise_std_mm, motion_through_jumps, with_known_scale
 from blf.signals import CHANNELS, position_differences
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.analysis.maint import spec_mm
 from hil.errors import RecordingError
-from hil.profile.config import Actuation
+from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
 from hil.record.runfolder import Signals
 
 
@@ -159,6 +159,15 @@ class ServAnalysis:
     act: Actuation
 
 
+def pitch_bound(correction: LvdtCorrection) -> float:
+    """The largest relative pitch error the corrected LVDT strokes may still carry: the calibration's residual,
+    else (no calibration) the largest the house admits for an LVDT, ``HARD_LVDT_GAIN_TOLERANCE`` (10 %; the
+    paper's is 7.5 %). What a jump must clear to count (:mod:`blf.serv.scale`)."""
+    if correction.residual_pitch_error is not None:
+        return float(correction.residual_pitch_error)
+    return HARD_LVDT_GAIN_TOLERANCE
+
+
 #: the fewest samples a recording must hold for BLFserv
 MIN_SAMPLES_SERV = 100
 
@@ -191,6 +200,13 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
     for ch in CHANNELS:
         _noisy(d[ch], ch)
     results = {ch: blf_serv(d[ch], rate, method=method, t0_s=float(sig.t[0])) for ch in CHANNELS}
+    # a jump counts only where it crosses the band whatever the LVDT's scale (blf.serv.scale): the ram's travel
+    # through it on the motor's exact scale, phi / i, times the largest pitch error the scale may have
+    x = {"int1": sig.phi1 / i, "int2": sig.phi2 / i, "ext": 0.5 * (sig.phi1 + sig.phi2) / i}
+    bound = pitch_bound(correction)
+    for ch in CHANNELS:
+        dx = motion_through_jumps(x[ch], rate, results[ch].jumps, t0_s=float(sig.t[0]))
+        results[ch] = with_known_scale(results[ch], dx, bound, lvdts=2 if ch == "ext" else 1)
     pitches = [abs(p - 1.0) for p in correction.pitch.values() if p is not None]
     pitch_err = max(pitches) if pitches else PAPER_PITCH_ERROR
     budget = backlash_error_budget(
@@ -278,8 +294,7 @@ def serv_verdicts(an: ServAnalysis) -> tuple[dict, list[str]]:
         r = an.results[ch]
         limit = spec_mm(an.act, ch)
         if r.backlash_mm is None or not math.isfinite(r.backlash_mm):
-            verdicts[ch] = decide(None, None, limit, not_traversed=True,
-                                  missing="not traversed: no backlash crossing counted in this recording")
+            verdicts[ch] = decide(None, None, limit, not_traversed=True, missing=_why_not(an, ch))
             continue
         sigma = r.backlash_sigma_mm if r.backlash_sigma_mm is not None and math.isfinite(r.backlash_sigma_mm) else 0.0
         u = serv_uncertainty(r.backlash_mm, sigma, m.pitch_compensated_mm, m.temperature_mm, an.method)
@@ -290,3 +305,15 @@ def serv_verdicts(an: ServAnalysis) -> tuple[dict, list[str]]:
     return verdicts, notes
 
 
+
+
+def _why_not(an: ServAnalysis, ch: str) -> str:
+    """Why channel ``ch`` has no reading: no crossing, or jumps the LVDT's unknown scale could have made."""
+    scaled = [j for j in an.results[ch].jumps if j.reason.startswith("within the LVDT scale's reach")]
+    if not scaled:
+        return "not traversed: no backlash crossing counted in this recording"
+    cal = ("no LVDT calibration: its pitch may be off by up to "
+           f"{pitch_bound(an.correction):.0%}" if an.correction.residual_pitch_error is None
+           else f"the calibration leaves a pitch error of up to {pitch_bound(an.correction):.2%}")
+    return (f"not measured: {len(scaled)} jump(s) found, none larger than the LVDT's scale could make of the "
+            f"ram's travel through it ({cal}); the backlash band is not shown crossed (docs/blfserv.md)")
