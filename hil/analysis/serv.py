@@ -47,7 +47,7 @@ from blf.serv import blf_serv, estimate_noise_std_mm, motion_through_jumps, with
 from blf.signals import CHANNELS, position_differences
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.analysis.maint import spec_mm
-from hil.errors import RecordingError
+from hil.errors import RecordingError, UnusableRecordingError
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
 from hil.record.runfolder import Signals
 
@@ -157,6 +157,7 @@ class ServAnalysis:
     budget: AccuracyBudget
     method: str
     act: Actuation
+    steps: tuple = ()  #: the steps of the stretch analysed (a recording with a step column), else ()
 
 
 def pitch_bound(correction: LvdtCorrection) -> float:
@@ -171,6 +172,18 @@ def pitch_bound(correction: LvdtCorrection) -> float:
 #: the fewest samples a recording must hold for BLFserv
 MIN_SAMPLES_SERV = 100
 
+#: a check's steps that are not a motion BLFserv may read (its step column): before the drives hold their
+#: position (idle; enable, whose D steps are the motors pulling in as their current comes on: 0.04 to 0.05 mm
+#: on the simulated rig, no load reversal) and after the check (done; aborted: the safe stop)
+NOT_SERVICE = ("idle", "enable", "done", "aborted")
+NOT_SERVICE_WORDS = "LVDT calibration, the drives' enabling or the check's end (idle, enable, cal*, done, aborted)"
+
+
+def serv_steps(step: np.ndarray) -> np.ndarray:
+    """Which samples of a recording's step column BLFserv may read (bool per sample): none of the LVDT
+    calibration (``cal1_*``, ``cal2_*``) nor of :data:`NOT_SERVICE`."""
+    return np.array([not (str(x).startswith(("cal1_", "cal2_")) or str(x) in NOT_SERVICE) for x in step], dtype=bool)
+
 
 def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: str) -> ServAnalysis:
     """Position differences from the corrected strokes, BLFserv on each, and the error budget."""
@@ -178,22 +191,26 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
         raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= {MIN_SAMPLES_SERV})")
     i = act.mechanics.i_total_rad_per_mm
     s1, s2 = correction.s1_mm, correction.s2_mm
+    steps = ()
     if sig.step is not None:
-        # BLFserv is for normal operation: the calibration phases of a recording (step column) are not
-        # analysed, only the longest stretch without them
-        operation = np.array([not str(x).startswith(("cal1_", "cal2_")) for x in sig.step], dtype=bool)
+        # BLFserv is for normal operation: of a recording with a step column only the longest stretch of
+        # steps in motion (never the LVDT calibration, the drives' enabling, or what follows an abort)
+        operation = serv_steps(sig.step)
         spans = runs(operation)
-        if not spans:
-            raise RecordingError("the step column marks every sample as LVDT calibration: nothing to analyse")
-        a, b = max(spans, key=lambda r: r[1] - r[0])
+        a, b = max(spans, key=lambda r: r[1] - r[0]) if spans else (0, 0)
+        if b - a < MIN_SAMPLES_SERV:
+            raise UnusableRecordingError(
+                f"{b - a} sample(s) of motion (BLFserv needs at least {MIN_SAMPLES_SERV}): the step column marks "
+                f"the rest as {NOT_SERVICE_WORDS}")
+        steps = tuple(dict.fromkeys(str(x) for x in sig.step[a:b]))
         if b - a < sig.n:
             keep = np.zeros(sig.n, bool)
             keep[a:b] = True
             sig = sig.select(keep)
             s1, s2 = s1[a:b], s2[a:b]
             correction = replace(correction, notes=correction.notes + (
-                f"BLFserv on t = {sig.t[0]:.1f}..{sig.t[-1]:.1f} s only: the step column marks the rest as "
-                "LVDT calibration, not normal operation",))
+                f"BLFserv on t = {sig.t[0]:.1f}..{sig.t[-1]:.1f} s only (step {', '.join(steps)}): the step column "
+                f"marks the rest as {NOT_SERVICE_WORDS}, not normal operation",))
     pd = position_differences(sig.phi1, sig.phi2, s1, s2, i)
     d = {"int1": pd.d_int1_mm, "int2": pd.d_int2_mm, "ext": pd.d_ext_mm}
     rate = 1.0 / sig.sample_period_s
@@ -213,7 +230,7 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
         act.mechanics.stroke_limit_mm, pitch_err, act.sensors.lvdt_noise_pp_mm / 6.0, rate,
         backlash_mm=act.mechanics.backlash_spec_int_mm,
         residual_pitch_error=correction.residual_pitch_error if correction.residual_pitch_error is not None else 1e-3)
-    return ServAnalysis(sig, correction, d, results, budget, method, act)
+    return ServAnalysis(sig, correction, d, results, budget, method, act, steps)
 
 
 #: each channel's D in words, for messages
@@ -225,7 +242,7 @@ def _noisy(d_mm: np.ndarray, ch: str) -> None:
     try:
         estimate_noise_std_mm(d_mm)
     except AnalysisError:
-        raise RecordingError(
+        raise UnusableRecordingError(
             f"D_{ch} = {D_WORDS[ch]} holds no measurement noise (below 1e-6 mm): the LVDT or motor angle is not "
             f"a raw measurement (computed from the other, or smoothed); BLFserv needs the recorded signals"
         ) from None
@@ -261,7 +278,8 @@ def serv_dict(an: ServAnalysis, truth: dict | None, source: str) -> dict:
         "calibration": {"source": c.source, **{k: {"kind": c.kind[k], "pitch": c.pitch[k],
                                                     "offset_mm": c.offset_mm[k]} for k in ("ema1", "ema2")}},
         "accuracy": budget_dict(an.budget),
-        "recording": {"source": source, "samples": int(an.sig.n),
+        "recording": {"source": source, "samples": int(an.sig.n), "t_start_s": float(an.sig.t[0]),
+                      "t_end_s": float(an.sig.t[-1]), "steps": list(an.steps),
                       "duration_s": float(an.sig.t[-1] - an.sig.t[0]),
                       "sample_period_s": float(an.sig.sample_period_s)},
         "notes": list(an.sig.notes) + list(c.notes),
@@ -317,3 +335,22 @@ def _why_not(an: ServAnalysis, ch: str) -> str:
            else f"the calibration leaves a pitch error of up to {pitch_bound(an.correction):.2%}")
     return (f"not measured: {len(scaled)} jump(s) found, none larger than the LVDT's scale could make of the "
             f"ram's travel through it ({cal}); the backlash band is not shown crossed (docs/blfserv.md)")
+
+
+def unjudged_dict(act: Actuation, status: str, why: str, source: str) -> dict:
+    """serv.json of a run cut short (``status`` ``"aborted"`` or ``"incomplete"``) whose recording holds
+    nothing BLFserv can read (``why``): every channel not measured, no reading, no report."""
+    verdicts = {ch: decide(None, None, spec_mm(act, ch), missing=f"the run was cut short; {why}")
+                for ch in CHANNELS}
+    return {
+        "status": status, "analysis_error": why, "method": None,
+        "backlash_mm": dict.fromkeys(CHANNELS), "backlash_sigma_mm": dict.fromkeys(CHANNELS),
+        "traversals": dict.fromkeys(CHANNELS, 0), "jumps": {ch: [] for ch in CHANNELS},
+        "backlash_paper_mm": dict.fromkeys(CHANNELS),
+        "calibration": {"source": "none (nothing analysed)", "ema1": None, "ema2": None},
+        "recording": {"source": source, "samples": 0, "duration_s": 0.0, "sample_period_s": None},
+        "verdict": {ch: {"status": v.status, "backlash_mm": None, "uncertainty_mm": None, "limit_mm": v.limit_mm,
+                         "margin_mm": None, "traversals": 0, "reason": v.reason} for ch, v in verdicts.items()},
+        "decision_rule": "nothing judged: the recording of a run cut short holds no stretch BLFserv can read",
+        "notes": [],
+    }
