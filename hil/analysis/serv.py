@@ -64,6 +64,7 @@ class LvdtCorrection:
     s1_mm: np.ndarray
     s2_mm: np.ndarray
     notes: tuple
+    file: Path | None = None  #: the result.json the calibration was read from (None: none, or the recording's own)
 
 
 def _from_result_json(path: Path) -> dict:
@@ -105,17 +106,17 @@ def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
                               {k: float(cals[k].pitch) for k in cals}, {k: float(cals[k].offset_mm) for k in cals},
                               max(1e-4, float(max(res_err))), s["ema1"], s["ema2"], tuple(notes))
 
-    def linear(lin: dict, source: str) -> LvdtCorrection:
+    def linear(lin: dict, source: str, file: Path) -> LvdtCorrection:
         return LvdtCorrection(source, {"ema1": "linear", "ema2": "linear"},
                               {k: lin[k][0] for k in lin}, {k: lin[k][1] for k in lin}, 1e-3,
                               correct_linear(sig.s1, *lin["ema1"]), correct_linear(sig.s2, *lin["ema2"]),
-                              tuple(notes))
+                              tuple(notes), Path(file))
 
     if calibration_file is not None:
         lin = _from_result_json(Path(calibration_file))
         if lin["ema1"] is None or lin["ema2"] is None:
             raise RecordingError(f"{calibration_file}: calibration of both LVDTs needed (ema1, ema2)")
-        return linear(lin, f"--calibration {calibration_file}")
+        return linear(lin, f"--calibration {calibration_file}", calibration_file)
     if sig.step is not None:
         m1, m2 = sig.step == "cal1_sweep", sig.step == "cal2_sweep"
         if m1.sum() >= 100 and m2.sum() >= 100:
@@ -129,7 +130,7 @@ def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
             notes.append(f"result.json not usable for calibration: {exc}")
             lin = None
         if lin is not None and lin["ema1"] is not None and lin["ema2"] is not None:
-            return linear(lin, "run folder result.json (pitch, offset)")
+            return linear(lin, "run folder result.json (pitch, offset)", run_dir / "result.json")
     T = sig.sample_period_s
     cals = {}
     for k, phi, s, f in (("ema1", sig.phi1, sig.s1, sig.F1), ("ema2", sig.phi2, sig.s2, sig.F2)):

@@ -16,6 +16,7 @@ from hil.cli.console import make_console
 from hil.cli.history_glue import installation, record_history, refuse_foreign_history
 from hil.cli.result import INCOMPLETE_REASON, exit_for, trace_of
 from hil.errors import IncompleteRecordingError, RecordingError
+from hil.record.inputs import input_entry, recording_inputs
 from hil.record.outputs import Outputs, outputs_for
 from hil.record.recording import actuation_for, load_recording
 from hil.record.runfolder import read_record, resolve_recording
@@ -107,8 +108,11 @@ def cmd_serv(args: argparse.Namespace) -> int:
     if truth is not None:
         data["truth"] = truth
     data["run"] = run
+    inputs = recording_inputs(sig_path, run_dir, meta, args.profile) + (
+        [input_entry("calibration", an.correction.file)] if an is not None and an.correction.file is not None else [])
     data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order,
-                                              **installation(args, act, meta).as_json(), "modified": modified})
+                                              **installation(args, act, meta).as_json(), "modified": modified,
+                                              "inputs": inputs})
     # said first among the notes, on the console and in the report: a run cut short, a recording changed
     data["notes"] = ([run["words"]] if cut_short else []) + ([modified["words"]] if modified else []) + list(
         data["notes"])
