@@ -51,17 +51,19 @@ def _by_role(inputs: list[dict]) -> dict:
     return {i["role"]: i for i in inputs}
 
 
-def _serv(tmp_path, *args) -> dict:
+def _serv(tmp_path, *args, report: bool = False) -> dict:
     out = tmp_path / "out"
-    assert main(["serv", *map(str, args), "--out", str(out), "--no-report", "--no-history"]) == 0
+    assert main(["serv", *map(str, args), "--out", str(out), "--no-history"] + ([] if report else ["--no-report"])) == 0
     data = json.loads((out / "serv.json").read_text())
     jsonschema.validate(data, _schema("serv"))
     return data
 
 
 def test_serv_of_a_run_folder_names_its_recording_record_profile_and_calibration(run_folder, tmp_path):
-    got = _by_role(_serv(tmp_path, run_folder)["trace"]["inputs"])
+    got = _by_role(_serv(tmp_path, run_folder, report=True)["trace"]["inputs"])
     assert set(got) == {"recording", "run_record", "actuation_profile", "calibration"}
+    html = (tmp_path / "out" / "serv_report.html").read_text()  # the traceability table lists each
+    assert all(f"read: {r} (sha256)</td><td>{got[r]['file']}: {got[r]['sha256'][:16]}" in html for r in got)
     assert got["recording"]["file"] == str(run_folder / "signals.csv")
     assert got["run_record"]["file"] == str(run_folder / "meta.json")
     # meta.json holds no profile snapshot here: the shipped profile was read
