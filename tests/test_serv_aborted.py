@@ -98,17 +98,24 @@ def test_aborted_with_no_stretch_of_motion_judges_nothing(at_06s, tmp_path, caps
 
 
 @pytest.mark.slow
-def test_a_run_killed_while_running_is_incomplete(at_06s, tmp_path, capsys):
-    """meta.json still `running` (the master killed): said as incomplete, judged as the aborted one."""
+@pytest.mark.parametrize("rows", [None, 0])
+def test_a_run_killed_while_running_is_incomplete(at_06s, tmp_path, capsys, rows):
+    """meta.json still `running` and unsealed (the master killed): said as incomplete, judged as the aborted
+    one; the same where it was killed before its first data (signals.csv its header, no can.log)."""
     run = tmp_path / "run"
     shutil.copytree(at_06s, run)
     meta = json.loads((run / "meta.json").read_text())
     meta["status"], meta["reason"] = "running", None
+    meta.pop("recording_sha256", None)
     (run / "meta.json").write_text(json.dumps(meta))
+    if rows == 0:
+        (run / "signals.csv").write_text((run / "signals.csv").read_text().splitlines()[0] + "\n")
+        (run / "can.log").unlink()
     rc, data, _, console = _serv(tmp_path, capsys, run)
     assert rc == ExitCode.ABORTED and data["status"] == "incomplete"
     assert data["run"]["status"] == "incomplete" and data["run"]["reason"] == INCOMPLETE_REASON
     assert "run incomplete" in console
+    assert ("43 sample(s) of motion" if rows is None else "signals.csv") in data["analysis_error"]
 
 
 def test_serv_steps_never_read_the_enable_calibration_or_end():

@@ -19,7 +19,7 @@ from hil.errors import IncompleteRecordingError, RecordingError
 from hil.record.inputs import input_entry, recording_inputs
 from hil.record.outputs import Outputs, outputs_for
 from hil.record.recording import actuation_for, load_recording
-from hil.record.runfolder import read_record, resolve_recording
+from hil.record.runfolder import has_record, read_record, resolve_recording
 from hil.record.runrecord import RunStatus
 from hil.record.seal import check_seal
 
@@ -77,7 +77,13 @@ def cmd_serv(args: argparse.Namespace) -> int:
     method = getattr(args, "method", None) or "improved"
     if method not in METHODS:
         raise RecordingError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
-    sig_path, run_dir = resolve_recording(args.recording)
+    arg = Path(args.recording)
+    try:
+        sig_path, run_dir = resolve_recording(arg)
+    except IncompleteRecordingError:
+        if not (arg.is_dir() and has_record(arg)):
+            raise
+        sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = read_record(run_dir)
     modified = check_seal(sig_path, meta, args.accept_modified)  # before anything is written
     act = actuation_for(args.profile, meta)
