@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hil.record.runfolder import record_path
+
 #: roles, in the order a result lists them
 ROLES = ("recording", "run_record", "actuation_profile", "check_profile", "calibration", "reference_recording",
          "reference_run_record", "reference_actuation_profile", "history")
@@ -38,7 +40,7 @@ def profile_input(role: str, given: Path | None, run_dir: Path | None, snapshot:
     if given is not None:
         return input_entry(role, Path(given))
     if snapshot and run_dir is not None:
-        return input_entry(role, Path(run_dir) / "meta.json", part=f"profiles.{shipped.removesuffix('.toml')}")
+        return input_entry(role, record_path(run_dir), part=f"profiles.{shipped.removesuffix('.toml')}")
     return input_entry(role, default_profile_path(shipped))
 
 
@@ -47,8 +49,8 @@ def recording_inputs(sig_path: Path, run_dir: Path | None, meta, profile: Path |
     """The recording read, its run record (a run folder) and the actuation profile it was read with
     (:func:`hil.profile.load.actuation_of_recording`'s rule); ``prefix`` ``"reference_"`` for a reference."""
     out = [input_entry(prefix + "recording", sig_path)]
-    if run_dir is not None and (Path(run_dir) / "meta.json").is_file():
-        out.append(input_entry(prefix + "run_record", Path(run_dir) / "meta.json"))
+    if run_dir is not None and record_path(run_dir).is_file():
+        out.append(input_entry(prefix + "run_record", record_path(run_dir)))
     snap = meta is not None and meta.profiles is not None and meta.profiles.actuation is not None
     out.append(profile_input(prefix + "actuation_profile", profile, run_dir, snap, "actuation.toml"))
     return out
