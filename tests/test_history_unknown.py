@@ -86,3 +86,23 @@ def test_recording_a_bare_result_says_it_joins_no_trend(tmp_path):
                               say=said.append)
     assert said == [f"recorded in the history sqlite:///{tmp_path / 'h.sqlite'}; in no trend: the identity of ema1 "
                     "and ema2 is unknown (not an actuator)"]
+
+
+@pytest.mark.slow
+def test_bare_csvs_analysed_and_recorded_give_no_trend_end_to_end(dry_run, tmp_path, capsys):
+    """The issue's way: copies of a check's signals.csv analysed as bare files into one history (each its own
+    recording: one sample's last digit changed) at growing flight hours: recorded, listed, no trend."""
+    run, _ = dry_run
+    url = f"sqlite:///{tmp_path / 'h.sqlite'}"
+    lines = (run / "signals.csv").read_text().splitlines()
+    for k in range(MIN_POINTS):
+        csv = tmp_path / f"flight{k}.csv"
+        row, f2 = lines[100].split(","), lines[0].split(",").index("F2")
+        row[f2] = row[f2][:-1] + str(k)  # F2's last digit: another file, the same check to within 0.01 N
+        csv.write_text("\n".join(lines[:100] + [",".join(row)] + lines[101:]) + "\n")
+        assert main(["analyze", str(csv), "--history", url, "--flight-hours", str(1000 * (k + 1))]) == 0
+        assert "in no trend: the identity of ema1 and ema2 is unknown" in capsys.readouterr().out
+    assert main(["history", "--history", url, "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["checks"]) == MIN_POINTS and doc["trends"] == []
+    assert all(c["not_trended"] == f"int1, int2, ext: {NO_IDENTITY}" and not c["in_trend"] for c in doc["checks"])
