@@ -88,15 +88,28 @@ def test_run_folder_uses_its_calibration_and_finds_the_truth(run_folder, tmp_pat
     assert not (run_folder / "serv.json").exists() and (run_folder / "result.json").read_bytes() == before
 
 
-def test_bare_csv_without_calibration_says_uncorrected(run_folder, tmp_path):
+def test_bare_csv_without_calibration_reports_only_channels_it_saw_crossed(run_folder, sim_data, tmp_path):
+    """Issue 47: without an LVDT calibration `serv` read ext 0.077 +- 0.058 mm from 4 "traversals" (the full
+    stroke's acceleration phases through LVDTs of unknown pitch; symmetric operation never crosses ext) and
+    int1 from 6 (4 of them such artefacts). Now a jump counts only where it clears what the unknown scale can
+    make of the ram's travel through it (blf.serv.scale): the two reversals per EMA remain."""
     bare = tmp_path / "flight.csv"
     shutil.copy(run_folder / "signals.csv", bare)
     rc, data, _ = _serv(tmp_path, bare)
     assert rc == 0
     assert data["calibration"]["source"] == "none"
     assert any("uncorrected" in n for n in data["notes"])
-    # the pitch error's acceleration artefacts show up as an external "backlash"
-    assert data["backlash_mm"]["ext"] is not None
+    truth = sim_data["rec"].truth.backlash_mm
+    for ch in ("int1", "int2"):
+        # within the calibrated run's 10 % plus the uncorrected pitch's scale error on the height itself (7.5 %)
+        assert data["traversals"][ch] == 2 and abs(data["backlash_mm"][ch] / truth[ch] - 1.0) < 0.175, ch
+        assert data["verdict"][ch]["status"] == "pass"
+    assert sum(j["reason"].startswith("within the LVDT scale's reach") for j in data["jumps"]["int1"]) == 4
+    v = data["verdict"]["ext"]
+    assert data["backlash_mm"]["ext"] is None and data["traversals"]["ext"] == 0 and v["status"] == "not_traversed"
+    assert "not measured: 4 jump(s) found" in v["reason"] and "not shown crossed" in v["reason"]
+    assert all(j["reason"].startswith("within the LVDT scale's reach") and not j["accepted"]
+               for j in data["jumps"]["ext"]) and len(data["jumps"]["ext"]) == 4
 
 
 def test_explicit_calibration_file_and_paper_method(run_folder, tmp_path):

@@ -125,8 +125,6 @@ plotting, logging, file IO or clocks.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy import signal
 
@@ -152,7 +150,7 @@ from blf.serv.detect import (
     params_vector,
 )
 from blf.serv.filters import design_serv_filters, robust_noise_std
-from blf.serv.results import BlfServResult, ServJump
+from blf.serv.results import BlfServResult, ServJump, improved_reading, paper_reading
 from blf.validate import as_1d_finite, as_finite, count, one_of, positive_scalar, readonly, scalar
 
 __all__ = ["METHODS", "BlfServMonitor", "blf_serv"]
@@ -442,15 +440,8 @@ class BlfServMonitor:
                 reason=reason))
         acc = [j for j in jumps if j.accepted]
         pac = [j for j in jumps if j.paper_accepted]
-        b_imp = float(np.median([abs(j.height_mm) for j in acc])) if acc else None
-        if len(acc) >= 3:
-            hs = np.array([abs(j.height_mm) for j in acc])
-            s_imp = float(1.2533 * np.std(hs, ddof=1) / math.sqrt(hs.size))
-        elif acc:
-            s_imp = float(max(j.height_sigma_mm for j in acc))
-        else:
-            s_imp = None
-        b_pap = float(max(abs(j.paper_delta_mm) for j in pac)) if pac else None
+        b_imp, s_imp = improved_reading(acc)
+        b_pap = paper_reading(pac)
         if self.method == "improved":
             b, n, s = b_imp, len(acc), s_imp
         else:

@@ -4,13 +4,14 @@ traversal of the backlash it detected and the result per D channel, as frozen da
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from blf.serv.filters import ServFilters
 
-__all__ = ["ServJump", "BlfServResult"]
+__all__ = ["ServJump", "BlfServResult", "improved_reading", "paper_reading"]
 
 
 @dataclass(frozen=True)
@@ -124,3 +125,21 @@ class BlfServResult:
     d_filtered_mm: np.ndarray | None
     d1_mm_per_s: np.ndarray | None
     d2_mm_per_s2: np.ndarray | None
+
+
+def improved_reading(counted) -> tuple[float | None, float | None]:
+    """The improved method's backlash and its standard uncertainty from its counted jumps, mm: the median
+    of :math:`|h|`; :math:`1.2533\\,s/\\sqrt{N}` (``s`` the spread of the counted heights) for N >= 3,
+    else the largest fit uncertainty of a jump; ``(None, None)`` for none counted (not traversed)."""
+    if not counted:
+        return None, None
+    hs = np.array([abs(j.height_mm) for j in counted])
+    b = float(np.median(hs))
+    if hs.size >= 3:
+        return b, float(1.2533 * np.std(hs, ddof=1) / math.sqrt(hs.size))
+    return b, float(max(j.height_sigma_mm for j in counted))
+
+
+def paper_reading(counted) -> float | None:
+    """The paper method's backlash from its counted jumps: the largest :math:`|\\Delta D|`, mm (None: none)."""
+    return float(max(abs(j.paper_delta_mm) for j in counted)) if counted else None

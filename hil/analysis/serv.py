@@ -43,12 +43,12 @@ from blf.maint import (
     runs,
     serv_uncertainty,
 )
-from blf.serv import blf_serv, estimate_noise_std_mm
+from blf.serv import blf_serv, estimate_noise_std_mm, motion_through_jumps, with_known_scale
 from blf.signals import CHANNELS, position_differences
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.analysis.maint import spec_mm
-from hil.errors import RecordingError
-from hil.profile.config import Actuation
+from hil.errors import RecordingError, UnusableRecordingError
+from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation
 from hil.record.runfolder import Signals
 
 
@@ -64,6 +64,7 @@ class LvdtCorrection:
     s1_mm: np.ndarray
     s2_mm: np.ndarray
     notes: tuple
+    file: Path | None = None  #: the result.json the calibration was read from (None: none, or the recording's own)
 
 
 def _from_result_json(path: Path) -> dict:
@@ -105,17 +106,17 @@ def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
                               {k: float(cals[k].pitch) for k in cals}, {k: float(cals[k].offset_mm) for k in cals},
                               max(1e-4, float(max(res_err))), s["ema1"], s["ema2"], tuple(notes))
 
-    def linear(lin: dict, source: str) -> LvdtCorrection:
+    def linear(lin: dict, source: str, file: Path) -> LvdtCorrection:
         return LvdtCorrection(source, {"ema1": "linear", "ema2": "linear"},
                               {k: lin[k][0] for k in lin}, {k: lin[k][1] for k in lin}, 1e-3,
                               correct_linear(sig.s1, *lin["ema1"]), correct_linear(sig.s2, *lin["ema2"]),
-                              tuple(notes))
+                              tuple(notes), Path(file))
 
     if calibration_file is not None:
         lin = _from_result_json(Path(calibration_file))
         if lin["ema1"] is None or lin["ema2"] is None:
             raise RecordingError(f"{calibration_file}: calibration of both LVDTs needed (ema1, ema2)")
-        return linear(lin, f"--calibration {calibration_file}")
+        return linear(lin, f"--calibration {calibration_file}", calibration_file)
     if sig.step is not None:
         m1, m2 = sig.step == "cal1_sweep", sig.step == "cal2_sweep"
         if m1.sum() >= 100 and m2.sum() >= 100:
@@ -129,7 +130,7 @@ def choose_calibration(sig: Signals, act: Actuation, run_dir: Path | None,
             notes.append(f"result.json not usable for calibration: {exc}")
             lin = None
         if lin is not None and lin["ema1"] is not None and lin["ema2"] is not None:
-            return linear(lin, "run folder result.json (pitch, offset)")
+            return linear(lin, "run folder result.json (pitch, offset)", run_dir / "result.json")
     T = sig.sample_period_s
     cals = {}
     for k, phi, s, f in (("ema1", sig.phi1, sig.s1, sig.F1), ("ema2", sig.phi2, sig.s2, sig.F2)):
@@ -157,10 +158,32 @@ class ServAnalysis:
     budget: AccuracyBudget
     method: str
     act: Actuation
+    steps: tuple = ()  #: the steps of the stretch analysed (a recording with a step column), else ()
+
+
+def pitch_bound(correction: LvdtCorrection) -> float:
+    """The largest relative pitch error the corrected LVDT strokes may still carry: the calibration's residual,
+    else (no calibration) the largest the house admits for an LVDT, ``HARD_LVDT_GAIN_TOLERANCE`` (10 %; the
+    paper's is 7.5 %). What a jump must clear to count (:mod:`blf.serv.scale`)."""
+    if correction.residual_pitch_error is not None:
+        return float(correction.residual_pitch_error)
+    return HARD_LVDT_GAIN_TOLERANCE
 
 
 #: the fewest samples a recording must hold for BLFserv
 MIN_SAMPLES_SERV = 100
+
+#: a check's steps that are not a motion BLFserv may read (its step column): before the drives hold their
+#: position (idle; enable, whose D steps are the motors pulling in as their current comes on: 0.04 to 0.05 mm
+#: on the simulated rig, no load reversal) and after the check (done; aborted: the safe stop)
+NOT_SERVICE = ("idle", "enable", "done", "aborted")
+NOT_SERVICE_WORDS = "LVDT calibration, the drives' enabling or the check's end (idle, enable, cal*, done, aborted)"
+
+
+def serv_steps(step: np.ndarray) -> np.ndarray:
+    """Which samples of a recording's step column BLFserv may read (bool per sample): none of the LVDT
+    calibration (``cal1_*``, ``cal2_*``) nor of :data:`NOT_SERVICE`."""
+    return np.array([not (str(x).startswith(("cal1_", "cal2_")) or str(x) in NOT_SERVICE) for x in step], dtype=bool)
 
 
 def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: str) -> ServAnalysis:
@@ -169,35 +192,46 @@ def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: st
         raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= {MIN_SAMPLES_SERV})")
     i = act.mechanics.i_total_rad_per_mm
     s1, s2 = correction.s1_mm, correction.s2_mm
+    steps = ()
     if sig.step is not None:
-        # BLFserv is for normal operation: the calibration phases of a recording (step column) are not
-        # analysed, only the longest stretch without them
-        operation = np.array([not str(x).startswith(("cal1_", "cal2_")) for x in sig.step], dtype=bool)
+        # BLFserv is for normal operation: of a recording with a step column only the longest stretch of
+        # steps in motion (never the LVDT calibration, the drives' enabling, or what follows an abort)
+        operation = serv_steps(sig.step)
         spans = runs(operation)
-        if not spans:
-            raise RecordingError("the step column marks every sample as LVDT calibration: nothing to analyse")
-        a, b = max(spans, key=lambda r: r[1] - r[0])
+        a, b = max(spans, key=lambda r: r[1] - r[0]) if spans else (0, 0)
+        if b - a < MIN_SAMPLES_SERV:
+            raise UnusableRecordingError(
+                f"{b - a} sample(s) of motion (BLFserv needs at least {MIN_SAMPLES_SERV}): the step column marks "
+                f"the rest as {NOT_SERVICE_WORDS}")
+        steps = tuple(dict.fromkeys(str(x) for x in sig.step[a:b]))
         if b - a < sig.n:
             keep = np.zeros(sig.n, bool)
             keep[a:b] = True
             sig = sig.select(keep)
             s1, s2 = s1[a:b], s2[a:b]
             correction = replace(correction, notes=correction.notes + (
-                f"BLFserv on t = {sig.t[0]:.1f}..{sig.t[-1]:.1f} s only: the step column marks the rest as "
-                "LVDT calibration, not normal operation",))
+                f"BLFserv on t = {sig.t[0]:.1f}..{sig.t[-1]:.1f} s only (step {', '.join(steps)}): the step column "
+                f"marks the rest as {NOT_SERVICE_WORDS}, not normal operation",))
     pd = position_differences(sig.phi1, sig.phi2, s1, s2, i)
     d = {"int1": pd.d_int1_mm, "int2": pd.d_int2_mm, "ext": pd.d_ext_mm}
     rate = 1.0 / sig.sample_period_s
     for ch in CHANNELS:
         _noisy(d[ch], ch)
     results = {ch: blf_serv(d[ch], rate, method=method, t0_s=float(sig.t[0])) for ch in CHANNELS}
+    # a jump counts only where it crosses the band whatever the LVDT's scale (blf.serv.scale): the ram's travel
+    # through it on the motor's exact scale, phi / i, times the largest pitch error the scale may have
+    x = {"int1": sig.phi1 / i, "int2": sig.phi2 / i, "ext": 0.5 * (sig.phi1 + sig.phi2) / i}
+    bound = pitch_bound(correction)
+    for ch in CHANNELS:
+        dx = motion_through_jumps(x[ch], rate, results[ch].jumps, t0_s=float(sig.t[0]))
+        results[ch] = with_known_scale(results[ch], dx, bound, lvdts=2 if ch == "ext" else 1)
     pitches = [abs(p - 1.0) for p in correction.pitch.values() if p is not None]
     pitch_err = max(pitches) if pitches else PAPER_PITCH_ERROR
     budget = backlash_error_budget(
         act.mechanics.stroke_limit_mm, pitch_err, act.sensors.lvdt_noise_pp_mm / 6.0, rate,
         backlash_mm=act.mechanics.backlash_spec_int_mm,
         residual_pitch_error=correction.residual_pitch_error if correction.residual_pitch_error is not None else 1e-3)
-    return ServAnalysis(sig, correction, d, results, budget, method, act)
+    return ServAnalysis(sig, correction, d, results, budget, method, act, steps)
 
 
 #: each channel's D in words, for messages
@@ -209,7 +243,7 @@ def _noisy(d_mm: np.ndarray, ch: str) -> None:
     try:
         estimate_noise_std_mm(d_mm)
     except AnalysisError:
-        raise RecordingError(
+        raise UnusableRecordingError(
             f"D_{ch} = {D_WORDS[ch]} holds no measurement noise (below 1e-6 mm): the LVDT or motor angle is not "
             f"a raw measurement (computed from the other, or smoothed); BLFserv needs the recorded signals"
         ) from None
@@ -245,7 +279,8 @@ def serv_dict(an: ServAnalysis, truth: dict | None, source: str) -> dict:
         "calibration": {"source": c.source, **{k: {"kind": c.kind[k], "pitch": c.pitch[k],
                                                     "offset_mm": c.offset_mm[k]} for k in ("ema1", "ema2")}},
         "accuracy": budget_dict(an.budget),
-        "recording": {"source": source, "samples": int(an.sig.n),
+        "recording": {"source": source, "samples": int(an.sig.n), "t_start_s": float(an.sig.t[0]),
+                      "t_end_s": float(an.sig.t[-1]), "steps": list(an.steps),
                       "duration_s": float(an.sig.t[-1] - an.sig.t[0]),
                       "sample_period_s": float(an.sig.sample_period_s)},
         "notes": list(an.sig.notes) + list(c.notes),
@@ -278,8 +313,7 @@ def serv_verdicts(an: ServAnalysis) -> tuple[dict, list[str]]:
         r = an.results[ch]
         limit = spec_mm(an.act, ch)
         if r.backlash_mm is None or not math.isfinite(r.backlash_mm):
-            verdicts[ch] = decide(None, None, limit, not_traversed=True,
-                                  missing="not traversed: no backlash crossing counted in this recording")
+            verdicts[ch] = decide(None, None, limit, not_traversed=True, missing=_why_not(an, ch))
             continue
         sigma = r.backlash_sigma_mm if r.backlash_sigma_mm is not None and math.isfinite(r.backlash_sigma_mm) else 0.0
         u = serv_uncertainty(r.backlash_mm, sigma, m.pitch_compensated_mm, m.temperature_mm, an.method)
@@ -290,3 +324,34 @@ def serv_verdicts(an: ServAnalysis) -> tuple[dict, list[str]]:
     return verdicts, notes
 
 
+
+
+def _why_not(an: ServAnalysis, ch: str) -> str:
+    """Why channel ``ch`` has no reading: no crossing, or jumps the LVDT's unknown scale could have made."""
+    scaled = [j for j in an.results[ch].jumps if j.reason.startswith("within the LVDT scale's reach")]
+    if not scaled:
+        return "not traversed: no backlash crossing counted in this recording"
+    cal = ("no LVDT calibration: its pitch may be off by up to "
+           f"{pitch_bound(an.correction):.0%}" if an.correction.residual_pitch_error is None
+           else f"the calibration leaves a pitch error of up to {pitch_bound(an.correction):.2%}")
+    return (f"not measured: {len(scaled)} jump(s) found, none larger than the LVDT's scale could make of the "
+            f"ram's travel through it ({cal}); the backlash band is not shown crossed (docs/blfserv.md)")
+
+
+def unjudged_dict(act: Actuation, status: str, why: str, source: str) -> dict:
+    """serv.json of a run cut short (``status`` ``"aborted"`` or ``"incomplete"``) whose recording holds
+    nothing BLFserv can read (``why``): every channel not measured, no reading, no report."""
+    verdicts = {ch: decide(None, None, spec_mm(act, ch), missing=f"the run was cut short; {why}")
+                for ch in CHANNELS}
+    return {
+        "status": status, "analysis_error": why, "method": None,
+        "backlash_mm": dict.fromkeys(CHANNELS), "backlash_sigma_mm": dict.fromkeys(CHANNELS),
+        "traversals": dict.fromkeys(CHANNELS, 0), "jumps": {ch: [] for ch in CHANNELS},
+        "backlash_paper_mm": dict.fromkeys(CHANNELS),
+        "calibration": {"source": "none (nothing analysed)", "ema1": None, "ema2": None},
+        "recording": {"source": source, "samples": 0, "duration_s": 0.0, "sample_period_s": None},
+        "verdict": {ch: {"status": v.status, "backlash_mm": None, "uncertainty_mm": None, "limit_mm": v.limit_mm,
+                         "margin_mm": None, "traversals": 0, "reason": v.reason} for ch, v in verdicts.items()},
+        "decision_rule": "nothing judged: the recording of a run cut short holds no stretch BLFserv can read",
+        "notes": [],
+    }

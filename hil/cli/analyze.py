@@ -11,6 +11,7 @@ from hil.cli.console import make_console, print_summary
 from hil.cli.history_glue import installation, record_history, refuse_foreign_history
 from hil.cli.result import INCOMPLETE_REASON, analyze_and_report, exit_for, trace_of
 from hil.errors import IncompleteRecordingError, RecordingError
+from hil.record.inputs import recording_inputs
 from hil.record.outputs import outputs_for
 from hil.record.recording import actuation_for
 from hil.record.runfolder import has_record, read_record, resolve_recording
@@ -37,7 +38,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     status = meta.status if meta is not None else None
     incomplete = status is RunStatus.RUNNING
     extra = {"operator": args.operator, "work_order": args.work_order, **installation(args, act, meta).as_json(),
-             "modified": modified}
+             "modified": modified, "inputs": recording_inputs(sig_path, run_dir, meta, args.profile)}
     try:
         result = analyze_and_report(sig_path, act, outputs, truth, meta, console, trace_extra=extra)
     except BaseException as exc:

@@ -28,6 +28,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     # the folder only once there is something to write into it (a refused recording leaves none)
     run_dir = req.recording if out.kind == "model" and req.recording.is_dir() else None
     outputs = outputs_for(args.out, req.recording, run_dir, "diagnose", _NAMES)
+    out.data["trace"] = _trace(req, out)
     outputs.write_json("diagnosis.json", out.data)
     written = outputs.path("diagnosis.json")
     if out.untrusted and out.kind == "model":
@@ -61,6 +62,38 @@ def _request(args: argparse.Namespace):
     return DiagnoseRequest(Path(args.recording), args.model, args.profile, axis, args.force_floor_N is not None,
                            None if args.reference is None or from_history else args.reference, from_history, url,
                            args.check, args.allow_other_serials, args.accept_modified)
+
+
+def _read(path: Path, model: str, profile: Path | None, prefix: str = "") -> tuple[list[dict], Path | None, object]:
+    """The inputs of one recording argument (hil.record.inputs), its run folder and run record."""
+    from hil.record.inputs import input_entry, recording_inputs
+    from hil.record.runfolder import read_record, resolve_recording
+
+    if model != "dual-ema":
+        return [input_entry(prefix + "recording", path)], None, None
+    sig_path, run_dir = resolve_recording(path)
+    meta = read_record(run_dir)
+    return recording_inputs(sig_path, run_dir, meta, profile, prefix=prefix), run_dir, meta
+
+
+def _trace(req, out) -> dict:
+    """diagnosis.json's ``trace``: when, which software, and every file read, by role, with its SHA-256: the
+    recording (its run record and profiles), the reference (likewise) and the history it was looked up in."""
+    from hil import __version__
+    from hil.record.inputs import history_input, profile_input
+    from hil.record.outputs import utc_iso
+
+    inputs, run_dir, meta = _read(req.recording, req.model, req.profile)
+    if req.model == "dual-ema":  # (its check profile: the calibration's opposing force; with a reference, floors)
+        snap = meta is not None and meta.profiles is not None and meta.profiles.check is not None
+        inputs.append(profile_input("check_profile", req.check if out.kind == "dual_reference" else None, run_dir,
+                                    snap, "check.toml"))
+    ref = (out.data.get("reference") or {}).get("recording") if out.kind == "dual_reference" else req.reference
+    if ref:
+        inputs += _read(Path(ref), req.model, req.profile, prefix="reference_")[0]
+    if req.from_history and req.history_url:
+        inputs.append(history_input(req.history_url))
+    return {"analysed_utc": utc_iso(), "software": {"name": "emacheck", "version": __version__}, "inputs": inputs}
 
 
 def _write_report(path: Path, out, json_name: str) -> None:

@@ -111,6 +111,7 @@ def print_history(console, doc: dict, series: list, *, detail: bool) -> None:
         console.print(tab)
         for n in notes:
             console.print(escape(n), soft_wrap=True)
+    print_not_trended(console, doc, detail=detail)
     if not detail:
         console.print(f"{len(doc['checks'])} result(s); --actuator SERIAL or --aircraft REG lists the checks")
         return
@@ -127,6 +128,22 @@ def print_history(console, doc: dict, series: list, *, detail: bool) -> None:
                       (r["run_id"] or r["run_key"])[:8], f"{p.backlash_mm:.4f}{u}", p.verdict or "—",
                       str(p.segment + 1) if r["kind"] == "maint" else "(serv)")
         console.print(t)
+
+
+def print_not_trended(console, doc: dict, *, detail: bool) -> None:
+    """The results in no trend and why (their actuators' identity is unknown); with ``detail`` each one."""
+    from rich.markup import escape
+
+    from hil.history.trends import NO_IDENTITY
+
+    out = [c for c in doc["checks"] if c.get("not_trended")]
+    if not out:
+        return
+    console.print(escape(f"{len(out)} result(s) in no trend: {NO_IDENTITY}"), soft_wrap=True)
+    for c in out if detail else ():
+        read = ", ".join(f"{ch} {v:.4f}" for ch, v in c["backlash_mm"].items() if v is not None)
+        console.print(escape(f"  {c['time_utc']} {c['kind']} {c['status']} ({read} mm) of "
+                             f"{c.get('recording') or c['run_key']}: {c['not_trended']}"), soft_wrap=True)
 
 
 def cmd_sync(args: argparse.Namespace) -> int:

@@ -31,11 +31,18 @@ def _recording_hash(path: Path) -> dict:
 
 def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) -> dict:
     """The traceability block of result.json: when, which software, which actuators (0x1018 read in the
-    preflight), who and for which work order, which files (SHA-256), which run and recording; ``extra``
-    (the command's flags: operator, work order, installation) before the record's."""
+    preflight), who and for which work order, which files (SHA-256: the check's profiles, ``files_sha256``;
+    every file this result was read from, by role, ``inputs``), which run and recording; ``extra`` (the
+    command's flags: operator, work order, installation; ``inputs``, :mod:`hil.record.inputs`) before the
+    record's."""
     from hil import __version__
 
-    rec, extra = meta or RunRecord(), extra or {}
+    rec, extra = meta or RunRecord(), dict(extra or {})
+    inputs = extra.pop("inputs", None)
+    if inputs is None:  # (a check's own result: its recording; hil.record.inputs)
+        from hil.record.inputs import input_entry
+
+        inputs = [input_entry("recording", sig_path)]
     held = rec.installation.as_json() if rec.installation is not None else {}
     place = {k: extra[k] if extra.get(k) is not None else held.get(k) for k in INSTALLATION_KEYS}
     extra = {k: v for k, v in extra.items() if v}
@@ -52,6 +59,8 @@ def trace_of(meta: RunRecord | None, sig_path: Path, extra: dict | None = None) 
         # a recording without run record (analyze file.csv): the file's own hash names what was analysed
         "files_sha256": rec.files_sha256 or ({} if meta is not None else _recording_hash(sig_path)),
         "recording": str(sig_path),
+        # every file this result was made from, by role, with its SHA-256 (hil.record.inputs)
+        "inputs": inputs,
         "mode": rec.mode.value if rec.mode is not None else None,
         # each drive's reaction to losing the master: configured, and what the drill observed (or the
         # external watchdog stated instead)

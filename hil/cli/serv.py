@@ -11,14 +11,16 @@ from rich.console import Console
 from rich.table import Table
 
 from blf.signals import CHANNELS
-from hil.cli.args import add_history_args, add_parser, add_recording_args, add_trace_args
+from hil.cli.args import ExitCode, add_history_args, add_parser, add_recording_args, add_trace_args
 from hil.cli.console import make_console
 from hil.cli.history_glue import installation, record_history, refuse_foreign_history
-from hil.cli.result import exit_for, trace_of
-from hil.errors import RecordingError
+from hil.cli.result import INCOMPLETE_REASON, exit_for, trace_of
+from hil.errors import IncompleteRecordingError, RecordingError
+from hil.record.inputs import input_entry, recording_inputs
 from hil.record.outputs import Outputs, outputs_for
 from hil.record.recording import actuation_for, load_recording
-from hil.record.runfolder import read_record, resolve_recording
+from hil.record.runfolder import has_record, read_record, resolve_recording
+from hil.record.runrecord import RunStatus
 from hil.record.seal import check_seal
 
 
@@ -30,7 +32,10 @@ def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) 
 
     truth = data.get("truth")
     st = data.get("status", "")
-    tab = Table(title=f"BLFserv ({data['method']}): {styled(st.upper(), st, bold=True)}",
+    run = data.get("run") or {}
+    if run.get("status") in ("aborted", "incomplete"):
+        console.print(f"[red]run {run['status']}:[/red] {run['reason']}", soft_wrap=True)
+    tab = Table(title=f"BLFserv ({data['method'] or 'nothing analysed'}): {styled(st.upper(), st, bold=True)}",
                 box=box.SIMPLE_HEAD, pad_edge=False)
     for col in ("channel", "backlash ± U mm", "traversals", "limit mm", "margin mm", "verdict", "paper mm",
                 "truth mm" if truth else None):
@@ -41,7 +46,8 @@ def print_summary(console: Console, data: dict, outputs: Outputs, report: bool) 
         v = data.get("verdict", {}).get(ch, {})
         u = v.get("uncertainty_mm")
         s = v.get("status", "")
-        row = [ch, "not traversed" if b is None else f"{b:.4f}" + ("" if u is None else f" ± {u:.4f}"),
+        missing = "not traversed" if s == "not_traversed" else "not measured"
+        row = [ch, missing if b is None else f"{b:.4f}" + ("" if u is None else f" ± {u:.4f}"),
                str(data["traversals"][ch]), fmt(v.get("limit_mm"), 3),
                "—" if v.get("margin_mm") is None else f"{v['margin_mm']:+.4f}",
                styled(s, s) if s else "—", fmt(data["backlash_paper_mm"][ch])]
@@ -62,7 +68,7 @@ def cmd_serv(args: argparse.Namespace) -> int:
     # imported here: python-control, numba and scipy.signal cost seconds (not for other commands)
     from blf.errors import AnalysisError, InputError
     from blf.serv import METHODS
-    from hil.analysis.serv import MIN_SAMPLES_SERV, analyse, choose_calibration, serv_dict
+    from hil.analysis.serv import MIN_SAMPLES_SERV, analyse, choose_calibration, serv_dict, unjudged_dict
     from hil.record.signals_csv import SERV_CHANNELS
     from hil.report.serv import write_serv_report
 
@@ -71,29 +77,51 @@ def cmd_serv(args: argparse.Namespace) -> int:
     method = getattr(args, "method", None) or "improved"
     if method not in METHODS:
         raise RecordingError(f"--method must be one of {', '.join(METHODS)}, got {method!r}")
-    sig_path, run_dir = resolve_recording(args.recording)
+    arg = Path(args.recording)
+    try:
+        sig_path, run_dir = resolve_recording(arg)
+    except IncompleteRecordingError:
+        if not (arg.is_dir() and has_record(arg)):
+            raise
+        sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
     meta = read_record(run_dir)
     modified = check_seal(sig_path, meta, args.accept_modified)  # before anything is written
     act = actuation_for(args.profile, meta)
     refuse_foreign_history(args, act)
+    run = run_state(meta)
+    # a run cut short (aborted, or killed: still `running`): read as analyze reads it (its last samples may hold
+    # the sensor fault that stopped it, a jump or a signal held still), and judged only where it can be
+    cut_short = run is not None and run["status"] != "done"
+    an = None
     try:
-        sig = load_recording(sig_path, act, meta, channels=SERV_CHANNELS, min_rows=MIN_SAMPLES_SERV, what="BLFserv")
+        sig = load_recording(sig_path, act, meta, channels=() if cut_short else SERV_CHANNELS,
+                             min_rows=MIN_SAMPLES_SERV, what="BLFserv", jumps=not cut_short)
         corr = choose_calibration(sig, act, run_dir, getattr(args, "calibration", None))
         an = analyse(sig, act, corr, method)
     except (InputError, AnalysisError, RecordingError) as exc:
-        # each message names the file it is about: the recording's, unless it names a file itself
-        named = [str(p) for p in (sig_path, getattr(args, "calibration", None)) if p is not None]
-        if any(n in str(exc) for n in named):
-            raise
-        raise RecordingError(f"{sig_path}: {exc}") from None
+        if not (cut_short and isinstance(exc, (IncompleteRecordingError, AnalysisError))):
+            # each message names the file it is about: the recording's, unless it names a file itself
+            named = [str(p) for p in (sig_path, getattr(args, "calibration", None)) if p is not None]
+            if any(n in str(exc) for n in named):
+                raise
+            raise RecordingError(f"{sig_path}: {exc}") from None
+        why = str(exc)
     truth = meta.truth if meta is not None else None
-    report = not getattr(args, "no_report", False)
+    report = not getattr(args, "no_report", False) and an is not None
     outputs = outputs_for(args.out, sig_path, run_dir, "serv", ("serv.json", "serv_report.html"))
-    data = serv_dict(an, truth, str(sig_path))
+    data = serv_dict(an, truth, str(sig_path)) if an is not None else unjudged_dict(act, run["status"], why,
+                                                                                     str(sig_path))
+    if truth is not None:
+        data["truth"] = truth
+    data["run"] = run
+    inputs = recording_inputs(sig_path, run_dir, meta, args.profile) + (
+        [input_entry("calibration", an.correction.file)] if an is not None and an.correction.file is not None else [])
     data["trace"] = trace_of(meta, sig_path, {"operator": args.operator, "work_order": args.work_order,
-                                              **installation(args, act, meta).as_json(), "modified": modified})
-    if modified:  # said first among the notes: on the console and in the report
-        data["notes"] = [modified["words"]] + list(data["notes"])
+                                              **installation(args, act, meta).as_json(), "modified": modified,
+                                              "inputs": inputs})
+    # said first among the notes, on the console and in the report: a run cut short, a recording changed
+    data["notes"] = ([run["words"]] if cut_short else []) + ([modified["words"]] if modified else []) + list(
+        data["notes"])
     data["analysis_s"] = round(time.perf_counter() - t0, 3)
     outputs.write_json("serv.json", data)
     if report:
@@ -101,7 +129,24 @@ def cmd_serv(args: argparse.Namespace) -> int:
             path, an, data, act, json_name=outputs.path("serv.json").name))
     print_summary(console, data, outputs, report)
     record_history(console, args, act, outputs.path("serv.json"), run_folder=run_dir, recording=sig_path)
-    return exit_for(data)
+    return ExitCode.ABORTED if an is None else exit_for(data)
+
+
+def run_state(meta) -> dict | None:
+    """serv.json's ``run``: the run folder's status (``done``; ``aborted`` or ``incomplete``, a run killed
+    while ``running``) and why, in words; None for a recording without a run record."""
+    if meta is None or meta.status is None:
+        return None
+    if meta.status is RunStatus.DONE:
+        return {"status": "done", "reason": None, "words": "the check finished"}
+    if meta.status is RunStatus.ABORTED:
+        status, why = "aborted", meta.reason or "no reason recorded"
+    else:
+        status, why = "incomplete", INCOMPLETE_REASON
+    return {"status": status, "reason": why,
+            "words": f"the check was {'aborted' if status == 'aborted' else 'cut short'} ({why}): BLFserv read only "
+                     "the stretch of motion recorded before (never the drives' enabling, the LVDT calibration or "
+                     "the safe stop); what it could not see is not measured"}
 
 
 def register(sub) -> None:

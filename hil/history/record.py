@@ -174,6 +174,14 @@ def record_from_result(result: dict, *, result_path: Path | None = None, run_fol
     return CheckRecord(check=check, identity=identity, readings=readings)
 
 
+def unidentified(result: dict) -> list[str]:
+    """The EMAs of a result whose identity (0x1018 vendor, product, serial) it does not carry: a bare
+    recording's are unknown, and its readings are never trended with another's (:mod:`hil.history.trends`)."""
+    ident = (result.get("trace") or {}).get("identity") or {}
+    return [e for e in ("ema1", "ema2")
+            if any(_int((ident.get(e) or {}).get(f)) is None for f in ("vendor_id", "product_code", "serial"))]
+
+
 def load_result(path: Path) -> dict:
     """A result.json / serv.json, or :class:`hil.errors.RecordingError` naming the file."""
     from hil.errors import RecordingError

@@ -81,5 +81,12 @@ def record_after_check(url: str, result_path: Path, *, run_folder: Path | None, 
         say(f"NOT recorded in the history: {why}; the result is kept in {result_path}; record it later with "
             f"`emacheck history sync {later}`")
         return False
-    say(f"{'recorded in' if new else 'already recorded in'} the history {masked(url)}")
+    from hil.history.record import load_result, unidentified
+
+    try:
+        unknown = unidentified(load_result(result_path))
+    except Exception:  # noqa: BLE001 - recorded already; only the words below depend on it
+        unknown = []
+    say(f"{'recorded in' if new else 'already recorded in'} the history {masked(url)}"
+        + (f"; in no trend: the identity of {' and '.join(unknown)} is unknown (not an actuator)" if unknown else ""))
     return True

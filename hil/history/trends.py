@@ -5,7 +5,9 @@ actuator (by its 0x1018 vendor, product and serial) at one aircraft and
 position, or the external backlash of the pair of actuators there. Real and
 simulated checks never share a series. Its points are the maintenance checks
 (BLFmaint) that decided something (pass, fail, inconclusive), one per run:
-the latest analysis of each run id. BLFserv readings are listed and plotted
+the latest analysis of each run id. A reading without its actuator's identity (0x1018 vendor, product
+and serial: a bare recording) is in no series: recorded and listed, never trended with another
+(:data:`NO_IDENTITY`). BLFserv readings are listed and plotted
 beside them but not fitted (another method, with another bound: a method
 bias would look like wear).
 
@@ -128,6 +130,26 @@ def _ident_key(ident: dict | None) -> tuple | None:
     return None if not ident else (ident["vendor_id"], ident["product_code"], ident["serial"])
 
 
+#: why a reading without its actuator's identity is in no trend (docs/history.md)
+NO_IDENTITY = ("the actuator's identity is unknown (no 0x1018 vendor, product and serial: a bare recording, or "
+               "drives not read); 'unknown' is not an actuator, so its readings are recorded and listed but never "
+               "trended together with another's")
+
+
+def _who(ident: dict, ch: str) -> tuple:
+    """The actuators a channel's reading is of: (EMA 1, EMA 2) for ext, its EMA's for an internal channel."""
+    if ch == "ext":
+        return (_ident_key(ident.get("ema1")), _ident_key(ident.get("ema2")))
+    return (_ident_key(ident.get("ema1" if ch == "int1" else "ema2")),)
+
+
+def not_trended(r: dict) -> str | None:
+    """Why channels of a recorded result are in no trend (:data:`NO_IDENTITY`, naming them), None if each can be."""
+    chs = [ch for ch in CHANNELS if (r["readings"].get(ch) or {}).get("backlash_mm") is not None
+           and None in _who(r["identity"], ch)]
+    return None if not chs else f"{', '.join(chs)}: {NO_IDENTITY}"
+
+
 def latest_per_run(rows: list[dict]) -> list[dict]:
     """Of several results of one run (a check and its re-analyses), the latest analysed, per kind."""
     best: dict[tuple, dict] = {}
@@ -149,6 +171,9 @@ def build_series(rows: list[dict], *, serial: int | None = None) -> list[Series]
         Checks from :meth:`hil.history.store.HistoryStore.checks` (time order).
     serial : int, optional
         Keep only the series of this actuator (its internal channel and the external one of its pairs).
+
+    A reading whose actuator's identity is unknown (a bare recording) joins no series: "unknown" is not an
+    actuator (:func:`not_trended` says so of its result).
     """
     series: dict[tuple, Series] = {}
     for r in latest_per_run(rows):
@@ -157,13 +182,11 @@ def build_series(rows: list[dict], *, serial: int | None = None) -> list[Series]
             rd = r["readings"].get(ch)
             if rd is None or rd.get("backlash_mm") is None:
                 continue
-            if ch == "ext":
-                who = (_ident_key(ident.get("ema1")), _ident_key(ident.get("ema2")))
-                sid = {e: ident.get(e) for e in ("ema1", "ema2")}
-            else:
-                e = "ema1" if ch == "int1" else "ema2"
-                who = (_ident_key(ident.get(e)),)
-                sid = {e: ident.get(e)}
+            who = _who(ident, ch)
+            if None in who:  # "unknown" is not an actuator: never joined with another's readings (not_trended)
+                continue
+            emas = ("ema1", "ema2") if ch == "ext" else ("ema1",) if ch == "int1" else ("ema2",)
+            sid = {e: ident.get(e) for e in emas}
             key = (bool(r["simulated"]), r["aircraft"], r["position"], ch, who)
             s = series.get(key)
             if s is None:
@@ -317,7 +340,7 @@ def check_dict(r: dict, in_trend: set[int], current: set[int] | None = None) -> 
                             "nonlinearity_mm": r.get(f"{e}_lvdt_nonlinearity_mm"),
                             "rmse_mm": r.get(f"{e}_lvdt_rmse_mm")} for e in ("ema1", "ema2")},
         "software_version": r["software_version"], "run_folder": r["run_folder"], "result_path": r["result_path"],
-        "in_trend": r["id"] in in_trend,
+        "in_trend": r["id"] in in_trend, "not_trended": not_trended(r), "recording": r.get("recording"),
         "id": r["id"], "supersedes": r.get("supersedes_id"),
         "current": current is None or r["id"] in current,
     }

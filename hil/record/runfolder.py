@@ -335,6 +335,11 @@ def has_record(run_dir: Path) -> bool:
     return (Path(run_dir) / META_NAME).exists()
 
 
+def record_path(run_dir: Path) -> Path:
+    """The path of ``run_dir``'s run record (meta.json), whether it exists or not."""
+    return Path(run_dir) / META_NAME
+
+
 def read_record(run_dir: Path | None) -> RunRecord | None:
     """A run folder's record (:class:`hil.record.runrecord.RunRecord`), or None (no run folder, or no meta.json
     in it); not JSON, or a malformed field: a :class:`~hil.errors.RecordingError` naming the file (and

@@ -448,6 +448,8 @@ def trace_lines(trace: dict | None) -> str:
                      "the master's force loop on the measured force in CSP (its drive has no CST)"])
     for k, h in (trace.get("files_sha256") or {}).items():
         rows.append([f"{k} (sha256)", h[:16] + "…" if h else "—"])
+    for i in trace.get("inputs") or ():  # every file this result was read from (hil.record.inputs)
+        rows.append([f"read: {i['role']} (sha256)", f"{i['file']}: " + (i["sha256"] or "—")[:16]])
     return ("<section class='keep'><h2>Traceability</h2>" + identity_warning(trace.get("identity"))
             + table(["item", "value"], rows, css="items") + "</section>")
 
