@@ -180,6 +180,10 @@ def test_the_cli_says_why_and_exits_5_or_3(dry_run, tmp_path, capsys):
     csv = write_columns(tmp_path / "m.csv", {c: getattr(m, c) for c in SIGNAL_COLUMNS}, SIGNAL_COLUMNS)
     assert main(["analyze", str(csv), "--out", str(tmp_path / "b"), "--no-history"]) == 3
     assert "'s1' in m" in capsys.readouterr().err
+    assert main(["serv", str(csv), "--out", str(tmp_path / "s"), "--no-history"]) == 3
+    assert "'s2' in m" in capsys.readouterr().err
+    assert main(["diagnose", str(csv), "--out", str(tmp_path / "dm")]) == 3
+    assert "cannot belong to this actuation" in capsys.readouterr().err
 
 
 def test_the_shipped_profile_states_its_stiffness_ranges():

@@ -45,6 +45,7 @@ from blf.maint import (
 )
 from blf.serv import blf_serv, estimate_noise_std_mm, motion_through_jumps, with_known_scale
 from blf.signals import CHANNELS, position_differences
+from hil.analysis import plausible
 from hil.analysis.budget import PAPER_PITCH_ERROR, budget_dict
 from hil.analysis.maint import spec_mm
 from hil.errors import RecordingError, UnusableRecordingError
@@ -186,11 +187,30 @@ def serv_steps(step: np.ndarray) -> np.ndarray:
     return np.array([not (str(x).startswith(("cal1_", "cal2_")) or str(x) in NOT_SERVICE) for x in step], dtype=bool)
 
 
+def refuse_gross_scale(sig: Signals, act: Actuation, correction: LvdtCorrection) -> None:
+    """Refuse (:class:`hil.errors.RecordingError`) a recording whose LVDTs read the motors' stroke off by more than
+    a factor 2 (:mod:`hil.analysis.plausible`): the calibration's pitch, else the slope over the recording. A
+    unit (m, cm; degrees) or the gear ratio, never a BLFserv reading."""
+    i = act.mechanics.i_total_rad_per_mm
+    gross = []
+    for k, phi, s in ((1, sig.phi1, sig.s1), (2, sig.phi2, sig.s2)):
+        pitch = correction.pitch.get(f"ema{k}")
+        how = f"its calibration ({correction.source})"
+        if pitch is None:
+            pitch, how = plausible.slope_pitch(phi / i, s), "the slope over the whole recording"
+        if pitch is not None:
+            words, bad = plausible.pitch_problem(k, float(pitch), how)
+            gross += [words] if bad else []
+    if gross:
+        raise RecordingError("; ".join(gross) + ": the recording cannot belong to this actuation")
+
+
 def analyse(sig: Signals, act: Actuation, correction: LvdtCorrection, method: str) -> ServAnalysis:
     """Position differences from the corrected strokes, BLFserv on each, and the error budget."""
     if sig.n < MIN_SAMPLES_SERV:
         raise RecordingError(f"recording too short for BLFserv: {sig.n} samples (need >= {MIN_SAMPLES_SERV})")
     i = act.mechanics.i_total_rad_per_mm
+    refuse_gross_scale(sig, act, correction)
     s1, s2 = correction.s1_mm, correction.s2_mm
     steps = ()
     if sig.step is not None:
