@@ -21,7 +21,8 @@ import pytest
 from hil.cli import main
 from hil.cli.args import ExitCode
 from hil.cli.check import master_setup
-from hil.cli.commission import commission, simulated_transport
+from hil.cli.commission import commission
+from hil.cli.commission_setup import simulated_transport
 from hil.cli.dry_run import dry_run
 from hil.errors import ProfileError
 from hil.master.commission_explain import serial_findings, swap_patch

@@ -234,7 +234,8 @@ def test_a_preflight_refusal_is_a_finding_with_its_key(tmp_path, capsys):
 
 def test_an_error_that_stops_the_preflight_is_named_with_its_key():
     """The key of a stop in the preflight: the refusal's own, else the SDO timeout, else the EDS of the node
-    that refused an object its EDS offers; an error of no known kind keeps none."""
+    that refused an object its EDS offers; an error of no known kind gets the table it concerns (a preflight's:
+    ``canopen``, the drives' configuration), never an empty key."""
     from hil.canopen.frame import Frame
     from hil.canopen.sdo import SdoAbortError, SdoTimeout
     from hil.master.commission import Commission
@@ -244,8 +245,8 @@ def test_an_error_that_stops_the_preflight_is_named_with_its_key():
     for exc, key in ((PreflightError("x", "canopen.force_control"), "canopen.force_control"),
                      (SdoTimeout(1, 0x6502, 0, 0.5, Frame(0x601, bytes(8))), "canopen.sdo_timeout_s"),
                      (SdoAbortError(2, 0x6502, 0, 0x06020000), "canopen.eds"),
-                     (SdoAbortError(9, 0x6502, 0, 0x06020000), ""),  # no node of the plan
-                     (PreflightError("no key"), "")):
+                     (SdoAbortError(9, 0x6502, 0, 0x06020000), "canopen"),  # no node of the plan
+                     (PreflightError("no key"), "canopen")):
         core = Commission(ACT, CHECK, plan)
         core.failed(exc)
         assert [(f.stage, f.kind, f.key) for f in core.findings] == [(Stage.SCAN, Kind.PREFLIGHT, key)], exc
