@@ -382,7 +382,9 @@ def lead_order(period_m: float, period_u_m: float, lead_m: float, gear_ratio: fl
 
     The order is the cycles per turn of a part: :math:`n = L/P` for the screw, :math:`n = L/(gP)` for the
     motor, with :math:`u_n = n u_P / P`. The part whose order lies nearest a whole number
-    (1..``max_order``, in standard uncertainties) is named. **Contradicts** the stated lead when no part's
+    (1..``max_order``, in standard uncertainties) is named; where several are whole within ``z_max``, the
+    lowest order (a 1 mm period with a 5 mm lead and 5 motor turns per screw turn: the motor once per turn,
+    not the screw five times). **Contradicts** the stated lead when no part's
     order lies within ``z_max`` standard uncertainties of a whole number: the period found is used, the
     stated lead is reported as not matching (or the position sensor's scale is off by the difference).
     """
@@ -391,14 +393,13 @@ def lead_order(period_m: float, period_u_m: float, lead_m: float, gear_ratio: fl
     uP = max(float(period_u_m), 1e-12)
     parts = [("screw", L / P)] + ([("motor", L / (positive_scalar(gear_ratio, "gear_ratio", "1") * P))]
                                   if gear_ratio else [])
-    best = None
+    cands = []
     for part, n in parts:
         un = n * uP / P
         k = int(min(max_order, max(1, round(n))))
-        z = abs(n - k) / un
-        if best is None or z < best[4]:
-            best = (part, n, un, k, z)
-    part, n, un, k, z = best
+        cands.append((part, n, un, k, abs(n - k) / un))
+    # among the parts whose order is whole within z_max the lowest order (the fastest part's), else the nearest
+    part, n, un, k, z = min(cands, key=lambda c: (c[4] > z_max, c[3] if c[4] <= z_max else c[4]))
     ok = z <= z_max
     what = {1: "once per turn"}.get(k, f"{k} times per turn")
     words = (f"order {k} of the {part} ({what}; {n:.4g} ± {un:.2g} cycles per turn with the stated lead "
