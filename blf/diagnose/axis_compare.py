@@ -212,7 +212,8 @@ def compare_axis(new: AxisSamples, ref: AxisSamples, force_floor_N: float, z_min
         plan = periodic_pair(new, ref, ident, fn, fr, xn, xr)
         if plan.periods_new_m:
             fr, fn = _fit(ref, ident, xr | plan.columns_ref), _fit(new, ident, xn | plan.columns_new)
-        periodic = compare_periodic(plan, new, ref, ident, fn, fr, periodic_floor_N, z_min, xn, lead_m, gear_ratio)
+        periodic = compare_periodic(plan, new, ref, ident, fn, fr, periodic_floor_N, z_min, xn, lead_m, gear_ratio,
+                                    xr)
     floors = axis_floors(force_floor_N, fr.running_speed_m_per_s, half)
     changes = [c for c in compare_fits(fn, fr, floors, z_min) if not c.name.startswith("periodic")]
     checks = [effort_load_check(fit, p.load_N, p.mask.used, force_floor_N, z_min, gain_rel_u)

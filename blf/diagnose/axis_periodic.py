@@ -41,7 +41,7 @@ from blf.diagnose.periodic import (
 from blf.errors import AnalysisError
 
 __all__ = ["PeriodicPlan", "PeriodicChange", "AxisPeriodic", "periodic_pair", "compare_periodic",
-           "axis_residual", "directions"]
+           "axis_residual", "directions", "profile"]
 
 MAX_ORDER = 3  #: harmonics fitted with a fundamental, where the sampling resolves them
 
@@ -91,6 +91,7 @@ class AxisPeriodic:
     holdout_rms_after_N: float | None  #: with the periodic terms
     floor_N: float
     words: str
+    profiles: tuple = ()  #: (recording, reference) of :func:`profile` at the first component's period
 
 
 def directions(p) -> np.ndarray:
@@ -196,7 +197,8 @@ def _words(amp: dict, named: tuple, period: float, floor: float) -> str:
 
 
 def compare_periodic(plan: PeriodicPlan, new, ref, ident, fit_new, fit_ref, floor_N: float, z_min: float,
-                     extra_new: dict, lead_m: float | None = None, gear_ratio: float | None = None) -> AxisPeriodic:
+                     extra_new: dict, lead_m: float | None = None, gear_ratio: float | None = None,
+                     extra_ref: dict | None = None) -> AxisPeriodic:
     """Each component's amplitude per direction against the reference's, after the joint fits
     (``fit_new``, ``fit_ref`` with the plan's columns), with where it acts and which order it is."""
     if not plan.periods_new_m:
@@ -233,4 +235,30 @@ def compare_periodic(plan: PeriodicPlan, new, ref, ident, fit_new, fit_ref, floo
                                   float(np.mean([amp[d][2] for d in use])) if use else 0.0,
                                   floor_N, where, lead, fin, words))
     before, after = _holdout(new, ident, extra_new, plan.columns_new)
-    return AxisPeriodic(tuple(out), before, after, floor_N, plan.words)
+    prof = tuple(profile(p, ident, f, x, cols, plan.periods_new_m[0])
+                 for p, f, x, cols in ((new, fit_new, extra_new, plan.columns_new),
+                                       (ref, fit_ref, extra_ref, plan.columns_ref))) if extra_ref is not None else ()
+    return AxisPeriodic(tuple(out), before, after, floor_N, plan.words, prof)
+
+
+def profile(p, ident, fit, extra: dict, cols: dict, period_m: float) -> dict:
+    """The effort against position, cycle-averaged: per direction of motion, the force and the model
+    without and with the periodic terms, each averaged in position bins of a sixth of the period (N).
+
+    Returns {direction: (bin centres m, force N, model without N, model with N)}."""
+    y = p.force_N + (0.0 if p.load_N is None else p.load_N)
+    with_p = y - axis_residual(p, ident, fit, extra | cols)
+    without = with_p - sum((fit.parameters[k] * c for k, c in cols.items()), np.zeros_like(y))
+    d = directions(p)
+    out = {}
+    width = period_m / 6
+    for s, name in DIRECTIONS.items():
+        sel = p.mask.used & (d == s)
+        if sel.sum() < 10:
+            continue
+        q = p.q_m[sel]
+        k = np.floor((q - q.min()) / width).astype(int)
+        n = np.bincount(k).astype(float)
+        ok = n >= 3
+        out[name] = tuple((np.bincount(k, v[sel])[ok] / n[ok]) for v in (p.q_m, y, without, with_p))
+    return out

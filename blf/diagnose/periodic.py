@@ -107,7 +107,7 @@ class LeadOrder:
     words: str
 
 
-def search_range(q_m, used, direction=None) -> PeriodSearch:
+def search_range(q_m, used, direction=None, shortest_m: float = 0.0) -> PeriodSearch:
     """The periods (m) a recording's positions can show.
 
     Parameters
@@ -118,6 +118,9 @@ def search_range(q_m, used, direction=None) -> PeriodSearch:
         The samples compared.
     direction : array_like, shape (n,), optional
         Direction of motion (+1, -1, 0); default the sign of the position's gradient.
+    shortest_m : float
+        A shorter period the model does not claim (e.g. the speed over the band it compares in), m: the
+        shortest period sought is the larger of the two.
 
     Returns
     -------
@@ -140,7 +143,7 @@ def search_range(q_m, used, direction=None) -> PeriodSearch:
     d = np.sign(np.gradient(q)) if direction is None else np.asarray(direction, float)
     spans = [float(np.ptp(q[idx][d[idx] == s])) for s in DIRECTIONS if np.sum(d[idx] == s) > 2]
     span = min(spans) if spans else 0.0  # the travel in each direction
-    shortest, longest = SAMPLES_PER_PERIOD * step, span / MIN_PERIODS
+    shortest, longest = max(SAMPLES_PER_PERIOD * step, float(shortest_m)), span / MIN_PERIODS
     if step <= 0 or span <= 0 or longest <= shortest:
         raise AnalysisError(f"the travel compared ({span * 1e3:.4g} mm) is shorter than two of the shortest "
                             f"periods it could show ({shortest * 1e3:.4g} mm, {SAMPLES_PER_PERIOD:g} samples of "

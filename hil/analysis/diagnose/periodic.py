@@ -36,9 +36,19 @@ def _component(c, trusted: bool) -> dict:
     return out
 
 
+def _profile(prof: dict) -> dict:
+    return {d: {k: [round(float(x), 6 if k == "q_m" else 2) for x in arr]
+                for k, arr in zip(("q_m", "force_N", "model_without_N", "model_with_N"), v, strict=True)}
+            for d, v in prof.items()}
+
+
 def periodic_dict(p, trusted: bool = True) -> dict:
-    """diagnosis.json's ``periodic`` from :class:`blf.diagnose.axis_periodic.AxisPeriodic`."""
+    """diagnosis.json's ``periodic`` from :class:`blf.diagnose.axis_periodic.AxisPeriodic`; ``profile``: the
+    effort against position, cycle-averaged (bins of a sixth of the first component's period), of the
+    recording and the reference, with each one's model without and with the periodic terms."""
     return {"components": [_component(c, trusted) for c in p.changes], "floor_N": rounded(p.floor_N),
+            **({"profile": {"period_m": rounded(p.changes[0].period_m), "recording": _profile(p.profiles[0]),
+                            "reference": _profile(p.profiles[1])}} if p.profiles else {}),
             "holdout_rms_before_N": rounded(p.holdout_rms_before_N),
             "holdout_rms_after_N": rounded(p.holdout_rms_after_N),
             "words": p.words + ("; held-out strokes (every other stroke of each direction, fitted on the rest): "
