@@ -19,18 +19,21 @@ import numpy as np
 
 from blf.diagnose import Candidate, Param
 
-__all__ = ["periodic_start", "periodic_candidate", "periodic_force"]
+__all__ = ["periodic_start", "periodic_candidate", "periodic_force", "envelope"]
 
 _DECIMATE = 10  #: every 10th sample searched (the period is tens of samples of travel long at the check's speed)
 _MOVING_MM_PER_S = 0.5  #: slower than this the ram is taken as standing
 
 
 def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float) -> tuple | None:
-    """(period mm, amplitude N, phase rad) of the strongest force periodic in the ram's position while the
-    EMA holds force and moves, or None where none is found (or the travel is shorter than two periods).
+    """(period mm, amplitude N, phase rad, local span or None) of the strongest force periodic in the ram's
+    position while the EMA holds force and moves, or None where none is found (or the travel is shorter
+    than two periods). Local (:func:`blf.diagnose.periodic.locality` in stretches of two periods): its
+    span (centre mm, half width mm) from the power of the complex demodulate at the period (its centroid,
+    and sqrt(3) times its standard deviation: a flat stretch's half width).
     Periods shorter than the travel in one period of the band's edge (the 95th percentile of the speed
     over ``band_hz``) are not sought: the replay does not claim them."""
-    from blf.diagnose.periodic import find_periods, search_range
+    from blf.diagnose.periodic import find_periods, locality, search_range
     from blf.errors import AnalysisError
     x = np.asarray(xm_mm, float)[::_DECIMATE] * 1e-3
     v = np.asarray(v_mm_per_s, float)[::_DECIMATE]
@@ -47,26 +50,49 @@ def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float) -
     if not found:
         return None
     p = found[0].period_m
-    cols = [np.ones(x.size), np.cos(2 * np.pi * x / p), np.sin(2 * np.pi * x / p)]
+    where = locality(x, r, d, used, p, search_range(x, used, d), periods_per_bin=2.0)
+    env = np.ones(x.size)
+    span = None
+    if not where.uniform:  # centre and half width of the envelope from the complex demodulate's power
+        z = np.abs(np.convolve(np.where(used, r * np.exp(-2j * np.pi * x / p), 0), np.ones(25), "same")) ** 2
+        c = float(np.sum(z[used] * x[used]) / np.sum(z[used]))
+        w = float(np.sqrt(3 * np.sum(z[used] * (x[used] - c) ** 2) / np.sum(z[used])))
+        span = (c * 1e3, max(w, p) * 1e3)
+        env = envelope(x * 1e3, *span)
+    cols = [np.ones(x.size), env * np.cos(2 * np.pi * x / p), env * np.sin(2 * np.pi * x / p)]
     X = np.column_stack([cols[0] * (d > 0), cols[0] * (d < 0), cols[1], cols[2]])
     a, b = np.linalg.lstsq(X[used], r[used], rcond=None)[0][2:]
     # the load cell reads -F_p: -A cos(theta + phi) = a cos(theta) + b sin(theta)
-    return p * 1e3, float(np.hypot(a, b)), float(np.arctan2(-b, -a))
+    return p * 1e3, float(np.hypot(a, b)), float(np.arctan2(-b, -a)), span
+
+
+def envelope(xm_mm, center_mm: float, half_width_mm: float) -> np.ndarray:
+    """A local defect's envelope, :math:`e^{-((x - x_0)/w)^4}` (flat over most of +-w, smooth at its ends)."""
+    return np.exp(-(((np.asarray(xm_mm, float) - center_mm) / half_width_mm) ** 4))
 
 
 def periodic_candidate(where: str, n: str, start: tuple) -> Candidate:
     """The candidate ``periodic_force`` at an EMA, started where :func:`periodic_start` found it."""
-    p, a, ph = start
-    return Candidate("periodic_force", where,
-                     f"a force periodic in the ram's position in the drive of EMA {n} (period {p:.4g} mm of travel "
-                     "found in the data: a screw's runout or misalignment, or a raceway defect)",
-                     (Param("amplitude_N", a, max(a, 1.0), 0.0, 1e4),
-                      Param("phase_rad", ph, 0.5, ph - 2 * np.pi, ph + 2 * np.pi),
-                      Param("period_mm", p, p * 0.01, p * 0.9, p * 1.1)),
-                     "", ("phase_rad", "period_mm"))
+    p, a, ph, span = start
+    params = (Param("amplitude_N", a, max(a, 1.0), 0.0, 1e4),
+              Param("phase_rad", ph, 0.5, ph - 2 * np.pi, ph + 2 * np.pi),
+              Param("period_mm", p, p * 0.01, p * 0.9, p * 1.1))
+    shape = ("phase_rad", "period_mm")
+    words = (f"a force periodic in the ram's position in the drive of EMA {n} (period {p:.4g} mm of travel found in "
+             "the data")
+    if span is None:
+        words += ", uniform along the stroke: a screw's runout or misalignment)"
+    else:
+        c, w = span
+        params += (Param("center_mm", c, w / 4, c - w, c + w), Param("half_width_mm", w, w / 4, w / 3, 3 * w))
+        shape += ("center_mm", "half_width_mm")
+        words += f", local: around {c:+.3g} mm of the stroke: a defect on the raceway there)"
+    return Candidate("periodic_force", where, words, params, "", shape)
 
 
 def periodic_force(xm_mm, x) -> np.ndarray:
-    """:math:`F_p` (N) at the motor-side positions for the candidate's parameters (amplitude, phase, period)."""
-    a, ph, p = (float(v) for v in x)
-    return a * np.cos(2 * np.pi * np.asarray(xm_mm, float) / p + ph)
+    """:math:`F_p` (N) at the motor-side positions for the candidate's parameters (amplitude, phase, period,
+    and for a local one the centre and half width of its :func:`envelope`)."""
+    a, ph, p = (float(v) for v in x[:3])
+    f = a * np.cos(2 * np.pi * np.asarray(xm_mm, float) / p + ph)
+    return f * envelope(xm_mm, float(x[3]), float(x[4])) if len(x) == 5 else f

@@ -31,7 +31,7 @@ from hil.errors import RecordingError
 FORCE_FLOOR_N = 75.0
 #: default relevance floor of a periodic force's amplitude change, N: 3 x the RMS of the changes per
 #: direction of the healthy Cranfield actuator's ripple (``normal`` runs 6-10 against 1-5 and odd against
-#: even runs at +20 and +40 kgf: 8 changes, RMS 2.59 N, x 3 = 7.8 N), rounded up to 8 N: a repeatability
+#: even runs at +20 and +40 kgf: 8 changes, RMS 2.62 N, x 3 = 7.85 N), rounded up to 8 N: a repeatability
 #: (docs/diagnose.md, "Forces periodic in position"; tests/bench/bench_diagnose_cranfield_periodic.py)
 PERIODIC_FLOOR_N = 8.0
 EFFORTS = ("force", "torque", "current")
