@@ -234,8 +234,9 @@ def _periodic_parts(per: dict | None) -> list:
         return []
     g = lambda x: "—" if x is None else f"{x:.4g}"  # noqa: E731
     rows = [(g(c["period_m"] * 1e3), g(c["period_reference_m"] * 1e3),
-             "; ".join(f"{d} {g(v['reference_N'])} -> {g(v['amplitude_N'])} ({g(v['change_N'])} ± {g(v['uncertainty_N'])})"
-                       for d, v in c["directions"].items()), g(c["floor_N"]), "named" if c["named"] else "not named",
+             "; ".join(f"{d} {g(v['reference_N'])} -> {g(v['amplitude_N'])} "
+                       f"({g(v['change_N'])} ± {g(v['uncertainty_N'])})" for d, v in c["directions"].items()),
+             g(c["floor_N"]), "named" if c["named"] else "not named",
              c["where"]["words"], c.get("order", {}).get("words", "—")) for c in per["components"]]
     parts = ["<h2>Forces periodic in position</h2>", f"<p>{esc(per['words'])}</p>",
              table(["period mm", "reference's mm", "amplitude per direction N: reference -> this (change ± u)",

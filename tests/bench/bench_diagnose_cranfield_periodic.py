@@ -68,8 +68,9 @@ def floor(rows) -> dict:
 
 
 def _fmt(c) -> str:
-    dirs = "; ".join(f"{d[:3]} {v['reference_N']:.1f}->{v['amplitude_N']:.1f} ({v['change_N']:+.1f}±{v['uncertainty_N']:.1f})"
-                     f"{'*' if v['named'] else ''}" for d, v in c["directions"].items())
+    dirs = "; ".join(f"{d[:3]} {v['reference_N']:.1f}->{v['amplitude_N']:.1f} "
+                     f"({v['change_N']:+.1f}±{v['uncertainty_N']:.1f}){'*' if v['named'] else ''}"
+                     for d, v in c["directions"].items())
     where = "uniform" if c["where"]["uniform"] else (f"local {c['where']['span_m'][0] * 1e3:.0f}-"
                                                      f"{c['where']['span_m'][1] * 1e3:.0f} mm")
     order = c.get("order", {})

@@ -43,7 +43,8 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     origin, half, not_cand, conv_words = cmp.origin_m, cmp.half_stroke_m, cmp.not_candidates, pair.conversion_words
     effort = effort_checks(cmp, pair, opts)
     from hil.analysis.diagnose.periodic import periodic_dict, periodic_effects
-    effects = ([_effect(c) for c in changes if c.named] + periodic_effects(cmp.periodic)) if effort["trusted"] else []
+    effects = [_effect(c) for c in changes if c.named] + periodic_effects(cmp.periodic)
+    effects = effects if effort["trusted"] else []
     verdict = "untrusted_effort" if not effort["trusted"] else "explained" if effects else "no_mismatch"
     return {
         "verdict": verdict, "model": "single-axis", "mode": "reference", "effort": effort,
@@ -68,7 +69,8 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
             "their floors: the force floor at the end of the stroke, half_stroke_m from the origin")},
         "conversion": conv_words, "sample_rate_hz": rounded(new.sample_rate_hz),
         "running_speed_m_per_s": rounded(fn.running_speed_m_per_s),
-    } | ({"periodic": periodic_dict(cmp.periodic, effort["trusted"])} if cmp.periodic is not None else {}) | ({"notes": list(new.notes + ref.notes)} if new.notes + ref.notes else {})
+    } | ({"periodic": periodic_dict(cmp.periodic, effort["trusted"])} if cmp.periodic is not None else {}) | (
+        {"notes": list(new.notes + ref.notes)} if new.notes + ref.notes else {})
 
 
 def effort_checks(cmp, pair, opts: AxisOptions) -> dict:

@@ -14,10 +14,8 @@ from hil.analysis.diagnose.results import rounded
 def _component(c, trusted: bool) -> dict:
     per_dir = {d: {"amplitude_N": rounded(v[0]), "amplitude_u_N": rounded(v[1]), "reference_N": rounded(v[2]),
                    "reference_u_N": rounded(v[3]), "change_N": rounded(v[4]), "uncertainty_N": rounded(v[5]),
-                   "z": rounded(v[6], 4)}
+                   "z": rounded(v[6], 4), "named": d in c.named and trusted}
                for d, v in c.amplitude.items()}
-    for d, v in c.amplitude.items():
-        per_dir[d]["named"] = d in c.named and trusted
     out = {"period_m": rounded(c.period_m), "period_u_m": rounded(c.period_u_m),
            "period_reference_m": rounded(c.period_reference_m), "found_in": c.found_in,
            "amplitude_N": rounded(c.amplitude_N), "amplitude_reference_N": rounded(c.amplitude_reference_N),
