@@ -25,7 +25,8 @@ _DECIMATE = 10  #: every 10th sample searched (the period is tens of samples of 
 _MOVING_MM_PER_S = 0.5  #: slower than this the ram is taken as standing
 
 
-def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float) -> tuple | None:
+def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float,
+                   decimate: int = _DECIMATE) -> tuple | None:
     """(period mm, amplitude N, phase rad, local span or None) of the strongest force periodic in the ram's
     position while the EMA holds force and moves, or None where none is found (or the travel is shorter
     than two periods). Local (:func:`blf.diagnose.periodic.locality` in stretches of two periods): its
@@ -35,10 +36,11 @@ def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float) -
     over ``band_hz``) are not sought: the replay does not claim them."""
     from blf.diagnose.periodic import find_periods, locality, search_range
     from blf.errors import AnalysisError
-    x = np.asarray(xm_mm, float)[::_DECIMATE] * 1e-3
-    v = np.asarray(v_mm_per_s, float)[::_DECIMATE]
-    r = (np.asarray(force_N, float) - np.asarray(target_N, float))[::_DECIMATE]
-    used = np.asarray(hold, bool)[::_DECIMATE] & (np.abs(v) > _MOVING_MM_PER_S)
+    k = max(1, int(decimate))
+    x = np.asarray(xm_mm, float)[::k] * 1e-3
+    v = np.asarray(v_mm_per_s, float)[::k]
+    r = (np.asarray(force_N, float) - np.asarray(target_N, float))[::k]
+    used = np.asarray(hold, bool)[::k] & (np.abs(v) > _MOVING_MM_PER_S)
     d = np.where(used, np.sign(v), 0.0)
     if used.sum() < 50:
         return None
@@ -55,6 +57,7 @@ def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float) -
     span = None
     if not where.uniform:  # centre and half width of the envelope from the complex demodulate's power
         z = np.abs(np.convolve(np.where(used, r * np.exp(-2j * np.pi * x / p), 0), np.ones(25), "same")) ** 2
+        z = np.where(used, z, 0.0)
         c = float(np.sum(z[used] * x[used]) / np.sum(z[used]))
         w = float(np.sqrt(3 * np.sum(z[used] * (x[used] - c) ** 2) / np.sum(z[used])))
         span = (c * 1e3, max(w, p) * 1e3)
@@ -78,8 +81,8 @@ def periodic_candidate(where: str, n: str, start: tuple) -> Candidate:
               Param("phase_rad", ph, 0.5, ph - 2 * np.pi, ph + 2 * np.pi),
               Param("period_mm", p, p * 0.01, p * 0.9, p * 1.1))
     shape = ("phase_rad", "period_mm")
-    words = (f"a force periodic in the ram's position in the drive of EMA {n} (period {p:.4g} mm of travel found in "
-             "the data")
+    place = f"the ram's position in the drive of EMA {n}" if n else "position on the axis"
+    words = f"a force periodic in {place} (period {p:.4g} mm of travel found in the data"
     if span is None:
         words += ", uniform along the stroke: a screw's runout or misalignment)"
     else:
