@@ -31,6 +31,7 @@ import numpy as np
 from blf.diagnose.axis_reference import design_columns, fit_axis
 from blf.diagnose.periodic import (
     DIRECTIONS,
+    FALSE_ALARM,
     find_periods,
     lead_order,
     locality,
@@ -156,7 +157,7 @@ def periodic_pair(new, ref, ident, fit_new, fit_ref, extra_new: dict, extra_ref:
         cn |= periodic_columns(new.q_m, directions(new), p_new, o, i)
         cr |= periodic_columns(ref.q_m, directions(ref), p_ref, o, i)
     words = (f"searched {sn.words}; {len(comps)} component(s) found in the residuals against position "
-             f"(false-alarm probability {1e-3:g} per search)")
+             f"(false-alarm probability {FALSE_ALARM:g} per search)")
     return PeriodicPlan(tuple(pn), tuple(pr), tuple(us), tuple(orders), tuple(c[2] for c in comps), cn, cr, words)
 
 

@@ -43,7 +43,7 @@ from blf.errors import AnalysisError
 from blf.validate import as_1d_finite, positive_scalar
 
 __all__ = ["PeriodSearch", "PeriodFound", "Locality", "LeadOrder", "search_range", "amplitude_spectrum",
-           "find_periods", "periodic_columns", "periodic_amplitudes", "locality", "lead_order",
+           "find_periods", "periodic_columns", "periodic_amplitudes", "locality", "lead_order", "column_name",
            "SAMPLES_PER_PERIOD", "FALSE_ALARM", "MIN_PERIODS", "DIRECTIONS"]
 
 SAMPLES_PER_PERIOD = 2.5  #: fewest samples of travel per period (Nyquist's 2, with margin for uneven steps)
