@@ -169,3 +169,19 @@ def test_healthy_pairs_name_no_periodic_force(tmp_path):
         new = _write(tmp_path / f"new{seed}.csv", q, _axis_force(q, rng, _ripple(q, 0.005, 20.0)))
         d = reference_diagnosis(new, ref, AxisOptions())
         assert d["verdict"] == "no_mismatch" and d["effects"] == []
+
+
+@pytest.mark.parametrize("hi, lead, says", [
+    (0.0215, None, "shorter than two of the shortest periods"),  # 1.5 mm of travel: no period at all
+    (0.035, 0.010, "cannot be named from this recording"),  # 15 mm of travel: a 10 mm lead needs 20 mm
+])
+def test_a_recording_too_short_for_a_period_says_so_in_diagnosis_json(tmp_path, hi, lead, says):
+    from hil.analysis.diagnose.axis_reference import reference_diagnosis
+    from hil.analysis.diagnose.single_axis import AxisOptions
+    rng = np.random.default_rng(9)
+    q = _stroke(n_cycles=20, hi=hi)
+    ref = _write(tmp_path / "ref.csv", q, _axis_force(q, rng))
+    new = _write(tmp_path / "new.csv", q, _axis_force(q, rng, _ripple(q, 0.010, 40.0)))
+    d = reference_diagnosis(new, ref, AxisOptions(screw_lead_m=lead))
+    assert says in d["periodic"]["words"]
+    assert not any(e["name"] == "periodic_force_change" and e["period_m"] > (hi - 0.02) / 2 for e in d["effects"])

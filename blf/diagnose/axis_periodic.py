@@ -202,8 +202,17 @@ def compare_periodic(plan: PeriodicPlan, new, ref, ident, fit_new, fit_ref, floo
                      extra_ref: dict | None = None) -> AxisPeriodic:
     """Each component's amplitude per direction against the reference's, after the joint fits
     (``fit_new``, ``fit_ref`` with the plan's columns), with where it acts and which order it is."""
+    words = plan.words
+    try:
+        longest = search_range(new.q_m, new.mask.used, directions(new)).longest_m
+    except AnalysisError:
+        longest = 0.0
+    if lead_m and lead_m > longest:
+        words += (f"; the stated lead ({lead_m * 1e3:.4g} mm) is longer than half the travel of each direction "
+                  f"({longest * 1e3:.4g} mm): a ripple once per turn of the screw cannot be named from this recording "
+                  f"(it needs two whole periods)")
     if not plan.periods_new_m:
-        return AxisPeriodic((), None, None, floor_N, plan.words)
+        return AxisPeriodic((), None, None, floor_N, words)
     resid = axis_residual(new, ident, fit_new, extra_new | plan.columns_new)
     out = []
     for i, (pn, pr, u, o, fin) in enumerate(zip(plan.periods_new_m, plan.periods_ref_m, plan.periods_u_m,
@@ -239,7 +248,7 @@ def compare_periodic(plan: PeriodicPlan, new, ref, ident, fit_new, fit_ref, floo
     prof = tuple(profile(p, ident, f, x, cols, plan.periods_new_m[0])
                  for p, f, x, cols in ((new, fit_new, extra_new, plan.columns_new),
                                        (ref, fit_ref, extra_ref, plan.columns_ref))) if extra_ref is not None else ()
-    return AxisPeriodic(tuple(out), before, after, floor_N, plan.words, prof)
+    return AxisPeriodic(tuple(out), before, after, floor_N, words, prof)
 
 
 def profile(p, ident, fit, extra: dict, cols: dict, period_m: float) -> dict:
