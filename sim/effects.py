@@ -45,6 +45,7 @@ __all__ = [
     "AsymmetricFriction",
     "LeadError",
     "StiffnessBump",
+    "PeriodicForce",
     "COLUMNS",
     "N_COLUMNS",
     "WHERE_ROW",
@@ -73,6 +74,11 @@ COLUMNS = (
     "bump_rel",  # relative internal stiffness increase at the bump centre
     "bump_center_m",  # motor-side position of the stiffness bump
     "bump_width_m",  # Gaussian width of the stiffness bump
+    "periodic_amp_N",  # amplitude of a force periodic in the motor-side position (drive, behind the load cell)
+    "periodic_period_m",  # its period along the motor-side stroke
+    "periodic_phase_rad",  # its phase at position 0
+    "periodic_center_m",  # centre of the stretch where it acts (local)
+    "periodic_halfwidth_m",  # half the length of that stretch; 0: everywhere (uniform)
 )
 N_COLUMNS = len(COLUMNS)
 COL_COULOMB_N = COLUMNS.index("coulomb_force_N")
@@ -91,6 +97,11 @@ COL_LEAD_PERIOD = COLUMNS.index("lead_period_m")
 COL_BUMP_REL = COLUMNS.index("bump_rel")
 COL_BUMP_CENTER = COLUMNS.index("bump_center_m")
 COL_BUMP_WIDTH = COLUMNS.index("bump_width_m")
+COL_PER_AMP = COLUMNS.index("periodic_amp_N")
+COL_PER_PERIOD = COLUMNS.index("periodic_period_m")
+COL_PER_PHASE = COLUMNS.index("periodic_phase_rad")
+COL_PER_CENTER = COLUMNS.index("periodic_center_m")
+COL_PER_HALFWIDTH = COLUMNS.index("periodic_halfwidth_m")
 
 _EMA_ONLY = ("ema1", "ema2")
 
@@ -447,8 +458,58 @@ class StiffnessBump(_Effect):
         table[row, COL_BUMP_WIDTH] = float(self.width_mm) * 1e-3
 
 
+@dataclass(frozen=True)
+class PeriodicForce(_Effect):
+    """A force periodic in the ram's position, in the drive (behind the load cell): a screw's runout or
+    misalignment (uniform), or a defect on the raceway (local, over one stretch of the stroke).
+
+    Parameters
+    ----------
+    where : {"ema1", "ema2"}
+    amplitude_N : float
+        Amplitude, >= 0 N.
+    period_mm : float
+        Period along the motor-side stroke, > 0 mm (once per turn of a 5 mm lead: 5 mm).
+    phase_rad : float
+        Phase at the motor-side position 0, rad.
+    center_mm, width_mm : float
+        Local: it acts only within ``width_mm`` (> 0) around ``center_mm`` (motor-side position, mm);
+        ``width_mm`` 0: everywhere (uniform).
+
+    Notes
+    -----
+    The drive's motor carries, besides the load path's force,
+    :math:`F_p = A\\cos(2\\pi x_m/p + \\varphi)\\,[\\,|x_m - x_0| \\le w/2\\,]` (N, the sign of a
+    load on the ram: positive opposes extension), :math:`x_m = \\varphi_m/i_{total}`.
+    """
+
+    NAME: ClassVar[str] = "periodic_force"  #: machine name in profiles
+
+    where: str
+    amplitude_N: float
+    period_mm: float = 5.0
+    phase_rad: float = 0.0
+    center_mm: float = 0.0
+    width_mm: float = 0.0
+
+    _LIMITS: ClassVar[tuple] = (
+        ("amplitude_N", "N", 0.0, False),
+        ("period_mm", "mm", 0.0, True),
+        ("phase_rad", "rad", -math.inf, True),
+        ("center_mm", "mm", -math.inf, True),
+        ("width_mm", "mm", 0.0, False),
+    )
+
+    def _compile(self, table: np.ndarray, row: int, sample_period_s: float, substep_s: float) -> None:
+        table[row, COL_PER_AMP] = float(self.amplitude_N)
+        table[row, COL_PER_PERIOD] = float(self.period_mm) * 1e-3
+        table[row, COL_PER_PHASE] = float(self.phase_rad)
+        table[row, COL_PER_CENTER] = float(self.center_mm) * 1e-3
+        table[row, COL_PER_HALFWIDTH] = 0.5 * float(self.width_mm) * 1e-3
+
+
 _KNOWN = (CoulombFriction, ViscousFriction, Viscoelastic, LvdtDrift, TimeSkew,
-          StribeckFriction, AsymmetricFriction, LeadError, StiffnessBump)
+          StribeckFriction, AsymmetricFriction, LeadError, StiffnessBump, PeriodicForce)
 
 #: Machine name (profiles, diagnosis) -> effect class.
 EFFECTS = {cls.NAME: cls for cls in _KNOWN}

@@ -31,6 +31,11 @@ from sim.effects import (
     COL_LEAD_PERIOD,
     COL_LVDT_DELAY,
     COL_LVDT_DRIFT,
+    COL_PER_AMP,
+    COL_PER_CENTER,
+    COL_PER_HALFWIDTH,
+    COL_PER_PERIOD,
+    COL_PER_PHASE,
     COL_STRIBECK_N,
     COL_STRIBECK_V,
     COL_VE_ALPHA,
@@ -188,6 +193,10 @@ def _kick(X, P, E, e, mode, val, wff, hk, implicit):
     # passive velocity terms (implicit): motor viscous, ram viscous, Coulomb (linearised)
     c_lin = P[G_B] + E[e, COL_VISCOUS] / (im * im)
     t_rest = -(X[b + SE_F] + fstop) / im
+    if E[e, COL_PER_AMP] > 0.0:  # a force periodic in the ram's position, in the drive
+        hw = E[e, COL_PER_HALFWIDTH]
+        if hw <= 0.0 or abs(xm - E[e, COL_PER_CENTER]) <= hw:
+            t_rest -= E[e, COL_PER_AMP] * math.cos(2.0 * math.pi * xm / E[e, COL_PER_PERIOD] + E[e, COL_PER_PHASE]) / im
     fc = E[e, COL_COULOMB_N]
     fs = E[e, COL_STRIBECK_N]
     fa = E[e, COL_FRIC_ASYM]

@@ -34,7 +34,9 @@ Candidates (per EMA): LVDT non-linearity (quadratic and cubic over the
 stroke), drift, time skew; load-cell gain; tension/compression stiffness
 asymmetry, progressive stiffness, visco-elastic creep of the load path; and,
 where the EMA holds force, extra Coulomb, viscous, Stribeck or
-direction-dependent friction of its drive (>= 0: added to the common nominal).
+direction-dependent friction of its drive (>= 0: added to the common nominal), and a force periodic
+in the ram's position in its drive where the recording shows one (its period found from the data,
+:mod:`sim.replay_periodic`).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from scipy.signal import savgol_filter
 from blf.diagnose import Candidate, Param, ParamVector, Reference, holding, mode_changes, segment_changes, transients
 from blf.validate import as_1d_finite, positive_scalar, same_shape
 from sim.replay import ChainParams, friction_force, lvdt_model, replay_chains
+from sim.replay_periodic import periodic_candidate, periodic_force, periodic_start
 
 __all__ = ["DualEmaReplay", "dual_ema_candidates", "BAND_HZ"]
 
@@ -228,6 +231,11 @@ class DualEmaReplay:
         self.nominal = _nominal_params(rig, g0, o0, any(self.drive))
         self.names = tuple(q.name for q in self.nominal)  #: of the nominal vector, read with ParamVector
         self.candidates = dual_ema_candidates(self.drive)
+        for e, (where, n) in enumerate((("ema1", "1"), ("ema2", "2"))):  # a force periodic in position, if found
+            start = periodic_start(self.xm[e], self.v[e], (f1, f2)[e], self.targets[e],
+                                   self.valid[f"Fd{e + 1}"], self.band_hz) if self.drive[e] else None
+            if start is not None:
+                self.candidates += (periodic_candidate(where, n, start),)
         self.references = _references(self.names, sens, _surface_damping(rig))
         xc = 0.5 * (self.xm[0] + self.xm[1])
         self.regimes = {
@@ -346,5 +354,8 @@ class DualEmaReplay:
                 kwf = self._friction_kw(fx, where, variant)
                 if kwf is not None:
                     ff = ff + friction_force(self.v[e], **kwf)
+            per = fx.get(("periodic_force", where, ""))
+            if per is not None:
+                ff = ff + periodic_force(self.xm[e], per)
             out[f"Fd{n}"] = lg * (self.targets[e] - ff - M * 1e-3 * self.a[e])
         return out

@@ -28,7 +28,10 @@ Candidates (added to F; :math:`\\tilde q = q - \\mathrm{median}(q)`,
   is the offset, already nominal);
 * ``position_dependent_friction``: :math:`a\\,\\tilde q\\,s`;
 * ``position_dependent_force``: :math:`b_1 \\tilde q + b_2 \\tilde q^2`
-  (a spring, cable carrier or gravity component).
+  (a spring, cable carrier or gravity component);
+* ``periodic_force``, where the recording shows one (its period found from the
+  force against position, :mod:`sim.replay_periodic`): :math:`-A\\cos(2\\pi q/P + \\varphi)`
+  (with an envelope where it is local).
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import numpy as np
 from blf.diagnose import Candidate, Param, ParamVector
 from blf.errors import InputError
 from blf.validate import as_1d_finite, positive_scalar, same_shape
+from sim.replay_periodic import periodic_force
 
 __all__ = ["SingleAxisReplay", "single_axis_candidates"]
 
@@ -118,6 +122,13 @@ class SingleAxisReplay:
         #: candidates this recording cannot tell apart from the nominal model: (name, why), not screened
         self.not_candidates = ()
         self.candidates = self._separable_candidates(ok_far if ok_far.any() else ok)
+        # a force periodic in position, where the recording shows one (its period found from the data)
+        from sim.replay_periodic import periodic_candidate, periodic_start
+        fs = 1.0 / T
+        start = periodic_start(self.q * 1e3, self.v * 1e3, arrs[3], 0.0, ok_far if ok_far.any() else ok,
+                               self.band_hz, decimate=max(1, int(fs // 100)))
+        if start is not None:
+            self.candidates += (periodic_candidate("axis", "", start),)
         self.regimes = {"position along the stroke": self.qc, "velocity": self.v,
                         "acceleration": self.a, "time since start": self.t_s - np.median(self.t_s)}
 
@@ -177,4 +188,6 @@ class SingleAxisReplay:
                 f = f + x[0] * self.qc * th
             elif cand.name == "position_dependent_force":
                 f = f + x[0] * self.qc + x[1] * self.qc * self.qc
+            elif cand.name == "periodic_force":
+                f = f - periodic_force(self.q * 1e3, x)  # the replay's sign: the recorded force reads -F_p
         return f

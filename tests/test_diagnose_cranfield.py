@@ -26,7 +26,8 @@ def rows(tmp_path_factory):
 @pytest.mark.parametrize("load", [20, 40])
 def test_lack_of_lubrication_is_named_a_friction_increase_of_the_size_the_raw_current_says(rows, load):
     r = rows[("lackLubrication1", load)]
-    assert [n.split()[0] for n in r["named"]] == ["friction_change"]
+    # the friction increase, and besides it at most a periodic force that decreased (issue 48)
+    assert [n.split()[0] for n in r["named"] if not n.startswith("periodic_force_change -")] == ["friction_change"]
     raw = r["raw_current_friction_change_N"]
     assert raw > 0 and raw / 2 <= r["friction_change_N"] <= 2 * raw
 
@@ -35,9 +36,10 @@ def test_lack_of_lubrication_is_named_a_friction_increase_of_the_size_the_raw_cu
 @pytest.mark.parametrize("load", [20, 40])
 def test_backlash_and_spalling_name_no_friction_increase_and_no_other_term(rows, name, load):
     r = rows[(name, load)]
-    # a friction change is the only term that may be named, and only a decrease (what the current says)
-    assert all(n.split()[0] == "friction_change" for n in r["named"])
-    assert not (r["named"] and r["friction_change_N"] > 0)
+    # a friction change may be named only as a decrease (what the current says); the only other term
+    # that may be named is a force periodic in position (issue 48, tests/test_diagnose_cranfield_periodic.py)
+    assert all(n.split()[0] in ("friction_change", "periodic_force_change") for n in r["named"])
+    assert not any(n.startswith("friction_change") for n in r["named"]) or r["friction_change_N"] < 0
 
 
 @pytest.mark.parametrize("load", [20, 40])

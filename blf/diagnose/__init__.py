@@ -19,7 +19,10 @@ Offers, by module:
   :func:`identifiability`, :func:`fit_axis`, :func:`compare_fits`, ...); its effort as a force in
   :mod:`~blf.diagnose.axis_effort` (:func:`effort_to_force`, :func:`identify_current_per_force`,
   :func:`effort_load_check`); the whole comparison of two recordings in one step in
-  :mod:`~blf.diagnose.axis_compare` (:func:`compare_axis`, :class:`AxisSamples`, :class:`AxisComparison`).
+  :mod:`~blf.diagnose.axis_compare` (:func:`compare_axis`, :class:`AxisSamples`, :class:`AxisComparison`);
+* :mod:`~blf.diagnose.periodic`: forces periodic in position found from a residual against position
+  (:func:`search_range`, :func:`find_periods`, :func:`periodic_columns`, :func:`locality`,
+  :func:`lead_order`); their comparison against a reference in :mod:`~blf.diagnose.axis_periodic`.
 
 Uses :mod:`blf.maint` (the check's segments) and blf's five modules.
 """
@@ -41,4 +44,9 @@ __getattr__, __dir__, __all__ = lazy.attach(__name__, submod_attrs={
                     "effort_load_check", "LAWS"],
     "axis_compare": ["AxisSamples", "AxisComparison", "compare_axis", "common_terms", "stroke_candidates",
                      "axis_floors"],
+    "periodic": ["PeriodSearch", "PeriodFound", "Locality", "LeadOrder", "search_range", "amplitude_spectrum",
+                 "find_periods", "periodic_columns", "periodic_amplitudes", "locality", "lead_order", "column_name",
+                 "SAMPLES_PER_PERIOD", "FALSE_ALARM", "MIN_PERIODS", "DIRECTIONS"],
+    "axis_periodic": ["AxisPeriodic", "PeriodicChange", "PeriodicPlan", "periodic_pair", "compare_periodic",
+                      "axis_residual", "directions", "profile"],
 })

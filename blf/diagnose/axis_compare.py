@@ -103,6 +103,7 @@ class AxisComparison:
     changes: tuple
     effort_recording: EffortCheck
     effort_reference: EffortCheck
+    periodic: object = None  #: :class:`blf.diagnose.axis_periodic.AxisPeriodic`, or None: not sought
 
 
 def common_terms(ref: Identifiability, new: Identifiability, ref_name: str) -> Identifiability:
@@ -163,7 +164,8 @@ def _fit(p: AxisSamples, ident: Identifiability, extra: dict) -> AxisFit:
 
 
 def compare_axis(new: AxisSamples, ref: AxisSamples, force_floor_N: float, z_min: float = 3.0,
-                 gain_rel_u: float = 0.0) -> AxisComparison:
+                 gain_rel_u: float = 0.0, periodic_floor_N: float | None = None, lead_m: float | None = None,
+                 gear_ratio: float | None = None) -> AxisComparison:
     """A single-axis recording against its reference: both fitted with the terms both can separate, each
     parameter compared against its floor, each effort checked against its known load.
 
@@ -177,6 +179,12 @@ def compare_axis(new: AxisSamples, ref: AxisSamples, force_floor_N: float, z_min
         Statistical support of a named change (|change| > z_min combined standard uncertainties).
     gain_rel_u : float
         Relative standard uncertainty of the effort conversion (e.g. the current per newton).
+    periodic_floor_N : float, optional
+        The relevance floor of a periodic force's amplitude change, N; None: forces periodic in position
+        are not sought. Where sought they are found in both residuals and fitted jointly with the nominal
+        model (:mod:`blf.diagnose.axis_periodic`), so the nominal changes are those of the joint fit.
+    lead_m, gear_ratio : float, optional
+        The screw's lead (m per turn) and motor turns per screw turn: which order of which part a period is.
 
     Returns
     -------
@@ -198,8 +206,16 @@ def compare_axis(new: AxisSamples, ref: AxisSamples, force_floor_N: float, z_min
         fn = _fit(new, ident, xn)
     except AnalysisError as exc:
         raise AnalysisError(f"{new.name}: {exc}") from None
+    periodic = None
+    if periodic_floor_N is not None:
+        from blf.diagnose.axis_periodic import compare_periodic, periodic_pair
+        plan = periodic_pair(new, ref, ident, fn, fr, xn, xr)
+        if plan.periods_new_m:
+            fr, fn = _fit(ref, ident, xr | plan.columns_ref), _fit(new, ident, xn | plan.columns_new)
+        periodic = compare_periodic(plan, new, ref, ident, fn, fr, periodic_floor_N, z_min, xn, lead_m, gear_ratio,
+                                    xr)
     floors = axis_floors(force_floor_N, fr.running_speed_m_per_s, half)
-    changes = compare_fits(fn, fr, floors, z_min)
+    changes = [c for c in compare_fits(fn, fr, floors, z_min) if not c.name.startswith("periodic")]
     checks = [effort_load_check(fit, p.load_N, p.mask.used, force_floor_N, z_min, gain_rel_u)
               for fit, p in ((fn, new), (fr, ref))]
-    return AxisComparison(ident, origin, half, not_cand, fr, fn, floors, tuple(changes), *checks)
+    return AxisComparison(ident, origin, half, not_cand, fr, fn, floors, tuple(changes), *checks, periodic)

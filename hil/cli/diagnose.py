@@ -152,6 +152,8 @@ def _say_axis_reference(console, out, args: argparse.Namespace, written: Path) -
     console.print(f"  effort against the known load: {data['effort']['words']}")
     for c in data["changes"]:
         console.print(f"  {c['parameter']}: {c['words']}")
+    for c in data.get("periodic", {}).get("components", []):
+        console.print(f"  periodic {c['period_m'] * 1e3:.4g} mm: {c['words']}")
     for m in data["identifiability"]["cannot_tell_apart"]:
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
     console.print(f"  masked: {data['mask']['words']}")

@@ -197,9 +197,50 @@ def write_reference_report(path: Path, data: dict, *, json_name: str = "diagnosi
         "<h2>What this recording cannot tell apart</h2>",
         table(["terms", "why", "what motion would separate them"],
               [(", ".join(m["terms"]), m["why"], m["would_separate"]) for m in ident["cannot_tell_apart"]]),
+        *_periodic_parts(data.get("periodic")),
         "<h2>Samples not compared</h2>",
         f"<p>This recording: {esc(data['mask']['words'])}.<br>"
         f"Reference: {esc(data['reference']['mask']['words'])}.</p>",
         file_link(json_name),
     ]
     write_page(path, "diagnosis against a reference", parts)
+
+
+def figure_periodic_profile(prof: dict):
+    """The effort against position, cycle-averaged, per direction: the recording and the reference, each with
+    its model without and with the periodic terms (diagnosis.json ``periodic.profile``)."""
+    dirs = [d for d in ("extend", "retract") if d in prof["recording"] or d in prof["reference"]]
+    fig, ax = pyplot().subplots(len(dirs), 1, figsize=(9, 2.6 * len(dirs) + 0.6), squeeze=False)
+    for a, d in zip(ax[:, 0], dirs, strict=True):
+        for key, col, lab in (("reference", "0.55", "reference"), ("recording", "C0", "this recording")):
+            p = prof[key].get(d)
+            if p is None:
+                continue
+            q = np.asarray(p["q_m"]) * 1e3
+            a.plot(q, p["force_N"], ".", ms=2.5, color=col, label=f"{lab}: effort (cycle-averaged)")
+            a.plot(q, p["model_without_N"], "--", lw=0.8, color=col, label=f"{lab}: fit without the periodic term")
+            a.plot(q, p["model_with_N"], "-", lw=0.9, color=col, label=f"{lab}: fit with it")
+        a.set_ylabel(f"force N ({d})")
+    ax[-1, 0].set_xlabel("position mm")
+    ax[0, 0].legend(fontsize=7, ncol=2)
+    ax[0, 0].set_title(f"effort against position, period {prof['period_m'] * 1e3:.4g} mm", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def _periodic_parts(per: dict | None) -> list:
+    """The report's section on forces periodic in position (single axis against a reference)."""
+    if per is None:
+        return []
+    g = lambda x: "—" if x is None else f"{x:.4g}"  # noqa: E731
+    rows = [(g(c["period_m"] * 1e3), g(c["period_reference_m"] * 1e3),
+             "; ".join(f"{d} {g(v['reference_N'])} -> {g(v['amplitude_N'])} "
+                       f"({g(v['change_N'])} ± {g(v['uncertainty_N'])})" for d, v in c["directions"].items()),
+             g(c["floor_N"]), "named" if c["named"] else "not named",
+             c["where"]["words"], c.get("order", {}).get("words", "—")) for c in per["components"]]
+    parts = ["<h2>Forces periodic in position</h2>", f"<p>{esc(per['words'])}</p>",
+             table(["period mm", "reference's mm", "amplitude per direction N: reference -> this (change ± u)",
+                    "floor N", "status", "where along the travel", "order"], rows)]
+    if per.get("profile"):
+        parts.append(img(figure_periodic_profile(per["profile"])))
+    return parts

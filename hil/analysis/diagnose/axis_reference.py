@@ -35,13 +35,16 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     pair = prepared_pair(new_path, ref_path, opts)
     new, ref, pn, pr = pair.new, pair.ref, pair.prepared_new, pair.prepared_ref
     try:
-        cmp = compare_axis(pn, pr, opts.force_floor_N, opts.z_min, pair.gain_rel_u)
+        cmp = compare_axis(pn, pr, opts.force_floor_N, opts.z_min, pair.gain_rel_u, opts.periodic_floor_N,
+                           opts.screw_lead_m, opts.gear_ratio)
     except AnalysisError as exc:
         raise RecordingError(str(exc)) from None
     fn, fr, ident, changes = cmp.recording, cmp.reference, cmp.ident, cmp.changes
     origin, half, not_cand, conv_words = cmp.origin_m, cmp.half_stroke_m, cmp.not_candidates, pair.conversion_words
     effort = effort_checks(cmp, pair, opts)
-    effects = [_effect(c) for c in changes if c.named] if effort["trusted"] else []
+    from hil.analysis.diagnose.periodic import periodic_dict, periodic_effects
+    effects = [_effect(c) for c in changes if c.named] + periodic_effects(cmp.periodic)
+    effects = effects if effort["trusted"] else []
     verdict = "untrusted_effort" if not effort["trusted"] else "explained" if effects else "no_mismatch"
     return {
         "verdict": verdict, "model": "single-axis", "mode": "reference", "effort": effort,
@@ -66,7 +69,8 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
             "their floors: the force floor at the end of the stroke, half_stroke_m from the origin")},
         "conversion": conv_words, "sample_rate_hz": rounded(new.sample_rate_hz),
         "running_speed_m_per_s": rounded(fn.running_speed_m_per_s),
-    } | ({"notes": list(new.notes + ref.notes)} if new.notes + ref.notes else {})
+    } | ({"periodic": periodic_dict(cmp.periodic, effort["trusted"])} if cmp.periodic is not None else {}) | (
+        {"notes": list(new.notes + ref.notes)} if new.notes + ref.notes else {})
 
 
 def effort_checks(cmp, pair, opts: AxisOptions) -> dict:

@@ -56,18 +56,24 @@ def _library_changes(fits: list, floors: dict, speed_mm_per_s: float) -> tuple:
     sides = ((m_new, T_new, d_new, "new recording"), (m_ref, T_ref, d_ref, "reference"))
     for key in keys:
         own = [next((e for e in d.effects if (e.name, e.where, e.variant) == key), None) for _, _, d, _ in sides]
-        cand = next(c for m in (m_new, m_ref) for c in m.candidates if (c.name, c.where, c.variant) == key)
         having = next(e for e in own if e is not None)
+        # the candidate of the recording that has the effect (one started from its data: a period found)
+        first = (m_new, m_ref) if own[0] is not None else (m_ref, m_new)
+        cand = next(c for m in first for c in m.candidates if (c.name, c.where, c.variant) == key)
         held = None if None not in own else sides[own.index(having)][3]
         pair = []
         for (model, T, d, _), e in zip(sides, own, strict=True):
             if e is None:
-                c = next(c for c in model.candidates if (c.name, c.where, c.variant) == key)
+                c = cand
                 e = fit_effect(model, T, d.nominal, c, _active(model, d),
                                fixed={q: having.parameters[q] for q in c.shape})
             pair.append(e)
         if None not in pair:
-            out += library_change(pair[0], pair[1], floors, speed_mm_per_s, cand.shape, held)
+            got = library_change(pair[0], pair[1], floors, speed_mm_per_s, cand.shape, held)
+            if "period_mm" in having.parameters:  # a force periodic in position: its period and amplitude
+                got = [c | {"period_m": having.parameters["period_mm"] * 1e-3,
+                            "amplitude_N": pair[0].parameters["amplitude_N"]} for c in got]
+            out += got
             pairs[key] = tuple(pair)
     return out, pairs
 
@@ -264,7 +270,8 @@ def _effect_of(c: dict) -> dict:
             "change": {c["parameter"]: c["change"]}, "floor": {c["parameter"]: c["floor"]},
             "delta_bic": None, "delta_chi2_holdout": None,
             "evidence": f"z = {c['z']:.1f}" + (" from the two fits" if c.get("source") == "library"
-                                               else " against the measured repeatability")}
+                                               else " against the measured repeatability")} | {
+        k: c[k] for k in ("period_m", "amplitude_N") if k in c}
 
 
 def _effect_name(parameter: str) -> str:

@@ -155,6 +155,8 @@ LIBRARY_FLOORS = {
     ("progressive_stiffness", "progressive_per_mm"): ("progressive_pct_per_mm", "%/mm", 100.0,
                                                       "progressive stiffness"),
     ("viscoelastic", "stiffness_N_per_mm"): ("viscoelastic_N_per_mm", "N/mm", 1.0, "visco-elastic stiffness"),
+    # an extra force at one EMA, as the frictions' (docs/diagnose.md, "Forces periodic in position")
+    ("periodic_force", "amplitude_N"): ("ema_friction_N", "N", 1.0, "amplitude of a force periodic in position"),
 }
 
 

@@ -73,13 +73,20 @@ def untrusted_dict(effort: dict) -> dict:
             "band": {"cutoff_hz": None, "step": 1, "words": "nothing compared: the effort is not trusted"}}
 
 
+def _periodic_keys(par: dict) -> dict:
+    """A force periodic in position carries its period in metres of travel and its amplitude in N."""
+    if "period_mm" not in par or "amplitude_N" not in par:
+        return {}
+    return {"period_m": rounded(par["period_mm"] * 1e-3), "amplitude_N": rounded(par["amplitude_N"])}
+
+
 def diagnosis_dict(d, model_name: str, seconds: float) -> dict:
     """JSON shape of diagnosis.json (hil/schemas/diagnosis.schema.json): ``effects`` lists every
     effect accepted whatever the verdict; RMS figures in the compared band, ``raw`` ones beside."""
     eff = lambda e: {"name": e.name, "where": e.where, "words": e.words, "source": e.source,  # noqa: E731
                      "parameters": rounded_dict(e.parameters), "uncertainty": rounded_dict(e.uncertainty),
                      "delta_bic": rounded(e.delta_bic), "delta_chi2_holdout": rounded(e.delta_chi2_holdout),
-                     "evidence": e.evidence}
+                     "evidence": e.evidence} | _periodic_keys(e.parameters)
     b = d.band
     return {
         "verdict": d.verdict, "model": model_name,

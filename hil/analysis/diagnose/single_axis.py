@@ -29,6 +29,11 @@ from hil.errors import RecordingError
 #: +20 and +40 kgf: friction +15.8 and -43.2 N, offset -8.7 and +8.4 N; RMS 23.8 N, x 3 = 71.3 N),
 #: rounded up to 75 N (docs/diagnose.md, "Floors"; tests/bench/bench_diagnose_cranfield.py --repeatability)
 FORCE_FLOOR_N = 75.0
+#: default relevance floor of a periodic force's amplitude change, N: 3 x the RMS of the changes per
+#: direction of the healthy Cranfield actuator's ripple (``normal`` runs 6-10 against 1-5 and odd against
+#: even runs at +20 and +40 kgf: 8 changes, RMS 2.62 N, x 3 = 7.85 N), rounded up to 8 N: a repeatability
+#: (docs/diagnose.md, "Forces periodic in position"; tests/bench/bench_diagnose_cranfield_periodic.py)
+PERIODIC_FLOOR_N = 8.0
 EFFORTS = ("force", "torque", "current")
 
 
@@ -56,6 +61,8 @@ class AxisOptions:
     screw_lead_m: float | None = None
     force_floor_N: float = FORCE_FLOOR_N
     z_min: float = 3.0
+    periodic_floor_N: float | None = PERIODIC_FLOOR_N  #: None: forces periodic in position not sought
+    gear_ratio: float | None = None  #: motor turns per screw turn (with screw_lead_m: the part's order)
 
 
 def read_axis(path: Path) -> AxisRecording:
