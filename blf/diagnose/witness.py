@@ -167,12 +167,16 @@ def _change(name, value, reference, ch, u, floor, unit, z_min) -> WitnessChange:
     z = ch / u if u > 0 else (np.inf if ch else 0.0)
     sup, rel = bool(abs(z) > z_min), bool(abs(ch) > floor)
     verb = "rose" if ch > 0 else "fell"
-    size = f"{100 * ch:+.1f} % ± {100 * u:.1f} %" if unit == "1" else f"{1e3 * ch:+.3g} mm ± {1e3 * u:.2g} mm"
-    fl = f"{100 * floor:.3g} %" if unit == "1" else f"{1e3 * floor:.3g} mm"
-    how = (f"named: above its floor of {fl}" if sup and rel else
-           f"real (z = {z:.1f}) but under its floor of {fl}: not named" if sup else
+    if unit == "1":
+        what = (f"from {1e3 * reference:.3g} to {1e3 * value:.3g} mm ({100 * ch:+.1f} ± {100 * u:.1f} %)",
+                f"{100 * floor:.3g} %")
+    else:
+        what = f"from {1e6 * reference:.3g} to {1e6 * value:.3g} um ({1e6 * ch:+.1f} ± {1e6 * u:.1f} um)", \
+            f"{1e6 * floor:.3g} um"
+    how = (f"named: above its floor of {what[1]}" if sup and rel else
+           f"real (z = {z:.1f}) but under its floor of {what[1]}: not named" if sup else
            f"not statistically supported (z = {z:.1f})")
-    words = (f"{_WORDS[name]} {verb} from {1e3 * reference:.3g} to {1e3 * value:.3g} mm ({size}); {how}")
+    words = f"{_WORDS[name]} {verb} {what[0]}; {how}"
     return WitnessChange(name, value, reference, ch, u, unit, float(z), floor, sup, rel, sup and rel, words)
 
 

@@ -125,6 +125,11 @@ def _say_axis_reference(console, out, args: argparse.Namespace, written: Path) -
         console.print(f"  {c['parameter']}: {c['words']}")
     for m in data["identifiability"]["cannot_tell_apart"]:
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
+    if data.get("witness"):
+        console.print(f"  second witness, the tracking error: {data['witness']['words']}")
+    cov = data["floor"].get("coverage")
+    if cov:
+        console.print(f"  floors: {cov['kind']}: {cov['words']}")
     console.print(f"  masked: {data['mask']['words']}")
     console.print(f"  written {written}")
 

@@ -46,6 +46,22 @@ def default_coverage(stated: bool) -> dict:
     return coverage("repeatability", "every floor is a default, " + REPEATABILITY_WORDS)
 
 
+def dual_coverage(floors: dict) -> dict:
+    """The coverage of a dual-EMA comparison's floors (``by_kind``): the measured defaults
+    (:data:`hil.profile.floors.DUAL_FLOORS`) are a repeatability (rig models and repeated simulated checks: no
+    session-to-session change); a kind set in the check profile's ``[diagnosis]`` is stated there."""
+    from hil.profile.floors import DUAL_FLOORS
+    stated = sorted(k for k, v in floors.items() if k in DUAL_FLOORS and v != DUAL_FLOORS[k])
+    words = ("the defaults are a repeatability: measured on rig models and repeated simulated checks, which have "
+             "no session-to-session change (temperature, re-assembly, days); a real rig's spread between checks is "
+             "larger (the Cranfield actuator's friction: about 96 N RMS between sessions), so a change under it "
+             "may be a session offset; state a rig's own reproducibility in the check profile's [diagnosis]")
+    if stated:
+        return coverage("stated", f"{', '.join(stated)} stated in the check profile's [diagnosis]: they cover what "
+                        f"their author measured them over; the others: {words}", stated=stated)
+    return coverage("repeatability", words)
+
+
 def _pairs(refs: list, opts, witness_floors: dict) -> tuple:
     """The changes between every pair of references: ({force parameter: [N]}, [lag m], [jitter ratio])."""
     from blf.diagnose import compare_axis

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.analysis.diagnose.coverage import dual_coverage
 from hil.analysis.diagnose.floors import KINDS, check_speed, floors_for, library_change, nominal_changes
 from hil.analysis.diagnose.results import with_notes
 
@@ -228,7 +229,7 @@ def compare_pair(rec_new, rec_ref, floors: dict | None, floors_source: str, cach
                                "measured repeatability (changes); a library effect's from its fits"},
         "nominal": dict(new.nominal), "changes": changes,
         "floor": {"force_N": floors["friction_N"], "z_min": 3.0, "by_kind": floors, "source": floors_source,
-                  "defaults": dict(DUAL_FLOORS), "words": (
+                  "defaults": dict(DUAL_FLOORS), "coverage": dual_coverage(floors), "words": (
             "a change is named only when supported (|z| > 3) and above its floor (play um, stiffness, sensor and "
             "load cell gain %, friction N); a nominal parameter's floor is 3 sqrt(2) x the measured spread of the "
             "nominal fit and its u = floor/3 (hil/profile/floors.py, docs/diagnose.md)")},

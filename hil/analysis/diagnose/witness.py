@@ -30,6 +30,7 @@ from hil.analysis.diagnose.results import rounded
 #: (:data:`hil.analysis.diagnose.coverage.REPEATABILITY_WORDS`)
 WITNESS_FLOORS = {"tracking_lag_m": 20e-6, "tracking_jitter_ratio": 0.13}
 
+_FORCES = ("friction_N", "coulomb_N", "offset_N")
 _EFFECT = {"tracking_lag_m": "tracking_lag_change", "tracking_jitter_ratio": "tracking_jitter_change"}
 
 
@@ -90,11 +91,12 @@ def apply_witness(data: dict, changes, section: dict) -> dict:
         return data
     lag, jit = changes
     if witnesses_disagree(effort["trusted"], bool(named_effort), (lag,)):
-        said = "; ".join(c["words"] for c in data["changes"] if c["parameter"] in ("friction_N", "coulomb_N",
-                                                                                 "offset_N"))
-        words = (f"the two witnesses disagree: the effort names no change ({said}) while {lag.words}"
-                 + (f", and {jit.words}" if jit.named else "") + "; the mean force the position loop fights "
-                 "changed and the effort does not show it: the effort is not trusted to say 'no change'")
+        said = ", ".join(f"{c['parameter']} {c['change']:+.1f} ± {c['uncertainty']:.1f} N" for c in data["changes"]
+                         if c["parameter"] in _FORCES)
+        words = (f"the two witnesses disagree: the effort names no change ({said or 'no force parameter'}; floor "
+                 f"{data['floor']['force_N']:g} N) while {lag.words}" + (f"; and {jit.words}" if jit.named else "")
+                 + ". The mean force the position loop fights changed and the effort does not show it: the effort "
+                 "is not trusted to say 'no change'")
         effort |= {"trusted": False, "words": words, "witness_disagrees": True}
         data |= {"verdict": "untrusted_effort", "effort": effort, "effects": [],
                  "changes": [c | {"named": False} for c in data["changes"]]}
