@@ -9,7 +9,11 @@ a force that grows rougher (dry or damaged contacts, play) makes it jitter more.
 :func:`blf.diagnose.axis_reference.effort_mask` does, so the lag at a start or stop is not in them):
 
 * the **lag** :math:`L`: the mean of :math:`e\\,\\mathrm{sign}(\\dot q_{ref})` (m; positive: the
-  position behind the set point);
+  position behind the set point), over each steady stretch less as many samples again as its catch-up
+  lasted: the catch-up mask ends where :math:`e` is within 3 sigma of its steady value, and its tail
+  (an exponential of the loop's time constant) would otherwise bias the lag by about
+  :math:`3\\sigma\\tau/T` and make it grow with the jitter; after as long again it has decayed by the
+  catch-up's own ratio (6 mm to 0.3 mm on a 24 mm/s start: to about 15 um);
 * the **jitter** :math:`J`: the RMS of the tracking error's fast part, :math:`e` less its local
   quadratic trend (a Savitzky-Golay fit over ``window_s``, 1 s by default, about the loop's settling time:
   what varies more slowly is the lag, not jitter), m.
@@ -89,13 +93,25 @@ class WitnessChange:
     words: str
 
 
-def steady_samples(t_s, q_m, q_ref_m, sample_rate_hz: float) -> np.ndarray:
-    """The samples in steady motion (bool, shape (n,)): moving, not in the catch-up after a set-point step.
+def steady_samples(t_s, q_m, q_ref_m, sample_rate_hz: float, *, with_transients: bool = False):
+    """The samples in steady motion (bool, shape (n,)): moving, not in the catch-up after a set-point step;
+    ``with_transients``: (steady, catch-up) masks.
 
     The mask of :func:`blf.diagnose.axis_reference.effort_mask` with the dwells and the catch-up transients
     masked (the catch-up ends when :math:`e` stays within 3 robust sigma of its steady value for 0.2 s)."""
     from blf.diagnose.axis_reference import effort_mask
-    return effort_mask(t_s, q_m, q_ref_m, sample_rate_hz, dwell_says_nothing=True, mask_transients=True).used
+    m = effort_mask(t_s, q_m, q_ref_m, sample_rate_hz, dwell_says_nothing=True, mask_transients=True)
+    if not with_transients:
+        return m.used
+    return m.used, ~m.used & m.moving
+
+
+def _catch_up(transient: np.ndarray, a: int) -> int:
+    """Samples of the catch-up that ends just before sample ``a`` (0 where none does)."""
+    k = a
+    while k > 0 and transient[k - 1]:
+        k -= 1
+    return a - k
 
 
 def _cluster_mean(x: np.ndarray, n: np.ndarray) -> tuple:
@@ -130,9 +146,11 @@ def tracking_witness(t_s, q_m, q_ref_m, sample_rate_hz: float, window_s: float =
 
     Notes
     -----
-    Per stroke :math:`k` (:math:`n_k` samples): :math:`L_k = \\overline{e\\,s}`,
+    Per stroke :math:`k` (:math:`n_k` samples): :math:`L_k = \\overline{e\\,s}` (over the stroke less
+    as many samples as its catch-up lasted, :math:`n'_k` of them, at least one window; else the stroke
+    gives no lag),
     :math:`M_k = \\overline{(e - \\tilde e)^2}` with :math:`\\tilde e` the quadratic Savitzky-Golay trend over
-    the window; :math:`L = \\sum n_k L_k / N`, :math:`J = \\sqrt{\\sum n_k M_k / N}`,
+    the window; :math:`L = \\sum n'_k L_k / N'`, :math:`J = \\sqrt{\\sum n_k M_k / N}`,
     :math:`u(\\bar x) = \\sqrt{\\tfrac{G}{G-1}\\sum_k n_k^2 (x_k - \\bar x)^2}/N` over the :math:`G` strokes
     and :math:`u(J) = u(J^2) / 2J`.
     """
@@ -143,21 +161,24 @@ def tracking_witness(t_s, q_m, q_ref_m, sample_rate_hz: float, window_s: float =
     same_shape((t, "t_s", "s"), (q, "q_m", "m"), (qr, "q_ref_m", "m"))
     fs = positive_scalar(sample_rate_hz, "sample_rate_hz", "Hz")
     w = max(7, int(round(positive_scalar(window_s, "window_s", "s") * fs)) | 1)
-    used = steady_samples(t, q, qr, fs)
+    used, transient = steady_samples(t, q, qr, fs, with_transients=True)
     e, s = qr - q, np.sign(np.gradient(qr, t))
-    lag, ms, n = [], [], []
+    lag, n_lag, ms, n = [], [], [], []
     for a, b in runs(used):
         if b - a < w:
             continue
         seg = e[a:b]
-        lag.append(float(np.mean(seg * s[a:b])))
         ms.append(float(np.mean((seg - savgol_filter(seg, w, 2, mode="interp")) ** 2)))
         n.append(b - a)
-    if len(n) < 2:
-        raise AnalysisError(f"{len(n)} steady stroke(s) of at least {w} samples ({w / fs:.3g} s): the tracking "
-                            "error's lag and jitter need two or more")
+        c = a + _catch_up(transient, a)
+        if b - c >= w:
+            lag.append(float(np.mean(e[c:b] * s[c:b])))
+            n_lag.append(b - c)
+    if len(n) < 2 or len(n_lag) < 2:
+        raise AnalysisError(f"{min(len(n), len(n_lag))} steady stroke(s) of at least {w} samples ({w / fs:.3g} s) "
+                            "after their catch-up: the tracking error's lag and jitter need two or more")
     n_arr = np.asarray(n, float)
-    L, uL = _cluster_mean(np.asarray(lag), n_arr)
+    L, uL = _cluster_mean(np.asarray(lag), np.asarray(n_lag, float))
     M, uM = _cluster_mean(np.asarray(ms), n_arr)
     J = float(np.sqrt(M))
     return TrackingWitness(L, uL, J, uM / (2 * J) if J > 0 else 0.0, len(n), int(n_arr.sum()), w / fs)
@@ -214,15 +235,34 @@ def compare_witness(new: TrackingWitness, ref: TrackingWitness, floors: dict, z_
 def witnesses_disagree(effort_trusted: bool, effort_named: bool, witness: tuple) -> bool:
     """The rule that sets the effort against the tracking error.
 
-    True when the effort's own check passed (it sees its known load, ``effort_trusted``), it names no
-    change (``effort_named`` False) and the tracking error changed beyond its floor (a
-    :class:`WitnessChange` named): the loop fights another force than the reference's while the effort says
-    nothing changed. Physics: the position loop closes on the measured position, so a change of the force
-    it fights shows in its tracking error (a larger lag for more friction, a larger jitter for a rougher
-    force) whatever the effort's conversion does; an effort that shows no change then is not trusted to
-    say "no change". Where the effort names a change, the witnesses agree that something changed and the
-    effort's change stands (its size is the effort's)."""
-    return bool(effort_trusted and not effort_named and any(c.named for c in witness))
+    Parameters
+    ----------
+    effort_trusted : bool
+        The effort's own check passed (it sees its known load with the sign its conversion predicts).
+    effort_named : bool
+        The effort names a change (any parameter above its floor).
+    witness : tuple of WitnessChange
+        The tracking error's changes (:func:`compare_witness`).
+
+    Returns
+    -------
+    bool
+        True when the effort is trusted by its own check, names no change, and the tracking error says the
+        force the loop fights changed: its lag changed beyond its floor (either sign: the mean force), or its
+        jitter **rose** beyond its floor (the force grew rougher: dry or damaged contacts, play).
+
+    Notes
+    -----
+    Physics: the position loop closes on the measured position, so a change of the force it fights shows in
+    its tracking error whatever the effort's conversion does (a current's gain, its offsets, a re-levelling
+    in preprocessing). An effort that shows no change then is not trusted to say "no change": a missed
+    degradation is the failure a maintenance check must not make. A jitter that **fell** beyond its floor
+    (the new recording tracks more smoothly than the reference) contradicts no "no degradation" and is named
+    from the witness instead. Where the effort names a change, both witnesses say something changed and the
+    effort's change stands (its size is the effort's).
+    """
+    return bool(effort_trusted and not effort_named and any(c.named and (c.unit == "m" or c.change > 0)
+                                                              for c in witness))
 
 
 def floor_from_spread(changes) -> float:
