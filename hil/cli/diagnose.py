@@ -118,8 +118,8 @@ def _say_axis_reference(console, out, args: argparse.Namespace, written: Path) -
     data = out.data
     head = ("effort not trusted, not diagnosed" if out.untrusted else
             "changes named" if data["effects"] else "no change above its floor")
-    console.print(f"[bold]{head}[/bold] against {data['reference']['recording']} ({data['diagnosis_s']:.1f} s); effort: "
-                  f"{data['conversion']}")
+    console.print(f"[bold]{head}[/bold] against {data['reference']['recording']} ({data['diagnosis_s']:.1f} s); "
+                  f"effort: {data['conversion']}")
     console.print(f"  effort against the known load: {data['effort']['words']}")
     for c in data["changes"]:
         console.print(f"  {c['parameter']}: {c['words']}")

@@ -150,7 +150,8 @@ def main(argv: list[str]) -> int:
     for r in rows:
         mark = " (current re-levelled, README)" if r["load_kgf"] < 0 else ""
         print(f"| {r['condition']}{' 6-10 vs 1-5' if r['condition'] == 'normal' else ''} | {r['load_kgf']:+d}{mark} "
-              f"| {r['verdict']} | {', '.join(r['named'] + r['named_witness']) or '-'} | {r['friction_change_N']:+.1f} ± "
+              f"| {r['verdict']} | {', '.join(r['named'] + r['named_witness']) or '-'} "
+              f"| {r['friction_change_N']:+.1f} ± "
               f"{r['friction_u_N']:.1f} | {r['offset_change_N']:+.1f} ± {r['offset_u_N']:.1f} "
               f"| {r['along_stroke_change_N']:.1f} | {r['floor_N']:g} "
               f"| {r['raw_current_friction_change_N']:+.1f} | {r['effort_sees_N']:+.0f} ± {r['effort_sees_u_N']:.0f} "
