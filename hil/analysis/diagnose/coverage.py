@@ -128,3 +128,24 @@ def floors_from_references(refs, opts, stated: bool) -> tuple:
                             "tracking_jitter_ratio": [rounded(v) for v in jit]},
                    measured=(["force_N"] if not stated and f_force is not None else []) + measured_w)
     return force_floor, f_w, cov
+
+
+def dual_floors_from_spread(pooled: dict, folders: list, floors: dict) -> tuple:
+    """(floors by kind, diagnosis.json's ``floor.coverage``) of a dual-EMA comparison whose reference is the
+    wear history's, from the changes between every pair of its healthy checks of the same actuators
+    (``pooled``: floor key -> changes in its unit, separable sized parameters only, of the ``folders``
+    compared pairwise: :func:`hil.analysis.diagnose.dual_reference.history_floors`): each kind's floor is 3 x
+    the RMS of its changes; a kind without a change, or with no spread, keeps its floor."""
+    from blf.diagnose.witness import floor_from_spread
+    spread = {k: floor_from_spread(v) for k, v in pooled.items() if v}
+    measured = sorted(k for k, v in spread.items() if v > 0)
+    n_pairs = len(folders) * (len(folders) - 1) // 2
+    few = ", with few pairs an estimate" if n_pairs < 3 else ""
+    words = (f"a reproducibility over the wear history's {len(folders)} latest healthy checks of these actuators "
+             f"({n_pairs} pair(s), 3 x the RMS of their changes per kind{few}): {', '.join(measured) or 'no kind'} "
+             "measured so; it covers what moved between those checks (sessions, days, what was done to the rig "
+             "between them), not what none of them saw; the other kinds: " + dual_coverage(floors)["words"])
+    cov = coverage("reproducibility", words, references=[str(f) for f in folders], pairs=n_pairs,
+                   from_spread={k: rounded(v) for k, v in spread.items()},
+                   changes={k: [rounded(x) for x in v] for k, v in pooled.items()}, measured=measured)
+    return floors | {k: spread[k] for k in measured}, cov
