@@ -34,11 +34,11 @@ TAU_S = 0.25  #: the synthetic loop's time constant
 KEEP = 0.931
 
 
-def recording(cycles=20, lag_m=0.0, sigma_m=1e-4, seed=1, friction_N=300.0, load_N=196.0):
+def recording(cycles=20, lag_m=0.0, sigma_m=1e-4, seed=1, friction_N=300.0, load_N=196.0, seen_load_N=None):
     """t, q, q_ref, force, load: extension 0.02 -> 0.14 m at 24 mm/s, 3 s dwell, retraction, 1 s dwell; the
     position follows with a catch-up of 6 mm decaying with TAU_S after each step, a steady lag ``lag_m``
     along the motion (reached with the same time constant) and white noise ``sigma_m``; the force: friction
-    along the motion less the load, 20 N noise."""
+    along the motion less the load (``seen_load_N``, default the load column's), 20 N noise."""
     rng = np.random.default_rng(seed)
     v, n = 0.024, int(round(0.12 / 0.024 * FS))
     parts = []
@@ -58,7 +58,7 @@ def recording(cycles=20, lag_m=0.0, sigma_m=1e-4, seed=1, friction_N=300.0, load
     for i in range(1, qr.size):
         lag[i] = a * lag[i - 1] + (1 - a) * lag_m * d[i]
     q = qr - catch - lag + rng.normal(0, sigma_m, qr.size)
-    force = friction_N * d - load_N + rng.normal(0, 20, qr.size)
+    force = friction_N * d - (load_N if seen_load_N is None else seen_load_N) + rng.normal(0, 20, qr.size)
     return t, q, qr, force, np.full(qr.size, load_N)
 
 
@@ -173,6 +173,16 @@ def test_the_tracking_error_is_a_second_witness_against_the_reference(tmp_path, 
         assert e["uncertainty"]["tracking_jitter_ratio"] > 0
     html = (out / "diagnosis_report.html").read_text()
     assert "Second witness: the tracking error" in html and "What the floors cover: repeatability" in html
+
+
+def test_an_effort_that_fails_its_own_check_is_untrusted_for_that_and_the_witness_only_listed(tmp_path):
+    ref = write(tmp_path / "ref.csv", seed=2)
+    new = write(tmp_path / "new.csv", seed=3, sigma_m=1.5e-4, seen_load_N=-196.0)  # the opposite load
+    code, data, _ = _diagnose(tmp_path, new, ref)
+    assert (code, data["verdict"], data["witness"]["rule"]) == (5, "untrusted_effort", "none")
+    assert data["effort"]["recording"]["trusted"] is False and "witness_disagrees" not in data["effort"]
+    assert data["witness"]["words"] == ("the effort failed its own check against the known load; the tracking "
+                                        "error changed beyond its floors")
 
 
 def test_one_reference_labels_its_floors_a_repeatability_and_says_what_it_does_not_cover(tmp_path):

@@ -107,8 +107,9 @@ def apply_witness(data: dict, changes, section: dict) -> dict:
         section = section | {"rule": "named", "words": f"named from the tracking error: {jit.words}; the effort "
                                                        "names no change (a smoother tracking misses no degradation)"}
     else:
-        agree = ("the effort names a change and the tracking error " + ("changed too" if lag.named or jit.named
-                                                                        else "did not change beyond its floors")
+        moved = "changed beyond its floors" if lag.named or jit.named else "did not change beyond its floors"
+        agree = (f"the effort failed its own check against the known load; the tracking error {moved}"
+                 if not effort["trusted"] else f"the effort names a change and the tracking error {moved}"
                  if named_effort else "neither witness changed beyond its floors")
         section = section | {"rule": "none", "words": agree}
     data["witness"] = section
