@@ -147,7 +147,8 @@ def dual_reference(new_path: Path, reference: Path | None, profile: Path | None,
     cov = None
     if len(healthy) >= 2:
         floors, cov = history_floors(healthy, profile, floors, source, cache)
-        source += "; " + ", ".join(cov["measured"]) + " measured from the wear history's healthy checks"
+        if cov["measured"]:
+            source += "; " + ", ".join(cov["measured"]) + " measured from the wear history's healthy checks"
     data, fits = compare_pair(new, ref, floors, source, cache)
     if cov is not None:
         data["floor"]["coverage"] = cov
