@@ -36,8 +36,9 @@ def test_lack_of_lubrication_is_named_a_friction_increase_of_the_size_the_raw_cu
 @pytest.mark.parametrize("load", [20, 40])
 def test_backlash_and_spalling_name_no_friction_increase_and_no_other_term(rows, name, load):
     r = rows[(name, load)]
-    # a friction change may be named only as a decrease (what the current says); the only other term
-    # that may be named is a force periodic in position (issue 48, tests/test_diagnose_cranfield_periodic.py)
+    # a friction change may be named only as a decrease (what the current says); the only other term the effort
+    # may name is a force periodic in position (issue 48, tests/test_diagnose_cranfield_periodic.py); the tracking
+    # error's changes are judged in tests/test_diagnose_cranfield_witness.py
     assert all(n.split()[0] in ("friction_change", "periodic_force_change") for n in r["named"])
     assert not any(n.startswith("friction_change") for n in r["named"]) or r["friction_change_N"] < 0
 
@@ -59,8 +60,10 @@ def test_the_default_floor_is_three_times_the_rms_of_the_healthy_session_changes
 
 @pytest.mark.parametrize("load", [20, 40])
 def test_every_current_at_plus_20_and_40_kgf_sees_its_known_load(rows, load):
-    """The effort check (the effort must see the known load with its sign) passes on the usable rows."""
+    """The effort check (the effort must see the known load with its sign) passes on the usable rows; a verdict
+    untrusted_effort there comes only from the second witness (tests/test_diagnose_cranfield_witness.py)."""
     for name in cranfield.DEVELOPMENT:
         r = rows[(name, load)]
-        assert r["effort_trusted"] and r["verdict"] != "untrusted_effort"
+        assert r["load_check_trusted"]
+        assert r["effort_trusted"] or r["witness_rule"] == "untrusted"
         assert r["effort_sees_N"] > 0 and r["load_N"] > 0

@@ -54,13 +54,17 @@ def _request(args: argparse.Namespace):
     axis = AxisOptions(current_law=args.current_law, current_a_per_N=args.current_per_force,
                        screw_lead_m=args.screw_lead_m,
                        force_floor_N=FORCE_FLOOR_N if args.force_floor_N is None else args.force_floor_N)
-    from_history = str(args.reference) == "history"
+    refs = list(args.reference or [])
+    from_history = [str(r) for r in refs] == ["history"]
+    if len(refs) > 1 and "history" in map(str, refs):
+        raise RecordingError("--reference history: the wear history's last check is one reference; give recordings "
+                             "to measure the floors from several")
     url = None
     if from_history and args.model == "dual-ema":
         from hil.cli.history_glue import history_url_for
         url = history_url_for(args.history, args.profile)
     return DiagnoseRequest(Path(args.recording), args.model, args.profile, axis, args.force_floor_N is not None,
-                           None if args.reference is None or from_history else args.reference, from_history, url,
+                           None if not refs or from_history else refs[0], tuple(refs[1:]), from_history, url,
                            args.check, args.allow_other_serials, args.accept_modified)
 
 
@@ -147,8 +151,8 @@ def _say_axis_reference(console, out, args: argparse.Namespace, written: Path) -
     data = out.data
     head = ("effort not trusted, not diagnosed" if out.untrusted else
             "changes named" if data["effects"] else "no change above its floor")
-    console.print(f"[bold]{head}[/bold] against {args.reference} ({data['diagnosis_s']:.1f} s); effort: "
-                  f"{data['conversion']}")
+    console.print(f"[bold]{head}[/bold] against {data['reference']['recording']} ({data['diagnosis_s']:.1f} s); "
+                  f"effort: {data['conversion']}")
     console.print(f"  effort against the known load: {data['effort']['words']}")
     for c in data["changes"]:
         console.print(f"  {c['parameter']}: {c['words']}")
@@ -156,6 +160,11 @@ def _say_axis_reference(console, out, args: argparse.Namespace, written: Path) -
         console.print(f"  periodic {c['period_m'] * 1e3:.4g} mm: {c['words']}")
     for m in data["identifiability"]["cannot_tell_apart"]:
         console.print(f"  cannot tell apart {', '.join(m['terms'])}: {m['why']}; would need {m['would_separate']}")
+    if data.get("witness"):
+        console.print(f"  second witness, the tracking error: {data['witness']['words']}")
+    cov = data["floor"].get("coverage")
+    if cov:
+        console.print(f"  floors: {cov['kind']}: {cov['words']}")
     console.print(f"  masked: {data['mask']['words']}")
     console.print(f"  written {written}")
 
@@ -188,12 +197,13 @@ def register(sub) -> None:
     p.add_argument("--model", choices=("dual-ema", "single-axis"), default="dual-ema",
                    help="dual-EMA rig (default) or a single positioning axis (e.g. EMPS)")
     p.add_argument("--no-report", action="store_true", help="write diagnosis.json only")
-    p.add_argument("--reference", metavar="HEALTHY", type=Path,
+    p.add_argument("--reference", metavar="HEALTHY", type=Path, action="append",
                    help="compare with this healthy recording of the same rig (single axis: same columns and sample "
                         "rate; dual-EMA: a run folder or recording, or 'history': the last check of the same "
                         "actuator serials in the wear history): the "
                         "nominal model identified on both, each parameter's change with its uncertainty, named "
-                        "only above its floor")
+                        "only above its floor. Single axis: given more than once, the recording is compared with "
+                        "the first and the floors are measured from the spread of all (a reproducibility)")
     p.add_argument("--check", metavar="CHECK.toml", type=Path,
                    help="dual-EMA --reference: the check profile whose [diagnosis] floors to use (default: the "
                         "recording's run folder's snapshot, else the shipped check.toml)")

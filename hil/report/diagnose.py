@@ -192,8 +192,10 @@ def write_reference_report(path: Path, data: dict, *, json_name: str = "diagnosi
         f"<p>Effort: {esc(data['conversion'])}</p>",
         f"<p>Effort against the known load: {esc(data['effort']['words'])}</p>",
         f"<p>{esc(data['floor']['words'])}</p>",
+        coverage_paragraph(data["floor"]),
         "<h2>Nominal parameters against the reference</h2>",
         table(["parameter", "unit", "reference", "this recording", "change ± u", "z", "floor", "status"], rows),
+        *witness_parts(data.get("witness")),
         "<h2>What this recording cannot tell apart</h2>",
         table(["terms", "why", "what motion would separate them"],
               [(", ".join(m["terms"]), m["why"], m["would_separate"]) for m in ident["cannot_tell_apart"]]),
@@ -243,4 +245,37 @@ def _periodic_parts(per: dict | None) -> list:
                     "floor N", "status", "where along the travel", "order"], rows)]
     if per.get("profile"):
         parts.append(img(figure_periodic_profile(per["profile"])))
+    return parts
+
+
+def coverage_paragraph(floor: dict) -> str:
+    """What the floors cover (diagnosis.json ``floor.coverage``): a repeatability, a reproducibility or stated."""
+    cov = floor.get("coverage")
+    if not cov:
+        return ""
+    return (f"<p><b>What the floors cover: {esc(cov['kind'])}.</b> {esc(cov['words'][:1].upper() + cov['words'][1:])}."
+            "</p>")
+
+
+def witness_parts(w: dict | None) -> list:
+    """The tracking error as a second witness (diagnosis.json ``witness``): its lag and jitter against the
+    reference's, the rule that applied."""
+    if not w:
+        return []
+    parts = ["<h2>Second witness: the tracking error</h2>", f"<p>{esc(w['words'])}</p>"]
+    if w.get("compared"):
+        g = lambda x, k=1.0: "—" if x is None else f"{k * x:.4g}"  # noqa: E731
+        rows = [(c["parameter"], "um" if c["unit"] == "m" else "mm", g(c["reference_m"], 1e6 if c["unit"] == "m"
+                                                                       else 1e3),
+                 g(c["value_m"], 1e6 if c["unit"] == "m" else 1e3),
+                 (f"{g(c['change'], 1e6)} ± {g(c['uncertainty'], 1e6)} um" if c["unit"] == "m" else
+                  f"{g(c['change'], 100)} ± {g(c['uncertainty'], 100)} %"),
+                 g(c["z"]), g(c["floor"], 1e6) + " um" if c["unit"] == "m" else g(c["floor"], 100) + " %",
+                 "named" if c["named"] else ("under its floor" if c["supported"] else "not supported"))
+                for c in w["changes"]]
+        parts.append(table(["statistic", "unit", "reference", "this recording", "change ± u", "z", "floor",
+                            "status"], rows))
+        parts.append(f"<p>Steady samples only (moving, the catch-up after each set-point step masked): "
+                     f"{w['recording']['strokes']} strokes here, {w['reference']['strokes']} in the reference; "
+                     f"jitter: the tracking error less its quadratic trend over {g(w.get('window_s'))} s.</p>")
     return parts

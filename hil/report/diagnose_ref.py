@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.report.diagnose import figure_residuals_pair
+from hil.report.diagnose import coverage_paragraph, figure_residuals_pair
 from hil.report.shell import column, esc, file_link, img, table, write_page
 
 
@@ -62,6 +62,7 @@ def write_dual_reference_report(path: Path, data: dict, fits, *, json_name: str 
              f"{esc(_cap(data['reference']['words']))}.</p>", table(cols, rows, raw=True),
              f"<h2>Floors</h2><p>{kinds} (play um; stiffness, sensor and load cell gain %; friction N). "
              f"{esc(_cap(fl['words']))}. Source: {esc(fl.get('source', 'the defaults'))}.</p>",
+             coverage_paragraph(fl),
              "<h2>Library effects each recording's own diagnosis accepted</h2>",
              table([column("recording"), column("effects")],
                    [["this recording", esc(", ".join(f"{e['name']} at {e['where']}" for e in

@@ -60,14 +60,33 @@ def diagnose_pair(folder: Path, name: str, load_kgf: float, runs, ref_runs, **op
     return reference_diagnosis(new, ref, AxisOptions(current_law="power", **opts))
 
 
+def _um(x):
+    return None if x is None else 1e6 * x
+
+
+def _pct(x):
+    return None if x is None else 100 * x
+
+
 def _row(name, load, data, raw) -> dict:
     ch = {c["parameter"]: c for c in data["changes"]}
     f, o = ch.get("friction_N", {}), ch.get("offset_N", {})
     half = data["stroke"]["half_stroke_m"]
     along = [abs(c["change"]) * (half ** 2 if c["parameter"].endswith("per_m2") else half)
              for c in data["changes"] if c["parameter"].startswith("position_dependent")]
+    w = {c["parameter"]: c for c in data["witness"].get("changes", [])}
+    lag, jit = w.get("tracking_lag_m", {}), w.get("tracking_jitter_ratio", {})
     return {"condition": name, "load_kgf": load, "verdict": data["verdict"],
-            "named": [f"{e['name']} {e['change'][next(iter(e['change']))]:+.0f} N" for e in data["effects"]],
+            "named": [f"{e['name']} {e['change'][next(iter(e['change']))]:+.0f} N" for e in data["effects"]
+                      if e["source"] != "witness"],
+            "named_witness": [f"{e['name']} {100 * e['change'][next(iter(e['change']))]:+.1f} %"
+                              for e in data["effects"] if e["source"] == "witness"],
+            "witness_rule": data["witness"].get("rule"), "lag_change_um": _um(lag.get("change")),
+            "lag_u_um": _um(lag.get("uncertainty")), "lag_named": lag.get("named"),
+            "jitter_m": jit.get("value_m"), "jitter_reference_m": jit.get("reference_m"),
+            "jitter_change_pct": _pct(jit.get("change")), "jitter_u_pct": _pct(jit.get("uncertainty")),
+            "jitter_named": jit.get("named"),
+            "load_check_trusted": data["effort"]["recording"]["trusted"],
             "friction_change_N": f.get("change"), "friction_u_N": f.get("uncertainty"),
             "offset_change_N": o.get("change"), "offset_u_N": o.get("uncertainty"),
             "along_stroke_change_N": max(along, default=None),
@@ -125,16 +144,21 @@ def main(argv: list[str]) -> int:
         rows = table(Path(tmp), loads=(20, 40, -40))
     result["rows"] = rows
     print("| condition | load kgf | verdict | named | friction change N (± u) | direction-dependent change N (± u) "
-          "| largest change along the stroke N | floor N | raw current says N | effort sees load N (± u) of |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| largest change along the stroke N | floor N | raw current says N | effort sees load N (± u) of "
+          "| tracking lag change um (± u) | tracking jitter mm, change % (± u) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         mark = " (current re-levelled, README)" if r["load_kgf"] < 0 else ""
         print(f"| {r['condition']}{' 6-10 vs 1-5' if r['condition'] == 'normal' else ''} | {r['load_kgf']:+d}{mark} "
-              f"| {r['verdict']} | {', '.join(r['named']) or '-'} | {r['friction_change_N']:+.1f} ± "
+              f"| {r['verdict']} | {', '.join(r['named'] + r['named_witness']) or '-'} "
+              f"| {r['friction_change_N']:+.1f} ± "
               f"{r['friction_u_N']:.1f} | {r['offset_change_N']:+.1f} ± {r['offset_u_N']:.1f} "
               f"| {r['along_stroke_change_N']:.1f} | {r['floor_N']:g} "
               f"| {r['raw_current_friction_change_N']:+.1f} | {r['effort_sees_N']:+.0f} ± {r['effort_sees_u_N']:.0f} "
-              f"of {r['load_N']:+.0f}{'' if r['effort_trusted'] else ' untrusted'} |")
+              f"of {r['load_N']:+.0f}{'' if r['load_check_trusted'] else ' untrusted'} "
+              f"| {r['lag_change_um']:+.1f} ± {r['lag_u_um']:.1f}{' named' if r['lag_named'] else ''} "
+              f"| {1e3 * r['jitter_reference_m']:.3f} -> {1e3 * r['jitter_m']:.3f}, {r['jitter_change_pct']:+.1f} ± "
+              f"{r['jitter_u_pct']:.1f}{' named' if r['jitter_named'] else ''} |")
     out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"written {out}")
     return 0

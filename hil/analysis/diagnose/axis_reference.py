@@ -24,14 +24,27 @@ _EFFECT = {"position_dependent_friction_N_per_m": "position_dependent_friction_c
            "mass_kg": "mass_change"}
 
 
-def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> dict:
+def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions, more_refs: tuple = (),
+                        floor_stated: bool = False) -> dict:
     """diagnosis.json of a single-axis recording against a reference (nothing written here).
+
+    ``more_refs``: further healthy references; with them the floors are measured from the spread of all
+    (:func:`hil.analysis.diagnose.coverage.floors_from_references`; a force floor ``floor_stated`` is kept).
+    The tracking error is compared too and set against the effort
+    (:func:`hil.analysis.diagnose.witness.apply_witness`).
 
     :class:`RecordingError` (exit 3) for a reference of the other model, other sample rate or other
     columns, a current with no way to convert it, a reference too short to identify the nominal model.
     """
+    import dataclasses
+
     from blf.diagnose import compare_axis
     from blf.errors import AnalysisError
+    from hil.analysis.diagnose import coverage, witness
+    w_floors, cov = witness.WITNESS_FLOORS, coverage.default_coverage(floor_stated)
+    if more_refs:
+        force_floor, w_floors, cov = coverage.floors_from_references((ref_path, *more_refs), opts, floor_stated)
+        opts = dataclasses.replace(opts, force_floor_N=force_floor)
     pair = prepared_pair(new_path, ref_path, opts)
     new, ref, pn, pr = pair.new, pair.ref, pair.prepared_new, pair.prepared_ref
     try:
@@ -46,7 +59,12 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
     effects = [_effect(c) for c in changes if c.named] + periodic_effects(cmp.periodic)
     effects = effects if effort["trusted"] else []
     verdict = "untrusted_effort" if not effort["trusted"] else "explained" if effects else "no_mismatch"
-    return {
+    floor_words = (f"force parameters {opts.force_floor_N:g} N" + (
+        " (measured from the references' spread)" if cov.get("measured") and "force_N" in cov["measured"] else
+        " (default: 3 x RMS of the healthy Cranfield actuator's changes between halves of one session)"
+        if opts.force_floor_N == FORCE_FLOOR_N else " (stated)"))
+    w_changes, w_section = witness.compare_pair(new, ref, w_floors, opts.z_min)
+    data = {
         "verdict": verdict, "model": "single-axis", "mode": "reference", "effort": effort,
         "effects": effects, "where": [], "locations": [],
         "band": {"cutoff_hz": None, "step": 1, "words": "every sample kept (a least-squares fit of a model linear "
@@ -59,10 +77,10 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
         "changes": [_change(c, effort["trusted"]) for c in changes],
         "floor": {"force_N": opts.force_floor_N, "z_min": opts.z_min, "words": (
             "a change is named only when |change| > z_min combined standard uncertainties and > its floor; "
-            f"force parameters {opts.force_floor_N:g} N" + (" (default: 3 x RMS of the healthy Cranfield "
-                                                            "actuator's session-to-session changes)"
-                                                            if opts.force_floor_N == FORCE_FLOOR_N else
-                                                            " (stated)"))},
+            + floor_words + f"; the tracking error's lag {1e6 * w_floors['tracking_lag_m']:.3g} um, jitter "
+            f"{100 * w_floors['tracking_jitter_ratio']:.3g} %"),
+            "tracking_lag_m": rounded(w_floors["tracking_lag_m"]),
+            "tracking_jitter_ratio": rounded(w_floors["tracking_jitter_ratio"]), "coverage": cov},
         "identifiability": ident_dict(ident) | {"not_candidates": [{"name": n, "why": w} for n, w in not_cand]},
         "stroke": {"origin_m": rounded(origin), "half_stroke_m": rounded(half), "words": (
             "terms along the stroke screened against the reference (fitted beside the nominal ones on both); "
@@ -71,6 +89,7 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions) -> di
         "running_speed_m_per_s": rounded(fn.running_speed_m_per_s),
     } | ({"periodic": periodic_dict(cmp.periodic, effort["trusted"])} if cmp.periodic is not None else {}) | (
         {"notes": list(new.notes + ref.notes)} if new.notes + ref.notes else {})
+    return witness.apply_witness(data, w_changes, w_section)
 
 
 def effort_checks(cmp, pair, opts: AxisOptions) -> dict:

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.analysis.diagnose.coverage import dual_coverage
 from hil.analysis.diagnose.floors import KINDS, check_speed, floors_for, library_change, nominal_changes
 from hil.analysis.diagnose.results import with_notes
 
@@ -135,22 +136,51 @@ def dual_reference(new_path: Path, reference: Path | None, profile: Path | None,
     The reference is ``reference``, or with ``history_url`` the wear history's last check of the same
     actuators (:func:`hil.analysis.diagnose.history_reference.reference_from_history`); a reference of other
     actuators is refused unless ``allow_other_serials``; the floors are the check profile's
-    (:func:`hil.analysis.diagnose.floors.floors_for`, ``check``: ``--check``)."""
-    from hil.analysis.diagnose.history_reference import reference_from_history, refuse_other_serials
-    hist = None
+    (:func:`hil.analysis.diagnose.floors.floors_for`, ``check``: ``--check``), and with ``history_url`` and two
+    or more healthy checks of the same actuators there, measured from their spread
+    (:func:`history_floors`: a reproducibility)."""
+    from hil.analysis.diagnose.history_reference import healthy_checks, reference_from_history, refuse_other_serials
+    hist, healthy = None, []
     if history_url is not None:
         ref_path, hist = reference_from_history(new_path, history_url, allow_other_serials)
+        healthy = healthy_checks(new_path, history_url)
     else:
         ref_path = Path(reference)
     serials = refuse_other_serials(new_path, ref_path, allow_other_serials)
     cache: dict = {}
     new, ref = load_pair(new_path, ref_path, profile, cache, accept_modified)
     floors, source = floors_for(new, check)
+    cov = None
+    if len(healthy) >= 2:
+        floors, cov = history_floors(healthy, profile, floors, source, cache)
+        if cov["measured"]:
+            source += "; " + ", ".join(cov["measured"]) + " measured from the wear history's healthy checks"
     data, fits = compare_pair(new, ref, floors, source, cache)
+    if cov is not None:
+        data["floor"]["coverage"] = cov
     data["serials"] = serials
     if hist is not None:
         data["reference_history"] = hist
     return data, fits
+
+
+def history_floors(folders: list, profile: Path | None, floors: dict, source: str, cache: dict) -> tuple:
+    """(floors by kind, diagnosis.json's ``floor.coverage``) from the wear history's healthy checks of the same
+    actuators (``folders``, :func:`hil.analysis.diagnose.history_reference.healthy_checks`): every pair compared
+    as a recording is against its reference (:func:`compare_pair`, ``floors`` as given), the changes of each
+    floor's kind pooled (separable, sized parameters only), the floors 3 x their RMS
+    (:func:`hil.analysis.diagnose.coverage.dual_floors_from_spread`)."""
+    from itertools import combinations
+
+    from hil.analysis.diagnose.coverage import dual_floors_from_spread
+    pooled: dict = {}
+    for a, b in combinations(folders, 2):
+        new, ref = load_pair(b, a, profile, cache)
+        data, _ = compare_pair(new, ref, floors, source, cache)
+        for c in data["changes"]:
+            if c.get("floor_key") and c.get("separable", True) and not c.get("shape"):
+                pooled.setdefault(c["floor_key"], []).append(float(c["change"]))
+    return dual_floors_from_spread(pooled, folders, floors)
 
 
 def _key(path: Path, profile: Path | None) -> tuple:
@@ -234,7 +264,7 @@ def compare_pair(rec_new, rec_ref, floors: dict | None, floors_source: str, cach
                                "measured repeatability (changes); a library effect's from its fits"},
         "nominal": dict(new.nominal), "changes": changes,
         "floor": {"force_N": floors["friction_N"], "z_min": 3.0, "by_kind": floors, "source": floors_source,
-                  "defaults": dict(DUAL_FLOORS), "words": (
+                  "defaults": dict(DUAL_FLOORS), "coverage": dual_coverage(floors), "words": (
             "a change is named only when supported (|z| > 3) and above its floor (play um, stiffness, sensor and "
             "load cell gain %, friction N); a nominal parameter's floor is 3 sqrt(2) x the measured spread of the "
             "nominal fit and its u = floor/3 (hil/profile/floors.py, docs/diagnose.md)")},

@@ -52,16 +52,9 @@ def _key(row: dict, e: str):
     return None if i is None else (i["vendor_id"], i["product_code"], i["serial"])
 
 
-def reference_from_history(new: Path, url: str, allow: bool) -> tuple[Path, dict]:
-    """(run folder, diagnosis.json's ``reference_history`` entry) of ``--reference history``.
-
-    Raises
-    ------
-    hil.errors.RecordingError
-        RUN is not a run folder with a result.json naming both actuators' serials; no history database;
-        no earlier check of either actuator there (or its run folder is gone); the last one's actuators
-        differ from RUN's and not ``allow``.
-    """
+def _earlier(new: Path, url: str) -> tuple:
+    """(RUN's history record, the earlier maintenance checks of either of its actuators in time order, the
+    masked url); :class:`RecordingError` as :func:`reference_from_history` says."""
     from hil.history.record import load_result, record_from_result
     from hil.history.store import HistoryStore
     from hil.profile.history_url import masked
@@ -87,6 +80,20 @@ def reference_from_history(new: Path, url: str, allow: bool) -> tuple[Path, dict
     if not rows:
         raise RecordingError(f"--reference history: no earlier check of the actuators {fmt_identity(me.identity)} "
                              f"in {masked(url)}")
+    return me, rows, masked(url)
+
+
+def reference_from_history(new: Path, url: str, allow: bool) -> tuple[Path, dict]:
+    """(run folder, diagnosis.json's ``reference_history`` entry) of ``--reference history``.
+
+    Raises
+    ------
+    hil.errors.RecordingError
+        RUN is not a run folder with a result.json naming both actuators' serials; no history database;
+        no earlier check of either actuator there (or its run folder is gone); the last one's actuators
+        differ from RUN's and not ``allow``.
+    """
+    me, rows, shown = _earlier(new, url)
     last = rows[-1]
     theirs = {e: _key(last, e) for e in EMAS}
     same = all(theirs[e] == me.identity[e] for e in EMAS)
@@ -99,7 +106,22 @@ def reference_from_history(new: Path, url: str, allow: bool) -> tuple[Path, dict
     if not folder.is_dir():
         raise RecordingError(f"--reference history: the run folder of the last check of these actuators is gone: "
                              f"{folder}")
-    return folder, {"history": masked(url), "run_folder": str(folder), "run_id": last["run_id"],
+    return folder, {"history": shown, "run_folder": str(folder), "run_id": last["run_id"],
                     "time_utc": last["time_utc"].isoformat(), "serials": fmt_identity(theirs), "same_serials": same,
                     "words": f"the last check of {fmt_identity(me.identity)} before this one in the wear history"
                              + ("" if same else " (other serials, taken as --allow-other-serials says)")}
+
+
+#: at most this many of the latest healthy checks measure the floors (their pairs: 6)
+HEALTHY_MOST = 4
+
+
+def healthy_checks(new: Path, url: str, most: int = HEALTHY_MOST) -> list:
+    """The run folders of the latest earlier checks (at most ``most``) in the wear history that passed
+    (``status`` pass) with the same actuators as RUN at both positions and whose run folders are still there,
+    oldest first: the healthy checks whose spread measures the floors of ``--reference history``
+    (:func:`hil.analysis.diagnose.coverage.dual_floors_from_checks`). Raises as :func:`reference_from_history`."""
+    me, rows, _ = _earlier(new, url)
+    ok = [Path(r["run_folder"]) for r in rows if r["status"] == "pass"
+          and all(_key(r, e) == me.identity[e] for e in EMAS) and Path(r["run_folder"]).is_dir()]
+    return ok[-most:]

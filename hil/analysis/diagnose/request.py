@@ -35,6 +35,7 @@ class DiagnoseRequest:
     axis: AxisOptions = AxisOptions()  #: a single axis: how to read its effort, its force floor
     force_floor_stated: bool = False  #: ``--force-floor-N`` given (without a reference it then applies)
     reference: Path | None = None  #: the healthy recording, or None
+    more_references: tuple = ()  #: further healthy recordings (``--reference`` again): the floors from their spread
     from_history: bool = False  #: ``--reference history``: the wear history's last check of the same actuators
     history_url: str | None = None  #: ... in this database (dual-EMA)
     check: Path | None = None  #: dual-EMA reference: the check profile whose ``[diagnosis]`` floors apply
@@ -52,12 +53,18 @@ def diagnose_recording(req: DiagnoseRequest, progress: Callable[[str], None] | N
     if req.from_history and req.model != "dual-ema":
         raise RecordingError("--reference history: the wear history holds dual-EMA checks; a single axis needs "
                              "its reference recording")
-    if not req.from_history and not Path(req.reference).exists():
-        raise RecordingError(f"--reference {req.reference}: no such file")
+    for ref in () if req.from_history else (req.reference, *req.more_references):
+        if not Path(ref).exists():
+            raise RecordingError(f"--reference {ref}: no such file")
+    if req.more_references and req.model != "single-axis":
+        raise RecordingError("--reference given more than once: floors measured from several references are for "
+                             "a single axis; a dual-EMA check's floors are its check profile's [diagnosis]")
     t0 = time.perf_counter()
     if req.model == "single-axis":
         from hil.analysis.diagnose.axis_reference import reference_diagnosis
-        out = DiagnoseOutcome("axis_reference", reference_diagnosis(req.recording, Path(req.reference), req.axis))
+        out = DiagnoseOutcome("axis_reference", reference_diagnosis(
+            req.recording, Path(req.reference), req.axis, tuple(Path(r) for r in req.more_references),
+            req.force_floor_stated))
     else:
         from hil.analysis.diagnose.dual_reference import dual_reference
         data, fits = dual_reference(req.recording, req.reference, req.profile, req.check,
