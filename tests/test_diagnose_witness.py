@@ -248,3 +248,19 @@ def test_the_dual_ema_floors_say_whether_they_are_the_defaults_or_stated():
     assert dual_coverage(dict(DUAL_FLOORS))["kind"] == "repeatability"
     c = dual_coverage(dict(DUAL_FLOORS) | {"play_um": 2.0})
     assert c["kind"] == "stated" and c["stated"] == ["play_um"] and "repeatability" in c["words"]
+
+
+@pytest.mark.parametrize("flat", ["reference", "recording"])
+def test_a_tracking_error_without_jitter_is_not_compared_and_says_why(tmp_path, flat):
+    """A set point equal to the position (a recording without a position loop's error, e.g. made by a model):
+    the witness is not compared, the effort alone decides; never an internal error (it raised before)."""
+    paths = {}
+    for name in ("recording", "reference"):
+        t, q, qr, f, load = recording(seed=2 if name == "recording" else 1)
+        q = qr if name == flat else q
+        paths[name] = tmp_path / f"{name}.csv"
+        np.savetxt(paths[name], np.column_stack([t, q, qr, f, load]), delimiter=",",
+                   header="t,q,q_ref,force,load", comments="")
+    code, data, _ = _diagnose(tmp_path, paths["recording"], paths["reference"])
+    assert code == 0 and data["verdict"] == "no_mismatch"
+    assert data["witness"]["compared"] is False and "has no jitter" in data["witness"]["words"]

@@ -65,6 +65,10 @@ def compare_pair(new, ref, floors: dict, z_min: float) -> tuple:
     if isinstance(wn, str) or isinstance(wr, str):
         why = "; ".join(w for w in (wn, wr) if isinstance(w, str))
         return None, {"compared": False, "changes": [], "words": f"the tracking error was not compared ({why})"}
+    if flat := [f"{r.path.name}: its tracking error has no jitter (set point and position the same or held)"
+                for r, w in ((new, wn), (ref, wr)) if not w.jitter_m > 0]:
+        return None, {"compared": False, "changes": [],
+                      "words": f"the tracking error was not compared ({'; '.join(flat)})"}
     changes = compare_witness(wn, wr, floors, z_min)
     return changes, {"compared": True, "window_s": rounded(wn.window_s), "recording": _stat_dict(wn),
                      "reference": _stat_dict(wr), "changes": [change_dict(c) for c in changes]}
