@@ -63,7 +63,8 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions, more_
         " (measured from the references' spread)" if cov.get("measured") and "force_N" in cov["measured"] else
         " (default: 3 x RMS of the healthy Cranfield actuator's changes between halves of one session)"
         if opts.force_floor_N == FORCE_FLOOR_N else " (stated)"))
-    w_changes, w_section = witness.compare_pair(new, ref, w_floors, opts.z_min)
+    periods = witness.named_periods(cmp.periodic) if effort["trusted"] else ((), ())
+    w_changes, w_section = witness.compare_pair(new, ref, w_floors, opts.z_min, periods)
     data = {
         "verdict": verdict, "model": "single-axis", "mode": "reference", "effort": effort,
         "effects": effects, "where": [], "locations": [],
