@@ -49,7 +49,7 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions, more_
     new, ref, pn, pr = pair.new, pair.ref, pair.prepared_new, pair.prepared_ref
     try:
         cmp = compare_axis(pn, pr, opts.force_floor_N, opts.z_min, pair.gain_rel_u, opts.periodic_floor_N,
-                           opts.screw_lead_m, opts.gear_ratio)
+                           opts.screw_lead_m, opts.gear_ratio, opts.position_scale_tolerance)
     except AnalysisError as exc:
         raise RecordingError(str(exc)) from None
     fn, fr, ident, changes = cmp.recording, cmp.reference, cmp.ident, cmp.changes
