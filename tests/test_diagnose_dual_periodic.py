@@ -63,11 +63,11 @@ def test_the_replay_finds_the_period_and_starts_the_candidate_there(period):
 
 
 def test_a_local_defect_starts_a_local_candidate_where_it_is():
-    x, v, f, target = _sweeps(5.0, 40.0, local=(3.0, 6.0))
+    x, v, f, target = _sweeps(5.0, 40.0, local=(3.0, 6.0, 0.01))
     p, a, ph, span = periodic_start(x, v, f, target, np.ones(x.size, bool), 10.0)
     assert abs(p / 5 - 1) < 0.02 and span is not None and abs(span[0] - 3.0) < 2.0
     c = periodic_candidate("ema1", "1", (p, a, ph, span))
-    assert [q.name for q in c.params][-2:] == ["center_mm", "half_width_mm"] and "local" in c.words
+    assert [q.name for q in c.params][-3:] == ["center_mm", "half_width_mm", "edge_mm"] and "local" in c.words
 
 
 def test_noise_alone_starts_no_candidate():
