@@ -168,7 +168,8 @@ def test_the_tracking_error_is_a_second_witness_against_the_reference(tmp_path, 
     assert [e["name"] for e in data["effects"]] == effects
     if rule == "untrusted":
         words = data["effort"]["words"]
-        assert data["effort"]["witness_disagrees"] and "the effort names no change of its mean force (friction_N" in words
+        assert data["effort"]["witness_disagrees"]
+        assert "the effort names no change of its mean force (friction_N" in words
         assert "the tracking error's steady" in words and not any(c["named"] for c in data["changes"])
     if rule == "named":
         e = data["effects"][0]

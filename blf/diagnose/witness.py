@@ -178,7 +178,8 @@ def tracking_witness(t_s, q_m, q_ref_m, sample_rate_hz: float, window_s: float =
     as many samples as its catch-up lasted, :math:`n'_k` of them, at least one window; else the stroke
     gives no lag),
     :math:`M_k = \\overline{(e - \\tilde e)^2}` with :math:`\\tilde e` the quadratic Savitzky-Golay trend over
-    the window (less the component at ``periods_m``, where given); :math:`L = \\sum n'_k L_k / N'`, :math:`J = \\sqrt{\\sum n_k M_k / N}`,
+    the window (less the component at ``periods_m``, where given);
+    :math:`L = \\sum n'_k L_k / N'`, :math:`J = \\sqrt{\\sum n_k M_k / N}`,
     :math:`u(\\bar x) = \\sqrt{\\tfrac{G}{G-1}\\sum_k n_k^2 (x_k - \\bar x)^2}/N` over the :math:`G` strokes
     and :math:`u(J) = u(J^2) / 2J`.
     """

@@ -51,11 +51,11 @@ def _request(args: argparse.Namespace):
         val = getattr(args, name)
         if val is not None and not val > 0:
             raise RecordingError(f"--{name.replace('_', '-')}: must be > 0; got {val}")
-    if not 0.0 <= getattr(args, "position_scale_tolerance", 0.0) < 0.5:
-        raise RecordingError(f"--position-scale-tolerance: must be in [0, 0.5) (a fraction); got "
-                             f"{args.position_scale_tolerance}")
+    tol = getattr(args, "position_scale_tolerance", 0.0)
+    if not 0.0 <= tol < 0.5:
+        raise RecordingError(f"--position-scale-tolerance: must be in [0, 0.5) (a fraction); got {tol}")
     axis = AxisOptions(current_law=args.current_law, current_a_per_N=args.current_per_force,
-                       screw_lead_m=args.screw_lead_m, position_scale_tolerance=getattr(args, "position_scale_tolerance", 0.0),
+                       screw_lead_m=args.screw_lead_m, position_scale_tolerance=tol,
                        force_floor_N=FORCE_FLOOR_N if args.force_floor_N is None else args.force_floor_N)
     refs = list(args.reference or [])
     from_history = [str(r) for r in refs] == ["history"]

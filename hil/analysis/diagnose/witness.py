@@ -132,7 +132,8 @@ def apply_witness(data: dict, changes, section: dict) -> dict:
     elif effort["trusted"] and not named_effort and jit.named:
         data |= {"verdict": "explained", "effects": periodic + [_effect(jit)]}
         section = section | {"rule": "named", "words": f"named from the tracking error: {jit.words}; the effort "
-                                                       "names no change of its mean force (a smoother tracking misses no degradation)"}
+                                                       "names no change of its mean force (a smoother tracking "
+                                                       "misses no degradation)"}
     else:
         moved = "changed beyond its floors" if lag.named or jit.named else "did not change beyond its floors"
         agree = (f"the effort failed its own check against the known load; the tracking error {moved}"
