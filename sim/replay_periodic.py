@@ -9,8 +9,11 @@ is a constant per direction: the periodogram's floating mean takes it), is searc
 ``periodic_force`` at that EMA (amplitude, phase and period, the last two its shape), which the diagnosis
 then screens, refits and accepts or not like any other (:func:`blf.diagnose.engine.diagnose`).
 
-.. math:: F_p(x_m) = A\\cos(2\\pi x_m / p + \\varphi)\\quad [N],\\qquad
+.. math:: F_p(x_m) = A\\cos(2\\pi x_m / p + \\varphi)\\,W(x_m)\\quad [N],\\qquad
           F_d = g_{lc}(F_{target} - F_f(v) - F_p(x_m) - M a)
+
+with :math:`W = 1` for a uniform ripple and, for a local defect, :func:`envelope`: a window with fitted
+edges (centre, half width, edge width), which follows a defect's sharp ends as well as a gradual one.
 """
 
 from __future__ import annotations
@@ -61,7 +64,7 @@ def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float,
         c = float(np.sum(z[used] * x[used]) / np.sum(z[used]))
         w = float(np.sqrt(3 * np.sum(z[used] * (x[used] - c) ** 2) / np.sum(z[used])))
         span = (c * 1e3, max(w, p) * 1e3)
-        env = envelope(x * 1e3, *span)
+        env = envelope(x * 1e3, *span, _edge_start(span[1]))
     cols = [np.ones(x.size), env * np.cos(2 * np.pi * x / p), env * np.sin(2 * np.pi * x / p)]
     X = np.column_stack([cols[0] * (d > 0), cols[0] * (d < 0), cols[1], cols[2]])
     a, b = np.linalg.lstsq(X[used], r[used], rcond=None)[0][2:]
@@ -69,9 +72,29 @@ def periodic_start(xm_mm, v_mm_per_s, force_N, target_N, hold, band_hz: float,
     return p * 1e3, float(np.hypot(a, b)), float(np.arctan2(-b, -a)), span
 
 
-def envelope(xm_mm, center_mm: float, half_width_mm: float) -> np.ndarray:
-    """A local defect's envelope, :math:`e^{-((x - x_0)/w)^4}` (flat over most of +-w, smooth at its ends)."""
-    return np.exp(-(((np.asarray(xm_mm, float) - center_mm) / half_width_mm) ** 4))
+def envelope(xm_mm, center_mm: float, half_width_mm: float, edge_mm: float) -> np.ndarray:
+    """A local defect's envelope: a window of half width :math:`w` around :math:`x_0` whose two edges are
+    logistic of width :math:`s`,
+
+    .. math:: W(x) = \\sigma\\!\\left(\\frac{x - x_0 + w}{s}\\right)\\,
+              \\sigma\\!\\left(\\frac{x_0 + w - x}{s}\\right),\\qquad \\sigma(u) = \\frac{1}{1 + e^{-u}}
+
+    (all mm). :math:`s \\to 0` is a box (a defect with sharp ends, as the simulator's ``periodic_force``
+    with ``width_mm``), :math:`s` of the order of :math:`w` a gradual rise; :math:`W(x_0 \\pm w) = 1/2`
+    where :math:`s \\ll w`, so :math:`w` is the half width at half height whatever the edges. The edge
+    width is fitted (a shape parameter of the candidate), not assumed.
+    """
+    x = np.asarray(xm_mm, float)
+    s = float(edge_mm)
+    lo = np.clip((x - center_mm + half_width_mm) / s, -60.0, 60.0)
+    hi = np.clip((center_mm + half_width_mm - x) / s, -60.0, 60.0)
+    return 1.0 / ((1.0 + np.exp(-lo)) * (1.0 + np.exp(-hi)))
+
+
+def _edge_start(half_width_mm: float) -> float:
+    """The edge width a local candidate starts from: a sixth of its half width (between a box and a bump;
+    the fit moves it)."""
+    return half_width_mm / 6.0
 
 
 def periodic_candidate(where: str, n: str, start: tuple) -> Candidate:
@@ -87,15 +110,17 @@ def periodic_candidate(where: str, n: str, start: tuple) -> Candidate:
         words += ", uniform along the stroke: a screw's runout or misalignment)"
     else:
         c, w = span
-        params += (Param("center_mm", c, w / 4, c - w, c + w), Param("half_width_mm", w, w / 4, w / 3, 3 * w))
-        shape += ("center_mm", "half_width_mm")
+        # the edge width from a hundredth of the half width (a box to the sampling's eye) to the half width
+        params += (Param("center_mm", c, w / 4, c - w, c + w), Param("half_width_mm", w, w / 4, w / 3, 3 * w),
+                   Param("edge_mm", _edge_start(w), w / 12, w / 100, w))
+        shape += ("center_mm", "half_width_mm", "edge_mm")
         words += f", local: around {c:+.3g} mm of the stroke: a defect on the raceway there)"
     return Candidate("periodic_force", where, words, params, "", shape)
 
 
 def periodic_force(xm_mm, x) -> np.ndarray:
     """:math:`F_p` (N) at the motor-side positions for the candidate's parameters (amplitude, phase, period,
-    and for a local one the centre and half width of its :func:`envelope`)."""
+    and for a local one the centre, half width and edge width of its :func:`envelope`)."""
     a, ph, p = (float(v) for v in x[:3])
     f = a * np.cos(2 * np.pi * np.asarray(xm_mm, float) / p + ph)
-    return f * envelope(xm_mm, float(x[3]), float(x[4])) if len(x) == 5 else f
+    return f * envelope(xm_mm, float(x[3]), float(x[4]), float(x[5])) if len(x) == 6 else f

@@ -107,6 +107,34 @@ def test_a_stated_lead_names_the_order_or_is_reported_as_contradicted():
     assert bad.contradicts and "contradicts" in bad.words
 
 
+@pytest.mark.parametrize("z, contradicts", [(2.9, False), (3.1, True)])
+@pytest.mark.parametrize("side", ["longer", "shorter"])
+def test_a_stated_position_scale_tolerance_widens_the_order_check_at_its_boundary(z, contradicts, side):
+    """Tolerance s = 5 %, u_P/P = 0.1 %: order 1 is consistent while the gap |n - 1| - s n is within 3 u_n.
+    Longer period: n = 1/(1 + s + z r) gives gap/u_n = z (r = u_P/P); shorter: n = 1/(1 - s - z r)."""
+    s_tol, r, lead = 0.05, 0.001, 0.005
+    n = 1.0 / (1.0 + s_tol + z * r) if side == "longer" else 1.0 / (1.0 - s_tol - z * r)
+    # n = 1/(1 + s + z r): gap = 1 - n - s n = z r n = z u_n; n = 1/(1 - s - z r): gap = n - 1 - s n = z u_n
+    P = lead / n
+    got = lead_order(P, P * r, lead, scale_tolerance=s_tol)
+    assert got.contradicts is contradicts and got.nearest == 1
+    assert got.scale_difference == pytest.approx(1.0 / n - 1.0)
+    if contradicts:
+        assert "beyond the stated tolerance of the position's scale" in got.words
+    else:
+        assert "within the stated tolerance of the position sensor's scale" in got.words
+        assert lead_order(P, P * r, lead).contradicts  # the same period with the scale taken as exact
+
+
+def test_a_scale_tolerance_that_joins_two_orders_says_so_and_a_bad_one_is_refused():
+    """Orders k and k + 1 meet once s >= 1/(2k + 1): 1/3 for order 1."""
+    assert "cannot be told apart" in lead_order(0.005, 1e-5, 0.005, scale_tolerance=0.34).words
+    assert "cannot be told apart" not in lead_order(0.005, 1e-5, 0.005, scale_tolerance=0.32).words
+    for bad in (-0.01, 0.5):
+        with pytest.raises(AnalysisError, match="scale_tolerance"):
+            lead_order(0.005, 1e-5, 0.005, scale_tolerance=bad)
+
+
 def _write(path, q, force, fs=FS):
     t = np.arange(q.size) / fs
     np.savetxt(path, np.column_stack([t, q, q, force]), delimiter=",", header="t,q,q_ref,force", comments="",
@@ -187,3 +215,22 @@ def test_a_recording_too_short_for_a_period_says_so_in_diagnosis_json(tmp_path, 
     d = reference_diagnosis(new, ref, AxisOptions(screw_lead_m=lead))
     assert says in d["periodic"]["words"]
     assert not any(e["name"] == "periodic_force_change" and e["period_m"] > (hi - 0.02) / 2 for e in d["effects"])
+
+
+@pytest.mark.parametrize("tol, code", [("0.05", 0), ("0.5", 3), ("-0.01", 3)])
+def test_the_command_takes_a_position_scale_tolerance_in_0_to_half(tmp_path, tol, code, capsys):
+    from hil.cli import main
+    rng = np.random.default_rng(5)
+    q = _stroke()
+    ref = _write(tmp_path / "ref.csv", q, _axis_force(q, rng, _ripple(q, 0.005, 10.0)))
+    new = _write(tmp_path / "new.csv", q, _axis_force(q, rng, _ripple(q, 0.0052, 30.0)))  # +4 % scale
+    out = tmp_path / "out"
+    got = main(["diagnose", str(new), "--model", "single-axis", "--reference", str(ref), "--out", str(out),
+                "--quiet", "--screw-lead-m", "0.005", "--position-scale-tolerance", tol])
+    assert got == code
+    if code:
+        assert "--position-scale-tolerance" in capsys.readouterr().err and not (out / "diagnosis.json").exists()
+    else:
+        comp = json.loads((out / "diagnosis.json").read_text())["periodic"]["components"][0]
+        assert not comp["order"]["contradicts_stated_lead"] and comp["order"]["nearest"] == 1
+        assert comp["order"]["scale_difference"] == pytest.approx(0.04, abs=0.004)

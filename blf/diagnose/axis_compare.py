@@ -165,7 +165,7 @@ def _fit(p: AxisSamples, ident: Identifiability, extra: dict) -> AxisFit:
 
 def compare_axis(new: AxisSamples, ref: AxisSamples, force_floor_N: float, z_min: float = 3.0,
                  gain_rel_u: float = 0.0, periodic_floor_N: float | None = None, lead_m: float | None = None,
-                 gear_ratio: float | None = None) -> AxisComparison:
+                 gear_ratio: float | None = None, scale_tolerance: float = 0.0) -> AxisComparison:
     """A single-axis recording against its reference: both fitted with the terms both can separate, each
     parameter compared against its floor, each effort checked against its known load.
 
@@ -185,6 +185,9 @@ def compare_axis(new: AxisSamples, ref: AxisSamples, force_floor_N: float, z_min
         model (:mod:`blf.diagnose.axis_periodic`), so the nominal changes are those of the joint fit.
     lead_m, gear_ratio : float, optional
         The screw's lead (m per turn) and motor turns per screw turn: which order of which part a period is.
+    scale_tolerance : float
+        The stated tolerance of the position sensor's scale (fraction, [0, 0.5)) in that order's check
+        (:func:`blf.diagnose.periodic.lead_order`); 0: the scale taken as exact.
 
     Returns
     -------
@@ -213,7 +216,7 @@ def compare_axis(new: AxisSamples, ref: AxisSamples, force_floor_N: float, z_min
         if plan.periods_new_m:
             fr, fn = _fit(ref, ident, xr | plan.columns_ref), _fit(new, ident, xn | plan.columns_new)
         periodic = compare_periodic(plan, new, ref, ident, fn, fr, periodic_floor_N, z_min, xn, lead_m, gear_ratio,
-                                    xr)
+                                    xr, scale_tolerance)
     floors = axis_floors(force_floor_N, fr.running_speed_m_per_s, half)
     changes = [c for c in compare_fits(fn, fr, floors, z_min) if not c.name.startswith("periodic")]
     checks = [effort_load_check(fit, p.load_N, p.mask.used, force_floor_N, z_min, gain_rel_u)

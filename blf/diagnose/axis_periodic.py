@@ -199,7 +199,7 @@ def _words(amp: dict, named: tuple, period: float, floor: float) -> str:
 
 def compare_periodic(plan: PeriodicPlan, new, ref, ident, fit_new, fit_ref, floor_N: float, z_min: float,
                      extra_new: dict, lead_m: float | None = None, gear_ratio: float | None = None,
-                     extra_ref: dict | None = None) -> AxisPeriodic:
+                     extra_ref: dict | None = None, scale_tolerance: float = 0.0) -> AxisPeriodic:
     """Each component's amplitude per direction against the reference's, after the joint fits
     (``fit_new``, ``fit_ref`` with the plan's columns), with where it acts and which order it is."""
     words = plan.words
@@ -238,7 +238,7 @@ def compare_periodic(plan: PeriodicPlan, new, ref, ident, fit_new, fit_ref, floo
                           if k.startswith(f"periodic{i}_"))
         where = locality(new.q_m, own, directions(new), new.mask.used, pn,
                          search_range(new.q_m, new.mask.used, directions(new)))
-        lead = lead_order(pn, u, lead_m, gear_ratio) if lead_m else None
+        lead = lead_order(pn, u, lead_m, gear_ratio, scale_tolerance=scale_tolerance) if lead_m else None
         words = _words(amp, named, pn, floor_N) + f"; {where.words}" + (f"; {lead.words}" if lead else "")
         out.append(PeriodicChange(i, pn, u, pr, amp, harm, named, ch, chu,
                                   float(np.mean([amp[d][0] for d in use])) if use else 0.0,

@@ -105,6 +105,7 @@ class LeadOrder:
     nearest: int
     contradicts: bool
     words: str
+    scale_difference: float = 0.0  #: c - 1: the position's scale (measured per true length) making it whole
 
 
 def search_range(q_m, used, direction=None, shortest_m: float = 0.0) -> PeriodSearch:
@@ -379,20 +380,34 @@ def locality(q_m, r, direction, used, period_m: float, search: PeriodSearch, per
 
 
 def lead_order(period_m: float, period_u_m: float, lead_m: float, gear_ratio: float | None = None,
-               z_max: float = 3.0, max_order: int = 12) -> LeadOrder:
+               z_max: float = 3.0, max_order: int = 12, scale_tolerance: float = 0.0) -> LeadOrder:
     """Which order of which part a period is, given the screw's lead (m of travel per screw turn) and
-    optionally the motor turns per screw turn.
+    optionally the motor turns per screw turn, and the tolerance of the position sensor's scale.
 
     The order is the cycles per turn of a part: :math:`n = L/P` for the screw, :math:`n = L/(gP)` for the
-    motor, with :math:`u_n = n u_P / P`. The part whose order lies nearest a whole number
-    (1..``max_order``, in standard uncertainties) is named; where several are whole within ``z_max``, the
-    lowest order (a 1 mm period with a 5 mm lead and 5 motor turns per screw turn: the motor once per turn,
-    not the screw five times). **Contradicts** the stated lead when no part's
-    order lies within ``z_max`` standard uncertainties of a whole number: the period found is used, the
-    stated lead is reported as not matching (or the position sensor's scale is off by the difference).
+    motor, with :math:`u_n = n u_P / P`. A period is found in the **measured** position: where the sensor's
+    scale is :math:`c` (measured per true length), :math:`P = c L / k` for order :math:`k`, so the order
+    seen is :math:`n = k / c`. With a stated scale tolerance :math:`s` (:math:`|c - 1| \\le s`) order
+    :math:`k` is consistent with :math:`n` where the gap :math:`\\max(0, |n - k| - s n)` is within
+    ``z_max`` :math:`u_n`; the scale that makes it whole is :math:`c = k / n`. With :math:`s = 0` (the
+    default: the scale taken as exact) this is :math:`|n - k| \\le z_{max} u_n`. Orders :math:`k` and
+    :math:`k + 1` cannot be told apart once :math:`s \\ge 1/(2k + 1)` (their bands of :math:`n` meet): the
+    words say so. The part whose order is consistent is named; where several are, the lowest order (a
+    1 mm period with a 5 mm lead and 5 motor turns per screw turn: the motor once per turn, not the screw
+    five times). **Contradicts** the stated lead when no part's order is consistent: the period found is
+    used, and the words give the scale :math:`c - 1` that would make the nearest order whole (either the
+    lead is not the one stated or the position's scale is off by that).
+
+    Raises
+    ------
+    AnalysisError
+        ``scale_tolerance`` not in [0, 0.5).
     """
     P = positive_scalar(period_m, "period_m", "m")
     L = positive_scalar(lead_m, "lead_m", "m")
+    s = float(scale_tolerance)
+    if not 0.0 <= s < 0.5:
+        raise AnalysisError(f"scale_tolerance: must be in [0, 0.5) (a fraction of the position's scale); got {s}")
     uP = max(float(period_u_m), 1e-12)
     parts = [("screw", L / P)] + ([("motor", L / (positive_scalar(gear_ratio, "gear_ratio", "1") * P))]
                                   if gear_ratio else [])
@@ -400,16 +415,26 @@ def lead_order(period_m: float, period_u_m: float, lead_m: float, gear_ratio: fl
     for part, n in parts:
         un = n * uP / P
         k = int(min(max_order, max(1, round(n))))
-        cands.append((part, n, un, k, abs(n - k) / un))
+        cands.append((part, n, un, k, max(0.0, abs(n - k) - s * n) / un))
     # among the parts whose order is whole within z_max the lowest order (the fastest part's), else the nearest
     part, n, un, k, z = min(cands, key=lambda c: (c[4] > z_max, c[3] if c[4] <= z_max else c[4]))
     ok = z <= z_max
+    scale = k / n - 1.0  #: c - 1: the position's scale that makes order k whole
     what = {1: "once per turn"}.get(k, f"{k} times per turn")
     words = (f"order {k} of the {part} ({what}; {n:.4g} ± {un:.2g} cycles per turn with the stated lead "
              f"{L * 1e3:.4g} mm" + (f" and {gear_ratio:g} motor turns per screw turn" if gear_ratio else "") + ")")
+    if ok and s > 0 and abs(n - k) > z_max * un:
+        words += (f" in the position's scale: the period found, {P * 1e3:.4g} ± {uP * 1e3:.2g} mm, is the "
+                  f"part's in a position scaled by {scale * 100:+.2g} %, within the stated tolerance of the "
+                  f"position sensor's scale ± {s * 100:.3g} %")
+    if ok and s >= 1.0 / (2 * k + 1):
+        words += (f"; with a scale tolerance of ± {s * 100:.3g} % orders {k} and {k + 1} cannot be told apart "
+                  f"(they can below ± {100 / (2 * k + 1):.3g} %)")
     if not ok:
-        words = (f"the stated lead {L * 1e3:.4g} mm contradicts the period found, {P * 1e3:.4g} ± {uP * 1e3:.2g} mm: "
-                 f"nearest is order {k} of the {part} ({n:.4g} ± {un:.2g} cycles per turn, {z:.1f} standard "
-                 f"uncertainties from {k}); the period found is used. Either the lead is not the one stated "
-                 f"or the position's scale is off by {(k / n - 1) * 100:+.2g} %")
-    return LeadOrder(part, n, un, k, not ok, words)
+        beyond = f" beyond the stated tolerance of the position's scale ± {s * 100:.3g} %" if s > 0 else ""
+        words = (f"the stated lead {L * 1e3:.4g} mm contradicts the period found, {P * 1e3:.4g} ± {uP * 1e3:.2g} mm"
+                 f"{beyond}: nearest is order {k} of the {part} ({n:.4g} ± {un:.2g} cycles per turn, {z:.1f} "
+                 f"standard uncertainties from {k}" + (" less the tolerance" if s > 0 else "") + "); the period "
+                 f"found is used. Either the lead is not the one stated or the position's scale is off by "
+                 f"{scale * 100:+.2g} %")
+    return LeadOrder(part, n, un, k, not ok, words, scale)

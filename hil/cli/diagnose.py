@@ -51,8 +51,11 @@ def _request(args: argparse.Namespace):
         val = getattr(args, name)
         if val is not None and not val > 0:
             raise RecordingError(f"--{name.replace('_', '-')}: must be > 0; got {val}")
+    tol = getattr(args, "position_scale_tolerance", 0.0)
+    if not 0.0 <= tol < 0.5:
+        raise RecordingError(f"--position-scale-tolerance: must be in [0, 0.5) (a fraction); got {tol}")
     axis = AxisOptions(current_law=args.current_law, current_a_per_N=args.current_per_force,
-                       screw_lead_m=args.screw_lead_m,
+                       screw_lead_m=args.screw_lead_m, position_scale_tolerance=tol,
                        force_floor_N=FORCE_FLOOR_N if args.force_floor_N is None else args.force_floor_N)
     refs = list(args.reference or [])
     from_history = [str(r) for r in refs] == ["history"]
@@ -218,7 +221,11 @@ def register(sub) -> None:
     p.add_argument("--current-per-force", type=float, metavar="A_PER_N",
                    help="current per newton along the motion (default: identified on --reference's load column)")
     p.add_argument("--screw-lead-m", type=float, metavar="M",
-                   help="single axis with a torque column: the screw lead, m per revolution")
+                   help="single axis: the screw lead, m per revolution (a torque column becomes a force; a force "
+                        "periodic in position is named an order of the screw)")
+    p.add_argument("--position-scale-tolerance", type=float, default=0.0, metavar="FRACTION",
+                   help="single axis with --screw-lead-m: the position sensor's scale tolerance (e.g. 0.05 for "
+                        "+-5 %%) allowed between a period found and an order of the lead (default 0: exact)")
     p.add_argument("--force-floor-N", dest="force_floor_N", type=float, metavar="N",
                    help="relevance floor of a force change (friction, offset), N (with --reference default 75: "
                         "docs/diagnose.md; without, single axis: no floor unless stated)")

@@ -178,7 +178,9 @@ def write_reference_report(path: Path, data: dict, *, json_name: str = "diagnosi
     """The report of ``diagnose --reference`` (single axis): each nominal parameter against its reference
     value, the floors, what this recording cannot tell apart, the masked samples."""
     from blf.diagnose import NOMINAL_UNITS
-    verdict = ("effort not trusted: not diagnosed" if data["verdict"] == "untrusted_effort" else
+    untrusted = ("the effort's mean force not trusted (the witnesses disagree); a force periodic in position named"
+                 if data["effects"] else "effort not trusted: not diagnosed")
+    verdict = (untrusted if data["verdict"] == "untrusted_effort" else
                "changes named" if data["effects"] else "no change above its floor")
     g = lambda x: "—" if x is None else f"{x:.4g}"  # noqa: E731
     rows = [(c["parameter"], NOMINAL_UNITS.get(c["parameter"], ""), g(c["reference"]), g(c["value"]),

@@ -7,7 +7,10 @@ row: the verdict, the effects named, and per periodic component its period in th
 reference, the amplitude per direction (reference -> recording, change ± u), whether named, where along
 the travel, and the held-out residual RMS without and with the periodic terms; the CPU time of the pair.
 
-    python tests/bench/bench_diagnose_cranfield_periodic.py /tmp/periodic.json [--floor]
+    python tests/bench/bench_diagnose_cranfield_periodic.py /tmp/periodic.json [--floor] [--scale-tolerance S]
+
+Per row also the tracking error's witness rule and jitter change (the merged rule: docs/diagnose.md, "The
+second witness") and, per component, the position's scale that makes the nearest order of the lead whole.
 
 ``--floor`` prints how the default floor (``hil.analysis.diagnose.single_axis.PERIODIC_FLOOR_N``) was
 measured: the amplitude changes per direction of the two ``normal`` splits at +20 and +40 kgf, their RMS, x 3.
@@ -45,15 +48,20 @@ def pairs(loads=(20, 40, -40), conditions=DEVELOPMENT):
                 yield name, name, load, ALL_RUNS, ALL_RUNS
 
 
-def row(folder: Path, label, name, load, runs, ref_runs) -> dict:
+def row(folder: Path, label, name, load, runs, ref_runs, scale_tolerance: float = 0.0) -> dict:
     t0 = time.process_time()
-    d = diagnose_pair(folder, name, load, runs, ref_runs, screw_lead_m=LEAD_M)
+    d = diagnose_pair(folder, name, load, runs, ref_runs, screw_lead_m=LEAD_M,
+                      position_scale_tolerance=scale_tolerance)
     cpu = time.process_time() - t0
-    per = d.get("periodic", {})
+    per, wit = d.get("periodic", {}), d.get("witness", {})
+    jit = next((c for c in wit.get("changes", []) if c["parameter"] == "tracking_jitter_ratio"), None)
     return {"condition": label, "load_kgf": load, "verdict": d["verdict"], "cpu_s": cpu,
+            "rule": wit.get("rule", "-"), "jitter_change": None if jit is None else jit["change"],
+            "jitter_u": None if jit is None else jit["uncertainty"], "jitter_named": bool(jit and jit["named"]),
             "named": [e["name"] + (f" {e['period_m'] * 1e3:.4g} mm {e['change']['amplitude_N']:+.0f} N "
                                    f"({'+'.join(e['directions'])})" if "period_m" in e else
-                                   f" {next(iter(e['change'].values())):+.0f}") for e in d["effects"]],
+                                   f" {100 * next(iter(e['change'].values())):+.0f} %" if e.get("source") == "witness"
+                                   else f" {next(iter(e['change'].values())):+.0f}") for e in d["effects"]],
             "components": per.get("components", []), "holdout_before_N": per.get("holdout_rms_before_N"),
             "holdout_after_N": per.get("holdout_rms_after_N"),
             "friction_change_N": next(c["change"] for c in d["changes"] if c["parameter"] == "friction_N")}
@@ -74,8 +82,9 @@ def _fmt(c) -> str:
     where = "uniform" if c["where"]["uniform"] else (f"local {c['where']['span_m'][0] * 1e3:.0f}-"
                                                      f"{c['where']['span_m'][1] * 1e3:.0f} mm")
     order = c.get("order", {})
+    scale = f", scale {order['scale_difference'] * 100:+.1f} %" if "scale_difference" in order else ""
     return (f"{c['period_m'] * 1e3:.3f} ± {c['period_u_m'] * 1e3:.3f} (ref {c['period_reference_m'] * 1e3:.3f}) mm; "
-            f"{dirs}; {where}; order {order.get('nearest', '-')}"
+            f"{dirs}; {where}; order {order.get('nearest', '-')}{scale}"
             f"{' (lead contradicted)' if order.get('contradicts_stated_lead') else ''}")
 
 
@@ -83,22 +92,27 @@ def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("json", nargs="?", default="bench_diagnose_cranfield_periodic.json")
     ap.add_argument("--floor", action="store_true", help="also print how the default floor was measured")
+    ap.add_argument("--scale-tolerance", type=float, default=0.0, metavar="FRACTION",
+                    help="the position sensor's scale tolerance stated (--position-scale-tolerance; default 0)")
     args = ap.parse_args(argv)
     if not (CRANFIELD / "normal.csv.gz").exists():
         print(f"Cranfield recordings not present at {CRANFIELD}")
         return 2
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [row(Path(tmp), *p) for p in pairs()]
-    print("| condition | load kgf | verdict | named | friction change N | periodic components: period (reference) mm; "
-          "amplitude per direction reference -> recording N (change ± u; * named); where; order of the 5 mm lead "
+        rows = [row(Path(tmp), *p, scale_tolerance=args.scale_tolerance) for p in pairs()]
+    print("| condition | load kgf | verdict | named | witness rule (jitter change %, * named) | friction change N "
+          "| periodic components: period (reference) mm; amplitude per direction reference -> recording N "
+          "(change ± u; * named); where; order of the 5 mm lead, the position's scale that makes it whole "
           "| held-out RMS N before -> after | CPU s |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         comps = "<br>".join(_fmt(c) for c in r["components"]) or "-"
         ho = (f"{r['holdout_before_N']:.1f} -> {r['holdout_after_N']:.1f}" if r["holdout_after_N"] is not None
               else "-")
+        jit = (f" ({100 * r['jitter_change']:+.1f} ± {100 * r['jitter_u']:.1f}{'*' if r['jitter_named'] else ''})"
+               if r["jitter_change"] is not None else "")
         print(f"| {r['condition']} | {r['load_kgf']:+d} | {r['verdict']} | {', '.join(r['named']) or '-'} "
-              f"| {r['friction_change_N']:+.1f} | {comps} | {ho} | {r['cpu_s']:.2f} |")
+              f"| {r['rule']}{jit} | {r['friction_change_N']:+.1f} | {comps} | {ho} | {r['cpu_s']:.2f} |")
     result = {"rows": rows}
     if args.floor:
         result["floor"] = f = floor(rows)

@@ -49,7 +49,7 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions, more_
     new, ref, pn, pr = pair.new, pair.ref, pair.prepared_new, pair.prepared_ref
     try:
         cmp = compare_axis(pn, pr, opts.force_floor_N, opts.z_min, pair.gain_rel_u, opts.periodic_floor_N,
-                           opts.screw_lead_m, opts.gear_ratio)
+                           opts.screw_lead_m, opts.gear_ratio, opts.position_scale_tolerance)
     except AnalysisError as exc:
         raise RecordingError(str(exc)) from None
     fn, fr, ident, changes = cmp.recording, cmp.reference, cmp.ident, cmp.changes
@@ -63,7 +63,8 @@ def reference_diagnosis(new_path: Path, ref_path: Path, opts: AxisOptions, more_
         " (measured from the references' spread)" if cov.get("measured") and "force_N" in cov["measured"] else
         " (default: 3 x RMS of the healthy Cranfield actuator's changes between halves of one session)"
         if opts.force_floor_N == FORCE_FLOOR_N else " (stated)"))
-    w_changes, w_section = witness.compare_pair(new, ref, w_floors, opts.z_min)
+    periods = witness.named_periods(cmp.periodic) if effort["trusted"] else ((), ())
+    w_changes, w_section = witness.compare_pair(new, ref, w_floors, opts.z_min, periods)
     data = {
         "verdict": verdict, "model": "single-axis", "mode": "reference", "effort": effort,
         "effects": effects, "where": [], "locations": [],

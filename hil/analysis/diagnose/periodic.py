@@ -30,6 +30,7 @@ def _component(c, trusted: bool) -> dict:
     if c.lead is not None:
         out["order"] = {"part": c.lead.part, "order": rounded(c.lead.order), "order_u": rounded(c.lead.order_u),
                         "nearest": c.lead.nearest, "contradicts_stated_lead": c.lead.contradicts,
+                        "scale_difference": rounded(c.lead.scale_difference),
                         "words": c.lead.words}
     return out
 

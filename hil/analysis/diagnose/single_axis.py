@@ -63,6 +63,8 @@ class AxisOptions:
     z_min: float = 3.0
     periodic_floor_N: float | None = PERIODIC_FLOOR_N  #: None: forces periodic in position not sought
     gear_ratio: float | None = None  #: motor turns per screw turn (with screw_lead_m: the part's order)
+    #: the stated tolerance of the position sensor's scale (fraction) in the order's check; 0: exact
+    position_scale_tolerance: float = 0.0
 
 
 def read_axis(path: Path) -> AxisRecording:

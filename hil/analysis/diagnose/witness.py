@@ -34,13 +34,14 @@ _FORCES = ("friction_N", "coulomb_N", "offset_N")
 _EFFECT = {"tracking_lag_m": "tracking_lag_change", "tracking_jitter_ratio": "tracking_jitter_change"}
 
 
-def witness_of(rec):
+def witness_of(rec, periods_m=()):
     """The tracking witness of a single-axis recording (:class:`hil.analysis.diagnose.single_axis.AxisRecording`),
-    or the reason (str) it has none."""
+    or the reason (str) it has none; ``periods_m``: the periods (m of travel) of the periodic force the effort
+    names in it, removed from the jitter (:func:`blf.diagnose.witness.tracking_witness`)."""
     from blf.diagnose.witness import tracking_witness
     from blf.errors import AnalysisError
     try:
-        return tracking_witness(rec.t, rec.q, rec.q_ref, rec.sample_rate_hz)
+        return tracking_witness(rec.t, rec.q, rec.q_ref, rec.sample_rate_hz, periods_m=periods_m)
     except AnalysisError as exc:
         return f"{rec.path.name}: {exc}"
 
@@ -58,10 +59,18 @@ def _stat_dict(w) -> dict:
             "jitter_u_m": rounded(w.jitter_u_m), "strokes": w.n_strokes, "samples": w.n_samples}
 
 
-def compare_pair(new, ref, floors: dict, z_min: float) -> tuple:
-    """(changes or None, diagnosis.json's ``witness`` without the rule's words) of two recordings."""
+def named_periods(periodic) -> tuple:
+    """((recording's periods, reference's periods) in m) of the periodic components named
+    (:class:`blf.diagnose.axis_periodic` comparison, or None)."""
+    comps = [c for c in (periodic.changes if periodic is not None else ()) if c.named]
+    return tuple(c.period_m for c in comps), tuple(c.period_reference_m for c in comps)
+
+
+def compare_pair(new, ref, floors: dict, z_min: float, periods=((), ())) -> tuple:
+    """(changes or None, diagnosis.json's ``witness`` without the rule's words) of two recordings;
+    ``periods``: :func:`named_periods`, removed from each recording's jitter."""
     from blf.diagnose.witness import compare_witness
-    wn, wr = witness_of(new), witness_of(ref)
+    wn, wr = witness_of(new, periods[0]), witness_of(ref, periods[1])
     if isinstance(wn, str) or isinstance(wr, str):
         why = "; ".join(w for w in (wn, wr) if isinstance(w, str))
         return None, {"compared": False, "changes": [], "words": f"the tracking error was not compared ({why})"}
@@ -70,7 +79,10 @@ def compare_pair(new, ref, floors: dict, z_min: float) -> tuple:
         return None, {"compared": False, "changes": [],
                       "words": f"the tracking error was not compared ({'; '.join(flat)})"}
     changes = compare_witness(wn, wr, floors, z_min)
-    return changes, {"compared": True, "window_s": rounded(wn.window_s), "recording": _stat_dict(wn),
+    removed = ({"periods_removed_m": [rounded(p) for p in wn.periods_removed_m],
+                "periods_removed_reference_m": [rounded(p) for p in wr.periods_removed_m]}
+               if wn.periods_removed_m else {})
+    return changes, removed | {"compared": True, "window_s": rounded(wn.window_s), "recording": _stat_dict(wn),
                      "reference": _stat_dict(wr), "changes": [change_dict(c) for c in changes]}
 
 
@@ -83,13 +95,19 @@ def _effect(c) -> dict:
                                                     f"{c.floor:g} ({c.unit})"}
 
 
+def _periodic(effect: dict) -> bool:
+    return effect["name"].startswith("periodic")
+
+
 def apply_witness(data: dict, changes, section: dict) -> dict:
     """diagnosis.json ``data`` (of :func:`hil.analysis.diagnose.axis_reference.reference_diagnosis`) with the
     tracking error's comparison (``witness``) and the rule applied: returns the new dict."""
     from blf.diagnose.witness import witnesses_disagree
     data = dict(data)
     effort = dict(data["effort"])
-    named_effort = [e for e in data["effects"] if e.get("source") != "witness"]
+    # the effort's mean-force changes: a periodic change's component is removed from the witness's jitter
+    named_effort = [e for e in data["effects"] if e.get("source") != "witness" and not _periodic(e)]
+    periodic = [e for e in data["effects"] if _periodic(e)]
     if changes is None:
         data["witness"] = section
         return data
@@ -98,23 +116,31 @@ def apply_witness(data: dict, changes, section: dict) -> dict:
         said = ", ".join(f"{c['parameter']} {c['change']:+.1f} ± {c['uncertainty']:.1f} N" for c in data["changes"]
                          if c["parameter"] in _FORCES)
         seen = "; ".join(c.words for c in changes if c.named)
-        words = (f"the two witnesses disagree: the effort names no change ({said or 'no force parameter'}; floor "
-                 f"{data['floor']['force_N']:g} N) while {seen}. The force the position loop fights "
+        said = said or "no force parameter"
+        words = (f"the two witnesses disagree: the effort names no change of its mean force ({said}; floor "
+                 f"{data['floor']['force_N']:g} N) while {seen}"
+                 + (" (less the component at the period the effort names)" if periodic else "")
+                 + ". The force the position loop fights "
                  + ("changed" if lag.named else "grew rougher") + " and the effort does not show it: the effort "
-                 "is not trusted to say 'no change'")
+                 "is not trusted to say 'no change'" + (
+                     "; the force periodic in position it names stays named (a current's offsets or "
+                     "re-levelling leave a ripple within a stroke as it was)" if periodic else ""))
         effort |= {"trusted": False, "words": words, "witness_disagrees": True}
-        data |= {"verdict": "untrusted_effort", "effort": effort, "effects": [],
+        data |= {"verdict": "untrusted_effort", "effort": effort, "effects": periodic,
                  "changes": [c | {"named": False} for c in data["changes"]]}
         section = section | {"rule": "untrusted", "words": words}
     elif effort["trusted"] and not named_effort and jit.named:
-        data |= {"verdict": "explained", "effects": [_effect(jit)]}
+        data |= {"verdict": "explained", "effects": periodic + [_effect(jit)]}
         section = section | {"rule": "named", "words": f"named from the tracking error: {jit.words}; the effort "
-                                                       "names no change (a smoother tracking misses no degradation)"}
+                                                       "names no change of its mean force (a smoother tracking "
+                                                       "misses no degradation)"}
     else:
         moved = "changed beyond its floors" if lag.named or jit.named else "did not change beyond its floors"
         agree = (f"the effort failed its own check against the known load; the tracking error {moved}"
                  if not effort["trusted"] else f"the effort names a change and the tracking error {moved}"
-                 if named_effort else "neither witness changed beyond its floors")
+                 if named_effort else "the effort names a force periodic in position only and the tracking "
+                 f"error, less that period's component, {moved}" if periodic
+                 else "neither witness changed beyond its floors")
         section = section | {"rule": "none", "words": agree}
     data["witness"] = section
     return data
