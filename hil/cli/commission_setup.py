@@ -16,6 +16,8 @@ from hil.cli.args import add_cpu_latency_arg, add_seed_arg, rt_priority_arg
 
 #: The key of the finding of a stop on stale data: not a profile key, the PC running emacheck.
 STALE_KEY = "pc.stale_data"
+#: The key of a node's heartbeat lost while the master's own loop was held as long (the PC, not the node).
+HEARTBEAT_PC_KEY = "pc.heartbeat_lost"
 
 
 def wiring_fault(text: str):
@@ -43,7 +45,7 @@ def add_rig_args(p) -> None:
                         "simulated nodes are built as its `actuation` profile says (default the shipped one), not "
                         "as the profile under test, so a mistake in that profile shows. Without --sim: the "
                         "shipped simulated rig, built as the profile under test")
-    add_seed_arg(p)
+    add_seed_arg(p, "with --simulate; recorded in commission.json")
     p.add_argument("--wiring-fault", action="append", type=wiring_fault, metavar="KIND[:EMA[:VALUE]]",
                    help="with --simulate, wire the simulated rig wrongly (repeatable): lvdt_sign, lvdt_scale "
                         "(VALUE: reading / stroke, default 0.5), lvdt_dead, loadcell_sign, loadcell_scale, "
@@ -112,7 +114,10 @@ def open_rig(args, act, rig, profile: Path | None):
         return transport, None, {
             "simulated": True, "seed": simrig.seed if args.seed is None else args.seed, "wiring_faults": wiring,
             "bus": {"interface": "in-process", "channel": "simulated"}, "simulated_rig": simulated,
-            "files_sha256": file_hashes(simrig=args.sim, **({"simulated_rig_actuation": own} if own else {}))}
+            "files_sha256": file_hashes(simrig=args.sim, **({"simulated_rig_actuation": own} if own else {})),
+            # kept beside the judged profiles: the rig rehearsed on, as given
+            "copies": {k: v for k, v in (("simulated-rig.toml", args.sim), ("simulated-rig-actuation.toml", own))
+                       if v is not None}}
     from hil.transport import BusTransport
 
     bitrate = args.bitrate or act.canopen.bitrate_bps
@@ -123,24 +128,37 @@ def open_rig(args, act, rig, profile: Path | None):
                                     "multicast_hops": multicast_hops_for(args.interface, args.multicast_hops)}}
 
 
-def stale_finding(finding, exc: BaseException, rt_priority: int | None):
+def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: tuple[float, float] | None = None):
     """The finding of a stop ``exc``: a stop on stale data (:class:`hil.master.link.StaleData`) is given the key
-    :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; any other is ``finding``.
+    :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; a node's heartbeat lost
+    (:class:`hil.master.events.HeartbeatLost`) while the master's own loop was held as long (``stall``: the
+    latest stall of its loop, :attr:`hil.master.stalls.StallWatch.last`; the rule
+    :func:`hil.master.stalls.stall_explains`) likewise, :data:`HEARTBEAT_PC_KEY`; any other is ``finding``.
 
     The drives answer every SYNC within microseconds; a sample missing for the freshness limit in force, or a
     SYNC taken late by the master, is most often the master's PC not running its loop in time (a loaded PC at
     normal scheduling: docs/performance.md). ``rt_priority``: the SCHED_FIFO priority the loop ran at (0 or
     None: normal scheduling)."""
+    from hil.master.events import HeartbeatLost
     from hil.master.link import StaleData
+    from hil.master.stalls import stall_explains
 
-    if not isinstance(exc, StaleData):
+    if isinstance(exc, StaleData):
+        key, seen = STALE_KEY, ""
+    elif isinstance(exc, HeartbeatLost) and stall_explains(stall, exc.at_s, exc.silent_s, exc.overdue_s):
+        key = HEARTBEAT_PC_KEY
+        seen = (f" (the master's own loop was held {stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, within the "
+                f"heartbeat's {exc.silent_s * 1e3:.0f} ms of silence: at least the {exc.overdue_s * 1e3:.0f} ms a "
+                f"heartbeat may be overdue ({exc.key}); a producer on this PC, or its frames, were held as long)")
+    else:
         return finding
     ran = f"SCHED_FIFO {rt_priority}" if rt_priority else "normal scheduling"
     hint = (f"the likely cause is the PC running emacheck ({ran}): it did not keep up with the bus; run with "
             "--rt-priority N (e.g. 50) and without other load on the PC, then commission again" if not rt_priority
             else f"the likely cause is the PC running emacheck ({ran}): unload the PC and commission again; "
-                 "if it repeats on an idle PC, check that each drive sends its TPDOs on every SYNC")
-    return dataclasses.replace(finding, key=STALE_KEY, text=f"{finding.text}; {hint}")
+                 + ("if it repeats on an idle PC, check that each drive sends its TPDOs on every SYNC"
+                    if key == STALE_KEY else f"if it repeats on an idle PC, check the node's heartbeat ({exc.key})"))
+    return dataclasses.replace(finding, key=key, text=f"{finding.text}{seen}; {hint}")
 
 
 def ended_in(d: dict, scanned: dict) -> str:

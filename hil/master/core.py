@@ -451,8 +451,12 @@ class MasterCore:
                         t - v.last_heartbeat_s > v.hb_timeout_s - 0.5 * self.T:
                     v.lost = True
                     self.events.append(event.HeartbeatMissed(t, n))
-                    self._fail(HeartbeatLost(f"{v.label}: heartbeat lost (none for {t - v.last_heartbeat_s:.3f} s, "
-                                             f"timeout {v.hb_timeout_s:.3f} s)"), t, n)
+                    spec = next(x.spec for x in self.plan.nodes if x.spec.node_id == n)
+                    silent = t - v.last_heartbeat_s
+                    self._fail(HeartbeatLost(f"{v.label}: heartbeat lost (none for {silent:.3f} s, "
+                                             f"timeout {v.hb_timeout_s:.3f} s)", key=f"{spec.key}.heartbeat_period_s",
+                                             at_s=t, silent_s=silent,
+                                             overdue_s=v.hb_timeout_s - spec.heartbeat_period_s), t, n)
         return []
 
     # ------------------------------------------------------------------ cyclic

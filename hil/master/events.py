@@ -5,6 +5,7 @@ kind string, and reads typed fields; ``str(event)`` is the line for a log."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from hil.canopen.cia402 import State
@@ -22,7 +23,17 @@ class DriveFault(EmacheckError, RuntimeError):
 
 
 class HeartbeatLost(EmacheckError, RuntimeError):
-    """A node's heartbeat did not arrive within its timeout."""
+    """A node's heartbeat did not arrive within its timeout.
+
+    ``key``: the profile key of the node's heartbeat (``canopen.heartbeat_period_s`` for a drive,
+    ``nodes.NAME.heartbeat_period_s`` for a sensor node); ``at_s``: when it was judged lost [s, the master's
+    time]; ``silent_s``: since its last heartbeat [s]; ``overdue_s``: how long a heartbeat may be overdue before
+    it is lost, the timeout less the producer period [s]."""
+
+    def __init__(self, message: str = "", *, key: str = "", at_s: float = math.nan, silent_s: float = math.nan,
+                 overdue_s: float = math.nan) -> None:
+        super().__init__(message)
+        self.key, self.at_s, self.silent_s, self.overdue_s = key, at_s, silent_s, overdue_s
 
 
 @dataclass(frozen=True, slots=True)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EVERY_S_MAX", "EVERY_S_MIN", "MasterStalls", "STALL_MS_MAX", "StallWatch"]
+__all__ = ["EVERY_S_MAX", "EVERY_S_MIN", "MasterStalls", "STALL_MS_MAX", "StallWatch", "stall_explains"]
 
 #: ``--master-stall-ms``: above 0, at most this [ms] (far beyond any freshness limit: the drives' consumer
 #: heartbeat stops them first)
@@ -108,6 +108,7 @@ class StallWatch:
         self.longest_s = 0.0
         self.listed: list[tuple[float, float]] = []  #: (begin [s, SYNC time], length [s]), the first MAX_LISTED
         self._open: _Open | None = None
+        self._last: tuple[float, float] | None = None  #: the latest stall closed (begin, length) [s]
 
     def observe(self, t_s: float, late_s: float) -> None:
         """The SYNC of time ``t_s`` [s] was taken ``late_s`` [s] after it arrived (or was due)."""
@@ -131,8 +132,15 @@ class StallWatch:
         o, self._open = self._open, None
         self.count += 1
         self.longest_s = max(self.longest_s, o.late_s)
+        self._last = (o.at_s, o.late_s)
         if len(self.listed) < MAX_LISTED:
             self.listed.append((o.at_s, o.late_s))
+
+    @property
+    def last(self) -> tuple[float, float] | None:
+        """The latest stall, still open or closed: (begin [s, SYNC time], length [s]); None: none yet."""
+        o = self._open
+        return (o.at_s, o.late_s) if o is not None else self._last
 
     def as_json(self) -> dict:
         """count, longest [ms] and each stall's begin [s] and length [ms] (a stall still open counted)."""
@@ -140,3 +148,19 @@ class StallWatch:
             self._close()
         return {"count": self.count, "longest_ms": round(self.longest_s * 1000.0, 3),
                 "at": [[round(t, 6), round(d * 1000.0, 3)] for t, d in self.listed]}
+
+
+def stall_explains(stall: tuple[float, float] | None, at_s: float, silent_s: float, overdue_s: float) -> bool:
+    r"""Whether a stall of the master's own loop explains a node's heartbeat lost: the PC, not the node.
+
+    A heartbeat is judged lost at :math:`t_l` (``at_s``) when none came for ``silent_s`` (more than its timeout);
+    it was then at least ``overdue_s`` = timeout - producer period late. The stall (``stall``: begin :math:`b`,
+    length :math:`L` [s], :attr:`StallWatch.last`) explains it when the master's loop itself was held at least as
+    long, :math:`L \ge` ``overdue_s``, within the silence, :math:`b \le t_l` and :math:`b + L \ge t_l -` ``silent_s``:
+    a PC that held its own loop that long in that window did not run a heartbeat producer on it either (the
+    simulated drives of ``sim-serve`` on the same PC), or took the frames late. A shorter stall, or one outside
+    the silence, leaves the node (its wiring, its power, its 0x1017) the cause. False where ``stall`` is None."""
+    if stall is None or not (math.isfinite(at_s) and math.isfinite(silent_s) and math.isfinite(overdue_s)):
+        return False
+    b, length = stall
+    return length >= overdue_s and b <= at_s and b + length >= at_s - silent_s
