@@ -79,8 +79,8 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
             smp = link.exchange(sp1, sp2)
     except (*KNOWN_ERRORS, CanopenError, KeyboardInterrupt) as exc:
         core.failed(exc)
-        stall = link.stall_watch.last  # (the PC named where its own loop was held: a stop on stale data, a
-        core.findings[-1:] = [stale_finding(f, exc, rt_priority, stall) for f in core.findings[-1:]]  # heartbeat)
+        stall, bus = link.stall_watch.last, str(context["bus"]["interface"])  # (the PC named where the evidence
+        core.findings[-1:] = [stale_finding(f, exc, rt_priority, stall, bus) for f in core.findings[-1:]]  # says)
         link.abort()
         interrupted = isinstance(exc, KeyboardInterrupt)
     else:

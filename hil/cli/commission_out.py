@@ -69,6 +69,7 @@ def report_data(core, master, link, final: dict, context: dict, explanation, ide
         "patch": {"file": PATCH, "keys": explanation.patch, "wiring_fixes": list(explanation.wiring)},
         "drives_final": final,
         "close_errors": list(link.close_errors),
+        "stalls": link.stall_record(),  # the master loop's own stalls (as meta.json's), the PC's evidence
         "findings": findings,
     }
 

@@ -16,8 +16,11 @@ from hil.cli.args import add_cpu_latency_arg, add_seed_arg, rt_priority_arg
 
 #: The key of the finding of a stop on stale data: not a profile key, the PC running emacheck.
 STALE_KEY = "pc.stale_data"
-#: The key of a node's heartbeat lost while the master's own loop was held as long (the PC, not the node).
+#: The key of a node's heartbeat lost while the master's own loop was held as long, or, on a software bus, the
+#: node's process sent nothing at all as long (the PC, not the node).
 HEARTBEAT_PC_KEY = "pc.heartbeat_lost"
+#: python-can interfaces whose nodes are processes on a PC, not devices (``sim-serve``'s simulated drives).
+SOFTWARE_BUSES = frozenset({"udp_multicast", "virtual"})
 
 
 def wiring_fault(text: str):
@@ -128,12 +131,15 @@ def open_rig(args, act, rig, profile: Path | None):
                                     "multicast_hops": multicast_hops_for(args.interface, args.multicast_hops)}}
 
 
-def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: tuple[float, float] | None = None):
+def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: tuple[float, float] | None = None,
+                  interface: str = ""):
     """The finding of a stop ``exc``: a stop on stale data (:class:`hil.master.link.StaleData`) is given the key
     :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; a node's heartbeat lost
     (:class:`hil.master.events.HeartbeatLost`) while the master's own loop was held as long (``stall``: the
     latest stall of its loop, :attr:`hil.master.stalls.StallWatch.last`; the rule
-    :func:`hil.master.stalls.stall_explains`) likewise, :data:`HEARTBEAT_PC_KEY`; any other is ``finding``.
+    :func:`hil.master.stalls.stall_explains`), or on a software bus (``interface`` in :data:`SOFTWARE_BUSES`)
+    with the node silent altogether as long (:func:`hil.master.stalls.process_held`), likewise,
+    :data:`HEARTBEAT_PC_KEY`; any other is ``finding``.
 
     The drives answer every SYNC within microseconds; a sample missing for the freshness limit in force, or a
     SYNC taken late by the master, is most often the master's PC not running its loop in time (a loaded PC at
@@ -141,7 +147,7 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: t
     None: normal scheduling)."""
     from hil.master.events import HeartbeatLost
     from hil.master.link import StaleData
-    from hil.master.stalls import stall_explains
+    from hil.master.stalls import process_held, stall_explains
 
     if isinstance(exc, StaleData):
         key, seen = STALE_KEY, ""
@@ -150,6 +156,12 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: t
         seen = (f" (the master's own loop was held {stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, within the "
                 f"heartbeat's {exc.silent_s * 1e3:.0f} ms of silence: at least the {exc.overdue_s * 1e3:.0f} ms a "
                 f"heartbeat may be overdue ({exc.key}); a producer on this PC, or its frames, were held as long)")
+    elif isinstance(exc, HeartbeatLost) and interface in SOFTWARE_BUSES and \
+            process_held(exc.frames_silent_s, exc.overdue_s):
+        key = HEARTBEAT_PC_KEY
+        seen = (f" (on {interface} the node is a process on a PC, and it sent nothing at all, no statusword either, "
+                f"for {exc.frames_silent_s * 1e3:.0f} ms: at least the {exc.overdue_s * 1e3:.0f} ms a heartbeat may "
+                f"be overdue ({exc.key}); the process serving it was not run)")
     else:
         return finding
     ran = f"SCHED_FIFO {rt_priority}" if rt_priority else "normal scheduling"

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EVERY_S_MAX", "EVERY_S_MIN", "MasterStalls", "STALL_MS_MAX", "StallWatch", "stall_explains"]
+__all__ = ["EVERY_S_MAX", "EVERY_S_MIN", "MasterStalls", "STALL_MS_MAX", "StallWatch", "process_held", "stall_explains"]
 
 #: ``--master-stall-ms``: above 0, at most this [ms] (far beyond any freshness limit: the drives' consumer
 #: heartbeat stops them first)
@@ -164,3 +164,15 @@ def stall_explains(stall: tuple[float, float] | None, at_s: float, silent_s: flo
         return False
     b, length = stall
     return length >= overdue_s and b <= at_s and b + length >= at_s - silent_s
+
+
+def process_held(frames_silent_s: float, overdue_s: float) -> bool:
+    """Whether a node whose heartbeat was lost was silent altogether, no statusword (TPDO) either for at least
+    ``overdue_s`` (timeout - producer period [s], as in :func:`stall_explains`) before it was judged lost.
+
+    Only meaningful on a software bus (python-can's ``udp_multicast``, ``virtual``), where every node is a
+    process on a PC (``sim-serve``'s simulated drives): a process that sent nothing at all for that long was not
+    run, the PC's doing; its heartbeat producer only late while its TPDOs came would be the node's own. (On a
+    real bus a drive silent altogether is its power, its cable or a bus-off: the caller never asks there.) False
+    where the time is not known (NaN: not a drive, no statusword yet)."""
+    return math.isfinite(frames_silent_s) and math.isfinite(overdue_s) and frames_silent_s >= overdue_s
