@@ -314,3 +314,23 @@ def test_a_heartbeat_lost_in_simulated_time_is_keyed_to_the_nodes_heartbeat_not_
     assert rc == ExitCode.NOT_READY and [(x["kind"], x["key"]) for x in f] == [
         ("stopped", "canopen.heartbeat_period_s")]
     assert "HeartbeatLost" in f[0]["text"] and "PC" not in f[0]["text"]
+
+
+def test_a_drive_that_lost_the_masters_heartbeat_names_the_pc_where_the_loop_was_held_the_consumer_margin():
+    """EMCY 0x8130 from a drive: the master's heartbeat (sent from its loop every 50 ms) missed the drive's
+    consumer time (125 ms); a loop held at least 125 - 50 = 75 ms within those 125 ms explains it."""
+    from hil.canopen.emcy import Emcy
+    from hil.master.events import DriveFault
+    from hil.profile.load import load_actuation
+
+    c = load_actuation(None).canopen
+    margin = c.master_consumer_time_s - c.master_heartbeat_period_s
+    assert margin == pytest.approx(0.075)
+    fault = DriveFault("node 1: EMCY 0x8130", emcy=Emcy(4.55, 1, 0x8130, 0x11, bytes(5)))
+    base = Finding(Stage.JOG, Kind.STOP, "safety", "DriveFault: node 1: EMCY 0x8130 (life guard or heartbeat)")
+    pc = stale_finding(base, fault, 0, (4.426, margin), "udp_multicast", c)
+    assert pc.key == HEARTBEAT_PC_KEY and "lost the master's heartbeat" in pc.text
+    assert stale_finding(base, fault, 0, (4.426, math.nextafter(margin, 0.0)), "udp_multicast", c) is base
+    assert stale_finding(base, fault, 0, (4.426, margin), "udp_multicast", None) is base  # no profile: no rule
+    other = DriveFault("node 1: EMCY 0x4310", emcy=Emcy(4.55, 1, 0x4310, 0x09, bytes(5)))
+    assert stale_finding(base, other, 0, (4.426, 0.2), "udp_multicast", c) is base  # another fault: the drive's

@@ -132,14 +132,17 @@ def open_rig(args, act, rig, profile: Path | None):
 
 
 def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: tuple[float, float] | None = None,
-                  interface: str = ""):
+                  interface: str = "", canopen=None):
     """The finding of a stop ``exc``: a stop on stale data (:class:`hil.master.link.StaleData`) is given the key
     :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; a node's heartbeat lost
     (:class:`hil.master.events.HeartbeatLost`) while the master's own loop was held as long (``stall``: the
     latest stall of its loop, :attr:`hil.master.stalls.StallWatch.last`; the rule
     :func:`hil.master.stalls.stall_explains`), or on a software bus (``interface`` in :data:`SOFTWARE_BUSES`)
     with the node silent altogether as long (:func:`hil.master.stalls.process_held`), likewise,
-    :data:`HEARTBEAT_PC_KEY`; any other is ``finding``.
+    :data:`HEARTBEAT_PC_KEY`; so is a drive's EMCY 0x8130 (it lost the master's heartbeat) where the master's
+    loop, which sends that heartbeat, was held at least the drive's consumer time less the master's heartbeat
+    period within the consumer time before it (``canopen``: the profile's table; the same rule). Any other is
+    ``finding``.
 
     The drives answer every SYNC within microseconds; a sample missing for the freshness limit in force, or a
     SYNC taken late by the master, is most often the master's PC not running its loop in time (a loaded PC at
@@ -162,6 +165,12 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: t
         seen = (f" (on {interface} the node is a process on a PC, and it sent nothing at all, no statusword either, "
                 f"for {exc.frames_silent_s * 1e3:.0f} ms: at least the {exc.overdue_s * 1e3:.0f} ms a heartbeat may "
                 f"be overdue ({exc.key}); the process serving it was not run)")
+    elif (emcy := _master_heartbeat_lost(exc, canopen)) is not None and stall_explains(
+            stall, emcy.t_s, canopen.master_consumer_time_s, margin := _consumer_margin_s(canopen)):
+        key = HEARTBEAT_PC_KEY
+        seen = (f" (the drive lost the master's heartbeat, which the master's loop sends: the loop was held "
+                f"{stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, at least the {margin * 1e3:.0f} ms the drive's "
+                f"consumer time (canopen.master_heartbeat_consumer_factor) leaves beyond the master's period)")
     else:
         return finding
     ran = f"SCHED_FIFO {rt_priority}" if rt_priority else "normal scheduling"
@@ -171,6 +180,22 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: t
                  + ("if it repeats on an idle PC, check that each drive sends its TPDOs on every SYNC"
                     if key == STALE_KEY else f"if it repeats on an idle PC, check the node's heartbeat ({exc.key})"))
     return dataclasses.replace(finding, key=key, text=f"{finding.text}{seen}; {hint}")
+
+
+def _master_heartbeat_lost(exc: BaseException, canopen):
+    """The EMCY of a drive that lost the master's heartbeat (0x8130, life guard or heartbeat) that stopped the
+    commissioning (``exc``), or None."""
+    from hil.canopen.emcy import EmcyCode
+    from hil.master.events import DriveFault
+
+    e = getattr(exc, "emcy", None) if isinstance(exc, DriveFault) and canopen is not None else None
+    return e if e is not None and e.code == EmcyCode.LIFE_GUARD_OR_HEARTBEAT else None
+
+
+def _consumer_margin_s(canopen) -> float:
+    """How long the master's heartbeat may be late before a drive's consumer fires [s]: its consumer time less
+    the master's heartbeat period (125 - 50 = 75 ms with the shipped profile)."""
+    return canopen.master_consumer_time_s - canopen.master_heartbeat_period_s
 
 
 def ended_in(d: dict, scanned: dict) -> str:

@@ -402,7 +402,7 @@ class MasterCore:
             self.emcy_in_check.append((self.sync_schedule.t_s, e))
         self.events.append(event.EmcyReceived(t, node, e))
         if e.code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
-            self._fail(DriveFault(str(e)), t, node)
+            self._fail(DriveFault(str(e), emcy=e), t, node)
 
     # ------------------------------------------------------------------ timing
 

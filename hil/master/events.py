@@ -19,7 +19,13 @@ __all__ = ["BadFrame", "BootUp", "CycleIncomplete", "DisableBySdo", "DriveFault"
 
 
 class DriveFault(EmacheckError, RuntimeError):
-    """A drive reported a fault (EMCY or fault state), or did not follow a command, during the check."""
+    """A drive reported a fault (EMCY or fault state), or did not follow a command, during the check.
+
+    ``emcy``: the EMCY that reported it (None: a state or a command not followed)."""
+
+    def __init__(self, message: str = "", *, emcy: Emcy | None = None) -> None:
+        super().__init__(message)
+        self.emcy = emcy
 
 
 class HeartbeatLost(EmacheckError, RuntimeError):
