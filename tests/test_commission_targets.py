@@ -127,44 +127,56 @@ def test_a_node_silent_altogether_for_the_overdue_margin_is_its_process_held():
 def test_on_a_software_bus_a_node_silent_altogether_names_the_pc_on_a_real_bus_never():
     base = Finding(Stage.MOVE, Kind.STOP, "canopen.heartbeat_period_s", "HeartbeatLost: EMA 1: heartbeat lost")
     held = _lost(frames=0.06)  # no statusword for 60 ms either: the node's process was not run
-    pc = stale_finding(base, held, 0, None, "udp_multicast")
+    pc = stale_finding(base, held, 0, (), "udp_multicast")
     assert pc.key == HEARTBEAT_PC_KEY and "sent nothing at all" in pc.text and "60 ms" in pc.text
-    assert stale_finding(base, held, 0, None, "socketcan") is base  # a real drive silent: its power, its cable
-    assert stale_finding(base, _lost(frames=0.049), 0, None, "udp_multicast") is base  # shorter: the node
-    assert stale_finding(base, _lost(frames=0.004), 0, None, "virtual") is base  # TPDOs came: its heartbeat
+    assert stale_finding(base, held, 0, (), "socketcan") is base  # a real drive silent: its power, its cable
+    assert stale_finding(base, _lost(frames=0.049), 0, (), "udp_multicast") is base  # shorter: the node
+    assert stale_finding(base, _lost(frames=0.004), 0, (), "virtual") is base  # TPDOs came: its heartbeat
 
 
 def test_a_stall_explains_a_heartbeat_lost_from_the_overdue_margin_on_and_within_the_silence():
     at, silent, over = 10.0, 0.151, 0.05
-    assert stall_explains((9.9, over), at, silent, over)  # held exactly as long as a heartbeat may be overdue
-    assert not stall_explains((9.9, math.nextafter(over, 0.0)), at, silent, over)  # a float step shorter
-    assert stall_explains((at - silent - over, over), at, silent, over)  # ends where the silence begins
-    assert not stall_explains((at - silent - over - 1e-9, over), at, silent, over)  # ended before it
-    assert stall_explains((at, over), at, silent, over) and not stall_explains((at + 1e-9, over), at, silent, over)
-    assert not stall_explains(None, at, silent, over) and not stall_explains((9.9, 1.0), math.nan, silent, over)
+
+    def ok(b, n, at_s=at):
+        return stall_explains([(b, n)], at_s, silent, over) == (b, n)
+
+    assert ok(9.9, over)  # held exactly as long as a heartbeat may be overdue
+    assert not ok(9.9, math.nextafter(over, 0.0))  # a float step shorter
+    assert ok(at - silent - over, over)  # ends where the silence begins
+    assert not ok(at - silent - over - 1e-9, over)  # ended before it
+    assert ok(at, over) and not ok(at + 1e-9, over)  # begins when it was judged lost, or after
+    assert stall_explains((), at, silent, over) is None and not ok(9.9, 1.0, math.nan)
+    # not only the latest: the longest of the recent stalls that explains it (short ones came after it)
+    assert stall_explains([(9.0, 0.2), (9.9, 0.08), (9.95, 0.003), (9.99, 0.004)], at, silent, over) == (9.9, 0.08)
 
 
 def test_a_heartbeat_lost_names_the_pc_only_where_the_masters_loop_was_held():
     base = Finding(Stage.MOVE, Kind.STOP, "canopen.heartbeat_period_s", "HeartbeatLost: EMA 1: heartbeat lost")
-    pc = stale_finding(base, _lost(), 0, (9.95, 0.08))
+    pc = stale_finding(base, _lost(), 0, [(9.95, 0.08), (10.0, 0.003)])
     assert pc.key == HEARTBEAT_PC_KEY and "held 80 ms" in pc.text and "--rt-priority N" in pc.text
-    rt = stale_finding(base, _lost(), 50, (9.95, 0.08))
+    rt = stale_finding(base, _lost(), 50, [(9.95, 0.08)])
     assert "SCHED_FIFO 50" in rt.text and "check the node's heartbeat (canopen.heartbeat_period_s)" in rt.text
-    assert stale_finding(base, _lost(), 0, (9.95, 0.02)) is base  # a shorter hold: the node, not the PC
-    assert stale_finding(base, _lost(), 0, None) is base
+    assert stale_finding(base, _lost(), 0, [(9.95, 0.02)]) is base  # a shorter hold: the node, not the PC
+    assert stale_finding(base, _lost(), 0, ()) is base
     assert STALE_KEY != HEARTBEAT_PC_KEY
 
 
-def test_the_stall_watch_keeps_the_latest_stall_open_or_closed():
+def test_the_stall_watch_keeps_the_recent_stalls_open_or_closed_at_most_its_bound():
+    from hil.master.stalls import RECENT_STALLS
+
     w = StallWatch(0.002)
-    assert w.last is None
+    assert w.recent == ()
     w.observe(1.0, 0.01)
     w.observe(1.002, 0.03)
-    assert w.last == (1.0, 0.03)  # still open
+    assert w.recent == ((1.0, 0.03),)  # still open
     w.on_time()
     w.observe(2.0, 0.004)
     w.on_time()
-    assert w.last == (2.0, 0.004) and w.count == 2
+    assert w.recent == ((1.0, 0.03), (2.0, 0.004)) and w.count == 2
+    for k in range(RECENT_STALLS):
+        w.observe(3.0 + k, 0.005)
+        w.on_time()
+    assert len(w.recent) == RECENT_STALLS and w.recent[0] == (3.0, 0.005) and w.count == RECENT_STALLS + 2
 
 
 def test_the_seed_help_says_where_each_command_records_it(capsys):
@@ -328,9 +340,9 @@ def test_a_drive_that_lost_the_masters_heartbeat_names_the_pc_where_the_loop_was
     assert margin == pytest.approx(0.075)
     fault = DriveFault("node 1: EMCY 0x8130", emcy=Emcy(4.55, 1, 0x8130, 0x11, bytes(5)))
     base = Finding(Stage.JOG, Kind.STOP, "safety", "DriveFault: node 1: EMCY 0x8130 (life guard or heartbeat)")
-    pc = stale_finding(base, fault, 0, (4.426, margin), "udp_multicast", c)
+    pc = stale_finding(base, fault, 0, [(4.426, margin)], "udp_multicast", c)
     assert pc.key == HEARTBEAT_PC_KEY and "lost the master's heartbeat" in pc.text
-    assert stale_finding(base, fault, 0, (4.426, math.nextafter(margin, 0.0)), "udp_multicast", c) is base
-    assert stale_finding(base, fault, 0, (4.426, margin), "udp_multicast", None) is base  # no profile: no rule
+    assert stale_finding(base, fault, 0, [(4.426, math.nextafter(margin, 0.0))], "udp_multicast", c) is base
+    assert stale_finding(base, fault, 0, [(4.426, margin)], "udp_multicast", None) is base  # no profile: no rule
     other = DriveFault("node 1: EMCY 0x4310", emcy=Emcy(4.55, 1, 0x4310, 0x09, bytes(5)))
-    assert stale_finding(base, other, 0, (4.426, 0.2), "udp_multicast", c) is base  # another fault: the drive's
+    assert stale_finding(base, other, 0, [(4.426, 0.2)], "udp_multicast", c) is base  # another fault: the drive's

@@ -131,12 +131,12 @@ def open_rig(args, act, rig, profile: Path | None):
                                     "multicast_hops": multicast_hops_for(args.interface, args.multicast_hops)}}
 
 
-def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: tuple[float, float] | None = None,
-                  interface: str = "", canopen=None):
+def stale_finding(finding, exc: BaseException, rt_priority: int | None, stalls=(), interface: str = "",
+                  canopen=None):
     """The finding of a stop ``exc``: a stop on stale data (:class:`hil.master.link.StaleData`) is given the key
     :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; a node's heartbeat lost
-    (:class:`hil.master.events.HeartbeatLost`) while the master's own loop was held as long (``stall``: the
-    latest stall of its loop, :attr:`hil.master.stalls.StallWatch.last`; the rule
+    (:class:`hil.master.events.HeartbeatLost`) while the master's own loop was held as long (``stalls``: the
+    latest stalls of its loop, :attr:`hil.master.stalls.StallWatch.recent`; the rule
     :func:`hil.master.stalls.stall_explains`), or on a software bus (``interface`` in :data:`SOFTWARE_BUSES`)
     with the node silent altogether as long (:func:`hil.master.stalls.process_held`), likewise,
     :data:`HEARTBEAT_PC_KEY`; so is a drive's EMCY 0x8130 (it lost the master's heartbeat) where the master's
@@ -154,7 +154,8 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: t
 
     if isinstance(exc, StaleData):
         key, seen = STALE_KEY, ""
-    elif isinstance(exc, HeartbeatLost) and stall_explains(stall, exc.at_s, exc.silent_s, exc.overdue_s):
+    elif isinstance(exc, HeartbeatLost) and (stall := stall_explains(stalls, exc.at_s, exc.silent_s,
+                                                                      exc.overdue_s)) is not None:
         key = HEARTBEAT_PC_KEY
         seen = (f" (the master's own loop was held {stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, within the "
                 f"heartbeat's {exc.silent_s * 1e3:.0f} ms of silence: at least the {exc.overdue_s * 1e3:.0f} ms a "
@@ -165,8 +166,8 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stall: t
         seen = (f" (on {interface} the node is a process on a PC, and it sent nothing at all, no statusword either, "
                 f"for {exc.frames_silent_s * 1e3:.0f} ms: at least the {exc.overdue_s * 1e3:.0f} ms a heartbeat may "
                 f"be overdue ({exc.key}); the process serving it was not run)")
-    elif (emcy := _master_heartbeat_lost(exc, canopen)) is not None and stall_explains(
-            stall, emcy.t_s, canopen.master_consumer_time_s, margin := _consumer_margin_s(canopen)):
+    elif (emcy := _master_heartbeat_lost(exc, canopen)) is not None and (stall := stall_explains(
+            stalls, emcy.t_s, canopen.master_consumer_time_s, margin := _consumer_margin_s(canopen))) is not None:
         key = HEARTBEAT_PC_KEY
         seen = (f" (the drive lost the master's heartbeat, which the master's loop sends: the loop was held "
                 f"{stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, at least the {margin * 1e3:.0f} ms the drive's "
