@@ -342,6 +342,8 @@ def test_a_drive_that_lost_the_masters_heartbeat_names_the_pc_where_the_loop_was
     base = Finding(Stage.JOG, Kind.STOP, "safety", "DriveFault: node 1: EMCY 0x8130 (life guard or heartbeat)")
     pc = stale_finding(base, fault, 0, [(4.426, margin)], "udp_multicast", c)
     assert pc.key == HEARTBEAT_PC_KEY and "lost the master's heartbeat" in pc.text
+    rt = stale_finding(base, fault, 50, [(4.426, margin)], "udp_multicast", c)
+    assert "SCHED_FIFO 50" in rt.text and "check the drives' consumer heartbeat" in rt.text
     assert stale_finding(base, fault, 0, [(4.426, math.nextafter(margin, 0.0))], "udp_multicast", c) is base
     assert stale_finding(base, fault, 0, [(4.426, margin)], "udp_multicast", None) is base  # no profile: no rule
     other = DriveFault("node 1: EMCY 0x4310", emcy=Emcy(4.55, 1, 0x4310, 0x09, bytes(5)))

@@ -153,33 +153,35 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stalls=(
     from hil.master.stalls import process_held, stall_explains
 
     if isinstance(exc, StaleData):
-        key, seen = STALE_KEY, ""
+        key, seen, idle = STALE_KEY, "", "check that each drive sends its TPDOs on every SYNC"
     elif isinstance(exc, HeartbeatLost) and (stall := stall_explains(stalls, exc.at_s, exc.silent_s,
                                                                       exc.overdue_s)) is not None:
         key = HEARTBEAT_PC_KEY
         seen = (f" (the master's own loop was held {stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, within the "
                 f"heartbeat's {exc.silent_s * 1e3:.0f} ms of silence: at least the {exc.overdue_s * 1e3:.0f} ms a "
                 f"heartbeat may be overdue ({exc.key}); a producer on this PC, or its frames, were held as long)")
+        idle = f"check the node's heartbeat ({exc.key})"
     elif isinstance(exc, HeartbeatLost) and interface in SOFTWARE_BUSES and \
             process_held(exc.frames_silent_s, exc.overdue_s):
         key = HEARTBEAT_PC_KEY
         seen = (f" (on {interface} the node is a process on a PC, and it sent nothing at all, no statusword either, "
                 f"for {exc.frames_silent_s * 1e3:.0f} ms: at least the {exc.overdue_s * 1e3:.0f} ms a heartbeat may "
                 f"be overdue ({exc.key}); the process serving it was not run)")
+        idle = f"check the node's heartbeat ({exc.key})"
     elif (emcy := _master_heartbeat_lost(exc, canopen)) is not None and (stall := stall_explains(
             stalls, emcy.t_s, canopen.master_consumer_time_s, margin := _consumer_margin_s(canopen))) is not None:
         key = HEARTBEAT_PC_KEY
         seen = (f" (the drive lost the master's heartbeat, which the master's loop sends: the loop was held "
                 f"{stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, at least the {margin * 1e3:.0f} ms the drive's "
                 f"consumer time (canopen.master_heartbeat_consumer_factor) leaves beyond the master's period)")
+        idle = "check the drives' consumer heartbeat (canopen.master_heartbeat_consumer_factor)"
     else:
         return finding
     ran = f"SCHED_FIFO {rt_priority}" if rt_priority else "normal scheduling"
     hint = (f"the likely cause is the PC running emacheck ({ran}): it did not keep up with the bus; run with "
             "--rt-priority N (e.g. 50) and without other load on the PC, then commission again" if not rt_priority
             else f"the likely cause is the PC running emacheck ({ran}): unload the PC and commission again; "
-                 + ("if it repeats on an idle PC, check that each drive sends its TPDOs on every SYNC"
-                    if key == STALE_KEY else f"if it repeats on an idle PC, check the node's heartbeat ({exc.key})"))
+                 f"if it repeats on an idle PC, {idle}")
     return dataclasses.replace(finding, key=key, text=f"{finding.text}{seen}; {hint}")
 
 
