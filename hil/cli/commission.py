@@ -204,7 +204,8 @@ def register(sub) -> None:
             "every measurement within its tolerance; advice the profile loader refuses is a wiring fix.\n"
             "Exit 0: ready for its first check; 6: not ready (every problem named); 2: Ctrl-C;\n"
             "3: bad input. Writes commission.json, commission.html, profile.patch.toml (the keys that\n"
-            "make the rig ready: emacheck profile apply-patch), judged-*.toml and can.log into a new folder.\n\n"
+            "make the rig ready: emacheck profile apply-patch), judged-*.toml (with --sim also\n"
+            "simulated-rig.toml, simulated-rig-actuation.toml) and can.log into a new folder.\n\n"
             "  emacheck commission my-rig.toml --interface socketcan --channel can0 --arm\n"
             "  emacheck commission --simulate --wiring-fault lvdt_sign:2 --wiring-fault lvdts_swapped"))
     p.add_argument("profile_pos", nargs="?", metavar="PROFILE", type=Path,
