@@ -464,7 +464,7 @@ def test_each_wiring_fault_is_named_with_its_key_and_the_fitting_value(runs, nam
 def test_a_dead_input_stops_before_anything_moves(runs, name, key):
     r = runs[name]
     assert r.exit_code == ExitCode.NOT_READY
-    assert _keys(r) == [("dead", key), ("stopped", "")]
+    assert _keys(r) == [("dead", key), ("stopped", key)]  # the stop names the key of what stopped it
     assert r.report["findings"][0]["fits"] is None and r.report["findings"][0]["measured"] == 0.0
     assert r.report["measured"]["lvdt_gain"] == {} and r.report["stage_reached"] == "stopped"
     _safe(r)

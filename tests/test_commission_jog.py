@@ -175,7 +175,7 @@ def plans(tmp_path_factory):
 def test_a_shared_factor_is_the_gear_ratio_with_the_value_that_fits(plans, factor, words):
     v = explain(_gains(factor * G_LVDT[1], factor * G_LVDT[2]), plans["no_object"], JOG)
     assert v.stop and [(f.stage, f.kind, f.key) for f in v.findings] == [
-        (Stage.JOG, Kind.SCALE, "mechanics.i_total_rad_per_mm"), (Stage.JOG, Kind.STOP, "")]
+        (Stage.JOG, Kind.GEAR, "mechanics.i_total_rad_per_mm"), (Stage.JOG, Kind.STOP, "")]
     r = math.sqrt(G_LVDT[1] * G_LVDT[2]) * factor  # the geometric mean of the two gains
     f = v.findings[0]
     assert f.measured == pytest.approx(r) and f.fits == pytest.approx(I_TOTAL / r, rel=1e-3)
@@ -340,8 +340,8 @@ def test_a_wrong_gear_ratio_is_stopped_in_the_force_free_jog_and_named(gear_runs
     run, injector = gear_runs[name]
     assert run.exit_code == ExitCode.NOT_READY and run.report["stage_reached"] == "stopped"
     f = run.report["findings"]
-    assert [(x["stage"], x["kind"], x["key"]) for x in f] == [("jog", "scale", "mechanics.i_total_rad_per_mm"),
-                                                              ("jog", "stopped", "")]
+    gear = "mechanics.i_total_rad_per_mm"  # named as the hypotheses name it; the stop names what stopped it
+    assert [(x["stage"], x["kind"], x["key"]) for x in f] == [("jog", "gear ratio", gear), ("jog", "stopped", gear)]
     jog = run.report["measured"]["jog"]
     rel = max(g["rel_tolerance"] for g in jog["gains"].values())
     r = f[0]["measured"]  # the gear ratio's factor: 57.3 (0.159) times the LVDTs' mean pitch (1.026)
@@ -379,4 +379,4 @@ def test_the_command_line_names_the_gear_ratio(tmp_path, capsys):
     rc = main(["commission", str(prof), "--simulate", "--out", str(tmp_path / "out")])
     assert rc == ExitCode.NOT_READY
     out = capsys.readouterr().out
-    assert "[jog] scale: mechanics.i_total_rad_per_mm" in out and "degrees where radians" in out
+    assert "[jog] gear ratio: mechanics.i_total_rad_per_mm" in out and "degrees where radians" in out

@@ -44,8 +44,10 @@ def add_parser(sub, name: str, *, help: str, description: str, handler) -> argpa
     return p
 
 
-def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: bool = False, eds: bool = True) -> None:
-    """``--profile``, ``--eds`` (and ``--check``, ``--sim``, ``--seed``): the profiles a command reads."""
+def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: bool = False, eds: bool = True,
+                     sim_nodes: bool = False) -> None:
+    """``--profile``, ``--eds`` (and ``--check``, ``--sim``, ``--seed``): the profiles a command reads;
+    ``sim_nodes``: the command builds simulated CANopen nodes (as the simulated rig's own ``actuation`` says)."""
     p.add_argument("--profile", metavar="ACTUATION.toml", type=Path,
                    help="actuation profile (mechanics, SYNC period, the drives and sensor nodes, the signal map)")
     if eds:
@@ -55,14 +57,17 @@ def add_profile_args(p: argparse.ArgumentParser, *, check: bool = True, sim: boo
                        help="check profile (sweep, opposing force, force fight, safety limits)")
     if sim:
         p.add_argument("--sim", metavar="SIMRIG.toml", type=Path,
-                       help="simulated-rig profile (physical parameters, sensor errors, seed)")
+                       help="simulated-rig profile (physical parameters, sensor errors, seed, [[faults]])"
+                            + ("; where it names an `actuation` profile, the simulated nodes are built as that one "
+                               "says, not as the profile under test, so a mistake in that profile shows"
+                               if sim_nodes else ""))
         add_seed_arg(p)
 
 
-def add_seed_arg(p: argparse.ArgumentParser) -> None:
-    """``--seed``: the simulated rig's noise seed, 0 to 2^63 - 1."""
+def add_seed_arg(p: argparse.ArgumentParser, recorded: str = "recorded in meta.json") -> None:
+    """``--seed``: the simulated rig's noise seed, 0 to 2^63 - 1; ``recorded``: where the command records it."""
     p.add_argument("--seed", type=_seed, help="noise seed, an integer 0 to 2^63-1 (default: the simulated-rig "
-                                              "profile's); recorded in meta.json")
+                                              f"profile's); {recorded}")
 
 
 def add_eds_arg(p: argparse.ArgumentParser) -> None:

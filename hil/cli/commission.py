@@ -36,10 +36,10 @@ class CommissionRun:
 
 def commission(act, check, rig, transport, out: Path, *, console=None, context: dict | None = None,
                rt_priority: int | None = None, loop_ended=None, paths: dict | None = None,
-               eds: Path | None = None) -> CommissionRun:
+               eds: Path | None = None, copies: dict | None = None) -> CommissionRun:
     """Commission the rig over ``transport``; the report, the profile patch, a copy of each profile judged
     (``paths``: ``{"actuation": file, "check": file}``, None: the shipped one) and the CAN log go into ``out``
-    (new or empty).
+    (new or empty), with ``copies`` (file name -> path: the simulated rig's profiles of a rehearsal).
 
     The link keeps the check's freshness rule (:func:`hil.check.staleness.stale_limit`: the derived stall budget
     where both drives keep their limits); a stop on stale data names the PC (``rt_priority``: the loop's
@@ -79,7 +79,9 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
             smp = link.exchange(sp1, sp2)
     except (*KNOWN_ERRORS, CanopenError, KeyboardInterrupt) as exc:
         core.failed(exc)
-        core.findings[-1:] = [stale_finding(f, exc, rt_priority) for f in core.findings[-1:]]
+        stall, bus = link.stall_watch.recent, str(context["bus"]["interface"])  # (the PC named where the evidence
+        core.findings[-1:] = [stale_finding(f, exc, rt_priority, stall, bus, act.canopen)  # says)
+                              for f in core.findings[-1:]]
         link.abort()
         interrupted = isinstance(exc, KeyboardInterrupt)
     else:
@@ -106,7 +108,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     report["exit_code"] = int(rc)
     i = act.mechanics.i_total_rad_per_mm
     traces = {name: {**x, "x1": x["phi1"] / i, "x2": x["phi2"] / i} for name, x in core.traces.items()}
-    write_outputs(out, report, traces, act.timing.sync_period_s, paths)
+    write_outputs(out, report, traces, act.timing.sync_period_s, paths, copies)
     print_summary(console, report, out)
     return CommissionRun(rc, report, out, core, link)
 
@@ -115,13 +117,14 @@ def _explained(core, act, profile: Path | None, eds: Path | None):
     """The findings explained jointly (:mod:`hil.master.hypotheses`), a pinned serial checked; the core's
     findings replaced by the explanation's."""
     from hil.master.commission_explain import explain_commission, serial_findings
+    from hil.master.commission_rules import keyed_stops
     from hil.profile.load import default_profile_path
     from hil.profile.tables import read_toml
 
     core.findings[:0] = serial_findings(act, core.scan.nodes)
     data = read_toml(Path(profile) if profile is not None else default_profile_path("actuation.toml"))
     explanation = explain_commission(core, act, data, profile, eds)
-    core.findings[:] = list(explanation.findings)
+    core.findings[:] = keyed_stops(explanation.findings)  # (a step's stop names the keys of what stopped it)
     return explanation
 
 
@@ -150,6 +153,7 @@ def cmd_commission(args: argparse.Namespace) -> int:
                "files_sha256": file_hashes(actuation=profile, check=args.check)}
     transport, bus, more = open_rig(args, act, rig, profile)
     context["files_sha256"] |= more.pop("files_sha256", {})
+    copies = more.pop("copies", {})
     context |= more
     out = out_dir(args.out, "commission")
     console.print(f"emacheck commission: {rig_nodes_text(rig)} on {context['bus']['interface']}:"
@@ -162,7 +166,7 @@ def cmd_commission(args: argparse.Namespace) -> int:
             console.print(f"real time: {rt}")
         run = commission(act, check, rig, transport, out, console=console, context=context,
                          rt_priority=args.rt_priority, loop_ended=end_realtime if bus is not None else None,
-                         paths={"actuation": profile, "check": args.check}, eds=args.eds)
+                         paths={"actuation": profile, "check": args.check}, eds=args.eds, copies=copies)
     finally:
         transport.close()
         if bus is not None:
@@ -200,7 +204,8 @@ def register(sub) -> None:
             "every measurement within its tolerance; advice the profile loader refuses is a wiring fix.\n"
             "Exit 0: ready for its first check; 6: not ready (every problem named); 2: Ctrl-C;\n"
             "3: bad input. Writes commission.json, commission.html, profile.patch.toml (the keys that\n"
-            "make the rig ready: emacheck profile apply-patch), judged-*.toml and can.log into a new folder.\n\n"
+            "make the rig ready: emacheck profile apply-patch), judged-*.toml (with --sim also\n"
+            "simulated-rig.toml, simulated-rig-actuation.toml) and can.log into a new folder.\n\n"
             "  emacheck commission my-rig.toml --interface socketcan --channel can0 --arm\n"
             "  emacheck commission --simulate --wiring-fault lvdt_sign:2 --wiring-fault lvdts_swapped"))
     p.add_argument("profile_pos", nargs="?", metavar="PROFILE", type=Path,

@@ -1,7 +1,8 @@
 """What ``emacheck commission`` leaves behind, each file written once into its folder: ``commission.json``
 (schema ``hil/schemas/commission.schema.json``), ``commission.html``, the profile patch
 ``profile.patch.toml`` and a copy of each profile it judged (``judged-actuation.toml``,
-``judged-check.toml``), and the console's summary."""
+``judged-check.toml``; of a rehearsal's simulated rig too, ``simulated-rig.toml``,
+``simulated-rig-actuation.toml``), and the console's summary."""
 
 from __future__ import annotations
 
@@ -68,13 +69,16 @@ def report_data(core, master, link, final: dict, context: dict, explanation, ide
         "patch": {"file": PATCH, "keys": explanation.patch, "wiring_fixes": list(explanation.wiring)},
         "drives_final": final,
         "close_errors": list(link.close_errors),
+        "stalls": link.stall_record(),  # the master loop's own stalls (as meta.json's), the PC's evidence
         "findings": findings,
     }
 
 
-def write_outputs(out: Path, report: dict, traces: dict, T: float, paths: dict) -> None:
+def write_outputs(out: Path, report: dict, traces: dict, T: float, paths: dict, copies: dict | None = None) -> None:
     """``commission.json``, ``commission.html``, the patch and a copy of each profile judged (``paths``:
-    name -> file, None: the shipped one), every file created once."""
+    name -> file, None: the shipped one) and of each file of ``copies`` (its name in ``out`` -> file: the
+    simulated rig's profiles, ``simulated-rig.toml`` and ``simulated-rig-actuation.toml``), every file created
+    once."""
     from hil.profile.load import default_profile_path
     from hil.profile.patch import patch_text
     from hil.record.runfolder import create_bytes
@@ -86,6 +90,8 @@ def write_outputs(out: Path, report: dict, traces: dict, T: float, paths: dict) 
     for name, path in paths.items():
         src = Path(path) if path is not None else default_profile_path(f"{name}.toml")
         create_bytes(outputs.path(f"judged-{name}.toml"), src.read_bytes())
+    for name, path in (copies or {}).items():
+        create_bytes(outputs.path(name), Path(path).read_bytes())
     sha = report.get("files_sha256") or {}
     header = [f"emacheck commission {report['created']}: the keys of {paths.get('actuation') or '(shipped)'} "
               f"(sha256 {sha.get('actuation', '-')}) that make this rig ready",

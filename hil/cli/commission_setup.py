@@ -16,6 +16,11 @@ from hil.cli.args import add_cpu_latency_arg, add_seed_arg, rt_priority_arg
 
 #: The key of the finding of a stop on stale data: not a profile key, the PC running emacheck.
 STALE_KEY = "pc.stale_data"
+#: The key of a node's heartbeat lost while the master's own loop was held as long, or, on a software bus, the
+#: node's process sent nothing at all as long (the PC, not the node).
+HEARTBEAT_PC_KEY = "pc.heartbeat_lost"
+#: python-can interfaces whose nodes are processes on a PC, not devices (``sim-serve``'s simulated drives).
+SOFTWARE_BUSES = frozenset({"udp_multicast", "virtual"})
 
 
 def wiring_fault(text: str):
@@ -43,7 +48,7 @@ def add_rig_args(p) -> None:
                         "simulated nodes are built as its `actuation` profile says (default the shipped one), not "
                         "as the profile under test, so a mistake in that profile shows. Without --sim: the "
                         "shipped simulated rig, built as the profile under test")
-    add_seed_arg(p)
+    add_seed_arg(p, "with --simulate; recorded in commission.json")
     p.add_argument("--wiring-fault", action="append", type=wiring_fault, metavar="KIND[:EMA[:VALUE]]",
                    help="with --simulate, wire the simulated rig wrongly (repeatable): lvdt_sign, lvdt_scale "
                         "(VALUE: reading / stroke, default 0.5), lvdt_dead, loadcell_sign, loadcell_scale, "
@@ -112,7 +117,10 @@ def open_rig(args, act, rig, profile: Path | None):
         return transport, None, {
             "simulated": True, "seed": simrig.seed if args.seed is None else args.seed, "wiring_faults": wiring,
             "bus": {"interface": "in-process", "channel": "simulated"}, "simulated_rig": simulated,
-            "files_sha256": file_hashes(simrig=args.sim, **({"simulated_rig_actuation": own} if own else {}))}
+            "files_sha256": file_hashes(simrig=args.sim, **({"simulated_rig_actuation": own} if own else {})),
+            # kept beside the judged profiles: the rig rehearsed on, as given
+            "copies": {k: v for k, v in (("simulated-rig.toml", args.sim), ("simulated-rig-actuation.toml", own))
+                       if v is not None}}
     from hil.transport import BusTransport
 
     bitrate = args.bitrate or act.canopen.bitrate_bps
@@ -123,24 +131,74 @@ def open_rig(args, act, rig, profile: Path | None):
                                     "multicast_hops": multicast_hops_for(args.interface, args.multicast_hops)}}
 
 
-def stale_finding(finding, exc: BaseException, rt_priority: int | None):
+def stale_finding(finding, exc: BaseException, rt_priority: int | None, stalls=(), interface: str = "",
+                  canopen=None):
     """The finding of a stop ``exc``: a stop on stale data (:class:`hil.master.link.StaleData`) is given the key
-    :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; any other is ``finding``.
+    :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; a node's heartbeat lost
+    (:class:`hil.master.events.HeartbeatLost`) while the master's own loop was held as long (``stalls``: the
+    latest stalls of its loop, :attr:`hil.master.stalls.StallWatch.recent`; the rule
+    :func:`hil.master.stalls.stall_explains`), or on a software bus (``interface`` in :data:`SOFTWARE_BUSES`)
+    with the node silent altogether as long (:func:`hil.master.stalls.process_held`), likewise,
+    :data:`HEARTBEAT_PC_KEY`; so is a drive's EMCY 0x8130 (it lost the master's heartbeat) where the master's
+    loop, which sends that heartbeat, was held at least the drive's consumer time less the master's heartbeat
+    period within the consumer time before it (``canopen``: the profile's table; the same rule). Any other is
+    ``finding``.
 
     The drives answer every SYNC within microseconds; a sample missing for the freshness limit in force, or a
     SYNC taken late by the master, is most often the master's PC not running its loop in time (a loaded PC at
     normal scheduling: docs/performance.md). ``rt_priority``: the SCHED_FIFO priority the loop ran at (0 or
     None: normal scheduling)."""
+    from hil.master.events import HeartbeatLost
     from hil.master.link import StaleData
+    from hil.master.stalls import process_held, stall_explains
 
-    if not isinstance(exc, StaleData):
+    if isinstance(exc, StaleData):
+        key, seen, idle = STALE_KEY, "", "check that each drive sends its TPDOs on every SYNC"
+    elif isinstance(exc, HeartbeatLost) and (stall := stall_explains(stalls, exc.at_s, exc.silent_s,
+                                                                      exc.overdue_s)) is not None:
+        key = HEARTBEAT_PC_KEY
+        seen = (f" (the master's own loop was held {stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, within the "
+                f"heartbeat's {exc.silent_s * 1e3:.0f} ms of silence: at least the {exc.overdue_s * 1e3:.0f} ms a "
+                f"heartbeat may be overdue ({exc.key}); a producer on this PC, or its frames, were held as long)")
+        idle = f"check the node's heartbeat ({exc.key})"
+    elif isinstance(exc, HeartbeatLost) and interface in SOFTWARE_BUSES and \
+            process_held(exc.frames_silent_s, exc.overdue_s):
+        key = HEARTBEAT_PC_KEY
+        seen = (f" (on {interface} the node is a process on a PC, and it sent nothing at all, no statusword either, "
+                f"for {exc.frames_silent_s * 1e3:.0f} ms: at least the {exc.overdue_s * 1e3:.0f} ms a heartbeat may "
+                f"be overdue ({exc.key}); the process serving it was not run)")
+        idle = f"check the node's heartbeat ({exc.key})"
+    elif (emcy := _master_heartbeat_lost(exc, canopen)) is not None and (stall := stall_explains(
+            stalls, emcy.t_s, canopen.master_consumer_time_s, margin := _consumer_margin_s(canopen))) is not None:
+        key = HEARTBEAT_PC_KEY
+        seen = (f" (the drive lost the master's heartbeat, which the master's loop sends: the loop was held "
+                f"{stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, at least the {margin * 1e3:.0f} ms the drive's "
+                f"consumer time (canopen.master_heartbeat_consumer_factor) leaves beyond the master's period)")
+        idle = "check the drives' consumer heartbeat (canopen.master_heartbeat_consumer_factor)"
+    else:
         return finding
     ran = f"SCHED_FIFO {rt_priority}" if rt_priority else "normal scheduling"
     hint = (f"the likely cause is the PC running emacheck ({ran}): it did not keep up with the bus; run with "
             "--rt-priority N (e.g. 50) and without other load on the PC, then commission again" if not rt_priority
             else f"the likely cause is the PC running emacheck ({ran}): unload the PC and commission again; "
-                 "if it repeats on an idle PC, check that each drive sends its TPDOs on every SYNC")
-    return dataclasses.replace(finding, key=STALE_KEY, text=f"{finding.text}; {hint}")
+                 f"if it repeats on an idle PC, {idle}")
+    return dataclasses.replace(finding, key=key, text=f"{finding.text}{seen}; {hint}")
+
+
+def _master_heartbeat_lost(exc: BaseException, canopen):
+    """The EMCY of a drive that lost the master's heartbeat (0x8130, life guard or heartbeat) that stopped the
+    commissioning (``exc``), or None."""
+    from hil.canopen.emcy import EmcyCode
+    from hil.master.events import DriveFault
+
+    e = getattr(exc, "emcy", None) if isinstance(exc, DriveFault) and canopen is not None else None
+    return e if e is not None and e.code == EmcyCode.LIFE_GUARD_OR_HEARTBEAT else None
+
+
+def _consumer_margin_s(canopen) -> float:
+    """How long the master's heartbeat may be late before a drive's consumer fires [s]: its consumer time less
+    the master's heartbeat period (125 - 50 = 75 ms with the shipped profile)."""
+    return canopen.master_consumer_time_s - canopen.master_heartbeat_period_s
 
 
 def ended_in(d: dict, scanned: dict) -> str:

@@ -147,14 +147,21 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
     refuse_foreign_history(args, act, simulated=True)
     check_new_run_folder(args.out)
     rig = master_setup(act, args.profile, args.eds, check)  # a bad EDS, map or sensor: refused before a run folder
+    sim_rig, own = rig, None
+    if args.sim is not None and simrig.actuation is not None:  # built as the simulated rig's own profile says
+        from hil.cli.commission_setup import simulated_rig_profile
+
+        sim_rig, own = simulated_rig_profile(args, args.profile, rig, simrig)
     out = out_dir(args.out, "dry-run")
     simrig, wear = worn_simrig(simrig, args.flight_hours, simrig.seed if args.seed is None else args.seed)
     trace = {"attribution": Attribution(args.operator, args.work_order), "installation": installation(args, act),
-             "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim), "wear": wear}
+             "files_sha256": file_hashes(actuation=args.profile, check=args.check, simrig=args.sim,
+                                         **({"simulated_rig_actuation": own} if own is not None else {})),
+             "wear": wear}
     stall = (args.master_stall_ms, args.master_stall_every_s) if args.master_stall_ms is not None else None
     rc = dry_run(act, check, simrig, out, seed=args.seed, realtime=args.realtime, quiet=args.quiet,
                  console=console, profile_path=args.profile, trace=trace, eds=args.eds, rig=rig,
-                 stall=stall).exit_code
+                 stall=stall, sim_rig=sim_rig).exit_code
     record_history(console, args, act, out / "result.json", run_folder=out)
     return rc
 
@@ -166,7 +173,7 @@ def register(sub) -> None:
                                "CiA 402 drives on an in-process virtual CAN bus, log every frame, analyse "
                                "and report, with the simulator's truth beside the measurement.")
     p.add_argument("--out", metavar="DIR", type=Path, help="run folder (default emacheck-runs/<time>-dry-run)")
-    add_profile_args(p, sim=True)
+    add_profile_args(p, sim=True, sim_nodes=True)
     add_trace_args(p)
     add_history_args(p, simulated=True)
     p.add_argument("--realtime", action="store_true",

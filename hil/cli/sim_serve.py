@@ -84,7 +84,7 @@ def register(sub) -> None:
     p.add_argument("--sim", metavar="SIMRIG.toml", type=Path,
                    help="simulated-rig profile (the plant, the seed, the serial numbers; its [[faults]], wiring "
                         "faults included, are applied as in `dry-run` and `commission --simulate`)")
-    add_seed_arg(p)
+    add_seed_arg(p, "printed on its ready line")
     rt_priority_arg(p, "run under SCHED_FIFO priority N (1-99; default 0: normal scheduling)")
     add_cpu_latency_arg(p)
     p.add_argument("--timing-json", metavar="FILE", type=Path,

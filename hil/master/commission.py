@@ -47,6 +47,7 @@ from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.canopen.signalmap import ForceControl, NodeRole, Signal
 from hil.errors import EmacheckError
 from hil.master.commission_rules import (
+    OPERATOR_KEY,
     REST_S,
     Finding,
     Kind,
@@ -268,7 +269,8 @@ class Commission:
         elif isinstance(exc, MasterLossReactionError):
             self.findings.append(Finding(Stage.PREFLIGHT, Kind.DRILL, "canopen.external_watchdog", str(exc)))
         elif isinstance(exc, KeyboardInterrupt):
-            self.findings.append(Finding(self.stage, Kind.STOP, "", str(exc) or "interrupted by the operator"))
+            text = str(exc) or "interrupted by the operator"
+            self.findings.append(Finding(self.stage, Kind.STOP, OPERATOR_KEY, text))
         else:
             stage = self.stage if self.stage is not Stage.STOPPED else Stage.PREFLIGHT
             kind = Kind.PREFLIGHT if stage in (Stage.SCAN, Stage.PREFLIGHT) else Kind.STOP

@@ -12,7 +12,7 @@ from hil.canopen.signalmap import Signal
 from hil.master.commission_rules import Finding, Kind, Stage, ema_key
 from hil.master.hypotheses import Explanation, explain, observe
 
-__all__ = ["explain_commission", "serial_findings", "swap_patch"]
+__all__ = ["explain_commission", "jog_patched", "serial_findings", "swap_patch"]
 
 _SENSORS = {"lvdt": Signal.LVDT, "force": Signal.FORCE}
 
@@ -50,9 +50,28 @@ def explain_commission(core, act, profile_data: dict, profile_path: str | Path |
                   declared={"lvdt": sensors.lvdt_noise_pp_mm, "force": sensors.loadcell_noise_std_N},
                   stroke_mm=min(sensors.lvdt_full_scale_mm, act.mechanics.stroke_limit_mm))
     fname = Path(profile_path).name if profile_path is not None else "actuation.toml"
-    return explain(obs, core.findings, scales=scales, i_total=act.mechanics.i_total_rad_per_mm,
-                   refuses=lambda patch: patch_problem(profile_data, patch, profile_path, eds, fname),
-                   swaps={s: swap_patch(plan, s) for s in _SENSORS})
+
+    def refuses(patch):
+        return patch_problem(profile_data, patch, profile_path, eds, fname)
+
+    ex = explain(obs, core.findings, scales=scales, i_total=act.mechanics.i_total_rad_per_mm, refuses=refuses,
+                 swaps={s: swap_patch(plan, s) for s in _SENSORS})
+    return jog_patched(ex, refuses)
+
+
+def jog_patched(ex: Explanation, refuses) -> Explanation:
+    """``ex`` with the values of the jog's findings in its patch: a jog that stopped on a scale (the gear ratio
+    in degrees for radians) is not explained again by the hypotheses (nothing was loaded: no gains of a move),
+    but its finding names one key and the value that fits; that goes into the patch, as every accepted cause's
+    does, where the profile loader takes it. A finding naming several keys that fit equally (an LVDT scale or
+    its encoder resolution) names no single fix: it stays out (the finding says which to check)."""
+    import dataclasses
+
+    items = {f.key: f.fits for f in ex.findings
+             if f.stage is Stage.JOG and f.fits is not None and f.key and "," not in f.key and f.key not in ex.patch}
+    if not items or refuses(ex.patch | items) is not None:
+        return ex
+    return dataclasses.replace(ex, patch=ex.patch | items)
 
 
 def serial_findings(act, scan_nodes: dict) -> list[Finding]:

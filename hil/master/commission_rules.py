@@ -17,8 +17,12 @@ from hil.canopen.signalmap import Signal
 from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation, Check
 
 __all__ = ["DEAD_FRACTION", "FORCE_GAIN_TOLERANCE", "MIN_MOTION_FRACTION", "MIN_STEP_MOTION_MM", "NOISE_FACTOR",
-           "REST_S", "Finding", "Kind", "Limits", "Stage", "drives_swapped", "ema_key", "force_findings", "gain_se",
-           "key_of", "lvdt_findings", "push_findings", "rest_findings", "slope", "slope_se", "swap_findings"]
+           "OPERATOR_KEY", "REST_S", "Finding", "Kind", "Limits", "Stage", "drives_swapped", "ema_key",
+           "force_findings", "gain_se", "key_of", "keyed_stops", "lvdt_findings", "push_findings", "rest_findings",
+           "slope", "slope_se", "swap_findings"]
+
+#: The key of a stop by the operator (Ctrl-C): not a profile key, the person at the rig.
+OPERATOR_KEY = "operator.interrupt"
 
 #: Time both drives hold still while every signal is read at rest [s].
 REST_S = 0.5
@@ -94,6 +98,23 @@ class Finding:
     def as_json(self) -> dict:
         return {"stage": self.stage.value, "kind": self.kind.value, "key": self.key, "text": self.text,
                 "measured": self.measured, "unit": self.unit, "fits": self.fits}
+
+
+def keyed_stops(findings) -> list[Finding]:
+    """``findings`` with every stop that names no key of its own (``nothing was moved``: the summary of a step that
+    stopped the commissioning) given the keys of the problems that stopped it: those of its own stage found before
+    it, else every problem before it (comma-separated, each once, in order). A stop with nothing before it keeps
+    its empty key (nothing to name)."""
+    import dataclasses
+
+    out: list[Finding] = []
+    for f in findings:
+        if f.kind is Kind.STOP and not f.key:
+            before = [x for x in out if x.kind is not Kind.STOP and x.key]
+            mine = [x for x in before if x.stage is f.stage] or before
+            f = dataclasses.replace(f, key=", ".join(dict.fromkeys(x.key for x in mine)))
+        out.append(f)
+    return out
 
 
 @dataclass(frozen=True, slots=True)

@@ -33,6 +33,7 @@ state, a mode change not confirmed), :class:`HeartbeatLost`.
 
 from __future__ import annotations
 
+import math
 import struct
 from collections import deque
 from collections.abc import Generator
@@ -401,7 +402,7 @@ class MasterCore:
             self.emcy_in_check.append((self.sync_schedule.t_s, e))
         self.events.append(event.EmcyReceived(t, node, e))
         if e.code != EmcyCode.NO_ERROR and self.phase is Phase.CYCLIC:
-            self._fail(DriveFault(str(e)), t, node)
+            self._fail(DriveFault(str(e), emcy=e), t, node)
 
     # ------------------------------------------------------------------ timing
 
@@ -451,8 +452,14 @@ class MasterCore:
                         t - v.last_heartbeat_s > v.hb_timeout_s - 0.5 * self.T:
                     v.lost = True
                     self.events.append(event.HeartbeatMissed(t, n))
-                    self._fail(HeartbeatLost(f"{v.label}: heartbeat lost (none for {t - v.last_heartbeat_s:.3f} s, "
-                                             f"timeout {v.hb_timeout_s:.3f} s)"), t, n)
+                    spec = next(x.spec for x in self.plan.nodes if x.spec.node_id == n)
+                    silent = t - v.last_heartbeat_s
+                    last = getattr(v, "last_tpdo_s", None)  # (a drive's last statusword: the node silent altogether)
+                    self._fail(HeartbeatLost(f"{v.label}: heartbeat lost (none for {silent:.3f} s, "
+                                             f"timeout {v.hb_timeout_s:.3f} s)", key=f"{spec.key}.heartbeat_period_s",
+                                             at_s=t, silent_s=silent,
+                                             overdue_s=v.hb_timeout_s - spec.heartbeat_period_s,
+                                             frames_silent_s=t - last if last is not None else math.nan), t, n)
         return []
 
     # ------------------------------------------------------------------ cyclic

@@ -5,6 +5,7 @@ kind string, and reads typed fields; ``str(event)`` is the line for a log."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from hil.canopen.cia402 import State
@@ -18,11 +19,29 @@ __all__ = ["BadFrame", "BootUp", "CycleIncomplete", "DisableBySdo", "DriveFault"
 
 
 class DriveFault(EmacheckError, RuntimeError):
-    """A drive reported a fault (EMCY or fault state), or did not follow a command, during the check."""
+    """A drive reported a fault (EMCY or fault state), or did not follow a command, during the check.
+
+    ``emcy``: the EMCY that reported it (None: a state or a command not followed)."""
+
+    def __init__(self, message: str = "", *, emcy: Emcy | None = None) -> None:
+        super().__init__(message)
+        self.emcy = emcy
 
 
 class HeartbeatLost(EmacheckError, RuntimeError):
-    """A node's heartbeat did not arrive within its timeout."""
+    """A node's heartbeat did not arrive within its timeout.
+
+    ``key``: the profile key of the node's heartbeat (``canopen.heartbeat_period_s`` for a drive,
+    ``nodes.NAME.heartbeat_period_s`` for a sensor node); ``at_s``: when it was judged lost [s, the master's
+    time]; ``silent_s``: since its last heartbeat [s]; ``overdue_s``: how long a heartbeat may be overdue before
+    it is lost, the timeout less the producer period [s]; ``frames_silent_s``: since the node's last statusword
+    (TPDO) [s] (NaN: not a drive, or none yet): a node silent altogether, not only its heartbeat."""
+
+    def __init__(self, message: str = "", *, key: str = "", at_s: float = math.nan, silent_s: float = math.nan,
+                 overdue_s: float = math.nan, frames_silent_s: float = math.nan) -> None:
+        super().__init__(message)
+        self.key, self.at_s, self.silent_s, self.overdue_s = key, at_s, silent_s, overdue_s
+        self.frames_silent_s = frames_silent_s
 
 
 @dataclass(frozen=True, slots=True)

@@ -318,6 +318,8 @@ def _fit(causes: tuple[Cause, ...], obs: tuple[Observation, ...]) -> tuple[dict,
                 for i in gains if (obs[i].sensor, obs[i].ema) not in scaled and obs[i].measured * pred[i] > 0]
         c = math.exp(sum(logs) / len(logs)) if logs else 1.0
         fitted["gear_factor"] = c
+        if math.isfinite(se := _log_mean_se(logs)):  # (JSON has no NaN: absent where not estimated)
+            fitted["gear_factor_se"] = c * se
         for i in gains:
             pred[i] *= c if obs[i].kind is ObsKind.LVDT_GAIN else 1.0 / c
     for s, a in sorted(scaled):
@@ -343,6 +345,19 @@ def _fit(causes: tuple[Cause, ...], obs: tuple[Observation, ...]) -> tuple[dict,
         elif o.kind is ObsKind.LEVEL:
             pred[i] = abs(_fixed(causes, o)) * fitted.get(f"{o.sensor}{o.ema}_scale", 1.0)
     return fitted, pred
+
+
+def _log_mean_se(logs: list[float]) -> float:
+    r"""The standard error of the mean of ``logs`` (the gains' log ratios a gear factor :math:`c` is fitted to):
+    :math:`s / \sqrt{n}` with :math:`s` their sample standard deviation, so :math:`\mathrm{SE}(c) \approx c\,
+    s/\sqrt{n}` (delta method). The gains' spread (each LVDT's pitch error, the load cells' torque constant) is
+    what one factor cannot explain: it, not each regression's own tiny standard error, bounds the fit. NaN for
+    fewer than two."""
+    n = len(logs)
+    if n < 2:
+        return math.nan
+    m = sum(logs) / n
+    return math.sqrt(sum((x - m) ** 2 for x in logs) / (n - 1) / n)
 
 
 def _judge(o: Observation, p: float) -> tuple[bool, float]:
@@ -488,11 +503,14 @@ def _cause_finding(c: Cause, best: Hypothesis, obs, scales, i_total, swaps, mark
     if c.kind is CauseKind.GEAR:
         k = best.fitted["gear_factor"]
         fits = float(f"{i_total / k:.5g}")
+        se = fits * best.fitted.get("gear_factor_se", math.nan) / k  # (delta method: SE(i/c) = (i/c) SE(c)/c)
         n = sum(1 for o in obs if o.kind in (ObsKind.LVDT_GAIN, ObsKind.FORCE_GAIN))
+        err = f" (standard error {se:.2g} rad/mm, from the {n} gains' spread)" if math.isfinite(se) else ""
         return Finding(stage, Kind.GEAR, "mechanics.i_total_rad_per_mm",
                        f"mechanics.i_total_rad_per_mm: one cause explains all {n} gains: the profile's gear ratio "
                        f"is {k:.3f} times the rig's (both LVDTs read {k:.3f} times the motor travel, both load "
-                       f"cells 1/{k:.3f} of the force){alt}", k, "x", fits), {"mechanics.i_total_rad_per_mm": fits}
+                       f"cells 1/{k:.3f} of the force); fits {fits:.5g} rad/mm{err}{alt}", k, "x", fits), \
+            {"mechanics.i_total_rad_per_mm": fits}
     if c.kind is CauseKind.UNIT:
         f10 = 10.0 ** c.power
         fits = float(f"{per / f10:.6g}")

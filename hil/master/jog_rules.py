@@ -55,7 +55,7 @@ from hil.profile.config import HARD_LVDT_GAIN_TOLERANCE, Actuation, Safety
 
 __all__ = ["DRIVE_SPEED_FACTOR", "JOG_FORCE_FRACTION", "JOG_GROWTH_S", "JOG_HOLD_S", "JOG_RAMP_S", "JOG_SEED_MM",
            "JOG_SPEED_FRACTION", "Hypothesis", "JogGain", "JogPlan", "JogVerdict", "commissioning_safety", "explain",
-           "jog_gain", "lvdt_ahead", "unit_error"]
+           "gear_se", "jog_gain", "lvdt_ahead", "unit_error"]
 
 #: The jog's speed: this fraction of the commissioning speed (0.5 mm/s for the shipped check).
 JOG_SPEED_FRACTION = 1.0
@@ -400,13 +400,25 @@ def _shared(plan, i: float, r: float, g: dict, hyps: list) -> Finding:
     if unit:
         seen += f": {unit}"
     also = [h for h in hyps[1:] if h.kept]
-    if gear.kept:
-        return Finding(Stage.JOG, Kind.SCALE, gear.keys[0], f"{gear.keys[0]}: {seen}; fits as well: "
+    if gear.kept:  # named as the hypotheses name it (kind gear ratio), with the fit's standard error
+        se = gear_se(gear.fits, g[1].gain, g[2].gain)
+        return Finding(Stage.JOG, Kind.GEAR, gear.keys[0], f"{gear.keys[0]}: {seen}; fits {gear.fits:.4g} rad/mm "
+                       f"(standard error {se:.2g} rad/mm, from the two gains' spread); fits as well: "
                        + ", ".join(f"{h.name} ({', '.join(h.keys)})" for h in also), r, "mm/mm", gear.fits)
     first = also[0]
     return Finding(Stage.JOG, Kind.SCALE, ", ".join(first.keys), f"{seen}; not the gear ratio ({gear.why}); fits "
                    "equally: " + " or ".join(f"{h.name} ({', '.join(h.keys)})" for h in also), r, "mm/mm",
                    first.fits)
+
+
+def gear_se(fits: float, g1: float, g2: float) -> float:
+    r"""The standard error [rad/mm] of the gear ratio ``fits`` = :math:`i / \sqrt{g_1 g_2}` fitted to two jog gains.
+
+    The fitted factor is the mean of the two log gains; their spread (the LVDTs' pitch errors, the play) is what
+    the fit cannot remove, so the standard error of the mean of two, :math:`|\ln(g_1 / g_2)| / 2`, is that of
+    :math:`\ln r`, and by the delta method :math:`\mathrm{SE}(i/r) = (i/r)\,|\ln(g_1/g_2)| / 2`. Two equal gains
+    give 0: the spread is then below what the jog resolves (its tolerance says how far)."""
+    return abs(fits) * abs(math.log(g1 / g2)) / 2.0
 
 
 def _still(plan, i: float, g: dict, jog: JogPlan, hyps: list) -> Finding:

@@ -20,11 +20,13 @@ keeps its period and every frame waits for the master with the time it was sent.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EVERY_S_MAX", "EVERY_S_MIN", "MasterStalls", "STALL_MS_MAX", "StallWatch"]
+__all__ = ["EVERY_S_MAX", "EVERY_S_MIN", "RECENT_STALLS", "STALL_MS_MAX", "MasterStalls", "StallWatch", "process_held",
+           "stall_explains"]
 
 #: ``--master-stall-ms``: above 0, at most this [ms] (far beyond any freshness limit: the drives' consumer
 #: heartbeat stops them first)
@@ -35,6 +37,10 @@ EVERY_S_MIN = 0.1
 EVERY_S_MAX = 3600.0
 #: The most stalls :class:`StallWatch` lists one by one (the count and the longest go on beyond it).
 MAX_LISTED = 1000
+#: The latest stalls :class:`StallWatch` keeps for :func:`stall_explains` (:attr:`StallWatch.recent`): two
+#: stalls are at least two SYNC periods apart (a late SYNC, then one on time), so 256 span at least 1.02 s at
+#: 500 Hz, more than a heartbeat's timeout (0.15 s shipped) or a drive's consumer time (0.125 s).
+RECENT_STALLS = 256
 
 
 class MasterStalls:
@@ -108,6 +114,8 @@ class StallWatch:
         self.longest_s = 0.0
         self.listed: list[tuple[float, float]] = []  #: (begin [s, SYNC time], length [s]), the first MAX_LISTED
         self._open: _Open | None = None
+        #: the latest stalls closed, (begin, length) [s], at most RECENT_STALLS
+        self._recent: deque[tuple[float, float]] = deque(maxlen=RECENT_STALLS)
 
     def observe(self, t_s: float, late_s: float) -> None:
         """The SYNC of time ``t_s`` [s] was taken ``late_s`` [s] after it arrived (or was due)."""
@@ -131,8 +139,16 @@ class StallWatch:
         o, self._open = self._open, None
         self.count += 1
         self.longest_s = max(self.longest_s, o.late_s)
+        self._recent.append((o.at_s, o.late_s))
         if len(self.listed) < MAX_LISTED:
             self.listed.append((o.at_s, o.late_s))
+
+    @property
+    def recent(self) -> tuple[tuple[float, float], ...]:
+        """The latest stalls, oldest first, the one still open last: (begin [s, SYNC time], length [s]) each; at
+        most :data:`RECENT_STALLS` closed ones."""
+        o = self._open
+        return tuple(self._recent) + (((o.at_s, o.late_s),) if o is not None else ())
 
     def as_json(self) -> dict:
         """count, longest [ms] and each stall's begin [s] and length [ms] (a stall still open counted)."""
@@ -140,3 +156,33 @@ class StallWatch:
             self._close()
         return {"count": self.count, "longest_ms": round(self.longest_s * 1000.0, 3),
                 "at": [[round(t, 6), round(d * 1000.0, 3)] for t, d in self.listed]}
+
+
+def stall_explains(stalls, at_s: float, silent_s: float, overdue_s: float) -> tuple[float, float] | None:
+    r"""Whether a stall of the master's own loop explains a node's heartbeat lost: the PC, not the node.
+
+    A heartbeat is judged lost at :math:`t_l` (``at_s``) when none came for ``silent_s`` (more than its timeout);
+    it was then at least ``overdue_s`` = timeout - producer period late. A stall (of ``stalls``, each begin
+    :math:`b`, length :math:`L` [s]: :attr:`StallWatch.recent`) explains it when the master's loop itself was
+    held at least as long, :math:`L \ge` ``overdue_s``, within the silence, :math:`b \le t_l` and
+    :math:`b + L \ge t_l -` ``silent_s``: a PC that held its own loop that long in that window did not run a
+    heartbeat producer on it either (the simulated drives of ``sim-serve`` on the same PC), or took the frames
+    late. A shorter stall, or one outside the silence, leaves the node (its wiring, its power, its 0x1017) the
+    cause. Returns the longest stall that
+    explains it, None where none does."""
+    if not (math.isfinite(at_s) and math.isfinite(silent_s) and math.isfinite(overdue_s)):
+        return None
+    fits = [(b, n) for b, n in stalls or () if n >= overdue_s and b <= at_s and b + n >= at_s - silent_s]
+    return max(fits, key=lambda x: x[1]) if fits else None
+
+
+def process_held(frames_silent_s: float, overdue_s: float) -> bool:
+    """Whether a node whose heartbeat was lost was silent altogether, no statusword (TPDO) either for at least
+    ``overdue_s`` (timeout - producer period [s], as in :func:`stall_explains`) before it was judged lost.
+
+    Only meaningful on a software bus (python-can's ``udp_multicast``, ``virtual``), where every node is a
+    process on a PC (``sim-serve``'s simulated drives): a process that sent nothing at all for that long was not
+    run, the PC's doing; its heartbeat producer only late while its TPDOs came would be the node's own. (On a
+    real bus a drive silent altogether is its power, its cable or a bus-off: the caller never asks there.) False
+    where the time is not known (NaN: not a drive, no statusword yet)."""
+    return math.isfinite(frames_silent_s) and math.isfinite(overdue_s) and frames_silent_s >= overdue_s
