@@ -361,7 +361,9 @@ def test_rt_priority_is_for_a_bus_and_reaches_the_real_time_set_up(tmp_path, mon
 # ------------------------------------------------------------------ over the bus (private network namespace)
 
 
-# two processes on wall-clock SYNC in a private namespace: one such test at a time (docs/testing.md, "Parallel")
+# two processes on wall-clock SYNC in a private namespace: one such test at a time (docs/testing.md, "Parallel");
+# slow (30 s of real time): in the default run, not in the fast loop
+@pytest.mark.slow
 @pytest.mark.xdist_group("wall_clock")
 def test_two_wiring_faults_served_by_sim_serve_give_the_in_process_findings(tmp_path, capsys):
     """The docs' example (LVDT 2 of the wrong sign, load cell 1 read in kN), in the simulated rig's [[faults]]:
