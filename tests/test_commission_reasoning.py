@@ -299,7 +299,10 @@ def test_load_cells_swapped_say_what_would_tell_them_from_two_wrong_signs(cases)
     assert "both signs wrong read alike" in f["text"] and "a load on the surface" in f["text"]
 
 
+# soak: the same four cases' patched profiles pass the dry-run through the command line in the default run
+# (tests/test_commission_targets.py); here in process, on request: python -m pytest -m soak
 @pytest.mark.slow
+@pytest.mark.soak
 @pytest.mark.parametrize("name", list(CASES))
 def test_the_patched_profile_passes_the_dry_run_on_the_same_faulty_rig(cases, name, tmp_path):
     _, second, fixed, true, _ = cases[name]

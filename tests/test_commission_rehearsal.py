@@ -379,7 +379,10 @@ def test_two_wiring_faults_served_by_sim_serve_give_the_in_process_findings(tmp_
     assert "2 fault(s): lvdt_sign (EMA 2), loadcell_scale 0.1 (EMA 1)" in r["serve_out"]
 
 
+# soak (7 x 30 s of wall clock, one at a time): not in the default run, whose two-fault case above takes the same
+# path; run with `python -m pytest -m soak` (docs/testing.md)
 @pytest.mark.slow
+@pytest.mark.soak
 @pytest.mark.xdist_group("wall_clock")
 @pytest.mark.parametrize("name", sorted(WIRING))
 def test_each_wiring_fault_served_by_sim_serve_gives_the_in_process_findings(name, tmp_path, capsys):
