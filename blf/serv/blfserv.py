@@ -150,7 +150,7 @@ from blf.serv.detect import (
     params_vector,
 )
 from blf.serv.filters import design_serv_filters, robust_noise_std
-from blf.serv.results import BlfServResult, ServJump, improved_reading, paper_reading
+from blf.serv.results import BlfServResult, ServJump, readings
 from blf.validate import as_1d_finite, as_finite, count, one_of, positive_scalar, readonly, scalar
 
 __all__ = ["METHODS", "BlfServMonitor", "blf_serv"]
@@ -438,21 +438,11 @@ class BlfServMonitor:
                 paper_delta_mm=paper, n_before=npre, n_after=npost, residual_before_mm=rpre,
                 residual_after_mm=rpost, accepted=reason == "ok", paper_accepted=abs(paper) >= min_jump,
                 reason=reason))
-        acc = [j for j in jumps if j.accepted]
-        pac = [j for j in jumps if j.paper_accepted]
-        b_imp, s_imp = improved_reading(acc)
-        b_pap = paper_reading(pac)
-        if self.method == "improved":
-            b, n, s = b_imp, len(acc), s_imp
-        else:
-            b, n, s = b_pap, len(pac), None
         df = d1 = d2 = None
         if arrays is not None:
             df, d1, d2 = (readonly(a) for a in arrays)
         return BlfServResult(
-            backlash_mm=b, traversals=n, method=self.method, backlash_sigma_mm=s,
-            backlash_improved_mm=b_imp, backlash_paper_mm=b_pap, traversals_improved=len(acc),
-            traversals_paper=len(pac), jumps=tuple(jumps), noise_std_mm=sig,
+            **readings(jumps, self.method), method=self.method, jumps=tuple(jumps), noise_std_mm=sig,
             threshold_d1_mm_per_s=float(self.threshold_d1[c]), threshold_d2_mm_per_s2=float(self.threshold_d2[c]),
             min_jump_mm=min_jump, filters=self._filters, n_samples=self._n, t0_s=self.t0_s,
             d_filtered_mm=df, d1_mm_per_s=d1, d2_mm_per_s2=d2)

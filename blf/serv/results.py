@@ -143,3 +143,16 @@ def improved_reading(counted) -> tuple[float | None, float | None]:
 def paper_reading(counted) -> float | None:
     """The paper method's backlash from its counted jumps: the largest :math:`|\\Delta D|`, mm (None: none)."""
     return float(max(abs(j.paper_delta_mm) for j in counted)) if counted else None
+
+
+def readings(jumps, method: str) -> dict:
+    """The readings of a channel from its jumps: both methods' backlash and counts, and the one ``method``
+    ("improved" or "paper") reports as ``backlash_mm``, ``traversals``, ``backlash_sigma_mm`` (the fields of
+    :class:`BlfServResult` they fill)."""
+    acc = [j for j in jumps if j.accepted]
+    pac = [j for j in jumps if j.paper_accepted]
+    b_imp, s_imp = improved_reading(acc)
+    b_pap = paper_reading(pac)
+    b, n, s = (b_imp, len(acc), s_imp) if method == "improved" else (b_pap, len(pac), None)
+    return {"backlash_mm": b, "traversals": n, "backlash_sigma_mm": s, "backlash_improved_mm": b_imp,
+            "backlash_paper_mm": b_pap, "traversals_improved": len(acc), "traversals_paper": len(pac)}

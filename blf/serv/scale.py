@@ -43,7 +43,7 @@ import dataclasses
 import numpy as np
 
 from blf.errors import InputError
-from blf.serv.results import BlfServResult, improved_reading, paper_reading
+from blf.serv.results import BlfServResult, readings
 from blf.validate import as_1d_finite, positive_scalar, scalar
 
 __all__ = ["motion_through_jumps", "with_known_scale"]
@@ -148,14 +148,5 @@ def with_known_scale(result: BlfServResult, motion_mm, pitch_bound: float, *, lv
                 f"within the LVDT scale's reach: |h| {abs(j.height_mm):.4f} mm - {lvdts} x {p:g} x travel "
                 f"{d:.4f} mm < {floor:.4f} mm"))
         jumps.append(dataclasses.replace(j, paper_accepted=paper_ok))
-    acc = [j for j in jumps if j.accepted]
-    pac = [j for j in jumps if j.paper_accepted]
-    b_imp, s_imp = improved_reading(acc)
-    b_pap = paper_reading(pac)
-    if result.method == "improved":
-        b, n, s = b_imp, len(acc), s_imp
-    else:
-        b, n, s = b_pap, len(pac), None
-    return dataclasses.replace(result, backlash_mm=b, traversals=n, backlash_sigma_mm=s, backlash_improved_mm=b_imp,
-                               backlash_paper_mm=b_pap, traversals_improved=len(acc), traversals_paper=len(pac),
+    return dataclasses.replace(result, **readings(jumps, result.method),
                                jumps=tuple(jumps))

@@ -14,7 +14,7 @@ from hil.errors import IncompleteRecordingError, RecordingError
 from hil.record.inputs import recording_inputs
 from hil.record.outputs import outputs_for
 from hil.record.recording import actuation_for
-from hil.record.runfolder import has_record, read_record, resolve_recording
+from hil.record.runfolder import read_record, resolve_run
 from hil.record.runrecord import RunStatus
 from hil.record.seal import check_seal
 
@@ -23,12 +23,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     """``emacheck analyze``: recompute the result from a run folder or a signals CSV."""
     console = make_console()
     arg = Path(args.recording)
-    try:
-        sig_path, run_dir = resolve_recording(arg)
-    except IncompleteRecordingError:
-        if not (arg.is_dir() and has_record(arg)):
-            raise
-        sig_path, run_dir = arg / "signals.csv", arg  # a run folder killed before its first data
+    sig_path, run_dir = resolve_run(arg)  # a run folder killed before its first data too
     meta = read_record(run_dir)
     modified = check_seal(sig_path, meta, args.accept_modified)  # before anything is written
     act = actuation_for(args.profile, meta)

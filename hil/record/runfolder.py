@@ -570,6 +570,18 @@ def is_can_log(path: Path) -> bool:
 
 
 
+def resolve_run(arg: str | Path) -> tuple[Path, Path | None]:
+    """:func:`resolve_recording`, and a run folder killed before its first data (a record, no signals yet) as
+    ``(folder / "signals.csv", folder)``: its record says what happened."""
+    arg = Path(arg)
+    try:
+        return resolve_recording(arg)
+    except IncompleteRecordingError:
+        if not (arg.is_dir() and has_record(arg)):
+            raise
+        return arg / "signals.csv", arg
+
+
 def resolve_recording(arg: str | Path) -> tuple[Path, Path | None]:
     """Map a RUN_FOLDER or SIGNALS.csv argument to (signals path, run folder or None)."""
     p = Path(arg)
