@@ -178,6 +178,41 @@ def test_heartbeat_consumer_restarts_at_each_heartbeat(cyclic):
         m.poll(t + limit + 1e-9)
 
 
+@pytest.mark.parametrize("gap_s", [0.06, 0.0])
+def test_heartbeat_lost_carries_the_longest_silence_of_the_nodes_statuswords(simrig, actuation, gap_s):
+    """A drive's process held ``gap_s`` (no statusword either), then run again: its TPDOs answer SYNCs before its
+    heartbeat is judged lost, so the node's silence is the longest gap between its statuswords since its last
+    heartbeat, not only the time since the last one (hil.master.stalls.process_held)."""
+    from support.canopen_rig import make_pair
+
+    pair = make_pair(RigPlant(simrig.params, np.random.default_rng(1)))
+    act = dataclasses.replace(actuation, canopen=dataclasses.replace(actuation.canopen,
+                                                                     skip_master_loss_drill="not this test's"))
+    m = make_master(act)
+    to_slaves, to_master = list(m.start(0.0)), list(pair.power_on(0.0))
+    while to_slaves or to_master:  # the preflight, every frame at t = 0 (as support.canopen_rig.cyclic_master)
+        while to_slaves:
+            to_master += pair.on_frame(to_slaves.pop(0), 0.0)
+        while to_master:
+            to_slaves += m.on_frame(to_master.pop(0), 0.0)
+    assert m.phase is Phase.CYCLIC
+    T = m.T
+    with pytest.raises(HeartbeatLost) as exc:
+        for k in range(1, 200):
+            t = k * T
+            for f in pair.on_frame(Frame(0x80, b""), t):
+                held = f.arbitration_id & 0x7F == 1 and 0.02 < t <= 0.02 + gap_s
+                if 0x180 <= f.arbitration_id < 0x580 and not held:
+                    m.on_frame(f, t)  # TPDOs only: no heartbeat arrives
+            m.poll(t)
+    lost = exc.value
+    assert lost.key == "canopen.heartbeat_period_s" and lost.overdue_s == pytest.approx(0.05)
+    if gap_s:  # the statuswords of node 1 stopped from 0.022 s to 0.08 s (the first after the gap at 0.082 s)
+        assert lost.frames_silent_s == pytest.approx(0.06 + T, abs=1e-9)
+    else:
+        assert lost.frames_silent_s == pytest.approx(T, abs=1e-9)
+
+
 # ---------------------------------------------------------------------------- the master's heartbeat producer
 
 

@@ -52,6 +52,7 @@ PLAN = master_setup(ACT, None).plan
 LIM = Limits.of(CHECK)
 JOG = JogPlan.of(ACT, LIM, PLAN)
 I_TOTAL = ACT.mechanics.i_total_rad_per_mm
+T = ACT.timing.sync_period_s  # the SYNC period [s]
 #: the simulated LVDTs' pitch (profiles/simrig.toml): the jog's gains include it
 G_LVDT = {1: SIMRIG.params.sensors1.lvdt_gain, 2: SIMRIG.params.sensors2.lvdt_gain}
 DEG = 180.0 / math.pi  # degrees for radians
@@ -267,7 +268,7 @@ def test_a_ram_ahead_of_its_motor_is_stopped_at_once_and_slowly():
     """Fed a rig whose rams move 57.3 times as far as the motors say (no play, exact sensors): the jog sees it
     once its LVDT ran ahead by delta (0.23 mm), creeps at the speed it had until an LVDT moved half the travel,
     and stops; the true ram speed never beyond the exponential start's when the rule fires (about 1 mm/s)."""
-    jog = Jog(JOG, PLAN, (0.0, 0.0), {"s1": 0.0, "s2": 0.0, "F1": 0.0, "F2": 0.0}, 0.0)
+    jog = Jog(JOG, PLAN, (0.0, 0.0), {"s1": 0.0, "s2": 0.0, "F1": 0.0, "F2": 0.0}, 0.0, T)
     t, sp = 0.0, None
     x_true = 0.0
     while not jog.done and t < 30:
@@ -289,9 +290,38 @@ def test_a_ram_ahead_of_its_motor_is_stopped_at_once_and_slowly():
     assert v.findings[0].measured == pytest.approx(DEG, rel=0.01)
 
 
+def _jog_setpoints(gap_after: int | None, gap_periods: int) -> list[float]:
+    """The setpoints [rad] of a whole jog on an exact rig (each ram where its motor says), the samples every period
+    but ``gap_periods`` periods without a sample after sample ``gap_after`` (the PC held the loop)."""
+    jog = Jog(JOG, PLAN, (0.0, 0.0), {"s1": 0.0, "s2": 0.0, "F1": 0.0, "F2": 0.0}, 0.0, T)
+    out, phi, k, t = [], 0.0, 0, 0.0
+    while not jog.done and k < 20000:
+        sp = jog.step(Sample(t, phi, phi, phi / I_TOTAL, phi / I_TOTAL, 0.0, 0.0))
+        out.append(sp[0].value)
+        assert sp[0].value == sp[1].value
+        phi = sp[0].value
+        t += T * (gap_periods if k == gap_after else 1)
+        k += 1
+    assert jog.done and jog.stopped is None
+    return out
+
+
+@pytest.mark.parametrize("gap_after", [100, 600, 900])
+def test_the_jog_resumes_where_it_was_after_periods_without_a_sample(gap_after):
+    """A hold of 40 ms (20 periods) on the way out, the hold or the way back: the setpoints after it go on from
+    where they were, the same sequence as without the hold; read on the samples' clock they would leap by the
+    motion missed (at 0.5 mm/s, 0.02 mm: 100 times a period's step)."""
+    plain, held = _jog_setpoints(None, 1), _jog_setpoints(gap_after, 20)
+    np.testing.assert_allclose(held, plain, rtol=0, atol=1e-9)  # [rad]: the same but for the float time's rounding
+    assert len(held) == len(plain)
+    steps = np.abs(np.diff(held))
+    assert steps[gap_after] <= np.max(np.delete(steps, gap_after))
+    assert np.max(steps) / I_TOTAL < JOG.speed_mm_per_s * T * 1.0001  # never more than a period at the speed
+
+
 def test_a_load_cell_that_changes_stops_the_jog_at_its_limit():
     for dF, stops in ((JOG.max_force_change_N * 0.999, False), (JOG.max_force_change_N * 1.001, True)):
-        jog = Jog(JOG, PLAN, (0.0, 0.0), {"s1": 0.0, "s2": 0.0, "F1": 5.0, "F2": 0.0}, 0.0)
+        jog = Jog(JOG, PLAN, (0.0, 0.0), {"s1": 0.0, "s2": 0.0, "F1": 5.0, "F2": 0.0}, 0.0, T)
         jog.step(Sample(0.0, 0.0, 0.0, 0.0, 0.0, 5.0 + dF, 0.0))
         assert (jog.phase is JogPhase.STOPPING) is stops and (jog.stop_key == "signals.ema1.force") is stops
 

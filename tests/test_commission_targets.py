@@ -367,3 +367,29 @@ def test_a_drive_that_lost_the_masters_heartbeat_names_the_pc_where_the_loop_was
     assert stale_finding(base, fault, 0, [(4.426, margin)], "udp_multicast", None) is base  # no profile: no rule
     other = DriveFault("node 1: EMCY 0x4310", emcy=Emcy(4.55, 1, 0x4310, 0x09, bytes(5)))
     assert stale_finding(base, other, 0, [(4.426, 0.2)], "udp_multicast", c) is base  # another fault: the drive's
+
+
+def test_the_pc_rules_take_a_fault_on_the_masters_clock_to_the_stalls_axis():
+    """The master's stalls are on the samples' axis (SYNC periods since the cyclic phase began), a heartbeat lost
+    or an EMCY on the master's clock (since the preflight began, 2.4 s earlier here): compared as they come, the
+    113 ms hold just before an EMCY 0x8130 lies 2.4 s away from it and explains nothing."""
+    from hil.canopen.cycle import SyncSchedule
+    from hil.canopen.emcy import Emcy
+    from hil.master.events import DriveFault
+    from hil.profile.load import load_actuation
+
+    c = load_actuation(None).canopen
+    sched = SyncSchedule(0.002)
+    for k in range(8235):  # the first SYNC of the cyclic phase at 2.4 s on the master's clock: 8235 periods
+        sched.on_sync(2.4 + k * 0.002)
+    assert sched.on_axis(2.4 + 8234 * 0.002) == pytest.approx(sched.t_s) and sched.t_s == pytest.approx(16.47)
+    assert sched.on_axis(18.95) == pytest.approx(16.552)
+    fault = DriveFault("node 1: EMCY 0x8130", emcy=Emcy(18.95, 1, 0x8130, 0x11, bytes(5)))
+    base = Finding(Stage.LOAD, Kind.STOP, "safety", "DriveFault: node 1: EMCY 0x8130 (life guard or heartbeat)")
+    stalls = [(16.468, 0.113)]
+    assert stale_finding(base, fault, 0, stalls, "udp_multicast", c, sched.on_axis).key == HEARTBEAT_PC_KEY
+    assert stale_finding(base, fault, 0, stalls, "udp_multicast", c) is base  # on the wrong axis: nothing
+    lost = _lost(at=18.95, silent=0.151, overdue=0.05, frames=0.004)
+    assert stale_finding(base, lost, 0, [(16.50, 0.06)], "socketcan", c, sched.on_axis).key == HEARTBEAT_PC_KEY
+    assert stale_finding(base, lost, 0, [(16.50, 0.06)], "socketcan", c) is base
+    assert SyncSchedule(0.002).on_axis(1.25) == 1.25  # before the first SYNC: the master's clock

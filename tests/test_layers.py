@@ -91,7 +91,7 @@ def _imports(path: Path) -> list[tuple[int, str]]:
 SANS_IO = ("hil.master.core", "hil.master.preflight", "hil.master.events", "hil.master.limits_setup",
            "hil.master.stalls", "hil.master.powerup", "hil.master.views", "hil.master.drill", "hil.master.commission",
            "hil.master.commission_rules", "hil.master.jog", "hil.master.jog_rules", "hil.master.hypotheses",
-           "hil.check.sequence", "hil.check.supervisor", "hil.check.staleness")
+           "hil.check.sequence", "hil.check.supervisor", "hil.check.staleness", "hil.check.profileclock")
 #: What a sans-IO core may import of hil: the vocabulary, the errors, the profiles' dataclasses, one another.
 SANS_IO_MAY = ("hil.canopen", "hil.errors", "hil.profile.config", *SANS_IO)
 #: Modules that touch a bus, a thread, a clock, a file or a process.

@@ -374,3 +374,10 @@ class SyncSchedule:
         """The time of the last SYNC's period [s] (``slot`` T)."""
         return self.slot * self.T
 
+    def on_axis(self, t: float) -> float:
+        """A time ``t`` on the receiver's clock (a frame's arrival, the master's poll) [s] on the samples' axis
+        (:attr:`t_s`, the time of ``signals.csv`` and of the master's stalls) [s]: ``t`` less the last SYNC's
+        arrival, plus its period's time (before the first SYNC: ``t`` itself; the axes then differ by the
+        preflight, seconds)."""
+        return t if self.slot == 0 else t - self._t_last + self.slot * self.T
+

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
+from hil.check.profileclock import ProfileClock
 from hil.errors import SequenceError
 from hil.profile.config import Actuation, Check
 
@@ -171,9 +172,9 @@ class CheckSequence:
         self.T = actuation.timing.sync_period_s
         self._step = Step.IDLE
         self._t0 = 0.0  # start time of the current step
-        #: time of the current step without a sample beyond one period per sample [s]: the step's
-        #: profile waits for it (a late SYNC, a missing sample: the drives held their last setpoints)
-        self._held_s = 0.0
+        #: the step's profile time: it waits for periods without a sample (a late SYNC, a missing sample: the
+        #: drives held their last setpoints; hil.check.profileclock)
+        self._clock = ProfileClock(self.T)
         self._events: list[Event] = []
         self._phi_hold = [0.0, 0.0]  # position targets (rad)
         self._phi_start = [0.0, 0.0]
@@ -266,7 +267,7 @@ class CheckSequence:
             raise SequenceError(f"illegal step transition {self._step.name} -> {new.name}")
         self._step = new
         self._t0 = t_s
-        self._held_s = 0.0
+        self._clock.restart(t_s)
         self._events.append(Event(t_s, new, detail))
 
     def _pos(self, k: int) -> Setpoint:
@@ -278,15 +279,11 @@ class CheckSequence:
         if last is not None:
             if not t > last:
                 raise SequenceError(f"sample time not increasing: {t} after {last}")
-            if t - last > 1.5 * self.T:
-                # periods without a sample: the profile resumes where it was, it does not jump ahead
-                # (setpoints leaping by the periods missed would make the motion the stall did not)
-                self._held_s += t - last - self.T
         self._t_last = t
         phi = (smp.phi1_rad, smp.phi2_rad)
         c = self.check
         i = self.i
-        dt = t - self._t0 - self._held_s  # the step's profile time (its time on the samples' clock)
+        dt = self._clock.elapsed(t)  # the step's profile time (its time on the samples' clock, less periods held)
         st = self._step
         settle = c.approach.settle_s
 

@@ -80,8 +80,8 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
     except (*KNOWN_ERRORS, CanopenError, KeyboardInterrupt) as exc:
         core.failed(exc)
         stall, bus = link.stall_watch.recent, str(context["bus"]["interface"])  # (the PC named where the evidence
-        core.findings[-1:] = [stale_finding(f, exc, rt_priority, stall, bus, act.canopen)  # says)
-                              for f in core.findings[-1:]]
+        core.findings[-1:] = [stale_finding(f, exc, rt_priority, stall, bus, act.canopen,  # says)
+                                            master.sync_schedule.on_axis) for f in core.findings[-1:]]
         link.abort()
         interrupted = isinstance(exc, KeyboardInterrupt)
     else:

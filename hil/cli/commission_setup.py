@@ -132,7 +132,7 @@ def open_rig(args, act, rig, profile: Path | None):
 
 
 def stale_finding(finding, exc: BaseException, rt_priority: int | None, stalls=(), interface: str = "",
-                  canopen=None):
+                  canopen=None, on_axis=None):
     """The finding of a stop ``exc``: a stop on stale data (:class:`hil.master.link.StaleData`) is given the key
     :data:`STALE_KEY` and says that the PC is the likely cause, with what to do; a node's heartbeat lost
     (:class:`hil.master.events.HeartbeatLost`) while the master's own loop was held as long (``stalls``: the
@@ -142,7 +142,9 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stalls=(
     :data:`HEARTBEAT_PC_KEY`; so is a drive's EMCY 0x8130 (it lost the master's heartbeat) where the master's
     loop, which sends that heartbeat, was held at least the drive's consumer time less the master's heartbeat
     period within the consumer time before it (``canopen``: the profile's table; the same rule). Any other is
-    ``finding``.
+    ``finding``. The stalls are on the samples' axis (SYNC periods since the cyclic phase began), a heartbeat
+    lost or an EMCY on the master's clock (since the preflight began): ``on_axis`` takes the latter to the
+    former (:meth:`hil.canopen.cycle.SyncSchedule.on_axis`; None: the same axis).
 
     The drives answer every SYNC within microseconds; a sample missing for the freshness limit in force, or a
     SYNC taken late by the master, is most often the master's PC not running its loop in time (a loaded PC at
@@ -152,9 +154,10 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stalls=(
     from hil.master.link import StaleData
     from hil.master.stalls import process_held, stall_explains
 
+    axis = on_axis if on_axis is not None else (lambda t: t)
     if isinstance(exc, StaleData):
         key, seen, idle = STALE_KEY, "", "check that each drive sends its TPDOs on every SYNC"
-    elif isinstance(exc, HeartbeatLost) and (stall := stall_explains(stalls, exc.at_s, exc.silent_s,
+    elif isinstance(exc, HeartbeatLost) and (stall := stall_explains(stalls, axis(exc.at_s), exc.silent_s,
                                                                       exc.overdue_s)) is not None:
         key = HEARTBEAT_PC_KEY
         seen = (f" (the master's own loop was held {stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, within the "
@@ -165,11 +168,12 @@ def stale_finding(finding, exc: BaseException, rt_priority: int | None, stalls=(
             process_held(exc.frames_silent_s, exc.overdue_s):
         key = HEARTBEAT_PC_KEY
         seen = (f" (on {interface} the node is a process on a PC, and it sent nothing at all, no statusword either, "
-                f"for {exc.frames_silent_s * 1e3:.0f} ms: at least the {exc.overdue_s * 1e3:.0f} ms a heartbeat may "
+                f"for {exc.frames_silent_s * 1e3:.0f} ms at a stretch within that silence: at least the "
+                f"{exc.overdue_s * 1e3:.0f} ms a heartbeat may "
                 f"be overdue ({exc.key}); the process serving it was not run)")
         idle = f"check the node's heartbeat ({exc.key})"
     elif (emcy := _master_heartbeat_lost(exc, canopen)) is not None and (stall := stall_explains(
-            stalls, emcy.t_s, canopen.master_consumer_time_s, margin := _consumer_margin_s(canopen))) is not None:
+            stalls, axis(emcy.t_s), canopen.master_consumer_time_s, margin := _consumer_margin_s(canopen))) is not None:
         key = HEARTBEAT_PC_KEY
         seen = (f" (the drive lost the master's heartbeat, which the master's loop sends: the loop was held "
                 f"{stall[1] * 1e3:.0f} ms at t = {stall[0]:.3f} s, at least the {margin * 1e3:.0f} ms the drive's "

@@ -45,6 +45,7 @@ from hil.canopen.nmt import NmtCommand
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.sdo import SdoAbortError, SdoTimeout
 from hil.canopen.signalmap import ForceControl, NodeRole, Signal
+from hil.check.profileclock import ProfileClock
 from hil.errors import EmacheckError
 from hil.master.commission_rules import (
     OPERATOR_KEY,
@@ -219,6 +220,9 @@ class Commission:
         #: figures)
         self.traces: dict[str, dict[str, np.ndarray]] = {}
         self._t0 = 0.0  #: the stage's start [s]
+        #: the stage's profile time: it waits for periods without a sample (hil.check.profileclock), so a move
+        #: resumes where it was after the PC held the loop instead of leaping by the motion missed
+        self._clock = ProfileClock(self.T)
         self._start: tuple[float, float] | None = None  #: motor angles at rest [rad]
         self._hold: float | None = None  #: the holding EMA's angle once it is back in CSP [rad]
         self._rec = _Record()
@@ -258,6 +262,7 @@ class Commission:
         if new not in TRANSITIONS[self.stage]:
             raise EmacheckError(f"commissioning: no transition {self.stage.value} -> {new.value}")
         self.stage, self._t0 = new, t
+        self._clock.restart(t)
         self._rec = _Record()
 
     def failed(self, exc: BaseException) -> None:
@@ -299,6 +304,7 @@ class Commission:
         if self._start is None:
             self._start = (smp.phi1_rad, smp.phi2_rad)
             self._goto(Stage.AT_REST, t)
+        tau = self._clock.elapsed(t)
         if self.done:
             return _DISABLED, _DISABLED
         if self.stage is not Stage.AT_REST and (why := self._guard(smp)):
@@ -308,7 +314,6 @@ class Commission:
         self._rec.add(smp)
         if self.stage is Stage.JOG:
             return self._jog_step(smp)
-        tau = t - self._t0
         if tau >= self._duration():
             self._end_of_stage(smp)
             if self.done:
@@ -435,7 +440,7 @@ class Commission:
                 return
             self._goto(Stage.JOG, t)
             self.jog = Jog(self.jog_plan, self.plan, self._start,
-                           {n: self.measured["at_rest"][n]["mean"] for n in ("s1", "s2", "F1", "F2")}, t)
+                           {n: self.measured["at_rest"][n]["mean"] for n in ("s1", "s2", "F1", "F2")}, t, self.T)
         elif self.stage is Stage.LOAD:
             self._goto(Stage.MOVE, t)
         elif self.stage is Stage.MOVE:

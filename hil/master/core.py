@@ -378,6 +378,8 @@ class MasterCore:
         v = self.nodes[node]
         state = data[0] & 0x7F
         v.last_heartbeat_s = t
+        if node in self.drives:
+            self.drives[node].tpdo_gap_s = 0.0  # (the gaps within the next heartbeat's silence)
         if state == NmtState.BOOT_UP:
             v.booted = True
             self.events.append(event.BootUp(t, node))
@@ -454,12 +456,13 @@ class MasterCore:
                     self.events.append(event.HeartbeatMissed(t, n))
                     spec = next(x.spec for x in self.plan.nodes if x.spec.node_id == n)
                     silent = t - v.last_heartbeat_s
-                    last = getattr(v, "last_tpdo_s", None)  # (a drive's last statusword: the node silent altogether)
+                    last = getattr(v, "last_tpdo_s", None)  # (a drive's statuswords: the node silent altogether)
+                    quiet = max(t - last, getattr(v, "tpdo_gap_s", 0.0)) if last is not None else math.nan
                     self._fail(HeartbeatLost(f"{v.label}: heartbeat lost (none for {silent:.3f} s, "
                                              f"timeout {v.hb_timeout_s:.3f} s)", key=f"{spec.key}.heartbeat_period_s",
                                              at_s=t, silent_s=silent,
                                              overdue_s=v.hb_timeout_s - spec.heartbeat_period_s,
-                                             frames_silent_s=t - last if last is not None else math.nan), t, n)
+                                             frames_silent_s=quiet), t, n)
         return []
 
     # ------------------------------------------------------------------ cyclic
@@ -490,6 +493,8 @@ class MasterCore:
         sample, so that the safe-state sequence sees every drive it can reach)."""
         k = d.ema - 1
         dec = self.decoder
+        if d.last_tpdo_s is not None and t - d.last_tpdo_s > d.tpdo_gap_s:
+            d.tpdo_gap_s = t - d.last_tpdo_s
         d.last_tpdo_s = t
         d.statusword = sw = dec.statusword[k]
         md = dec.mode_display[k]

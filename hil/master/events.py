@@ -34,8 +34,10 @@ class HeartbeatLost(EmacheckError, RuntimeError):
     ``key``: the profile key of the node's heartbeat (``canopen.heartbeat_period_s`` for a drive,
     ``nodes.NAME.heartbeat_period_s`` for a sensor node); ``at_s``: when it was judged lost [s, the master's
     time]; ``silent_s``: since its last heartbeat [s]; ``overdue_s``: how long a heartbeat may be overdue before
-    it is lost, the timeout less the producer period [s]; ``frames_silent_s``: since the node's last statusword
-    (TPDO) [s] (NaN: not a drive, or none yet): a node silent altogether, not only its heartbeat."""
+    it is lost, the timeout less the producer period [s]; ``frames_silent_s``: the longest the node sent no
+    statusword (TPDO) within the heartbeat's silence [s], the time since its last one or a gap between two since
+    its last heartbeat, whichever is longer (NaN: not a drive, or none yet): a node silent altogether, not only
+    its heartbeat."""
 
     def __init__(self, message: str = "", *, key: str = "", at_s: float = math.nan, silent_s: float = math.nan,
                  overdue_s: float = math.nan, frames_silent_s: float = math.nan) -> None:

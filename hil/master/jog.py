@@ -34,6 +34,7 @@ import numpy as np
 
 from hil.canopen.process import DriveMode, Sample, Setpoint
 from hil.canopen.signalmap import Signal
+from hil.check.profileclock import ProfileClock
 from hil.master.commission_rules import ema_key
 from hil.master.jog_rules import JogGain, JogPlan, JogVerdict, explain, jog_gain, lvdt_ahead
 
@@ -113,14 +114,22 @@ class Jog:
         Means at rest of ``s1, s2`` [mm] and ``F1, F2`` [N].
     t0_s : float
         Time of the first sample [s].
+    period_s : float
+        The SYNC period [s]: the jog's profile waits for periods without a sample
+        (:class:`hil.check.profileclock.ProfileClock`: after the PC held the loop it resumes where it was; a
+        trajectory read on the samples' clock would leap by the motion missed).
     """
 
-    def __init__(self, plan: JogPlan, rig, start_rad: tuple[float, float], rest: dict, t0_s: float) -> None:
+    def __init__(self, plan: JogPlan, rig, start_rad: tuple[float, float], rest: dict, t0_s: float,
+                 period_s: float) -> None:
         self.plan, self.rig = plan, rig
         self.start = start_rad
         self.rest = rest
         self.phase = JogPhase.OUT
-        self._t_phase = t0_s
+        self._clock = ProfileClock(period_s)
+        self._clock.restart(t0_s)
+        self._t_phase = 0.0  #: the phase's start on the jog's profile clock [s]
+        self._tp_prev: float | None = None  #: the last sample's profile time [s]
         self.stopped: str | None = None  #: why the jog was stopped (None: it ran its course)
         self.stop_key = ""  #: the key of the signal that stopped it
         self.rows: list[tuple] = []  #: t, x (commanded), phi1, phi2, s1, s2, F1, F2
@@ -143,6 +152,7 @@ class Jog:
         """One sample in, both setpoints out (holding where the jog ended once :attr:`done`)."""
         p = self.plan
         i = p.i_total_rad_per_mm
+        tp = self._clock.elapsed(smp.t_s)  # the jog's profile time
         x_meas = ((smp.phi1_rad - self.start[0]) / i, (smp.phi2_rad - self.start[1]) / i)
         self.rows.append((smp.t_s, self._x, smp.phi1_rad, smp.phi2_rad, smp.s1_mm, smp.s2_mm, smp.F1_N, smp.F2_N))
         if self.phase not in (JogPhase.STOPPING, JogPhase.DONE) and (why := self._check(smp, x_meas)):
@@ -152,11 +162,12 @@ class Jog:
             if not ahead and self.fit_end is None:
                 self.fit_end = len(self.rows)
             if ahead:  # on at the speed it had, for a slope (the deceleration after it is still outward)
-                self._enter(JogPhase.CREEP, smp.t_s)
+                self._enter(JogPhase.CREEP, tp)
             else:
                 self._stop_from = (self._x, self._v)
-                self._enter(JogPhase.STOPPING, smp.t_s)
-        self._advance(smp.t_s)
+                self._enter(JogPhase.STOPPING, tp)
+        self._advance(tp)
+        self._tp_prev = tp
         return (Setpoint(DriveMode.POSITION, self.start[0] + i * self._x),
                 Setpoint(DriveMode.POSITION, self.start[1] + i * self._x))
 
@@ -164,9 +175,10 @@ class Jog:
         self.phase, self._t_phase = phase, t
 
     def _advance(self, t: float) -> None:
-        """The commanded travel for the next cycle, and the phase."""
+        """The commanded travel for the next cycle, and the phase (``t``: the jog's profile time [s])."""
         p = self.plan
         tau = t - self._t_phase
+        dt = t - self._tp_prev if self._tp_prev is not None else 0.0
         move_s = p.travel_mm / min(p.speed_mm_per_s, p.travel_mm / p.ramp_s) + p.ramp_s
         x_prev = self._x
         if self.phase is JogPhase.OUT:
@@ -194,7 +206,7 @@ class Jog:
                 self._stop_from = (self._x, self._v)
                 self._enter(JogPhase.STOPPING, t)
             else:
-                self._x += self._v * (t - self.rows[-2][0] if len(self.rows) > 1 else 0.0)
+                self._x += self._v * dt
                 return
         if self.phase is JogPhase.STOPPING:
             tau = t - self._t_phase
@@ -204,7 +216,6 @@ class Jog:
             self._x = x0 + 0.5 * v0 * (tr + ts / math.pi * math.sin(math.pi * tr / ts))
             if tau >= ts + p.hold_s:
                 self._enter(JogPhase.DONE, t)
-        dt = t - self.rows[-2][0] if len(self.rows) > 1 else 0.0
         if dt > 0 and self.phase is not JogPhase.OUT:
             self._v = (self._x - x_prev) / dt
 

@@ -177,8 +177,10 @@ def stall_explains(stalls, at_s: float, silent_s: float, overdue_s: float) -> tu
 
 
 def process_held(frames_silent_s: float, overdue_s: float) -> bool:
-    """Whether a node whose heartbeat was lost was silent altogether, no statusword (TPDO) either for at least
-    ``overdue_s`` (timeout - producer period [s], as in :func:`stall_explains`) before it was judged lost.
+    """Whether a node whose heartbeat was lost was silent altogether, no statusword (TPDO) either, for at least
+    ``overdue_s`` (timeout - producer period [s], as in :func:`stall_explains`) at a stretch within the
+    heartbeat's silence (``frames_silent_s``: :attr:`hil.master.events.HeartbeatLost.frames_silent_s`; a process
+    held that long, then run again, answers SYNCs before its heartbeat is judged lost).
 
     Only meaningful on a software bus (python-can's ``udp_multicast``, ``virtual``), where every node is a
     process on a PC (``sim-serve``'s simulated drives): a process that sent nothing at all for that long was not

@@ -61,6 +61,9 @@ class DriveView(NodeView):
     #: (mode, last cycle by which 0x6061 must show it) of a mode change not yet confirmed
     mode_pending: tuple[int, int] | None = None
     last_tpdo_s: float | None = None  #: when the last statusword was received (TPDO or SDO); None: never
+    #: the longest time between two statuswords since the last heartbeat [s] (a node silent altogether within
+    #: its heartbeat's silence: hil.master.stalls.process_held)
+    tpdo_gap_s: float = 0.0
     last_cw: int = 0
     fault_resets: int = 0  #: fault resets sent in a row (bounded by canopen.fault_reset_attempts)
     reset_wait: int = 0  #: cycles left to wait for the last fault reset to take
