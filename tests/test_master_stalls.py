@@ -23,6 +23,7 @@ from hil.profile.load import load_actuation, load_check, load_simrig
 from hil.record.runfolder import read_record, read_signals
 from hil.transport import InProcessTransport
 from sim.plant import RigPlant
+from support.boundary import around
 from support.canopen_rig import cyclic_master, make_pair
 from support.rigs import brief_rig, quiet
 
@@ -326,3 +327,38 @@ def test_a_gap_the_master_accepted_is_one_the_analysis_reads(periods, with_stall
             refuse_jumps(sig, tmp_path / "signals.csv", 5.0, lines=True, meta=meta, sync_period_s=T)
     else:
         refuse_jumps(sig, tmp_path / "signals.csv", 5.0, lines=True, meta=meta, sync_period_s=T)
+
+
+class _LoopSync:
+    """A transport whose loop sends its own SYNC (udp_multicast): the next one due at ``due``, the clock at ``now``."""
+
+    T = T_EXACT
+
+    def __init__(self, due: float | None, now: float) -> None:
+        self.due, self.now = due, now
+
+    def clock(self) -> float:
+        return self.now
+
+    def sync_due(self) -> float | None:
+        return self.due
+
+
+def test_a_hold_that_ended_in_the_stop_is_recorded_as_the_stall_it_was():
+    """The loop held 211 ms with its SYNC due at 0.644 s; on waking, an EMCY that waited stopped it before the late
+    SYNC went out (where a stall is otherwise recorded): the stall is recorded from the overdue SYNC, more than one
+    period late (not on it), and nothing where the SYNC is not the loop's own."""
+    from support.canopen_rig import make_master
+
+    def recent(due, now):
+        link = CanopenLink(make_master(), _LoopSync(due, now))
+        link.record_overdue_sync()
+        return link.stall_watch.recent
+
+    got = recent(0.644, 0.855)
+    assert len(got) == 1 and got[0][1] == pytest.approx(0.211)
+    assert got[0][0] == make_master().sync_schedule.T  # at the period after the last SYNC the master saw
+    below, at, above = around(lambda now: now - 0.644, T_EXACT, 0.644 + T_EXACT)
+    assert recent(0.644, below) == () and recent(0.644, at) == ()
+    assert recent(0.644, above)[0][1] > T_EXACT
+    assert recent(None, 0.855) == ()

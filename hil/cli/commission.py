@@ -79,6 +79,7 @@ def commission(act, check, rig, transport, out: Path, *, console=None, context: 
             smp = link.exchange(sp1, sp2)
     except (*KNOWN_ERRORS, CanopenError, KeyboardInterrupt) as exc:
         core.failed(exc)
+        link.record_overdue_sync()  # (a hold that ended in the stop: what waited for it was judged first)
         stall, bus = link.stall_watch.recent, str(context["bus"]["interface"])  # (the PC named where the evidence
         core.findings[-1:] = [stale_finding(f, exc, rt_priority, stall, bus, act.canopen,  # says)
                                             master.sync_schedule.on_axis) for f in core.findings[-1:]]

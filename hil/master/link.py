@@ -370,6 +370,15 @@ class CanopenLink:
         (:meth:`MasterCore.emcy_report <hil.master.core.MasterCore.emcy_report>`)."""
         return self.m.emcy_report()
 
+    def record_overdue_sync(self) -> None:
+        """The loop stopped while its own SYNC was overdue by more than a period: it was held, and what waited
+        for it (an EMCY, a heartbeat judged lost once it ran again) stopped it before the late SYNC was sent,
+        where the stall is otherwise recorded. Recorded now, as long as it lasted so far (call before the stalls
+        are read: :attr:`stall_watch`); a no-op where the SYNC is not the loop's own, or not overdue."""
+        due = self.tr.sync_due() if self.timing is not None else None
+        if due is not None:
+            self._observe_sync(self.clock() - due, ahead=1)
+
     def abort(self) -> None:
         """The check aborted: drives go down by quick stop."""
         self.m.quick_stop = True
