@@ -251,6 +251,21 @@ def test_unreachable_drive_other_goes_safe_and_reason_names_it(tmp_path, profile
 
 
 @pytest.mark.slow
+def test_a_drive_unreachable_for_a_while_is_stopped_once_it_answers_again(tmp_path, profiles):
+    """Drive 2 silent for 0.3 s (a held process, a lapsed cable contact): the check stops on it, the other drive
+    goes safe, and the safe-state sequence keeps commanding the silent one until ``canopen.enable_timeout_s`` has
+    passed; it answers again at 2.3 s and is brought to Switch on disabled too (left at once, it ran on in
+    Operation enabled, holding its last target)."""
+    act, chk, _ = profiles
+    r, meta = _run(tmp_path, profiles, Fault("node_silent", 2, 2.0, duration_s=0.3))
+    assert 2.3 - 2.0 < act.canopen.enable_timeout_s
+    assert r.injector.final_states() == (State.SWITCH_ON_DISABLED, State.SWITCH_ON_DISABLED)
+    assert meta.drives_final["ema1"].safe and meta.drives_final["ema2"].safe
+    back = _t_safe_command(r.injector.truth, 2.3, reachable=(1,))
+    assert 2.3 - 1e-9 <= back <= 2.3 + 3 * T + 1e-9  # commanded at the first cycles it hears again
+
+
+@pytest.mark.slow
 def test_heartbeat_loss_detected_within_1p5_periods_of_the_last_heartbeat(tmp_path, profiles):
     act, chk, _ = profiles
     r, meta = _run(tmp_path, profiles, Fault("heartbeat_stop", 1, 2.05))

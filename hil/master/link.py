@@ -370,6 +370,10 @@ class CanopenLink:
         (:meth:`MasterCore.emcy_report <hil.master.core.MasterCore.emcy_report>`)."""
         return self.m.emcy_report()
 
+    def _stopped_all(self, t: float) -> bool:
+        """Every drive confirmed in the safe state, none unreachable (the end of the safe-state sequence)."""
+        return self.m.in_safe_state(t) and not self.m.unreachable(t)
+
     def record_overdue_sync(self) -> None:
         """The loop stopped while its own SYNC was overdue by more than a period: it was held, and what waited
         for it (an EMCY, a heartbeat judged lost once it ran again) stopped it before the late SYNC was sent,
@@ -473,9 +477,12 @@ class CanopenLink:
 
         Orderly (disable operation, shutdown, disable voltage) after a finished check, quick stop
         then disable after an abort. A drive that cannot be reached (heartbeat lost, no statusword)
-        does not hold up the other. Every step runs even if an earlier one fails; the first error
-        is re-raised at the end. Then each drive's state is read again by SDO (:meth:`_confirm_stop`):
-        :attr:`final_states` holds what was seen, confirmed only by that read.
+        does not hold up the other, which is stopped in the same cycles; it is commanded until
+        ``canopen.enable_timeout_s`` has passed, in case it answers again (its process or the PC was held:
+        left at once, it would end where the hold found it, in Operation enabled or Quick stop active).
+        Every step runs even if an earlier one fails; the first error is re-raised at the end. Then each
+        drive's state is read again by SDO (:meth:`_confirm_stop`): :attr:`final_states` holds what was seen,
+        confirmed only by that read.
         """
         if self._closed:
             return
@@ -484,7 +491,9 @@ class CanopenLink:
         try:
             if self._last is not None and self.m.preflight_done:
                 deadline = self.tr.now() + self.m.act.canopen.enable_timeout_s
-                while not self.m.in_safe_state(self.tr.now()) and self.tr.now() < deadline:
+                # (a drive unreachable now may be a held process or a lapsed heartbeat and answer again: commanded
+                # to the end, up to the deadline; the other is stopped in the same cycles meanwhile)
+                while not self._stopped_all(self.tr.now()) and self.tr.now() < deadline:
                     try:
                         self._safe_cycle()
                     except KNOWN_ERRORS as exc:  # recorded; keep stopping the drives
