@@ -50,6 +50,11 @@ def test_eight_bare_csvs_give_no_trend_and_the_history_says_why(tmp_path, capsys
     out = capsys.readouterr().out.replace("\n", " ")
     assert "8 result(s) in no trend: the actuator's identity is unknown" in out
     assert "'unknown' is not an actuator" in out and "flight7.csv" in out
+    # history.html says it too: a table of the results in no trend, each with its recording and why
+    assert main(["history", "--history", url, "--out", str(tmp_path / "h")]) == 0
+    html = (tmp_path / "h" / "history.html").read_text()
+    assert "<h2>In no trend</h2><p>8 result(s): the actuator&#x27;s identity is unknown" in html
+    assert all(f"flight{k}.csv" in html for k in range(8)) and html.count("int1, int2, ext: the actuator") == 8
 
 
 def test_a_known_actuator_is_trended_and_its_unknown_partner_is_not(tmp_path):

@@ -168,6 +168,16 @@ def test_identity_texts_at_the_limit_pass_one_more_is_exit_3(option, capsys, tmp
     assert not out.exists()
 
 
+def test_the_history_filter_on_an_aircraft_has_the_same_limit(capsys):
+    """``history --aircraft`` looks up what a check recorded: no recorded text is longer than 64 characters."""
+    ok = build_parser().parse_args(["history", "--aircraft", "W" * IDENTITY_MAX_CHARS])
+    assert ok.aircraft == "W" * IDENTITY_MAX_CHARS
+    with pytest.raises(SystemExit) as e:
+        main(["history", "--aircraft", "W" * (IDENTITY_MAX_CHARS + 1)])
+    assert e.value.code == 3
+    assert "argument --aircraft: 65 characters; an identity text is at most 64" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("n,ok", [(IDENTITY_MAX_CHARS, True), (IDENTITY_MAX_CHARS + 1, False)])
 def test_the_profiles_identity_texts_have_the_same_limit(tmp_path, n, ok):
     from hil.errors import ProfileError

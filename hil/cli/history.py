@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from hil.cli.args import EPILOG, ExitCode, add_parser, history_url_type
+from hil.cli.args import EPILOG, ExitCode, add_parser, history_url_type, identity_text
 from hil.cli.console import make_console
 from hil.cli.history_glue import history_url_for
 from hil.record.outputs import fresh_outputs
@@ -179,7 +179,8 @@ def register(sub) -> None:
                    help="actuation profile whose history.url to read (default: the shipped one)")
     p.add_argument("--actuator", metavar="SERIAL", type=_serial,
                    help="only this actuator (0x1018 serial number, decimal or 0x...)")
-    p.add_argument("--aircraft", metavar="REG", help="only checks on this aircraft")
+    p.add_argument("--aircraft", metavar="REG", type=identity_text,
+                   help="only checks on this aircraft (at most 64 characters, as recorded)")
     p.add_argument("--json", action="store_true", help="print the history as JSON (checks and trends) instead")
     p.add_argument("--out", metavar="DIR", type=Path,
                    help="also write history.html (plots, tables) and history.json here")

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from blf.wear import trend_band
-from hil.history.trends import Series, fmt_serial, iso
+from hil.history.trends import NO_IDENTITY, Series, fmt_serial, iso
 from hil.report.shell import column, esc, file_link, fmt, img, pyplot, table, write_page
 
 #: figures drawn at most (the page stays readable; filter with --actuator / --aircraft)
@@ -109,6 +109,18 @@ def _check_rows(s: Series) -> list[list[object]]:
     return rows
 
 
+def _not_trended(doc: dict) -> list[str]:
+    """The results in no trend and why (their actuators' identity unknown), as the console lists them."""
+    out = [c for c in doc["checks"] if c.get("not_trended")]
+    if not out:
+        return []
+    rows = [[c["time_utc"], c["kind"], c["status"],
+             ", ".join(f"{ch} {fmt(v)}" for ch, v in c["backlash_mm"].items() if v is not None) or "—",
+             c.get("recording") or c["run_key"], c["not_trended"]] for c in out]
+    return [f"<h2>In no trend</h2><p>{len(out)} result(s): {esc(NO_IDENTITY)}</p>",
+            table(["time (UTC)", "kind", "status", column("backlash", "mm"), "recording", "why"], rows)]
+
+
 def write_history_report(path: Path, doc: dict, series: list[Series], *, json_name: str | None = None) -> None:
     """Write the self-contained history page."""
     parts = [f"<h1>Wear history</h1><p>Database {esc(doc['history'])}; "
@@ -128,6 +140,7 @@ def write_history_report(path: Path, doc: dict, series: list[Series], *, json_na
          column("backlash now", "mm"),
          column("B_spec", "mm"), column("B_spec reached", "FH"), column("95 % interval", "FH"), "date",
          "date 95 % interval", "note"], _trend_rows(doc), raw=True))
+    parts += _not_trended(doc)
     for k, s in enumerate(series):
         parts.append(f"<h2>{esc(s.title())}</h2>")
         if k < MAX_FIGURES and s.points + s.serv_points:
