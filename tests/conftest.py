@@ -136,6 +136,18 @@ def once_per_run(tmp_path_factory, name: str, make):
 
 
 @pytest.fixture(scope="session")
+def run_shared(tmp_path_factory) -> Path:
+    """A folder every process of this test run sees (each xdist worker and the processes they start), for
+    answers made once per run and read by all (``support.independent_rig.diagnosed``). Serially: a new
+    temporary folder."""
+    if not _XDIST_WORKER:
+        return tmp_path_factory.mktemp("shared")
+    root = tmp_path_factory.getbasetemp().parent / "run-shared"
+    root.mkdir(exist_ok=True)
+    return root
+
+
+@pytest.fixture(scope="session")
 def actuation():
     return load_actuation()
 

@@ -29,6 +29,7 @@ from hil.master.jog_rules import gear_se
 from hil.master.stalls import StallWatch, process_held, stall_explains
 from hil.profile.load import default_profile_path
 from hil.profile.patch import read_patch
+from support.figures import figures_unrendered
 from support.profiles import write_profile_variant
 from support.sensor_rig import sensor_profile
 
@@ -254,11 +255,15 @@ class _Targets(dict):
         true, wrong = _io_swapped(base) if over is None else _shipped_variant(base, name.replace(" ", "-"), over)
         rig = _rig(base, true)
         d = base / name.replace(" ", "-")
-        rc1 = main(["commission", str(wrong), "--simulate", "--sim", str(rig), "--out", str(d / "c1")])
         fixed = d / "fixed.toml"
-        rcp = main(["profile", "apply-patch", str(wrong), str(d / "c1" / "profile.patch.toml"), "--out", str(fixed)])
-        rc2 = main(["commission", str(fixed), "--simulate", "--sim", str(rig), "--out", str(d / "c2")])
-        rcd = main(["dry-run", "--profile", str(fixed), "--sim", str(rig), "--out", str(d / "dry"), "--quiet"])
+        # the reports' figures built, not drawn: these tests read commission.json, the patch and meta.json
+        # (test_commission.py and test_dry_run.py draw both reports)
+        with figures_unrendered():
+            rc1 = main(["commission", str(wrong), "--simulate", "--sim", str(rig), "--out", str(d / "c1")])
+            rcp = main(["profile", "apply-patch", str(wrong), str(d / "c1" / "profile.patch.toml"),
+                        "--out", str(fixed)])
+            rc2 = main(["commission", str(fixed), "--simulate", "--sim", str(rig), "--out", str(d / "c2")])
+            rcd = main(["dry-run", "--profile", str(fixed), "--sim", str(rig), "--out", str(d / "dry"), "--quiet"])
         self[name] = {"rc": (rc1, rcp, rc2, rcd), "dir": d, "rig": rig, "true": true, "wrong": wrong}
         return self[name]
 

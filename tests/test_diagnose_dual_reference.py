@@ -12,21 +12,55 @@ profile's floors, and the bad inputs (exit 3, nothing written).
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import jsonschema
 import pytest
 
 from hil.cli import main
+from support.figures import figures_unrendered
 from support.profiles import write_profile_variant
+from support.shared_fits import one_fit_per_recording
 
 pytestmark = pytest.mark.slow
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _one_fit_per_recording():
+    """The module's diagnoses read and fit each recording once (support.shared_fits): no recording here changes
+    at its path, none is refused for itself."""
+    with one_fit_per_recording():
+        yield
+
+
 @pytest.fixture(scope="module")
-def healthy(tmp_path_factory):
-    out = tmp_path_factory.mktemp("dual") / "healthy"
-    assert main(["simulate", "--seed", "11", "--out", str(out), "--quiet"]) == 0
-    return out
+def simulated(tmp_path_factory):
+    """``simulated(seed, **variant)``: the run folder of ``emacheck simulate`` with that noise seed on the shipped
+    rig changed as ``write_profile_variant("simrig.toml", ..., **variant)`` says, simulated once per module:
+    several tests ask for the same check (seed 14 healthy; EMA 2's play up 30 um, seed 13), which they only read.
+    Its report's figures are built, not drawn: no test here looks at the
+    simulated check's report (the diagnosis reports are drawn)."""
+    root = tmp_path_factory.mktemp("dual")
+    made: dict = {}
+
+    def simulate(seed: int, **variant) -> Path:
+        key = (seed, json.dumps(variant, sort_keys=True))
+        if key not in made:
+            out = root / f"seed{seed}-{len(made)}"
+            argv = ["simulate", "--seed", str(seed), "--out", str(out), "--quiet"]
+            if variant:
+                argv += ["--sim", str(write_profile_variant("simrig.toml", root / f"rig-{len(made)}.toml", **variant))]
+            with figures_unrendered():
+                assert main(argv) == 0
+            made[key] = out
+        return made[key]
+
+    return simulate
+
+
+@pytest.fixture(scope="module")
+def healthy(simulated):
+    return simulated(11)
 
 
 @pytest.mark.parametrize("section, values, param, where, change", [
@@ -37,12 +71,9 @@ def healthy(tmp_path_factory):
      "ema1", 10.0),
     ("sensors2", {"loadcell_gain": 1.02}, "loadcell_gain.gain_error", "ema2", 2.0),
 ])
-def test_a_changed_rig_is_named_at_the_right_ema_with_sign_and_size(healthy, tmp_path, section, values, param,
-                                                                     where, change):
-    run = tmp_path / "changed"
-    rig = write_profile_variant("simrig.toml", tmp_path / "rig.toml", **(
-        {"add": {section: values}} if section == "effects" else {"overrides": {section: values}}))
-    assert main(["simulate", "--sim", str(rig), "--seed", "13", "--out", str(run), "--quiet"]) == 0
+def test_a_changed_rig_is_named_at_the_right_ema_with_sign_and_size(healthy, simulated, tmp_path, section, values,
+                                                                     param, where, change):
+    run = simulated(13, **({"add": {section: values}} if section == "effects" else {"overrides": {section: values}}))
     out = tmp_path / "o"
     assert main(["diagnose", str(run), "--reference", str(healthy), "--out", str(out), "--quiet"]) == 0
     data = json.loads((out / "diagnosis.json").read_text())
@@ -62,11 +93,10 @@ def test_a_changed_rig_is_named_at_the_right_ema_with_sign_and_size(healthy, tmp
     assert "change ± U (k=2)" in html and param in html and "Fits before and after" in html
 
 
-def test_two_healthy_checks_with_different_noise_name_nothing(healthy, tmp_path):
+def test_two_healthy_checks_with_different_noise_name_nothing(healthy, simulated, tmp_path):
     """Seed 14 against seed 11 of the shipped rig (14 not among the floors' measurements): every change
     under its floor, nothing named."""
-    run = tmp_path / "healthy14"
-    assert main(["simulate", "--seed", "14", "--out", str(run), "--quiet"]) == 0
+    run = simulated(14)
     out = tmp_path / "o"
     assert main(["diagnose", str(run), "--reference", str(healthy), "--out", str(out), "--quiet"]) == 0
     data = json.loads((out / "diagnosis.json").read_text())
@@ -75,15 +105,13 @@ def test_two_healthy_checks_with_different_noise_name_nothing(healthy, tmp_path)
     assert all(abs(c["change"]) <= c["floor"] for c in data["changes"] if c["floor"] is not None)
 
 
-def test_in_the_independent_rigs_layout_a_change_is_named_and_healthy_checks_name_nothing(healthy, tmp_path):
+def test_in_the_independent_rigs_layout_a_change_is_named_and_healthy_checks_name_nothing(healthy, simulated,
+                                                                                           tmp_path):
     """The checks as bare CSVs in the independent rig's layout (t,phi1,phi2,s1,s2,F1,F2 only: no run folder, no
     step or mode columns, the phases found from the data): EMA 2's internal play up 30 um is named there within
     30 %; seed 14 against seed 11 names nothing (tests/bench/bench_diagnose_reference_pairs.py --bare: all nine)."""
     from bench.bench_diagnose_reference_pairs import bare
-    rig = write_profile_variant("simrig.toml", tmp_path / "rig.toml", overrides={"ema2": {"backlash_int_mm": 0.15}})
-    runs = {"play": tmp_path / "play", "h14": tmp_path / "h14"}
-    assert main(["simulate", "--sim", str(rig), "--seed", "13", "--out", str(runs["play"]), "--quiet"]) == 0
-    assert main(["simulate", "--seed", "14", "--out", str(runs["h14"]), "--quiet"]) == 0
+    runs = {"play": simulated(13, overrides={"ema2": {"backlash_int_mm": 0.15}}), "h14": simulated(14)}
     ref = bare(healthy, tmp_path / "healthy.csv")
     assert ref.read_text().splitlines()[0] == "t,phi1,phi2,s1,s2,F1,F2"
     for name, run in runs.items():
@@ -103,17 +131,19 @@ def test_in_the_independent_rigs_layout_a_change_is_named_and_healthy_checks_nam
 
 
 @pytest.fixture(scope="module")
-def history_runs(healthy, tmp_path_factory):
+def history_runs(healthy, simulated, tmp_path_factory):
     """After ``healthy`` (seed 11): ``other``, EMA 2 replaced (another serial, seed 12), then ``later``, the
     healthy actuators with 10 N more Coulomb friction in the drive of EMA 1 (seed 13). ``same.db`` records
     ``healthy``; ``mixed.db`` records ``healthy`` and ``other``."""
     root = tmp_path_factory.mktemp("hist")
-    other_rig = write_profile_variant("simrig.toml", root / "other.toml", {"identity": {"serial_ema2": 0x5E000199}})
+    other = simulated(12, overrides={"identity": {"serial_ema2": 0x5E000199}})
+    # simulated here, after ``other`` (not the module's check of the same rig and seed, which may be older): the
+    # wear history's reference is the last check before it in time
     later_rig = write_profile_variant("simrig.toml", root / "later.toml", add={"effects": [
         {"name": "coulomb_friction", "where": "ema1", "force_N": 10.0}]})
-    other, later = root / "other", root / "later"
-    assert main(["simulate", "--sim", str(other_rig), "--seed", "12", "--out", str(other), "--quiet"]) == 0
-    assert main(["simulate", "--sim", str(later_rig), "--seed", "13", "--out", str(later), "--quiet"]) == 0
+    later = root / "later"
+    with figures_unrendered():
+        assert main(["simulate", "--sim", str(later_rig), "--seed", "13", "--out", str(later), "--quiet"]) == 0
     same, mixed = f"sqlite:///{root / 'same.db'}", f"sqlite:///{root / 'mixed.db'}"
     assert main(["history", "sync", str(healthy), "--history", same]) == 0
     assert main(["history", "sync", str(healthy), str(other), "--history", mixed]) == 0

@@ -11,24 +11,25 @@ from __future__ import annotations
 import pytest
 
 from support.ci import skip_or_fail
-from support.independent_rig import DATA, KEYS
+from support.independent_rig import DATA, KEYS, SharedFits
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def fits() -> dict:
-    """Each independent-rig recording's fit, made once for the comparisons below (in one test process)."""
-    return {}
+def fits(run_shared) -> dict:
+    """Each independent-rig recording's fit, made once for the comparisons below: its diagnosis once per test
+    run (test_diagnose_independent.py's dev set makes the same ones: support.independent_rig.diagnosed)."""
+    return SharedFits(run_shared)
 
 
-def test_the_play_stiffness_compliance_and_gain_floors_cover_three_sqrt2_times_the_identification_spread():
+def test_the_play_stiffness_compliance_and_gain_floors_cover_three_sqrt2_times_the_identification_spread(run_shared):
     if not (DATA / "keys.json").exists():
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
     from bench.bench_diagnose_floors import independent
 
     from hil.profile.floors import DUAL_FLOORS
-    ind = independent()
+    ind = independent(shared=run_shared)
     for kind in ("play_um", "external_play_um", "stiffness_pct", "sensor_gain_pct", "loadcell_gain_pct"):
         assert ind[kind]["floor_3sqrt2_sd"] <= DUAL_FLOORS[kind], kind
         assert abs(ind[kind]["mean"]) < 3 * ind[kind]["sd"]  # no bias beyond the spread: the fit is right

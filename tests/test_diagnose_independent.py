@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import pytest
 
 from support.ci import skip_or_fail
-from support.independent_rig import DATA, KEYS, diagnose_file, judge
+from support.independent_rig import DATA, KEYS, diagnosed, judge
 
 pytestmark = pytest.mark.slow
 
@@ -26,16 +27,16 @@ def _needs_the_shared_recordings():
         skip_or_fail(f"independent-rig recordings not present at {DATA} (../shared/data)")
 
 
-def _one(name: str) -> tuple[str, bool, str, float]:
-    d, secs = diagnose_file(DATA / f"{name}.csv.gz")  # a crash fails the test
+def _one(name: str, shared: Path) -> tuple[str, bool, str, float]:
+    d, secs = diagnosed(name, shared)  # a crash fails the test; once per run (test_diagnose_floors reads it)
     ok, why = judge(KEYS[name]["expect"], d.verdict, [(e.name, e.where) for e in d.effects], list(d.where))
     return name, ok, why, secs
 
 
-def test_dev_set_at_least_90_percent_right():
+def test_dev_set_at_least_90_percent_right(run_shared):
     # one recording per core (the diagnosis is single-threaded); each one's CPU time is its own
     with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
-        rows = list(pool.map(_one, KEYS, chunksize=1))
+        rows = list(pool.map(_one, KEYS, [run_shared] * len(KEYS), chunksize=1))
     assert len(rows) == len(KEYS) == 19
     for name, _, _, secs in rows:
         assert secs < 30.0, (name, secs)

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from test_boundaries_master import T_EXACT, ScriptedBus
 
 from hil.canopen.frame import SYNC_COB_ID
-from hil.cli.dry_run import dry_run
+from hil.cli.dry_run import dry_run as dry_run_in_process
 from hil.master.link import CanopenLink, StaleData
 from hil.master.stalls import EVERY_S_MAX, EVERY_S_MIN, STALL_MS_MAX, MasterStalls, StallWatch
 from hil.profile.load import load_actuation, load_check, load_simrig
@@ -203,15 +204,17 @@ def test_link_of_drives_that_keep_not_all_limits_keeps_the_short_lag_limit(check
 # ------------------------------------------------------------------ the whole check (slow)
 
 @pytest.fixture(scope="module")
-def check_runs(tmp_path_factory):
+def check_runs(tmp_path_factory, dry_run):
     """The shipped check stall-free and with the master stalling every 5 s for 45 ms (the issue's figure) and
     for 50 ms (the derived limit), one seed. (Not the short check of support.diagnose_cases: made for the plant
-    without drives, over CANopen its 4 mm/s sweep start trips the 10 mm/s speed limit stall-free.)"""
+    without drives, over CANopen its 4 mm/s sweep start trips the 10 mm/s speed limit stall-free.) The
+    stall-free one is the session's ``emacheck dry-run`` (conftest ``dry_run``: the same profiles and seed, made
+    once per test run; its signals.csv is byte for byte this function's, docs/performance.md)."""
     act, sim = load_actuation(), load_simrig()
     chk = load_check(None, act)
     tmp = tmp_path_factory.mktemp("stalls")
-    free = dry_run(act, chk, sim, tmp / "free")
-    stalled = {ms: dry_run(act, chk, sim, tmp / f"stalled{ms:g}", stall=(ms, 5.0)) for ms in (45.0, 50.0)}
+    free = SimpleNamespace(out=dry_run[0], exit_code=dry_run[1])
+    stalled = {ms: dry_run_in_process(act, chk, sim, tmp / f"stalled{ms:g}", stall=(ms, 5.0)) for ms in (45.0, 50.0)}
     return free, stalled
 
 
@@ -247,7 +250,7 @@ def test_a_check_with_stalls_up_to_the_limit_passes_with_the_backlash_of_the_sta
 def test_the_same_seed_gives_the_same_stalls(check_runs, tmp_path):
     stalled = check_runs[1][45.0]
     act, sim = load_actuation(), load_simrig()
-    again = dry_run(act, load_check(None, act), sim, tmp_path / "again", stall=(45.0, 5.0))
+    again = dry_run_in_process(act, load_check(None, act), sim, tmp_path / "again", stall=(45.0, 5.0))
     assert read_record(again.out).stalls.at == read_record(stalled.out).stalls.at
     assert (again.out / "signals.csv").read_bytes() == (stalled.out / "signals.csv").read_bytes()
 

@@ -40,14 +40,21 @@ PAIRS = (("lead5-ema1", "healthy11"), ("lead4-ema2", "healthy11"), ("local-ema1"
          ("healthy12", "healthy11"), ("healthy13", "healthy11"))
 
 
-def simulate(folder: Path, name: str) -> Path:
+def simulate(folder: Path, name: str, here: bool = False) -> Path:
+    """``emacheck simulate`` of the check ``name`` into ``folder``: a process of its own, or ``here`` (in this
+    process, through :func:`hil.cli.main`: the same command without a new interpreter's start)."""
     from support.profiles import write_profile_variant
     effects, seed, *_ = CHECKS[name]
     out = folder / name
-    cmd = [sys.executable, "-m", "hil", "simulate", "--seed", str(seed), "--out", str(out), "--quiet"]
+    argv = ["simulate", "--seed", str(seed), "--out", str(out), "--quiet"]
     if effects:
-        cmd += ["--sim", str(write_profile_variant("simrig.toml", folder / f"{name}.toml", add={"effects": effects}))]
-    subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True)
+        argv += ["--sim", str(write_profile_variant("simrig.toml", folder / f"{name}.toml", add={"effects": effects}))]
+    if here:
+        from hil.cli import main
+        if main(argv) != 0:
+            raise RuntimeError(f"emacheck {' '.join(argv)} failed")
+    else:
+        subprocess.run([sys.executable, "-m", "hil", *argv], check=True, cwd=ROOT, capture_output=True)
     return out
 
 
@@ -71,9 +78,10 @@ def row(new: str, ref: str, data: dict) -> dict:
     return out
 
 
-def table(folder: Path) -> list:
+def table(folder: Path, here: bool = False) -> list:
+    """The pairs' rows; ``here``: the checks simulated in this process (:func:`simulate`)."""
     from hil.analysis.diagnose.dual_reference import dual_reference_diagnosis
-    runs = {name: simulate(folder, name) for name in CHECKS}
+    runs = {name: simulate(folder, name, here) for name in CHECKS}
     cache: dict = {}
     return [row(n, r, dual_reference_diagnosis(runs[n], runs[r], None, cache=cache)[0]) for n, r in PAIRS]
 

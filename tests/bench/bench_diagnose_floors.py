@@ -40,7 +40,7 @@ import numpy as np
 TESTS = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(TESTS.parent), str(TESTS)]
 
-from support.independent_rig import DATA, KEYS, diagnose_file  # noqa: E402
+from support.independent_rig import DATA, KEYS  # noqa: E402
 
 SEEDS = (11, 12, 13)
 #: library candidates (name, variant) fitted on every healthy recording for the floors of their changes
@@ -108,13 +108,14 @@ def _pooled(series: dict) -> dict:
     return out
 
 
-def independent(everything: bool = False) -> dict:
-    """Fitted minus true internal play (um) and contact stiffness (%), per effect-free recording and EMA."""
+def independent(everything: bool = False, shared: Path | None = None) -> dict:
+    """Fitted minus true internal play (um) and contact stiffness (%), per effect-free recording and EMA.
+    ``shared``: each recording's diagnosis once per test run (:func:`support.independent_rig.diagnosed`)."""
     from hil.analysis.diagnose.load import load_model
-    from support.independent_rig import rig_profile
+    from support.independent_rig import diagnosed, rig_profile
     rows, gains, ext = [], [], []
     for name in sorted(n for n, k in KEYS.items() if not k["expect"]):
-        d, secs = diagnose_file(DATA / f"{name}.csv.gz")
+        d, secs = diagnosed(name, shared)
         model, period = load_model(DATA / f"{name}.csv.gz", "dual-ema", rig_profile())
         ext.append({"recording": name, "play_fit_um": 1000 * (d.nominal["backlash_bearing1_mm"]
                                                               + d.nominal["backlash_bearing2_mm"]),

@@ -15,7 +15,9 @@ and the judgement of issue 13 (:func:`judge`):
 
 from __future__ import annotations
 
+import fcntl
 import json
+import pickle
 import re
 import tempfile
 import time
@@ -67,6 +69,61 @@ def diagnose_file(path: Path, profile: Path | None = None):
     t0 = time.process_time()
     d = diagnose(model, period)
     return d, time.process_time() - t0
+
+
+def diagnosed(name: str, shared: Path | None = None):
+    """:func:`diagnose_file` of the set's recording ``name`` with :func:`rig_profile`: (Diagnosis, CPU seconds).
+
+    With ``shared`` (a folder every process of one test run sees: ``conftest.run_shared``) each recording is
+    diagnosed once per test run, by the first process to ask (holding a lock on it; the others wait and read
+    its pickled answer, the CPU seconds its own diagnosis took). test_diagnose_independent.py diagnoses all 19
+    and test_diagnose_floors.py 12 of them again, through the same ``diagnose`` of the same model (issue 13's
+    dev set, the floors, the pairs): the second asker reads the first's, bit for bit the same answer
+    (docs/performance.md, "Test suite, fifth pass"). Without ``shared``: diagnosed here."""
+    path = DATA / f"{name}.csv.gz"
+    if shared is None:
+        return diagnose_file(path)
+    shared.mkdir(parents=True, exist_ok=True)
+    answer = shared / f"indep-{name}.pickle"
+    with open(shared / f"indep-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if answer.exists():
+                return pickle.loads(answer.read_bytes())
+            made = diagnose_file(path)
+            part = answer.with_suffix(".part")
+            part.write_bytes(pickle.dumps(made, protocol=pickle.HIGHEST_PROTOCOL))
+            part.replace(answer)
+            return made
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+class SharedFits(dict):
+    """A ``cache`` for :func:`hil.analysis.diagnose.dual_reference.dual_reference_diagnosis` whose fits of the
+    set's recordings (loaded with :func:`rig_profile`) come from :func:`diagnosed` (once per test run), the
+    nominal covariance computed here from it as ``_fitted`` does. The cache's keys are dual_reference's:
+    ``("loaded", path, profile)`` -> recording, ``("fitted", id(recording))`` -> (diagnosis, covariance)."""
+
+    def __init__(self, shared: Path | None):
+        super().__init__()
+        self.shared = shared
+
+    def __contains__(self, key) -> bool:
+        if dict.__contains__(self, key):
+            return True
+        if self.shared is None or not (isinstance(key, tuple) and key[:1] == ("fitted",)):
+            return False
+        rec = next((v for k, v in self.items() if k[0] == "loaded" and id(v) == key[1]), None)
+        loaded = next(k for k, v in self.items() if v is rec) if rec is not None else None
+        name = Path(rec.path).name.removesuffix(".csv.gz") if rec is not None else None
+        if (name not in KEYS or Path(rec.path).resolve() != (DATA / f"{name}.csv.gz").resolve()
+                or loaded[2] != str(rig_profile())):
+            return False
+        from blf.diagnose import nominal_covariance
+        d, _ = diagnosed(name, self.shared)
+        self[key] = (d, nominal_covariance(rec.model, rec.period_s, d.nominal))
+        return True
 
 
 def judge(expect: list, verdict: str, effects: list, where: list) -> tuple[bool, str]:
