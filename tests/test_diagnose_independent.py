@@ -34,11 +34,8 @@ def _one(name: str, shared: Path) -> tuple[str, bool, str, float]:
 
 
 def test_dev_set_at_least_90_percent_right(run_shared):
-    # one recording per core (the diagnosis is single-threaded); each one's CPU time is its own. Under pytest-xdist
-    # the other cores run the other workers (the vcan stage's guest among them, started with this test, and
-    # stopped on stale data when three busy processes shared two cores): one process here, the same total work
-    workers = 1 if os.environ.get("PYTEST_XDIST_WORKER") else min(2, os.cpu_count() or 1)
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    # one recording per core (the diagnosis is single-threaded); each one's CPU time is its own
+    with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
         rows = list(pool.map(_one, KEYS, [run_shared] * len(KEYS), chunksize=1))
     assert len(rows) == len(KEYS) == 19
     for name, _, _, secs in rows:
