@@ -4,8 +4,8 @@ A profile (the check's steps, the commissioning's stages, the force-free jog) is
 its step began. After periods without a sample (the master's PC held its loop, or the drives' answers were
 lost), the samples' clock jumps by the periods missed; a profile read on that clock would jump too: its next
 setpoint a step of :math:`v L` from the last at speed :math:`v` after a hold of :math:`L`, a motion the stall
-did not make (0.04 mm at 0.5 mm/s after 80 ms, met by both drives at once only where their setpoints arrive
-in one SYNC cycle; by two rams a cycle apart, a force fight). The drives held the last setpoint meanwhile, so
+did not make (0.04 mm at 0.5 mm/s after 80 ms; in a loaded two-process commissioning such a leap in the
+force-free jog was followed by +214 N on one load cell of a clean rig). The drives held the last setpoint, so
 the profile resumes where it was: a sample more than 1.5 periods after the last (a gap of two periods or
 more, rounded to the nearest period) adds the time beyond one period to the time held,
 
@@ -38,7 +38,6 @@ class ProfileClock:
         self.T = period_s
         self.t0_s = 0.0  #: the step's start, on the samples' clock [s]
         self.held_s = 0.0  #: the time held since the step's start [s]
-        self.held_total_s = 0.0  #: the time held since the first sample [s]
         self._last: float | None = None
 
     def restart(self, t_s: float) -> None:
@@ -51,6 +50,5 @@ class ProfileClock:
         last = self._last
         if last is not None and t_s - last > 1.5 * self.T:
             self.held_s += t_s - last - self.T
-            self.held_total_s += t_s - last - self.T
         self._last = t_s
         return t_s - self.t0_s - self.held_s
