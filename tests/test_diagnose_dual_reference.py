@@ -20,17 +20,11 @@ import pytest
 from hil.cli import main
 from support.figures import figures_unrendered
 from support.profiles import write_profile_variant
-from support.shared_fits import one_fit_per_recording
+from support.shared_fits import module_fits_once  # noqa: F401 (a fixture, used below)
 
-pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _one_fit_per_recording():
-    """The module's diagnoses read and fit each recording once (support.shared_fits): no recording here changes
-    at its path, none is refused for itself."""
-    with one_fit_per_recording():
-        yield
+# the module's diagnoses read and fit each recording once (support.shared_fits): no recording here changes at its
+# path, none is refused for itself
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("module_fits_once")]
 
 
 @pytest.fixture(scope="module")

@@ -39,3 +39,11 @@ def one_fit_per_recording() -> Iterator[dict]:
         mp.setattr(dr, "load_pair", load_pair_shared)
         mp.setattr(dr, "_fitted", fitted_shared)
         yield shared
+
+
+@pytest.fixture(scope="module")
+def module_fits_once():
+    """:func:`one_fit_per_recording` for a whole test module: import it into the module and add
+    ``pytest.mark.usefixtures("module_fits_once")`` to its ``pytestmark`` (the module's docstring says why it may)."""
+    with one_fit_per_recording():
+        yield
