@@ -37,6 +37,21 @@ INNER = "tests/vcan/vcan_check_traffic.py"
 #: and ~30 s around it, one killed after 3 s and one after ~14 s of check, each process starting in
 #: 2.5-5 s there); bounds, not targets. ``--durations=0`` prints where the inner time goes.
 INNER_TIMEOUT_S = 600.0
+#: the whole check's run folder inside an attempt's kept folder (vcan_check_traffic.py's full_check)
+WHOLE_CHECK_RUN = Path("vcan-check0") / "run"
+
+
+def _stopped_by_a_stall(keep: Path) -> bool:
+    """Whether the attempt's whole check ended on the master's stall rule (hil.master.link raises
+    StaleData: the master fell behind the bus by more than the stall budget), read from its run record."""
+    import json
+
+    meta = keep / WHOLE_CHECK_RUN / "meta.json"
+    try:
+        rec = json.loads(meta.read_text())
+    except (OSError, ValueError):
+        return False
+    return rec.get("status") == "aborted" and "StaleData: sensor data stale" in str(rec.get("reason"))
 UML_TIMEOUT_S = 660.0
 
 
@@ -72,9 +87,15 @@ def test_vcan_stage(tmp_path):
     assert not vcan_stage.inside_uml()  # stage_mode never answers "uml" inside UML
     # UML's single CPU is two host processes handing over at each system call; a busy host can
     # stall it for tens of milliseconds, and the check then aborts on a safety limit exactly as
-    # a rig would. Such a run is repeated once (both are reported); a real fault fails twice.
-    first = None
-    for attempt in (1, 2):
+    # a rig would. A failed attempt is repeated once (both are reported); a real fault fails twice.
+    # A third attempt only where both failed ones were stopped by the master's own stall rule
+    # (_stopped_by_a_stall: the stall budget, 100 ms here, was exceeded): the project's CI host stopped this
+    # VM for over 100 ms in one of two attempts on 2026-11-29 (docs/vcan.md), which no budget the
+    # product allows can absorb; any other failure still fails after two.
+    failed: list[vcan_stage.UmlResult] = []
+    for attempt in (1, 2, 3):
+        if attempt == 3 and not all(_stopped_by_a_stall(tmp_path / f"inner{a}") for a in (1, 2)):
+            break
         res = vcan_stage.run_in_uml(_inner_cmd_uml(tmp_path / f"inner{attempt}"), tmp_path / f"uml{attempt}",
                                     UML_TIMEOUT_S)
         print(f"user-mode-linux attempt {attempt}: vcan0 up "
@@ -83,12 +104,13 @@ def test_vcan_stage(tmp_path):
         print(res.output[-2000:])
         if res.status == 0 or res.status == vcan_stage.SETUP_FAILED or res.status is None or res.timed_out:
             break
-        first = first or res
+        failed.append(res)
+    first = failed[0] if failed and failed[0] is not res else None
     assert not res.timed_out, f"user-mode-linux did not halt within {UML_TIMEOUT_S} s:\n{res.output[-8000:]}"
     assert res.status is not None, (f"no exit status from inside user-mode-linux; console:\n{res.console_tail}\n"
                                     f"output:\n{res.output[-4000:]}")
     assert res.status != vcan_stage.SETUP_FAILED, f"vcan setup inside user-mode-linux failed:\n{res.output}"
-    assert res.status == 0, (f"vcan tests inside user-mode-linux failed twice (exit {res.status}):\n"
+    assert res.status == 0, (f"vcan tests inside user-mode-linux failed {len(failed)} times (exit {res.status}):\n"
                              f"{res.output[-8000:]}\nfirst attempt:\n{first.output[-4000:] if first else ''}")
 
 
@@ -198,3 +220,23 @@ def test_serve_with_a_sensor_node_boots_and_answers_it(tmp_path):
         th.join(10)
         master.shutdown()
     assert not th.is_alive() and out["stats"].send_errors == 0
+
+
+@pytest.mark.parametrize("meta, third", [
+    ({"status": "aborted", "reason": "error: StaleData: sensor data stale: the master is 102 ms behind the bus"}, True),
+    ({"status": "aborted", "reason": "error: StaleData: sensor data stale: no complete sample for 11 SYNC cycles"},
+     True),
+    ({"status": "aborted", "reason": "safety limit max_force_N: 2318 N"}, False),
+    ({"status": "done", "reason": ""}, False),
+    (None, False),
+])
+def test_only_a_whole_check_stopped_by_the_stall_rule_earns_a_third_attempt(tmp_path, meta, third):
+    """The stage's third attempt is for a check the master stopped on its stall rule (the host stopped the
+    VM longer than the budget), read from the whole check's run record; anything else fails after two."""
+    import json
+
+    run = tmp_path / WHOLE_CHECK_RUN
+    run.mkdir(parents=True)
+    if meta is not None:
+        (run / "meta.json").write_text(json.dumps(meta))
+    assert _stopped_by_a_stall(tmp_path) is third
