@@ -189,7 +189,8 @@ def resolve_eds(name: str, profile_path: str | Path | None, key: str = "canopen.
     shipped = default_profile_path(name)
     if shipped.is_file():
         return shipped
-    raise ProfileError(f"actuation profile: field '{key}' = {name!r}: no such EDS (looked next to the profile "
+    where = f"actuation profile {profile_path}" if profile_path is not None else "actuation profile"
+    raise ProfileError(f"{where}: field '{key}' = {name!r}: no such EDS (looked next to the profile "
                        f"and among the shipped profiles; give its path with --eds PATH)")
 
 
