@@ -100,7 +100,8 @@ def test_hard_caps_hold_even_for_a_check_built_past_the_loader(actuation, check_
     (dict(overrides={"safety": {"max_frozen_cycles": 101}}),
      r"field 'safety.max_frozen_cycles' = 101 is above the hard cap 100"),
     (dict(overrides={"safety": {"max_force_fight_N": 5000.0}}),
-     r"'force_fight.amplitude_fraction_of_limit' gives 6000 N, not below safety.max_force_fight_N"),
+     r"'force_fight.amplitude_fraction_of_limit' = 0.15 of mechanics.limit_load_N = 40000 N in the shipped "
+     r"actuation.toml gives 6000 N, not below safety.max_force_fight_N"),
     (dict(overrides={"safety": {"max_stale_cycles": 2.5}}), r"field 'safety.max_stale_cycles' must be an integer"),
     (dict(overrides={"safety": {"max_lag_s": 0.6}}), r"field 'safety.max_lag_s' = 0.6 is above the hard cap 0.5"),
     (dict(rename={"safety.max_lag_s": "max_lag_ms"}), r"max_lag_ms.*did you mean 'max_lag_s'"),
@@ -109,6 +110,19 @@ def test_profile_values_above_hard_caps_are_refused_naming_the_field(tmp_path, a
     p = write_profile_variant("check.toml", tmp_path / "check.toml", **variant)
     with pytest.raises(ProfileError, match=message):
         load_check(p, actuation)
+
+
+def test_a_check_profile_that_no_longer_fits_the_actuations_limit_load_names_both_files(tmp_path, capsys):
+    """The shipped check's force fight (0.15 of the limit load) under an actuation whose limit load was raised
+    to 50 kN: 7500 N, above the check's 7000 N force-fight limit. The problem is the pair of files; the
+    message names both (found by the readers' fuzzing: exit 3 naming only check.toml)."""
+    prof = write_profile_variant("actuation.toml", tmp_path / "rig-a.toml",
+                                 overrides={"mechanics": {"limit_load_N": 50000.0}})
+    assert main(["profile", "check", str(prof)]) == 3
+    err = capsys.readouterr()
+    text = err.out + err.err
+    assert ("check.toml: field 'force_fight.amplitude_fraction_of_limit' = 0.15 of mechanics.limit_load_N = "
+            "50000 N in rig-a.toml gives 7500 N, not below safety.max_force_fight_N = 7000 N") in " ".join(text.split())
 
 
 _EDS_PRODUCT_CODE = ("[1018sub2]\nParameterName=Product code\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\n"

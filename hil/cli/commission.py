@@ -137,7 +137,7 @@ def cmd_commission(args: argparse.Namespace) -> int:
         return ExitCode.INPUT
     profile = args.profile_pos or args.profile
     act = load_actuation(profile)
-    check = load_check(args.check, act)
+    check = load_check(args.check, act, profile)
     if not args.simulate and (args.interface is None or args.channel is None):
         console.print("[red]give --interface and --channel[/red] (real drives), or --simulate")
         return ExitCode.INPUT

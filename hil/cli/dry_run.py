@@ -142,7 +142,7 @@ def cmd_dry_run(args: argparse.Namespace) -> int:
                              "into each other")
     # every profile is validated before anything is sent on the bus
     act = load_actuation(args.profile)
-    check = load_check(args.check, act)
+    check = load_check(args.check, act, args.profile)
     simrig = load_simrig(args.sim)
     refuse_foreign_history(args, act, simulated=True)
     check_new_run_folder(args.out)

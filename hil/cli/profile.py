@@ -60,7 +60,7 @@ def cmd_profile_check(args: argparse.Namespace) -> int:
     console = make_console()
     try:
         act = load_actuation(args.profile_file)
-        check = load_check(args.check, act)
+        check = load_check(args.check, act, args.profile_file)
         rig = plan_for(act, args.profile_file, args.eds)
         steps = sensor_steps(rig.plan, act, check)
         if bad := step_problems(rig.plan, act, check):

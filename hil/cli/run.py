@@ -43,7 +43,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     console = make_console()
     act = load_actuation(args.profile)
-    check = load_check(args.check, act)
+    check = load_check(args.check, act, args.profile)
     rig = master_setup(act, args.profile, args.eds, check)
     load = rig.plan.load
     if not args.arm:

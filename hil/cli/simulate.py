@@ -30,7 +30,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     console = make_console()
     act = load_actuation(args.profile)
-    check = load_check(args.check, act)
+    check = load_check(args.check, act, args.profile)
     simrig = load_simrig(args.sim)
     refuse_shared_serial(act, simrig, args.sim)
     refuse_foreign_history(args, act, simulated=True)
@@ -71,7 +71,7 @@ def simulate_scenario(args: argparse.Namespace) -> int:
 
     console = make_console()
     act = load_actuation(args.profile)
-    check = load_check(args.check, act)
+    check = load_check(args.check, act, args.profile)
     simrig = load_simrig(args.sim)
     refuse_shared_serial(act, simrig, args.sim)
     seed = simrig.seed if args.seed is None else args.seed

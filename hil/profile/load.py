@@ -240,40 +240,44 @@ def profiles_from(path: str | Path | None, actuation_snapshot: dict | None,
     return act, load_check(None, act)
 
 
-def load_check(path: str | Path | None = None, actuation: Actuation | None = None) -> Check:
-    """Load and validate a check profile; with ``actuation``, also cross-check limits."""
+def load_check(path: str | Path | None = None, actuation: Actuation | None = None,
+               actuation_path: str | Path | None = None) -> Check:
+    """Load and validate a check profile; with ``actuation`` (read from ``actuation_path``, None: the
+    shipped one), also cross-check limits."""
     path = Path(path) if path is not None else default_profile_path("check.toml")
     check = build_dataclass(Check, read_toml(path), path.name)
     if actuation is not None:
-        validate_check(check, actuation, path.name)
+        act_name = Path(actuation_path).name if actuation_path is not None else "the shipped actuation.toml"
+        validate_check(check, actuation, path.name, act_name)
     return check
 
 
-def validate_check(check: Check, act: Actuation, fname: str = "check.toml") -> None:
-    """Cross-field checks between a check profile and the actuation it runs on: every problem at once."""
+def validate_check(check: Check, act: Actuation, fname: str = "check.toml",
+                   act_name: str = "the actuation profile") -> None:
+    """Cross-field checks between a check profile and the actuation it runs on (``act_name``, named where
+    a bound comes from it): every problem at once."""
     problems = Problems()
     f_limit = act.mechanics.limit_load_N
+    of_limit = f"mechanics.limit_load_N = {f_limit:g} N in {act_name}"
     cap = HARD_MAX_FORCE_FRACTION * f_limit
     s = check.safety
     if s.max_force_N > cap:
         problems.add(
             f"{fname}: field 'safety.max_force_N' = {s.max_force_N} is above the hard cap "
-            f"{cap:g} N ({HARD_MAX_FORCE_FRACTION:.0%} of limit_load_N)")
+            f"{cap:g} N ({HARD_MAX_FORCE_FRACTION:.0%} of {of_limit})")
     for name, value, frac in (("safety.max_force_fight_N", s.max_force_fight_N, HARD_MAX_FORCE_FIGHT_FRACTION),
                               ("safety.max_force_imbalance_N", s.max_force_imbalance_N,
                                HARD_MAX_FORCE_IMBALANCE_FRACTION)):
         if value > frac * f_limit:
             problems.add(f"{fname}: field '{name}' = {value} is above the hard cap "
-                               f"{frac * f_limit:g} N ({frac:.0%} of limit_load_N)")
+                               f"{frac * f_limit:g} N ({frac:.0%} of {of_limit})")
     ff = check.force_fight.amplitude_fraction_of_limit * f_limit
+    ff_from = (f"{fname}: field 'force_fight.amplitude_fraction_of_limit' = "
+               f"{check.force_fight.amplitude_fraction_of_limit:g} of {of_limit} gives {ff:g} N")
     if ff >= s.max_force_fight_N:
-        problems.add(
-            f"{fname}: field 'force_fight.amplitude_fraction_of_limit' gives {ff:g} N, "
-            f"not below safety.max_force_fight_N = {s.max_force_fight_N:g} N")
+        problems.add(f"{ff_from}, not below safety.max_force_fight_N = {s.max_force_fight_N:g} N")
     if ff >= s.max_force_N:
-        problems.add(
-            f"{fname}: field 'force_fight.amplitude_fraction_of_limit' gives {ff:g} N, "
-            f"not below safety.max_force_N = {s.max_force_N:g} N")
+        problems.add(f"{ff_from}, not below safety.max_force_N = {s.max_force_N:g} N")
     if check.force_fight.amplitude_fraction_of_limit > HARD_FORCE_FIGHT_FRACTION:  # pragma: no cover
         problems.add(f"{fname}: force fight above the hard cap")  # (metadata catches it first)
     if check.calibration.opposing_force_N >= s.max_force_N:
@@ -283,7 +287,7 @@ def validate_check(check: Check, act: Actuation, fname: str = "check.toml") -> N
     if s.max_stroke_mm > act.mechanics.stroke_limit_mm:
         problems.add(
             f"{fname}: field 'safety.max_stroke_mm' = {s.max_stroke_mm} is above the hard cap "
-            f"{act.mechanics.stroke_limit_mm} mm (the actuation's stroke_limit_mm)")
+            f"{act.mechanics.stroke_limit_mm} mm (mechanics.stroke_limit_mm in {act_name})")
     if check.calibration.sweep_amplitude_mm >= s.max_stroke_mm:
         problems.add(
             f"{fname}: field 'calibration.sweep_amplitude_mm' = {check.calibration.sweep_amplitude_mm} "
