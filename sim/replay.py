@@ -355,17 +355,23 @@ def lvdt_model(s_mm: np.ndarray, t_s: np.ndarray, *, gain: float = 1.0, offset_m
 
 def friction_force(v_mm_s: np.ndarray, *, coulomb_N: float = 0.0, viscous_N_s_per_mm: float = 0.0,
                    stribeck_N: float = 0.0, stribeck_velocity_mm_s: float = 1.0, asym_N: float = 0.0,
-                   band_mm_s: float = 0.1) -> np.ndarray:
+                   band_mm_s: float = 0.1, tanh_v: np.ndarray | None = None) -> np.ndarray:
     """Friction force on the motor-side motion (the law of :mod:`sim.effects`), N.
+
+    ``tanh_v``: ``np.tanh(v_mm_s / band_mm_s)`` where the caller holds it (a model that asks about the
+    same velocities many times, :class:`sim.replay_model.DualEmaReplay`); computed here without it.
 
     Notes
     -----
     :math:`F_f = (F_C + F_A \\tanh(v/v_\\varepsilon) + F_S e^{-(v/v_s)^2})\\tanh(v/v_\\varepsilon) + c v`
-    with v in mm/s.
+    with v in mm/s. Without a Stribeck term (:math:`F_S = \\pm 0`) its exponential is not evaluated: the
+    term adds :math:`F_S` itself, the same signed zero every sample's :math:`F_S e^{\\ldots}` is (the
+    result bit for bit the same, docs/performance.md "Test suite, sixth pass").
     """
     v = np.asarray(v_mm_s, dtype=np.float64)
-    th = np.tanh(v / band_mm_s)
-    level = coulomb_N + asym_N * th + stribeck_N * np.exp(-(v / stribeck_velocity_mm_s) ** 2)
+    th = np.tanh(v / band_mm_s) if tanh_v is None else tanh_v
+    stribeck = stribeck_N * np.exp(-(v / stribeck_velocity_mm_s) ** 2) if stribeck_N != 0.0 else stribeck_N
+    level = coulomb_N + asym_N * th + stribeck
     return level * th + viscous_N_s_per_mm * v
 
 

@@ -204,6 +204,8 @@ class DualEmaReplay:
         # order 4 for the acceleration: order 3 biases it by (w h)^2 (0.06 N of M a at 0.7 Hz); the band removes
         # the extra noise it lets through
         self.a = tuple(savgol_filter(x, 21, 4, deriv=2, delta=T, mode="interp") for x in self.xm)
+        #: tanh(v / v_eps) of the friction law at the default band (0.1 mm/s), asked at every prediction
+        self._tanh_v = tuple(np.tanh(np.asarray(v, dtype=np.float64) / 0.1) for v in self.v)
         recorded = all(x is not None for x in (mode1, sp1, mode2, sp2))
         if recorded:
             hold = holding(n, T, mode1=mode1, sp1=sp1, mode2=mode2, sp2=sp2)
@@ -305,7 +307,7 @@ class DualEmaReplay:
         key = (tuple(chains), hv, hc, tuple(None if k is None else tuple(sorted(k.items())) for k in lp))
         tr = self._cache.get(key)
         if tr is None:
-            ff = [None if lp[e] is None else friction_force(self.v[e], **lp[e]) for e in (0, 1)]
+            ff = [None if lp[e] is None else friction_force(self.v[e], **lp[e], tanh_v=self._tanh_v[e]) for e in (0, 1)]
             tr = replay_chains(self.xm[0], self.xm[1], chains[0], chains[1], self.T, 0.0, _SURFACE_MASS, hv, hc,
                                ff[0], ff[1])
             if len(self._cache) > 48:
@@ -349,11 +351,11 @@ class DualEmaReplay:
                 out[f"Fd{n}"] = np.zeros(self.t_s.size)
                 continue
             M, c, fc = th["reflected_mass_kg"], th["drive_viscous_N_s_per_mm"], th["drive_coulomb_N"]
-            ff = friction_force(self.v[e], coulomb_N=fc, viscous_N_s_per_mm=c)
+            ff = friction_force(self.v[e], coulomb_N=fc, viscous_N_s_per_mm=c, tanh_v=self._tanh_v[e])
             for variant in ("drive", "load path"):
                 kwf = self._friction_kw(fx, where, variant)
                 if kwf is not None:
-                    ff = ff + friction_force(self.v[e], **kwf)
+                    ff = ff + friction_force(self.v[e], **kwf, tanh_v=self._tanh_v[e])
             per = fx.get(("periodic_force", where, ""))
             if per is not None:
                 ff = ff + periodic_force(self.xm[e], per)

@@ -205,3 +205,30 @@ def default_run(tmp_path_factory, actuation, check_profile, simrig):
 
     made = once_per_run(tmp_path_factory, "run", make)
     return Path(made["out"]), made["truth"]
+
+
+@pytest.fixture(scope="session")
+def stalled_dry_runs(tmp_path_factory) -> dict:
+    """The shipped check's in-process dry-run (:func:`hil.cli.dry_run.dry_run`, the shipped profiles and seed, no
+    fault) with the master stalling every 5 s for 45 ms (the issue's figure) and for 50 ms (the derived limit),
+    each made once per test run: tests/test_master_stalls.py and tests/test_faults.py each ran both, the same
+    call on the same profiles (docs/performance.md, "Test suite, sixth pass"). ``{stall_ms: run}``, each run
+    what those tests read of :class:`hil.cli.dry_run.DryRun`: ``out`` (its run folder, which no test changes),
+    ``exit_code`` and ``link.tr.stalls.injected`` (the stalls injected, [(t, s)])."""
+    from types import SimpleNamespace
+
+    from hil.cli.dry_run import dry_run as dry_run_in_process
+
+    def make(where: Path) -> dict:
+        act, sim = load_actuation(), load_simrig()
+        chk = load_check(None, act)
+        made = {}
+        for ms in (45.0, 50.0):
+            r = dry_run_in_process(act, chk, sim, where / f"stalled{ms:g}", stall=(ms, 5.0))
+            made[ms] = {"out": str(r.out), "exit_code": r.exit_code, "injected": list(r.link.tr.stalls.injected)}
+        return made
+
+    made = once_per_run(tmp_path_factory, "stalled", make)
+    return {ms: SimpleNamespace(out=Path(r["out"]), exit_code=r["exit_code"],
+                                link=SimpleNamespace(tr=SimpleNamespace(stalls=SimpleNamespace(injected=r["injected"]))))
+            for ms, r in made.items()}

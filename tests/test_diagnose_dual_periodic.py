@@ -16,6 +16,7 @@ import pytest
 from blf.errors import InputError
 from sim.effects import COLUMNS, PeriodicForce, compile_effects
 from sim.replay_periodic import periodic_candidate, periodic_force, periodic_start
+from support.shared_fits import module_fits_once  # noqa: F401 (a fixture, used below)
 
 
 def test_the_effect_compiles_to_its_columns_in_si():
@@ -76,6 +77,10 @@ def test_noise_alone_starts_no_candidate():
 
 
 @pytest.mark.slow
+# the table's diagnoses fit each replay model once per test run (support.shared_fits): its six checks stay at their
+# paths, none is refused for itself; the healthy seed-11 check and one more are fitted by
+# test_diagnose_dual_reference.py as well (docs/performance.md, "Test suite, sixth pass")
+@pytest.mark.usefixtures("module_fits_once")
 def test_the_dual_ema_path_names_the_periodic_force_at_the_right_ema_with_its_period_and_amplitude(tmp_path):
     import sys
     sys.path.insert(0, str(Path(__file__).parent))

@@ -204,18 +204,16 @@ def test_link_of_drives_that_keep_not_all_limits_keeps_the_short_lag_limit(check
 # ------------------------------------------------------------------ the whole check (slow)
 
 @pytest.fixture(scope="module")
-def check_runs(tmp_path_factory, dry_run):
+def check_runs(dry_run, stalled_dry_runs):
     """The shipped check stall-free and with the master stalling every 5 s for 45 ms (the issue's figure) and
     for 50 ms (the derived limit), one seed. (Not the short check of support.diagnose_cases: made for the plant
     without drives, over CANopen its 4 mm/s sweep start trips the 10 mm/s speed limit stall-free.) The
     stall-free one is the session's ``emacheck dry-run`` (conftest ``dry_run``: the same profiles and seed, made
-    once per test run; its signals.csv is byte for byte this function's, docs/performance.md)."""
-    act, sim = load_actuation(), load_simrig()
-    chk = load_check(None, act)
-    tmp = tmp_path_factory.mktemp("stalls")
+    once per test run; its signals.csv is byte for byte this function's, docs/performance.md); the stalled ones
+    are conftest ``stalled_dry_runs`` (``dry_run_in_process`` of the same profiles, once per test run: the same
+    two checks test_faults.py's passing stall cases read)."""
     free = SimpleNamespace(out=dry_run[0], exit_code=dry_run[1])
-    stalled = {ms: dry_run_in_process(act, chk, sim, tmp / f"stalled{ms:g}", stall=(ms, 5.0)) for ms in (45.0, 50.0)}
-    return free, stalled
+    return free, stalled_dry_runs
 
 
 @pytest.mark.slow

@@ -11,19 +11,106 @@ What each command does with them (floors, comparisons, the history's reference, 
 it writes) runs at every call. Use it only where no recording changes at its path within the module and no
 test expects a recording's own refusal (the seal of a run folder changed after its check, a reading
 refused): a cached recording is not read again.
+
+Across modules (:func:`module_fits_once` under a test run's ``run_shared`` folder): test_diagnose_dual_reference.py
+and test_diagnose_history_floors.py each simulate the same checks (the shipped rig with noise seeds 11 and 14;
+10 N more Coulomb friction at EMA 1 with seed 13), each in its own run folder, and fitted each. A fit is now
+made once per test run for each replay model: keyed by the sha256 of everything the fit reads (every array,
+number and name of the model, :func:`model_key`, and the sample period), the first process to ask fits it
+holding a lock and pickles (diagnosis, covariance), the others read that, bit for bit what their own fit of
+the same model gives (docs/performance.md, "Test suite, sixth pass"). A model with anything the key cannot
+read is fitted where it is asked, as before.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import fcntl
+import hashlib
+import pickle
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 
+class _Unkeyable(Exception):
+    pass
+
+
+def _feed(h, obj, seen: set) -> None:
+    """Feed ``obj`` into the hash ``h``: arrays by dtype, shape and bytes; numbers, strings and bytes by type
+    and repr; tuples, lists and dicts (keys sorted by repr) element by element; dataclasses and plain objects by
+    class and fields (a model's memo ``_cache`` left out: what it memoises follows from the rest)."""
+    if isinstance(obj, np.ndarray):
+        h.update(f"nd{obj.dtype.str}{obj.shape}".encode())
+        h.update(np.ascontiguousarray(obj).tobytes())
+    elif obj is None or isinstance(obj, (bool, int, float, complex, str, bytes, np.generic)):
+        h.update(f"{type(obj).__name__}:{obj!r};".encode())
+    elif isinstance(obj, (tuple, list)):
+        h.update(f"{type(obj).__name__}[{len(obj)}".encode())
+        for x in obj:
+            _feed(h, x, seen)
+        h.update(b"]")
+    elif isinstance(obj, dict):
+        h.update(f"dict[{len(obj)}".encode())
+        for k in sorted(obj, key=repr):
+            _feed(h, k, seen)
+            _feed(h, obj[k], seen)
+        h.update(b"]")
+    else:
+        if id(obj) in seen:
+            raise _Unkeyable(f"a cycle at {type(obj).__qualname__}")
+        seen.add(id(obj))
+        cls = type(obj)
+        if dataclasses.is_dataclass(obj):
+            fields = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+        elif cls.__module__.split(".")[0] in ("sim", "blf", "hil") and hasattr(obj, "__dict__"):
+            fields = {k: v for k, v in vars(obj).items() if k != "_cache"}
+        else:
+            raise _Unkeyable(f"{cls.__module__}.{cls.__qualname__}")
+        h.update(f"{cls.__module__}.{cls.__qualname__}(".encode())
+        _feed(h, fields, seen)
+        h.update(b")")
+        seen.discard(id(obj))
+
+
+def model_key(model, period_s: float) -> str | None:
+    """sha256 of everything a replay model holds (see :func:`_feed`) and the sample period; None where it holds
+    something that is not read into the key."""
+    h = hashlib.sha256()
+    try:
+        _feed(h, (model, period_s), set())
+    except _Unkeyable:
+        return None
+    return h.hexdigest()
+
+
+def _once_per_run(folder: Path, key: str, make):
+    """``make()`` once per test run for ``key``: the first process to ask makes it holding a lock on it and
+    pickles it; the others read that. A ``make`` that raises leaves nothing: the next asker makes it again."""
+    folder.mkdir(parents=True, exist_ok=True)
+    answer = folder / f"fit-{key}.pickle"
+    with open(folder / f"fit-{key}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if answer.exists():
+                return pickle.loads(answer.read_bytes())
+            made = make()
+            part = answer.with_suffix(".part")
+            part.write_bytes(pickle.dumps(made, protocol=pickle.HIGHEST_PROTOCOL))
+            part.replace(answer)
+            return made
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 @contextmanager
-def one_fit_per_recording() -> Iterator[dict]:
-    """Within it, the dual-EMA reference diagnosis reads and fits each recording once (see the module)."""
+def one_fit_per_recording(run_shared: Path | None = None) -> Iterator[dict]:
+    """Within it, the dual-EMA reference diagnosis reads and fits each recording once (see the module); with
+    ``run_shared`` (conftest ``run_shared``) each replay model is fitted once per test run."""
     from hil.analysis.diagnose import dual_reference as dr
 
     shared: dict = {}
@@ -33,6 +120,11 @@ def one_fit_per_recording() -> Iterator[dict]:
         return load_pair(new_path, ref_path, profile, shared, accept_modified)
 
     def fitted_shared(rec, cache):
+        k = ("fitted", id(rec))
+        if run_shared is not None and k not in shared:
+            key = model_key(rec.model, rec.period_s)
+            if key is not None:
+                shared[k] = _once_per_run(run_shared / "fits", key, lambda: fitted(rec, {}))
         return fitted(rec, shared)
 
     with pytest.MonkeyPatch.context() as mp:
@@ -42,8 +134,9 @@ def one_fit_per_recording() -> Iterator[dict]:
 
 
 @pytest.fixture(scope="module")
-def module_fits_once():
-    """:func:`one_fit_per_recording` for a whole test module: import it into the module and add
-    ``pytest.mark.usefixtures("module_fits_once")`` to its ``pytestmark`` (the module's docstring says why it may)."""
-    with one_fit_per_recording():
+def module_fits_once(run_shared):
+    """:func:`one_fit_per_recording` for a whole test module, each model's fit once per test run: import it into the
+    module and add ``pytest.mark.usefixtures("module_fits_once")`` to its ``pytestmark`` (the module's docstring
+    says why it may)."""
+    with one_fit_per_recording(run_shared):
         yield
