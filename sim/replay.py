@@ -353,9 +353,13 @@ def lvdt_model(s_mm: np.ndarray, t_s: np.ndarray, *, gain: float = 1.0, offset_m
     return out + offset_mm if offset_mm != 0.0 else out
 
 
+#: the friction law's velocity band v_eps [mm/s] (:func:`friction_force`'s default)
+FRICTION_BAND_MM_S = 0.1
+
+
 def friction_force(v_mm_s: np.ndarray, *, coulomb_N: float = 0.0, viscous_N_s_per_mm: float = 0.0,
                    stribeck_N: float = 0.0, stribeck_velocity_mm_s: float = 1.0, asym_N: float = 0.0,
-                   band_mm_s: float = 0.1, tanh_v: np.ndarray | None = None) -> np.ndarray:
+                   band_mm_s: float = FRICTION_BAND_MM_S, tanh_v: np.ndarray | None = None) -> np.ndarray:
     """Friction force on the motor-side motion (the law of :mod:`sim.effects`), N.
 
     ``tanh_v``: ``np.tanh(v_mm_s / band_mm_s)`` where the caller holds it (a model that asks about the

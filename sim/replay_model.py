@@ -46,7 +46,7 @@ from scipy.signal import savgol_filter
 
 from blf.diagnose import Candidate, Param, ParamVector, Reference, holding, mode_changes, segment_changes, transients
 from blf.validate import as_1d_finite, positive_scalar, same_shape
-from sim.replay import ChainParams, friction_force, lvdt_model, replay_chains
+from sim.replay import FRICTION_BAND_MM_S, ChainParams, friction_force, lvdt_model, replay_chains
 from sim.replay_periodic import periodic_candidate, periodic_force, periodic_start
 
 __all__ = ["DualEmaReplay", "dual_ema_candidates", "BAND_HZ"]
@@ -204,8 +204,8 @@ class DualEmaReplay:
         # order 4 for the acceleration: order 3 biases it by (w h)^2 (0.06 N of M a at 0.7 Hz); the band removes
         # the extra noise it lets through
         self.a = tuple(savgol_filter(x, 21, 4, deriv=2, delta=T, mode="interp") for x in self.xm)
-        #: tanh(v / v_eps) of the friction law at the default band (0.1 mm/s), asked at every prediction
-        self._tanh_v = tuple(np.tanh(np.asarray(v, dtype=np.float64) / 0.1) for v in self.v)
+        #: tanh(v / v_eps) of the friction law at its band (FRICTION_BAND_MM_S), asked at every prediction
+        self._tanh_v = tuple(np.tanh(np.asarray(v, dtype=np.float64) / FRICTION_BAND_MM_S) for v in self.v)
         recorded = all(x is not None for x in (mode1, sp1, mode2, sp2))
         if recorded:
             hold = holding(n, T, mode1=mode1, sp1=sp1, mode2=mode2, sp2=sp2)
@@ -289,6 +289,11 @@ class DualEmaReplay:
                 kw["asym_N"] = 0.5 * (float(x[0]) - float(x[1]))
         return kw or None
 
+    def _tanh_of(self, kw: dict, e: int) -> np.ndarray | None:
+        """The held tanh(v / v_eps) of EMA ``e`` where the friction law ``kw`` has the band it was taken at;
+        None (computed by :func:`sim.replay.friction_force`) for another band."""
+        return self._tanh_v[e] if kw.get("band_mm_s", FRICTION_BAND_MM_S) == FRICTION_BAND_MM_S else None
+
     def _trace(self, th, fx):
         chains = []
         for n, where in ((1, "ema1"), (2, "ema2")):
@@ -307,7 +312,8 @@ class DualEmaReplay:
         key = (tuple(chains), hv, hc, tuple(None if k is None else tuple(sorted(k.items())) for k in lp))
         tr = self._cache.get(key)
         if tr is None:
-            ff = [None if lp[e] is None else friction_force(self.v[e], **lp[e], tanh_v=self._tanh_v[e]) for e in (0, 1)]
+            ff = [None if lp[e] is None else friction_force(self.v[e], **lp[e], tanh_v=self._tanh_of(lp[e], e))
+                  for e in (0, 1)]
             tr = replay_chains(self.xm[0], self.xm[1], chains[0], chains[1], self.T, 0.0, _SURFACE_MASS, hv, hc,
                                ff[0], ff[1])
             if len(self._cache) > 48:
@@ -355,7 +361,7 @@ class DualEmaReplay:
             for variant in ("drive", "load path"):
                 kwf = self._friction_kw(fx, where, variant)
                 if kwf is not None:
-                    ff = ff + friction_force(self.v[e], **kwf, tanh_v=self._tanh_v[e])
+                    ff = ff + friction_force(self.v[e], **kwf, tanh_v=self._tanh_of(kwf, e))
             per = fx.get(("periodic_force", where, ""))
             if per is not None:
                 ff = ff + periodic_force(self.xm[e], per)

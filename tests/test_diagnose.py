@@ -503,3 +503,24 @@ def test_a_form_the_recording_cannot_tell_apart_is_named_beside_the_one_taken():
     assert (e.name, e.where) == ("coulomb_friction", "ema1") and d.verdict == "explained"
     assert e.parameters["force_N"] == pytest.approx(20.0, abs=0.1)
     assert "as good within 2 BIC units" in e.evidence and "viscous_friction (BIC -" in e.evidence, e.evidence
+
+
+def test_the_friction_law_with_a_held_tanh_is_the_law_and_another_band_is_computed_afresh():
+    """sim.replay.friction_force takes tanh(v / v_eps) from a model that holds it (the dual-EMA replay):
+    bit for bit the law computed afresh, Stribeck term or not; a friction law of another band never gets
+    the held one (DualEmaReplay._tanh_of)."""
+    import numpy as np
+
+    from sim.replay import FRICTION_BAND_MM_S, friction_force
+    from sim.replay_model import DualEmaReplay
+
+    v = np.random.default_rng(3).normal(0.0, 2.0, 500)
+    held = np.tanh(v / FRICTION_BAND_MM_S)
+    for kw in ({"coulomb_N": 12.0, "viscous_N_s_per_mm": 0.4}, {"coulomb_N": -0.0, "stribeck_N": 5.0},
+               {"asym_N": 3.0, "stribeck_N": -0.0}):
+        assert friction_force(v, **kw, tanh_v=held).tobytes() == friction_force(v, **kw).tobytes(), kw
+    model = DualEmaReplay.__new__(DualEmaReplay)  # only the held tanh is needed here
+    model._tanh_v = (held, held)
+    assert model._tanh_of({"coulomb_N": 1.0}, 0) is held
+    assert model._tanh_of({"coulomb_N": 1.0, "band_mm_s": FRICTION_BAND_MM_S}, 1) is held
+    assert model._tanh_of({"coulomb_N": 1.0, "band_mm_s": 0.2}, 0) is None
