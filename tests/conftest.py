@@ -111,28 +111,20 @@ def once_per_run(tmp_path_factory, name: str, make):
     ask builds it under the run's shared base folder, holding a lock; the others wait and read its
     pickled answer. A ``make`` that raises leaves no answer: the next worker tries again (and fails the
     same way), as each would serially."""
-    import fcntl
-    import pickle
+    from support.once import made_once
 
     if not _XDIST_WORKER:
         return make(tmp_path_factory.mktemp(name))
     root = tmp_path_factory.getbasetemp().parent / f"once-{name}"
-    root.mkdir(exist_ok=True)
-    answer = root / "answer.pickle"
-    with open(root / "lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            if answer.exists():
-                return pickle.loads(answer.read_bytes())
-            folder = root / "made"
-            if folder.exists():  # a failed attempt's leftovers
-                shutil.rmtree(folder)
-            folder.mkdir()
-            made = make(folder)
-            answer.write_bytes(pickle.dumps(made))
-            return made
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
+
+    def make_afresh():
+        folder = root / "made"
+        if folder.exists():  # a failed attempt's leftovers
+            shutil.rmtree(folder)
+        folder.mkdir()
+        return make(folder)
+
+    return made_once(root, "answer", make_afresh)
 
 
 @pytest.fixture(scope="session")

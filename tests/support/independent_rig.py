@@ -15,14 +15,14 @@ and the judgement of issue 13 (:func:`judge`):
 
 from __future__ import annotations
 
-import fcntl
 import json
-import pickle
 import re
 import tempfile
 import time
 from functools import cache
 from pathlib import Path
+
+from support.once import made_once
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "independent-rig"
 KEYS: dict = json.loads((DATA / "keys.json").read_text()) if (DATA / "keys.json").exists() else {}
@@ -83,20 +83,7 @@ def diagnosed(name: str, shared: Path | None = None):
     path = DATA / f"{name}.csv.gz"
     if shared is None:
         return diagnose_file(path)
-    shared.mkdir(parents=True, exist_ok=True)
-    answer = shared / f"indep-{name}.pickle"
-    with open(shared / f"indep-{name}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            if answer.exists():
-                return pickle.loads(answer.read_bytes())
-            made = diagnose_file(path)
-            part = answer.with_suffix(".part")
-            part.write_bytes(pickle.dumps(made, protocol=pickle.HIGHEST_PROTOCOL))
-            part.replace(answer)
-            return made
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
+    return made_once(shared, f"indep-{name}", lambda: diagnose_file(path))
 
 
 class SharedFits(dict):

@@ -25,15 +25,15 @@ read is fitted where it is asked, as before.
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import hashlib
-import pickle
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from support.once import made_once
 
 
 class _Unkeyable(Exception):
@@ -88,25 +88,6 @@ def model_key(model, period_s: float) -> str | None:
     return h.hexdigest()
 
 
-def _once_per_run(folder: Path, key: str, make):
-    """``make()`` once per test run for ``key``: the first process to ask makes it holding a lock on it and
-    pickles it; the others read that. A ``make`` that raises leaves nothing: the next asker makes it again."""
-    folder.mkdir(parents=True, exist_ok=True)
-    answer = folder / f"fit-{key}.pickle"
-    with open(folder / f"fit-{key}.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            if answer.exists():
-                return pickle.loads(answer.read_bytes())
-            made = make()
-            part = answer.with_suffix(".part")
-            part.write_bytes(pickle.dumps(made, protocol=pickle.HIGHEST_PROTOCOL))
-            part.replace(answer)
-            return made
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
-
-
 @contextmanager
 def one_fit_per_recording(run_shared: Path | None = None) -> Iterator[dict]:
     """Within it, the dual-EMA reference diagnosis reads and fits each recording once (see the module); with
@@ -124,7 +105,7 @@ def one_fit_per_recording(run_shared: Path | None = None) -> Iterator[dict]:
         if run_shared is not None and k not in shared:
             key = model_key(rec.model, rec.period_s)
             if key is not None:
-                shared[k] = _once_per_run(run_shared / "fits", key, lambda: fitted(rec, {}))
+                shared[k] = made_once(run_shared / "fits", f"fit-{key}", lambda: fitted(rec, {}))
         return fitted(rec, shared)
 
     with pytest.MonkeyPatch.context() as mp:
