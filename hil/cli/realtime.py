@@ -8,6 +8,7 @@ each function says what it managed.
 
 from __future__ import annotations
 
+import functools
 import gc
 import os
 
@@ -53,7 +54,10 @@ HEAP_RESERVE_BYTES = 32 << 20
 _heap_held = False
 
 
+@functools.cache
 def _glibc():
+    """glibc's ``mallopt``, ``malloc``, ``free`` and ``malloc_trim`` with their C signatures (loaded once);
+    AttributeError where the C library is not glibc's."""
     import ctypes
     import ctypes.util
 
@@ -179,8 +183,8 @@ def end_realtime() -> None:
 
 def prepare_realtime(priority: int, *, bounded: bool = False, cpu_latency_us: int | None = None) -> str:
     """Set this process up for a cyclic loop: memory locked, the heap held (:func:`hold_heap`), GC frozen, the
-    CPUs' wake-up latency
-    held at ``cpu_latency_us`` (:func:`hold_cpu_latency`; None: not asked), SCHED_FIFO ``priority`` if > 0.
+    CPUs' wake-up latency held at ``cpu_latency_us`` (:func:`hold_cpu_latency`; None: not asked), SCHED_FIFO
+    ``priority`` if > 0.
 
     ``gc.freeze`` moves every object made so far (profiles, object dictionaries,
     imported modules) out of the collector's reach, so no collection inside a

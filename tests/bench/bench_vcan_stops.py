@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shlex
 import subprocess
 import sys
@@ -37,7 +38,7 @@ SPIN = ("import os, sys, time\nos.sched_setaffinity(0, {int(sys.argv[1])})\nsys.
 def stop_machine(seconds: float) -> None:
     """Every CPU busy at SCHED_FIFO 99 for ``seconds`` (the spinners start first, then spin together)."""
     spin = [subprocess.Popen([sys.executable, "-c", SPIN, str(cpu), str(seconds)], stdin=subprocess.PIPE, text=True)
-            for cpu in sorted(__import__("os").sched_getaffinity(0))]
+            for cpu in sorted(os.sched_getaffinity(0))]
     time.sleep(0.3)  # their interpreters started, at normal priority
     for p in spin:
         p.stdin.write("go\n")
